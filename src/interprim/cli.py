@@ -1,0 +1,59 @@
+"""The ``interprim`` command line.
+
+Each sub-command lives in its own module, which exposes
+``add_parser(subparsers)`` (registering one or more sub-commands with
+``set_defaults(func=...)``).  Those modules keep their top-level imports
+light; heavy imports happen inside the command functions, so ``--help`` is fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import InterprimError
+
+# Modules that register sub-commands, in the order they appear in --help.
+COMMAND_MODULES = [
+    "interprim.commands",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="interprim",
+        description=(
+            "Interaction Primitives (Ben Amor et al., ICRA 2014): learn from demonstrations of two "
+            "people how a robot should respond to a human partner, then predict that response "
+            "from a partial observation of the human."
+        ),
+        epilog="Run 'interprim COMMAND --help' for the options of one command.",
+    )
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"interprim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        print(f"interprim {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

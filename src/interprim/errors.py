@@ -1,0 +1,25 @@
+"""Exception types raised by interprim.
+
+Every error is a subclass of a built-in exception (``ValueError`` or
+``TypeError``) so that callers who do not know this module can still catch
+it, and every message names the offending argument, what it was and what was
+expected.
+"""
+
+from __future__ import annotations
+
+
+class InterprimError(Exception):
+    """Base class of all errors raised on purpose by interprim."""
+
+
+class NotFittedError(InterprimError, ValueError, AttributeError):
+    """A model was used (``predict``, ``stream``, ``save``) before ``fit``."""
+
+
+class ModelFileError(InterprimError, ValueError):
+    """A model file is missing, truncated, corrupt or of an unknown format version."""
+
+
+class DataFileError(InterprimError, ValueError):
+    """A demonstration or observation file cannot be read or is malformed."""

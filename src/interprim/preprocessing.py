@@ -1,0 +1,145 @@
+"""Pre-processing of recorded movements (paper Sec. IV): resampling, smoothing,
+derivatives and PCA.
+
+The forcing terms of Eq. 3 and Eq. 15 need accelerations of recorded data, and
+recorded data is noisy: derivatives are taken with a Savitzky-Golay filter
+(a local polynomial fit), whose window is a visible parameter everywhere it
+is used.  ``window=None`` falls back to plain central differences
+(``numpy.gradient``), which is exact on smooth synthetic data.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from ._validation import as_2d_finite, check_times
+
+__all__ = ["resample_uniform", "derivatives", "PCA", "time_normalise"]
+
+
+def resample_uniform(y, times, n: int | None = None, dt: float | None = None):
+    """Linearly interpolate an irregularly sampled ``(T, D)`` movement onto a uniform grid.
+
+    Parameters
+    ----------
+    y : array_like, shape (T, D)
+    times : array_like, shape (T,)
+        Strictly increasing time stamps in seconds.
+    n : int, optional
+        Number of output frames (covering ``times[0]`` to ``times[-1]``).
+    dt : float, optional
+        Output sampling interval in seconds (used when ``n`` is not given);
+        defaults to the median interval of ``times``.
+
+    Returns
+    -------
+    y_uniform : ndarray, shape (n, D)
+    t_uniform : ndarray, shape (n,)
+    """
+    y = as_2d_finite(y, "y", min_rows=2)
+    t = check_times(times, y.shape[0], "times")
+    if n is None:
+        if dt is None:
+            dt = float(np.median(np.diff(t)))
+        n = int(round((t[-1] - t[0]) / dt)) + 1
+    n = max(int(n), 2)
+    tu = np.linspace(t[0], t[-1], n)
+    out = np.empty((n, y.shape[1]))
+    for d in range(y.shape[1]):
+        out[:, d] = np.interp(tu, t, y[:, d])
+    return out, tu
+
+
+def time_normalise(y, n: int) -> np.ndarray:
+    """Resample a uniformly sampled ``(T, D)`` movement to ``n`` frames over normalised time [0, 1]."""
+    y = np.asarray(y, dtype=np.float64)
+    if y.shape[0] == n:
+        return y.copy()
+    s_in = np.linspace(0.0, 1.0, y.shape[0])
+    s_out = np.linspace(0.0, 1.0, n)
+    out = np.empty((n, y.shape[1]))
+    for d in range(y.shape[1]):
+        out[:, d] = np.interp(s_out, s_in, y[:, d])
+    return out
+
+
+def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
+    """Smoothed position, first and second derivative of a uniformly sampled movement.
+
+    Parameters
+    ----------
+    y : ndarray, shape (T, D)
+        Positions, time on axis 0.
+    ds : float
+        Sampling interval (in whatever time unit the derivatives should use;
+        interprim uses normalised time, see :mod:`interprim.dmp`).
+    window : int or None
+        Savitzky-Golay window length in frames (odd; it is shrunk to the
+        largest odd number not above ``T`` when the movement is short).
+        ``None`` means no smoothing: second-order central differences.
+    polyorder : int
+        Polynomial order of the Savitzky-Golay filter (default 3).
+
+    Returns
+    -------
+    y_s, yd, ydd : ndarray, shape (T, D) each
+    """
+    y = np.asarray(y, dtype=np.float64)
+    T = y.shape[0]
+    if T < 3:
+        raise ValueError(f"derivatives need at least 3 frames, got {T}")
+    if window is not None:
+        w = min(int(window), T if T % 2 == 1 else T - 1)
+        if w % 2 == 0:
+            w -= 1
+        p = min(polyorder, w - 1)
+        if w >= 3 and p >= 2:
+            y_s = savgol_filter(y, w, p, deriv=0, axis=0, mode="interp")
+            yd = savgol_filter(y, w, p, deriv=1, delta=ds, axis=0, mode="interp")
+            ydd = savgol_filter(y, w, p, deriv=2, delta=ds, axis=0, mode="interp")
+            return y_s, yd, ydd
+    yd = np.gradient(y, ds, axis=0, edge_order=2)
+    ydd = np.gradient(yd, ds, axis=0, edge_order=2)
+    return y.copy(), yd, ydd
+
+
+class PCA:
+    """Principal component analysis of the frames of one agent (paper Sec. IV).
+
+    The paper projects high-dimensional motion capture onto a five-dimensional
+    space before learning the IP.  ``fit`` takes all frames of all
+    demonstrations; ``transform`` and ``inverse_transform`` map ``(T, D)`` to
+    ``(T, k)`` and back.
+
+    Parameters
+    ----------
+    n_components : int
+        Number of principal components ``k`` kept.
+    """
+
+    def __init__(self, n_components: int):
+        if int(n_components) < 1:
+            raise ValueError(f"n_components must be >= 1, got {n_components}")
+        self.n_components = int(n_components)
+
+    def fit(self, frames):
+        X = as_2d_finite(frames, "frames", min_rows=2)
+        if self.n_components > X.shape[1]:
+            raise ValueError(f"n_components={self.n_components} exceeds the {X.shape[1]} dimensions of the data")
+        self.mean_ = X.mean(axis=0)
+        _, s, vt = np.linalg.svd(X - self.mean_, full_matrices=False)
+        # deterministic sign: largest |loading| of each component is positive
+        signs = np.sign(vt[np.arange(vt.shape[0]), np.argmax(np.abs(vt), axis=1)])
+        signs[signs == 0] = 1.0
+        vt = vt * signs[:, None]
+        self.components_ = vt[: self.n_components]
+        var = s**2 / max(X.shape[0] - 1, 1)
+        self.explained_variance_ratio_ = var[: self.n_components] / max(var.sum(), np.finfo(float).tiny)
+        return self
+
+    def transform(self, X):
+        return (np.asarray(X, dtype=np.float64) - self.mean_) @ self.components_.T
+
+    def inverse_transform(self, Z):
+        return np.asarray(Z, dtype=np.float64) @ self.components_ + self.mean_

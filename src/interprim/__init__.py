@@ -3,12 +3,24 @@
 Implements H. Ben Amor, G. Neumann, S. Kamthe, O. Kroemer, J. Peters,
 "Interaction Primitives for Human-Robot Cooperation Tasks", ICRA 2014.
 See ``docs/equations.md`` for the map from the paper's equations to the code.
+
+The public names are loaded lazily (PEP 562), so ``import interprim`` is cheap
+and sub-packages such as :mod:`interprim.sim` import without the numerical core.
 """
 
+from __future__ import annotations
+
+import importlib
+
 from .errors import DataFileError, InterprimError, ModelFileError, NotFittedError
-from .primitive import InteractionPrimitive, Prediction, Stream
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    "InteractionPrimitive": "interprim.primitive",
+    "Prediction": "interprim.primitive",
+    "Stream": "interprim.primitive",
+}
 
 __all__ = [
     "InteractionPrimitive",
@@ -20,3 +32,16 @@ __all__ = [
     "DataFileError",
     "__version__",
 ]
+
+
+def __getattr__(name):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'interprim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

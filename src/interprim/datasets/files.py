@@ -1,0 +1,546 @@
+"""Reading and writing users' own demonstrations (CSV and NPZ; see ``docs/data-formats.md``).
+
+Formats
+-------
+CSV (one file)
+    A header row of column names, then one row per frame.  A ``time`` column (seconds,
+    strictly increasing within a demonstration) is required unless ``dt`` is given.  An
+    optional ``demo`` column labels the demonstration each row belongs to; rows of one
+    demonstration must be contiguous.  Every other column is a degree of freedom (numbers;
+    an empty cell, ``nan`` or ``NA`` is a missing value).  Lines starting with ``#`` are
+    comments; ``# observed: a, b`` names the observed agent's columns.
+Folder
+    Every ``*.csv`` and ``*.npz`` file in it (not recursive), in natural order; all must
+    have the same columns.
+NPZ
+    Arrays ``demo_000``, ``demo_001``, ... of shape ``(T, D)``, ``time_000``, ... of shape
+    ``(T,)`` (or a scalar ``dt``), optional ``columns`` (``(D,)`` strings) and ``observed``
+    (strings).  Read with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataFileError
+from ._base import DataNotFoundError, Demonstrations, select_columns, uniform_dt
+
+__all__ = ["load_demonstrations", "save_demonstrations"]
+
+TIME = "time"
+DEMO = "demo"
+_MISSING = {"", "nan", "NaN", "NAN", "NA", "N/A", "na", "null", "None"}
+_DEMO_KEY = re.compile(r"^demo_(\d+)$")
+_TIME_KEY = re.compile(r"^time_(\d+)$")
+_NPZ_META = {"columns", "dt", "observed"}
+
+
+def _natural_key(p: Path):
+    return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", p.name)]
+
+
+# --------------------------------------------------------------------------- checks
+def _fill_nans(y, max_nan_gap, where, row_of):
+    """Interpolate interior NaN runs of at most ``max_nan_gap`` frames; reject any other NaN."""
+    bad = np.isnan(y)
+    if not bad.any():
+        return y
+    y = y.copy()
+    for d in range(y.shape[1]):
+        col = bad[:, d]
+        if not col.any():
+            continue
+        i = 0
+        T = col.shape[0]
+        while i < T:
+            if not col[i]:
+                i += 1
+                continue
+            j = i
+            while j < T and col[j]:
+                j += 1
+            run = j - i
+            if run > max_nan_gap or i == 0 or j == T:
+                why = (
+                    "missing value(s)"
+                    if max_nan_gap == 0
+                    else ("a run of missing values at the start or end" if (i == 0 or j == T) else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
+                )
+                raise DataFileError(
+                    f"{where(d)}: {why} starting at {row_of(i)} ({run} frame(s)); "
+                    "fill or cut them, or pass max_nan_gap to interpolate short interior gaps"
+                )
+            y[i:j, d] = np.interp(np.arange(i, j), [i - 1, j], [y[i - 1, d], y[j, d]])
+            i = j
+    return y
+
+
+def _check_times(t, where, row_of):
+    if not np.all(np.isfinite(t)):
+        i = int(np.argmax(~np.isfinite(t)))
+        raise DataFileError(f"{where}: missing or non-finite time at {row_of(i)}")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.argmax(d <= 0)) + 1
+        raise DataFileError(
+            f"{where}: time must be strictly increasing, but {row_of(i)} has time {float(t[i])!r} "
+            f"after {float(t[i - 1])!r}"
+        )
+
+
+def _check_frames(n, min_frames, where):
+    if n < min_frames:
+        raise DataFileError(f"{where}: only {n} frame(s), at least {min_frames} are needed")
+
+
+# --------------------------------------------------------------------------- CSV
+def _read_csv(path: Path, dt, max_nan_gap, min_frames):
+    """Parse one CSV file into (demos, times, columns, labels, meta)."""
+    try:
+        fh = open(path, newline="", encoding="utf-8-sig")
+    except IsADirectoryError:
+        raise DataFileError(f"{path}: is a folder, expected a CSV file") from None
+    meta = {}
+    header = None
+    header_line = 0
+    rows = []  # (line_no, cells)
+    with fh:
+        try:
+            reader = csv.reader(fh)
+            for cells in reader:
+                line = reader.line_num
+                if not cells or all(not c.strip() for c in cells):
+                    continue
+                first = cells[0].lstrip()
+                if first.startswith("#"):
+                    text = ",".join(cells).lstrip()[1:]
+                    if ":" in text:
+                        k, v = text.split(":", 1)
+                        meta[k.strip().lower()] = v.strip()
+                    continue
+                if header is None:
+                    header = [c.strip() for c in cells]
+                    header_line = line
+                    continue
+                rows.append((line, cells))
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise DataFileError(f"{path}: not a readable CSV text file ({exc})") from None
+    if header is None:
+        raise DataFileError(f"{path}: empty file, expected a header row of column names")
+    if any(not h for h in header):
+        raise DataFileError(f"{path}, line {header_line}: empty column name in the header {header}")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise DataFileError(f"{path}, line {header_line}: duplicate column name(s) {dup}")
+    has_time = TIME in header
+    if not has_time and dt is None:
+        raise DataFileError(
+            f"{path}: missing column 'time' (seconds); the header is {header}. "
+            "Add a time column or pass dt for uniformly sampled data"
+        )
+    data_cols = [h for h in header if h not in (TIME, DEMO)]
+    if not data_cols:
+        raise DataFileError(f"{path}: no data columns besides 'time'/'demo' in the header {header}")
+    i_time = header.index(TIME) if has_time else None
+    i_demo = header.index(DEMO) if DEMO in header else None
+    i_data = [header.index(c) for c in data_cols]
+    groups: dict = {}
+    order = []
+    last = None
+    for line, cells in rows:
+        if len(cells) != len(header):
+            raise DataFileError(f"{path}, line {line}: {len(cells)} cells but the header has {len(header)} columns")
+        label = cells[i_demo].strip() if i_demo is not None else "0"
+        if label != last:
+            if label in groups:
+                raise DataFileError(
+                    f"{path}, line {line}: rows of demo {label!r} are not contiguous (it appeared before line {line})"
+                )
+            groups[label] = []
+            order.append(label)
+            last = label
+        groups[label].append((line, cells))
+    if not order:
+        raise DataFileError(f"{path}: no data rows after the header (line {header_line})")
+
+    def num(cell, line, col, allow_missing):
+        s = cell.strip()
+        if s in _MISSING:
+            if not allow_missing:
+                raise DataFileError(f"{path}, line {line}: missing value in column {col!r}")
+            return math.nan
+        try:
+            v = float(s)
+        except ValueError:
+            raise DataFileError(f"{path}, line {line}: non-numeric value {cell!r} in column {col!r}") from None
+        if math.isinf(v):
+            raise DataFileError(f"{path}, line {line}: infinite value {cell!r} in column {col!r}")
+        return v
+
+    demos, times, labels = [], [], []
+    for label in order:
+        grp = groups[label]
+        lines = [ln for ln, _ in grp]
+        where_demo = f"{path}" + (f", demo {label!r}" if i_demo is not None else "")
+        y = np.array(
+            [[num(cells[i], ln, header[i], True) for i in i_data] for ln, cells in grp], dtype=np.float64
+        ).reshape(len(grp), len(i_data))
+        if has_time:
+            t = np.array([num(cells[i_time], ln, TIME, False) for ln, cells in grp], dtype=np.float64)
+        else:
+            t = np.arange(len(grp)) * float(dt)
+
+        def row_of(i, _lines=lines):
+            return f"line {_lines[i]}"
+
+        _check_frames(len(grp), min_frames, where_demo)
+        _check_times(t, where_demo, row_of)
+        y = _fill_nans(y, max_nan_gap, lambda d, _w=where_demo: f"{_w}, column {data_cols[d]!r}", row_of)
+        demos.append(y)
+        times.append(t)
+        labels.append(label if i_demo is not None else path.stem)
+    return demos, times, data_cols, labels, meta
+
+
+# --------------------------------------------------------------------------- NPZ
+def _read_npz(path: Path, dt, max_nan_gap, min_frames):
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001
+        raise DataFileError(f"{path}: not a readable .npz file ({exc})") from None
+    if not hasattr(npz, "files"):
+        raise DataFileError(f"{path}: a single .npy array, expected an .npz archive with demo_000, ...")
+    meta = {}
+    with npz:
+        keys = list(npz.files)
+        demo_keys = {}
+        time_keys = {}
+        for k in keys:
+            m = _DEMO_KEY.match(k)
+            if m:
+                demo_keys[int(m.group(1))] = k
+                continue
+            m = _TIME_KEY.match(k)
+            if m:
+                time_keys[int(m.group(1))] = k
+                continue
+            if k not in _NPZ_META:
+                raise DataFileError(
+                    f"{path}: unknown key {k!r}; expected demo_000, demo_001, ..., time_000, ..., "
+                    "and optionally columns, dt, observed"
+                )
+        if not demo_keys:
+            raise DataFileError(f"{path}: no demonstrations (keys demo_000, demo_001, ...); it has {keys}")
+        extra = sorted(set(time_keys) - set(demo_keys))
+        if extra:
+            raise DataFileError(f"{path}: {time_keys[extra[0]]!r} has no matching demo_ key")
+
+        def load(k):
+            try:
+                return npz[k]
+            except ValueError as exc:  # object arrays would need pickle
+                raise DataFileError(f"{path}: key {k!r} cannot be read without pickle ({exc})") from None
+
+        file_dt = None
+        if "dt" in npz.files:
+            a = load("dt")
+            try:
+                file_dt = float(np.asarray(a, dtype=np.float64).reshape(()))
+            except (TypeError, ValueError):
+                raise DataFileError(f"{path}: 'dt' must be one positive number, got shape {a.shape}") from None
+            if not (np.isfinite(file_dt) and file_dt > 0):
+                raise DataFileError(f"{path}: 'dt' must be a positive number, got {file_dt!r}")
+        columns = None
+        if "columns" in npz.files:
+            a = load("columns")
+            if a.dtype.kind not in "US" or a.ndim != 1:
+                raise DataFileError(f"{path}: 'columns' must be a 1-D string array, got dtype {a.dtype} shape {a.shape}")
+            columns = [str(c) for c in a.astype(str)]
+            dup = sorted({c for c in columns if columns.count(c) > 1})
+            if dup:
+                raise DataFileError(f"{path}: duplicate column name(s) {dup} in 'columns'")
+        if "observed" in npz.files:
+            a = load("observed")
+            meta["observed"] = ",".join(str(c) for c in np.atleast_1d(a).astype(str))
+        if time_keys and len(time_keys) != len(demo_keys):
+            missing = [demo_keys[i] for i in sorted(demo_keys) if i not in time_keys]
+            raise DataFileError(f"{path}: time stamps missing for {missing[:3]} (every demo_ needs a time_ or none)")
+        step = file_dt if file_dt is not None else dt
+        if not time_keys and step is None:
+            raise DataFileError(f"{path}: no time stamps (time_000, ...) and no 'dt'; add either, or pass dt")
+        demos, times, labels = [], [], []
+        n_cols = None
+        for i in sorted(demo_keys):
+            k = demo_keys[i]
+            y = load(k)
+            if y.dtype.kind not in "fiub":
+                raise DataFileError(f"{path}: {k!r} is not numeric (dtype {y.dtype})")
+            if y.ndim == 1:
+                y = y[:, None]
+            if y.ndim != 2:
+                raise DataFileError(f"{path}: {k!r} must have shape (T, D), got {y.shape}")
+            y = y.astype(np.float64)
+            if n_cols is None:
+                n_cols = y.shape[1]
+                if columns is not None and len(columns) != n_cols:
+                    raise DataFileError(f"{path}: 'columns' names {len(columns)} columns but {k!r} has {n_cols}")
+            elif y.shape[1] != n_cols:
+                raise DataFileError(f"{path}: {k!r} has {y.shape[1]} columns, the first demonstration has {n_cols}")
+            where = f"{path}, {k}"
+            _check_frames(y.shape[0], min_frames, where)
+            if np.isinf(y).any():
+                r, c = np.argwhere(np.isinf(y))[0]
+                raise DataFileError(f"{where}: infinite value at row {r}, column {c}")
+            if i in time_keys:
+                t = load(time_keys[i])
+                if t.dtype.kind not in "fiu" or t.ndim != 1 or t.shape[0] != y.shape[0]:
+                    raise DataFileError(
+                        f"{path}: {time_keys[i]!r} must be numeric with shape ({y.shape[0]},), got {t.dtype} {t.shape}"
+                    )
+                t = t.astype(np.float64)
+            else:
+                t = np.arange(y.shape[0]) * float(step)
+
+            def row_of(r):
+                return f"row {r}"
+
+            _check_times(t, f"{path}, {time_keys.get(i, k)}", row_of)
+            cols_now = columns or [f"dof_{j}" for j in range(n_cols)]
+            y = _fill_nans(y, max_nan_gap, lambda d, _w=where, _c=cols_now: f"{_w}, column {_c[d]!r}", row_of)
+            demos.append(y)
+            times.append(t)
+            labels.append(k)
+    if columns is None:
+        columns = [f"dof_{j}" for j in range(n_cols)]
+    return demos, times, columns, labels, meta
+
+
+# --------------------------------------------------------------------------- public
+def _read_file(p: Path, dt, max_nan_gap, min_frames):
+    suffix = p.suffix.lower()
+    if suffix == ".csv":
+        return _read_csv(p, dt, max_nan_gap, min_frames)
+    if suffix == ".npz":
+        return _read_npz(p, dt, max_nan_gap, min_frames)
+    raise DataFileError(f"{p}: unsupported file type {p.suffix!r}; expected .csv, .npz or a folder of them")
+
+
+def load_demonstrations(
+    path,
+    *,
+    columns=None,
+    dt: float | None = None,
+    resample_dt: float | None = None,
+    max_nan_gap: int = 0,
+    min_frames: int = 5,
+) -> Demonstrations:
+    """Load demonstrations from a CSV file, an NPZ file or a folder of them.
+
+    See ``docs/data-formats.md`` for the formats.  Every problem is reported as a
+    :class:`~interprim.errors.DataFileError` naming the file and the line (CSV, 1-based,
+    counting the header and comments) or row (NPZ, 0-based frame index).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.csv`` file, an ``.npz`` file or a folder holding ``.csv``/``.npz`` files.
+    columns : sequence of str or int, or str, optional
+        Columns to keep, in this order (names, indices or a comma-separated string);
+        default all data columns.  Unknown names raise ``DataFileError``.
+    dt : float, optional
+        Sampling interval in seconds for files without time stamps (a CSV without a
+        ``time`` column, an NPZ without ``time_`` keys or ``dt``).  Ignored when the file
+        has time stamps.
+    resample_dt : float, optional
+        If given, every demonstration is linearly interpolated onto a uniform grid with this
+        interval (:func:`interprim.preprocessing.resample_uniform`).
+    max_nan_gap : int
+        Longest interior run of missing values (per column) that is filled by linear
+        interpolation (default 0: any missing value is an error).  Missing values at the
+        start or end of a demonstration are always an error.
+    min_frames : int
+        Fewest frames a demonstration may have (default 5).
+
+    Returns
+    -------
+    Demonstrations
+        The demonstrations, time stamps (seconds, as in the file), column names, ``dt``
+        (when uniformly sampled), ``observed_dofs`` (from an ``observed`` entry in the
+        file, if any) and labels (``demo`` values, file names or NPZ keys).
+
+    Raises
+    ------
+    DataNotFoundError
+        If ``path`` does not exist (also a ``FileNotFoundError``).
+    DataFileError
+        For a malformed file: missing ``time`` column, unknown columns, non-numeric cells,
+        missing values, non-increasing time, too few frames, inconsistent columns.
+    """
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise DataNotFoundError(f"demonstrations not found: {p}")
+    if dt is not None and not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    if p.is_dir():
+        files = sorted(
+            (f for f in p.iterdir() if f.is_file() and f.suffix.lower() in (".csv", ".npz")), key=_natural_key
+        )
+        if not files:
+            raise DataFileError(f"{p}: the folder holds no .csv or .npz files")
+    else:
+        files = [p]
+    demos, times, labels = [], [], []
+    cols = None
+    meta = {}
+    for f in files:
+        d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames))
+        if cols is None:
+            cols, first = c, f
+            meta = m
+        elif c != cols:
+            if sorted(c) == sorted(cols):
+                order = [c.index(name) for name in cols]
+                d = [x[:, order] for x in d]
+            else:
+                missing = [x for x in cols if x not in c]
+                extra = [x for x in c if x not in cols]
+                raise DataFileError(
+                    f"{f}: columns differ from {first.name}: missing {missing}, unexpected {extra}"
+                )
+        demos.extend(d)
+        times.extend(t)
+        labels.extend(lab if len(files) == 1 else [f"{f.stem}:{x}" if len(d) > 1 else f.stem for x in lab])
+    observed = None
+    if meta.get("observed"):
+        observed = select_columns(cols, meta["observed"], where=f"{files[0]} ('observed')")
+    ds = Demonstrations(
+        demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
+        name=p.stem, source=str(p), labels=labels,
+    )  # fmt: skip
+    if columns is not None:
+        ds = ds.select(columns)
+    if resample_dt is not None:
+        if not (np.isfinite(resample_dt) and resample_dt > 0):
+            raise ValueError(f"resample_dt must be a positive number of seconds, got {resample_dt!r}")
+        new_d, new_t = [], []
+        for y, t in zip(ds.demos, ds.times):
+            n = int(np.floor((t[-1] - t[0]) / resample_dt + 1e-9)) + 1
+            t_new = t[0] + np.arange(n) * resample_dt
+            yy = np.empty((n, y.shape[1]))
+            for j in range(y.shape[1]):
+                yy[:, j] = np.interp(t_new, t, y[:, j])
+            new_d.append(yy)
+            new_t.append(t_new)
+        ds.demos, ds.times, ds.dt = new_d, new_t, float(resample_dt)
+    return ds
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def save_demonstrations(path, demos, times=None, *, dt=None, columns=None, observed=None) -> Path:
+    """Write demonstrations in one of the formats :func:`load_demonstrations` reads.
+
+    The format follows ``path``: ``*.csv`` writes one CSV file (with a ``demo`` column when
+    there is more than one demonstration), ``*.npz`` one NPZ archive, anything else a folder
+    with one CSV file per demonstration (``demo_000.csv``, ...).  Numbers are written with
+    full precision, so a round trip is exact.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file or folder (parent folders are created).
+    demos : Demonstrations or list of ndarray, shape (T_i, D)
+        The demonstrations.  A :class:`Demonstrations` also supplies ``times``,
+        ``columns`` and ``observed`` unless they are given.
+    times : list of ndarray, shape (T_i,), optional
+        Time stamps in seconds; default ``arange(T_i) * dt``.
+    dt : float, optional
+        Sampling interval used when ``times`` is not given.
+    columns : sequence of str, optional
+        Column names (default ``dof_0``, ``dof_1``, ...).  ``time`` and ``demo`` are
+        reserved.
+    observed : sequence of str or int, optional
+        The observed agent's columns, stored in the file (``# observed:`` comment in CSV,
+        ``observed`` array in NPZ).
+
+    Returns
+    -------
+    Path
+        The written file or folder.
+    """
+    from .._validation import as_2d_finite, check_times
+
+    if isinstance(demos, Demonstrations):
+        times = demos.times if times is None else times
+        columns = demos.columns if columns is None else columns
+        if observed is None and demos.observed_dofs is not None:
+            observed = [demos.columns[i] for i in demos.observed_dofs]
+        dt = demos.dt if dt is None else dt
+        demos = demos.demos
+    if isinstance(demos, np.ndarray) and demos.ndim == 2:
+        demos = [demos]
+    arrs = [as_2d_finite(d, f"demos[{i}]") for i, d in enumerate(demos)]
+    if not arrs:
+        raise ValueError("demos is empty; nothing to save")
+    D = arrs[0].shape[1]
+    for i, a in enumerate(arrs):
+        if a.shape[1] != D:
+            raise ValueError(f"demos[{i}] has {a.shape[1]} columns, demos[0] has {D}")
+    if columns is None:
+        columns = [f"dof_{j}" for j in range(D)]
+    columns = [str(c) for c in columns]
+    if len(columns) != D:
+        raise ValueError(f"columns has {len(columns)} names for {D} columns")
+    bad = [c for c in columns if c in (TIME, DEMO) or not c or "," in c or c.startswith("#")]
+    if bad or len(set(columns)) != D:
+        raise ValueError(f"columns must be unique, non-empty, without commas and not 'time'/'demo': {columns}")
+    if times is None:
+        if dt is None:
+            raise ValueError("give times or dt")
+        times = [np.arange(a.shape[0]) * float(dt) for a in arrs]
+    times = [check_times(t, a.shape[0], f"times[{i}]") for i, (t, a) in enumerate(zip(times, arrs))]
+    obs_names = None
+    if observed is not None:
+        obs_names = [columns[i] for i in select_columns(columns, observed, where="observed")]
+    p = Path(path).expanduser()
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        p.parent.mkdir(parents=True, exist_ok=True)
+        out = {"columns": np.array(columns, dtype=str)}
+        for i, (a, t) in enumerate(zip(arrs, times)):
+            out[f"demo_{i:03d}"] = a
+            out[f"time_{i:03d}"] = t
+        if obs_names:
+            out["observed"] = np.array(obs_names, dtype=str)
+        np.savez(p, **out)
+        return p
+
+    def write_csv(fp: Path, items):
+        with open(fp, "w", newline="", encoding="utf-8") as fh:
+            fh.write("# interprim demonstrations (see docs/data-formats.md)\n")
+            if obs_names:
+                fh.write("# observed: " + ", ".join(obs_names) + "\n")
+            multi = len(items) > 1
+            fh.write(",".join(([DEMO] if multi else []) + [TIME] + columns) + "\n")
+            for k, (a, t) in items:
+                lead = f"{k}," if multi else ""
+                for r in range(a.shape[0]):
+                    fh.write(lead + _fmt(t[r]) + "," + ",".join(_fmt(v) for v in a[r]) + "\n")
+
+    if suffix == ".csv":
+        p.parent.mkdir(parents=True, exist_ok=True)
+        write_csv(p, list(enumerate(zip(arrs, times))))
+        return p
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{p} exists and is not a folder; use a .csv or .npz name to write a file")
+    p.mkdir(parents=True, exist_ok=True)
+    for i, (a, t) in enumerate(zip(arrs, times)):
+        write_csv(p / f"demo_{i:03d}.csv", [(i, (a, t))])
+    return p

@@ -17,6 +17,7 @@ from .errors import InterprimError
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [
     "interprim.commands",
+    "interprim.server.cli",
 ]
 
 

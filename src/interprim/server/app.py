@@ -1,0 +1,706 @@
+"""The WebSocket server: sessions, limits, the HTTP side (page, static files, JSON API).
+
+One WebSocket connection is one *session*.  Inside it the client says ``hello``,
+``open``\\s a model (or ``auto`` recognition among several), streams frames and
+receives one ``prediction`` (or ``error``) per frame, in order.  Each session
+owns its own ``model.stream()``; nothing is shared between sessions except the
+read-only fitted models.
+
+Concurrency: the asyncio event loop does all the I/O; the CPU-bound
+``stream.update`` + trajectory + JSON encoding of a frame runs either inline on
+the loop (``workers=0``) or in a thread pool (``workers=N``).  Per-session
+ordering holds in both modes because a session awaits frame ``k`` before it
+reads frame ``k+1``.  Replies go through a bounded per-session queue drained by
+a writer task, so a client that never reads is detected (queue full) and closed
+with code 1008 instead of growing the server's memory.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import http
+import ipaddress
+import itertools
+import json
+import logging
+import mimetypes
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
+
+import numpy as np
+
+from . import protocol as P
+from .models import ModelEntry
+
+log = logging.getLogger("interprim.server")
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+LOOPBACK_NAMES = {"localhost", "127.0.0.1", "::1"}
+
+
+@dataclass
+class ServerConfig:
+    """Limits and options of a server (the ``interprim serve`` flags)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8765  # 0 = any free port (tests)
+    token: str | None = None
+    max_sessions: int = 64
+    max_message_bytes: int = 65536
+    max_rate_hz: float = 500.0  # messages per second per session (token bucket) ...
+    rate_burst: int = 50  # ... with this many messages of burst
+    workers: int = 0  # 0 = compute inline on the event loop; N = thread pool of N
+    send_queue: int = 256  # replies pending for one client before it counts as "not reading"
+    write_limit: int = 256 * 1024  # bytes buffered in the socket writer before send() waits
+    max_points: int = 500
+    default_points: int = 50
+    max_errors: int = 200  # consecutive protocol errors before the session is closed
+    hello_timeout: float = 10.0
+    close_timeout: float = 2.0
+    ping_interval: float | None = 20.0
+    allowed_origins: tuple = ()
+    log_errors_per_session: int = 10
+
+    def validate(self) -> None:
+        if not is_loopback(self.host) and not self.token:
+            raise ValueError(
+                f"refusing to listen on {self.host!r} without a token: anyone who can reach it could use the "
+                "server. Pass --token (or set INTERPRIM_TOKEN), or keep the default --host 127.0.0.1"
+            )
+        for name in ("max_sessions", "max_message_bytes", "send_queue", "max_points", "rate_burst", "max_errors"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if not self.max_rate_hz > 0:
+            raise ValueError(f"max_rate_hz must be positive, got {self.max_rate_hz}")
+        if self.workers < 0:
+            raise ValueError(f"workers must be >= 0, got {self.workers}")
+        if not 2 <= self.default_points <= self.max_points:
+            raise ValueError(f"default_points must be in [2, max_points={self.max_points}]")
+        if self.max_message_bytes < 256:
+            raise ValueError("max_message_bytes must be at least 256 (a frame message needs room)")
+
+
+def is_loopback(host: str) -> bool:
+    if host in LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class _Bucket:
+    """Token bucket: ``rate`` messages per second, ``burst`` at most in one go."""
+
+    def __init__(self, rate: float, burst: int):
+        self.rate, self.burst = float(rate), float(burst)
+        self.tokens = float(burst)
+        self.last = time.monotonic()
+
+    def take(self) -> bool:
+        now = time.monotonic()
+        self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        self.last = now
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+
+@dataclass
+class _Open:
+    """An opened model (or set of candidates) inside a session."""
+
+    name: str  # requested: a model name or "auto"
+    entries: list
+    streams: list
+    cols: list  # per candidate: data columns returned in mean/std/goal
+    points: int
+    std: bool
+    frames: int = 0
+    update_kw: dict = field(default_factory=dict)
+
+
+_CLOSE = object()
+
+
+@dataclass
+class _Session:
+    id: int
+    ws: object
+    peer: str
+    out: asyncio.Queue
+    bucket: _Bucket
+    ready: bool = False
+    open: _Open | None = None
+    seq: int = 0
+    errors: int = 0
+    consecutive_errors: int = 0
+    predictions: int = 0
+    closing: bool = False
+    writer: asyncio.Task | None = None
+    close_reason: str = ""
+    error_counts: dict = field(default_factory=dict)
+
+
+def _round(a: np.ndarray) -> list:
+    return np.round(np.asarray(a, dtype=np.float64), 6).tolist()
+
+
+def _accepts_need_cov(stream) -> bool:
+    import inspect
+
+    try:
+        return "need_cov" in inspect.signature(stream.update).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
+    """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound)."""
+    t0 = time.perf_counter()
+    preds = [s.update(frame, **op.update_kw) for s in op.streams]
+    op.frames += 1
+    probs = None
+    best = 0
+    if len(preds) > 1:
+        lls = [float(p.log_likelihood) for p in preds]
+        probs = P.softmax(lls)
+        best = int(np.argmax(probs))
+    entry, pred, cols = op.entries[best], preds[best], op.cols[best]
+    mean = np.asarray(pred.trajectory(op.points))[:, cols]
+    out = {
+        "type": "prediction",
+        "seq": seq,
+        "model": entry.name,
+        "phase": float(pred.phase),
+        "x": float(pred.x),
+        "speed": float(pred.speed),
+        "duration": float(pred.duration),
+        "log_likelihood": float(pred.log_likelihood),
+        "columns": cols,
+        "mean": _round(mean),
+        "goal": _round(np.asarray(pred.goal)[cols]),
+    }
+    if op.std:
+        out["std"] = _round(np.asarray(pred.std(op.points))[:, cols])
+    if probs is not None:
+        out["probabilities"] = {e.name: round(p, 6) for e, p in zip(op.entries, probs)}
+    if t is not None:
+        out["t"] = t
+    out["compute_ms"] = round((time.perf_counter() - t0) * 1e3, 4)
+    try:
+        return P.dumps(out)
+    except ValueError:
+        # The core produced NaN/inf: never put them on the wire.
+        raise FloatingPointError("the model produced non-finite values for this frame") from None
+
+
+class InterprimServer:
+    """A streaming server for fitted models.
+
+    Parameters
+    ----------
+    models : dict of name -> ModelEntry
+        From :func:`interprim.server.models.load_models` or :func:`interprim.server.demo.demo_models`.
+    config : ServerConfig
+    extra_info : dict, optional
+        Extra JSON sent by ``GET /api/info`` (e.g. the sim's arm geometry).
+    """
+
+    def __init__(self, models: dict, config: ServerConfig | None = None, extra_info: dict | None = None):
+        self.config = config or ServerConfig()
+        self.config.validate()
+        if not models:
+            raise ValueError("the server needs at least one model (model files, or --demo)")
+        self.models: dict[str, ModelEntry] = dict(models)
+        self.extra_info = dict(extra_info or {})
+        self._ids = itertools.count(1)
+        self.sessions: dict[int, _Session] = {}
+        self.stats = {"sessions": 0, "predictions": 0, "errors": 0, "rejected": 0}
+        self._pool = ThreadPoolExecutor(self.config.workers, thread_name_prefix="ip-worker") if self.config.workers else None
+        self._server = None
+        self._static = self._load_static()
+        self.port = None
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self):
+        from websockets.asyncio.server import serve
+
+        c = self.config
+        self._server = await serve(
+            self._handler,
+            c.host,
+            c.port,
+            process_request=self._process_request,
+            max_size=c.max_message_bytes,
+            max_queue=16,
+            write_limit=c.write_limit,
+            compression=None,
+            close_timeout=c.close_timeout,
+            ping_interval=c.ping_interval,
+            ping_timeout=c.ping_interval,
+            logger=logging.getLogger("interprim.server.websockets"),
+        )
+        sock = self._server.sockets[0]
+        self.port = sock.getsockname()[1]
+        log.info(
+            "serving %d model(s) %s on http://%s:%d/ (WebSocket at /ws, protocol v%d, %s)",
+            len(self.models),
+            sorted(self.models),
+            c.host,
+            self.port,
+            P.PROTOCOL_VERSION,
+            f"{c.workers} worker thread(s)" if c.workers else "inline compute",
+        )
+        return self
+
+    async def serve_forever(self):
+        if self._server is None:
+            await self.start()
+        await self._server.serve_forever()
+
+    async def stop(self):
+        if self._server is not None:
+            self._server.close(close_connections=True)
+            await self._server.wait_closed()
+            self._server = None
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+    @property
+    def url(self) -> str:
+        host = self.config.host
+        if ":" in host:
+            host = f"[{host}]"
+        return f"http://{host}:{self.port}/"
+
+    @property
+    def ws_url(self) -> str:
+        return self.url.replace("http://", "ws://", 1) + "ws"
+
+    # ------------------------------------------------------------------ HTTP side
+    def _load_static(self) -> dict:
+        files = {}
+        if STATIC_DIR.is_dir():
+            for p in STATIC_DIR.iterdir():
+                if p.is_file() and not p.name.startswith("."):
+                    ctype = mimetypes.guess_type(p.name)[0] or "application/octet-stream"
+                    if p.suffix == ".js":
+                        ctype = "text/javascript"
+                    if ctype.startswith("text/") or ctype.endswith("json"):
+                        ctype += "; charset=utf-8"
+                    files[p.name] = (p.read_bytes(), ctype)
+        return files
+
+    def info(self) -> dict:
+        c = self.config
+        from .. import __version__
+
+        return {
+            "server": f"interprim {__version__}",
+            "protocol": P.PROTOCOL_VERSION,
+            "token_required": bool(c.token),
+            "models": [m.describe() for m in self.models.values()],
+            "limits": {
+                "max_sessions": c.max_sessions,
+                "max_message_bytes": c.max_message_bytes,
+                "max_rate_hz": c.max_rate_hz,
+                "rate_burst": c.rate_burst,
+                "max_points": c.max_points,
+                "send_queue": c.send_queue,
+            },
+            **self.extra_info,
+        }
+
+    def _http(self, conn, status: int, body: bytes, ctype: str):
+        from websockets.datastructures import Headers
+        from websockets.http11 import Response
+
+        st = http.HTTPStatus(status)
+        headers = Headers(
+            [
+                ("Content-Type", ctype),
+                ("Content-Length", str(len(body))),
+                ("Cache-Control", "no-store"),
+                ("X-Content-Type-Options", "nosniff"),
+                ("Referrer-Policy", "no-referrer"),
+                (
+                    "Content-Security-Policy",
+                    "default-src 'self'; connect-src 'self' ws: wss:; img-src 'self' data:; "
+                    "style-src 'self' 'unsafe-inline'; frame-ancestors 'none'",
+                ),
+                ("Connection", "close"),
+            ]
+        )
+        return Response(st.value, st.phrase, headers, body)
+
+    def _json(self, conn, status: int, obj) -> object:
+        return self._http(conn, status, json.dumps(obj).encode(), "application/json; charset=utf-8")
+
+    def _token_ok(self, given) -> bool:
+        want = self.config.token
+        if not want:
+            return True
+        return isinstance(given, str) and hmac.compare_digest(given.encode(), want.encode())
+
+    def _origin_ok(self, request) -> bool:
+        origin = request.headers.get("Origin")
+        if origin is None or origin in self.config.allowed_origins or "*" in self.config.allowed_origins:
+            return True  # non-browser clients send no Origin
+        try:
+            netloc = urlsplit(origin).netloc
+        except ValueError:
+            return False
+        return netloc == request.headers.get("Host")
+
+    def _process_request(self, conn, request):
+        try:
+            parts = urlsplit(request.path)
+        except ValueError:
+            return self._json(conn, 400, {"error": "bad request path"})
+        path, query = parts.path, parse_qs(parts.query)
+        if path == "/ws":
+            if not self._origin_ok(request):
+                log.warning("rejected WebSocket from origin %r (host %r): cross-site request",
+                            request.headers.get("Origin"), request.headers.get("Host"))
+                self.stats["rejected"] += 1
+                return self._json(conn, 403, {"error": "cross-origin WebSocket refused; start the server with --allow-origin"})
+            return None  # go on with the WebSocket handshake
+        if path in ("/", "/index.html"):
+            body, ctype = self._static["index.html"]
+            return self._http(conn, 200, body, ctype)
+        if path.startswith("/static/"):
+            name = path[len("/static/"):]
+            if name in self._static:  # whitelist of files present at start: no path traversal
+                body, ctype = self._static[name]
+                return self._http(conn, 200, body, ctype)
+            return self._json(conn, 404, {"error": f"no static file {name!r}"})
+        if path == "/healthz":
+            return self._http(conn, 200, b"ok\n", "text/plain; charset=utf-8")
+        if path.startswith("/api/"):
+            auth = request.headers.get("Authorization", "")
+            token = query.get("token", [None])[0] or (auth[7:] if auth.startswith("Bearer ") else None)
+            if not self._token_ok(token):
+                return self._json(conn, 401, {"error": "missing or wrong token (?token=... or Authorization: Bearer)"})
+            if path == "/api/info":
+                return self._json(conn, 200, self.info())
+            if path.startswith("/api/replay/"):
+                name = path[len("/api/replay/"):]
+                entry = self.models.get(name)
+                if entry is None or "replay" not in entry.meta:
+                    return self._json(conn, 404, {"error": f"no replay data for model {name!r}"})
+                return self._json(conn, 200, entry.meta["replay"])
+        return self._json(conn, 404, {"error": f"not found: {path}"})
+
+    # ------------------------------------------------------------------ sessions
+    async def _handler(self, ws):
+        c = self.config
+        sid = next(self._ids)
+        try:
+            peer = "%s:%s" % tuple(ws.remote_address[:2])
+        except Exception:
+            peer = "?"
+        if len(self.sessions) >= c.max_sessions:
+            self.stats["rejected"] += 1
+            log.warning("session %d from %s refused: server full (%d sessions)", sid, peer, c.max_sessions)
+            await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {c.max_sessions} sessions; try again later")
+            return
+        s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
+        self.sessions[sid] = s
+        self.stats["sessions"] += 1
+        s.writer = asyncio.get_running_loop().create_task(self._writer(s))
+        log.info("session %d: connected from %s (%d active)", sid, peer, len(self.sessions))
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while not s.closing:
+                try:
+                    if not s.ready:
+                        async with asyncio.timeout(c.hello_timeout):
+                            data = await ws.recv()
+                    else:
+                        data = await ws.recv()
+                except TimeoutError:
+                    self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
+                    break
+                await self._on_message(s, data)
+        except ConnectionClosed as exc:
+            rcvd = exc.rcvd
+            if s.closing:
+                pass
+            elif rcvd is None:
+                log.warning("session %d: client disconnected without a close frame after %d frame(s)", sid, s.seq)
+            elif rcvd.code == P.CLOSE_TOO_BIG or (exc.sent is not None and exc.sent.code == P.CLOSE_TOO_BIG):
+                reason = exc.sent.reason if exc.sent is not None else rcvd.reason
+                log.warning("session %d: closed with 1009 message too big (%s)", sid, reason)
+            elif exc.sent is not None and exc.sent.code not in (1000, 1001):
+                log.warning("session %d: closed by server: %d %s", sid, exc.sent.code, exc.sent.reason)
+            else:
+                log.info("session %d: client closed (%d %s)", sid, rcvd.code, rcvd.reason)
+        except Exception:  # never let a session bug escape to the library's handler
+            log.exception("session %d: internal error; closing the session", sid)
+            self._fatal(s, P.CLOSE_INTERNAL, "internal server error (logged)")
+        finally:
+            self.sessions.pop(sid, None)
+            if s.closing and s.writer is not None:
+                try:  # let the writer send the queued error + close frame
+                    await asyncio.wait_for(asyncio.shield(s.writer), c.close_timeout + 1.0)
+                except (TimeoutError, asyncio.CancelledError, Exception):
+                    pass
+            if s.writer is not None and not s.writer.done():
+                s.writer.cancel()
+            extra = f", errors {s.error_counts}" if s.error_counts else ""
+            log.info("session %d: ended (%d frames, %d predictions%s)", sid, s.seq, s.predictions, extra)
+
+    async def _writer(self, s: _Session):
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while True:
+                item = await s.out.get()
+                if isinstance(item, tuple) and item and item[0] is _CLOSE:
+                    await s.ws.close(item[1], item[2])
+                    return
+                await s.ws.send(item)
+        except ConnectionClosed:
+            return
+
+    def _send(self, s: _Session, text: str) -> None:
+        if s.closing:
+            return
+        try:
+            s.out.put_nowait(text)
+        except asyncio.QueueFull:
+            reason = f"client is not reading: {self.config.send_queue} replies pending"
+            log.warning("session %d: closing 1008: %s", s.id, reason)
+            s.closing = True
+            s.close_reason = reason
+            # Bypass the full queue: close now (the library aborts the TCP connection after close_timeout).
+            s.writer.cancel()
+            s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
+
+    def _fatal(self, s: _Session, code: int, reason: str, message: dict | None = None) -> None:
+        if s.closing:
+            return
+        log.warning("session %d: closing %d: %s", s.id, code, reason)
+        if message is not None:
+            self._send(s, P.dumps(message))
+        if s.closing:  # _send found the queue full
+            return
+        s.closing = True
+        s.close_reason = reason
+        try:
+            s.out.put_nowait((_CLOSE, code, reason[:120]))
+        except asyncio.QueueFull:
+            s.writer.cancel()
+            s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
+
+    def _error(self, s: _Session, exc: P.ProtocolError, seq=None) -> None:
+        s.errors += 1
+        s.consecutive_errors += 1
+        s.error_counts[exc.code] = s.error_counts.get(exc.code, 0) + 1
+        self.stats["errors"] += 1
+        if s.errors <= self.config.log_errors_per_session:
+            log.warning("session %d: %s: %s%s", s.id, exc.code, exc.message, f" (seq {seq})" if seq else "")
+        elif s.errors == self.config.log_errors_per_session + 1:
+            log.warning("session %d: further errors are counted, not logged", s.id)
+        msg = P.error(exc.code, exc.message, seq=seq)
+        if exc.fatal:
+            self._fatal(s, P.CLOSE_POLICY, exc.message, msg)
+        elif s.consecutive_errors >= self.config.max_errors:
+            self._send(s, P.dumps(msg))
+            self._fatal(s, P.CLOSE_POLICY, f"too many protocol errors ({s.consecutive_errors} in a row)")
+        else:
+            self._send(s, P.dumps(msg))
+
+    async def _on_message(self, s: _Session, data) -> None:
+        c = self.config
+        is_frame = isinstance(data, (bytes, bytearray, memoryview))
+        msg = None
+        if not is_frame:
+            try:
+                msg = P.parse_text(data)
+            except P.ProtocolError as exc:
+                if not s.bucket.take():
+                    return self._error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"))
+                return self._error(s, exc)
+            is_frame = msg["type"] == "frame"
+        seq = None
+        if is_frame:
+            s.seq += 1
+            seq = s.seq
+        if not s.bucket.take():
+            return self._error(
+                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"), seq
+            )
+        try:
+            if msg is None or msg["type"] == "frame":
+                await self._on_frame(s, data, msg, seq)
+            else:
+                self._on_control(s, msg)
+        except P.ProtocolError as exc:
+            self._error(s, exc, seq)
+
+    def _on_control(self, s: _Session, msg: dict) -> None:
+        mtype = msg["type"]
+        if mtype == "hello":
+            h = P.check_hello(msg)
+            if not self._token_ok(h["token"]):
+                raise P.ProtocolError("unauthorized", "missing or wrong token in hello", fatal=True)
+            s.ready = True
+            s.consecutive_errors = 0
+            reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
+            reply.update({k: v for k, v in self.info().items() if k in ("server", "models", "limits")})
+            self._send(s, P.dumps(reply))
+            return
+        if not s.ready:
+            raise P.ProtocolError("not_ready", f"send hello first (got {mtype!r})")
+        if mtype == "open":
+            o = P.check_open(msg, self.models, default_points=self.config.default_points, max_points=self.config.max_points)
+            entries = [self.models[n] for n in o["candidates"]]
+            streams, cols = [], []
+            for e in entries:
+                try:
+                    streams.append(e.model.stream(robot_state=o["robot_state"]))
+                except (ValueError, TypeError) as exc:
+                    raise P.ProtocolError("bad_message", f"open.robot_state for model {e.name!r}: {exc}") from None
+                dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
+                cols.append(list(range(e.n_dofs)) if dofs == "all" else e.controlled_dofs)
+            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
+            if _accepts_need_cov(streams[0]):  # mean-only updates are much cheaper when no band is asked for
+                s.open.update_kw = {"need_cov": o["std"]}
+            s.consecutive_errors = 0
+            log.info("session %d: opened %s%s", s.id, o["model"],
+                     f" among {o['candidates']}" if o["model"] == "auto" else "")
+            self._send(s, P.dumps({
+                "type": "opened",
+                "model": o["model"],
+                "candidates": o["candidates"],
+                "n_observed": entries[0].n_observed,
+                "columns": cols[0] if len(cols) == 1 else {e.name: cl for e, cl in zip(entries, cols)},
+                "points": o["points"],
+                "std": o["std"],
+            }))
+            return
+        if s.open is None:
+            raise P.ProtocolError("not_open", f"{mtype!r} needs an open session: send open first")
+        if mtype == "reset":
+            for st in s.open.streams:
+                st.reset()
+            s.open.frames = 0
+            s.consecutive_errors = 0
+            self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
+        elif mtype == "close":
+            s.open = None
+            s.consecutive_errors = 0
+            self._send(s, P.dumps({"type": "closed", "seq": s.seq}))
+
+    async def _on_frame(self, s: _Session, data, msg, seq: int) -> None:
+        if not s.ready:
+            raise P.ProtocolError("not_ready", "send hello first (got a frame)")
+        op = s.open
+        if op is None:
+            raise P.ProtocolError("not_open", "frame needs an open session: send open first")
+        n = op.entries[0].n_observed
+        if msg is None:
+            frame, t = P.decode_binary_frame(bytes(data), n), None
+        else:
+            frame, t = P.check_frame(msg, n)
+        try:
+            if self._pool is None:
+                text = compute_prediction(op, frame, seq, t)
+            else:
+                loop = asyncio.get_running_loop()
+                text = await loop.run_in_executor(self._pool, compute_prediction, op, frame, seq, t)
+        except Exception as exc:
+            self.stats["errors"] += 1
+            log.exception("session %d: prediction failed at seq %d", s.id, seq)
+            self._send(s, P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq)))
+            return
+        if s.open is not op:  # closed/reopened while computing
+            return
+        s.consecutive_errors = 0
+        s.predictions += 1
+        self.stats["predictions"] += 1
+        self._send(s, text)
+
+
+class ServerThread:
+    """Run an :class:`InterprimServer` in a background thread with its own event loop.
+
+    >>> with ServerThread(server) as st:   # doctest: +SKIP
+    ...     Client(st.ws_url).open("highfive")
+    """
+
+    def __init__(self, server: InterprimServer):
+        self.server = server
+        self.loop = None
+        self._thread = None
+        self._ready = threading.Event()
+        self._error = None
+
+    def start(self) -> "ServerThread":
+        def run():
+            loop = asyncio.new_event_loop()
+            self.loop = loop
+            asyncio.set_event_loop(loop)
+            try:
+                loop.run_until_complete(self.server.start())
+            except BaseException as exc:  # report bind errors to the caller
+                self._error = exc
+                self._ready.set()
+                loop.close()
+                return
+            self._ready.set()
+            try:
+                loop.run_forever()
+            finally:
+                loop.run_until_complete(self.server.stop())
+                loop.close()
+
+        self._thread = threading.Thread(target=run, name="interprim-server", daemon=True)
+        self._thread.start()
+        self._ready.wait(30)
+        if self._error is not None:
+            raise self._error
+        return self
+
+    def stop(self) -> None:
+        if self.loop is not None and self._thread is not None and self._thread.is_alive():
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self._thread.join(15)
+
+    @property
+    def url(self) -> str:
+        return self.server.url
+
+    @property
+    def ws_url(self) -> str:
+        return self.server.ws_url
+
+    def call(self, fn, *args):
+        """Run ``fn(*args)`` on the server's loop and return its result (for tests)."""
+        import concurrent.futures
+
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+
+        def go():
+            try:
+                fut.set_result(fn(*args))
+            except BaseException as exc:
+                fut.set_exception(exc)
+
+        self.loop.call_soon_threadsafe(go)
+        return fut.result(10)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()

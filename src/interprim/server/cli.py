@@ -1,0 +1,137 @@
+"""``interprim serve``: the streaming server and live page (top-level imports stay light)."""
+
+from __future__ import annotations
+
+import os
+
+DESCRIPTION = """\
+Serve fitted models over WebSocket (protocol: docs/protocol.md) and a live page in the browser.
+
+A client (a robot controller, the page, interprim.server.Client) opens a session on one model,
+or on "auto" to let the server recognise the interaction among the loaded models, streams the
+observed agent's frames and gets after each frame the phase, the recognised model and the
+controlled agent's predicted trajectory (mean, optionally a std band).
+
+Open http://127.0.0.1:8765/ for the page (simulated high-five and handwriting completion:
+start with --demo to fit demo models at start-up)."""
+
+EPILOG = """\
+examples:
+  interprim serve --demo                      # fit the demo models, open http://127.0.0.1:8765/
+  interprim serve highfive.npz letters/a.npz  # model names are the file stems
+  interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
+
+Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in
+their hello message and the page reads it from ?token=... in its URL."""
+
+
+def add_parser(subparsers) -> None:
+    import argparse
+
+    p = subparsers.add_parser(
+        "serve",
+        help="serve models over WebSocket with a live browser page",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("models", nargs="*", metavar="MODEL", help="saved model files (.npz); name = file stem")
+    p.add_argument("--demo", action="store_true",
+                   help="also fit demo models at start-up: 'highfive' (interprim.sim) and letters c/s/u")
+    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0 = any free port)")
+    p.add_argument("--token", default=None,
+                   help="shared token clients must send in hello (default: $INTERPRIM_TOKEN); "
+                        "required when --host is not loopback")
+    p.add_argument("--max-sessions", type=int, default=64, help="concurrent sessions (default 64)")
+    p.add_argument("--max-message-bytes", type=int, default=65536,
+                   help="largest accepted message; bigger ones close the session with 1009 (default 65536)")
+    p.add_argument("--max-rate-hz", type=float, default=500.0,
+                   help="messages per second per session; extra ones are dropped with a rate_limited error "
+                        "(default 500)")
+    p.add_argument("--rate-burst", type=int, default=50, help="burst allowance of the rate limit (default 50)")
+    p.add_argument("--workers", type=int, default=0,
+                   help="threads for the prediction maths; 0 = on the event loop (default 0, fastest "
+                        "for small models: see benchmarks/SERVER_RESULTS.md)")
+    p.add_argument("--send-queue", type=int, default=256,
+                   help="replies pending for one client before it is closed as not reading (default 256)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
+                   help="extra browser Origin allowed to open WebSockets (default: same host only)")
+    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import asyncio
+    import logging
+
+    from ..errors import InterprimError, ModelFileError
+
+    logging.basicConfig(level=getattr(logging, args.log_level), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    log = logging.getLogger("interprim.server")
+    if args.log_level != "DEBUG":  # the websockets library logs every HTTP request at INFO
+        logging.getLogger("interprim.server.websockets").setLevel(logging.WARNING)
+    try:
+        import websockets  # noqa: F401
+    except ImportError:
+        raise InterprimError("interprim serve needs the 'websockets' package: pip install 'interprim[serve]'") from None
+    from .app import InterprimServer, ServerConfig
+    from .models import load_models
+
+    if not args.models and not args.demo:
+        raise InterprimError("give at least one MODEL file, or --demo to fit demo models")
+    token = args.token if args.token is not None else (os.environ.get("INTERPRIM_TOKEN") or None)
+    config = ServerConfig(
+        host=args.host,
+        port=args.port,
+        token=token,
+        max_sessions=args.max_sessions,
+        max_message_bytes=args.max_message_bytes,
+        max_rate_hz=args.max_rate_hz,
+        rate_burst=args.rate_burst,
+        workers=args.workers,
+        send_queue=args.send_queue,
+        allowed_origins=tuple(args.allow_origin),
+    )
+    try:
+        config.validate()
+    except ValueError as exc:
+        raise InterprimError(f"bad option: {exc}") from None  # printed as a clean CLI error
+    models = load_models(args.models)  # fails here, before listening, on a corrupt file
+    extra = {}
+    if args.demo:
+        from .demo import demo_models
+
+        log.info("fitting demo models (simulated high-five + letters) ...")
+        for name, entry in demo_models(progress=True).items():
+            if name in models:
+                raise ModelFileError(f"a model file is named {name!r} like a demo model; rename it")
+            models[name] = entry
+    if any(e.meta.get("world") == "highfive" for e in models.values()) or _has_sim():
+        try:
+            from .demo import highfive_world
+
+            extra["highfive_world"] = highfive_world()
+        except Exception:  # the page then draws the arms with default lengths
+            pass
+    server = InterprimServer(models, config, extra_info=extra)
+
+    async def main():
+        await server.start()
+        print(f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True)
+        try:
+            await server.serve_forever()
+        finally:
+            await server.stop()
+
+    try:
+        asyncio.run(main())
+    except OSError as exc:
+        raise InterprimError(f"cannot listen on {args.host}:{args.port}: {exc}") from None
+    return 0
+
+
+def _has_sim() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("interprim.sim") is not None

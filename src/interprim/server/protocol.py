@@ -1,0 +1,236 @@
+"""The interprim streaming protocol: message parsing and validation.
+
+Pure Python (plus numpy for frames); no networking here, so that the rules can be
+tested and reused without a server.  The normative description is
+``docs/protocol.md``; the JSON Schema is ``static/protocol.schema.json``.
+
+Every function here raises :class:`ProtocolError` with a machine-readable
+``code`` and a human-readable message naming the offending field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+import numpy as np
+
+PROTOCOL_VERSION = 1
+"""Version of the wire protocol.  Bumped on any incompatible change."""
+
+SUPPORTED_VERSIONS = (1,)
+
+CLIENT_TYPES = ("hello", "open", "frame", "reset", "close")
+
+# Error codes sent in {"type": "error", "code": ...}.
+ERROR_CODES = {
+    "bad_json": "the text message is not valid UTF-8 JSON",
+    "bad_message": "the message is not an object, lacks 'type', or a field has the wrong type/value",
+    "unknown_type": "the 'type' field names no client message",
+    "bad_version": "the client's protocol version is not supported",
+    "not_ready": "'hello' must be the first message",
+    "unauthorized": "the hello carried no token or a wrong one (the session is then closed with 1008)",
+    "not_open": "a frame/reset/close was sent with no open session",
+    "unknown_model": "the requested model is not loaded",
+    "bad_frame": "the frame has the wrong length, a non-number, NaN or inf, or a bad binary size",
+    "rate_limited": "the message exceeded the server's rate limit and was dropped",
+    "internal": "the server failed to compute this prediction (logged on the server)",
+}
+
+# WebSocket close codes used by the server (RFC 6455 + IANA registry).
+CLOSE_NORMAL = 1000
+CLOSE_GOING_AWAY = 1001
+CLOSE_POLICY = 1008  # bad token, client that never reads, too many protocol errors
+CLOSE_TOO_BIG = 1009  # message over --max-message-bytes (sent by the websockets library)
+CLOSE_INTERNAL = 1011
+CLOSE_TRY_AGAIN = 1013  # too many sessions
+
+MAX_POINTS_HARD = 2000
+MAX_CANDIDATES = 64
+
+
+class ProtocolError(Exception):
+    """A client message broke the protocol; ``code`` is one of :data:`ERROR_CODES`."""
+
+    def __init__(self, code: str, message: str, *, fatal: bool = False):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+        self.fatal = fatal
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _describe(v) -> str:
+    text = json.dumps(v, allow_nan=True, default=str) if not isinstance(v, str) else repr(v)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def parse_text(data: str) -> dict:
+    """Parse one text message into a dict with a valid ``type``."""
+    try:
+        msg = json.loads(data, parse_constant=_reject_constant)
+    except ProtocolError:
+        raise
+    except (ValueError, RecursionError) as exc:
+        raise ProtocolError("bad_json", f"message is not valid JSON: {exc}") from None
+    if not isinstance(msg, dict):
+        raise ProtocolError("bad_message", f"message must be a JSON object, got {type(msg).__name__}")
+    mtype = msg.get("type")
+    if not isinstance(mtype, str):
+        raise ProtocolError("bad_message", f"message needs a string field 'type', got {_describe(mtype)}")
+    if mtype not in CLIENT_TYPES:
+        raise ProtocolError(
+            "unknown_type", f"unknown message type {_describe(mtype)}; expected one of {list(CLIENT_TYPES)}"
+        )
+    return msg
+
+
+def _reject_constant(name: str):
+    # json.loads accepts the non-standard tokens NaN, Infinity, -Infinity; the protocol does not.
+    raise ProtocolError("bad_json", f"message is not valid JSON: non-standard constant {name} (use finite numbers)")
+
+
+def check_hello(msg: dict) -> dict:
+    """Validate a ``hello``; returns ``{"version": int, "token": str|None, "client": str|None}``."""
+    version = msg.get("version", PROTOCOL_VERSION)
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ProtocolError("bad_message", f"hello.version must be an integer, got {_describe(version)}")
+    if version not in SUPPORTED_VERSIONS:
+        raise ProtocolError(
+            "bad_version",
+            f"protocol version {version} is not supported; this server speaks {list(SUPPORTED_VERSIONS)}",
+            fatal=True,
+        )
+    token = msg.get("token")
+    if token is not None and not isinstance(token, str):
+        raise ProtocolError("bad_message", "hello.token must be a string")
+    client = msg.get("client")
+    if client is not None and not isinstance(client, str):
+        raise ProtocolError("bad_message", "hello.client must be a string")
+    return {"version": version, "token": token, "client": client}
+
+
+def check_open(msg: dict, models: dict, *, default_points: int, max_points: int) -> dict:
+    """Validate an ``open`` against the loaded ``models`` (name -> entry with ``n_observed``)."""
+    name = msg.get("model", "auto")
+    if not isinstance(name, str):
+        raise ProtocolError("bad_message", f"open.model must be a string (a model name or 'auto'), got {_describe(name)}")
+    cands = msg.get("candidates")
+    if name == "auto":
+        if cands is None:
+            cands = list(models)
+        if not isinstance(cands, list) or not cands or not all(isinstance(c, str) for c in cands):
+            raise ProtocolError("bad_message", "open.candidates must be a non-empty list of model names")
+        if len(cands) > MAX_CANDIDATES:
+            raise ProtocolError("bad_message", f"open.candidates has {len(cands)} names; at most {MAX_CANDIDATES}")
+        cands = list(dict.fromkeys(cands))
+        unknown = [c for c in cands if c not in models]
+        if unknown:
+            raise ProtocolError(
+                "unknown_model", f"unknown model(s) {unknown} in open.candidates; loaded: {sorted(models)}"
+            )
+        dims = {c: models[c].n_observed for c in cands}
+        if len(set(dims.values())) != 1:
+            raise ProtocolError(
+                "bad_message",
+                "'auto' needs candidates that observe the same number of DoFs; got "
+                + ", ".join(f"{c}: {d}" for c, d in dims.items())
+                + " (choose them with open.candidates)",
+            )
+    else:
+        if cands is not None:
+            raise ProtocolError("bad_message", "open.candidates is only allowed with model 'auto'")
+        if name not in models:
+            raise ProtocolError("unknown_model", f"unknown model {name!r}; loaded: {sorted(models)} or 'auto'")
+        cands = [name]
+    points = msg.get("points", default_points)
+    if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= max_points:
+        raise ProtocolError("bad_message", f"open.points must be an integer in [2, {max_points}], got {_describe(points)}")
+    std = msg.get("std", False)
+    if not isinstance(std, bool):
+        raise ProtocolError("bad_message", f"open.std must be true or false, got {_describe(std)}")
+    dofs = msg.get("dofs")
+    if dofs is not None and dofs not in ("controlled", "all"):
+        raise ProtocolError("bad_message", f"open.dofs must be 'controlled' or 'all', got {_describe(dofs)}")
+    robot_state = msg.get("robot_state")
+    if robot_state is not None:
+        if not isinstance(robot_state, list) or not all(_is_number(v) for v in robot_state):
+            raise ProtocolError("bad_message", "open.robot_state must be a list of numbers or null")
+        if not all(math.isfinite(v) for v in robot_state):
+            raise ProtocolError("bad_message", "open.robot_state contains NaN or inf")
+    return {
+        "model": name,
+        "candidates": cands,
+        "points": points,
+        "std": std,
+        "dofs": dofs,
+        "robot_state": robot_state,
+    }
+
+
+def check_frame(msg: dict, n: int) -> tuple[np.ndarray, float | None]:
+    """Validate a JSON ``frame``; returns the float64 frame and the optional echo stamp ``t``."""
+    frame = msg.get("frame")
+    if not isinstance(frame, list):
+        raise ProtocolError("bad_frame", f"frame.frame must be a list of {n} numbers, got {_describe(frame)}")
+    if len(frame) != n:
+        raise ProtocolError("bad_frame", f"frame.frame has {len(frame)} values; this model observes {n} DoFs")
+    for i, v in enumerate(frame):
+        if not _is_number(v):
+            raise ProtocolError("bad_frame", f"frame.frame[{i}] must be a number, got {_describe(v)}")
+    try:
+        arr = np.array(frame, dtype=np.float64)
+    except OverflowError:  # integers beyond float range
+        raise ProtocolError("bad_frame", "frame.frame has an integer too large for a float64") from None
+    if not np.all(np.isfinite(arr)):
+        raise ProtocolError("bad_frame", f"frame.frame contains NaN or inf: {_describe(frame)}")
+    t = msg.get("t")
+    if t is not None and not (_is_number(t) and math.isfinite(t)):
+        raise ProtocolError("bad_message", f"frame.t must be a finite number (echoed back), got {_describe(t)}")
+    return arr, t
+
+
+def decode_binary_frame(data: bytes, n: int) -> np.ndarray:
+    """Decode a binary frame: exactly ``n`` little-endian IEEE-754 float64 values."""
+    if len(data) != 8 * n:
+        raise ProtocolError(
+            "bad_frame",
+            f"binary frame has {len(data)} bytes; expected {8 * n} ({n} little-endian float64 values)",
+        )
+    arr = np.frombuffer(data, dtype="<f8").astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ProtocolError("bad_frame", f"binary frame contains NaN or inf: {arr.tolist()}")
+    return arr
+
+
+def encode_binary_frame(frame) -> bytes:
+    """Encode a frame for the binary form of ``frame`` (little-endian float64)."""
+    values = [float(v) for v in frame]
+    return struct.pack(f"<{len(values)}d", *values)
+
+
+def error(code: str, message: str, **extra) -> dict:
+    out = {"type": "error", "code": code, "message": message}
+    out.update({k: v for k, v in extra.items() if v is not None})
+    return out
+
+
+def dumps(obj) -> str:
+    """Compact JSON; raises ``ValueError`` on NaN/inf (never sent on the wire)."""
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+
+
+def softmax(values) -> list[float]:
+    """Posterior probabilities from log-likelihoods (uniform prior); robust to -inf/NaN."""
+    v = np.asarray(values, dtype=np.float64)
+    v = np.where(np.isnan(v), -np.inf, v)
+    if not np.any(np.isfinite(v)):
+        return [1.0 / v.size] * v.size
+    v = v - np.max(v[np.isfinite(v)])
+    e = np.exp(np.clip(v, -745.0, 0.0))
+    e[~np.isfinite(v)] = 0.0
+    return (e / e.sum()).tolist()

@@ -157,6 +157,7 @@ def solve_reach(
     n_basis: int = 5,
     n_knots: int = 50,
     q_final_guess=None,
+    limit_margin: float = 1e-3,
     maxiter: int = 200,
     ftol: float = 1e-7,
     _basis_cache: dict | None = None,
@@ -187,6 +188,10 @@ def solve_reach(
         Quadrature grid for the attractor cost and the joint-limit constraints.
     q_final_guess : array_like, shape (n,), optional
         Initial guess of the final posture (default: inverse kinematics of ``goal``).
+    limit_margin : float
+        The joint limits are imposed on the ``n_knots`` grid shrunk by this
+        margin (radians), so that the smooth trajectory stays inside the true
+        limits between grid points as well.
     maxiter, ftol : SLSQP options.
 
     Returns
@@ -275,8 +280,8 @@ def solve_reach(
     Q = q_rest + M0 @ res.x.reshape(B1, n)
     if not res.success or np.any(Q < lo - 1e-9) or np.any(Q > hi + 1e-9):
         Lin = np.kron(M0, np.eye(n))  # vec(M0 Z), row-major
-        lo_v = np.tile(lo - q_rest, n_knots)
-        hi_v = np.tile(hi - q_rest, n_knots)
+        lo_v = np.tile(lo + limit_margin - q_rest, n_knots)
+        hi_v = np.tile(hi - limit_margin - q_rest, n_knots)
         Lin2 = np.vstack([Lin, -Lin])
         ineq = {
             "type": "ineq",

@@ -1,0 +1,246 @@
+"""Dynamic movement primitives (paper Sec. III-A, Eq. 1-4, and Eq. 12-15).
+
+The DMP of the paper, for one degree of freedom, in real time ``t``::
+
+    ydd = (alpha_y (beta_y (g - y) - yd / tau) + f(x)) tau^2          (Eq. 1)
+
+In normalised time ``s = t tau`` (``y' = yd / tau``, ``y'' = ydd / tau^2``) the
+same system reads ``y'' = alpha_y (beta_y (g - y) - y') + f(x(s))``: ``tau``
+only stretches time.  All functions here therefore work in normalised time
+and convert to seconds at the edges.
+
+Rearranged so that everything unknown is on the right (Eq. 12-13)::
+
+    y'' + alpha_y y' + alpha_y beta_y y = phi(x)^T w + alpha_y beta_y g = [phi^T, alpha_y beta_y] [w; g]
+
+The left-hand side is the *forcing value* of a recorded movement (Eq. 15,
+:func:`forcing_values`); with ``g`` known it gives the forcing targets of
+Eq. 3 (:func:`forcing_targets`).
+
+Integration (:class:`LinearRollout`) is exact for the linear ODE with the
+forcing held at its mid-step value on a fine grid of ``n_steps`` steps
+(zero-order hold), and, because positions are linear in ``theta = [w, g]``
+for a given start state, it is precomputed once as a linear map.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve, expm
+
+from .basis import Basis
+
+__all__ = ["forcing_targets", "forcing_values", "fit_weights", "LinearRollout"]
+
+
+def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
+    """Forcing targets ``F = y'' - alpha_y (beta_y (g - y) - y')`` (Eq. 3, normalised time).
+
+    ``y, yd, ydd`` have shape ``(T, D)``, ``g`` shape ``(D,)``.
+    """
+    return ydd - alpha_y * (beta_y * (g - y) - yd)
+
+
+def forcing_values(y, yd, ydd, alpha_y: float, beta_y: float):
+    """Forcing values of an observation, Eq. 15: ``f* = y'' - alpha_y (-beta_y y - y')``.
+
+    These equal ``Phi_tilde theta`` (Eq. 13-14) for the movement's parameters.
+    """
+    return ydd + alpha_y * (beta_y * y + yd)
+
+
+def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y: float, ridge: float = 1e-10):
+    """Least-squares DMP parameters of many demonstrations at once (Eq. 3-4).
+
+    The goal of each DoF is its last recorded position (``g = y_T``); the
+    weights solve ``Phi w = F`` in the least-squares sense (Eq. 4) with a tiny
+    ridge for numerical safety.  Demonstrations of the same length share one
+    Cholesky factorisation of ``Phi^T Phi``; all their DoFs are solved in one
+    call.
+
+    Parameters
+    ----------
+    Y_list, Yd_list, Ydd_list : list of ndarray, shape (T_j, D)
+        Positions and first/second derivatives in normalised time.
+
+    Returns
+    -------
+    theta : ndarray, shape (S, D, n_basis + 1)
+        Per demonstration and DoF ``[w_1..w_m, g]``.
+    residual_ms : ndarray, shape (S, D)
+        Mean squared residual ``|F - Phi w|^2 / T`` of the fit.
+    """
+    S = len(Y_list)
+    D = Y_list[0].shape[1]
+    m = basis.n_basis
+    theta = np.empty((S, D, m + 1))
+    resid = np.empty((S, D))
+    groups: dict[int, list[int]] = {}
+    for j, Y in enumerate(Y_list):
+        groups.setdefault(Y.shape[0], []).append(j)
+    for T, idx in groups.items():
+        Phi = basis.phi(np.linspace(0.0, 1.0, T))  # (T, m)
+        PtP = Phi.T @ Phi
+        PtP[np.diag_indices_from(PtP)] += ridge * max(np.trace(PtP) / m, 1e-300)
+        cf = cho_factor(PtP)
+        Yg = np.stack([Y_list[j] for j in idx])  # (n, T, D)
+        g = Yg[:, -1, :]  # (n, D)
+        F = forcing_targets(Yg, np.stack([Yd_list[j] for j in idx]), np.stack([Ydd_list[j] for j in idx]),
+                            g[:, None, :], alpha_y, beta_y)  # (n, T, D)
+        rhs = np.einsum("tm,ntd->mnd", Phi, F).reshape(m, -1)
+        W = cho_solve(cf, rhs).reshape(m, len(idx), D)  # (m, n, D)
+        W = np.transpose(W, (1, 2, 0))  # (n, D, m)
+        theta[idx, :, :m] = W
+        theta[idx, :, m] = g
+        R = F - np.einsum("tm,ndm->ntd", Phi, W)
+        resid[idx] = np.mean(R**2, axis=1)
+    return theta, resid
+
+
+@lru_cache(maxsize=16)
+def _discretisation(alpha_y: float, beta_y: float, n_steps: int):
+    """Exact zero-order-hold discretisation of the DMP's linear part over one step ``1 / n_steps``."""
+    h = 1.0 / n_steps
+    A = np.array([[0.0, 1.0], [-alpha_y * beta_y, -alpha_y]])
+    M = np.zeros((3, 3))
+    M[:2, :2] = A
+    M[1, 2] = 1.0
+    E = expm(M * h)
+    Ad, Bd = E[:2, :2], E[:2, 2]
+    powers = np.empty((n_steps + 1, 2, 2))
+    powers[0] = np.eye(2)
+    for k in range(n_steps):
+        powers[k + 1] = Ad @ powers[k]
+    return Ad, Bd, powers
+
+
+class LinearRollout:
+    """Integration of Eq. 1 as a precomputed linear map (normalised time).
+
+    For a DoF with start state ``z0 = [y, y']`` at normalised time ``s0`` and
+    parameters ``theta = [w, g]``, the position at ``s >= s0`` is::
+
+        y(s) = e1^T Ad^(k-k0) z0 + (Z[k] - Ad^(k-k0) Z[k0])[0] @ theta
+
+    where ``Z[k]`` is the state reached from rest at ``s = 0`` under unit forcing
+    of each basis function (and of the goal term ``alpha_y beta_y``), computed
+    once by the exact discretisation of the critically damped system on a grid
+    of ``n_steps`` steps.  Times are snapped to that grid (error at most
+    ``0.5 / n_steps`` in normalised time).
+
+    Parameters
+    ----------
+    basis : Basis
+    alpha_y, beta_y : float
+    n_steps : int
+        Number of integration steps over the whole movement (default 2000).
+    """
+
+    def __init__(self, basis: Basis, alpha_y: float, beta_y: float, n_steps: int = 2000):
+        self.basis = basis
+        self.alpha_y = float(alpha_y)
+        self.beta_y = float(beta_y)
+        self.n_steps = int(n_steps)
+        K = self.n_steps
+        Ad, Bd, powers = _discretisation(self.alpha_y, self.beta_y, K)
+        self._powers = powers  # (K+1, 2, 2)
+        mid = (np.arange(K) + 0.5) / K
+        U = basis.phi_tilde(mid, self.alpha_y, self.beta_y)  # (K, q)
+        q = U.shape[1]
+        Z = np.zeros((K + 1, 2, q))
+        # forced response from rest: Z[k+1] = Ad Z[k] + Bd u_k  (one vectorised recursion per step)
+        for k in range(K):
+            Z[k + 1] = Ad @ Z[k] + Bd[:, None] * U[k][None, :]
+        self._Z = Z
+
+    @property
+    def n_params(self) -> int:
+        return self._Z.shape[2]
+
+    def index(self, s) -> np.ndarray:
+        """Grid index of normalised time(s) ``s`` (clipped to [0, 1])."""
+        return np.clip(np.rint(np.asarray(s, dtype=np.float64) * self.n_steps), 0, self.n_steps).astype(np.intp)
+
+    def design(self, s0: float, s_out, derivative: int = 0):
+        """Linear map from start state and ``theta`` to positions (or velocities) at ``s_out``.
+
+        Returns
+        -------
+        free : ndarray, shape (n, 2)
+            Map from the start state ``[y(s0), y'(s0)]``.
+        H : ndarray, shape (n, n_basis + 1)
+            Map from ``theta = [w, g]``.
+
+        ``y(s_out) = free @ z0 + H @ theta``.  ``s0`` is snapped to the grid;
+        outputs are interpolated linearly between grid points, and outputs
+        before ``s0`` are clipped to ``s0``.  ``derivative=1`` gives ``y'`` (normalised time).
+        """
+        k0 = int(self.index(s0))
+        # linear interpolation between the two grid points around each output time
+        u = np.clip(np.asarray(s_out, dtype=np.float64) * self.n_steps, k0, self.n_steps)
+        kf = np.minimum(np.floor(u).astype(np.intp), self.n_steps - 1)
+        kf = np.maximum(kf, k0)
+        a = (u - kf)[:, None]
+        row = int(derivative)
+        free = np.zeros((u.shape[0], 2))
+        H = np.zeros((u.shape[0], self._Z.shape[2]))
+        for k, wgt in ((kf, 1.0 - a), (np.minimum(kf + 1, self.n_steps), a)):
+            P = self._powers[k - k0][:, row, :]  # (n, 2)
+            free += wgt * P
+            H += wgt * (self._Z[k, row, :] - P @ self._Z[k0])
+        return free, H
+
+    def rollout(self, theta, y0, yd0, s0: float = 0.0, s_out=None, n: int = 100):
+        """Positions of several DoFs from a start state (Eq. 1 integrated).
+
+        Parameters
+        ----------
+        theta : ndarray, shape (D, n_basis + 1)
+            ``[w, g]`` per DoF.
+        y0, yd0 : ndarray, shape (D,)
+            Start position and velocity ``y' = dy/ds`` at ``s0``.
+        s0 : float
+            Normalised start time.
+        s_out : ndarray, optional
+            Normalised output times; default ``n`` points from ``s0`` to 1.
+
+        Returns
+        -------
+        ndarray, shape (len(s_out), D)
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        if s_out is None:
+            s_out = np.linspace(s0, 1.0, n)
+        free, H = self.design(s0, s_out)
+        z0 = np.stack([np.broadcast_to(y0, theta.shape[0]), np.broadcast_to(yd0, theta.shape[0])])  # (2, D)
+        return free @ z0 + H @ theta.T
+
+    def integrate(self, theta, y0, yd0=0.0, tau: float = 1.0, dt: float = 0.01, x0: float = 1.0):
+        """Integrate Eq. 1 in real time from phase ``x0`` until ``x = exp(-alpha_x)``.
+
+        Parameters
+        ----------
+        theta : ndarray, shape (D, n_basis + 1)
+            ``[w, g]`` per DoF; change ``g`` to move the goal.
+        y0, yd0 : array_like, shape (D,)
+            Start position and velocity (velocity in units per second).
+        tau : float
+            Time scaling (1 / duration in seconds); larger is faster.
+        dt : float
+            Output sampling interval in seconds.
+        x0 : float
+            Canonical phase at the start (1 = beginning of the movement).
+
+        Returns
+        -------
+        t : ndarray, shape (n,)
+            Time stamps in seconds from the start.
+        y : ndarray, shape (n, D)
+        """
+        s0 = float(-np.log(x0) / self.basis.alpha_x)
+        n = int(np.floor((1.0 - s0) / (tau * dt) + 1e-9)) + 1
+        t = np.arange(n) * dt
+        y = self.rollout(theta, np.asarray(y0, float), np.asarray(yd0, float) / tau, s0, s0 + t * tau)
+        return t, y

@@ -1,0 +1,681 @@
+"""Interaction Primitives: both agents, phase, conditioning and prediction (paper Sec. III, Eq. 1-18).
+
+:class:`InteractionPrimitive` is the public estimator.  ``fit`` turns each
+demonstration into DMP parameters (Eq. 3-4) of every DoF of both agents and
+learns ``p(theta)`` over ``theta = [theta_o, theta_c]`` (Eq. 10).  ``predict``
+estimates the phase of a partial observation of the observed agent by
+open-end DTW (Eq. 5-9), conditions ``p(theta)`` on it with
+``Omega~ = [Omega, 0]`` (Eq. 15-18, Sec. III-D) and returns a
+:class:`Prediction` of the whole interaction.  ``stream`` does the same one
+frame at a time with incremental DTW.
+
+Internally the DoFs are ordered observed agent first, then controlled agent
+(after the optional PCA of each agent, paper Sec. IV); every output is mapped
+back to the demonstrations' column order.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from ._validation import as_2d_finite, as_frame, check_positive, check_times
+from .basis import Basis, canonical_phase
+from .dmp import LinearRollout, fit_weights, forcing_values
+from .errors import NotFittedError
+from .gaussian import GaussianPrior, Posterior, condition, fit_prior, sample
+from .phase import IncrementalDTW, open_end_dtw
+from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
+
+__all__ = ["InteractionPrimitive", "Prediction", "Stream"]
+
+OBSERVATION_MODELS = ("forcing", "position")
+
+
+class InteractionPrimitive:
+    """An Interaction Primitive (Ben Amor et al., ICRA 2014).
+
+    Parameters
+    ----------
+    observed_dofs : sequence of int
+        Columns of the demonstrations that belong to the observed agent (the
+        human).  All other columns are the controlled agent (the robot).
+        Listing every column gives the single-agent model of the paper's
+        handwriting experiments (Fig. 3-4).
+    n_basis : int, default 20
+        Basis functions per DoF (Eq. 2); ``theta`` has ``n_basis + 1`` entries per DoF.
+    alpha_y : float, default 25.0
+        Spring constant of Eq. 1.
+    beta_y : float, optional
+        Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
+    alpha_x : float, default 3.0
+        Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
+    sigma2 : "auto" or float, default "auto"
+        Observation noise variance of Eq. 16.  ``"auto"`` uses the mean
+        squared residual of the observation model on the training
+        demonstrations' own fits (observed DoFs), which sets the noise on the
+        scale of the chosen observation.
+    covariance : {"shrinkage", "ridge", "empirical"}, default "shrinkage"
+        Regularisation of Eq. 10's covariance (see :func:`interprim.gaussian.fit_prior`).
+    ridge : float, default 1e-6
+        Relative diagonal loading of the covariance.
+    observation : {"forcing", "position"}, default "forcing"
+        ``"forcing"`` conditions on forcing values of the observation (Eq. 15,
+        the paper's method); ``"position"`` conditions on the observed
+        positions themselves, which are linear in ``theta`` given the start
+        state (integrated Eq. 1), and needs no second derivatives.
+    smoothing_window : int or None, default None
+        Savitzky-Golay window (frames) used for the derivatives of Eq. 3 and
+        Eq. 15; ``None`` uses central differences (noise-free data).
+    pca_components : None, int or (int, int)
+        Project each agent onto this many principal components before
+        learning (paper Sec. IV); an int applies to both agents.
+    reference : "mean" or int, default "mean"
+        Reference movement for DTW: the mean of the time-normalised
+        demonstrations of the observed agent, or the demonstration with this index
+        (the paper's choice).
+    min_observed : int, default 3
+        Fewer observed frames than this give the prior (no conditioning).
+    n_steps : int, default 2000
+        Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
+    """
+
+    def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
+                 alpha_x: float = 3.0, sigma2="auto", covariance: str = "shrinkage", ridge: float = 1e-6,
+                 observation: str = "forcing", smoothing_window: int | None = None, pca_components=None,
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000):
+        self.observed_dofs = observed_dofs
+        self.n_basis = n_basis
+        self.alpha_y = alpha_y
+        self.beta_y = beta_y
+        self.alpha_x = alpha_x
+        self.sigma2 = sigma2
+        self.covariance = covariance
+        self.ridge = ridge
+        self.observation = observation
+        self.smoothing_window = smoothing_window
+        self.pca_components = pca_components
+        self.reference = reference
+        self.min_observed = min_observed
+        self.n_steps = n_steps
+
+    # ------------------------------------------------------------------ parameters
+    def get_params(self) -> dict:
+        """Hyper-parameters as a JSON-friendly dict (scikit-learn convention)."""
+        obs = self.observed_dofs
+        pca = self.pca_components
+        return {
+            "observed_dofs": [int(i) for i in obs] if obs is not None else None,
+            "n_basis": int(self.n_basis), "alpha_y": float(self.alpha_y),
+            "beta_y": None if self.beta_y is None else float(self.beta_y), "alpha_x": float(self.alpha_x),
+            "sigma2": self.sigma2 if isinstance(self.sigma2, str) else float(self.sigma2),
+            "covariance": self.covariance, "ridge": float(self.ridge), "observation": self.observation,
+            "smoothing_window": None if self.smoothing_window is None else int(self.smoothing_window),
+            "pca_components": None if pca is None else ([int(pca), int(pca)] if isinstance(pca, numbers.Integral)
+                                                        else [int(p) for p in pca]),
+            "reference": self.reference if isinstance(self.reference, str) else int(self.reference),
+            "min_observed": int(self.min_observed), "n_steps": int(self.n_steps),
+        }
+
+    def _check_params(self, n_dofs: int):
+        obs = self.observed_dofs
+        if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
+            raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
+        if not all(isinstance(i, numbers.Integral) for i in obs):
+            raise TypeError(f"observed_dofs must hold integers, got {list(obs)!r}")
+        obs = [int(i) for i in obs]
+        if len(set(obs)) != len(obs):
+            raise ValueError(f"observed_dofs has repeated columns: {obs}")
+        bad = [i for i in obs if not 0 <= i < n_dofs]
+        if bad:
+            raise ValueError(f"observed_dofs {bad} out of range for demonstrations with {n_dofs} columns")
+        if not isinstance(self.n_basis, numbers.Integral) or self.n_basis < 2:
+            raise ValueError(f"n_basis must be an integer >= 2, got {self.n_basis!r}")
+        for name in ("alpha_y", "alpha_x"):
+            check_positive(getattr(self, name), name)
+        if self.beta_y is not None:
+            check_positive(self.beta_y, "beta_y")
+        if self.observation not in OBSERVATION_MODELS:
+            raise ValueError(f"observation must be one of {OBSERVATION_MODELS}, got {self.observation!r}")
+        if not (isinstance(self.sigma2, str) and self.sigma2 == "auto"):
+            check_positive(self.sigma2, "sigma2")
+        if self.smoothing_window is not None and (not isinstance(self.smoothing_window, numbers.Integral)
+                                                  or self.smoothing_window < 3):
+            raise ValueError(f"smoothing_window must be None or an odd integer >= 3, got {self.smoothing_window!r}")
+        if not isinstance(self.min_observed, numbers.Integral) or self.min_observed < 3:
+            raise ValueError(f"min_observed must be an integer >= 3, got {self.min_observed!r}")
+        ctrl = [i for i in range(n_dofs) if i not in set(obs)]
+        pca = self.pca_components
+        if pca is not None:
+            kk = [pca, pca] if isinstance(pca, numbers.Integral) else list(pca)
+            if len(kk) != 2 or not all(isinstance(k, numbers.Integral) and k >= 1 for k in kk):
+                raise ValueError(f"pca_components must be a positive int or a pair of them, got {pca!r}")
+            kk = [min(int(kk[0]), len(obs)), min(int(kk[1]), len(ctrl))]
+        else:
+            kk = None
+        return obs, ctrl, kk
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, demos, dt: float | None = None, times=None):
+        """Learn the Interaction Primitive from demonstrations of both agents.
+
+        Parameters
+        ----------
+        demos : list of array_like, shape (T_j, D)
+            One array per demonstration, time on axis 0, the columns of both
+            agents (``observed_dofs`` for the human).  Lengths may differ.
+        dt : float, optional
+            Sampling interval in seconds of uniformly sampled demos (default 0.01 if
+            neither ``dt`` nor ``times`` is given).
+        times : list of array_like, shape (T_j,), optional
+            Time stamps in seconds per demonstration; irregular sampling is
+            resampled onto a uniform grid at the median interval.
+
+        Returns
+        -------
+        self
+        """
+        if isinstance(demos, np.ndarray) and demos.ndim == 3:
+            demos = list(demos)
+        if not isinstance(demos, (list, tuple)):
+            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
+        if len(demos) < 2:
+            raise ValueError(f"at least 2 demonstrations are needed to learn a distribution, got {len(demos)}")
+        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
+        D = arrays[0].shape[1]
+        for j, a in enumerate(arrays):
+            if a.shape[1] != D:
+                raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
+        obs, ctrl, kk = self._check_params(D)
+        min_frames = max(5, self.smoothing_window or 0)
+        if times is not None:
+            if dt is not None:
+                raise ValueError("give either dt or times, not both")
+            if len(times) != len(arrays):
+                raise ValueError(f"times has {len(times)} entries but there are {len(arrays)} demos")
+            ts = [check_times(t, a.shape[0], f"times[{j}]") for j, (t, a) in enumerate(zip(times, arrays))]
+            dt = float(np.median(np.concatenate([np.diff(t) for t in ts])))
+            arrays = [resample_uniform(a, t, dt=dt)[0] for a, t in zip(arrays, ts)]
+        dt = 0.01 if dt is None else check_positive(dt, "dt")
+        for j, a in enumerate(arrays):
+            if a.shape[0] < min_frames:
+                raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
+
+        beta_y = self.alpha_y / 4.0 if self.beta_y is None else float(self.beta_y)
+        self.beta_y_ = beta_y
+        self.observed_dofs_ = obs
+        self.controlled_dofs_ = ctrl
+        self.n_dofs_ = D
+        self.dt_ = dt
+        self.durations_ = np.array([(a.shape[0] - 1) * dt for a in arrays])
+        self.mean_duration_ = float(self.durations_.mean())
+        self.n_demos_ = len(arrays)
+
+        # optional PCA per agent (Sec. IV)
+        self.pca_observed_ = self.pca_controlled_ = None
+        if kk is not None:
+            self.pca_observed_ = PCA(kk[0]).fit(np.vstack([a[:, obs] for a in arrays]))
+            if ctrl:
+                self.pca_controlled_ = PCA(kk[1]).fit(np.vstack([a[:, ctrl] for a in arrays]))
+        latent = [self._to_latent(a) for a in arrays]
+        self.n_observed_latent_ = self._n_obs_latent()
+        self.n_latent_ = latent[0].shape[1]
+
+        self._setup()
+        # DMP parameters of every demonstration (Eq. 3-4), normalised time s in [0, 1]
+        ders = [derivatives(z, 1.0 / (z.shape[0] - 1), self.smoothing_window) for z in latent]
+        theta, resid = fit_weights([d[0] for d in ders], [d[1] for d in ders], [d[2] for d in ders],
+                                   self.basis_, self.alpha_y, beta_y)
+        self.thetas_ = theta.reshape(len(latent), -1)  # [w_1, g_1, ..., w_N, g_N] (observed DoFs first)
+        self.start_position_ = np.mean([z[0] for z in latent], axis=0)
+        self.start_velocity_ = np.mean([d[1][0] for d in ders], axis=0)
+        self.prior_ = fit_prior(self.thetas_, self.covariance, self.ridge)
+
+        # observation noise (Eq. 16)
+        n_o = self.n_observed_latent_
+        if isinstance(self.sigma2, str):
+            if self.observation == "forcing":
+                s2 = float(np.mean(resid[:, :n_o]))
+            else:
+                errs = []
+                for z, d, th in zip(latent, ders, theta):
+                    s = np.linspace(0.0, 1.0, z.shape[0])
+                    y = self.rollout_.rollout(th[:n_o], d[0][0, :n_o], d[1][0, :n_o], 0.0, s)
+                    errs.append(np.mean((y - z[:, :n_o]) ** 2))
+                s2 = float(np.mean(errs))
+            scale = float(np.mean([np.var(z[:, :n_o]) for z in latent]))
+            self.sigma2_ = max(s2, 1e-10 * max(scale, 1e-12))
+        else:
+            self.sigma2_ = float(self.sigma2)
+
+        # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
+        n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
+        if isinstance(self.reference, str):
+            if self.reference != "mean":
+                raise ValueError(f"reference must be 'mean' or a demo index, got {self.reference!r}")
+            self.reference_ = np.mean([time_normalise(z[:, :n_o], n_ref) for z in latent], axis=0)
+        else:
+            r = int(self.reference)
+            if not 0 <= r < len(latent):
+                raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
+            self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
+        return self
+
+    def _setup(self):
+        """Derived, non-learned state (basis, rollout map, index tables)."""
+        self.basis_ = Basis(int(self.n_basis), float(self.alpha_x))
+        self.rollout_ = LinearRollout(self.basis_, float(self.alpha_y), self.beta_y_, int(self.n_steps))
+        q = self.n_basis + 1
+        self._q = q
+        self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
+
+    def _n_obs_latent(self):
+        return self.pca_observed_.n_components if self.pca_observed_ is not None else len(self.observed_dofs_)
+
+    def _to_latent(self, a):
+        o = a[:, self.observed_dofs_]
+        c = a[:, self.controlled_dofs_]
+        if self.pca_observed_ is not None:
+            o = self.pca_observed_.transform(o)
+        if self.pca_controlled_ is not None:
+            c = self.pca_controlled_.transform(c)
+        return np.hstack([o, c])
+
+    def _observed_to_latent(self, o):
+        return self.pca_observed_.transform(o) if self.pca_observed_ is not None else o
+
+    def _latent_map(self):
+        """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
+        if getattr(self, "_map_cache", None) is not None:
+            return self._map_cache
+        D = self.n_dofs_
+        M = np.zeros((D, self.n_latent_))
+        off = np.zeros(D)
+        n_o = self.n_observed_latent_
+        obs, ctrl = self.observed_dofs_, self.controlled_dofs_
+        if self.pca_observed_ is not None:
+            M[np.ix_(obs, range(n_o))] = self.pca_observed_.components_.T
+            off[obs] = self.pca_observed_.mean_
+        else:
+            M[obs, range(n_o)] = 1.0
+        if self.pca_controlled_ is not None:
+            M[np.ix_(ctrl, range(n_o, self.n_latent_))] = self.pca_controlled_.components_.T
+            off[ctrl] = self.pca_controlled_.mean_
+        elif ctrl:
+            M[ctrl, range(n_o, self.n_latent_)] = 1.0
+        self._map_cache = (M, off)
+        return self._map_cache
+
+    def _check_fitted(self, what: str):
+        if not hasattr(self, "prior_"):
+            raise NotFittedError(f"this InteractionPrimitive is not fitted yet; call fit(demos) before {what}")
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
+                phase: float | None = None) -> "Prediction":
+        """Predict the interaction from a partial observation of the observed agent.
+
+        Parameters
+        ----------
+        partial : array_like, shape (t, len(observed_dofs))
+            Frames of the observed agent seen so far, from the start of the
+            movement, in the order of ``observed_dofs``.
+        robot_state : array_like, optional
+            Start position of the controlled agent, shape ``(len(controlled_dofs),)``,
+            or start position and velocity (in units per second) as shape ``(2, n)``.
+            Default: the mean start of the demonstrations.
+        dt : float, optional
+            Sampling interval of ``partial`` when it differs from the training ``dt_``.
+        times : array_like, shape (t,), optional
+            Time stamps of ``partial`` (irregular sampling); resampled to ``dt_``.
+        phase : float, optional
+            Known normalised time (in (0, 1]) of the last observed frame; skips
+            the phase estimation (for experiments with an oracle phase, or
+            when the timing is known).
+
+        Returns
+        -------
+        Prediction
+        """
+        self._check_fitted("predict")
+        n_cols = len(self.observed_dofs_)
+        o = as_2d_finite(partial, "partial", n_cols=n_cols, min_rows=1)
+        if times is not None:
+            t = check_times(times, o.shape[0], "times")
+            o = resample_uniform(o, t, dt=self.dt_)[0] if o.shape[0] > 1 else o
+        elif dt is not None and abs(check_positive(dt, "dt") - self.dt_) > 1e-12 * self.dt_ and o.shape[0] > 1:
+            o = resample_uniform(o, np.arange(o.shape[0]) * dt, dt=self.dt_)[0]
+        z = self._observed_to_latent(o)
+        if phase is not None:
+            ph = float(phase)
+            if not 0.0 < ph <= 1.0:
+                raise ValueError(f"phase must be in (0, 1], got {phase!r}")
+            return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
+        res = open_end_dtw(self.reference_, z, return_path=False)
+        return self._predict_latent(z, res.n_star, res.cost, robot_state, need_cov=True)
+
+    def _robot_start(self, robot_state):
+        n_o = self.n_observed_latent_
+        y0 = self.start_position_[n_o:].copy()
+        v0 = self.start_velocity_[n_o:].copy()
+        if robot_state is None or not self.controlled_dofs_:
+            return y0, v0
+        rs = np.asarray(robot_state, dtype=np.float64)
+        nc = len(self.controlled_dofs_)
+        if rs.shape == (nc,):
+            pos, vel = rs, None
+        elif rs.shape == (2, nc):
+            pos, vel = rs[0], rs[1]
+        else:
+            raise ValueError(f"robot_state must have shape ({nc},) or (2, {nc}), got {rs.shape}")
+        if not np.all(np.isfinite(rs)):
+            raise ValueError("robot_state contains NaN or inf")
+        if self.pca_controlled_ is not None:
+            y0 = self.pca_controlled_.transform(pos[None])[0]
+            if vel is not None:
+                v0 = (vel @ self.pca_controlled_.components_.T) * self.mean_duration_
+        else:
+            y0 = pos
+            if vel is not None:
+                v0 = vel * self.mean_duration_
+        return y0, v0
+
+    def _phase_info(self, n_star: int, M: int):
+        N = self.reference_.shape[0]
+        s_end = n_star / (N - 1)
+        elapsed = (M - 1) * self.dt_
+        if M > 1 and s_end > 0:
+            duration = elapsed / s_end
+        else:
+            duration = self.mean_duration_
+        return s_end, duration
+
+    def _observation(self, z, s_end):
+        """Design ``X`` and targets ``Y`` of the observation model at the observed frames."""
+        M = z.shape[0]
+        s = np.linspace(0.0, s_end, M)
+        ds = s_end / (M - 1)
+        y, yd, ydd = derivatives(z, ds, self.smoothing_window)
+        if self.observation == "forcing":
+            X = self.basis_.phi_tilde(s, self.alpha_y, self.beta_y_)  # Eq. 13 rows
+            Y = forcing_values(y, yd, ydd, self.alpha_y, self.beta_y_)  # Eq. 15
+            y0 = y[0]
+        else:
+            free, X = self.rollout_.design(0.0, s)
+            y0 = y[0]
+            v0 = self.start_velocity_[: self.n_observed_latent_]
+            Y = z - free @ np.vstack([y0, v0])
+        return X, Y, y0
+
+    def _predict_latent(self, z, n_star, cost, robot_state, need_cov=True, robot_start=None) -> "Prediction":
+        M = z.shape[0]
+        s_end, duration = self._phase_info(n_star, M)
+        prior = self.prior_
+        stats = None
+        if M >= self.min_observed and s_end > 0:
+            X, Y, y0 = self._observation(z, s_end)
+            stats = (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size)
+            post = self._condition(stats, need_cov)
+        else:
+            y0 = z[0]
+            post = Posterior(prior.mean, prior.cov, 0.0)
+        if robot_start is None:
+            robot_start = self._robot_start(robot_state)
+        return Prediction(self, post, stats, s_end, duration, n_star, cost, M, y0, robot_start, z[-1])
+
+    def _condition(self, stats, need_cov: bool) -> Posterior:
+        """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``."""
+        G, B, yy, n = stats
+        return condition(self.prior_.mean, self.prior_.cov, self.obs_index_, G, B, self.sigma2_,
+                         yy=yy, n_obs=n, need_cov=need_cov)
+
+    def stream(self, robot_state=None) -> "Stream":
+        """Online predictor that takes one observed frame at a time (incremental DTW)."""
+        self._check_fitted("stream")
+        return Stream(self, robot_state)
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path):
+        """Save to a safe ``.npz`` model file (arrays + JSON metadata, no pickle); see :mod:`interprim.io`."""
+        self._check_fitted("save")
+        from .io import save_model
+
+        save_model(self, path)
+
+    @classmethod
+    def load(cls, path) -> "InteractionPrimitive":
+        """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
+        from .io import load_model
+
+        return load_model(path)
+
+    def __repr__(self):
+        p = self.get_params()
+        shown = ", ".join(f"{k}={v!r}" for k, v in p.items() if k in ("observed_dofs", "n_basis", "observation"))
+        return f"InteractionPrimitive({shown})"
+
+
+class Prediction:
+    """The model's belief about the whole interaction after a partial observation.
+
+    Attributes
+    ----------
+    phase : float
+        Fraction of the movement already seen, in (0, 1] (DTW, Eq. 8).
+    x : float
+        Canonical-system phase ``exp(-alpha_x * phase)`` (Eq. 9).
+    speed : float
+        Partner's speed relative to the mean demonstration (1 = as fast).
+    duration : float
+        Estimated duration of the whole movement in seconds.
+    tau : float
+        Time scaling ``1 / duration`` of Eq. 1.
+    n_star, dtw_cost : int, float
+        Matched reference frame (0-based) and ``D(n*, M)``.
+    n_observed : int
+        Number of observed frames used.
+    log_likelihood : float
+        ``log p(observation | model)`` at the estimated phase (0 when
+        nothing was conditioned on); compare across models for recognition.
+    posterior_mean, posterior_cov : ndarray
+        ``p(theta | tau_o)`` in the internal (latent) parameter layout.
+    """
+
+    def __init__(self, model, post: Posterior, stats, s_end, duration, n_star, cost, n_observed, y0_obs,
+                 robot_start, last_obs):
+        self._m = model
+        self._post = post
+        self._stats = stats
+        self.normalised_time = float(s_end)
+        N = model.reference_.shape[0]
+        self.phase = float(max(s_end, 0.5 / (N - 1)))
+        self.x = float(canonical_phase(self.phase, model.alpha_x))
+        self.duration = float(duration)
+        self.tau = 1.0 / self.duration
+        self.speed = float(model.mean_duration_ / self.duration)
+        self.n_star = int(round(n_star))
+        self.dtw_cost = float(cost)
+        self.n_observed = int(n_observed)
+        self.log_likelihood = float(post.log_likelihood)
+        self._y0_obs = np.asarray(y0_obs, dtype=np.float64)
+        self._robot_start = robot_start
+        self._last_obs = last_obs
+
+    # -- parameters
+    @property
+    def posterior_mean(self) -> np.ndarray:
+        return self._post.mean
+
+    @property
+    def posterior_cov(self) -> np.ndarray:
+        if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
+            self._post = self._m._condition(self._stats, need_cov=True)
+        return self._post.cov
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Posterior mean goal attractor ``g`` of every DoF, in data columns, shape ``(D,)``."""
+        m = self._m
+        q = m._q
+        g_lat = self._post.mean.reshape(m.n_latent_, q)[:, -1]
+        M, off = m._latent_map()
+        return M @ g_lat + off
+
+    def _start_states(self):
+        m = self._m
+        n_o = m.n_observed_latent_
+        y0 = np.concatenate([self._y0_obs, self._robot_start[0]])
+        v0 = np.concatenate([m.start_velocity_[:n_o], self._robot_start[1]])
+        return y0, v0
+
+    def _latent_traj(self, Th, s_out, y0, v0, s0=0.0):
+        """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``."""
+        free, H = self._m.rollout_.design(s0, s_out)
+        return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
+
+    def _theta(self, flat=None):
+        m = self._m
+        flat = self._post.mean if flat is None else flat
+        return flat.reshape(*flat.shape[:-1], m.n_latent_, m._q)
+
+    # -- trajectories
+    def trajectory(self, n: int = 100) -> np.ndarray:
+        """Posterior mean of all DoFs over the whole movement, shape ``(n, D)``.
+
+        Uniform normalised-time grid from 0 to 1; the observed agent starts at
+        its first observed frame, the controlled agent at ``robot_state``.
+        """
+        m = self._m
+        s = np.linspace(0.0, 1.0, int(n))
+        y0, v0 = self._start_states()
+        lat = self._latent_traj(self._theta(), s, y0, v0)
+        M, off = m._latent_map()
+        return lat @ M.T + off
+
+    def std(self, n: int = 100) -> np.ndarray:
+        """Pointwise posterior standard deviation of :meth:`trajectory`, shape ``(n, D)``."""
+        m = self._m
+        s = np.linspace(0.0, 1.0, int(n))
+        _, H = m.rollout_.design(0.0, s)
+        C = self.posterior_cov.reshape(m.n_latent_, m._q, m.n_latent_, m._q)
+        S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
+        M, _ = m._latent_map()
+        var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
+        return np.sqrt(np.clip(var, 0.0, None))
+
+    def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
+        """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``."""
+        m = self._m
+        th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
+        s = np.linspace(0.0, 1.0, int(n))
+        y0, v0 = self._start_states()
+        lat = self._latent_traj(self._theta(th), s, y0, v0)
+        M, off = m._latent_map()
+        return lat @ M.T + off
+
+    def response(self, n: int = 100, state=None):
+        """The controlled agent's mean movement from the current phase to the end.
+
+        Parameters
+        ----------
+        n : int
+            Number of points from the current phase to the end.
+        state : array_like, optional
+            Current robot position ``(n_c,)`` or position and velocity
+            ``(2, n_c)`` (velocity per second); default: the mean prediction's
+            state at the current phase.
+
+        Returns
+        -------
+        t : ndarray, shape (n,)
+            Seconds from now, at the partner's estimated speed.
+        y : ndarray, shape (n, len(controlled_dofs))
+        """
+        m = self._m
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        s = np.linspace(s0, 1.0, int(n))
+        th = self._theta()[n_o:]
+        if state is None:
+            rs = self._robot_start
+            free, H = m.rollout_.design(0.0, np.array([s0]))
+            freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
+            z0 = np.vstack([rs[0], rs[1]])
+            y0 = (free @ z0 + H @ th.T)[0]
+            v0 = (freed @ z0 + Hd @ th.T)[0]
+        else:
+            y0, v0 = m._robot_start(state)
+            v0 = v0 / m.mean_duration_ * self.duration
+        lat = self._latent_traj(th, s, y0, v0, s0=s0)
+        M, off = m._latent_map()
+        ctrl = m.controlled_dofs_
+        y = lat @ M[ctrl, n_o:].T + off[ctrl]
+        return (s - s0) * self.duration, y
+
+    def completion(self, n: int = 100):
+        """Pattern completion (paper Fig. 3): continue the observed agent from its last observed frame.
+
+        Returns ``(s, y)``: normalised times from the current phase to 1 and
+        positions ``(n, len(observed_dofs))``.
+        """
+        m = self._m
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        s = np.linspace(s0, 1.0, int(n))
+        th = self._theta()[:n_o]
+        # velocity at the current phase from the posterior mean movement
+        freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
+        z0 = np.vstack([self._y0_obs, m.start_velocity_[:n_o]])
+        v0 = (freed @ z0 + Hd @ th.T)[0]
+        lat = self._latent_traj(th, s, self._last_obs, v0, s0=s0)
+        M, off = m._latent_map()
+        obs = m.observed_dofs_
+        return s, lat @ M[obs, :n_o].T + off[obs]
+
+    def __repr__(self):
+        return (f"Prediction(phase={self.phase:.3f}, speed={self.speed:.3f}, n_observed={self.n_observed}, "
+                f"log_likelihood={self.log_likelihood:.3g})")
+
+
+class Stream:
+    """Online use of a fitted :class:`InteractionPrimitive`: one observed frame at a time.
+
+    Each :meth:`update` adds one column to the open-end DTW (Eq. 5-8, ``O(N D)``)
+    and conditions on all frames seen so far at their new phases (Eq. 15-18).
+    The frame buffer is preallocated and grows by doubling.
+    """
+
+    def __init__(self, model: InteractionPrimitive, robot_state=None):
+        self.model = model
+        self.robot_state = robot_state
+        self._robot_start = model._robot_start(robot_state)
+        self._dtw = IncrementalDTW(model.reference_)
+        self._buf = np.empty((max(2 * model.reference_.shape[0], 16), model.n_observed_latent_))
+        self._n = 0
+
+    @property
+    def n_frames(self) -> int:
+        return self._n
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        self._dtw.reset()
+        self._n = 0
+        if robot_state is not None:
+            self.robot_state = robot_state
+            self._robot_start = self.model._robot_start(robot_state)
+
+    def update(self, frame, need_cov: bool = True) -> Prediction:
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`."""
+        m = self.model
+        f = as_frame(frame, "frame", len(m.observed_dofs_))
+        if m.pca_observed_ is not None:
+            f = m.pca_observed_.transform(f[None])[0]
+        if self._n == self._buf.shape[0]:
+            self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
+        self._buf[self._n] = f
+        self._n += 1
+        n_star, cost = self._dtw.update(f, check=False)
+        return m._predict_latent(self._buf[: self._n], n_star, cost, None, need_cov=need_cov,
+                                 robot_start=self._robot_start)

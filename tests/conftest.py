@@ -1,0 +1,28 @@
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+SHARED = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "shared"))
+
+
+@pytest.fixture(scope="session")
+def synthetic():
+    from interprim.synthetic import two_agent_demos
+
+    return two_agent_demos(30, seed=0), two_agent_demos(8, seed=5)
+
+
+@pytest.fixture(scope="session")
+def fitted(synthetic):
+    import interprim as ip
+
+    train, _ = synthetic
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=20).fit(train, dt=0.01)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)

@@ -53,8 +53,8 @@ COLUMNS = ["obs_shoulder", "obs_elbow", "ctrl_shoulder", "ctrl_elbow", "ctrl_wri
 
 # Attractor offsets from the midpoint (rest hand, goal), in the arm's own
 # "forward" frame: x towards the partner, y up.  Metres.
-_ATTRACTOR_FORWARD = (-0.25, 0.10)
-_ATTRACTOR_UP = (-0.10, 0.25)
+_ATTRACTOR_FORWARD = (-0.20, 0.05)
+_ATTRACTOR_UP = (-0.05, 0.15)
 
 
 def _cell_of(goals):

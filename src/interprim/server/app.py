@@ -430,17 +430,18 @@ class InterprimServer:
                     self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
                     break
                 await self._on_message(s, data)
+                if not s.out.empty():
+                    # Let the writer push the reply to the socket now: the queue then only fills up
+                    # when the socket's write buffer is full, i.e. when the client is not reading.
+                    await asyncio.sleep(0)
         except ConnectionClosed as exc:
-            rcvd = exc.rcvd
+            rcvd, sent = exc.rcvd, exc.sent
             if s.closing:
                 pass
+            elif sent is not None and sent.code not in (1000, 1001):
+                log.warning("session %d: closed by server: %d %s", sid, sent.code, sent.reason)
             elif rcvd is None:
                 log.warning("session %d: client disconnected without a close frame after %d frame(s)", sid, s.seq)
-            elif rcvd.code == P.CLOSE_TOO_BIG or (exc.sent is not None and exc.sent.code == P.CLOSE_TOO_BIG):
-                reason = exc.sent.reason if exc.sent is not None else rcvd.reason
-                log.warning("session %d: closed with 1009 message too big (%s)", sid, reason)
-            elif exc.sent is not None and exc.sent.code not in (1000, 1001):
-                log.warning("session %d: closed by server: %d %s", sid, exc.sent.code, exc.sent.reason)
             else:
                 log.info("session %d: client closed (%d %s)", sid, rcvd.code, rcvd.reason)
         except Exception:  # never let a session bug escape to the library's handler
@@ -503,7 +504,8 @@ class InterprimServer:
 
     def _error(self, s: _Session, exc: P.ProtocolError, seq=None) -> None:
         s.errors += 1
-        s.consecutive_errors += 1
+        if exc.code != "rate_limited":  # dropping is the limit's own answer; not a protocol violation
+            s.consecutive_errors += 1
         s.error_counts[exc.code] = s.error_counts.get(exc.code, 0) + 1
         self.stats["errors"] += 1
         if s.errors <= self.config.log_errors_per_session:

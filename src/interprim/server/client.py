@@ -81,7 +81,11 @@ class Client:
         from websockets.sync.client import connect
 
         self.timeout = timeout
-        self.ws = connect(url, open_timeout=timeout, close_timeout=2, **connect_kwargs)
+        kw = dict(open_timeout=timeout, close_timeout=2, **connect_kwargs)
+        try:  # websockets >= 16 wants legacy=True for a plain (non-context-manager) connection
+            self.ws = connect(url, legacy=True, **kw)
+        except TypeError:
+            self.ws = connect(url, **kw)
         self.ws.send(_hello(token, "interprim.server.Client"))
         self.welcome = self.recv()
         self.opened = None

@@ -16,6 +16,7 @@ from .errors import InterprimError
 
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [
+    "interprim.commands_demo",
     "interprim.commands",
     "interprim.server.cli",
 ]

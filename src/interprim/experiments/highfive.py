@@ -503,7 +503,7 @@ def animate(model, test, idx, cfg, path, fps=15):
     curve is the currently predicted hand path, the red cross the predicted goal.
     """
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.animation import PillowWriter
 
     oa, ca = test.observed_arm, test.controlled_arm
     d = test.demos[idx]
@@ -516,7 +516,10 @@ def animate(model, test, idx, cfg, path, fps=15):
     pred = None
     for t in range(T + n_hold):
         if t < T:
-            pred = stream.update(d[t, :2])
+            try:  # the mean is enough here; skip the posterior covariance where the core allows it
+                pred = stream.update(d[t, :2], need_cov=False)
+            except TypeError:
+                pred = stream.update(d[t, :2])
         traj = pred.trajectory(cfg.n_points)
         target = np.array([np.interp(min(pred.phase, 1.0) if t < T else 1.0, s_grid, traj[:, c]) for c in range(2, 5)])
         q_ctrl = q_ctrl + 0.35 * (target - q_ctrl)
@@ -549,8 +552,11 @@ def animate(model, test, idx, cfg, path, fps=15):
         txt.set_text(f"seen {100 * (t + 1) / T:3.0f} %   estimated phase {ph:.2f}")
         return obs_line, ctrl_line, trace, path_line, goal_pt, txt
 
-    anim = FuncAnimation(fig, draw, frames=len(sel), blit=False)
-    anim.save(str(path), writer=PillowWriter(fps=fps), dpi=72)
+    writer = PillowWriter(fps=fps)
+    with writer.saving(fig, str(path), dpi=72):  # one render per frame
+        for f in range(len(sel)):
+            draw(f)
+            writer.grab_frame()
     plt.close(fig)
 
 

@@ -41,9 +41,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", "-o", default="interprim-demo", metavar="DIR",
                    help="output folder for figures, report.md and results.json (default: ./interprim-demo)")
     p.add_argument("--n-train", type=int, default=None, metavar="N",
-                   help="training interactions (default 100; 40 with --quick)")
+                   help="training interactions (default 100; 30 with --quick)")
     p.add_argument("--n-test", type=int, default=None, metavar="N",
-                   help="held-out test interactions (default 30; 10 with --quick)")
+                   help="held-out test interactions (default 30; 8 with --quick)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed of the data and samples (default 0)")
     p.add_argument("--quick", action="store_true", help="a small, fast run (smoke test)")
     p.add_argument("--no-gif", action="store_true", help="skip the animation")

@@ -12,7 +12,8 @@ const state = (window.ipState = {
   ready: false,
   info: null,
   hf: { connected: false, frames: 0, predictions: 0, phase: null, robotQ: null, robotHand: null,
-        meetingPoint: null, humanQ: null, humanHand: null, active: false, error: null, replayGoal: null },
+        meetingPoint: null, humanQ: null, humanHand: null, active: false, error: null, replayGoal: null,
+        sent: [] },
   hw: { connected: false, frames: 0, predictions: 0, model: null, probabilities: null, phase: null,
         active: false, error: null, points: [] },
 });
@@ -53,6 +54,7 @@ function jacobian(arm, q) {
   return J;
 }
 
+const POINTER_DELAY_MS = 40;
 const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
 
 // Analytic IK of a 2-link arm, "elbow bends upwards" branch (positive elbow angle).
@@ -253,8 +255,37 @@ function hfTick() {
     if (r.i >= r.frames.length) { hfStop(); return; }
     hf.humanQ = r.frames[r.i++].slice();
   }
+  if (hf.dragging) {
+    // Mouse events come every ~16-30 ms and timers jitter: send frames on an exact dt grid of
+    // pointer time (catching up after a late tick), sampling the pointer path by linear
+    // interpolation a little in the past, so that the observed movement is smooth.
+    const log = hf.pointerLog, now = performance.now() - POINTER_DELAY_MS, dtMs = 1000 * hf.model.dt;
+    let sentAny = false;
+    while (hf.gridT <= now) {
+      const T = hf.gridT;
+      hf.gridT += dtMs;
+      let i = 1;
+      while (i < log.length && log[i][0] < T) i++;
+      let pt;
+      if (i >= log.length) pt = log[log.length - 1];
+      else {
+        const [t0, x0, y0] = log[i - 1], [t1, x1, y1] = log[i];
+        const w = t1 > t0 ? clamp((T - t0) / (t1 - t0), 0, 1) : 1;
+        pt = [T, x0 + w * (x1 - x0), y0 + w * (y1 - y0)];
+      }
+      hf.humanQ = ik2(hf.world.observed_arm, [pt[1], pt[2]]);
+      hf.client.sendFrame(hf.humanQ);
+      state.hf.frames += 1;
+      if (state.hf.sent.length < 5000) state.hf.sent.push(hf.humanQ.slice());
+      sentAny = true;
+      if (hf.released && T >= log[log.length - 1][0]) { hfStop(); break; }
+    }
+    $("hf-frames").textContent = state.hf.frames;
+    return;
+  }
   hf.client.sendFrame(hf.humanQ);
   state.hf.frames += 1;
+  if (state.hf.sent.length < 5000) state.hf.sent.push(hf.humanQ.slice());
   $("hf-frames").textContent = state.hf.frames;
 }
 
@@ -262,8 +293,9 @@ function hfStart() {
   hfStop();
   hf.pred = null;
   hf.robotPhase = 0;
-  hf.robotQ = hf.world.controlled_arm.rest.slice();
+  hf.robotQ = hf.restRobot.slice();
   state.hf.frames = 0;
+  state.hf.sent = [];
   state.hf.active = true;
   $("hf-error").textContent = "";
   hf.client.reset().catch((e) => ($("hf-error").textContent = e.message));
@@ -276,6 +308,7 @@ function hfStop() {
   hf.timer = null;
   hf.replay = null;
   hf.dragging = false;
+  hf.released = false;
   state.hf.active = false;
 }
 
@@ -300,13 +333,23 @@ async function hfInit(info) {
   hf.world = info.highfive_world || DEFAULT_WORLD;
   hf.model = info.models.find((m) => m.world === "highfive") || info.models.find((m) => m.controlled_dofs.length === 3 && m.observed_dofs.length === 2);
   hfSetupView();
-  hf.humanQ = hf.world.observed_arm.rest.slice();
-  hf.robotQ = hf.world.controlled_arm.rest.slice();
+  hf.restHuman = hf.world.observed_arm.rest.slice();
+  hf.restRobot = hf.world.controlled_arm.rest.slice();
+  hf.humanQ = hf.restHuman.slice();
+  hf.robotQ = hf.restRobot.slice();
   requestAnimationFrame(hfAnimate);
   if (!hf.model) {
     $("hf-error").textContent = "no high-five model loaded (start the server with --demo)";
     return;
   }
+  // Start postures of the model's interactions (the arms' rest postures may differ from the data's).
+  const start = await fetchJSON(`/api/replay/${encodeURIComponent(hf.model.name)}`);
+  if (start && start.interactions.length) {
+    hf.restHuman = start.interactions[0].observed[0].slice();
+    if (start.interactions[0].controlled_truth) hf.restRobot = start.interactions[0].controlled_truth[0].slice();
+  }
+  hf.humanQ = hf.restHuman.slice();
+  hf.robotQ = hf.restRobot.slice();
   hf.client = await connect("hf");
   hf.client.onPrediction = hfApplyPrediction;
   hf.client.onError = (e) => { state.hf.error = e.message; $("hf-error").textContent = e.message; };
@@ -318,22 +361,27 @@ async function hfInit(info) {
     hf.canvas.setPointerCapture(ev.pointerId);
     state.hf.replayGoal = null;
     $("hf-goal").textContent = "–";
-    hf.humanQ = hf.world.observed_arm.rest.slice();
+    hf.humanQ = ik2(hf.world.observed_arm, p); // the first frame is where the hand really is
+    hf.pointerLog = [[performance.now(), p[0], p[1]]];
+    hf.gridT = performance.now() - POINTER_DELAY_MS;
+    hf.released = false;
     hfStart();
     hf.dragging = true;
   });
   hf.canvas.addEventListener("pointermove", (ev) => {
     if (!hf.dragging) return;
-    hf.humanQ = ik2(hf.world.observed_arm, c2w(canvasPoint(hf.canvas, ev)));
+    const p = c2w(canvasPoint(hf.canvas, ev));
+    hf.pointerLog.push([performance.now(), p[0], p[1]]);
+    if (hf.pointerLog.length > 4000) hf.pointerLog.splice(0, 2000);
   });
-  const up = () => { if (hf.dragging) hfStop(); };
+  const up = () => { if (hf.dragging) hf.released = true; }; // the tick stops after the last event
   hf.canvas.addEventListener("pointerup", up);
   hf.canvas.addEventListener("pointercancel", up);
   $("hf-reset").onclick = () => {
     hfStop();
     hf.pred = null; state.hf.replayGoal = null;
-    hf.humanQ = hf.world.observed_arm.rest.slice();
-    hf.robotQ = hf.world.controlled_arm.rest.slice();
+    hf.humanQ = hf.restHuman.slice();
+    hf.robotQ = hf.restRobot.slice();
   };
   let replayIndex = 0;
   $("hf-replay").onclick = async () => {
@@ -344,7 +392,8 @@ async function hfInit(info) {
     $("hf-goal").textContent = it.goal ? `(${fmt(it.goal[0])}, ${fmt(it.goal[1])}) m` : "–";
     hf.humanQ = it.observed[0].slice();
     hfStart();
-    hf.replay = { frames: it.observed, i: 0 };
+    const frac = Number($("hf-replay-frac").value) || 1; // stop the human early: the robot anticipates
+    hf.replay = { frames: it.observed.slice(0, Math.max(2, Math.round(frac * it.observed.length))), i: 0 };
   };
 }
 

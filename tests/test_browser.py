@@ -1,0 +1,183 @@
+"""End to end: the live page in a real headless Chromium (Debian's ``chromium`` + ``chromium-driver``).
+
+Starts a server with the demo models (a small high-five model from ``interprim.sim`` and the letter
+models), loads the page, performs a scripted mouse drag of the human hand along a held-out test
+interaction, checks that the robot arm ended near the high-five point, replays a letter on the
+handwriting tab, and saves screenshots to ``test-artifacts/``.
+
+Skipped only when Chromium (or its driver) is not installed:
+``apt-get install -y chromium chromium-driver``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+DRIVER = shutil.which("chromedriver")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None or DRIVER is None,
+    reason="needs Chromium and its driver: apt-get install -y chromium chromium-driver",
+)
+
+ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+
+
+@pytest.fixture(scope="module")
+def live_server():
+    from interprim.server.app import InterprimServer, ServerConfig, ServerThread
+    from interprim.server.demo import highfive_model, highfive_world, letter_models
+
+    models = {"highfive": highfive_model(n_train=24, n_test=2, seed=0)}
+    models.update(letter_models(n=10))
+    srv = InterprimServer(models, ServerConfig(port=0), extra_info={"highfive_world": highfive_world()})
+    with ServerThread(srv) as st:
+        yield st
+
+
+@pytest.fixture(scope="module")
+def driver():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    profile = tempfile.mkdtemp(prefix="interprim-chromium-")
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--window-size=1300,800"):
+        opts.add_argument(flag)
+    drv = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    drv.set_script_timeout(30)
+    yield drv
+    drv.quit()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
+def wait_for(drv, script, timeout=30.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = drv.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for: {script}\nstate: {drv.execute_script('return JSON.stringify(window.ipState)')[:2000]}")
+
+
+def path_end_world(drv, q):
+    return drv.execute_script(
+        """const arm = window.ipState.info.highfive_world.observed_arm; const q = arguments[0];
+           let a = arm.base_angle, x = arm.base[0], y = arm.base[1];
+           for (let i = 0; i < q.length; i++) { a += arm.sign * q[i]; x += arm.link_lengths[i] * Math.cos(a);
+                                                y += arm.link_lengths[i] * Math.sin(a); }
+           return [x, y];""", q)
+
+
+def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    driver.get(live_server.url)
+    wait_for(driver, "return window.ipState && window.ipState.ready")
+    assert driver.execute_script("return window.ipState.hf.connected") is True
+    replay = json.loads(urllib.request.urlopen(live_server.url + "api/replay/highfive").read())
+    test = replay["interactions"][0]
+    goal = test["goal"]
+    # the human goes 60 % of the way and stops: the robot must anticipate the meeting point
+    observed = test["observed"][: int(0.6 * len(test["observed"]))]
+    rest_hand = driver.execute_script("return window.ipState.hf.robotHand")
+    # the human hand path of the held-out interaction, in page coordinates
+    path = driver.execute_script(
+        """const arm = window.ipState.info.highfive_world.observed_arm;
+           return arguments[0].map(q => {
+             let a = arm.base_angle, x = arm.base[0], y = arm.base[1];
+             for (let i = 0; i < q.length; i++) { a += arm.sign * q[i]; x += arm.link_lengths[i] * Math.cos(a);
+                                                  y += arm.link_lengths[i] * Math.sin(a); }
+             return window.ipView.worldToClient(x, y); });""",
+        observed,
+    )
+    step = 3  # a pointer move every 3 frames; the page interpolates between pointer events
+    actions = ActionBuilder(driver, duration=int(1000 * replay["dt"] * step))
+    ptr = actions.pointer_action
+    x0, y0 = path[0]
+    ptr.move_to_location(int(round(x0)), int(round(y0)))
+    ptr.pointer_down()
+    for x, y in path[step::step] + [path[-1]]:
+        ptr.move_to_location(int(round(x)), int(round(y)))
+    ptr.pause(0.1)
+    ptr.pointer_up()
+    actions.perform()
+
+    n_pred = wait_for(driver, "return window.ipState.hf.predictions >= 20 && window.ipState.hf.predictions")
+    assert n_pred >= 20
+    # after the human stops, the robot finishes its predicted movement
+    wait_for(driver, "return !window.ipState.hf.active")
+    time.sleep(2.5)
+    st = driver.execute_script("return window.ipState.hf")
+    (ARTIFACTS / "browser_highfive_drag_frames.json").write_text(json.dumps(st["sent"]))
+    assert st["error"] is None, st["error"]
+    human_end = st["humanHand"]
+    robot = st["robotHand"]
+    meet = st["meetingPoint"]
+    d_rest = math.dist(rest_hand, goal)
+    d_robot = math.dist(robot, goal)
+    d_meet = math.dist(meet, goal)
+    driver.save_screenshot(str(ARTIFACTS / "browser_highfive_drag.png"))
+    print(f"goal {goal}, human hand {human_end}, robot hand {robot}, meeting point {meet}: "
+          f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
+    assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
+    # Mouse input is quantised to pixels and irregular in time; the model's prediction from it is
+    # much noisier than from clean frames (see docs/CORE_REQUESTS.md), so this check is loose: the
+    # robot hand ends clearly closer to the high-five point than where it started.  The replay test
+    # below checks the accurate case.
+    assert d_robot < 0.75 * d_rest, (robot, goal)
+    assert driver.find_element("id", "hf-canvas").get_attribute("data-robot-hand")
+
+
+def fk_robot_rest(drv, q):
+    return drv.execute_script(
+        """const arm = window.ipState.info.highfive_world.controlled_arm; const q = arguments[0];
+           let a = arm.base_angle, x = arm.base[0], y = arm.base[1];
+           for (let i = 0; i < q.length; i++) { a += arm.sign * q[i]; x += arm.link_lengths[i] * Math.cos(a);
+                                                y += arm.link_lengths[i] * Math.sin(a); }
+           return [x, y];""", q)
+
+
+def test_replay_button_and_handwriting_tab(live_server, driver):
+    ARTIFACTS.mkdir(exist_ok=True)
+    driver.get(live_server.url)
+    wait_for(driver, "return window.ipState && window.ipState.ready")
+    from selenium.webdriver.support.ui import Select
+
+    Select(driver.find_element("id", "hf-replay-frac")).select_by_value("0.6")
+    driver.find_element("id", "hf-replay").click()
+    wait_for(driver, "return window.ipState.hf.predictions >= 30")
+    wait_for(driver, "return !window.ipState.hf.active")
+    time.sleep(2.0)  # the robot finishes its predicted movement
+    st = driver.execute_script("return window.ipState.hf")
+    driver.save_screenshot(str(ARTIFACTS / "browser_highfive_replay60.png"))
+    print("replay 60 %:", st["replayGoal"], st["meetingPoint"], st["robotHand"])
+    assert math.dist(st["meetingPoint"], st["replayGoal"]) < 0.2
+    assert math.dist(st["robotHand"], st["replayGoal"]) < 0.2
+    assert st["replayGoal"] is not None
+    start = json.loads(urllib.request.urlopen(live_server.url + "api/replay/highfive").read())
+    d_rest = math.dist(st["replayGoal"], fk_robot_rest(driver, start["interactions"][0]["controlled_truth"][0]))
+    assert d_rest > 1.0  # the robot really had to move
+    driver.find_element("id", "tab-writing").click()
+    driver.find_element("id", "hw-replay").click()  # first letter model: half a letter, completed live
+    wait_for(driver, "return window.ipState.hw.predictions >= 20 && !window.ipState.hw.active")
+    hw = driver.execute_script("return window.ipState.hw")
+    assert hw["error"] is None and hw["model"] == "letter_c", hw
+    assert abs(sum(hw["probabilities"].values()) - 1) < 1e-3
+    time.sleep(0.3)
+    driver.save_screenshot(str(ARTIFACTS / "browser_handwriting.png"))
+    logs = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
+    assert not logs, logs

@@ -31,6 +31,7 @@ from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
+PHASE_METHODS = ("dtw", "likelihood")
 
 
 class InteractionPrimitive:
@@ -55,7 +56,11 @@ class InteractionPrimitive:
         Observation noise variance of Eq. 16.  ``"auto"`` uses the mean
         squared residual of the observation model on the training
         demonstrations' own fits (observed DoFs), which sets the noise on the
-        scale of the chosen observation.
+        scale of the chosen observation.  ``"cv"`` chooses ``sigma2`` and (with
+        ``covariance="shrinkage"``) the shrinkage intensity by K-fold
+        cross-validation of held-out predictions of all DoFs on the training
+        demonstrations (:func:`interprim.selection.select_hyperparameters`);
+        the choice is reported in ``selection_``.
     covariance : {"shrinkage", "ridge", "empirical"}, default "shrinkage"
         Regularisation of Eq. 10's covariance (see :func:`interprim.gaussian.fit_prior`).
     ridge : float, default 1e-6
@@ -79,12 +84,18 @@ class InteractionPrimitive:
         Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
+    phase_method : {"dtw", "likelihood"}, default "dtw"
+        How ``predict`` estimates the phase: the paper's open-end DTW
+        (Eq. 5-9), or the maximum of the marginal likelihood of the observed
+        positions under the learned prior over candidate phases, started from
+        the DTW estimate (:mod:`interprim.phase_likelihood`; ``Stream`` uses a
+        cheap local search around its previous estimate).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="auto", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "forcing", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000):
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "dtw"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
         self.alpha_y = alpha_y
@@ -99,6 +110,7 @@ class InteractionPrimitive:
         self.reference = reference
         self.min_observed = min_observed
         self.n_steps = n_steps
+        self.phase_method = phase_method
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
@@ -116,6 +128,7 @@ class InteractionPrimitive:
                                                         else [int(p) for p in pca]),
             "reference": self.reference if isinstance(self.reference, str) else int(self.reference),
             "min_observed": int(self.min_observed), "n_steps": int(self.n_steps),
+            "phase_method": self.phase_method,
         }
 
     def _check_params(self, n_dofs: int):
@@ -138,8 +151,10 @@ class InteractionPrimitive:
             check_positive(self.beta_y, "beta_y")
         if self.observation not in OBSERVATION_MODELS:
             raise ValueError(f"observation must be one of {OBSERVATION_MODELS}, got {self.observation!r}")
-        if not (isinstance(self.sigma2, str) and self.sigma2 == "auto"):
+        if not (isinstance(self.sigma2, str) and self.sigma2 in ("auto", "cv")):
             check_positive(self.sigma2, "sigma2")
+        if self.phase_method not in PHASE_METHODS:
+            raise ValueError(f"phase_method must be one of {PHASE_METHODS}, got {self.phase_method!r}")
         if self.smoothing_window is not None and (not isinstance(self.smoothing_window, numbers.Integral)
                                                   or self.smoothing_window < 3):
             raise ValueError(f"smoothing_window must be None or an odd integer >= 3, got {self.smoothing_window!r}")
@@ -248,6 +263,11 @@ class InteractionPrimitive:
             self.sigma2_ = max(s2, 1e-10 * max(scale, 1e-12))
         else:
             self.sigma2_ = float(self.sigma2)
+        self.phase_sigma2_ = None
+        if self.sigma2 == "cv" or self.phase_method == "likelihood":
+            from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
+
+            select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
 
         # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
         n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
@@ -353,6 +373,12 @@ class InteractionPrimitive:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
             return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
         res = open_end_dtw(self.reference_, z, return_path=False)
+        if self.phase_method == "likelihood" and z.shape[0] >= 2:
+            from .phase_likelihood import estimate_phase
+
+            N1 = self.reference_.shape[0] - 1
+            est = estimate_phase(self, z, s_init=res.n_star / N1)
+            return self._predict_latent(z, est.s_end * N1, res.cost, robot_state, need_cov=True)
         return self._predict_latent(z, res.n_star, res.cost, robot_state, need_cov=True)
 
     def _robot_start(self, robot_state):
@@ -677,5 +703,11 @@ class Stream:
         self._buf[self._n] = f
         self._n += 1
         n_star, cost = self._dtw.update(f, check=False)
+        if m.phase_method == "likelihood":  # local search around the previous estimate
+            from .phase_likelihood import track_phase
+
+            s_prev = getattr(self, "_s_prev", None) if self._n > 1 else None
+            self._s_prev = track_phase(m, self._buf[: self._n], s_prev, self._n - 1)
+            n_star = self._s_prev * (m.reference_.shape[0] - 1)
         return m._predict_latent(self._buf[: self._n], n_star, cost, None, need_cov=need_cov,
                                  robot_start=self._robot_start)

@@ -1,0 +1,253 @@
+"""Peer methods evaluated on the same splits as Interaction Primitives.
+
+Every method has the same small interface, used by :mod:`interprim.evaluation`::
+
+    est = Method(observed_dofs, ...).fit(demos, dt=...)
+    out = est.predict(partial)          # partial: (M, len(observed_dofs)) frames from the start
+    out.trajectory(n), out.std(n)       # (n, D) over normalised time 0..1 (std may be None)
+
+- :class:`PriorMean` - replay the mean of the time-normalised demonstrations
+  (no conditioning): the bar every method must clear.
+- :class:`NearestNeighbour` - the training demonstration whose observed agent
+  is nearest to the observed prefix under open-end DTW (Eq. 5-8).
+- :class:`InteractionProMP` - an Interaction ProMP (Maeda et al., "Probabilistic
+  movement primitives for coordination of multiple human-robot collaborative
+  tasks", Autonomous Robots 2017) built from the peer packages: ProMP weights
+  of every DoF by ``movement_primitives.promp.ProMP``, a Gaussian over the
+  stacked weights of both agents, and conditioning on the human's DoFs with
+  ``gmr.MVN.condition``; the phase (time scaling) is chosen by maximum
+  likelihood of the observation over a grid of candidates.  The peer
+  packages are the ``bench`` extra (``pip install "interprim[bench]"``) and are
+  imported lazily.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .preprocessing import time_normalise
+
+__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction"]
+
+
+class BaselinePrediction:
+    """A prediction of the whole movement of all DoFs on normalised time (0..1).
+
+    Parameters
+    ----------
+    times : ndarray, shape (K,)
+        Normalised times of ``mean`` (and ``std``).
+    mean : ndarray, shape (K, D)
+    std : ndarray, shape (K, D) or None
+    phase : float
+        Estimated fraction of the movement already seen (NaN when not estimated).
+    log_likelihood : float
+    """
+
+    def __init__(self, times, mean, std=None, phase=float("nan"), log_likelihood=float("nan")):
+        self._t = np.asarray(times, dtype=np.float64)
+        self._mean = np.asarray(mean, dtype=np.float64)
+        self._std = None if std is None else np.asarray(std, dtype=np.float64)
+        self.phase = float(phase)
+        self.log_likelihood = float(log_likelihood)
+
+    def _interp(self, Y, n):
+        s = np.linspace(0.0, 1.0, int(n))
+        return np.stack([np.interp(s, self._t, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+
+    def trajectory(self, n: int = 100) -> np.ndarray:
+        return self._interp(self._mean, n)
+
+    def std(self, n: int = 100):
+        return None if self._std is None else self._interp(self._std, n)
+
+
+def _check_demos(demos):
+    arrays = [np.asarray(d, dtype=np.float64) for d in demos]
+    if len(arrays) < 2:
+        raise ValueError(f"at least 2 demonstrations are needed, got {len(arrays)}")
+    D = arrays[0].shape[1]
+    for j, a in enumerate(arrays):
+        if a.ndim != 2 or a.shape[1] != D or not np.all(np.isfinite(a)):
+            raise ValueError(f"demos[{j}] must be a finite (T, {D}) array, got shape {a.shape}")
+    return arrays
+
+
+class PriorMean:
+    """Replay the mean demonstration (time-normalised), with the demonstrations' spread as ``std``.
+
+    Parameters
+    ----------
+    observed_dofs : sequence of int
+    n : int
+        Points of the normalised-time grid the demonstrations are averaged on.
+    """
+
+    def __init__(self, observed_dofs, n: int = 200):
+        self.observed_dofs = observed_dofs
+        self.n = n
+
+    def fit(self, demos, dt=None):
+        arrays = _check_demos(demos)
+        Y = np.stack([time_normalise(a, self.n) for a in arrays])
+        self.mean_ = Y.mean(axis=0)
+        self.std_ = Y.std(axis=0, ddof=1)
+        return self
+
+    def predict(self, partial) -> BaselinePrediction:
+        return BaselinePrediction(np.linspace(0.0, 1.0, self.n), self.mean_, self.std_)
+
+
+class NearestNeighbour:
+    """The training demonstration nearest to the observed prefix under open-end DTW.
+
+    The cost of demonstration ``j`` is ``D(n*, M) / (n* + M)`` of the open-end
+    DTW (Eq. 5-8) of the observed prefix against demonstration ``j``'s observed
+    agent (normalised by the alignment length, so that demonstrations of
+    different lengths compare fairly); the prediction is that demonstration,
+    time-normalised, and its matched fraction ``(n*+1)/N_j`` is the phase.
+    """
+
+    def __init__(self, observed_dofs, n: int = 200):
+        self.observed_dofs = observed_dofs
+        self.n = n
+
+    def fit(self, demos, dt=None):
+        arrays = _check_demos(demos)
+        obs = [int(i) for i in self.observed_dofs]
+        self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
+        self.demos_ = [time_normalise(a, self.n) for a in arrays]
+        return self
+
+    def predict(self, partial) -> BaselinePrediction:
+        from .phase import open_end_dtw
+
+        v = np.asarray(partial, dtype=np.float64)
+        best, best_c, frac = 0, np.inf, float("nan")
+        for j, u in enumerate(self.observed_):
+            r = open_end_dtw(u, v, return_path=False)
+            c = r.cost / (r.n_star + 1 + v.shape[0])
+            if c < best_c:
+                best, best_c, frac = j, c, r.fraction
+        self.neighbour_ = best
+        return BaselinePrediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, phase=frac)
+
+
+class InteractionProMP:
+    """Interaction ProMP (Maeda et al. 2017) from ``movement_primitives`` and ``gmr``.
+
+    Parameters
+    ----------
+    observed_dofs : sequence of int
+    n_weights : int
+        ProMP basis functions per DoF.
+    sigma2 : "auto" or float
+        Observation noise; ``"auto"`` is the mean squared residual of the
+        ProMP fits of the observed DoFs, floored at 1e-6 of their variance.
+    ridge : float
+        Relative diagonal loading of the weight covariance (the sample
+        covariance is singular with fewer demonstrations than weights).
+    n_phases : int
+        Time-scaling candidates (fraction of the movement seen, log-spaced in
+        [0.02, 1]) for the maximum-likelihood phase.
+    """
+
+    def __init__(self, observed_dofs, n_weights: int = 10, sigma2="auto", ridge: float = 1e-6,
+                 n_phases: int = 40):
+        self.observed_dofs = observed_dofs
+        self.n_weights = n_weights
+        self.sigma2 = sigma2
+        self.ridge = ridge
+        self.n_phases = n_phases
+
+    def _basis(self, t):
+        """ProMP activations (K, len(t)) at normalised times ``t`` in [0, 1] (movement_primitives' RBFs)."""
+        T = np.append(np.asarray(t, dtype=np.float64), 1.0)
+        return self.promp_._rbfs_1d_sequence(T.copy())[:, :-1]
+
+    def fit(self, demos, dt=None):
+        from movement_primitives.promp import ProMP
+
+        arrays = _check_demos(demos)
+        D = arrays[0].shape[1]
+        obs = [int(i) for i in self.observed_dofs]
+        ctrl = [i for i in range(D) if i not in set(obs)]
+        self.order_ = obs + ctrl  # observed DoFs first in the stacked weights
+        self.n_dofs_ = D
+        self.promp_ = ProMP(n_dims=D, n_weights_per_dim=int(self.n_weights))
+        W, res = [], []
+        for a in arrays:
+            t = np.linspace(0.0, 1.0, a.shape[0])
+            Y = a[:, self.order_]
+            w = self.promp_.weights(t, Y)
+            W.append(w)
+            if self.sigma2 == "auto":
+                res.append(np.mean((self.promp_.trajectory_from_weights(t, w)[:, : len(obs)] - Y[:, : len(obs)]) ** 2))
+        W = np.asarray(W)
+        self.weights_ = W
+        self.mean_ = W.mean(axis=0)
+        cov = np.cov(W, rowvar=False, bias=True)
+        cov[np.diag_indices_from(cov)] += self.ridge * max(float(np.mean(np.diag(cov))), 1e-300)
+        self.cov_ = cov
+        var_o = float(np.mean([np.var(a[:, obs]) for a in arrays]))
+        self.sigma2_ = (max(float(np.mean(res)), 1e-6 * var_o) if self.sigma2 == "auto" else float(self.sigma2))
+        self.n_obs_ = len(obs)
+        return self
+
+    def _stats(self, partial, s):
+        M = partial.shape[0]
+        Psi = self._basis(np.linspace(0.0, s, M)).T  # (M, K)
+        return Psi.T @ Psi, Psi.T @ partial, float(np.sum(partial**2)), partial.size
+
+    def phase_log_likelihood(self, partial, s) -> float:
+        """``log p(partial | s)`` under the weight distribution (exact, structured evaluation)."""
+        from .gaussian import condition
+
+        K = int(self.n_weights)
+        G, B, yy, n = self._stats(partial, s)
+        idx = np.arange(self.n_obs_ * K).reshape(self.n_obs_, K)
+        return condition(self.mean_[: self.n_obs_ * K], self.cov_[: self.n_obs_ * K, : self.n_obs_ * K], idx,
+                         G, B, self.sigma2_, yy=yy, n_obs=n, need_cov=False).log_likelihood
+
+    def predict(self, partial, phase: float | None = None) -> BaselinePrediction:
+        """Condition on the observed prefix (phase by maximum likelihood unless given)."""
+        from gmr import MVN
+
+        v = np.asarray(partial, dtype=np.float64)
+        M = v.shape[0]
+        K = int(self.n_weights)
+        if phase is None:
+            grid = np.exp(np.linspace(np.log(0.02), 0.0, int(self.n_phases)))
+            ll = [self.phase_log_likelihood(v, s) for s in grid]
+            i = int(np.argmax(ll))
+            s, best_ll = float(grid[i]), float(ll[i])
+        else:
+            s, best_ll = float(phase), self.phase_log_likelihood(v, float(phase))
+        # compressed observation z = L w_o + noise with L^T L = Psi^T Psi (exact; see interprim.gaussian)
+        G, B, _, _ = self._stats(v, s)
+        e, V = np.linalg.eigh(G)
+        keep = e > 1e-10 * e[-1]
+        e, V = e[keep], V[:, keep]
+        L = np.sqrt(e)[:, None] * V.T  # (k, K)
+        zc = (V.T @ B) / np.sqrt(e)[:, None]  # (k, D_o)
+        k = L.shape[0]
+        no = self.n_obs_
+        Lb = np.kron(np.eye(no), L)  # (no k, no K)
+        P = self.mean_.shape[0]
+        Om = np.zeros((no * k, P))
+        Om[:, : no * K] = Lb
+        # joint Gaussian of [z, w] and gmr's conditioning on the z block (the human's observed dims)
+        mean = np.concatenate([Om @ self.mean_, self.mean_])
+        SOt = self.cov_ @ Om.T
+        cov = np.block([[Om @ SOt + self.sigma2_ * np.eye(no * k), SOt.T], [SOt, self.cov_]])
+        post = MVN(mean=mean, covariance=cov).condition(np.arange(no * k), zc.T.reshape(-1))
+        t = np.linspace(0.0, 1.0, 200)
+        Psi = self._basis(t)  # (K, n)
+        Wm = post.mean.reshape(self.n_dofs_, K)
+        Y = Wm @ Psi  # (D, n)
+        C = post.covariance.reshape(self.n_dofs_, K, self.n_dofs_, K)
+        var = np.einsum("kt,dkdl,lt->dt", Psi, C, Psi)
+        inv = np.argsort(self.order_)
+        mean_traj = Y.T[:, inv]
+        std = np.sqrt(np.clip(var, 0.0, None)).T[:, inv]
+        return BaselinePrediction(t, mean_traj, std, phase=s, log_likelihood=best_ll)

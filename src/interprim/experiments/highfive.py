@@ -359,7 +359,7 @@ def _goal_box_patches(ax):
     for k, (cx, cy) in enumerate(TEST_CELLS):
         ax.add_patch(
             Rectangle(
-                (x0 + cx * cw, y0 + cy * ch), cw, ch, fc="tab:red", alpha=0.12, ec="none",
+                (x0 + cx * cw, y0 + cy * ch), cw, ch, fc="tab:red", alpha=0.18, ec="tab:red", lw=0.6, zorder=5,
                 label="held-out (test) goal region" if k == 0 else None,
             )
         )
@@ -395,7 +395,7 @@ def plot_setup(train, test, path):
     _draw_arm(ax, oa, train.demos[0][-1, :2], color="tab:blue", label="observed agent (2 links)")
     _draw_arm(ax, ca, train.demos[0][-1, 2:], color="tab:green", label="controlled agent (3 links)")
     _setup_axes(ax, f"Simulated high-five (Fig. 5): {len(train)} optimal-control demonstrations")
-    ax.legend(loc="lower center", fontsize=7, ncol=2)
+    ax.legend(loc="upper left", fontsize=6.5, ncol=1, framealpha=0.9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -127,7 +127,14 @@ def add_parser(subparsers) -> None:
         'needs pip install "interprim[lasa]")',
     )
     p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF (default 20)")
-    p.add_argument("--observation", choices=("forcing", "position"), default=None, help="observation model")
+    p.add_argument(
+        "--observations",
+        default="forcing,position",
+        help="IP observation models to compare, comma-separated (default forcing,position)",
+    )
+    p.add_argument(
+        "--no-true-phase", action="store_true", help="skip the diagnostic IP given the true phase"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the folds (default 0)")
     p.add_argument("--data", default=None, metavar="PATH", help="trajectories_train.mat (default: the data folder)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
@@ -364,9 +371,10 @@ def cmd_handwriting(args) -> int:
             raise CommandError(f"unknown LASA shape(s) {bad}; available: {', '.join(known)}")
     if args.folds < 2:
         raise CommandError(f"--folds must be >= 2, got {args.folds}")
-    kwargs = {}
-    if args.observation:
-        kwargs["observation"] = args.observation
+    observations = [o.strip() for o in args.observations.split(",") if o.strip()]
+    bad = [o for o in observations if o not in ("forcing", "position")]
+    if bad or not observations:
+        raise CommandError(f"--observations must list 'forcing' and/or 'position', got {args.observations!r}")
     try:
         res = run_handwriting(
             args.out,
@@ -375,7 +383,8 @@ def cmd_handwriting(args) -> int:
             n_folds=args.folds,
             lasa_shapes=shapes,
             n_basis=args.n_basis,
-            model_kwargs=kwargs,
+            observations=observations,
+            true_phase=not args.no_true_phase,
             seed=args.seed,
             data_path=args.data,
             figures=not args.no_figures,

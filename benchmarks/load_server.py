@@ -1,0 +1,256 @@
+"""Load test of ``interprim serve``: N concurrent sessions, each streaming frames at 100 Hz on loopback.
+
+The server runs in its own process (``python -m interprim.cli serve`` equivalent, started here with a
+model fitted on the simulated high-five); the clients run in another process (asyncio, one
+connection per session, each sending a frame every 10 ms on its own schedule and timing
+frame-sent -> prediction-received).  Reports, per N: median and p99 latency, frames dropped (sent
+without a prediction back, or answered with an error), and the server's CPU use (from /proc).
+
+    python benchmarks/load_server.py                   # N = 1, 10, 50, 100; 5 s each; writes SERVER_RESULTS.md
+    python benchmarks/load_server.py --sessions 50 --seconds 10 --workers 2
+
+Traffic goes to 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import multiprocessing as mp
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def _fit_model(path: Path, n_train: int) -> None:
+    import interprim as ip
+    from interprim.sim import highfive_split
+
+    train, test = highfive_split(n_train, 1, seed=0, progress=False)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15).fit(train.demos, dt=train.dt)
+    m.save(str(path))
+    import numpy as np
+
+    np.save(str(path.with_suffix(".test.npy")), test.demos[0][:, :2])
+
+
+def _server_main(model_path, port_q, workers, ready_evt, stop_evt):
+    import logging
+
+    logging.basicConfig(level=logging.WARNING)
+    from interprim.server.app import InterprimServer, ServerConfig
+    from interprim.server.models import load_models
+
+    models = load_models([model_path])
+    import numpy as np
+
+    st = models["highfive"].model.stream()  # warm up (numba compilation) before taking connections
+    for f in np.load(str(Path(model_path).with_suffix(".test.npy")))[:20]:
+        st.update(f, need_cov=False).trajectory(50)
+    cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, max_rate_hz=1000, rate_burst=100)
+
+    async def main():
+        srv = InterprimServer(models, cfg)
+        await srv.start()
+        port_q.put(srv.port)
+        ready_evt.set()
+        while not stop_evt.is_set():
+            await asyncio.sleep(0.1)
+        await srv.stop()
+
+    asyncio.run(main())
+
+
+def _cpu_seconds(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+async def _session(url, frames, seconds, rate_hz, binary, out, start_at, points, std):
+    from websockets.asyncio.client import connect
+
+    from interprim.server.protocol import encode_binary_frame
+
+    sent_at = {}
+    lat = []
+    errors = 0
+    async with connect(url, max_size=2**22, compression=None) as ws:
+        await ws.send(json.dumps({"type": "hello", "version": 1}))
+        json.loads(await ws.recv())
+        await ws.send(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std}))
+        json.loads(await ws.recv())
+        loop = asyncio.get_running_loop()
+        n_total = int(seconds * rate_hz)
+
+        async def reader():
+            nonlocal errors
+            while len(lat) + errors < n_total:
+                msg = json.loads(await ws.recv())
+                t = loop.time()
+                seq = msg.get("seq")
+                if msg["type"] == "prediction":
+                    lat.append(t - sent_at.pop(seq))
+                elif msg["type"] == "error":
+                    errors += 1
+
+        rtask = asyncio.create_task(reader())
+        await asyncio.sleep(max(0.0, start_at - loop.time()))
+        t0 = loop.time()
+        for k in range(n_total):
+            target = t0 + k / rate_hz
+            delay = target - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            f = frames[k % len(frames)]
+            if k and k % len(frames) == 0:
+                await ws.send(json.dumps({"type": "reset"}))  # control replies are not counted
+            sent_at[k + 1] = loop.time()
+            await ws.send(encode_binary_frame(f) if binary else json.dumps({"type": "frame", "frame": list(f)}))
+        try:
+            await asyncio.wait_for(rtask, timeout=5.0)
+        except (asyncio.TimeoutError, TimeoutError):
+            rtask.cancel()
+    out.append({"lat": lat, "sent": n_total, "errors": errors, "missing": n_total - len(lat) - errors})
+
+
+def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
+    async def main():
+        out = []
+        loop = asyncio.get_running_loop()
+        start_at = loop.time() + 1.0
+        loop.call_at(start_at, q.put, "start")
+        # spread the sessions' phases over one period so they do not all send at the same instant
+        tasks = [
+            _session(url, frames, seconds, rate_hz, binary, out, start_at + (i / max(n, 1)) / rate_hz, points, std)
+            for i in range(n)
+        ]
+        await asyncio.gather(*tasks)
+        return out
+
+    import resource
+
+    out = asyncio.run(main())
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    q.put((out, ru.ru_utime + ru.ru_stime))
+
+
+
+def run_one(url, server_pid, n, seconds, binary, frames, points, std):
+    q = mp.Queue()
+    p = mp.Process(target=_client_main, args=(url, n, seconds, 100.0, binary, frames, points, std, q))
+    p.start()
+    assert q.get(timeout=120) == "start"
+    cpu0, t0 = _cpu_seconds(server_pid), time.monotonic()
+    time.sleep(seconds)  # server CPU over the streaming window only
+    cpu1, t1 = _cpu_seconds(server_pid), time.monotonic()
+    res, client_cpu = q.get(timeout=seconds + 120)
+    p.join(30)
+    lat = sorted(x for r in res for x in r["lat"])
+    sent = sum(r["sent"] for r in res)
+    dropped = sum(r["errors"] + r["missing"] for r in res)
+
+    def pct(v):
+        return lat[min(len(lat) - 1, int(round(v / 100 * (len(lat) - 1))))] * 1e3 if lat else float("nan")
+
+    return {
+        "N": n,
+        "frames": sent,
+        "median_ms": statistics.median(lat) * 1e3 if lat else float("nan"),
+        "p99_ms": pct(99),
+        "max_ms": lat[-1] * 1e3 if lat else float("nan"),
+        "dropped": dropped,
+        "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
+        "client_cpu_pct": 100.0 * client_cpu / (t1 - t0),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sessions", type=int, nargs="*", default=[1, 10, 50, 100])
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--workers", type=int, nargs="*", default=[0], help="server worker threads (0 = inline)")
+    ap.add_argument("--binary", action="store_true", help="binary frames instead of JSON")
+    ap.add_argument("--points", type=int, default=50)
+    ap.add_argument("--std", action="store_true", help="ask for the std band too (much more maths per frame)")
+    ap.add_argument("--out", default=str(HERE / "SERVER_RESULTS.md"))
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+
+    import numpy as np
+
+    tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"interprim-load-{os.getpid()}"
+    tmp.mkdir(parents=True, exist_ok=True)
+    model_path = tmp / "highfive.npz"
+    print("fitting the high-five model ...", flush=True)
+    _fit_model(model_path, 30)
+    frames = np.load(str(model_path.with_suffix(".test.npy"))).tolist()
+
+    rows = []
+    for workers in args.workers:
+        ctx = mp.get_context("spawn")
+        port_q, ready, stop = ctx.Queue(), ctx.Event(), ctx.Event()
+        srv = ctx.Process(target=_server_main, args=(str(model_path), port_q, workers, ready, stop))
+        srv.start()
+        ready.wait(60)
+        url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
+        try:
+            for n in args.sessions:
+                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std)
+                r["workers"] = workers
+                rows.append(r)
+                print(
+                    f"workers={workers} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
+                    f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, dropped {r['dropped']}, "
+                    f"server CPU {r['server_cpu_pct']:.0f} %, client CPU {r['client_cpu_pct']:.0f} %",
+                    flush=True,
+                )
+        finally:
+            stop.set()
+            srv.join(20)
+            if srv.is_alive():
+                srv.terminate()
+    if not args.no_write:
+        write_results(Path(args.out), rows, args)
+    return rows
+
+
+def write_results(path: Path, rows, args):
+    import numpy as np
+    import websockets
+
+    lines = [
+        "# Server load test",
+        "",
+        "`python benchmarks/load_server.py` — N concurrent sessions, each streaming one frame every 10 ms "
+        f"(100 Hz) for {args.seconds:g} s on loopback; {'binary' if args.binary else 'JSON'} frames; each reply "
+        f"carries the controlled agent's mean trajectory at {args.points} points"
+        f"{' and its std band' if args.std else ''}. Model: simulated high-five (2 observed + 3 controlled "
+        "joints, 15 basis functions, 30 demonstrations). Server and clients in separate processes. "
+        "Latency = frame sent -> prediction received (client clock). Dropped = frames answered with an error "
+        "or not answered. Server CPU = server process CPU time / wall time (100 % = one core).",
+        "",
+        f"Machine: {os.cpu_count()} CPUs, {platform.platform()}, Python {platform.python_version()}, "
+        f"numpy {np.__version__}, websockets {websockets.__version__}.",
+        "",
+        "| workers | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {'inline' if r['workers'] == 0 else r['workers']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
+            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} |"
+        )
+    lines.append("")
+    path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)

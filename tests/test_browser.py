@@ -135,7 +135,7 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
           f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
     assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
     # Mouse input is quantised to pixels and irregular in time; the model's prediction from it is
-    # much noisier than from clean frames (see docs/CORE_REQUESTS.md), so this check is loose: the
+    # much noisier than from clean frames (the forcing-term observation differentiates the input twice), so this check is loose: the
     # robot hand ends clearly closer to the high-five point than where it started.  The replay test
     # below checks the accurate case.
     assert d_robot < 0.75 * d_rest, (robot, goal)

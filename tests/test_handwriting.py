@@ -95,9 +95,12 @@ def test_run_handwriting_small_subset(tmp_path):
     again = run_handwriting(
         None, letters="ae", max_per_letter=10, n_folds=2, lasa_shapes=(), percents=(40, 80),
         observations=("position",), true_phase=False, progress=False,
+        extra_variants={"ip_position_8_basis": {"observation": "position", "n_basis": 8}},
     )  # fmt: skip
     assert again["letters"]["a"]["ip_position"] == res["letters"]["a"]["ip_position"]
-    assert again["methods"] == ["ip_position", "prior_mean", "nearest_neighbour"]
+    assert again["methods"] == ["ip_position", "ip_position_8_basis", "prior_mean", "nearest_neighbour"]
+    assert again["config"]["variants"]["ip_position_8_basis"]["n_basis"] == 8
+    assert again["letters"]["a"]["ip_position_8_basis"] != again["letters"]["a"]["ip_position"]
 
 
 def test_run_handwriting_rejects_bad_arguments():
@@ -105,6 +108,8 @@ def test_run_handwriting_rejects_bad_arguments():
         run_handwriting(None, letters="a", lasa_shapes=(), percents=(0, 50), progress=False)
     with pytest.raises(ValueError, match="observations must be"):
         run_handwriting(None, letters="a", lasa_shapes=(), observations=("velocity",), progress=False)
+    with pytest.raises(ValueError, match="'prior_mean' is already used"):
+        run_handwriting(None, letters="a", lasa_shapes=(), extra_variants={"prior_mean": {}}, progress=False)
 
 
 @needs_data

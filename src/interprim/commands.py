@@ -135,6 +135,11 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--no-true-phase", action="store_true", help="skip the diagnostic IP given the true phase"
     )
+    p.add_argument(
+        "--beyond-paper",
+        action="store_true",
+        help="also evaluate an IP with phase by likelihood and cross-validated sigma2 (several times slower)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the folds (default 0)")
     p.add_argument("--data", default=None, metavar="PATH", help="trajectories_train.mat (default: the data folder)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
@@ -351,7 +356,7 @@ def cmd_predict(args) -> int:
 # ----------------------------------------------------------------------------- handwriting
 def cmd_handwriting(args) -> int:
     """``interprim handwriting``: run :func:`interprim.experiments.handwriting.run_handwriting`."""
-    from interprim.experiments.handwriting import DEFAULT_LASA_SHAPES, run_handwriting, summary_lines
+    from interprim.experiments.handwriting import BEYOND_PAPER, DEFAULT_LASA_SHAPES, run_handwriting, summary_lines
 
     if args.shapes is None:
         shapes = DEFAULT_LASA_SHAPES
@@ -385,6 +390,7 @@ def cmd_handwriting(args) -> int:
             n_basis=args.n_basis,
             observations=observations,
             true_phase=not args.no_true_phase,
+            extra_variants=BEYOND_PAPER if args.beyond_paper else None,
             seed=args.seed,
             data_path=args.data,
             figures=not args.no_figures,

@@ -38,7 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_handwriting", "open_end_dtw", "write_report", "DEFAULT_LASA_SHAPES", "DEFAULT_PERCENTS"]
+__all__ = [
+    "run_handwriting",
+    "open_end_dtw",
+    "write_report",
+    "summary_lines",
+    "DEFAULT_LASA_SHAPES",
+    "DEFAULT_PERCENTS",
+    "BEYOND_PAPER",
+]
 
 DEFAULT_PERCENTS = (20, 30, 40, 50, 60, 70, 80)
 DEFAULT_LASA_SHAPES = ("GShape", "Angle", "Sshape", "WShape", "NShape", "Snake")
@@ -128,6 +136,21 @@ def open_end_dtw(query, ref):
     return _dtw_py(q, r)
 
 
+#: Extra variant using the core's options beyond the paper: phase by likelihood and
+#: ``sigma2`` chosen by cross-validation on the training demonstrations (slower).
+BEYOND_PAPER = {"ip_forcing_likelihood_cv": {"observation": "forcing", "sigma2": "cv", "phase_method": "likelihood"}}
+
+
+def _dtw_phase() -> dict:
+    """``{"phase_method": "dtw"}`` if the core has that option (pins the paper's DTW phase)."""
+    import inspect
+
+    from ..primitive import InteractionPrimitive
+
+    params = inspect.signature(InteractionPrimitive.__init__).parameters
+    return {"phase_method": "dtw"} if "phase_method" in params else {}
+
+
 # ----------------------------------------------------------------------------- helpers
 def _normalise(y, n):
     from ..preprocessing import time_normalise
@@ -202,6 +225,7 @@ def run_handwriting(
     n_points: int = 100,
     observations=("forcing", "position"),
     true_phase: bool = True,
+    extra_variants: dict | None = None,
     model_kwargs: dict | None = None,
     seed: int = 0,
     data_path=None,
@@ -240,8 +264,13 @@ def run_handwriting(
         instead of DTW (method ``ip_<observation>_true_phase``): a diagnostic that
         separates the error of phase estimation from the error of conditioning, not a
         method one could use online.
+    extra_variants : dict, optional
+        More IP variants to evaluate, ``{method_name: InteractionPrimitive keyword
+        arguments}``, e.g. :data:`BEYOND_PAPER` (likelihood phase and cross-validated
+        ``sigma2``, the core's options beyond the paper).
     model_kwargs : dict, optional
-        Further keyword arguments of :class:`interprim.InteractionPrimitive`.
+        Further keyword arguments of :class:`interprim.InteractionPrimitive` for every
+        variant.
     seed : int
         Seed of the fold permutations.
     data_path : str or Path, optional
@@ -272,8 +301,14 @@ def run_handwriting(
     observations = list(observations)
     if not observations or any(o not in ("forcing", "position") for o in observations):
         raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
-    ip_methods = [f"ip_{o}" for o in observations]
+    variants = {f"ip_{o}": {**kwargs, "observation": o, **_dtw_phase()} for o in observations}
+    for name, kw in (extra_variants or {}).items():
+        if name in variants or name in ("prior_mean", "nearest_neighbour"):
+            raise ValueError(f"extra_variants: the name {name!r} is already used")
+        variants[str(name)] = {**kwargs, **dict(kw)}
+    ip_methods = list(variants)
     oracle = f"ip_{observations[-1]}_true_phase" if true_phase else None
+    oracle_of = f"ip_{observations[-1]}"
     methods = tuple(ip_methods + ([oracle] if oracle else []) + ["prior_mean", "nearest_neighbour"])
     shown = f"ip_{'position' if 'position' in observations else observations[0]}"
     items = _load_items(letters, max_per_letter, tuple(lasa_shapes or ()), lasa_subsample, data_path)
@@ -295,10 +330,10 @@ def run_handwriting(
         for fi, test_idx in enumerate(folds_of[it.name]):
             train = [it.demos[i] for i in range(len(it.demos)) if i not in set(test_idx.tolist())]
             models = {
-                f"ip_{o}": ip.InteractionPrimitive(
-                    observed_dofs=list(range(D)), n_basis=n_basis, **{**kwargs, "observation": o}
-                ).fit(train, dt=it.dt)
-                for o in observations
+                m: ip.InteractionPrimitive(observed_dofs=list(range(D)), **{"n_basis": n_basis, **kw}).fit(
+                    train, dt=it.dt
+                )
+                for m, kw in variants.items()
             }
             train_norm = np.stack([_normalise(y, n_points) for y in train])
             prior = train_norm.mean(axis=0)
@@ -313,7 +348,7 @@ def run_handwriting(
                     ests = {m: np.asarray(pr.trajectory(n_points)) for m, pr in preds.items()}
                     if oracle:
                         ests[oracle] = np.asarray(
-                            models[ip_methods[-1]].predict(prefix, phase=t_obs / T).trajectory(n_points)
+                            models[oracle_of].predict(prefix, phase=t_obs / T).trajectory(n_points)
                         )
                     pred = preds[shown]
                     costs = [open_end_dtw(prefix, r)[0] for r in train]
@@ -374,6 +409,7 @@ def run_handwriting(
             "n_basis": n_basis,
             "n_points": n_points,
             "model_kwargs": kwargs,
+            "variants": {m: {k: v for k, v in kw.items()} for m, kw in variants.items()},
             "seed": seed,
             "error": "RMS Euclidean distance over the normalised-time grid (rmse: whole movement; "
             "rmse_unseen: after the observed fraction)",
@@ -462,8 +498,11 @@ def _figures(out: Path, examples, results):
             "prior_mean": ("prior mean", "0.4", "o-"),
             "nearest_neighbour": ("nearest neighbour (DTW)", "tab:blue", "o-"),
         }
+        extra_colors = iter(["tab:green", "tab:purple", "tab:brown", "tab:olive", "tab:cyan"])
         for ax, k in zip(axes[0], panels):
             for m in results["methods"]:
+                if m not in style:
+                    style[m] = (m, next(extra_colors, "k"), "^-")
                 label, color, ls = style[m]
                 ax.plot(results["percents"], results["overall"][k][m]["rmse"], ls, color=color, label=label, ms=4)
             unit = "tablet units" if k == "letters" else "LASA units"

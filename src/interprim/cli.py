@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "interprim.commands_demo",
     "interprim.commands",
     "interprim.server.cli",
+    "interprim.commands_evaluate",
 ]
 
 

@@ -10,7 +10,7 @@ model by K-fold cross-validation on the training demonstrations:
 
 1. split the demonstrations into ``n_folds`` folds; for every fold fit the
    prior (Eq. 10) on the others with each candidate shrinkage ``lambda``;
-2. for every held-out demonstration observe the first 20/40/60/80 % of the
+2. for every held-out demonstration observe the first 25/50/75 % of the
    observed agent (at its true phase), condition (Eq. 16-18) with every
    candidate ``sigma^2`` and predict the whole movement of *all* DoFs (both
    agents) by integrating the DMPs from the start;
@@ -46,8 +46,8 @@ __all__ = ["select_hyperparameters", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRI
 
 _LOG2PI = float(np.log(2.0 * np.pi))
 
-DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
-DEFAULT_SHRINKAGE_GRID = (0.02, 0.1, 0.3, 0.6, 0.9, 0.99)
+DEFAULT_FRACTIONS = (0.25, 0.5, 0.75)
+DEFAULT_SHRINKAGE_GRID = (0.02, 0.1, 0.3, 0.6, 0.95)
 #: ``sigma^2`` candidates relative to the mean square of the observation targets
 DEFAULT_SIGMA2_FACTORS = tuple(10.0 ** np.arange(-6.0, 3.01, 0.5))
 
@@ -91,7 +91,7 @@ def _log_likelihoods(U, e, Ur, resid_perp, n, dk, s2):
 
 def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
                            shrinkage_grid=DEFAULT_SHRINKAGE_GRID, sigma2_factors=DEFAULT_SIGMA2_FACTORS,
-                           select_sigma2: bool = True, n_out: int = 50, phase_cases: int = 24):
+                           select_sigma2: bool = True, n_out: int = 50, phase_cases: int = 16):
     """Choose ``sigma^2`` (and the shrinkage) of a model being fitted by K-fold cross-validation.
 
     Called by :meth:`InteractionPrimitive.fit` (``sigma2="cv"``, or

@@ -40,7 +40,7 @@ def _fit_model(path: Path, n_train: int) -> None:
     np.save(str(path.with_suffix(".test.npy")), test.demos[0][:, :2])
 
 
-def _server_main(model_path, port_q, workers, ready_evt, stop_evt):
+def _server_main(model_path, port_q, mode, ready_evt, stop_evt):
     import logging
 
     logging.basicConfig(level=logging.WARNING)
@@ -53,7 +53,9 @@ def _server_main(model_path, port_q, workers, ready_evt, stop_evt):
     st = models["highfive"].model.stream()  # warm up (numba compilation) before taking connections
     for f in np.load(str(Path(model_path).with_suffix(".test.npy")))[:20]:
         st.update(f, need_cov=False).trajectory(50)
-    cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, max_rate_hz=1000, rate_burst=100)
+    workers, processes = mode
+    cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, processes=processes, max_rate_hz=1000,
+                       rate_burst=100)
 
     async def main():
         srv = InterprimServer(models, cfg)
@@ -67,10 +69,24 @@ def _server_main(model_path, port_q, workers, ready_evt, stop_evt):
     asyncio.run(main())
 
 
-def _cpu_seconds(pid: int) -> float:
+def _stat(pid: int):
     with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        return f.read().rsplit(")", 1)[1].split()
+
+
+def _cpu_seconds(pid: int) -> float:
+    """CPU time (user + system) of ``pid`` and its child processes (the worker processes)."""
+    total = 0.0
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            fields = _stat(int(entry))
+        except OSError:
+            continue
+        if int(entry) == pid or int(fields[1]) == pid:
+            total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
 
 
 async def _session(url, frames, seconds, rate_hz, binary, out, start_at, points, std):
@@ -168,6 +184,7 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std):
         "dropped": dropped,
         "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
         "client_cpu_pct": 100.0 * client_cpu / (t1 - t0),
+        "loadavg": os.getloadavg()[0],
     }
 
 
@@ -175,7 +192,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sessions", type=int, nargs="*", default=[1, 10, 50, 100])
     ap.add_argument("--seconds", type=float, default=5.0)
-    ap.add_argument("--workers", type=int, nargs="*", default=[0], help="server worker threads (0 = inline)")
+    ap.add_argument("--modes", nargs="*", default=["inline", "procs:2"],
+                    help="server compute modes: inline, threads:N (thread pool), procs:N (worker processes)")
     ap.add_argument("--binary", action="store_true", help="binary frames instead of JSON")
     ap.add_argument("--points", type=int, default=50)
     ap.add_argument("--std", action="store_true", help="ask for the std band too (much more maths per frame)")
@@ -193,22 +211,25 @@ def main(argv=None):
     frames = np.load(str(model_path.with_suffix(".test.npy"))).tolist()
 
     rows = []
-    for workers in args.workers:
+    for label in args.modes:
+        kind, _, num = label.partition(":")
+        mode = {"inline": (0, 0), "threads": (int(num or 2), 0), "procs": (0, int(num or 2))}[kind]
         ctx = mp.get_context("spawn")
         port_q, ready, stop = ctx.Queue(), ctx.Event(), ctx.Event()
-        srv = ctx.Process(target=_server_main, args=(str(model_path), port_q, workers, ready, stop))
+        srv = ctx.Process(target=_server_main, args=(str(model_path), port_q, mode, ready, stop))
         srv.start()
-        ready.wait(60)
+        ready.wait(180)
         url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
         try:
             for n in args.sessions:
                 r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std)
-                r["workers"] = workers
+                r["mode"] = label
                 rows.append(r)
                 print(
-                    f"workers={workers} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
+                    f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
                     f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, dropped {r['dropped']}, "
-                    f"server CPU {r['server_cpu_pct']:.0f} %, client CPU {r['client_cpu_pct']:.0f} %",
+                    f"server CPU {r['server_cpu_pct']:.0f} %, client CPU {r['client_cpu_pct']:.0f} %, "
+                    f"load {r['loadavg']:.1f}",
                     flush=True,
                 )
         finally:
@@ -239,13 +260,13 @@ def write_results(path: Path, rows, args):
         f"Machine: {os.cpu_count()} CPUs, {platform.platform()}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, websockets {websockets.__version__}.",
         "",
-        "| workers | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| server compute | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | machine load (1 min) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {'inline' if r['workers'] == 0 else r['workers']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
-            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} |"
+            f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
+            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['loadavg']:.1f} |"
         )
     lines.append("")
     path.write_text("\n".join(lines) + "\n")

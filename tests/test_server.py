@@ -633,3 +633,34 @@ def test_protocol_helpers():
     assert P.decode_binary_frame(P.encode_binary_frame([1.5, -2.0]), 2).tolist() == [1.5, -2.0]
     with pytest.raises(ValueError):
         P.dumps({"x": float("nan")})
+
+
+# ---------------------------------------------------------------------------- worker processes
+def test_worker_processes_give_the_same_predictions(models, test_demo):
+    srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},
+                          ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
+    with ServerThread(srv) as st:
+        assert len(st.server._procs.workers) == 2
+        with Client(st.ws_url) as a, Client(st.ws_url) as b:  # consecutive session ids: different workers
+            a.open("pair", points=10, std=True)
+            b.open("pair", points=10)
+            da, db = models["pair"].model.stream(), models["pair"].model.stream()
+            for k, f in enumerate(test_demo[:30, :2]):
+                pa, pb = a.frame(f), b.frame(f, binary=True)
+                ea, eb = da.update(f), db.update(f)
+                np.testing.assert_allclose(pa["mean"], ea.trajectory(10)[:, 2:], atol=2e-6)
+                np.testing.assert_allclose(pa["std"], ea.std(10)[:, 2:], atol=2e-6)
+                np.testing.assert_allclose(pb["mean"], eb.trajectory(10)[:, 2:], atol=2e-6)
+                if k == 10:
+                    b.reset()
+                    db = models["pair"].model.stream()
+            with pytest.raises(ServerError) as e:
+                a.frame([1.0])
+            assert e.value.code == "bad_frame"
+            a.close_session()
+            with pytest.raises(ServerError) as e:
+                a.frame(test_demo[0, :2])
+            assert e.value.code == "not_open"
+            a.open("letter_c", points=5)
+            assert a.frame([0.5, 0.5])["model"] == "letter_c"
+        assert wait_until(lambda: n_sessions(st) == 0)

@@ -55,6 +55,7 @@ class ServerConfig:
     max_rate_hz: float = 500.0  # messages per second per session (token bucket) ...
     rate_burst: int = 50  # ... with this many messages of burst
     workers: int = 0  # 0 = compute inline on the event loop; N = thread pool of N
+    processes: int = 0  # N > 0: sessions pinned to N worker processes (see workers.py); overrides workers
     send_queue: int = 256  # replies pending for one client before it counts as "not reading"
     write_limit: int = 256 * 1024  # bytes buffered in the socket writer before send() waits
     max_points: int = 500
@@ -79,6 +80,8 @@ class ServerConfig:
             raise ValueError(f"max_rate_hz must be positive, got {self.max_rate_hz}")
         if self.workers < 0:
             raise ValueError(f"workers must be >= 0, got {self.workers}")
+        if self.processes < 0:
+            raise ValueError(f"processes must be >= 0, got {self.processes}")
         if not 2 <= self.default_points <= self.max_points:
             raise ValueError(f"default_points must be in [2, max_points={self.max_points}]")
         if self.max_message_bytes < 256:
@@ -152,6 +155,18 @@ def _round(a: np.ndarray) -> list:
     return np.round(np.asarray(a, dtype=np.float64), 6).tolist()
 
 
+def warm_up(entries) -> None:
+    """Run one prediction per model so that JIT compilation (numba) happens before the first client."""
+    for e in entries:
+        try:
+            st = e.model.stream()
+            kw = {"need_cov": False} if _accepts_need_cov(st) else {}
+            p = st.update(np.zeros(e.n_observed), **kw)
+            p.trajectory(5)
+        except Exception:  # a model that cannot predict from zeros will say so to its first client
+            log.debug("warm-up of %s failed", e.name, exc_info=True)
+
+
 def _accepts_need_cov(stream) -> bool:
     import inspect
 
@@ -223,7 +238,9 @@ class InterprimServer:
         self._ids = itertools.count(1)
         self.sessions: dict[int, _Session] = {}
         self.stats = {"sessions": 0, "predictions": 0, "errors": 0, "rejected": 0}
-        self._pool = ThreadPoolExecutor(self.config.workers, thread_name_prefix="ip-worker") if self.config.workers else None
+        c = self.config
+        self._pool = ThreadPoolExecutor(c.workers, thread_name_prefix="ip-worker") if c.workers and not c.processes else None
+        self._procs = None
         self._server = None
         self._static = self._load_static()
         self.port = None
@@ -233,6 +250,20 @@ class InterprimServer:
         from websockets.asyncio.server import serve
 
         c = self.config
+        if not c.processes:
+            await asyncio.get_running_loop().run_in_executor(None, warm_up, list(self.models.values()))
+        if c.processes:
+            from .workers import ProcessPool
+
+            pool = ProcessPool(self.models, c.processes)
+            loop = asyncio.get_running_loop()
+            try:
+                await loop.run_in_executor(None, pool.start)
+            except BaseException:
+                pool.stop()
+                raise
+            pool.attach(loop)
+            self._procs = pool
         self._server = await serve(
             self._handler,
             c.host,
@@ -256,7 +287,8 @@ class InterprimServer:
             c.host,
             self.port,
             P.PROTOCOL_VERSION,
-            f"{c.workers} worker thread(s)" if c.workers else "inline compute",
+            f"{c.processes} worker process(es)" if c.processes
+            else f"{c.workers} worker thread(s)" if c.workers else "inline compute",
         )
         return self
 
@@ -272,6 +304,9 @@ class InterprimServer:
             self._server = None
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
+        if self._procs is not None:
+            self._procs.stop()
+            self._procs = None
 
     @property
     def url(self) -> str:
@@ -449,6 +484,12 @@ class InterprimServer:
             self._fatal(s, P.CLOSE_INTERNAL, "internal server error (logged)")
         finally:
             self.sessions.pop(sid, None)
+            if self._procs is not None and s.open is not None:
+                s.open = None
+                try:
+                    await self._procs.call(sid, "drop")
+                except Exception:
+                    pass
             if s.closing and s.writer is not None:
                 try:  # let the writer send the queued error + close frame
                     await asyncio.wait_for(asyncio.shield(s.writer), c.close_timeout + 1.0)
@@ -545,11 +586,11 @@ class InterprimServer:
             if msg is None or msg["type"] == "frame":
                 await self._on_frame(s, data, msg, seq)
             else:
-                self._on_control(s, msg)
+                await self._on_control(s, msg)
         except P.ProtocolError as exc:
             self._error(s, exc, seq)
 
-    def _on_control(self, s: _Session, msg: dict) -> None:
+    async def _on_control(self, s: _Session, msg: dict) -> None:
         mtype = msg["type"]
         if mtype == "hello":
             h = P.check_hello(msg)
@@ -568,14 +609,22 @@ class InterprimServer:
             entries = [self.models[n] for n in o["candidates"]]
             streams, cols = [], []
             for e in entries:
-                try:
-                    streams.append(e.model.stream(robot_state=o["robot_state"]))
-                except (ValueError, TypeError) as exc:
-                    raise P.ProtocolError("bad_message", f"open.robot_state for model {e.name!r}: {exc}") from None
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
                 cols.append(list(range(e.n_dofs)) if dofs == "all" else e.controlled_dofs)
+                if self._procs is None:
+                    try:
+                        streams.append(e.model.stream(robot_state=o["robot_state"]))
+                    except (ValueError, TypeError) as exc:
+                        raise P.ProtocolError("bad_message", f"open.robot_state for model {e.name!r}: {exc}") from None
+            if self._procs is not None:
+                s.open = None
+                try:
+                    await self._procs.call(s.id, "open", model=o["model"], candidates=o["candidates"], cols=cols,
+                                           points=o["points"], std=o["std"], robot_state=o["robot_state"])
+                except RuntimeError as exc:
+                    raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
             s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
-            if _accepts_need_cov(streams[0]):  # mean-only updates are much cheaper when no band is asked for
+            if streams and _accepts_need_cov(streams[0]):  # mean-only updates are much cheaper without a band
                 s.open.update_kw = {"need_cov": o["std"]}
             s.consecutive_errors = 0
             log.info("session %d: opened %s%s", s.id, o["model"],
@@ -593,6 +642,11 @@ class InterprimServer:
         if s.open is None:
             raise P.ProtocolError("not_open", f"{mtype!r} needs an open session: send open first")
         if mtype == "reset":
+            if self._procs is not None:
+                try:
+                    await self._procs.call(s.id, "reset")
+                except RuntimeError as exc:
+                    raise P.ProtocolError("internal", f"reset failed: {exc}") from None
             for st in s.open.streams:
                 st.reset()
             s.open.frames = 0
@@ -600,6 +654,11 @@ class InterprimServer:
             self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
         elif mtype == "close":
             s.open = None
+            if self._procs is not None:
+                try:
+                    await self._procs.call(s.id, "drop")
+                except RuntimeError:
+                    pass
             s.consecutive_errors = 0
             self._send(s, P.dumps({"type": "closed", "seq": s.seq}))
 
@@ -615,7 +674,9 @@ class InterprimServer:
         else:
             frame, t = P.check_frame(msg, n)
         try:
-            if self._pool is None:
+            if self._procs is not None:
+                text = await self._procs.call(s.id, "frame", frame=frame.tolist(), seq=seq, t=t)
+            elif self._pool is None:
                 text = compute_prediction(op, frame, seq, t)
             else:
                 loop = asyncio.get_running_loop()

@@ -53,6 +53,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, default=0,
                    help="threads for the prediction maths; 0 = on the event loop (default 0, fastest "
                         "for small models: see benchmarks/SERVER_RESULTS.md)")
+    p.add_argument("--processes", type=int, default=0,
+                   help="worker processes for the prediction maths, sessions pinned to one each; 0 = none "
+                        "(default). Uses several cores: see benchmarks/SERVER_RESULTS.md")
     p.add_argument("--send-queue", type=int, default=256,
                    help="replies pending for one client before it is closed as not reading (default 256)")
     p.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
@@ -90,6 +93,7 @@ def run(args) -> int:
         max_rate_hz=args.max_rate_hz,
         rate_burst=args.rate_burst,
         workers=args.workers,
+        processes=args.processes,
         send_queue=args.send_queue,
         allowed_origins=tuple(args.allow_origin),
     )

@@ -61,7 +61,8 @@ def test_single_agent_recovers_its_own_demo():
     gt = time_normalise(d, 100)
     err = np.abs(pred.trajectory(100) - gt)
     assert np.max(err) < 0.03 * np.ptp(d) and np.mean(err) < 0.002
-    np.testing.assert_allclose(pred.goal, d[-1], atol=1e-3)
+    # exact Eq. 18 (every eigen-direction of X^T X kept): the weakly identified goal of one DoF moves by ~3e-3
+    np.testing.assert_allclose(pred.goal, d[-1], atol=5e-3)
 
 
 def test_stream_equals_batch_predict(fitted, synthetic):

@@ -37,12 +37,20 @@ _LOG2PI = float(np.log(2.0 * np.pi))
 
 @dataclass
 class GaussianPrior:
-    """``p(theta) = N(mean, cov)`` with how the covariance was regularised."""
+    """``p(theta) = N(mean, cov)`` with how the covariance was regularised.
+
+    ``diag`` and ``factor`` (optional) give the same covariance in the
+    diagonal-plus-low-rank form ``cov = diag(diag) + factor @ factor.T`` that
+    every method of :func:`fit_prior` produces (``factor`` has at most ``S``
+    columns, ``S`` demonstrations); :class:`LowRankConditioner` uses it.
+    """
 
     mean: np.ndarray
     cov: np.ndarray
     method: str
     shrinkage: float
+    diag: np.ndarray | None = None
+    factor: np.ndarray | None = None
 
 
 def shrinkage_intensity(X: np.ndarray) -> float:
@@ -67,15 +75,21 @@ def shrinkage_intensity(X: np.ndarray) -> float:
     if keep.sum() < 2:
         return 1.0
     Z = Xc[:, keep] / sd[keep]
-    W2 = (Z * Z).T @ (Z * Z)  # sum_k w_kij^2
-    R = (Z.T @ Z) / (S - 1)
-    wbar = R * (S - 1) / S
-    var_r = S / (S - 1) ** 3 * (W2 - S * wbar**2)
-    off = ~np.eye(R.shape[0], dtype=bool)
-    denom = float(np.sum(R[off] ** 2))
-    if denom <= 0:
+    # Sums over i != j of Var(r_ij) and r_ij^2 without forming the P x P matrices (O(S^2 P), not O(S P^2)):
+    # sum_ij W2_ij = sum_k (sum_i z_ki^2)^2 and sum_ij R_ij^2 = |Z Z^T|_F^2 / (S-1)^2.
+    Z2 = Z * Z
+    rs = Z2.sum(axis=1)
+    w2_all = float(rs @ rs)
+    w2_diag = float(np.sum(Z2 * Z2))
+    Rd = Z2.sum(axis=0) / (S - 1)  # diag of R
+    ZZt = Z @ Z.T
+    r2_all = float(np.sum(ZZt * ZZt)) / (S - 1) ** 2
+    r2_off = r2_all - float(Rd @ Rd)
+    wb = (S - 1) / S
+    var_off = S / (S - 1) ** 3 * ((w2_all - w2_diag) - S * wb * wb * r2_off)
+    if r2_off <= 0:
         return 1.0
-    return float(np.clip(np.sum(var_r[off]) / denom, 0.0, 1.0))
+    return float(np.clip(var_off / r2_off, 0.0, 1.0))
 
 
 def fit_prior(thetas, method: str = "shrinkage", ridge: float = 1e-6, shrinkage: float | None = None) -> GaussianPrior:
@@ -100,8 +114,7 @@ def fit_prior(thetas, method: str = "shrinkage", ridge: float = 1e-6, shrinkage:
     mean = X.mean(axis=0)
     Xc = X - mean
     emp = Xc.T @ Xc / S  # Eq. 10
-    scale = float(np.mean(np.diag(emp))) if P else 0.0
-    floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
+    floor = _floor(emp, ridge)
     lam = 0.0
     if method == "empirical":
         cov = emp.copy()
@@ -116,7 +129,25 @@ def fit_prior(thetas, method: str = "shrinkage", ridge: float = 1e-6, shrinkage:
     else:
         raise ValueError(f"covariance method must be 'shrinkage', 'ridge' or 'empirical', got {method!r}")
     cov[np.diag_indices(P)] += floor
-    return GaussianPrior(mean=mean, cov=cov, method=method, shrinkage=lam)
+    d, factor = _lowrank(Xc, emp, lam, floor)
+    return GaussianPrior(mean=mean, cov=cov, method=method, shrinkage=lam, diag=d, factor=factor)
+
+
+def _floor(emp, ridge):
+    P = emp.shape[0]
+    scale = float(np.mean(np.diag(emp))) if P else 0.0
+    return max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
+
+
+def _lowrank(Xc, emp, lam, floor):
+    """The covariance of :func:`fit_prior` as diagonal + low rank: ``diag(d) + U U^T``, ``U = sqrt((1-lam)/S) Xc^T``."""
+    S, P = Xc.shape
+    d = lam * np.diag(emp) + floor
+    factor = np.sqrt((1.0 - lam) / S) * Xc.T
+    if S > P:  # more demonstrations than parameters: a rank-P factor of the same matrix
+        e, V = np.linalg.eigh((1.0 - lam) * emp)
+        factor = V * np.sqrt(np.clip(e, 0.0, None))
+    return d, np.ascontiguousarray(factor)
 
 
 @dataclass
@@ -128,7 +159,7 @@ class Posterior:
     log_likelihood: float
 
 
-def _compress(G, B, tol=1e-10):
+def _compress(G, B, tol=1e-14):
     e, V = np.linalg.eigh(0.5 * (G + G.T))
     keep = e > tol * max(float(e[-1]), 1e-300)
     e, V = e[keep], V[:, keep]
@@ -219,3 +250,167 @@ def sample(mean, cov, n: int, random_state=None) -> np.ndarray:
     e, V = np.linalg.eigh(0.5 * (cov + cov.T))
     e = np.clip(e, 0.0, None)
     return mean + (rng.standard_normal((n, mean.shape[0])) * np.sqrt(e)) @ V.T
+
+
+def lowrank_parts(prior: GaussianPrior, thetas=None, ridge: float | None = None, tol: float = 1e-10):
+    """``(d, U)`` with ``prior.cov == diag(d) + U U^T`` (checked to ``tol`` relative), or ``None``.
+
+    Uses ``prior.diag``/``prior.factor`` when present (set by :func:`fit_prior`);
+    otherwise (a model read from a file) rebuilds them from the demonstrations'
+    parameters ``thetas`` with the arithmetic of :func:`fit_prior` (so a saved
+    and reloaded model predicts bitwise identically) and checks the result
+    against ``prior.cov``.
+    """
+    if prior.diag is not None and prior.factor is not None:
+        return np.asarray(prior.diag, dtype=np.float64), np.ascontiguousarray(prior.factor, dtype=np.float64)
+    if thetas is None:
+        return None
+    X = np.asarray(thetas, dtype=np.float64)
+    S, P = X.shape
+    if P != prior.mean.shape[0] or S < 2:
+        return None
+    Xc = X - X.mean(axis=0)
+    emp = Xc.T @ Xc / S
+    lam = float(prior.shrinkage) if prior.method == "shrinkage" else 0.0
+    if ridge is not None:
+        floor = _floor(emp, ridge)
+    else:
+        floor = float(np.median(np.diag(prior.cov) - np.diag(emp)))
+    d, U = _lowrank(Xc, emp, lam, floor)
+    cov = prior.cov
+    scale = float(np.abs(cov).max()) if cov.size else 0.0
+    if not np.all(d > 0) or scale == 0.0:
+        return None
+    rec = U @ U.T
+    rec[np.diag_indices(P)] += d
+    if float(np.abs(rec - cov).max()) > tol * scale:
+        return None
+    return d, U
+
+
+class LowRankConditioner:
+    """Eq. 16-18 for a prior ``Sigma = diag(d) + U U^T`` (shrinkage, ridge and empirical priors all have it).
+
+    The observation is ``Omega~ = [blockdiag(X, ..., X), 0]`` (one ``X`` for
+    every observed DoF, Sec. III-D), seen through its statistics ``G = X^T X``
+    and ``B = X^T F``.  With ``S_i = diag(sqrt(d_i))``, ``Uh = S^{-1} U`` and
+    ``T_i = sigma^2 I + S_i G S_i`` (one per observed DoF, ``q x q``) the
+    posterior of Eq. 18 is, exactly,
+
+    * mean: ``mu + [S (a + sigma^2 T^{-1} Uh gamma);  U_c gamma]`` with
+      ``a = T^{-1} S (B - G mu_o)``, ``K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i``
+      (``r x r``) and ``gamma = K^{-1} Uh^T a``;
+    * covariance: ``blockdiag(sigma^2 S_i T_i^{-1} S_i) (+) diag(d_c) + W K^{-1} W^T``
+      with ``W = [-sigma^2 S T^{-1} Uh; -U_c]`` -- a sum of positive
+      semi-definite terms, no subtraction;
+    * ``log det A = n log sigma^2 + sum_i (log det T_i - q log sigma^2) + log det K``
+      (matrix determinant lemma), so the marginal log-likelihood needs no ``(T D_o)^2`` matrix.
+
+    Everything that depends only on the prior is computed here, once.  The
+    cost of :meth:`mean` is ``O(D_o (q^3 + q^2 r + q r^2) + P r)``: independent of
+    the number of observed frames, and far below the ``O((D_o q)^3)`` of the
+    dense structured form (:func:`condition`) when ``r`` (<= number of
+    demonstrations) is small.
+    """
+
+    def __init__(self, mean, d, U, obs_index):
+        obs_index = np.asarray(obs_index, dtype=np.intp)
+        self.obs_index = obs_index
+        D_o, q = obs_index.shape
+        P = mean.shape[0]
+        self.P, self.D_o, self.q = P, D_o, q
+        self.mean = np.ascontiguousarray(mean, dtype=np.float64)
+        self.obs_flat = np.ascontiguousarray(obs_index.reshape(-1))
+        mask = np.ones(P, dtype=bool)
+        mask[self.obs_flat] = False
+        self.other = np.flatnonzero(mask).astype(np.intp)
+        self.d = np.asarray(d, dtype=np.float64)
+        U = np.asarray(U, dtype=np.float64)
+        self.r = U.shape[1]
+        self.sq = np.ascontiguousarray(np.sqrt(self.d[obs_index]))  # (D_o, q)
+        self.Uh = np.ascontiguousarray(U[obs_index] / self.sq[:, :, None])  # (D_o, q, r)
+        self.mu_o = np.ascontiguousarray(self.mean[obs_index])
+        self.Uc = np.ascontiguousarray(U[self.other])  # (P - D_o q, r)
+        self.d_other = self.d[self.other]
+        Uh2 = self.Uh.reshape(D_o * q, self.r)
+        self.K0 = np.eye(self.r) + Uh2.T @ Uh2
+        # workspaces of the compiled kernel (the hot path allocates nothing that grows)
+        self._T = np.empty((D_o, q, q))
+        self._W = np.empty((q, self.r))
+        self._K = np.empty((self.r, self.r))
+        self._ca = np.empty((3, D_o, q))
+
+    @classmethod
+    def from_prior(cls, prior: GaussianPrior, obs_index, thetas=None, ridge: float | None = None):
+        """A conditioner for ``prior``, or ``None`` if its covariance is not diagonal plus low rank."""
+        parts = lowrank_parts(prior, thetas, ridge)
+        if parts is None:
+            return None
+        return cls(prior.mean, parts[0], parts[1], obs_index)
+
+    def _loglik(self, ld_T, ld_K, resid, sigma2, n_obs):
+        if n_obs is None:
+            return float("nan")
+        D_o, q = self.D_o, self.q
+        logdet = n_obs * np.log(sigma2) + ld_T - D_o * q * np.log(sigma2) + ld_K
+        return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
+
+    def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
+        """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
+        from ._kernels import lowrank_condition_mean
+
+        if out is None:
+            out = np.empty(self.P)
+        ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
+                                                   self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, self._T,
+                                                   self._W, self._K, self._ca, out)
+        if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
+            return None
+        return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
+
+    def _factors(self, G, sigma2):
+        q = self.q
+        T = self.sq[:, :, None] * G[None, :, :] * self.sq[:, None, :]
+        T[:, np.arange(q), np.arange(q)] += sigma2
+        TinvUh = np.linalg.solve(T, self.Uh)  # (D_o, q, r)
+        K = self.K0 - sigma2 * np.einsum("iqr,iqs->rs", self.Uh, TinvUh)
+        return T, TinvUh, 0.5 * (K + K.T)
+
+    def mean_numpy(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
+        """Same as :meth:`mean_compiled` in plain numpy (no compilation; used before the kernels are ready)."""
+        G = np.asarray(G, dtype=np.float64)
+        B = np.asarray(B, dtype=np.float64)
+        T, TinvUh, K = self._factors(G, sigma2)
+        mu_o = self.mean[self.obs_index]  # (D_o, q)
+        c = B.T - mu_o @ G  # (D_o, q)
+        a = np.linalg.solve(T, (self.sq * c)[:, :, None])[:, :, 0]
+        beta = np.einsum("iqr,iq->r", self.Uh, a)
+        gamma = np.linalg.solve(K, beta)
+        w = np.einsum("iqr,r->iq", TinvUh, gamma)
+        delta = self.sq * (a + sigma2 * w)
+        out = self.mean.copy()
+        out[self.obs_flat] += delta.reshape(-1)
+        out[self.other] += self.Uc @ gamma
+        resid = yy - float(np.sum(mu_o * (B.T + c))) - float(np.sum(c * delta))
+        ld_T = float(np.sum(np.linalg.slogdet(T)[1]))
+        ld_K = float(np.linalg.slogdet(K)[1])
+        return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
+
+    def cov(self, G, sigma2: float) -> np.ndarray:
+        """Posterior covariance of Eq. 18 (``P x P``), as a sum of positive semi-definite terms."""
+        G = np.asarray(G, dtype=np.float64)
+        T, TinvUh, K = self._factors(G, sigma2)
+        P, q = self.P, self.q
+        Tinv = np.linalg.inv(T)
+        blocks = sigma2 * self.sq[:, :, None] * Tinv * self.sq[:, None, :]  # (D_o, q, q)
+        Wt = np.empty((P, self.r))
+        Wt[self.obs_flat] = (-sigma2 * self.sq[:, :, None] * TinvUh).reshape(-1, self.r)
+        Wt[self.other] = -self.Uc
+        Lk = np.linalg.cholesky(K)
+        V = np.linalg.solve(Lk, Wt.T)  # (r, P)
+        out = V.T @ V
+        for i in range(self.D_o):
+            idx = self.obs_index[i]
+            out[np.ix_(idx, idx)] += blocks[i]
+        out[self.other, self.other] += self.d_other
+        return out

@@ -96,17 +96,119 @@ def _argmin_first(col):
 
 
 @njit(cache=True, fastmath=False)
+def _cost_column_t(uT, vm, out):
+    """``out[n] = c(u_n, v_m)`` from the transposed reference ``uT`` (D, N).
+
+    Same summation order over ``d`` as :func:`_local_cost_column` (bitwise equal),
+    but the loop over ``n`` is innermost and contiguous, so it vectorises.
+    """
+    D, N = uT.shape
+    for n in range(N):
+        out[n] = 0.0
+    for d in range(D):
+        vd = vm[d]
+        for n in range(N):
+            diff = uT[d, n] - vd
+            out[n] += diff * diff
+
+
+@njit(cache=True, fastmath=False)
+def _open_end_strips(uT, v, a, b, cb):
+    """n* and D(n*, M) (Eq. 5-8) with two columns of memory, four query frames per sweep.
+
+    Four consecutive columns of Eq. 7 are advanced together: at row ``n`` the
+    cells ``(n, m), (n, m+1), (n, m+2), (n, m+3)`` are computed from the
+    previous row of each.  The four dependency chains overlap in the CPU, so
+    the sweep is bounded by throughput, not by the latency of the ``min + add``
+    chain.  Every cell is computed with exactly the operations of Eq. 7, so the
+    result is bitwise equal to the column-by-column recursion.
+    """
+    D, N = uT.shape
+    M = v.shape[0]
+    _cost_column_t(uT, v[0], a)
+    for n in range(1, N):  # Eq. 6
+        a[n] += a[n - 1]
+    m = 1
+    while m + 4 <= M:
+        for k in range(4):
+            _cost_column_t(uT, v[m + k], cb[k])
+        c0 = cb[0]
+        c1 = cb[1]
+        c2 = cb[2]
+        c3 = cb[3]
+        # row 0: Eq. 5
+        A = a[0] + c0[0]
+        B = A + c1[0]
+        C = B + c2[0]
+        E = C + c3[0]
+        b[0] = E
+        for n in range(1, N):
+            pa0 = a[n - 1]
+            pa1 = a[n]
+            x = pa0 if pa0 <= pa1 else pa1
+            x = x if x <= A else A
+            An = x + c0[n]
+            x = A if A <= An else An
+            x = x if x <= B else B
+            Bn = x + c1[n]
+            x = B if B <= Bn else Bn
+            x = x if x <= C else C
+            Cn = x + c2[n]
+            x = C if C <= Cn else Cn
+            x = x if x <= E else E
+            En = x + c3[n]
+            b[n] = En
+            A = An
+            B = Bn
+            C = Cn
+            E = En
+        a, b = b, a
+        m += 4
+    while m < M:
+        _next_column_cost(a, cb[0], b, uT, v[m])
+        a, b = b, a
+        m += 1
+    n = _argmin_first(a)
+    return n, a[n]
+
+
+@njit(cache=True, fastmath=False)
+def _next_column_cost(prev, cost, col, uT, vm):
+    """One column of Eq. 5 and 7 (same result as :func:`_next_column`) via a vectorised cost column."""
+    _cost_column_t(uT, vm, cost)
+    N = prev.shape[0]
+    col[0] = prev[0] + cost[0]
+    for n in range(1, N):
+        best = prev[n - 1]
+        if prev[n] < best:
+            best = prev[n]
+        if col[n - 1] < best:
+            best = col[n - 1]
+        col[n] = best + cost[n]
+
+
+@njit(cache=True, fastmath=False)
+def _incremental_step(uT, vm, prev, col, cost, first):
+    """Add one query frame: new last column into ``col`` (``prev`` is the old one); returns n*."""
+    N = col.shape[0]
+    if first:
+        _cost_column_t(uT, vm, col)
+        for n in range(1, N):
+            col[n] += col[n - 1]
+    else:
+        _next_column_cost(prev, cost, col, uT, vm)
+    return _argmin_first(col)
+
+
 def _open_end(u, v):
     """n* and D(n*, M) without storing the matrix (two columns of memory)."""
     N = u.shape[0]
+    uT = np.ascontiguousarray(u.T)
     a = np.empty(N)
     b = np.empty(N)
-    _first_column(u, v[0], a)
-    for m in range(1, v.shape[0]):
-        _next_column(u, v[m], a, b)
-        a, b = b, a
-    n = _argmin_first(a)
-    return n, a[n]
+    cb = np.empty((4, N))
+    n, c = _open_end_strips(uT, v, a, b, cb)
+    return int(n), float(c)
 
 
 @njit(cache=True, fastmath=False)
@@ -214,8 +316,10 @@ class IncrementalDTW:
     def __init__(self, reference):
         self.reference = as_2d_finite(reference, "reference", min_rows=1)
         N = self.reference.shape[0]
+        self._uT = np.ascontiguousarray(self.reference.T)
         self._col = np.empty(N)
         self._prev = np.empty(N)
+        self._cost = np.empty(N)
         self.n_frames = 0
         self.n_star = -1
         self.cost = np.inf
@@ -228,13 +332,11 @@ class IncrementalDTW:
     def update(self, frame, check: bool = True):
         """Add one query frame; returns ``(n_star, cost)``."""
         v = as_frame(frame, "frame", self.reference.shape[1]) if check else frame
-        if self.n_frames == 0:
-            _first_column(self.reference, v, self._col)
-        else:
+        first = self.n_frames == 0
+        if not first:
             self._prev, self._col = self._col, self._prev
-            _next_column(self.reference, v, self._prev, self._col)
+        n = _incremental_step(self._uT, v, self._prev, self._col, self._cost, first)
         self.n_frames += 1
-        n = int(_argmin_first(self._col))
         self.n_star = n
         self.cost = float(self._col[n])
         return n, self.cost

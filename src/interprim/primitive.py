@@ -24,7 +24,8 @@ from ._validation import as_2d_finite, as_frame, check_positive, check_times
 from .basis import Basis, canonical_phase
 from .dmp import LinearRollout, fit_weights, forcing_values
 from .errors import NotFittedError
-from .gaussian import GaussianPrior, Posterior, condition, fit_prior, sample
+from . import _fast
+from .gaussian import GaussianPrior, LowRankConditioner, Posterior, condition, fit_prior, sample
 from .phase import IncrementalDTW, open_end_dtw
 from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 
@@ -378,8 +379,8 @@ class InteractionPrimitive:
 
             N1 = self.reference_.shape[0] - 1
             est = estimate_phase(self, z, s_init=res.n_star / N1)
-            return self._predict_latent(z, est.s_end * N1, res.cost, robot_state, need_cov=True)
-        return self._predict_latent(z, res.n_star, res.cost, robot_state, need_cov=True)
+            return self._predict_latent(z, est.s_end * N1, res.cost, robot_state)
+        return self._predict_latent(z, res.n_star, res.cost, robot_state)
 
     def _robot_start(self, robot_state):
         n_o = self.n_observed_latent_
@@ -434,14 +435,14 @@ class InteractionPrimitive:
             Y = z - free @ np.vstack([y0, v0])
         return X, Y, y0
 
-    def _predict_latent(self, z, n_star, cost, robot_state, need_cov=True, robot_start=None) -> "Prediction":
+    def _predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
+                        workspace=None) -> "Prediction":
         M = z.shape[0]
         s_end, duration = self._phase_info(n_star, M)
         prior = self.prior_
         stats = None
         if M >= self.min_observed and s_end > 0:
-            X, Y, y0 = self._observation(z, s_end)
-            stats = (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size)
+            stats, y0 = self._stats(z, s_end, workspace)
             post = self._condition(stats, need_cov)
         else:
             y0 = z[0]
@@ -450,9 +451,49 @@ class InteractionPrimitive:
             robot_start = self._robot_start(robot_state)
         return Prediction(self, post, stats, s_end, duration, n_star, cost, M, y0, robot_start, z[-1])
 
+    def _stats(self, z, s_end, workspace=None):
+        """Sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)`` of the observation (Eq. 13-15) and the start ``y0``.
+
+        The paper's forcing observation without smoothing runs in compiled
+        kernels on preallocated buffers (``workspace``, grown by doubling),
+        ``O(M q (q + D_o))`` for ``M`` frames because every frame gets a new
+        phase; other observation models use :meth:`_observation` (numpy).
+        Both give the same numbers (tested to 1e-12).
+        """
+        M = z.shape[0]
+        if self.observation == "forcing" and self.smoothing_window is None and M >= 3 and _fast.ready():
+            ws = workspace if workspace is not None else _fast.StatsWorkspace(M, z.shape[1], self._q)
+            G, B, yy = ws.forcing_stats(z, M, s_end, self)
+            return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0]
+        X, Y, y0 = self._observation(z, s_end)
+        return (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size), y0
+
+    def _conditioner(self):
+        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.gaussian.LowRankConditioner`)."""
+        cache = self.__dict__.get("_conditioner_cache")
+        if cache is not None and cache[0] is self.prior_ and cache[1] is self.obs_index_:
+            return cache[2]
+        cond = LowRankConditioner.from_prior(self.prior_, self.obs_index_, getattr(self, "thetas_", None),
+                                             float(self.ridge))
+        self._conditioner_cache = (self.prior_, self.obs_index_, cond)
+        return cond
+
     def _condition(self, stats, need_cov: bool) -> Posterior:
-        """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``."""
+        """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
+
+        Uses the exact low-rank form of :class:`~interprim.gaussian.LowRankConditioner`
+        (compiled) when the prior has it, else the structured dense form of
+        :func:`~interprim.gaussian.condition`; the covariance is computed only
+        when asked for (``need_cov``; :attr:`Prediction.posterior_cov` asks lazily).
+        """
         G, B, yy, n = stats
+        cond = self._conditioner()
+        if cond is not None:
+            res = cond.mean_compiled(G, B, self.sigma2_, yy, n) if _fast.ready() else \
+                cond.mean_numpy(G, B, self.sigma2_, yy, n)
+            if res is not None:
+                cov = cond.cov(G, self.sigma2_) if need_cov else None
+                return Posterior(res[0], cov, res[1])
         return condition(self.prior_.mean, self.prior_.cov, self.obs_index_, G, B, self.sigma2_,
                          yy=yy, n_obs=n, need_cov=need_cov)
 
@@ -677,7 +718,9 @@ class Stream:
         self.robot_state = robot_state
         self._robot_start = model._robot_start(robot_state)
         self._dtw = IncrementalDTW(model.reference_)
-        self._buf = np.empty((max(2 * model.reference_.shape[0], 16), model.n_observed_latent_))
+        cap = max(2 * model.reference_.shape[0], 16)
+        self._buf = np.empty((cap, model.n_observed_latent_))
+        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q) if _fast.ready() else None
         self._n = 0
 
     @property
@@ -692,8 +735,17 @@ class Stream:
             self.robot_state = robot_state
             self._robot_start = self.model._robot_start(robot_state)
 
-    def update(self, frame, need_cov: bool = True) -> Prediction:
-        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`."""
+    def update(self, frame, need_cov: bool = False) -> Prediction:
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
+
+        The posterior mean is computed now; the covariance only when asked
+        for (:attr:`Prediction.posterior_cov`, :meth:`Prediction.std`, ...) or
+        with ``need_cov=True``.  Work per frame: one DTW column ``O(N D_o)``,
+        the observation statistics ``O(M q (q + D_o))`` for the ``M`` frames
+        seen (every frame moves to a new phase), and a conditioning step
+        independent of ``M``; no buffer grows with ``M`` except the frame
+        buffer itself (doubling).
+        """
         m = self.model
         f = as_frame(frame, "frame", len(m.observed_dofs_))
         if m.pca_observed_ is not None:
@@ -710,4 +762,4 @@ class Stream:
             self._s_prev = track_phase(m, self._buf[: self._n], s_prev, self._n - 1)
             n_star = self._s_prev * (m.reference_.shape[0] - 1)
         return m._predict_latent(self._buf[: self._n], n_star, cost, None, need_cov=need_cov,
-                                 robot_start=self._robot_start)
+                                 robot_start=self._robot_start, workspace=self._ws)

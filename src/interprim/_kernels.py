@@ -1,0 +1,459 @@
+"""Compiled kernels of the online hot path (numba, cached on disk).
+
+Each kernel has a plain numpy reference elsewhere in the package that it is
+tested against (``tests/test_fastpaths.py``):
+
+* :func:`forcing_stats` -- sufficient statistics ``G = X^T X``, ``B = X^T Y``
+  and ``|Y|^2`` of the paper's forcing observation (Eq. 13-15) at ``M``
+  observed frames spread uniformly over ``[0, s_end]``; reference:
+  ``InteractionPrimitive._observation`` (``np.gradient`` derivatives,
+  :meth:`interprim.basis.Basis.phi_tilde`, :func:`interprim.dmp.forcing_values`).
+* :func:`lowrank_condition_mean` -- posterior mean and marginal
+  log-likelihood of Eq. 16-18 for a prior ``Sigma = diag(d) + U U^T``;
+  reference: :func:`interprim.gaussian.condition` / ``condition_literal``.
+* :func:`response_positions` -- the controlled agent's mean movement from the
+  current phase (integrated Eq. 1); reference:
+  :meth:`interprim.dmp.LinearRollout.design`.
+
+Nothing here allocates memory proportional to the number of observed frames:
+callers pass preallocated buffers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# reassociation lets LLVM vectorise reductions; no 'nnan'/'ninf' (inputs are checked finite upstream)
+_FM = {"contract", "reassoc", "nsz", "arcp"}
+
+
+@njit(cache=True, fastmath=_FM)
+def _gradient_uniform(f, M, dx, out):
+    """``np.gradient(f[:M], dx, axis=0, edge_order=2)`` into ``out[:M]`` (``M >= 3``)."""
+    D = f.shape[1]
+    two_dx = 2.0 * dx
+    for j in range(1, M - 1):
+        for d in range(D):
+            out[j, d] = (f[j + 1, d] - f[j - 1, d]) / two_dx
+    a = -1.5 / dx
+    b = 2.0 / dx
+    c = -0.5 / dx
+    for d in range(D):
+        out[0, d] = a * f[0, d] + b * f[1, d] + c * f[2, d]
+    a = 0.5 / dx
+    b = -2.0 / dx
+    c = 1.5 / dx
+    for d in range(D):
+        out[M - 1, d] = a * f[M - 3, d] + b * f[M - 2, d] + c * f[M - 1, d]
+
+
+@njit(cache=True, fastmath=_FM)
+def forcing_values_into(z, M, s_end, alpha_y, beta_y, yd, ydd, YT):
+    """Forcing values of Eq. 15 of the first ``M`` frames of ``z`` observed over ``[0, s_end]``.
+
+    Derivatives are second-order central differences in normalised time
+    (``np.gradient`` with ``edge_order=2``, i.e. ``smoothing_window=None``).
+    ``yd``, ``ydd`` are ``(>= M, D)`` workspaces; the forcing values are
+    written transposed into ``YT`` (``(D, >= M)``).  Returns ``alpha_y beta_y``.
+    """
+    D = z.shape[1]
+    ds = s_end / (M - 1)
+    _gradient_uniform(z, M, ds, yd)
+    _gradient_uniform(yd, M, ds, ydd)
+    for j in range(M):
+        for d in range(D):
+            YT[d, j] = ydd[j, d] + alpha_y * (beta_y * z[j, d] + yd[j, d])
+    return alpha_y * beta_y
+
+
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01  # fdlibm split of log(2): k * _LN2_HI is exact
+_LN2_LO = 1.90821492927058770002e-10
+_ROUND = 6755399441055744.0  # 1.5 * 2**52: adding and subtracting it rounds to the nearest integer
+
+
+@njit(cache=True, fastmath={"contract"})
+def vexp_nonpos(t, n, out, ibuf):
+    """``out[:n] = exp(t[:n])`` for ``t <= 0``, vectorised (SIMD) and accurate to about 1 ulp.
+
+    Cody-Waite range reduction ``t = k log 2 + r`` (``|r| <= log(2) / 2``), a
+    degree-13 Taylor polynomial of ``exp(r)`` (truncation error < 1e-17) and
+    ``2^k`` built from its IEEE bits.  Results below ``exp(-708)`` (subnormal
+    in IEEE arithmetic) are flushed to 0; where it is used they are multiplied
+    by numbers of order one, so this is far below double precision.
+    ``t`` and ``out`` must be different arrays (aliasing defeats vectorisation).
+    ``ibuf`` is an int64 workspace.
+    """
+    fb = ibuf.view(np.float64)
+    for i in range(n):
+        x = t[i]
+        x = x if x > -708.0 else -708.0
+        k = (x * _LOG2E + _ROUND) - _ROUND
+        r = (x - k * _LN2_HI) - k * _LN2_LO
+        p = 1.0 / 6227020800.0
+        p = p * r + 1.0 / 479001600.0
+        p = p * r + 1.0 / 39916800.0
+        p = p * r + 1.0 / 3628800.0
+        p = p * r + 1.0 / 362880.0
+        p = p * r + 1.0 / 40320.0
+        p = p * r + 1.0 / 5040.0
+        p = p * r + 1.0 / 720.0
+        p = p * r + 1.0 / 120.0
+        p = p * r + 1.0 / 24.0
+        p = p * r + 1.0 / 6.0
+        p = p * r + 0.5
+        p = p * r + 1.0
+        p = p * r + 1.0
+        ibuf[i] = np.int64(np.int32(k) + 1023) << 52
+        out[i] = p if t[i] > -708.0 else 0.0
+    for i in range(n):
+        out[i] = out[i] * fb[i]
+
+
+@njit(cache=True, fastmath=_FM)
+def design_stats(YT, M, s_end, centers, widths, alpha_x, const, XT, G, B, work, ibuf):
+    """``G = X^T X``, ``B = X^T Y`` and ``|Y|^2`` of Eq. 13 rows at ``s_j = linspace(0, s_end, M)``.
+
+    ``YT`` holds the targets transposed, ``(D, >= M)``.  Row ``j`` of ``X`` is ``[phi(x(s_j)), const]`` (Eq. 2 and 13, ``const = alpha_y beta_y``),
+    computed as :meth:`interprim.basis.Basis.phi` (max-shifted exponentials) with the
+    exponentials of :func:`vexp_nonpos`.  ``XT`` is a ``(q, >= M)`` workspace, ``work``
+    a ``(4, >= M)`` one and ``ibuf`` an int64 ``(>= M)`` one; ``G`` ``(q, q)`` and ``B``
+    ``(q, D)`` are outputs.  Loops run along the frames, so they vectorise.
+    """
+    m = centers.shape[0]
+    q = m + 1
+    D = YT.shape[0]
+    step = s_end / (M - 1) if M > 1 else 0.0
+    xs = work[0]
+    mx = work[1]
+    tot = work[2]
+    tv = work[3]
+    for j in range(M):
+        tv[j] = -alpha_x * (j * step)
+    tv[M - 1] = -alpha_x * s_end
+    vexp_nonpos(tv, M, xs, ibuf)  # x = exp(-alpha_x s)  (Eq. 9)
+    for j in range(M):
+        mx[j] = -np.inf
+        tot[j] = 0.0
+    for i in range(m):
+        Ei = XT[i]
+        ci = centers[i]
+        wi = widths[i]
+        for j in range(M):
+            dxc = xs[j] - ci
+            e = -wi * dxc * dxc
+            Ei[j] = e
+            mx[j] = e if e > mx[j] else mx[j]
+    for i in range(m):
+        Ei = XT[i]
+        for j in range(M):
+            tv[j] = Ei[j] - mx[j]
+        vexp_nonpos(tv, M, Ei, ibuf)
+        for j in range(M):
+            tot[j] += Ei[j]
+    for j in range(M):
+        tot[j] = xs[j] / tot[j]
+    for i in range(m):
+        Ei = XT[i]
+        for j in range(M):
+            Ei[j] *= tot[j]
+    Xc = XT[m]
+    for j in range(M):
+        Xc[j] = const
+    for a in range(q):
+        Xa = XT[a]
+        for b in range(a + 1):
+            Xb = XT[b]
+            acc = 0.0
+            for j in range(M):
+                acc += Xa[j] * Xb[j]
+            G[a, b] = acc
+            G[b, a] = acc
+    yy = 0.0
+    for d in range(D):
+        Yd = YT[d]
+        for a in range(q):
+            Xa = XT[a]
+            acc = 0.0
+            for j in range(M):
+                acc += Xa[j] * Yd[j]
+            B[a, d] = acc
+        acc = 0.0
+        for j in range(M):
+            acc += Yd[j] * Yd[j]
+        yy += acc
+    return yy
+
+
+@njit(cache=True, fastmath=_FM)
+def _chol_inplace(A, n):
+    """Lower Cholesky factor of the leading ``n x n`` block of ``A`` in place; returns log det, or NaN."""
+    logdet = 0.0
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= A[j, k] * A[j, k]
+        if not s > 0.0:
+            return np.nan
+        ljj = np.sqrt(s)
+        A[j, j] = ljj
+        logdet += 2.0 * np.log(ljj)
+        inv = 1.0 / ljj
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= A[i, k] * A[j, k]
+            A[i, j] = s * inv
+    return logdet
+
+
+@njit(cache=True, fastmath=_FM)
+def _chol_solve_vec(L, n, b, out):
+    """``out = (L L^T)^{-1} b`` for a lower Cholesky factor ``L``."""
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * out[k]
+        out[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+
+
+@njit(cache=True, fastmath=_FM)
+def _forward_rows(L, U, W):
+    """``W = L^{-1} U`` for lower-triangular ``L`` (q, q) and ``U`` (q, r); row updates vectorised over r."""
+    q, r = U.shape
+    for a in range(q):
+        Wa = W[a]
+        Ua = U[a]
+        for c in range(r):
+            Wa[c] = Ua[c]
+        b = 0
+        while b + 4 <= a:
+            l0 = L[a, b]
+            l1 = L[a, b + 1]
+            l2 = L[a, b + 2]
+            l3 = L[a, b + 3]
+            W0 = W[b]
+            W1 = W[b + 1]
+            W2 = W[b + 2]
+            W3 = W[b + 3]
+            for c in range(r):
+                Wa[c] -= l0 * W0[c] + l1 * W1[c] + l2 * W2[c] + l3 * W3[c]
+            b += 4
+        while b < a:
+            lab = L[a, b]
+            Wb = W[b]
+            for c in range(r):
+                Wa[c] -= lab * Wb[c]
+            b += 1
+        inv = 1.0 / L[a, a]
+        for c in range(r):
+            Wa[c] *= inv
+
+
+@njit(cache=True, fastmath=_FM)
+def _syrk_sub(W, s2, K):
+    """``K -= s2 W^T W`` for ``W`` (q, r), four rows of ``W`` per sweep over ``K``."""
+    q, r = W.shape
+    a = 0
+    while a + 4 <= q:
+        W0 = W[a]
+        W1 = W[a + 1]
+        W2 = W[a + 2]
+        W3 = W[a + 3]
+        for c1 in range(r):
+            w0 = s2 * W0[c1]
+            w1 = s2 * W1[c1]
+            w2 = s2 * W2[c1]
+            w3 = s2 * W3[c1]
+            Kc = K[c1]
+            for c2 in range(r):
+                Kc[c2] -= w0 * W0[c2] + w1 * W1[c2] + w2 * W2[c2] + w3 * W3[c2]
+        a += 4
+    while a < q:
+        Wa = W[a]
+        for c1 in range(r):
+            w = s2 * Wa[c1]
+            Kc = K[c1]
+            for c2 in range(r):
+                Kc[c2] -= w * Wa[c2]
+        a += 1
+
+
+@njit(cache=True, fastmath=_FM)
+def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, T, W, K, ca, out):
+    """Posterior mean of Eq. 18 for a prior ``Sigma = diag(d) + U U^T`` and ``Omega~ = [blockdiag(X), 0]``.
+
+    Exact (no approximation): Woodbury's identity is applied twice, once to
+    the block-diagonal part (one ``q x q`` Cholesky per observed DoF of
+    ``T_i = sigma^2 I + S_i G S_i`` with ``S_i = diag(sqrt(d_i))``) and once to
+    the rank-``r`` part (one ``r x r`` Cholesky of
+    ``K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i``, ``Uh = S^{-1} U``).
+    Cost ``O(D_o (q^3 + q^2 r + q r^2) + P r)``, independent of the number of frames.
+
+    Parameters
+    ----------
+    G, B : ``X^T X`` (q, q) and ``X^T F`` (q, D_o).
+    sq : (D_o, q) ``sqrt(d)`` on the observed parameters.
+    Uh : (D_o, q, r) whitened factor rows of the observed parameters.
+    K0 : (r, r) ``I + Uh^T Uh``.
+    mean : (P,) prior mean; mu_o : (D_o, q) its observed part.
+    obs_flat : (D_o q,) int, other : (P - D_o q,) int.
+    Uc : (P - D_o q, r) factor rows of the other parameters.
+    T, W, K, ca : workspaces (D_o, q, q), (q, r), (r, r), (3, D_o, q).
+    out : (P,) posterior mean (output).
+
+    Returns
+    -------
+    (sum_i log det T_i, log det K, |F - Omega mu|^2 - c^T delta_o); NaN log-dets flag a failed factorisation.
+    """
+    Do, q, r = Uh.shape
+    for i in range(r):
+        for j in range(r):
+            K[i, j] = K0[i, j]
+    beta = np.zeros(r)
+    tmp = np.empty(q)
+    logdet_T = 0.0
+    resid = yy
+    for i in range(Do):
+        Ti = T[i]
+        si = sq[i]
+        for a in range(q):
+            for b in range(a + 1):
+                Ti[a, b] = si[a] * G[a, b] * si[b]
+            Ti[a, a] += sigma2
+        ld = _chol_inplace(Ti, q)
+        logdet_T += ld
+        Ui = Uh[i]
+        _forward_rows(Ti, Ui, W)
+        _syrk_sub(W, sigma2, K)
+        # c_i = b_i - G mu_i ;  residual |f_i - X mu_i|^2 = yy_i - mu.b - mu.c
+        c = ca[0, i]
+        mu = mu_o[i]
+        for a in range(q):
+            acc = 0.0
+            Ga = G[a]
+            for b in range(q):
+                acc += Ga[b] * mu[b]
+            cc = B[a, i] - acc
+            c[a] = cc
+            resid -= mu[a] * (B[a, i] + cc)
+            tmp[a] = si[a] * cc
+        # a_i = T_i^{-1} S c_i ;  beta += Uh_i^T a_i
+        ai = ca[1, i]
+        _chol_solve_vec(Ti, q, tmp, ai)
+        for a in range(q):
+            aa = ai[a]
+            Ua = Ui[a]
+            for k in range(r):
+                beta[k] += Ua[k] * aa
+    ld_K = _chol_inplace(K, r)
+    gamma = np.empty(r)
+    _chol_solve_vec(K, r, beta, gamma)
+    for i in range(Do):
+        Ui = Uh[i]
+        si = sq[i]
+        for a in range(q):
+            Ua = Ui[a]
+            acc = 0.0
+            for k in range(r):
+                acc += Ua[k] * gamma[k]
+            tmp[a] = acc
+        w = ca[2, i]
+        _chol_solve_vec(T[i], q, tmp, w)
+        c = ca[0, i]
+        ai = ca[1, i]
+        for a in range(q):
+            delta = si[a] * (ai[a] + sigma2 * w[a])
+            idx = obs_flat[i * q + a]
+            out[idx] = mean[idx] + delta
+            resid -= c[a] * delta
+    for p in range(other.shape[0]):
+        acc = 0.0
+        Up = Uc[p]
+        for k in range(r):
+            acc += Up[k] * gamma[k]
+        idx = other[p]
+        out[idx] = mean[idx] + acc
+    return logdet_T, ld_K, resid
+
+
+@njit(cache=True, fastmath=_FM)
+def response_positions(Z, powers, s0, n, th, z0, at_s0, out):
+    """Mean positions of DoFs with parameters ``th`` (d, q) at ``linspace(s0, 1, n)``, from their state at ``s0``.
+
+    The state at ``s0`` is that of the movement started at ``s = 0`` in ``z0``
+    (2, d) (positions, velocities), or ``z0`` itself when ``at_s0``; the continuation uses the exact
+    discretisation of :class:`interprim.dmp.LinearRollout` (same snapping and
+    interpolation as :meth:`~interprim.dmp.LinearRollout.design`).
+    ``out`` has shape (n, d).
+    """
+    Kn = Z.shape[0] - 1
+    q = Z.shape[2]
+    d = th.shape[0]
+    h = np.empty(q)
+    # -- state at s0 of the movement from rest at s = 0 (design(0, [s0]) rows 0 and 1)
+    y0 = np.empty(d)
+    v0 = np.empty(d)
+    u = min(max(s0 * Kn, 0.0), float(Kn))
+    kf = min(int(np.floor(u)), Kn - 1)
+    kf = max(kf, 0)
+    a = u - kf
+    kf1 = min(kf + 1, Kn)
+    for row in range(2):
+        if at_s0:
+            for dd in range(d):
+                if row == 0:
+                    y0[dd] = z0[0, dd]
+                else:
+                    v0[dd] = z0[1, dd]
+            continue
+        f0 = (1.0 - a) * powers[kf, row, 0] + a * powers[kf1, row, 0]
+        f1 = (1.0 - a) * powers[kf, row, 1] + a * powers[kf1, row, 1]
+        for j in range(q):
+            # k0 = 0: P @ Z[0] = 0 because Z[0] = 0
+            h[j] = (1.0 - a) * (Z[kf, row, j] - (powers[kf, row, 0] * Z[0, 0, j] + powers[kf, row, 1] * Z[0, 1, j])) \
+                + a * (Z[kf1, row, j] - (powers[kf1, row, 0] * Z[0, 0, j] + powers[kf1, row, 1] * Z[0, 1, j]))
+        for dd in range(d):
+            acc = f0 * z0[0, dd] + f1 * z0[1, dd]
+            for j in range(q):
+                acc += h[j] * th[dd, j]
+            if row == 0:
+                y0[dd] = acc
+            else:
+                v0[dd] = acc
+    # -- continuation from s0 (design(s0, linspace(s0, 1, n)))
+    k0 = int(np.rint(s0 * Kn))
+    k0 = min(max(k0, 0), Kn)
+    pz = np.empty((2, q))  # rows of P @ Z[k0] for the two grid points, recomputed per output
+    step = (1.0 - s0) / (n - 1) if n > 1 else 0.0
+    for t in range(n):
+        s = t * step + s0 if t < n - 1 else 1.0
+        if n == 1:
+            s = s0
+        u = min(max(s * Kn, float(k0)), float(Kn))
+        kf = min(int(np.floor(u)), Kn - 1)
+        kf = max(kf, k0)
+        a = u - kf
+        kf1 = min(kf + 1, Kn)
+        pa0 = powers[kf - k0, 0, 0]
+        pa1 = powers[kf - k0, 0, 1]
+        pb0 = powers[kf1 - k0, 0, 0]
+        pb1 = powers[kf1 - k0, 0, 1]
+        f0 = (1.0 - a) * pa0 + a * pb0
+        f1 = (1.0 - a) * pa1 + a * pb1
+        for j in range(q):
+            pz[0, j] = pa0 * Z[k0, 0, j] + pa1 * Z[k0, 1, j]
+            pz[1, j] = pb0 * Z[k0, 0, j] + pb1 * Z[k0, 1, j]
+            h[j] = (1.0 - a) * (Z[kf, 0, j] - pz[0, j]) + a * (Z[kf1, 0, j] - pz[1, j])
+        for dd in range(d):
+            acc = f0 * y0[dd] + f1 * v0[dd]
+            for j in range(q):
+                acc += h[j] * th[dd, j]
+            out[t, dd] = acc
+    return out

@@ -328,6 +328,21 @@ class InteractionPrimitive:
         self._map_cache = (M, off)
         return self._map_cache
 
+    def _controlled_map(self):
+        """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
+        cache = self.__dict__.get("_ctrl_map_cache")
+        if cache is not None and cache[0] is self.pca_controlled_:
+            return cache[1]
+        M, off = self._latent_map()
+        n_o = self.n_observed_latent_
+        ctrl = self.controlled_dofs_
+        Mc = np.ascontiguousarray(M[ctrl, n_o:].T)
+        offc = off[ctrl].copy()
+        res = (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
+                               and not np.any(offc)) else (Mc, offc)
+        self._ctrl_map_cache = (self.pca_controlled_, res)
+        return res
+
     def _check_fitted(self, what: str):
         if not hasattr(self, "prior_"):
             raise NotFittedError(f"this InteractionPrimitive is not fitted yet; call fit(demos) before {what}")
@@ -659,6 +674,31 @@ class Prediction:
             Seconds from now, at the partner's estimated speed.
         y : ndarray, shape (n, len(controlled_dofs))
         """
+        if not _fast.ready():
+            return self._response_reference(n, state)
+        from ._kernels import response_positions
+
+        m = self._m
+        n = int(n)
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        th = self._theta()[n_o:]
+        if state is None:
+            z0 = np.vstack(self._robot_start)
+            at_s0 = False
+        else:
+            y0, v0 = m._robot_start(state)
+            z0 = np.vstack([y0, v0 / m.mean_duration_ * self.duration])
+            at_s0 = True
+        ro = m.rollout_
+        lat = response_positions(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])))
+        Mc, offc = m._controlled_map()
+        y = lat if Mc is None else lat @ Mc + offc
+        s = np.linspace(s0, 1.0, n)
+        return (s - s0) * self.duration, y
+
+    def _response_reference(self, n: int = 100, state=None):
+        """:meth:`response` with :meth:`interprim.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
         m = self._m
         n_o = m.n_observed_latent_
         s0 = self.normalised_time

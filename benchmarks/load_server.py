@@ -40,19 +40,47 @@ def _fit_model(path: Path, n_train: int) -> None:
     np.save(str(path.with_suffix(".test.npy")), test.demos[0][:, :2])
 
 
+class _StubPrediction:
+    """Constant-time stand-in for a Prediction: measures the server's own overhead."""
+
+    def __init__(self, n):
+        import numpy as np
+
+        self.phase, self.x, self.speed, self.duration, self.log_likelihood = 0.5, 0.2, 1.0, 1.5, -1.0
+        self.goal = np.zeros(5)
+        self._traj = np.linspace(0, 1, 5 * 500).reshape(500, 5)
+
+    def trajectory(self, n):
+        return self._traj[:n]
+
+    def std(self, n):
+        return self._traj[:n]
+
+
+class _StubModel:
+    observed_dofs_, controlled_dofs_, n_dofs_, dt_, mean_duration_ = [0, 1], [2, 3, 4], 5, 0.01, 1.5
+
+    def stream(self, robot_state=None):
+        return self
+
+    def update(self, frame, need_cov=True):
+        return _StubPrediction(len(frame))
+
+    def reset(self):
+        pass
+
+
 def _server_main(model_path, port_q, mode, ready_evt, stop_evt):
     import logging
 
     logging.basicConfig(level=logging.WARNING)
     from interprim.server.app import InterprimServer, ServerConfig
-    from interprim.server.models import load_models
+    from interprim.server.models import entry_for, load_models
 
-    models = load_models([model_path])
-    import numpy as np
-
-    st = models["highfive"].model.stream()  # warm up (numba compilation) before taking connections
-    for f in np.load(str(Path(model_path).with_suffix(".test.npy")))[:20]:
-        st.update(f, need_cov=False).trajectory(50)
+    if model_path == "stub":
+        models = {"highfive": entry_for("highfive", _StubModel())}
+    else:
+        models = load_models([model_path])
     workers, processes = mode
     cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, processes=processes, max_rate_hz=1000,
                        rate_burst=100)
@@ -108,12 +136,15 @@ async def _session(url, frames, seconds, rate_hz, binary, out, start_at, points,
         async def reader():
             nonlocal errors
             while len(lat) + errors < n_total:
-                msg = json.loads(await ws.recv())
+                raw = await ws.recv()
                 t = loop.time()
-                seq = msg.get("seq")
-                if msg["type"] == "prediction":
+                # Replies start with {"type":"...","seq":N,...}: read the head only, so that the client's
+                # own CPU (JSON decoding of trajectories) does not dominate the measurement.
+                head = raw[:48]
+                if head.startswith('{"type":"prediction","seq":'):
+                    seq = int(head[27:].split(",", 1)[0])
                     lat.append(t - sent_at.pop(seq))
-                elif msg["type"] == "error":
+                elif head.startswith('{"type":"error"'):
                     errors += 1
 
         rtask = asyncio.create_task(reader())
@@ -197,8 +228,11 @@ def main(argv=None):
     ap.add_argument("--binary", action="store_true", help="binary frames instead of JSON")
     ap.add_argument("--points", type=int, default=50)
     ap.add_argument("--std", action="store_true", help="ask for the std band too (much more maths per frame)")
+    ap.add_argument("--stub", action="store_true",
+                    help="serve a constant-time stand-in model: measures the server's own overhead (inline only)")
     ap.add_argument("--out", default=str(HERE / "SERVER_RESULTS.md"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--append", action="store_true", help="append rows to the existing table")
     args = ap.parse_args(argv)
 
     import numpy as np
@@ -216,14 +250,15 @@ def main(argv=None):
         mode = {"inline": (0, 0), "threads": (int(num or 2), 0), "procs": (0, int(num or 2))}[kind]
         ctx = mp.get_context("spawn")
         port_q, ready, stop = ctx.Queue(), ctx.Event(), ctx.Event()
-        srv = ctx.Process(target=_server_main, args=(str(model_path), port_q, mode, ready, stop))
+        srv = ctx.Process(target=_server_main,
+                          args=("stub" if args.stub else str(model_path), port_q, mode, ready, stop))
         srv.start()
         ready.wait(180)
         url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
         try:
             for n in args.sessions:
                 r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std)
-                r["mode"] = label
+                r["mode"] = label + (" (stub model)" if args.stub else "")
                 rows.append(r)
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
@@ -238,11 +273,11 @@ def main(argv=None):
             if srv.is_alive():
                 srv.terminate()
     if not args.no_write:
-        write_results(Path(args.out), rows, args)
+        write_results(Path(args.out), rows, args, append=args.append)
     return rows
 
 
-def write_results(path: Path, rows, args):
+def write_results(path: Path, rows, args, append=False):
     import numpy as np
     import websockets
 
@@ -269,7 +304,12 @@ def write_results(path: Path, rows, args):
             f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['loadavg']:.1f} |"
         )
     lines.append("")
-    path.write_text("\n".join(lines) + "\n")
+    if append and path.exists():
+        old = path.read_text().rstrip("\n").split("\n")
+        table_rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| server compute")]
+        path.write_text("\n".join(old + table_rows) + "\n")
+    else:
+        path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
 
 

@@ -664,3 +664,29 @@ def test_worker_processes_give_the_same_predictions(models, test_demo):
             a.open("letter_c", points=5)
             assert a.frame([0.5, 0.5])["model"] == "letter_c"
         assert wait_until(lambda: n_sessions(st) == 0)
+
+
+def test_async_client_pipelines_frames(server, models, test_demo):
+    import asyncio
+
+    from interprim.server.client import AsyncClient
+
+    async def go():
+        c = await AsyncClient.connect(server.ws_url)
+        async with c:
+            assert c.welcome["type"] == "welcome"
+            await c.open("pair", points=8)
+            for f in test_demo[:20, :2]:  # pipelined: send all, then read all
+                await c.send_frame(f, binary=True)
+            replies = [await c.recv() for _ in range(20)]
+            await c.send_frame([1.0, 2.0, 3.0])
+            err = await c.recv_raw()
+            return replies, err
+
+    replies, err = asyncio.run(go())
+    assert [r["seq"] for r in replies] == list(range(1, 21))
+    direct = models["pair"].model.stream()
+    for f in test_demo[:20, :2]:
+        d = direct.update(f)
+    np.testing.assert_allclose(replies[-1]["mean"], d.trajectory(8)[:, 2:], atol=2e-6)
+    assert err["type"] == "error" and err["code"] == "bad_frame" and err["seq"] == 21

@@ -117,76 +117,80 @@ def _cpu_seconds(pid: int) -> float:
     return total / os.sysconf("SC_CLK_TCK")
 
 
-async def _session(url, frames, seconds, rate_hz, binary, out, start_at, points, std):
+async def _open_session(url, points, std):
     from websockets.asyncio.client import connect
 
-    from interprim.server.protocol import encode_binary_frame
+    ws = await connect(url, max_size=2**22, compression=None)
+    await ws.send(json.dumps({"type": "hello", "version": 1}))
+    json.loads(await ws.recv())
+    await ws.send(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std}))
+    json.loads(await ws.recv())
+    return ws
 
-    sent_at = {}
-    lat = []
-    errors = 0
-    async with connect(url, max_size=2**22, compression=None) as ws:
-        await ws.send(json.dumps({"type": "hello", "version": 1}))
-        json.loads(await ws.recv())
-        await ws.send(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std}))
-        json.loads(await ws.recv())
-        loop = asyncio.get_running_loop()
-        n_total = int(seconds * rate_hz)
 
-        async def reader():
-            nonlocal errors
-            while len(lat) + errors < n_total:
-                raw = await ws.recv()
-                t = loop.time()
-                # Replies start with {"type":"...","seq":N,...}: read the head only, so that the client's
-                # own CPU (JSON decoding of trajectories) does not dominate the measurement.
-                head = raw[:48]
-                if head.startswith('{"type":"prediction","seq":'):
-                    seq = int(head[27:].split(",", 1)[0])
-                    lat.append(t - sent_at.pop(seq))
-                elif head.startswith('{"type":"error"'):
-                    errors += 1
-
-        rtask = asyncio.create_task(reader())
-        await asyncio.sleep(max(0.0, start_at - loop.time()))
-        t0 = loop.time()
-        for k in range(n_total):
-            target = t0 + k / rate_hz
-            delay = target - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            f = frames[k % len(frames)]
-            if k and k % len(frames) == 0:
-                await ws.send(json.dumps({"type": "reset"}))  # control replies are not counted
-            sent_at[k + 1] = loop.time()
-            await ws.send(encode_binary_frame(f) if binary else json.dumps({"type": "frame", "frame": list(f)}))
-        try:
-            await asyncio.wait_for(rtask, timeout=5.0)
-        except (asyncio.TimeoutError, TimeoutError):
-            rtask.cancel()
-    out.append({"lat": lat, "sent": n_total, "errors": errors, "missing": n_total - len(lat) - errors})
+async def _reader(ws, st, loop, n_total):
+    while st["got"] + st["errors"] < n_total:
+        raw = await ws.recv()
+        t = loop.time()
+        # Replies start with {"type":"...","seq":N,...}: read the head only, so that the client's own
+        # CPU (JSON decoding of trajectories) does not dominate the measurement.
+        head = raw[:48]
+        if head.startswith('{"type":"prediction","seq":'):
+            seq = int(head[27:].split(",", 1)[0])
+            st["lat"].append(t - st["sent_at"].pop(seq))
+            st["got"] += 1
+        elif head.startswith('{"type":"error"'):
+            st["errors"] += 1
 
 
 def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
+    """All sessions in one asyncio process: connect them all first, then one scheduler sends each
+    session's frame every 1/rate_hz s, sessions staggered evenly over the period."""
+    import heapq
+
+    from interprim.server.protocol import encode_binary_frame
+
+    payloads = [encode_binary_frame(f) if binary else json.dumps({"type": "frame", "frame": list(f)}) for f in frames]
+    reset = json.dumps({"type": "reset"})
+
     async def main():
-        out = []
         loop = asyncio.get_running_loop()
-        start_at = loop.time() + 1.0
-        loop.call_at(start_at, q.put, "start")
-        # spread the sessions' phases over one period so they do not all send at the same instant
-        tasks = [
-            _session(url, frames, seconds, rate_hz, binary, out, start_at + (i / max(n, 1)) / rate_hz, points, std)
-            for i in range(n)
-        ]
-        await asyncio.gather(*tasks)
-        return out
+        wss = await asyncio.gather(*[_open_session(url, points, std) for _ in range(n)])
+        n_total = int(seconds * rate_hz)
+        states = [{"lat": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
+        readers = [asyncio.create_task(_reader(ws, st, loop, n_total)) for ws, st in zip(wss, states)]
+        q.put("start")
+        t0 = loop.time() + 0.2
+        period = 1.0 / rate_hz
+        heap = [(t0 + (i / n) * period, i, 0) for i in range(n)]
+        heapq.heapify(heap)
+        while heap:
+            when, i, k = heap[0]
+            delay = when - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            now = loop.time()
+            while heap and heap[0][0] <= now:
+                when, i, k = heapq.heappop(heap)
+                ws, st = wss[i], states[i]
+                if k and k % len(payloads) == 0:
+                    await ws.send(reset)  # a new interaction; control replies are not counted
+                st["sent_at"][k + 1] = loop.time()
+                await ws.send(payloads[k % len(payloads)])
+                if k + 1 < n_total:
+                    heapq.heappush(heap, (t0 + (k + 1) * period + (i / n) * period, i, k + 1))
+        done, pending = await asyncio.wait(readers, timeout=5.0)
+        for t in pending:
+            t.cancel()
+        await asyncio.gather(*[ws.close() for ws in wss], return_exceptions=True)
+        return [{"lat": st["lat"], "sent": n_total, "errors": st["errors"],
+                 "missing": n_total - st["got"] - st["errors"]} for st in states]
 
     import resource
 
     out = asyncio.run(main())
     ru = resource.getrusage(resource.RUSAGE_SELF)
     q.put((out, ru.ru_utime + ru.ru_stime))
-
 
 
 def run_one(url, server_pid, n, seconds, binary, frames, points, std):

@@ -138,6 +138,7 @@ async def _reader(ws, st, loop, n_total):
         if head.startswith('{"type":"prediction","seq":'):
             seq = int(head[27:].split(",", 1)[0])
             st["lat"].append(t - st["sent_at"].pop(seq))
+            st["recv"].append(t)
             st["got"] += 1
         elif head.startswith('{"type":"error"'):
             st["errors"] += 1
@@ -157,7 +158,7 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
         loop = asyncio.get_running_loop()
         wss = await asyncio.gather(*[_open_session(url, points, std) for _ in range(n)])
         n_total = int(seconds * rate_hz)
-        states = [{"lat": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
+        states = [{"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
         readers = [asyncio.create_task(_reader(ws, st, loop, n_total)) for ws, st in zip(wss, states)]
         q.put("start")
         t0 = loop.time() + 0.2
@@ -183,7 +184,7 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
         for t in pending:
             t.cancel()
         await asyncio.gather(*[ws.close() for ws in wss], return_exceptions=True)
-        return [{"lat": st["lat"], "sent": n_total, "errors": st["errors"],
+        return [{"lat": st["lat"], "recv": st["recv"], "sent": n_total, "errors": st["errors"],
                  "missing": n_total - st["got"] - st["errors"]} for st in states]
 
     import resource
@@ -198,8 +199,9 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std):
     p = mp.Process(target=_client_main, args=(url, n, seconds, 100.0, binary, frames, points, std, q))
     p.start()
     assert q.get(timeout=120) == "start"
+    time.sleep(0.5)  # the scheduler starts 0.2 s after "start"
     cpu0, t0 = _cpu_seconds(server_pid), time.monotonic()
-    time.sleep(seconds)  # server CPU over the streaming window only
+    time.sleep(max(0.5, seconds - 1.0))  # server CPU over (most of) the streaming window only
     cpu1, t1 = _cpu_seconds(server_pid), time.monotonic()
     res, client_cpu = q.get(timeout=seconds + 120)
     p.join(30)
@@ -220,6 +222,8 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std):
         "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
         "client_cpu_pct": 100.0 * client_cpu / (t1 - t0),
         "loadavg": os.getloadavg()[0],
+        # CPU time the server spent per answered frame: independent of other load on the machine
+        "cpu_ms_per_frame": 1e3 * (cpu1 - cpu0) / max(1, sum(t0 <= x <= t1 for r in res for x in r["recv"])),
     }
 
 
@@ -267,7 +271,7 @@ def main(argv=None):
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
                     f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, dropped {r['dropped']}, "
-                    f"server CPU {r['server_cpu_pct']:.0f} %, client CPU {r['client_cpu_pct']:.0f} %, "
+                    f"server CPU {r['server_cpu_pct']:.0f} % ({r['cpu_ms_per_frame']:.3f} ms/frame), client CPU {r['client_cpu_pct']:.0f} %, "
                     f"load {r['loadavg']:.1f}",
                     flush=True,
                 )
@@ -299,13 +303,13 @@ def write_results(path: Path, rows, args, append=False):
         f"Machine: {os.cpu_count()} CPUs, {platform.platform()}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, websockets {websockets.__version__}.",
         "",
-        "| server compute | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | machine load (1 min) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| server compute | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | server CPU ms/frame | machine load (1 min) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
-            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['loadavg']:.1f} |"
+            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['cpu_ms_per_frame']:.3f} | {r['loadavg']:.1f} |"
         )
     lines.append("")
     if append and path.exists():

@@ -160,9 +160,12 @@ def warm_up(entries) -> None:
     for e in entries:
         try:
             st = e.model.stream()
-            kw = {"need_cov": False} if _accepts_need_cov(st) else {}
-            p = st.update(np.zeros(e.n_observed), **kw)
+            has_kw = _accepts_need_cov(st)
+            ramp = np.linspace(0.0, 0.1, 20)[:, None] * np.ones(e.n_observed)
+            for k, f in enumerate(ramp):
+                p = st.update(f, **({"need_cov": k % 2 == 1} if has_kw else {}))
             p.trajectory(5)
+            p.std(5)
         except Exception:  # a model that cannot predict from zeros will say so to its first client
             log.debug("warm-up of %s failed", e.name, exc_info=True)
 

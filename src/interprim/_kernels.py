@@ -457,3 +457,39 @@ def response_positions(Z, powers, s0, n, th, z0, at_s0, out):
                 acc += h[j] * th[dd, j]
             out[t, dd] = acc
     return out
+
+
+@njit(cache=True, fastmath=_FM)
+def forcing_targets_batch(Z, ds, alpha_y, beta_y, yd_work, F, yd0):
+    """Forcing targets of Eq. 3 for ``n`` demonstrations of one length, ``Z`` ``(n, T, D)``, in one pass.
+
+    ``F[k] = ydd - alpha_y (beta_y (g - y) - yd)`` with ``g = y[T-1]`` and
+    second-order central differences in normalised time (``np.gradient``
+    twice with ``edge_order=2``, as :func:`interprim.preprocessing.derivatives`
+    without smoothing).  ``yd0[k]`` receives the start velocity.  ``yd_work``
+    is a ``(T, D)`` workspace.  Reference: ``derivatives`` + :func:`interprim.dmp.forcing_targets`.
+    """
+    n, T, D = Z.shape
+    two_ds = 2.0 * ds
+    a0 = -1.5 / ds
+    b0 = 2.0 / ds
+    c0 = -0.5 / ds
+    a1 = 0.5 / ds
+    b1 = -2.0 / ds
+    c1 = 1.5 / ds
+    for k in range(n):
+        y = Z[k]
+        _gradient_uniform(y, T, ds, yd_work)
+        Fk = F[k]
+        g = y[T - 1]
+        for d in range(D):
+            yd0[k, d] = yd_work[0, d]
+        for j in range(T):
+            for d in range(D):
+                if j == 0:
+                    ydd = a0 * yd_work[0, d] + b0 * yd_work[1, d] + c0 * yd_work[2, d]
+                elif j == T - 1:
+                    ydd = a1 * yd_work[T - 3, d] + b1 * yd_work[T - 2, d] + c1 * yd_work[T - 1, d]
+                else:
+                    ydd = (yd_work[j + 1, d] - yd_work[j - 1, d]) / two_ds
+                Fk[j, d] = ydd - alpha_y * (beta_y * (g[d] - y[j, d]) - yd_work[j, d])

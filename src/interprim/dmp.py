@@ -28,11 +28,11 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, expm
 
 from .basis import Basis
 
-__all__ = ["forcing_targets", "forcing_values", "fit_weights", "LinearRollout"]
+__all__ = ["forcing_targets", "forcing_values", "fit_weights", "fit_weights_stacked", "fit_weights_targets",
+           "LinearRollout", "cached_rollout"]
 
 
 def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
@@ -58,7 +58,7 @@ def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y:
     weights solve ``Phi w = F`` in the least-squares sense (Eq. 4) with a tiny
     ridge for numerical safety.  Demonstrations of the same length share one
     Cholesky factorisation of ``Phi^T Phi``; all their DoFs are solved in one
-    call.
+    call (:func:`fit_weights_stacked`).
 
     Parameters
     ----------
@@ -81,22 +81,85 @@ def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y:
     for j, Y in enumerate(Y_list):
         groups.setdefault(Y.shape[0], []).append(j)
     for T, idx in groups.items():
-        Phi = basis.phi(np.linspace(0.0, 1.0, T))  # (T, m)
-        PtP = Phi.T @ Phi
-        PtP[np.diag_indices_from(PtP)] += ridge * max(np.trace(PtP) / m, 1e-300)
-        cf = cho_factor(PtP)
-        Yg = np.stack([Y_list[j] for j in idx])  # (n, T, D)
-        g = Yg[:, -1, :]  # (n, D)
-        F = forcing_targets(Yg, np.stack([Yd_list[j] for j in idx]), np.stack([Ydd_list[j] for j in idx]),
-                            g[:, None, :], alpha_y, beta_y)  # (n, T, D)
-        rhs = np.einsum("tm,ntd->mnd", Phi, F).reshape(m, -1)
-        W = cho_solve(cf, rhs).reshape(m, len(idx), D)  # (m, n, D)
-        W = np.transpose(W, (1, 2, 0))  # (n, D, m)
-        theta[idx, :, :m] = W
-        theta[idx, :, m] = g
-        R = F - np.einsum("tm,ndm->ntd", Phi, W)
-        resid[idx] = np.mean(R**2, axis=1)
+        th, r = fit_weights_stacked(np.stack([Y_list[j] for j in idx]), np.stack([Yd_list[j] for j in idx]),
+                                    np.stack([Ydd_list[j] for j in idx]), basis, alpha_y, beta_y, ridge)
+        theta[idx] = th
+        resid[idx] = r
     return theta, resid
+
+
+def fit_weights_stacked(Y, Yd, Ydd, basis: Basis, alpha_y: float, beta_y: float, ridge: float = 1e-10,
+                        resid_dofs=None):
+    """:func:`fit_weights` for ``n`` demonstrations of one length stacked as ``(n, T, D)`` arrays.
+
+    One Cholesky factorisation of ``Phi^T Phi`` (Eq. 4) and one BLAS product
+    for all demonstrations and DoFs; the forcing targets (Eq. 3) are formed in
+    one preallocated buffer.  ``resid_dofs`` (a slice or index array) limits
+    the residuals to those DoFs (the others are NaN), e.g. the observed agent's
+    for ``sigma2="auto"``.
+
+    Returns ``theta`` ``(n, D, n_basis + 1)`` and the mean squared residuals ``(n, D)``.
+    """
+    g = Y[:, -1, :]  # (n, D)
+    # F = ydd - alpha_y (beta_y (g - y) - yd)   (Eq. 3), same operations as forcing_targets
+    F = np.subtract(g[:, None, :], Y)
+    F *= beta_y
+    F -= Yd
+    F *= alpha_y
+    np.subtract(Ydd, F, out=F)
+    return fit_weights_targets(F, g, basis, ridge, resid_dofs)
+
+
+def fit_weights_targets(F, g, basis: Basis, ridge: float = 1e-10, resid_dofs=None):
+    """Eq. 4 for forcing targets ``F`` ``(n, T, D)`` (Eq. 3) and goals ``g`` ``(n, D)``; see :func:`fit_weights_stacked`."""
+    n, T, D = F.shape
+    m = basis.n_basis
+    Phi = basis.phi(np.linspace(0.0, 1.0, T))  # (T, m)
+    PtP = Phi.T @ Phi
+    PtP[np.diag_indices_from(PtP)] += ridge * max(np.trace(PtP) / m, 1e-300)
+    L = np.linalg.cholesky(PtP)
+    rhs = np.tensordot(Phi, F, axes=([0], [1])).reshape(m, n * D)  # Phi^T F, (m, n D)
+    W = np.linalg.solve(L.T, np.linalg.solve(L, rhs)).reshape(m, n, D)
+    theta = np.empty((n, D, m + 1))
+    theta[:, :, :m] = np.transpose(W, (1, 2, 0))
+    theta[:, :, m] = g
+    resid = np.full((n, D), np.nan)
+    sel = slice(None) if resid_dofs is None else resid_dofs
+    Fs = F[:, :, sel]
+    R = np.matmul(Phi, np.ascontiguousarray(np.transpose(W, (1, 0, 2))[:, :, sel]))  # (n, T, d)
+    np.subtract(Fs, R, out=R)
+    R *= R
+    resid[:, sel] = R.mean(axis=1)
+    return theta, resid
+
+
+def _expm_small(A):
+    """Matrix exponential of a small matrix by scaling and squaring with a Taylor series (to double precision)."""
+    nrm = float(np.abs(A).sum(axis=1).max())
+    k = max(0, int(np.ceil(np.log2(nrm / 0.25))) if nrm > 0.25 else 0)
+    X = A / (2.0**k)
+    E = np.eye(A.shape[0])
+    term = np.eye(A.shape[0])
+    for i in range(1, 20):
+        term = term @ X / i
+        E = E + term
+    for _ in range(k):
+        E = E @ E
+    return E
+
+
+def _scan_powers(Ad, n: int):
+    """``Ad^k`` for ``k = 0..n`` by doubling (``log2 n`` batched products instead of ``n``)."""
+    out = np.empty((n + 1,) + Ad.shape)
+    out[0] = np.eye(Ad.shape[0])
+    have = 1
+    P = Ad.copy()  # Ad^have
+    while have <= n:
+        take = min(have, n + 1 - have)
+        out[have:have + take] = P @ out[:take]
+        have += take
+        P = P @ P
+    return out
 
 
 @lru_cache(maxsize=16)
@@ -107,12 +170,9 @@ def _discretisation(alpha_y: float, beta_y: float, n_steps: int):
     M = np.zeros((3, 3))
     M[:2, :2] = A
     M[1, 2] = 1.0
-    E = expm(M * h)
+    E = _expm_small(M * h)
     Ad, Bd = E[:2, :2], E[:2, 2]
-    powers = np.empty((n_steps + 1, 2, 2))
-    powers[0] = np.eye(2)
-    for k in range(n_steps):
-        powers[k + 1] = Ad @ powers[k]
+    powers = _scan_powers(Ad, n_steps)
     return Ad, Bd, powers
 
 
@@ -149,10 +209,18 @@ class LinearRollout:
         mid = (np.arange(K) + 0.5) / K
         U = basis.phi_tilde(mid, self.alpha_y, self.beta_y)  # (K, q)
         q = U.shape[1]
+        # forced response from rest: Z[k+1] = Ad Z[k] + Bd u_k, i.e. Z[k] = sum_{l<k} Ad^(k-1-l) Bd u_l,
+        # as an inclusive scan by doubling (log2 K vectorised steps; Hillis-Steele)
         Z = np.zeros((K + 1, 2, q))
-        # forced response from rest: Z[k+1] = Ad Z[k] + Bd u_k  (one vectorised recursion per step)
-        for k in range(K):
-            Z[k + 1] = Ad @ Z[k] + Bd[:, None] * U[k][None, :]
+        Z[1:] = Bd[None, :, None] * U[:, None, :]
+        shift = 1
+        while shift <= K:
+            P = powers[shift]
+            src = Z[1:K + 1 - shift].copy()
+            dst = Z[shift + 1:]
+            dst[:, 0] += P[0, 0] * src[:, 0] + P[0, 1] * src[:, 1]
+            dst[:, 1] += P[1, 0] * src[:, 0] + P[1, 1] * src[:, 1]
+            shift *= 2
         self._Z = Z
 
     @property
@@ -244,3 +312,9 @@ class LinearRollout:
         t = np.arange(n) * dt
         y = self.rollout(theta, np.asarray(y0, float), np.asarray(yd0, float) / tau, s0, s0 + t * tau)
         return t, y
+
+
+@lru_cache(maxsize=8)
+def cached_rollout(n_basis: int, alpha_x: float, alpha_y: float, beta_y: float, n_steps: int) -> LinearRollout:
+    """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as read-only)."""
+    return LinearRollout(Basis(int(n_basis), float(alpha_x)), float(alpha_y), float(beta_y), int(n_steps))

@@ -22,7 +22,7 @@ import numpy as np
 
 from ._validation import as_2d_finite, as_frame, check_positive, check_times
 from .basis import Basis, canonical_phase
-from .dmp import LinearRollout, fit_weights, forcing_values
+from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
 from .errors import NotFittedError
 from . import _fast
 from .gaussian import GaussianPrior, LowRankConditioner, Posterior, condition, fit_prior, sample
@@ -234,22 +234,54 @@ class InteractionPrimitive:
             self.pca_observed_ = PCA(kk[0]).fit(np.vstack([a[:, obs] for a in arrays]))
             if ctrl:
                 self.pca_controlled_ = PCA(kk[1]).fit(np.vstack([a[:, ctrl] for a in arrays]))
-        latent = [self._to_latent(a) for a in arrays]
         self.n_observed_latent_ = self._n_obs_latent()
-        self.n_latent_ = latent[0].shape[1]
-
+        n_o = self.n_observed_latent_
         self._setup()
-        # DMP parameters of every demonstration (Eq. 3-4), normalised time s in [0, 1]
-        ders = [derivatives(z, 1.0 / (z.shape[0] - 1), self.smoothing_window) for z in latent]
-        theta, resid = fit_weights([d[0] for d in ders], [d[1] for d in ders], [d[2] for d in ders],
-                                   self.basis_, self.alpha_y, beta_y)
-        self.thetas_ = theta.reshape(len(latent), -1)  # [w_1, g_1, ..., w_N, g_N] (observed DoFs first)
+        # Demonstrations of equal length are processed together as one (n, T, D') array
+        # (one derivative call, one least-squares solve); latent[j] is a view into it.
+        S = len(arrays)
+        groups: dict[int, list[int]] = {}
+        for j, a in enumerate(arrays):
+            groups.setdefault(a.shape[0], []).append(j)
+        latent = [None] * S
+        ders = [None] * S
+        theta = None
+        resid = np.full((S, 0), np.nan)
+        var_obs = np.empty(S)
+        want_resid = isinstance(self.sigma2, str) and self.observation == "forcing"
+        for T, idx in groups.items():
+            Zg = self._to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
+            # DMP parameters (Eq. 3-4), normalised time s in [0, 1]; derivatives along time (axis 1)
+            rdofs = slice(0, n_o) if want_resid else slice(0, 0)
+            if self.smoothing_window is None and _fast.ready():  # one compiled pass: derivatives + Eq. 3
+                from ._kernels import forcing_targets_batch
+
+                F = np.empty_like(Zg)
+                yd0 = np.empty((len(idx), Zg.shape[2]))
+                forcing_targets_batch(Zg, 1.0 / (T - 1), float(self.alpha_y), beta_y, np.empty(Zg.shape[1:]), F, yd0)
+                th, r = fit_weights_targets(F, Zg[:, -1, :], self.basis_, resid_dofs=rdofs)
+                y0 = Zg[:, 0, :]
+            else:
+                y, yd, ydd = derivatives(np.moveaxis(Zg, 1, 0), 1.0 / (T - 1), self.smoothing_window)
+                y, yd, ydd = (np.moveaxis(v, 0, 1) for v in (y, yd, ydd))
+                th, r = fit_weights_stacked(y, yd, ydd, self.basis_, self.alpha_y, beta_y, resid_dofs=rdofs)
+                y0, yd0 = y[:, 0, :], yd[:, 0, :]
+            if theta is None:
+                theta = np.empty((S,) + th.shape[1:])
+                resid = np.empty((S, th.shape[1]))
+            theta[idx] = th
+            resid[idx] = r
+            var_obs[idx] = Zg[:, :, :n_o].reshape(len(idx), -1).var(axis=1)
+            for k, j in enumerate(idx):
+                latent[j] = Zg[k]
+                ders[j] = (y0[k], yd0[k])  # start position and velocity (normalised time)
+        self.n_latent_ = latent[0].shape[1]
+        self.thetas_ = theta.reshape(S, -1)  # [w_1, g_1, ..., w_N, g_N] (observed DoFs first)
         self.start_position_ = np.mean([z[0] for z in latent], axis=0)
-        self.start_velocity_ = np.mean([d[1][0] for d in ders], axis=0)
+        self.start_velocity_ = np.mean([d[1] for d in ders], axis=0)
         self.prior_ = fit_prior(self.thetas_, self.covariance, self.ridge)
 
         # observation noise (Eq. 16)
-        n_o = self.n_observed_latent_
         if isinstance(self.sigma2, str):
             if self.observation == "forcing":
                 s2 = float(np.mean(resid[:, :n_o]))
@@ -257,10 +289,10 @@ class InteractionPrimitive:
                 errs = []
                 for z, d, th in zip(latent, ders, theta):
                     s = np.linspace(0.0, 1.0, z.shape[0])
-                    y = self.rollout_.rollout(th[:n_o], d[0][0, :n_o], d[1][0, :n_o], 0.0, s)
+                    y = self.rollout_.rollout(th[:n_o], d[0][:n_o], d[1][:n_o], 0.0, s)
                     errs.append(np.mean((y - z[:, :n_o]) ** 2))
                 s2 = float(np.mean(errs))
-            scale = float(np.mean([np.var(z[:, :n_o]) for z in latent]))
+            scale = float(np.mean(var_obs))
             self.sigma2_ = max(s2, 1e-10 * max(scale, 1e-12))
         else:
             self.sigma2_ = float(self.sigma2)
@@ -286,7 +318,8 @@ class InteractionPrimitive:
     def _setup(self):
         """Derived, non-learned state (basis, rollout map, index tables)."""
         self.basis_ = Basis(int(self.n_basis), float(self.alpha_x))
-        self.rollout_ = LinearRollout(self.basis_, float(self.alpha_y), self.beta_y_, int(self.n_steps))
+        self.rollout_ = cached_rollout(int(self.n_basis), float(self.alpha_x), float(self.alpha_y), self.beta_y_,
+                                       int(self.n_steps))
         q = self.n_basis + 1
         self._q = q
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
@@ -302,6 +335,21 @@ class InteractionPrimitive:
         if self.pca_controlled_ is not None:
             c = self.pca_controlled_.transform(c)
         return np.hstack([o, c])
+
+    def _to_latent_stacked(self, arrays):
+        """:meth:`_to_latent` of equal-length demonstrations into one ``(n, T, D')`` array."""
+        n, T = len(arrays), arrays[0].shape[0]
+        if self.pca_observed_ is None and self.pca_controlled_ is None:
+            perm = np.asarray(list(self.observed_dofs_) + list(self.controlled_dofs_), dtype=np.intp)
+            out = np.empty((n, T, perm.size))
+            identity = bool(np.array_equal(perm, np.arange(perm.size)))
+            for k, a in enumerate(arrays):
+                if identity:
+                    out[k] = a
+                else:
+                    np.take(a, perm, axis=1, out=out[k])
+            return out
+        return np.stack([self._to_latent(a) for a in arrays])
 
     def _observed_to_latent(self, o):
         return self.pca_observed_.transform(o) if self.pca_observed_ is not None else o

@@ -1,25 +1,118 @@
-"""Glue between the public objects and the compiled kernels of :mod:`interprim._kernels`.
+"""Glue between the public objects and the compiled kernels (:mod:`interprim._kernels`, :mod:`interprim._dtw_kernels`).
 
-``ready()`` says whether the compiled kernels are used.  They are unless the
-environment variable ``INTERPRIM_JIT=0`` is set (then every hot path runs its
-plain numpy equivalent, which gives the same numbers).
+Every compiled kernel has a plain numpy equivalent that gives the same
+numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``).
+``ready()`` says which one runs:
+
+* ``INTERPRIM_JIT=1``: compiled kernels always (compiled or loaded from numba's
+  on-disk cache on first use, in the calling thread);
+* ``INTERPRIM_JIT=0``: numpy only;
+* default (``auto``): the first call starts loading the kernels in a
+  background thread (importing numba, reading its cache or compiling) and
+  the numpy equivalents serve until they are ready.  So ``import interprim``
+  plus a first ``predict`` never waits for numba, also in a fresh clone
+  without a compile cache.  :func:`warmup` blocks until the kernels are
+  ready; :meth:`InteractionPrimitive.stream` calls it, because streaming
+  needs the compiled per-frame step.
 """
 
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 
 _READY: bool | None = None
+_LOCK = threading.Lock()
+_THREAD: threading.Thread | None = None
+_ERROR: BaseException | None = None
+
+
+def _mode() -> str:
+    return os.environ.get("INTERPRIM_JIT", "auto").strip().lower()
+
+
+def _compile_all():
+    """Import numba and compile (or load from the cache) every kernel once, with tiny inputs of the real types."""
+    from . import _dtw_kernels as dk
+    from . import _kernels as k
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(6, 2))
+    v = rng.normal(size=(7, 2))
+    uT = np.ascontiguousarray(u.T)
+    dk._open_end_strips(uT, v, np.empty(6), np.empty(6), np.empty((4, 6)))
+    dk._incremental_step(uT, v[0], np.zeros(6), np.empty(6), np.empty(6), True)
+    Dm = dk._accumulate(u, v)
+    dk._backtrack(Dm, 2)
+    q, Do, r, M = 4, 2, 3, 6
+    z = np.cumsum(rng.normal(size=(M, Do)), axis=0)
+    yd = np.empty((M, Do))
+    ydd = np.empty((M, Do))
+    YT = np.empty((Do, M))
+    const = k.forcing_values_into(z, M, 0.5, 25.0, 6.25, yd, ydd, YT)
+    G = np.empty((q, q))
+    B = np.empty((q, Do))
+    k.design_stats(YT, M, 0.5, np.linspace(1.0, 0.1, q - 1), np.full(q - 1, 10.0), 3.0, const, np.empty((q, M)),
+                   G, B, np.empty((4, M)), np.empty(M, dtype=np.int64))
+    P = 2 * Do * q
+    idx = np.arange(Do * q, dtype=np.intp)
+    other = np.arange(Do * q, P, dtype=np.intp)
+    k.lowrank_condition_mean(G, B, 1.0, 1.0, np.ones((Do, q)), rng.normal(size=(Do, q, r)), np.eye(r) * 5.0,
+                             np.zeros(P), np.zeros((Do, q)), idx, other, np.zeros((P - Do * q, r)),
+                             np.empty((Do, q, q)), np.empty((q, r)), np.empty((r, r)), np.empty((3, Do, q)),
+                             np.empty(P))
+    Kn = 8
+    k.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
+                         np.zeros((2, Do)), False, np.empty((3, Do)))
+    Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
+    k.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
+
+
+def _load():
+    global _READY, _ERROR
+    try:
+        _compile_all()
+        _READY = True
+    except BaseException as exc:  # numba missing or broken: stay on numpy
+        _ERROR = exc
+        _READY = False
 
 
 def ready() -> bool:
-    """True when the numba kernels are to be used."""
-    global _READY
-    if _READY is None:
-        _READY = os.environ.get("INTERPRIM_JIT", "1") != "0"
-    return _READY
+    """True when the compiled kernels are to be used (see the module docstring)."""
+    global _READY, _THREAD
+    if _READY is not None:
+        return _READY
+    mode = _mode()
+    if mode in ("0", "false", "no", "off"):
+        _READY = False
+        return False
+    if mode in ("1", "true", "yes", "on"):
+        warmup()
+        return bool(_READY)
+    with _LOCK:
+        if _THREAD is None:
+            _THREAD = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
+            _THREAD.start()
+    return bool(_READY)
+
+
+def warmup() -> bool:
+    """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use."""
+    global _THREAD
+    if _READY is not None:
+        return _READY
+    if _mode() in ("0", "false", "no", "off"):
+        return ready()
+    with _LOCK:
+        t = _THREAD
+        if t is None:
+            _THREAD = t = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
+            t.start()
+    t.join()
+    return bool(_READY)
 
 
 class StatsWorkspace:

@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
 __all__ = ["GaussianPrior", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
@@ -192,6 +191,8 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
     need_cov : bool
         Compute the posterior covariance (``O(P^2 k)``); the mean alone is cheaper.
     """
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular  # lazy: keeps `import interprim` light
+
     obs_index = np.asarray(obs_index)
     D_o, q = obs_index.shape
     L, z = _compress(G, B)

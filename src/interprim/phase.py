@@ -16,7 +16,8 @@ movement seen and ``x = exp(-alpha_x (n*/N) tau)`` the phase (Eq. 9).
 Code uses 0-based indices: ``n_star`` in ``0..N-1``; the paper's fraction
 ``n*/N`` is ``(n_star + 1) / N``.  Ties in Eq. 8 go to the smallest ``n``.
 
-The recursion is compiled with numba (cached on disk).  :class:`IncrementalDTW`
+The recursion is compiled with numba (cached on disk; :mod:`interprim._dtw_kernels`),
+with bitwise-equal numpy equivalents used until the kernels are loaded.  :class:`IncrementalDTW`
 adds one query frame at a time in ``O(N D)`` by computing one new column of
 ``D`` and gives exactly the batch result.
 """
@@ -26,198 +27,56 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from . import _fast
 from ._validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
 
 
-@njit(cache=True, fastmath=False)
-def _local_cost_column(u, vm, out):
-    N, D = u.shape
-    for n in range(N):
-        acc = 0.0
-        for d in range(D):
-            diff = u[n, d] - vm[d]
-            acc += diff * diff
-        out[n] = acc
+# ----------------------------------------------------------------------------- numpy equivalents
+# Used until the compiled kernels (interprim._dtw_kernels) are loaded (see interprim._fast), e.g. for the
+# first prediction of a fresh process.  They perform exactly the operations of the compiled recursion
+# (the same cost summation order, min, then one addition per cell), so results are bitwise equal.
 
 
-@njit(cache=True, fastmath=False)
-def _first_column(u, v0, col):
-    """Eq. 6: D(n, 1) = sum_{k<=n} c(u_k, v_1)."""
-    _local_cost_column(u, v0, col)
-    for n in range(1, col.shape[0]):
-        col[n] += col[n - 1]
+def _cost_matrix_np(u, v):
+    """``C[n, m] = sum_d (u[n, d] - v[m, d])^2`` summed over ``d`` in order, shape (N, M)."""
+    C = np.zeros((u.shape[0], v.shape[0]))
+    for d in range(u.shape[1]):
+        diff = u[:, d, None] - v[None, :, d]
+        C += diff * diff
+    return C
 
 
-@njit(cache=True, fastmath=False)
-def _next_column(u, vm, prev, col):
-    """One column of Eq. 5 and 7 from the previous column (in place into ``col``)."""
-    N, D = u.shape
-    # row n = 0: Eq. 5, D(1, m) = D(1, m-1) + c(u_1, v_m)
-    acc = 0.0
-    for d in range(D):
-        diff = u[0, d] - vm[d]
-        acc += diff * diff
-    col[0] = prev[0] + acc
-    for n in range(1, N):
-        acc = 0.0
-        for d in range(D):
-            diff = u[n, d] - vm[d]
-            acc += diff * diff
-        best = prev[n - 1]
-        if prev[n] < best:
-            best = prev[n]
-        if col[n - 1] < best:
-            best = col[n - 1]
-        col[n] = best + acc
+def _accumulate_np(u, v):
+    """Eq. 5-7 by anti-diagonals (cells of one anti-diagonal are independent); returns (M, N) like the kernel."""
+    C = _cost_matrix_np(u, v)
+    N, M = C.shape
+    Dm = np.empty((N, M))
+    Dm[:, 0] = np.cumsum(C[:, 0]) if N else Dm[:, 0]
+    # Eq. 6 by sequential additions (np.cumsum adds in order)
+    Dm[0, :] = np.cumsum(C[0, :])
+    for k in range(2, N + M - 1):
+        n_lo = max(1, k - (M - 1))
+        n_hi = min(N - 1, k - 1)
+        if n_lo > n_hi:
+            continue
+        n = np.arange(n_lo, n_hi + 1)
+        m = k - n
+        best = np.minimum(np.minimum(Dm[n - 1, m - 1], Dm[n, m - 1]), Dm[n - 1, m])
+        Dm[n, m] = best + C[n, m]
+    return np.ascontiguousarray(Dm.T)
 
 
-@njit(cache=True, fastmath=False)
-def _accumulate(u, v):
-    N = u.shape[0]
-    M = v.shape[0]
-    Dm = np.empty((M, N))  # stored column-major in the query index for cache-friendly columns
-    _first_column(u, v[0], Dm[0])
-    for m in range(1, M):
-        _next_column(u, v[m], Dm[m - 1], Dm[m])
-    return Dm
+def _argmin_first_np(col):
+    return int(np.argmin(col))  # numpy's argmin returns the first minimum
 
 
-@njit(cache=True, fastmath=False)
-def _argmin_first(col):
-    best = 0
-    for n in range(1, col.shape[0]):
-        if col[n] < col[best]:
-            best = n
-    return best
-
-
-@njit(cache=True, fastmath=False)
-def _cost_column_t(uT, vm, out):
-    """``out[n] = c(u_n, v_m)`` from the transposed reference ``uT`` (D, N).
-
-    Same summation order over ``d`` as :func:`_local_cost_column` (bitwise equal),
-    but the loop over ``n`` is innermost and contiguous, so it vectorises.
-    """
-    D, N = uT.shape
-    for n in range(N):
-        out[n] = 0.0
-    for d in range(D):
-        vd = vm[d]
-        for n in range(N):
-            diff = uT[d, n] - vd
-            out[n] += diff * diff
-
-
-@njit(cache=True, fastmath=False)
-def _open_end_strips(uT, v, a, b, cb):
-    """n* and D(n*, M) (Eq. 5-8) with two columns of memory, four query frames per sweep.
-
-    Four consecutive columns of Eq. 7 are advanced together: at row ``n`` the
-    cells ``(n, m), (n, m+1), (n, m+2), (n, m+3)`` are computed from the
-    previous row of each.  The four dependency chains overlap in the CPU, so
-    the sweep is bounded by throughput, not by the latency of the ``min + add``
-    chain.  Every cell is computed with exactly the operations of Eq. 7, so the
-    result is bitwise equal to the column-by-column recursion.
-    """
-    D, N = uT.shape
-    M = v.shape[0]
-    _cost_column_t(uT, v[0], a)
-    for n in range(1, N):  # Eq. 6
-        a[n] += a[n - 1]
-    m = 1
-    while m + 4 <= M:
-        for k in range(4):
-            _cost_column_t(uT, v[m + k], cb[k])
-        c0 = cb[0]
-        c1 = cb[1]
-        c2 = cb[2]
-        c3 = cb[3]
-        # row 0: Eq. 5
-        A = a[0] + c0[0]
-        B = A + c1[0]
-        C = B + c2[0]
-        E = C + c3[0]
-        b[0] = E
-        for n in range(1, N):
-            pa0 = a[n - 1]
-            pa1 = a[n]
-            x = pa0 if pa0 <= pa1 else pa1
-            x = x if x <= A else A
-            An = x + c0[n]
-            x = A if A <= An else An
-            x = x if x <= B else B
-            Bn = x + c1[n]
-            x = B if B <= Bn else Bn
-            x = x if x <= C else C
-            Cn = x + c2[n]
-            x = C if C <= Cn else Cn
-            x = x if x <= E else E
-            En = x + c3[n]
-            b[n] = En
-            A = An
-            B = Bn
-            C = Cn
-            E = En
-        a, b = b, a
-        m += 4
-    while m < M:
-        _next_column_cost(a, cb[0], b, uT, v[m])
-        a, b = b, a
-        m += 1
-    n = _argmin_first(a)
-    return n, a[n]
-
-
-@njit(cache=True, fastmath=False)
-def _next_column_cost(prev, cost, col, uT, vm):
-    """One column of Eq. 5 and 7 (same result as :func:`_next_column`) via a vectorised cost column."""
-    _cost_column_t(uT, vm, cost)
-    N = prev.shape[0]
-    col[0] = prev[0] + cost[0]
-    for n in range(1, N):
-        best = prev[n - 1]
-        if prev[n] < best:
-            best = prev[n]
-        if col[n - 1] < best:
-            best = col[n - 1]
-        col[n] = best + cost[n]
-
-
-@njit(cache=True, fastmath=False)
-def _incremental_step(uT, vm, prev, col, cost, first):
-    """Add one query frame: new last column into ``col`` (``prev`` is the old one); returns n*."""
-    N = col.shape[0]
-    if first:
-        _cost_column_t(uT, vm, col)
-        for n in range(1, N):
-            col[n] += col[n - 1]
-    else:
-        _next_column_cost(prev, cost, col, uT, vm)
-    return _argmin_first(col)
-
-
-def _open_end(u, v):
-    """n* and D(n*, M) without storing the matrix (two columns of memory)."""
-    N = u.shape[0]
-    uT = np.ascontiguousarray(u.T)
-    a = np.empty(N)
-    b = np.empty(N)
-    cb = np.empty((4, N))
-    n, c = _open_end_strips(uT, v, a, b, cb)
-    return int(n), float(c)
-
-
-@njit(cache=True, fastmath=False)
-def _backtrack(Dm, n_end):
+def _backtrack_np(Dm, n_end):
     M = Dm.shape[0]
-    path = np.empty((M + n_end + 1, 2), dtype=np.int64)
-    n, m, k = n_end, M - 1, 0
-    path[0, 0] = n
-    path[0, 1] = m
+    path = [(n_end, M - 1)]
+    n, m = n_end, M - 1
     while n > 0 or m > 0:
         if n == 0:
             m -= 1
@@ -225,8 +84,8 @@ def _backtrack(Dm, n_end):
             n -= 1
         else:
             diag = Dm[m - 1, n - 1]
-            left = Dm[m - 1, n]  # D(n, m-1)
-            up = Dm[m, n - 1]  # D(n-1, m)
+            left = Dm[m - 1, n]
+            up = Dm[m, n - 1]
             if diag <= left and diag <= up:
                 n -= 1
                 m -= 1
@@ -234,10 +93,42 @@ def _backtrack(Dm, n_end):
                 m -= 1
             else:
                 n -= 1
-        k += 1
-        path[k, 0] = n
-        path[k, 1] = m
-    return path[: k + 1][::-1].copy()
+        path.append((n, m))
+    return np.array(path[::-1], dtype=np.int64)
+
+
+def _accumulate(u, v):
+    if _fast.ready():
+        from ._dtw_kernels import _accumulate as k
+
+        return k(u, v)
+    return _accumulate_np(u, v)
+
+
+def _open_end(u, v):
+    """n* and D(n*, M) without storing the matrix (two columns of memory when compiled)."""
+    if _fast.ready():
+        from ._dtw_kernels import _open_end_strips
+
+        N = u.shape[0]
+        uT = np.ascontiguousarray(u.T)
+        n, c = _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
+        return int(n), float(c)
+    Dm = _accumulate_np(u, v)
+    n = _argmin_first_np(Dm[-1])
+    return n, float(Dm[-1, n])
+
+
+def _argmin_first(col):
+    return _argmin_first_np(col)
+
+
+def _backtrack(Dm, n_end):
+    if _fast.ready():
+        from ._dtw_kernels import _backtrack as k
+
+        return k(Dm, n_end)
+    return _backtrack_np(Dm, n_end)
 
 
 @dataclass(frozen=True)
@@ -335,11 +226,39 @@ class IncrementalDTW:
         first = self.n_frames == 0
         if not first:
             self._prev, self._col = self._col, self._prev
-        n = _incremental_step(self._uT, v, self._prev, self._col, self._cost, first)
+        if _fast.ready():
+            from ._dtw_kernels import _incremental_step
+
+            n = _incremental_step(self._uT, v, self._prev, self._col, self._cost, first)
+        else:
+            n = self._step_np(v, first)
         self.n_frames += 1
         self.n_star = n
         self.cost = float(self._col[n])
         return n, self.cost
+
+    def _step_np(self, v, first):
+        u = self.reference
+        c = np.zeros(u.shape[0])
+        for d in range(u.shape[1]):
+            diff = u[:, d] - v[d]
+            c += diff * diff
+        col = self._col
+        if first:
+            np.cumsum(c, out=col)
+        else:
+            prev = self._prev
+            col[0] = prev[0] + c[0]
+            tmp = np.minimum(prev[:-1], prev[1:]).tolist()
+            cl = c.tolist()
+            x = col[0]
+            out = [x]
+            for n in range(1, len(cl)):
+                t = tmp[n - 1]
+                x = (t if t < x else x) + cl[n]
+                out.append(x)
+            col[:] = out
+        return _argmin_first_np(col)
 
     @property
     def column(self) -> np.ndarray:

@@ -11,7 +11,6 @@ is used.  ``window=None`` falls back to plain central differences
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from ._validation import as_2d_finite, check_times
 
@@ -95,6 +94,8 @@ def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
             w -= 1
         p = min(polyorder, w - 1)
         if w >= 3 and p >= 2:
+            from scipy.signal import savgol_filter  # lazy: scipy.signal takes ~0.5 s to import
+
             y_s = savgol_filter(y, w, p, deriv=0, axis=0, mode="interp")
             yd = savgol_filter(y, w, p, deriv=1, delta=ds, axis=0, mode="interp")
             ydd = savgol_filter(y, w, p, deriv=2, delta=ds, axis=0, mode="interp")

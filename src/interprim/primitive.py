@@ -808,7 +808,8 @@ class Stream:
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
-        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q) if _fast.ready() else None
+        # streaming needs the compiled per-frame step: load the kernels now (see interprim._fast)
+        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q) if _fast.warmup() else None
         self._n = 0
 
     @property

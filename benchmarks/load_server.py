@@ -144,7 +144,7 @@ async def _reader(ws, st, loop, n_total):
             st["errors"] += 1
 
 
-def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
+def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0):
     """All sessions in one asyncio process: connect them all first, then one scheduler sends each
     session's frame every 1/rate_hz s, sessions staggered evenly over the period."""
     import heapq
@@ -156,7 +156,9 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
 
     async def main():
         loop = asyncio.get_running_loop()
-        wss = await asyncio.gather(*[_open_session(url, points, std) for _ in range(n)])
+        # the first `heavy` sessions ask for 500 points with the std band: much more work per frame
+        wss = await asyncio.gather(*[_open_session(url, 500 if i < heavy else points, True if i < heavy else std)
+                                     for i in range(n)])
         n_total = int(seconds * rate_hz)
         states = [{"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
         readers = [asyncio.create_task(_reader(ws, st, loop, n_total)) for ws, st in zip(wss, states)]
@@ -194,9 +196,9 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q):
     q.put((out, ru.ru_utime + ru.ru_stime))
 
 
-def run_one(url, server_pid, n, seconds, binary, frames, points, std):
+def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0):
     q = mp.Queue()
-    p = mp.Process(target=_client_main, args=(url, n, seconds, 100.0, binary, frames, points, std, q))
+    p = mp.Process(target=_client_main, args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy))
     p.start()
     assert q.get(timeout=120) == "start"
     time.sleep(0.5)  # the scheduler starts 0.2 s after "start"
@@ -205,6 +207,7 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std):
     cpu1, t1 = _cpu_seconds(server_pid), time.monotonic()
     res, client_cpu = q.get(timeout=seconds + 120)
     p.join(30)
+    heavy_res, res = res[:heavy], res[heavy:]  # latency statistics over the normal sessions only
     lat = sorted(x for r in res for x in r["lat"])
     sent = sum(r["sent"] for r in res)
     dropped = sum(r["errors"] + r["missing"] for r in res)
@@ -240,6 +243,9 @@ def main(argv=None):
                     help="serve a constant-time stand-in model: measures the server's own overhead (inline only)")
     ap.add_argument("--out", default=str(HERE / "SERVER_RESULTS.md"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--heavy", type=int, default=0,
+                    help="this many of the N sessions ask for 500 points + std band (noisy neighbours); "
+                         "latencies are then reported for the other sessions")
     ap.add_argument("--append", action="store_true", help="append rows to the existing table")
     args = ap.parse_args(argv)
 
@@ -265,8 +271,9 @@ def main(argv=None):
         url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
         try:
             for n in args.sessions:
-                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std)
-                r["mode"] = label + (" (stub model)" if args.stub else "")
+                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std, args.heavy)
+                r["mode"] = label + (" (stub model)" if args.stub else "") + (
+                    f" + {args.heavy} heavy session(s)" if args.heavy else "")
                 rows.append(r)
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "

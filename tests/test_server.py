@@ -690,3 +690,39 @@ def test_async_client_pipelines_frames(server, models, test_demo):
         d = direct.update(f)
     np.testing.assert_allclose(replies[-1]["mean"], d.trajectory(8)[:, 2:], atol=2e-6)
     assert err["type"] == "error" and err["code"] == "bad_frame" and err["seq"] == 21
+
+
+def test_fair_queueing_serves_the_cheaper_session_first():
+    """The scheduler of a compute lane: among waiting frames, the session that used less compute goes first."""
+    import asyncio
+
+    from interprim.server.app import _Lane, _Session
+
+    order = []
+
+    async def run(job):
+        name, cost = job
+        order.append(name)
+        time.sleep(cost)  # compute time charged to the session
+        return name
+
+    async def go():
+        lane = _Lane(run)
+        heavy = _Session(1, None, "a", asyncio.Queue(), None)
+        light = _Session(2, None, "b", asyncio.Queue(), None)
+        # the heavy session queues first; while its first frame runs, both queue one more frame
+        f1 = lane.submit(heavy, ("heavy-1", 0.05))
+        await asyncio.sleep(0)
+        f2 = lane.submit(heavy, ("heavy-2", 0.05))
+        f3 = lane.submit(light, ("light-1", 0.0))
+        assert await f1 == "heavy-1" and await f2 == "heavy-2" and await f3 == "light-1"
+        assert heavy.vtime > light.vtime
+        # the light session, having used less compute, overtakes frames the heavy one queued earlier
+        f4 = lane.submit(heavy, ("heavy-3", 0.0))
+        f5 = lane.submit(light, ("light-2", 0.0))
+        await asyncio.gather(f4, f5)
+
+    asyncio.run(go())
+    assert order[0] == "heavy-1"
+    assert order.index("light-1") < order.index("heavy-2")
+    assert order.index("light-2") < order.index("heavy-3")

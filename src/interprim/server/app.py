@@ -18,6 +18,7 @@ with code 1008 instead of growing the server's memory.
 from __future__ import annotations
 
 import asyncio
+import heapq
 import hmac
 import http
 import ipaddress
@@ -149,6 +150,52 @@ class _Session:
     writer: asyncio.Task | None = None
     close_reason: str = ""
     error_counts: dict = field(default_factory=dict)
+    vtime: float = 0.0  # compute time used (fair queueing)
+
+
+class _Lane:
+    """One place where predictions are computed (the event loop, a thread, or a worker process),
+    shared by several sessions with fair queueing on compute time (start-time fair queueing).
+
+    Each session has at most one frame waiting (its handler awaits the reply before it reads the
+    next frame).  Among the waiting frames, the one of the session that has used the least compute
+    time goes first.  A session that asks for expensive predictions (many candidates, std band,
+    many points) or sends too fast therefore slows itself down, not the other sessions of the lane.
+    """
+
+    def __init__(self, run):
+        self.run = run  # async callable(job) -> reply text
+        self.heap: list = []
+        self.vclock = 0.0
+        self.task = None
+        self._tie = itertools.count()
+
+    def submit(self, s: "_Session", job) -> asyncio.Future:
+        loop = asyncio.get_running_loop()
+        fut = loop.create_future()
+        s.vtime = max(s.vtime, self.vclock)  # an idle session does not bank compute time
+        heapq.heappush(self.heap, (s.vtime, next(self._tie), s, job, fut))
+        if self.task is None or self.task.done():
+            self.task = loop.create_task(self._drain())
+        return fut
+
+    async def _drain(self) -> None:
+        while self.heap:
+            vt, _, s, job, fut = heapq.heappop(self.heap)
+            self.vclock = vt
+            if fut.done():
+                continue
+            t0 = time.perf_counter()
+            try:
+                result = await self.run(job)
+            except Exception as exc:
+                if not fut.done():
+                    fut.set_exception(exc)
+            else:
+                if not fut.done():
+                    fut.set_result(result)
+            s.vtime += time.perf_counter() - t0
+            await asyncio.sleep(0)  # let the other sessions read their next frames and queue them
 
 
 def _round(a: np.ndarray) -> list:
@@ -244,6 +291,7 @@ class InterprimServer:
         c = self.config
         self._pool = ThreadPoolExecutor(c.workers, thread_name_prefix="ip-worker") if c.workers and not c.processes else None
         self._procs = None
+        self._lanes: list = []
         self._server = None
         self._static = self._load_static()
         self.port = None
@@ -267,6 +315,7 @@ class InterprimServer:
                 raise
             pool.attach(loop)
             self._procs = pool
+        self._lanes = self._make_lanes()
         self._server = await serve(
             self._handler,
             c.host,
@@ -294,6 +343,30 @@ class InterprimServer:
             else f"{c.workers} worker thread(s)" if c.workers else "inline compute",
         )
         return self
+
+    def _make_lanes(self) -> list:
+        if self._procs is not None:
+            procs = self._procs
+
+            async def run_proc(job):
+                s, op, frame, seq, t = job
+                return await procs.call(s.id, "frame", frame=frame.tolist(), seq=seq, t=t)
+
+            return [_Lane(run_proc) for _ in range(procs.n)]  # session i runs on worker i % n
+        if self._pool is not None:
+            pool = self._pool
+
+            async def run_thread(job):
+                _, op, frame, seq, t = job
+                return await asyncio.get_running_loop().run_in_executor(pool, compute_prediction, op, frame, seq, t)
+
+            return [_Lane(run_thread) for _ in range(self.config.workers)]
+
+        async def run_inline(job):
+            _, op, frame, seq, t = job
+            return compute_prediction(op, frame, seq, t)
+
+        return [_Lane(run_inline)]
 
     async def serve_forever(self):
         if self._server is None:
@@ -677,13 +750,8 @@ class InterprimServer:
         else:
             frame, t = P.check_frame(msg, n)
         try:
-            if self._procs is not None:
-                text = await self._procs.call(s.id, "frame", frame=frame.tolist(), seq=seq, t=t)
-            elif self._pool is None:
-                text = compute_prediction(op, frame, seq, t)
-            else:
-                loop = asyncio.get_running_loop()
-                text = await loop.run_in_executor(self._pool, compute_prediction, op, frame, seq, t)
+            lane = self._lanes[s.id % len(self._lanes)]
+            text = await lane.submit(s, (s, op, frame, seq, t))
         except Exception as exc:
             self.stats["errors"] += 1
             log.exception("session %d: prediction failed at seq %d", s.id, seq)

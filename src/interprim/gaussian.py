@@ -189,38 +189,49 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
         ``sum_i |f_i|^2`` and the number ``T D_o`` of scalar observations;
         needed only for the marginal log-likelihood (otherwise it is NaN).
     need_cov : bool
-        Compute the posterior covariance (``O(P^2 k)``); the mean alone is cheaper.
+        Compute the posterior covariance (``O(P^2 P_o)``); the mean alone is cheaper.
+
+    The observation is whitened by the prior of the observed parameters
+    (``Sigma_oo = L L^T``), so that every matrix factorised is
+    ``sigma^2 I + L^T J L`` with ``J = blockdiag(G)``: exact for any ``G``,
+    including the singular ``G`` of the first frames of a movement.
     """
     from scipy.linalg import cho_factor, cho_solve, solve_triangular  # lazy: keeps `import interprim` light
 
     obs_index = np.asarray(obs_index)
     D_o, q = obs_index.shape
-    L, z = _compress(G, B)
-    k = L.shape[0]
     flat = obs_index.reshape(-1)
     P = mean.shape[0]
-    # Sigma L~^T, shape (P, D_o k); L~ = blockdiag(L, ..., L) on the observed indices
-    SLt = np.einsum("pdq,kq->pdk", cov[:, flat].reshape(P, D_o, q), L).reshape(P, D_o * k)
-    LSLt = np.einsum("kq,dqj->dkj", L, SLt[flat].reshape(D_o, q, D_o * k)).reshape(D_o * k, D_o * k)
-    A = LSLt
+    Po = flat.size
+    G = 0.5 * (np.asarray(G, dtype=np.float64) + np.asarray(G, dtype=np.float64).T)
+    # Whitened by the prior of the observed parameters, Sigma_oo = Lp Lp^T:
+    # Sigma Omega~^T A^-1 = Sigma_{:,o} Lp^-T (sigma^2 I + Q)^-1 Lp^T H^T with Q = Lp^T J Lp, J = blockdiag(G).
+    # Exact and stable for any G (singular early in a movement): nothing is divided by eigenvalues of G.
+    Lp = np.linalg.cholesky(cov[np.ix_(flat, flat)])
+    JL = np.einsum("ab,ibk->iak", G, Lp.reshape(D_o, q, Po)).reshape(Po, Po)
+    Q = Lp.T @ JL
+    Q = 0.5 * (Q + Q.T)
+    A = Q.copy()
     A[np.diag_indices_from(A)] += sigma2
     cf = cho_factor(A, lower=True)
     mu_o = mean[obs_index]  # (D_o, q)
-    r = (z - L @ mu_o.T).T.reshape(-1)  # z_i - L mu_i, stacked per DoF
-    alpha = cho_solve(cf, r)
-    post_mean = mean + SLt @ alpha
+    c = (B.T - mu_o @ G).reshape(-1)  # Omega^T (F - Omega mu), stacked per DoF
+    u = cho_solve(cf, Lp.T @ c)
+    w = solve_triangular(Lp, u, lower=True, trans="T")
+    shift = cov[:, flat] @ w
+    post_mean = mean + shift
     post_cov = None
     if need_cov:
-        Wt = solve_triangular(cf[0], SLt.T, lower=True)  # (D_o k, P)
-        post_cov = cov - Wt.T @ Wt
+        R = solve_triangular(Lp, cov[flat, :], lower=True)  # Lp^-1 Sigma_{o,:}, (Po, P)
+        K = R.T @ (cho_solve(cf, Q) @ R)
+        post_cov = cov - 0.5 * (K + K.T)
     loglik = float("nan")
     if yy is not None and n_obs is not None:
-        # |F - Omega mu|^2 = yy - 2 sum_i mu_i^T b_i + sum_i mu_i^T G mu_i
+        # |F - Omega mu|^2 = yy - 2 sum_i mu_i^T b_i + sum_i mu_i^T G mu_i ;  quadratic form by Woodbury
         resid_total = yy - 2.0 * np.sum(mu_o * B.T) + np.sum((mu_o @ G) * mu_o)
-        resid_perp = max(resid_total - float(r @ r), 0.0)
-        logdet = 2.0 * float(np.sum(np.log(np.diag(cf[0]))))
-        loglik = -0.5 * (n_obs * _LOG2PI + (n_obs - D_o * k) * np.log(sigma2) + logdet
-                         + resid_perp / sigma2 + float(r @ alpha))
+        quad = max(resid_total - float(c @ shift[flat]), 0.0) / sigma2
+        logdet = (n_obs - Po) * np.log(sigma2) + 2.0 * float(np.sum(np.log(np.diag(cf[0]))))
+        loglik = -0.5 * (n_obs * _LOG2PI + logdet + quad)
     return Posterior(post_mean, post_cov, loglik)
 
 

@@ -51,8 +51,8 @@ def add_parser(subparsers) -> None:
                         "(default 500)")
     p.add_argument("--rate-burst", type=int, default=50, help="burst allowance of the rate limit (default 50)")
     p.add_argument("--workers", type=int, default=0,
-                   help="threads for the prediction maths; 0 = on the event loop (default 0, fastest "
-                        "for small models: see benchmarks/SERVER_RESULTS.md)")
+                   help="threads for the prediction maths; 0 = on the event loop (default; threads are "
+                        "slower for the current core: see benchmarks/SERVER_RESULTS.md)")
     p.add_argument("--processes", type=int, default=0,
                    help="worker processes for the prediction maths, sessions pinned to one each; 0 = none "
                         "(default). Uses several cores: see benchmarks/SERVER_RESULTS.md")

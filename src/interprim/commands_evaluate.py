@@ -37,7 +37,7 @@ def add_parser(subparsers):
     p.add_argument("--no-recognition", action="store_true", help="skip the recognition sweep")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--pca", type=int, default=6, help="principal components per agent of '+pca' methods")
-    p.add_argument("--n-basis", type=int, default=10, help="basis functions per DoF of the IP models")
+    p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF of the IP models")
     p.set_defaults(func=run)
     return p
 

@@ -78,7 +78,7 @@ class EvalConfig:
         NuiSI file or data folder (default: the loaders' default).
     """
 
-    n_basis: int = 10
+    n_basis: int = 20
     smoothing_window: int | None = 7
     pca_components: int = 6
     promp_weights: int = 10
@@ -120,16 +120,13 @@ def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     if dataset == "highfive-sim":
         from .sim import generate_highfive
 
-        data = generate_highfive(40, seed=0, progress=False)
-        demos = list(data.demos)
-        n_obs = 2
-        return Task("highfive-sim", demos, list(range(n_obs)), float(getattr(data, "dt", 0.01)), 2)
+        data = generate_highfive(30, seed=0, progress=False)
+        return Task("highfive-sim", list(data.demos), list(data.observed_dofs), float(data.dt), 1)
     if dataset == "characters":
         from .datasets import load_character_trajectories
 
-        d = load_character_trajectories(cfg.data_path and None, letters=name)
-        demos = [np.asarray(x)[:, :2] for x in d.demos][:30]
-        return Task(f"characters/{name}", demos, [0, 1], float(d.dt or 0.005), 2)
+        d = load_character_trajectories(None, letters=name, max_per_letter=30)[name]
+        return Task(f"characters/{name}", [np.asarray(x)[:, :2] for x in d.demos], [0, 1], float(d.dt or 0.005), 2)
     raise ValueError(f"unknown data set {dataset!r}; expected nuisi, synthetic, synthetic-noisy, highfive-sim, characters")
 
 
@@ -237,8 +234,8 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
                                  else float("nan")),
                 })
             if selection is not None and p == cfg.fractions[0]:
-                rec["selection"] = {k2: selection[k2] for k2 in ("sigma2", "shrinkage", "phase_sigma2", "cv_error",
-                                                                 "cv_error_prior") if k2 in selection}
+                keys = ("sigma2", "shrinkage", "cross_shrinkage", "phase_sigma2", "cv_error", "cv_error_prior")
+                rec["selection"] = {k2: selection[k2] for k2 in keys if k2 in selection}
             out.append(rec)
     return out
 

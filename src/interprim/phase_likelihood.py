@@ -134,11 +134,45 @@ def _marginal(model):
     return mean_o, cov_o, idx
 
 
+def _factored(model):
+    """The observed block of the prior as diagonal + low rank (see :class:`interprim.selection._LowRankPrior`).
+
+    Exact when ``prior_`` was fitted by :func:`~interprim.gaussian.fit_prior` from ``thetas_`` (checked
+    once); ``None`` otherwise (then the dense path is used).
+    """
+    prior = model.prior_
+    cache = getattr(model, "_phase_factored", None)
+    if cache is not None and cache[0] is prior:
+        return cache[1]
+    from .selection import _LowRankPrior
+
+    pr = None
+    th = getattr(model, "thetas_", None)
+    if th is not None:
+        n = model.n_observed_latent_ * model._q
+        cand = _LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
+        cand.mean, cand.d, cand.W = cand.mean[:n], cand.d[:n], cand.W[:, :n]
+        dense = prior.cov[:n, :n]
+        approx = cand.W.T @ cand.W
+        approx[np.diag_indices(n)] += cand.d
+        if np.allclose(approx, dense, rtol=1e-8, atol=1e-10 * float(np.abs(dense).max())) and np.allclose(
+                cand.mean, prior.mean[:n]):
+            pr = cand
+    model._phase_factored = (prior, pr)
+    return pr
+
+
 def phase_log_likelihood(model, z, s_end: float, sigma2: float | None = None) -> float:
     """``log p(z | s_end)``: marginal likelihood of the observed latent frames ``z`` (M, n_o) at phase ``s_end``."""
-    mean_o, cov_o, idx = _marginal(model)
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
+    pr = _factored(model)
+    if pr is not None:  # O(D_o k^3 + D_o k S^2) instead of O((D_o k)^3)
+        from .selection import _lowrank_case
+
+        return float(_lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
+                                   need_ll=True)[1][0])
+    mean_o, cov_o, idx = _marginal(model)
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
                      need_cov=False)
     return float(post.log_likelihood)

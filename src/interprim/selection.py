@@ -10,13 +10,21 @@ model by K-fold cross-validation on the training demonstrations:
 
 1. split the demonstrations into ``n_folds`` folds; for every fold fit the
    prior (Eq. 10) on the others with each candidate shrinkage ``lambda``;
-2. for every held-out demonstration observe the first 25/50/75 % of the
+2. for every held-out demonstration observe the first 20/40/60/80 % of the
    observed agent (at its true phase), condition (Eq. 16-18) with every
    candidate ``sigma^2`` and predict the whole movement of *all* DoFs (both
    agents) by integrating the DMPs from the start;
-3. score each ``(lambda, sigma^2)`` by the mean squared error of those
+3. score each ``(lambda, sigma^2, gamma)`` by the mean squared error of those
    predictions, each DoF divided by its variance over the demonstrations, and
-   keep the best pair.  The largest ``sigma^2`` candidates (1000x the
+   keep the most conservative ``gamma`` (the largest) within one standard
+   error of the best, with the best ``(lambda, sigma^2)`` for it (Hastie et al.'s
+   one-standard-error rule: a few dozen demonstrations make the CV noisy).  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
+   covariance (observed x controlled) towards zero: the controlled agent's
+   posterior mean moves from the prior mean by ``(1 - gamma)`` times the
+   conditioned shift, so spurious correlations between the agents (few
+   demonstrations, noisy data) are damped without giving up conditioning on
+   the observed agent itself; ``gamma = 1`` predicts the controlled agent by
+   its prior mean.  The largest ``sigma^2`` candidates (10^6 x the
    observation's scale) leave the prior practically unchanged, so the
    selection can always fall back to the prior mean when conditioning does
    not help on held-out data.
@@ -46,10 +54,10 @@ __all__ = ["select_hyperparameters", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRI
 
 _LOG2PI = float(np.log(2.0 * np.pi))
 
-DEFAULT_FRACTIONS = (0.25, 0.5, 0.75)
-DEFAULT_SHRINKAGE_GRID = (0.02, 0.1, 0.3, 0.6, 0.95)
+DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
+DEFAULT_SHRINKAGE_GRID = (0.0, 0.02, 0.1, 0.3, 0.6, 0.95)
 #: ``sigma^2`` candidates relative to the mean square of the observation targets
-DEFAULT_SIGMA2_FACTORS = tuple(10.0 ** np.arange(-6.0, 3.01, 0.5))
+DEFAULT_SIGMA2_FACTORS = tuple(10.0 ** np.arange(-6.0, 6.01, 0.5))
 
 
 def _compress(G, B, tol=1e-10):
@@ -87,6 +95,70 @@ def _log_likelihoods(U, e, Ur, resid_perp, n, dk, s2):
     """Marginal log-likelihood of the observation for every ``sigma^2`` (Eq. 16-18 evidence)."""
     return -0.5 * (n * _LOG2PI + (n - dk) * np.log(s2) + np.sum(np.log(e[:, None] + s2[None, :]), axis=0)
                    + resid_perp / s2 + np.sum(Ur[:, None] ** 2 / (e[:, None] + s2[None, :]), axis=0))
+
+
+class _LowRankPrior:
+    """``N(mean, diag(d) + W^T W)``: the covariance of :func:`~interprim.gaussian.fit_prior` in factored form.
+
+    Every covariance method of ``fit_prior`` is ``(1 - lam) S + lam diag(S) + floor I`` with the
+    sample covariance ``S = Xc^T Xc / n`` of ``n`` demonstrations (``lam = 0`` for ``"ridge"`` and
+    ``"empirical"``), i.e. a diagonal plus a rank-``n`` term.  Conditioning then needs only
+    ``k x k`` eigendecompositions per observed DoF and ``n x n`` solves (Woodbury), for all
+    ``sigma^2`` candidates at once, instead of a ``(D_o k)``-sized eigendecomposition.
+    """
+
+    def __init__(self, thetas, method, ridge, lam):
+        X = np.asarray(thetas, dtype=np.float64)
+        n, P = X.shape
+        self.mean = X.mean(axis=0)
+        Xc = X - self.mean
+        diag = np.sum(Xc * Xc, axis=0) / n
+        scale = float(np.mean(diag)) if P else 0.0
+        floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
+        lam = 0.0 if (method != "shrinkage" or lam is None) else float(lam)
+        self.d = lam * diag + floor
+        self.W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
+
+
+def _lowrank_case(pr: _LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False):
+    """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation."""
+    L, zc = _compress(X.T @ X, X.T @ Y)
+    k = L.shape[0]
+    no_q = n_o * q
+    mu_o = pr.mean[:no_q].reshape(n_o, q)
+    d_o = pr.d[:no_q].reshape(n_o, q)
+    W_o = pr.W[:, :no_q].reshape(-1, n_o, q)  # (n, n_o, q)
+    # block i of B = L diag(d_i) L^T, eigendecomposed per observed DoF
+    B = np.einsum("kq,iq,jq->ikj", L, d_o, L)  # (n_o, k, k)
+    E, V = np.linalg.eigh(B)  # (n_o, k), (n_o, k, k)
+    E = np.clip(E, 0.0, None)
+    LW = np.einsum("kq,niq->ikn", L, W_o)  # (n_o, k, n)  = L W_i^T
+    Ut = np.einsum("ikj,ikn->ijn", V, LW).reshape(n_o * k, -1)  # V_i^T L W_i^T, stacked
+    r = (zc - L @ mu_o.T).T  # (n_o, k)
+    rt = np.einsum("ikj,ik->ij", V, r).reshape(-1)  # (n_o k,)
+    e = E.reshape(-1)
+    s2 = np.asarray(s2, dtype=np.float64)
+    g = 1.0 / (e[None, :] + s2[:, None])  # (S2, n_o k)
+    nW = Ut.shape[1]
+    C = np.einsum("ks,nk,kt->nst", Ut, g, Ut)
+    C[:, np.arange(nW), np.arange(nW)] += 1.0
+    gr = g * rt[None, :]
+    sol = np.linalg.solve(C, (gr @ Ut)[:, :, None])[:, :, 0]  # (S2, n)
+    at = gr - g * (sol @ Ut.T)  # A^-1 r in the eigenbases, (S2, n_o k)
+    means = ll = None
+    if need_mean:
+        alpha = np.einsum("ikj,sij->sik", V, at.reshape(-1, n_o, k))  # back to the compressed basis
+        v = np.einsum("kq,sik->siq", L, alpha).reshape(len(s2), no_q)  # Lb^T alpha
+        means = pr.mean[None, :] + (v @ pr.W[:, :no_q].T) @ pr.W
+        means[:, :no_q] += v * pr.d[None, :no_q]
+    if need_ll:
+        resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
+        resid_perp = max(resid_total - float(r.reshape(-1) @ r.reshape(-1)), 0.0)
+        n_obs, dk = Y.size, n_o * k
+        logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
+        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2
+                     + np.einsum("sk,k->s", at, rt))
+    return means, ll
 
 
 def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
@@ -139,7 +211,8 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
                        phase_cases)
 
 
-def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, select_sigma2, n_out, phase_cases):
+def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, select_sigma2, n_out, phase_cases,
+            cross_grid=(0.0, 0.25, 0.5, 0.75, 0.9, 1.0)):
     thetas = model.thetas_
     S, P = thetas.shape
     n_o = model.n_observed_latent_
@@ -177,7 +250,9 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     s2_grid = {kind: max(scale[kind], 1e-300) * np.asarray(sigma2_factors, dtype=np.float64) for kind in kinds}
 
     kind0 = kinds[0]
-    err = np.zeros((len(lam_grid), len(sigma2_factors)))
+    gam = np.asarray(cross_grid if n_lat > n_o else (0.0,), dtype=np.float64)
+    err = np.zeros((len(lam_grid), len(sigma2_factors), gam.size))
+    err2 = np.zeros_like(err)  # sums of squares for the one-standard-error rule
     ll = np.zeros((len(lam_grid), len(sigma2_factors)))
     err_prior = np.zeros(len(lam_grid))
     n_cases = 0
@@ -186,36 +261,66 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         if train.sum() < 2:
             continue
         for a, lam in enumerate(lam_grid):
-            prior = fit_prior(thetas[train], method, model.ridge, shrinkage=lam)
+            prior = _LowRankPrior(thetas[train], method, model.ridge, lam)
             for j, designs, base in cases:
                 if fold[j] != f:
                     continue
                 truth = truths[j]
                 if select_sigma2:
                     X, Y = designs[kind0]
-                    SLt, U, e, Ur, rp, n, dk = _case_terms(prior.cov, prior.mean, n_o, q, X, Y)
-                    Th = _posterior_means(prior.mean, SLt, U, e, Ur, s2_grid[kind0]).reshape(n_lat, q, -1)
+                    Th, lls = _lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position")
+                    Th = Th.T.reshape(n_lat, q, -1)
                     pred = base[None] + np.einsum("tq,dqs->std", H, Th)
-                    err[a] += np.mean(((pred - truth[None]) ** 2) * w_d, axis=(1, 2))
                     pm = base + H @ prior.mean.reshape(n_lat, q).T
+                    # observed agent: as conditioned; controlled agent: the conditioned shift scaled by
+                    # (1 - gamma), which is exactly the effect of scaling the cross-agent covariance
+                    e_o = np.sum(np.mean((pred[:, :, :n_o] - truth[None, :, :n_o]) ** 2, axis=1) * w_d[:n_o], axis=1)
+                    dc = pred[:, :, n_o:] - pm[None, :, n_o:]
+                    rc = pm[None, :, n_o:] - truth[None, :, n_o:]
+                    e_c = np.sum(np.mean((rc[None] + (1.0 - gam)[:, None, None, None] * dc[None]) ** 2, axis=2)
+                                 * w_d[n_o:], axis=2).T  # (S2, G)
+                    e_all = (e_o[:, None] + e_c) / n_lat
+                    err[a] += e_all
+                    err2[a] += e_all**2
                     err_prior[a] += float(np.mean(((pm - truth) ** 2) * w_d))
                     if kind0 == "position":
-                        ll[a] += _log_likelihoods(U, e, Ur, rp, n, dk, s2_grid["position"])
+                        ll[a] += lls
                 if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                     X, Y = designs["position"]
-                    _, U, e, Ur, rp, n, dk = _case_terms(prior.cov, prior.mean, n_o, q, X, Y)
-                    ll[a] += _log_likelihoods(U, e, Ur, rp, n, dk, s2_grid["position"])
+                    ll[a] += _lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
+                                           need_ll=True)[1]
                 if a == 0:
                     n_cases += 1
     err /= max(n_cases, 1)
+    err2 /= max(n_cases, 1)
     err_prior /= max(n_cases, 1)
 
     if select_sigma2:
-        a, b = np.unravel_index(int(np.argmin(err)), err.shape)
+        a, b, c = np.unravel_index(int(np.argmin(err)), err.shape)
+        # one-standard-error rule: the most conservative choice (largest cross-agent shrinkage, then
+        # largest sigma^2) whose CV error is within one standard error of the best
+        se = float(np.sqrt(max(err2[a, b, c] - err[a, b, c] ** 2, 0.0) / max(n_cases - 1, 1)))
+        ok = np.argwhere(err <= err[a, b, c] + se)
+        c = int(max(t[2] for t in ok))
+        a, b = np.unravel_index(int(np.argmin(err[:, :, c])), err.shape[:2])
         lam = lam_grid[a]
+        gamma = float(gam[c])
         model.sigma2_ = float(s2_grid[kind0][b])
-        if lam is not None:
-            model.prior_ = fit_prior(thetas, method, model.ridge, shrinkage=lam)
+        prior = fit_prior(thetas, method, model.ridge, shrinkage=lam)
+        if gamma > 0:  # shrink the cross-agent covariance (observed x controlled) towards zero
+            po = n_o * q
+            prior.cov[:po, po:] *= 1.0 - gamma
+            prior.cov[po:, :po] *= 1.0 - gamma
+            U = getattr(prior, "factor", None)
+            if U is not None:  # keep the diagonal + low-rank form (cov = diag + U U^T) exact: rank doubles
+                U = np.asarray(U, dtype=np.float64)
+                r = U.shape[1]
+                V = np.zeros((U.shape[0], 2 * r))
+                V[:po, :r] = U[:po]
+                V[po:, :r] = (1.0 - gamma) * U[po:]
+                V[po:, r:] = np.sqrt(1.0 - (1.0 - gamma) ** 2) * U[po:]
+                prior.factor = V
+        model.prior_ = prior
     else:
         a = 0
         lam = None
@@ -243,9 +348,11 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         "phase_error": None if phase_err is None else [float(x) for x in phase_err],
     }
     if select_sigma2:
-        sel["cv_error"] = float(err[a].min())
+        sel["cross_shrinkage"] = gamma
+        sel["cross_shrinkage_grid"] = gam.tolist()
+        sel["cv_error"] = float(err[a, b, c])
         sel["cv_error_prior"] = float(err_prior[a])
-        sel["cv_errors"] = err.tolist()
+        sel["cv_errors"] = err[:, :, c].tolist()
     model.selection_ = sel
     return sel
 
@@ -266,10 +373,10 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
     for j, p in cases:
         f = fold[j]
         if f not in priors:
-            priors[f] = fit_prior(model.thetas_[fold != f], model.covariance, model.ridge, shrinkage=lam)
+            pr = _LowRankPrior(model.thetas_[fold != f], model.covariance, model.ridge, lam)
+            pr.mean, pr.d, pr.W = pr.mean[: n_o * q], pr.d[: n_o * q], pr.W[:, : n_o * q]  # observed block
+            priors[f] = pr
         prior = priors[f]
-        mean_o = prior.mean[: n_o * q]
-        cov_o = prior.cov[: n_o * q, : n_o * q]
         z = latent[j]
         T = z.shape[0]
         M = int(np.clip(round(p * T), max(3, model.min_observed), T))
@@ -279,7 +386,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         curves = np.empty((grid.size, len(s2_grid)))
         for i, s in enumerate(grid):
             X, Y = observation_design(model, z[:M, :n_o], float(s), "position")
-            _, U, e, Ur, rp, n, dk = _case_terms(cov_o, mean_o, n_o, q, X, Y)
-            curves[i] = _log_likelihoods(U, e, Ur, rp, n, dk, s2_grid) + _log_speed_prior(model, M, s)
+            curves[i] = (_lowrank_case(prior, n_o, q, X, Y, s2_grid, need_mean=False, need_ll=True)[1]
+                         + _log_speed_prior(model, M, s))
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
     return errs / len(cases)

@@ -166,7 +166,13 @@ def _next_column_cost(prev, cost, col, uT, vm):
 
 @njit(cache=True, fastmath=False)
 def _incremental_step(uT, vm, prev, col, cost, first):
-    """Add one query frame: new last column into ``col`` (``prev`` is the old one); returns n*."""
+    """Add one query frame: new last column into ``col`` (``prev`` is the old one); returns n*.
+
+    Returns -1 without touching any buffer if the frame has a NaN or inf.
+    """
+    for d in range(vm.shape[0]):
+        if not np.isfinite(vm[d]):
+            return -1
     N = col.shape[0]
     if first:
         _cost_column_t(uT, vm, col)

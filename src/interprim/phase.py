@@ -192,6 +192,16 @@ def phase_from_index(n_star: int, N: int, alpha_x: float, tau: float = 1.0) -> f
     return float(np.exp(-alpha_x * ((n_star + 1) / N) * tau))
 
 
+_STEP: list = []
+
+
+def _load_step():
+    from ._dtw_kernels import _incremental_step
+
+    _STEP.append(_incremental_step)
+    return _incremental_step
+
+
 class IncrementalDTW:
     """Open-end DTW that takes one query frame at a time (``O(N D)`` per frame).
 
@@ -222,15 +232,22 @@ class IncrementalDTW:
 
     def update(self, frame, check: bool = True):
         """Add one query frame; returns ``(n_star, cost)``."""
-        v = as_frame(frame, "frame", self.reference.shape[1]) if check else frame
+        D = self.reference.shape[1]
+        step = _STEP[0] if _STEP else (_load_step() if _fast.ready() else None)
+        fast_in = (step is not None and type(frame) is np.ndarray and frame.dtype == np.float64
+                   and frame.shape == (D,))
+        v = frame if (fast_in or not check) else as_frame(frame, "frame", D)
         first = self.n_frames == 0
-        if not first:
-            self._prev, self._col = self._col, self._prev
-        if _fast.ready():
-            from ._dtw_kernels import _incremental_step
-
-            n = _incremental_step(self._uT, v, self._prev, self._col, self._cost, first)
+        if step is not None:
+            prev, col = (self._prev, self._col) if first else (self._col, self._prev)
+            n = step(self._uT, v, prev, col, self._cost, first)
+            if n < 0:  # non-finite frame: the kernel touched nothing; raise the usual message
+                as_frame(frame, "frame", D)
+                raise ValueError("frame contains NaN or inf")
+            self._prev, self._col = prev, col
         else:
+            if not first:
+                self._prev, self._col = self._col, self._prev
             n = self._step_np(v, first)
         self.n_frames += 1
         self.n_star = n

@@ -172,6 +172,27 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     d_rest = math.dist(st["replayGoal"], fk_robot_rest(driver, start["interactions"][0]["controlled_truth"][0]))
     assert d_rest > 1.0  # the robot really had to move
     driver.find_element("id", "tab-writing").click()
+    # write an "s" with the mouse: the server must recognise it among c, s, u
+    from interprim.server.demo import synthetic_letters
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    stroke = synthetic_letters("s", 1, seed=7)[0]
+    pts = driver.execute_script("return arguments[0].map(p => window.ipView.letterToClient(p[0], p[1]))",
+                                stroke[: int(0.7 * len(stroke))].tolist())
+    step = 3
+    actions = ActionBuilder(driver, duration=10 * step)
+    ptr = actions.pointer_action
+    ptr.move_to_location(int(round(pts[0][0])), int(round(pts[0][1])))
+    ptr.pointer_down()
+    for x, y in pts[step::step] + [pts[-1]]:
+        ptr.move_to_location(int(round(x)), int(round(y)))
+    ptr.pointer_up()
+    actions.perform()
+    wait_for(driver, "return window.ipState.hw.predictions >= 20 && !window.ipState.hw.active")
+    time.sleep(0.3)
+    hw = driver.execute_script("return window.ipState.hw")
+    driver.save_screenshot(str(ARTIFACTS / "browser_handwriting_drawn.png"))
+    assert hw["error"] is None and hw["model"] == "letter_s", hw["probabilities"]
     driver.find_element("id", "hw-replay").click()  # first letter model: half a letter, completed live
     wait_for(driver, "return window.ipState.hw.predictions >= 20 && !window.ipState.hw.active")
     hw = driver.execute_script("return window.ipState.hw")

@@ -57,6 +57,43 @@ function jacobian(arm, q) {
 const POINTER_DELAY_MS = 40;
 const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
 
+// Pointer events come every ~8-30 ms and timers jitter; a model wants frames every dt. This samples
+// the pointer path on an exact dt grid (catching up after a late timer), by linear interpolation
+// between pointer events, POINTER_DELAY_MS behind real time, so that frames are smooth and evenly
+// spaced (no staircase, which the model would read as jerky movement).
+class PointerSampler {
+  constructor(dtMs) { this.dtMs = dtMs; this.log = []; this.gridT = 0; this.released = false; this.done = false; }
+  start(p) {
+    const now = performance.now();
+    this.log = [[now, p[0], p[1]]];
+    this.gridT = now - POINTER_DELAY_MS;
+    this.released = false;
+    this.done = false;
+  }
+  add(p) {
+    this.log.push([performance.now(), p[0], p[1]]);
+    if (this.log.length > 4000) this.log.splice(0, 2000);
+  }
+  release() { this.released = true; }
+  due() {
+    const out = [], log = this.log, now = performance.now() - POINTER_DELAY_MS;
+    while (!this.done && this.gridT <= now) {
+      const T = this.gridT;
+      this.gridT += this.dtMs;
+      let i = 1;
+      while (i < log.length && log[i][0] < T) i++;
+      if (i >= log.length) out.push([log[log.length - 1][1], log[log.length - 1][2]]);
+      else {
+        const [t0, x0, y0] = log[i - 1], [t1, x1, y1] = log[i];
+        const w = t1 > t0 ? clamp((T - t0) / (t1 - t0), 0, 1) : 1;
+        out.push([x0 + w * (x1 - x0), y0 + w * (y1 - y0)]);
+      }
+      if (this.released && T >= log[log.length - 1][0]) this.done = true;
+    }
+    return out;
+  }
+}
+
 // Analytic IK of a 2-link arm, "elbow bends upwards" branch (positive elbow angle).
 function ik2(arm, target) {
   const [l1, l2] = arm.link_lengths;
@@ -256,31 +293,14 @@ function hfTick() {
     hf.humanQ = r.frames[r.i++].slice();
   }
   if (hf.dragging) {
-    // Mouse events come every ~16-30 ms and timers jitter: send frames on an exact dt grid of
-    // pointer time (catching up after a late tick), sampling the pointer path by linear
-    // interpolation a little in the past, so that the observed movement is smooth.
-    const log = hf.pointerLog, now = performance.now() - POINTER_DELAY_MS, dtMs = 1000 * hf.model.dt;
-    let sentAny = false;
-    while (hf.gridT <= now) {
-      const T = hf.gridT;
-      hf.gridT += dtMs;
-      let i = 1;
-      while (i < log.length && log[i][0] < T) i++;
-      let pt;
-      if (i >= log.length) pt = log[log.length - 1];
-      else {
-        const [t0, x0, y0] = log[i - 1], [t1, x1, y1] = log[i];
-        const w = t1 > t0 ? clamp((T - t0) / (t1 - t0), 0, 1) : 1;
-        pt = [T, x0 + w * (x1 - x0), y0 + w * (y1 - y0)];
-      }
-      hf.humanQ = ik2(hf.world.observed_arm, [pt[1], pt[2]]);
+    for (const p of hf.sampler.due()) {
+      hf.humanQ = ik2(hf.world.observed_arm, p);
       hf.client.sendFrame(hf.humanQ);
       state.hf.frames += 1;
       if (state.hf.sent.length < 5000) state.hf.sent.push(hf.humanQ.slice());
-      sentAny = true;
-      if (hf.released && T >= log[log.length - 1][0]) { hfStop(); break; }
     }
     $("hf-frames").textContent = state.hf.frames;
+    if (hf.sampler.done) hfStop();
     return;
   }
   hf.client.sendFrame(hf.humanQ);
@@ -308,7 +328,6 @@ function hfStop() {
   hf.timer = null;
   hf.replay = null;
   hf.dragging = false;
-  hf.released = false;
   state.hf.active = false;
 }
 
@@ -362,19 +381,16 @@ async function hfInit(info) {
     state.hf.replayGoal = null;
     $("hf-goal").textContent = "–";
     hf.humanQ = ik2(hf.world.observed_arm, p); // the first frame is where the hand really is
-    hf.pointerLog = [[performance.now(), p[0], p[1]]];
-    hf.gridT = performance.now() - POINTER_DELAY_MS;
-    hf.released = false;
+    hf.sampler = new PointerSampler(1000 * hf.model.dt);
+    hf.sampler.start(p);
     hfStart();
     hf.dragging = true;
   });
   hf.canvas.addEventListener("pointermove", (ev) => {
     if (!hf.dragging) return;
-    const p = c2w(canvasPoint(hf.canvas, ev));
-    hf.pointerLog.push([performance.now(), p[0], p[1]]);
-    if (hf.pointerLog.length > 4000) hf.pointerLog.splice(0, 2000);
+    hf.sampler.add(c2w(canvasPoint(hf.canvas, ev)));
   });
-  const up = () => { if (hf.dragging) hf.released = true; }; // the tick stops after the last event
+  const up = () => { if (hf.dragging) hf.sampler.release(); }; // the tick stops after the last event
   hf.canvas.addEventListener("pointerup", up);
   hf.canvas.addEventListener("pointercancel", up);
   $("hf-reset").onclick = () => {
@@ -460,16 +476,21 @@ function hwApplyPrediction(p) {
   }
 }
 
+function hwSend(p) {
+  hw.stroke.push(p.slice());
+  hw.client.sendFrame(p);
+  state.hw.frames += 1;
+}
+
 function hwTick() {
   if (!hw.client || !hw.client.isOpen) return;
   if (hw.replay) {
     if (hw.replay.i >= hw.replay.frames.length) { hwStop(); return; }
-    hw.pen = hw.replay.frames[hw.replay.i++];
+    hwSend(hw.replay.frames[hw.replay.i++]);
+  } else if (hw.drawing) {
+    for (const p of hw.sampler.due()) hwSend(p);
+    if (hw.sampler.done) hwStop();
   }
-  if (!hw.pen) return;
-  hw.stroke.push(hw.pen.slice());
-  hw.client.sendFrame(hw.pen);
-  state.hw.frames += 1;
 }
 
 function hwStart() {
@@ -501,11 +522,12 @@ async function hwInit(info) {
                        { points: 80, std: true, candidates: names.length > 1 ? names : undefined, dofs: "all" });
   hw.canvas.addEventListener("pointerdown", (ev) => {
     hw.canvas.setPointerCapture(ev.pointerId);
-    hw.pen = hc2w(canvasPoint(hw.canvas, ev));
-    hwStart(); hw.drawing = true; hwTick();
+    hw.sampler = new PointerSampler(1000 * hw.dt);
+    hw.sampler.start(hc2w(canvasPoint(hw.canvas, ev)));
+    hwStart(); hw.drawing = true;
   });
-  hw.canvas.addEventListener("pointermove", (ev) => { if (hw.drawing) hw.pen = hc2w(canvasPoint(hw.canvas, ev)); });
-  const up = () => { if (hw.drawing) hwStop(); };
+  hw.canvas.addEventListener("pointermove", (ev) => { if (hw.drawing) hw.sampler.add(hc2w(canvasPoint(hw.canvas, ev))); });
+  const up = () => { if (hw.drawing) hw.sampler.release(); }; // the tick stops after the last event
   hw.canvas.addEventListener("pointerup", up);
   hw.canvas.addEventListener("pointercancel", up);
   $("hw-clear").onclick = () => { hwStop(); hw.stroke = []; hw.pred = null; };

@@ -65,7 +65,7 @@ def _compile_all():
                              np.empty(P))
     Kn = 8
     k.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
-                         np.zeros((2, Do)), False, np.empty((3, Do)))
+                         np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))
     Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
     k.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
 

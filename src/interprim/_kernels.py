@@ -384,14 +384,14 @@ def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, o
 
 
 @njit(cache=True, fastmath=_FM)
-def response_positions(Z, powers, s0, n, th, z0, at_s0, out):
+def response_positions(Z, powers, s0, n, th, z0, at_s0, out, duration, t_out):
     """Mean positions of DoFs with parameters ``th`` (d, q) at ``linspace(s0, 1, n)``, from their state at ``s0``.
 
     The state at ``s0`` is that of the movement started at ``s = 0`` in ``z0``
     (2, d) (positions, velocities), or ``z0`` itself when ``at_s0``; the continuation uses the exact
     discretisation of :class:`interprim.dmp.LinearRollout` (same snapping and
     interpolation as :meth:`~interprim.dmp.LinearRollout.design`).
-    ``out`` has shape (n, d).
+    ``out`` has shape (n, d); ``t_out`` (n,) receives ``(s - s0) * duration``.
     """
     Kn = Z.shape[0] - 1
     q = Z.shape[2]
@@ -436,6 +436,7 @@ def response_positions(Z, powers, s0, n, th, z0, at_s0, out):
         s = t * step + s0 if t < n - 1 else 1.0
         if n == 1:
             s = s0
+        t_out[t] = (s - s0) * duration
         u = min(max(s * Kn, float(k0)), float(Kn))
         kf = min(int(np.floor(u)), Kn - 1)
         kf = max(kf, k0)

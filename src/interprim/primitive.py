@@ -16,12 +16,13 @@ back to the demonstrations' column order.
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
 
 from ._validation import as_2d_finite, as_frame, check_positive, check_times
-from .basis import Basis, canonical_phase
+from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
 from .errors import NotFittedError
 from . import _fast
@@ -620,7 +621,7 @@ class Prediction:
         self.normalised_time = float(s_end)
         N = model.reference_.shape[0]
         self.phase = float(max(s_end, 0.5 / (N - 1)))
-        self.x = float(canonical_phase(self.phase, model.alpha_x))
+        self.x = math.exp(-float(model.alpha_x) * self.phase)  # Eq. 9 (canonical_phase, scalar)
         self.duration = float(duration)
         self.tau = 1.0 / self.duration
         self.speed = float(model.mean_duration_ / self.duration)
@@ -724,26 +725,25 @@ class Prediction:
         """
         if not _fast.ready():
             return self._response_reference(n, state)
-        from ._kernels import response_positions
-
+        kern = _RESPONSE[0] if _RESPONSE else _load_response()
         m = self._m
         n = int(n)
         n_o = m.n_observed_latent_
         s0 = self.normalised_time
-        th = self._theta()[n_o:]
+        th = self._post.mean.reshape(m.n_latent_, m._q)[n_o:]
         if state is None:
-            z0 = np.vstack(self._robot_start)
+            rs = self._robot_start
+            z0 = rs[2] if len(rs) > 2 else np.vstack(rs[:2])
             at_s0 = False
         else:
             y0, v0 = m._robot_start(state)
             z0 = np.vstack([y0, v0 / m.mean_duration_ * self.duration])
             at_s0 = True
         ro = m.rollout_
-        lat = response_positions(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])))
+        t = np.empty(n)
+        lat = kern(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])), self.duration, t)
         Mc, offc = m._controlled_map()
-        y = lat if Mc is None else lat @ Mc + offc
-        s = np.linspace(s0, 1.0, n)
-        return (s - s0) * self.duration, y
+        return t, (lat if Mc is None else lat @ Mc + offc)
 
     def _response_reference(self, n: int = 100, state=None):
         """:meth:`response` with :meth:`interprim.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
@@ -793,6 +793,16 @@ class Prediction:
                 f"log_likelihood={self.log_likelihood:.3g})")
 
 
+_RESPONSE: list = []
+
+
+def _load_response():
+    from ._kernels import response_positions
+
+    _RESPONSE.append(response_positions)
+    return response_positions
+
+
 class Stream:
     """Online use of a fitted :class:`InteractionPrimitive`: one observed frame at a time.
 
@@ -804,7 +814,7 @@ class Stream:
     def __init__(self, model: InteractionPrimitive, robot_state=None):
         self.model = model
         self.robot_state = robot_state
-        self._robot_start = model._robot_start(robot_state)
+        self._robot_start = self._with_z0(model._robot_start(robot_state))
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
@@ -822,7 +832,12 @@ class Stream:
         self._n = 0
         if robot_state is not None:
             self.robot_state = robot_state
-            self._robot_start = self.model._robot_start(robot_state)
+            self._robot_start = self._with_z0(self.model._robot_start(robot_state))
+
+    @staticmethod
+    def _with_z0(rs):
+        """``(y0, v0, [y0; v0])``: the stacked start state is reused by every :meth:`Prediction.response`."""
+        return (rs[0], rs[1], np.vstack([rs[0], rs[1]]))
 
     def update(self, frame, need_cov: bool = False) -> Prediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
@@ -836,14 +851,20 @@ class Stream:
         buffer itself (doubling).
         """
         m = self.model
-        f = as_frame(frame, "frame", len(m.observed_dofs_))
-        if m.pca_observed_ is not None:
-            f = m.pca_observed_.transform(f[None])[0]
+        n_cols = len(m.observed_dofs_)
+        if (m.pca_observed_ is None and type(frame) is np.ndarray and frame.dtype == np.float64
+                and frame.shape == (n_cols,)):
+            f = frame  # validated (finite) by the DTW step below, before anything is stored
+            n_star, cost = self._dtw.update(f, check=True)
+        else:
+            f = as_frame(frame, "frame", n_cols)
+            if m.pca_observed_ is not None:
+                f = m.pca_observed_.transform(f[None])[0]
+            n_star, cost = self._dtw.update(f, check=False)
         if self._n == self._buf.shape[0]:
             self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
         self._buf[self._n] = f
         self._n += 1
-        n_star, cost = self._dtw.update(f, check=False)
         if m.phase_method == "likelihood":  # local search around the previous estimate
             from .phase_likelihood import track_phase
 

@@ -726,3 +726,16 @@ def test_fair_queueing_serves_the_cheaper_session_first():
     assert order[0] == "heavy-1"
     assert order.index("light-1") < order.index("heavy-2")
     assert order.index("light-2") < order.index("heavy-3")
+
+
+def test_garbage_connections_are_logged(server, caplog):
+    with caplog.at_level(logging.WARNING, logger="interprim.server"):
+        s = socket.create_connection(("127.0.0.1", server.server.port), timeout=5)
+        s.sendall(b"\x00\x01garbage that is not HTTP\r\n\r\n")
+        try:
+            while s.recv(4096):
+                pass
+        except OSError:
+            pass
+        s.close()
+        assert wait_until(lambda: "bad HTTP request" in caplog.text or "no complete handshake" in caplog.text)

@@ -89,6 +89,13 @@ class ServerConfig:
             raise ValueError("max_message_bytes must be at least 256 (a frame message needs room)")
 
 
+def _peer(conn) -> str:
+    try:
+        return "%s:%s" % tuple(conn.remote_address[:2])
+    except Exception:
+        return "?"
+
+
 def is_loopback(host: str) -> bool:
     if host in LOOPBACK_NAMES:
         return True
@@ -298,7 +305,19 @@ class InterprimServer:
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self):
-        from websockets.asyncio.server import serve
+        from websockets.asyncio.server import ServerConnection, serve
+
+        class LoggedConnection(ServerConnection):
+            """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them)."""
+
+            async def handshake(self, *args, **kwargs):
+                try:
+                    await super().handshake(*args, **kwargs)
+                except BaseException as exc:
+                    log.warning("connection from %s: no complete handshake (%s)", _peer(self), type(exc).__name__)
+                    raise
+                if self.request is None and self.protocol.handshake_exc is not None:
+                    log.warning("connection from %s: bad HTTP request: %s", _peer(self), self.protocol.handshake_exc)
 
         c = self.config
         if not c.processes:
@@ -329,6 +348,7 @@ class InterprimServer:
             ping_interval=c.ping_interval,
             ping_timeout=c.ping_interval,
             logger=logging.getLogger("interprim.server.websockets"),
+            create_connection=LoggedConnection,
         )
         sock = self._server.sockets[0]
         self.port = sock.getsockname()[1]
@@ -533,11 +553,10 @@ class InterprimServer:
             while not s.closing:
                 try:
                     if not s.ready:
-                        async with asyncio.timeout(c.hello_timeout):
-                            data = await ws.recv()
+                        data = await asyncio.wait_for(ws.recv(), c.hello_timeout)  # (3.10: no asyncio.timeout)
                     else:
                         data = await ws.recv()
-                except TimeoutError:
+                except (TimeoutError, asyncio.TimeoutError):
                     self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
                     break
                 await self._on_message(s, data)

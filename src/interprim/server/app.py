@@ -559,6 +559,9 @@ class InterprimServer:
                 except (TimeoutError, asyncio.TimeoutError):
                     self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
                     break
+                except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
+                    self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
+                    break
                 await self._on_message(s, data)
                 if not s.out.empty():
                     # Let the writer push the reply to the socket now: the queue then only fills up

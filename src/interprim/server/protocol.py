@@ -41,6 +41,7 @@ ERROR_CODES = {
 # WebSocket close codes used by the server (RFC 6455 + IANA registry).
 CLOSE_NORMAL = 1000
 CLOSE_GOING_AWAY = 1001
+CLOSE_INVALID_DATA = 1007  # a text message that is not UTF-8
 CLOSE_POLICY = 1008  # bad token, client that never reads, too many protocol errors
 CLOSE_TOO_BIG = 1009  # message over --max-message-bytes (sent by the websockets library)
 CLOSE_INTERNAL = 1011

@@ -60,9 +60,7 @@ def _compile_all():
     idx = np.arange(Do * q, dtype=np.intp)
     other = np.arange(Do * q, P, dtype=np.intp)
     k.lowrank_condition_mean(G, B, 1.0, 1.0, np.ones((Do, q)), rng.normal(size=(Do, q, r)), np.eye(r) * 5.0,
-                             np.zeros(P), np.zeros((Do, q)), idx, other, np.zeros((P - Do * q, r)),
-                             np.empty((Do, q, q)), np.empty((q, r)), np.empty((r, r)), np.empty((3, Do, q)),
-                             np.empty(P))
+                             np.zeros(P), np.zeros((Do, q)), idx, other, np.zeros((P - Do * q, r)), np.empty(P))
     Kn = 8
     k.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))

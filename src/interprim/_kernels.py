@@ -286,7 +286,7 @@ def _syrk_sub(W, s2, K):
 
 
 @njit(cache=True, fastmath=_FM)
-def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, T, W, K, ca, out):
+def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out):
     """Posterior mean of Eq. 18 for a prior ``Sigma = diag(d) + U U^T`` and ``Omega~ = [blockdiag(X), 0]``.
 
     Exact (no approximation): Woodbury's identity is applied twice, once to
@@ -305,14 +305,20 @@ def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, o
     mean : (P,) prior mean; mu_o : (D_o, q) its observed part.
     obs_flat : (D_o q,) int, other : (P - D_o q,) int.
     Uc : (P - D_o q, r) factor rows of the other parameters.
-    T, W, K, ca : workspaces (D_o, q, q), (q, r), (r, r), (3, D_o, q).
     out : (P,) posterior mean (output).
+
+    Workspaces are allocated here (a few tens of kB, independent of the
+    number of frames), so concurrent calls from several threads are safe.
 
     Returns
     -------
     (sum_i log det T_i, log det K, |F - Omega mu|^2 - c^T delta_o); NaN log-dets flag a failed factorisation.
     """
     Do, q, r = Uh.shape
+    T = np.empty((Do, q, q))
+    W = np.empty((q, r))
+    K = np.empty((r, r))
+    ca = np.empty((3, Do, q))
     for i in range(r):
         for j in range(r):
             K[i, j] = K0[i, j]

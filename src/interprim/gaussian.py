@@ -346,11 +346,6 @@ class LowRankConditioner:
         self.d_other = self.d[self.other]
         Uh2 = self.Uh.reshape(D_o * q, self.r)
         self.K0 = np.eye(self.r) + Uh2.T @ Uh2
-        # workspaces of the compiled kernel (the hot path allocates nothing that grows)
-        self._T = np.empty((D_o, q, q))
-        self._W = np.empty((q, self.r))
-        self._K = np.empty((self.r, self.r))
-        self._ca = np.empty((3, D_o, q))
 
     @classmethod
     def from_prior(cls, prior: GaussianPrior, obs_index, thetas=None, ridge: float | None = None):
@@ -374,8 +369,7 @@ class LowRankConditioner:
         if out is None:
             out = np.empty(self.P)
         ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
-                                                   self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, self._T,
-                                                   self._W, self._K, self._ca, out)
+                                                   self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, out)
         if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
             return None
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)

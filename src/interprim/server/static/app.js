@@ -320,7 +320,6 @@ function hfStart() {
   $("hf-error").textContent = "";
   hf.client.reset().catch((e) => ($("hf-error").textContent = e.message));
   hf.timer = setInterval(hfTick, 1000 * hf.model.dt);
-  hfTick();
 }
 
 function hfStop() {

@@ -118,7 +118,8 @@ def fit_weights_targets(F, g, basis: Basis, ridge: float = 1e-10, resid_dofs=Non
     PtP = Phi.T @ Phi
     PtP[np.diag_indices_from(PtP)] += ridge * max(np.trace(PtP) / m, 1e-300)
     L = np.linalg.cholesky(PtP)
-    rhs = np.tensordot(Phi, F, axes=([0], [1])).reshape(m, n * D)  # Phi^T F, (m, n D)
+    # Phi^T F per demonstration (n small BLAS products, no transposed copy of F), then as (m, n D)
+    rhs = np.ascontiguousarray(np.transpose(np.matmul(Phi.T, F), (1, 0, 2))).reshape(m, n * D)
     W = np.linalg.solve(L.T, np.linalg.solve(L, rhs)).reshape(m, n, D)
     theta = np.empty((n, D, m + 1))
     theta[:, :, :m] = np.transpose(W, (1, 2, 0))

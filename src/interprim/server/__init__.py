@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import importlib
 
-from .protocol import PROTOCOL_VERSION, ProtocolError
-
 _LAZY = {
+    "PROTOCOL_VERSION": "interprim.server.protocol",
+    "ProtocolError": "interprim.server.protocol",
     "Client": "interprim.server.client",
     "AsyncClient": "interprim.server.client",
     "ServerError": "interprim.server.client",
@@ -27,7 +27,7 @@ _LAZY = {
     "demo_models": "interprim.server.demo",
 }
 
-__all__ = ["PROTOCOL_VERSION", "ProtocolError", *_LAZY]
+__all__ = list(_LAZY)
 
 
 def __getattr__(name):

@@ -52,7 +52,8 @@ def connect(url, **kw):
 def models():
     train = two_agent_demos(12, seed=0, frames=100)
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8).fit(train, dt=0.01)
-    out = {"pair": entry_for("pair", m)}
+    one = ip.InteractionPrimitive(observed_dofs=[0], n_basis=6).fit(train, dt=0.01)
+    out = {"pair": entry_for("pair", m), "one": entry_for("one", one)}
     out.update(letter_models(n=8, n_basis=10))
     return out
 
@@ -251,9 +252,14 @@ def test_auto_refuses_candidates_of_different_sizes(server, models):
     with Client(server.ws_url) as c:
         with pytest.raises(ServerError) as e:
             c.open("auto", candidates=["pair", "missing"])
-        assert e.value.code == "unknown_model"
-        # pair (2 observed) and letters (2 observed) are compatible; build an incompatible set by hand
-        assert c.open("auto", candidates=["pair", "letter_c"])["type"] == "opened"
+        assert e.value.code == "unknown_model" and "missing" in str(e.value)
+        for kw in ({"candidates": ["pair", "one"]}, {}):  # default candidates: all loaded models
+            with pytest.raises(ServerError) as e:
+                c.open("auto", **kw)
+            assert e.value.code == "bad_message" and "observe the same number of DoFs" in str(e.value)
+        assert c.open("auto", candidates=["pair", "letter_c"])["type"] == "opened"  # both observe 2 DoFs
+        assert c.open("one", points=4)["n_observed"] == 1
+        assert np.array(c.frame([0.1])["mean"]).shape == (4, 4)
 
 
 # ---------------------------------------------------------------------------- bad input, one by one

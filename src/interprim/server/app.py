@@ -205,10 +205,6 @@ class _Lane:
             await asyncio.sleep(0)  # let the other sessions read their next frames and queue them
 
 
-def _round(a: np.ndarray) -> list:
-    return np.round(np.asarray(a, dtype=np.float64), 6).tolist()
-
-
 def warm_up(entries) -> None:
     """Run one prediction per model so that JIT compilation (numba) happens before the first client."""
     for e in entries:
@@ -233,6 +229,31 @@ def _accepts_need_cov(stream) -> bool:
         return False
 
 
+_FMT_CACHE: dict = {}
+
+
+def _json_array(a) -> str:
+    """A 1-D or 2-D float array as JSON text, 7 significant digits.
+
+    About twice as fast as ``json.dumps(a.tolist())`` (one %-format for the whole array).  Raises
+    ``FloatingPointError`` on NaN/inf, which are not JSON.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    if not np.all(np.isfinite(a)):
+        raise FloatingPointError("the model produced non-finite values for this frame")
+    key = a.shape
+    fmt = _FMT_CACHE.get(key)
+    if fmt is None:
+        if a.ndim == 1:
+            fmt = "[" + ",".join(["%.7g"] * a.shape[0]) + "]"
+        else:
+            row = "[" + ",".join(["%.7g"] * a.shape[1]) + "]"
+            fmt = "[" + ",".join([row] * a.shape[0]) + "]"
+        if len(_FMT_CACHE) < 256:
+            _FMT_CACHE[key] = fmt
+    return fmt % tuple(a.ravel().tolist())
+
+
 def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound)."""
     t0 = time.perf_counter()
@@ -245,9 +266,8 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
         probs = P.softmax(lls)
         best = int(np.argmax(probs))
     entry, pred, cols = op.entries[best], preds[best], op.cols[best]
-    mean = np.asarray(pred.trajectory(op.points))[:, cols]
-    out = {
-        "type": "prediction",
+    head = {
+        "type": "prediction",  # "type" and "seq" first: clients may read them without a full parse
         "seq": seq,
         "model": entry.name,
         "phase": float(pred.phase),
@@ -256,21 +276,24 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
         "duration": float(pred.duration),
         "log_likelihood": float(pred.log_likelihood),
         "columns": cols,
-        "mean": _round(mean),
-        "goal": _round(np.asarray(pred.goal)[cols]),
     }
-    if op.std:
-        out["std"] = _round(np.asarray(pred.std(op.points))[:, cols])
     if probs is not None:
-        out["probabilities"] = {e.name: round(p, 6) for e, p in zip(op.entries, probs)}
+        head["probabilities"] = {e.name: round(p, 6) for e, p in zip(op.entries, probs)}
     if t is not None:
-        out["t"] = t
-    out["compute_ms"] = round((time.perf_counter() - t0) * 1e3, 4)
+        head["t"] = t
+    parts = [
+        ',"mean":', _json_array(np.asarray(pred.trajectory(op.points))[:, cols]),
+        ',"goal":', _json_array(np.asarray(pred.goal)[cols]),
+    ]
+    if op.std:
+        parts += [',"std":', _json_array(np.asarray(pred.std(op.points))[:, cols])]
     try:
-        return P.dumps(out)
+        text = P.dumps(head)
     except ValueError:
         # The core produced NaN/inf: never put them on the wire.
         raise FloatingPointError("the model produced non-finite values for this frame") from None
+    parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
+    return text[:-1] + "".join(parts)
 
 
 class InterprimServer:

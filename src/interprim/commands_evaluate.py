@@ -38,6 +38,8 @@ def add_parser(subparsers):
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--pca", type=int, default=6, help="principal components per agent of '+pca' methods")
     p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF of the IP models")
+    p.add_argument("--fractions", default=None,
+                   help="comma-separated observed fractions (default 0.1,0.2,...,1.0)")
     p.set_defaults(func=run)
     return p
 
@@ -48,6 +50,8 @@ def run(args) -> int:
     from .evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
 
     cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis)
+    if args.fractions:
+        cfg = replace(cfg, fractions=tuple(float(f) for f in args.fractions.split(",") if f.strip()))
     if args.quick:
         cfg = replace(cfg, fractions=(0.2, 0.4, 0.6, 0.8, 1.0), recognition_fractions=(0.2, 0.4, 0.6))
     datasets = [d.strip() for d in args.data.split(",") if d.strip()]

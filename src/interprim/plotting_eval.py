@@ -145,6 +145,8 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
     obs_idx = [NUISI_JOINTS.index(j) for j in JOINT_GROUPS["upper_body"]]
     o = a1[:, obs_idx, :].reshape(T, -1)
     frames = np.unique(np.linspace(3, T, n_frames).astype(int))
+    allp = np.concatenate([a1.reshape(-1, 3), a2w.reshape(-1, 3)])
+    lims = [(float(allp[:, i].min()) - 0.1, float(allp[:, i].max()) + 0.1) for i in range(3)]
     fig = plt.figure(figsize=(5, 4.2))
     ax = fig.add_subplot(111, projection="3d")
 
@@ -153,7 +155,6 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
         pred = model.predict(o[:M])
         s_now = pred.normalised_time
         Y = pred.trajectory(60)
-        S = pred.std(60)
         ctrl = model.controlled_dofs_
         hand = Y[:, ctrl] @ R.T + off
         t = M - 1
@@ -164,11 +165,13 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
         fut = sgrid >= s_now
         ax.plot(*hand[fut].T, color="C3", lw=1.5, ls="--")
         kk = int(np.clip(np.searchsorted(sgrid, s_now), 0, 59))
-        ax.scatter(*hand[kk], color="C3", s=40 + 2000 * float(np.mean(S[kk, ctrl])), alpha=0.6)
-        ax.set_xlim(-0.4, 1.4)
-        ax.set_ylim(-0.9, 0.9)
-        ax.set_zlim(-0.8, 0.5)
-        ax.set_title(f"{action}: {100 * M / T:.0f} % of agent 1 seen\nblue: human, grey: partner, "
+        ax.scatter(*hand[kk], color="C3", s=60, alpha=0.9)
+        ax.scatter(*a2w[t, 9], color="k", s=15)
+        ax.set_xlim(*lims[0])
+        ax.set_ylim(*lims[1])
+        ax.set_zlim(*lims[2])
+        ax.set_box_aspect(tuple(b - a for a, b in lims))
+        ax.set_title(f"{action}: {100 * M / T:.0f} % of agent 1 seen\nblue: human, grey: partner (black dot: its hand), "
                      "red: predicted robot hand", fontsize=8)
         ax.view_init(elev=15, azim=-60)
         return []

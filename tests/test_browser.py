@@ -193,6 +193,7 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     hw = driver.execute_script("return window.ipState.hw")
     driver.save_screenshot(str(ARTIFACTS / "browser_handwriting_drawn.png"))
     assert hw["error"] is None and hw["model"] == "letter_s", hw["probabilities"]
+    driver.execute_script("window.ipState.hw.predictions = 0; window.ipState.hw.model = null;")
     driver.find_element("id", "hw-replay").click()  # first letter model: half a letter, completed live
     wait_for(driver, "return window.ipState.hw.predictions >= 20 && !window.ipState.hw.active")
     hw = driver.execute_script("return window.ipState.hw")

@@ -78,5 +78,8 @@ def test_phase_method_validated_and_saved(tmp_path, synthetic, lik_model):
     lik_model.save(path)
     m2 = ip.InteractionPrimitive.load(path)
     assert m2.phase_method == "likelihood"
-    p = m2.predict(test[0][:100, :2])  # works without the (unsaved) selection report
-    assert 0.0 < p.phase <= 1.0
+    assert m2.phase_sigma2_ == lik_model.phase_sigma2_
+    p = m2.predict(test[0][:100, :2])  # the same phase and prediction after the round trip
+    p0 = lik_model.predict(test[0][:100, :2])
+    assert p.normalised_time == pytest.approx(p0.normalised_time, abs=1e-12)
+    np.testing.assert_allclose(p.trajectory(20), p0.trajectory(20), atol=1e-10)

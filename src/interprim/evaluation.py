@@ -87,6 +87,8 @@ class EvalConfig:
     data_path: str | None = None
     fractions: tuple = FRACTIONS
     recognition_fractions: tuple = (0.2, 0.4, 0.6, 0.8)
+    recognition_covariance: str = "ridge"
+    recognition_noise: object = 1e-4
 
 
 @dataclass
@@ -248,7 +250,7 @@ def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
     # recognition uses the prior and the phase noise only (chosen in fit), not the conditioning sigma2
     return InteractionPrimitive(observed_dofs=t.observed_dofs, n_basis=cfg.n_basis,
-                                smoothing_window=cfg.smoothing_window, sigma2=1.0,
+                                smoothing_window=cfg.smoothing_window, sigma2=1.0, covariance=cfg.recognition_covariance,
                                 phase_method="likelihood").fit(demos, dt=t.dt)
 
 
@@ -263,7 +265,7 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
     names = task_names(dataset)
     with single_thread():
         models = {nm: _recognition_model(dataset, nm, cfg, j if nm == task else -1) for nm in names}
-        rec = Recogniser(models)
+        rec = Recogniser(models, noise=cfg.recognition_noise)
         test = _task(dataset, task, cfg).demos[j]
         obs = _task(dataset, task, cfg).observed_dofs
         T = test.shape[0]

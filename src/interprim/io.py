@@ -48,6 +48,7 @@ def save_model(model, path) -> None:
         "dt": float(model.dt_),
         "mean_duration": float(model.mean_duration_),
         "sigma2": float(model.sigma2_),
+        "phase_sigma2": (None if getattr(model, "phase_sigma2_", None) is None else float(model.phase_sigma2_)),
         "covariance_method": model.prior_.method,
         "shrinkage": float(model.prior_.shrinkage),
         "n_demos": int(model.n_demos_),
@@ -112,6 +113,8 @@ def load_model(path):
         model.dt_ = float(meta["dt"])
         model.mean_duration_ = float(meta["mean_duration"])
         model.sigma2_ = float(meta["sigma2"])
+        ps2 = meta.get("phase_sigma2")  # noise of the likelihood phase estimator (absent in older files)
+        model.phase_sigma2_ = None if ps2 is None else float(ps2)
         model.n_demos_ = int(meta["n_demos"])
         model.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
                                      float(meta["shrinkage"]))

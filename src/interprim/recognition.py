@@ -66,6 +66,12 @@ class Recogniser:
         ``phase_sigma2_`` (the sensor noise is the same whatever the
         interaction; with per-model noises the model with the smallest noise
         wins by its normalising constant alone); ``"own"`` uses each model's.
+        Best in practice: a float, the sensor noise variance in data units.
+        On NuiSI (leave-one-out, ``docs/evaluation.md``) ``noise=1e-4`` (1 cm)
+        with models fitted with ``covariance="ridge"`` recognised 46/97/98 % of
+        the six interactions at 20/40/60 % observed, while ``"shared"`` with
+        shrinkage priors was at chance: shrinking the weight correlations makes
+        every model's marginal likelihood so broad that they look alike.
     """
 
     def __init__(self, models: dict, prior: dict | None = None, noise="shared"):

@@ -50,12 +50,14 @@ __all__ = [
 ]
 
 DEFAULT_PERCENTS = (10, 20, 30, 40, 50, 60, 70, 80, 90, 100)
-METHODS = ("ip", "ip_known_phase", "prior", "nn")
+METHODS = ("ip", "ip_likelihood", "ip_known_phase", "prior", "nn", "promp")
 METHOD_LABELS = {
-    "ip": "IP (DTW phase)",
-    "ip_known_phase": "IP (known phase)",
+    "ip": "IP, DTW phase (paper)",
+    "ip_likelihood": "IP, likelihood phase",
+    "ip_known_phase": "IP, known phase",
     "prior": "prior mean",
     "nn": "nearest neighbour (DTW)",
+    "promp": "Interaction ProMP (peer)",
 }
 
 
@@ -228,10 +230,32 @@ def _n_observed(T: int, p: float) -> int:
     return int(min(T, max(3, round(p / 100.0 * T))))
 
 
-def _fit(train, n_basis, sigma2):
+def _fit(train, n_basis, sigma2, **kw):
     import interprim as ip
 
-    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, sigma2=sigma2).fit(train.demos, dt=train.dt)
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, sigma2=sigma2, **kw).fit(
+        train.demos, dt=train.dt)
+
+
+def _fit_optional(train, cfg, sigma2, log):
+    """The variants beyond the paper, when the installed core/extras provide them (else ``None``).
+
+    - ``ip_likelihood``: the same IP with ``phase_method="likelihood"`` (phase by the marginal
+      likelihood of the observation instead of DTW), same ``sigma2``.
+    - ``promp``: :class:`interprim.baselines.InteractionProMP` (needs the ``bench`` extra).
+    """
+    extra = {}
+    try:
+        extra["ip_likelihood"] = _fit(train, cfg.n_basis, sigma2, phase_method="likelihood")
+    except (TypeError, ValueError) as exc:  # a core without likelihood phase estimation
+        log(f"(skipping the likelihood-phase IP: {exc})")
+    try:
+        from ..baselines import InteractionProMP
+
+        extra["promp"] = InteractionProMP(observed_dofs=[0, 1]).fit(train.demos, dt=train.dt)
+    except Exception as exc:  # ImportError without the bench extra, or an incompatible peer version
+        log(f"(skipping the Interaction ProMP peer baseline: {type(exc).__name__}: {exc})")
+    return extra
 
 
 def _predict(model, partial, phase=None):
@@ -270,8 +294,11 @@ def _goal_spread(samples_ctrl, arm):
 
 
 # ----------------------------------------------------------------------------- evaluation
-def evaluate(model, train, test, cfg, progress=True) -> dict:
+def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
     """The "% observed" sweep of Fig. 7/8 on the test interactions (see the module docstring).
+
+    ``extra_models`` maps method names (``"ip_likelihood"``, ``"promp"``) to fitted models
+    whose ``predict(partial)`` returns an object with ``trajectory(n)`` (and ``goal`` for IPs).
 
     Returns
     -------
@@ -318,6 +345,11 @@ def evaluate(model, train, test, cfg, progress=True) -> dict:
             pk = _predict(model, partial, phase=max(true_phase, 1e-6))
             if pk is not None:
                 preds["ip_known_phase"] = (pk.trajectory(cfg.n_points), ca.hand(pk.goal[2:]))
+            for name, em in (extra_models or {}).items():
+                pe = em.predict(partial)
+                traj_e = pe.trajectory(cfg.n_points)
+                goal_e = ca.hand(pe.goal[2:]) if hasattr(pe, "goal") else ca.hand(traj_e[-1, 2:])
+                preds[name] = (traj_e, goal_e)
             preds["prior"] = (prior, prior_goal)
             preds["nn"] = (train_norm[nn[j]], train_goal_pts[nn[j]])
             for m, (traj, goal_pt) in preds.items():
@@ -443,9 +475,11 @@ def plot_fig7(ev, cfg, path):
     P = np.asarray(cfg.percents)
     styles = {
         "ip": dict(color="tab:red", lw=2.2),
-        "ip_known_phase": dict(color="tab:red", lw=1.2, ls="--"),
+        "ip_likelihood": dict(color="tab:orange", lw=1.8),
+        "ip_known_phase": dict(color="tab:red", lw=1.0, ls="--"),
         "prior": dict(color="0.45", lw=1.5, ls=":"),
         "nn": dict(color="tab:purple", lw=1.5, ls="-."),
+        "promp": dict(color="tab:cyan", lw=1.5, ls="-", marker="s"),
     }
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2))
     for ax, key, title in zip(axes, ("mse_obs", "mse_ctrl"), ("observed agent (prediction)", "controlled agent (inferred response)")):
@@ -453,7 +487,8 @@ def plot_fig7(ev, cfg, path):
             a = ev[key][m]
             if np.all(np.isnan(a)):
                 continue
-            ax.plot(P, np.nanmean(a, axis=0), marker="o", ms=3, label=METHOD_LABELS[m], **styles[m])
+            st = dict(styles[m])
+            ax.plot(P, np.nanmean(a, axis=0), marker=st.pop("marker", "o"), ms=3, label=METHOD_LABELS[m], **st)
             if m in ("ip", "nn"):
                 ax.fill_between(P, np.nanpercentile(a, 25, axis=0), np.nanpercentile(a, 75, axis=0),
                                 color=styles[m]["color"], alpha=0.12, lw=0)
@@ -461,8 +496,8 @@ def plot_fig7(ev, cfg, path):
         ax.set_ylabel("MSE of joint angles [rad$^2$]")
         ax.set_title(title, fontsize=10)
         ax.set_xticks(P)
-        ax.set_ylim(bottom=0)
-        ax.grid(alpha=0.3)
+        ax.set_yscale("log")  # the methods span two orders of magnitude
+        ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=8)
     fig.suptitle(f"Fig. 7: mean over {ev['mse_obs']['ip'].shape[0]} held-out interactions (band: 25-75 %)", fontsize=10)
     fig.tight_layout()
@@ -481,12 +516,18 @@ def plot_fig8(ev, test, cfg, path, percent=60):
     for t, p in zip(test.goals, pg):
         ax.plot([t[0], p[0]], [t[1], p[1]], color="0.6", lw=0.8)
     ax.plot(*test.goals.T, "o", mfc="none", mec="tab:blue", ms=8, mew=1.5, label="true goal")
-    ax.plot(*pg.T, "o", mfc="none", mec="tab:red", ms=8, mew=1.5, label=f"predicted goal ({percent} % observed)")
     dist = ev["goal_err"]["ip"][:, j]
+    ax.plot(*pg.T, "o", mfc="none", mec="tab:red", ms=8, mew=1.5,
+            label=f"predicted, {METHOD_LABELS['ip']}: {100 * np.mean(dist):.1f} cm")
+    lik = ev["pred_goals"].get("ip_likelihood")
+    if lik is not None and not np.all(np.isnan(lik)):
+        dl = ev["goal_err"]["ip_likelihood"][:, j]
+        ax.plot(*lik[:, j].T, "x", color="tab:orange", ms=6, mew=1.5,
+                label=f"predicted, {METHOD_LABELS['ip_likelihood']}: {100 * np.mean(dl):.1f} cm")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"Fig. 8: mean distance {100 * np.mean(dist):.1f} cm (FK of inferred goal joint angles)", fontsize=9)
+    ax.set_title(f"Fig. 8: goals at {percent} % observed (FK of inferred goal joint angles)", fontsize=9)
     ax.legend(fontsize=8, loc="lower left")
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -618,7 +659,8 @@ def _run_highfive(out_dir, config, progress, log):
         + ", ".join(f"{k}: {v:.4f}" for k, v in scores.items()) + ")")
 
     t0 = time.perf_counter()
-    ev = evaluate(model, train, test, cfg, progress)
+    extra = _fit_optional(train, cfg, sigma2, log)
+    ev = evaluate(model, train, test, cfg, progress, extra_models=extra)
     timing["evaluation_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -711,12 +753,15 @@ def _jsonable(x):
     return x
 
 
+_SUMMARY_METHODS = ("ip", "ip_likelihood", "prior", "nn")
+
+
 def _row(results, p):
     j = results["percents"].index(p)
     r = []
     for agent in ("observed", "controlled"):
-        for m in ("ip", "prior", "nn"):
-            s = results["fig7"][agent][m]
+        for m in _SUMMARY_METHODS:
+            s = results["fig7"][agent].get(m)
             r.append(s["mean"][j] if s else float("nan"))
     return r
 
@@ -724,18 +769,25 @@ def _row(results, p):
 def format_summary(results) -> str:
     """A short plain-text table of the main numbers (printed by ``interprim demo``)."""
     P = [p for p in (20, 40, 60, 80, 100) if p in results["percents"]]
+    head = f"{'IP':>7} {'IP-lik':>7} {'prior':>7} {'NN':>7}"
     lines = [
-        "MSE of joint angles [rad^2], mean over held-out interactions",
-        f"{'% seen':>6} | {'observed: IP':>12} {'prior':>8} {'NN':>8} | {'controlled: IP':>14} {'prior':>8} {'NN':>8}",
+        "MSE of joint angles [rad^2], mean over held-out interactions "
+        "(IP: paper's DTW phase; IP-lik: likelihood phase; NN: nearest neighbour)",
+        f"{'% seen':>6} | {'observed agent':^31} | {'controlled agent':^31}",
+        f"{'':>6} | {head} | {head}",
     ]
     for p in P:
         r = _row(results, p)
-        lines.append(f"{p:>6} | {r[0]:12.4f} {r[1]:8.4f} {r[2]:8.4f} | {r[3]:14.4f} {r[4]:8.4f} {r[5]:8.4f}")
+        lines.append(f"{p:>6} | " + " ".join(f"{x:7.4f}" for x in r[:4]) + " | " + " ".join(f"{x:7.4f}" for x in r[4:]))
     f8 = results["fig8"]
     md = f8["mean_distance_m"]
+
+    def cm(v):
+        return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.1f} cm"
+
     lines.append(
-        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {100 * md['ip']:.1f} cm, "
-        f"prior {100 * md['prior']:.1f} cm, NN {100 * md['nn']:.1f} cm"
+        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {cm(md['ip'])}, IP-lik {cm(md.get('ip_likelihood'))}, "
+        f"prior {cm(md['prior'])}, NN {cm(md['nn'])}"
     )
     f6 = results["fig6"]
     lines.append(

@@ -124,7 +124,8 @@ def test_vectorised_exp():
 
 
 @pytest.mark.parametrize("M,s_end", [(3, 0.01), (4, 0.3), (57, 0.5), (250, 1.0), (400, 0.73)])
-def test_forcing_statistics_kernel_equals_numpy(fitted, synthetic, M, s_end):
+def test_forcing_statistics_kernel_equals_numpy(fitted_paper, synthetic, M, s_end):
+    fitted = fitted_paper
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
     z = np.ascontiguousarray(d[:M, :2])
@@ -185,7 +186,8 @@ def test_incremental_rejects_bad_frames_without_corruption():
 def test_fit_fast_path_equals_per_demo_reference(synthetic):
     """Compiled derivatives + forcing targets + stacked least squares == per-demo np.gradient + fit_weights."""
     train, _ = synthetic
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15).fit(train, dt=0.01)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, observation="forcing", sigma2="auto").fit(
+        train, dt=0.01)
     lat = [m._to_latent(a) for a in train]
     ders = [derivatives(z, 1.0 / (z.shape[0] - 1)) for z in lat]
     theta, resid = fit_weights([d[0] for d in ders], [d[1] for d in ders], [d[2] for d in ders], m.basis_,
@@ -274,12 +276,13 @@ def test_numpy_fallback_predict_equals_compiled(fitted, synthetic, monkeypatch):
     np.testing.assert_allclose(a.response(50)[1], b.response(50)[1], atol=1e-8 * np.abs(a.response(50)[1]).max())
 
 
-def test_stream_allocation_does_not_grow_with_frames(fitted, synthetic):
+@pytest.mark.parametrize("config", ["paper", "default"])
+def test_stream_allocation_does_not_grow_with_frames(fitted, fitted_paper, synthetic, config):
     """tracemalloc: what one online step allocates is the same at 150 and at 380 frames seen (both conditioned;
     the frame buffer, 2x the reference length, does not double in between)."""
     _, test = synthetic
     d = np.ascontiguousarray(np.concatenate([test[1], test[1][::-1], test[1]])[:420, :2])
-    st = fitted.stream()
+    st = (fitted_paper if config == "paper" else fitted).stream()
     peaks = {}
     for i in range(420):
         if i in (150, 380):

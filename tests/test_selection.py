@@ -23,11 +23,12 @@ def small():
     return two_agent_demos(16, seed=0, frames=100)
 
 
-@pytest.mark.parametrize("observation", ["forcing", "position"])
-def test_cv_reports_its_choice_and_beats_the_prior_in_cv(small, observation):
+@pytest.mark.parametrize("observation,phase_method",
+                         [("forcing", "likelihood"), ("position", "likelihood"), ("position", "dtw")])
+def test_cv_reports_its_choice_and_beats_the_prior_in_cv(small, observation, phase_method):
     train = small
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, observation=observation, sigma2="cv").fit(
-        train, dt=0.01)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, observation=observation, sigma2="cv",
+                                phase_method=phase_method).fit(train, dt=0.01)
     sel = m.selection_
     for key in ("sigma2", "shrinkage", "phase_sigma2", "cv_error", "cv_error_prior", "sigma2_grid"):
         assert key in sel
@@ -35,6 +36,20 @@ def test_cv_reports_its_choice_and_beats_the_prior_in_cv(small, observation):
     assert any(np.isclose(m.sigma2_, g) for g in sel["sigma2_grid"])
     assert m.prior_.shrinkage in sel["shrinkage_grid"]
     assert sel["cv_error"] < 0.5 * sel["cv_error_prior"]  # correlated agents: conditioning helps a lot
+
+
+def test_cv_scores_the_dtw_phase_errors(small):
+    """With the paper's DTW phase the held-out cases are conditioned at the DTW estimate, not the true phase:
+    on demos that differ in goal, DTW's phase errors make forcing-value conditioning useless here, and the
+    selection falls back to the prior (largest cross-agent shrinkage) instead of trusting a tiny sigma2."""
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, observation="forcing", sigma2="cv",
+                                phase_method="dtw").fit(small, dt=0.01)
+    sel = m.selection_
+    assert sel["cv_error"] <= sel["cv_error_prior"] + 1e-12
+    assert sel["cross_shrinkage"] == 1.0
+    m_lik = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, observation="forcing", sigma2="cv",
+                                    phase_method="likelihood").fit(small, dt=0.01)
+    assert m_lik.selection_["cross_shrinkage"] < 0.5 and m_lik.sigma2_ < 1e-3 * m.sigma2_
 
 
 def test_cv_falls_back_towards_the_prior_when_agents_are_independent():

@@ -11,7 +11,9 @@ model by K-fold cross-validation on the training demonstrations:
 1. split the demonstrations into ``n_folds`` folds; for every fold fit the
    prior (Eq. 10) on the others with each candidate shrinkage ``lambda``;
 2. for every held-out demonstration observe the first 20/40/60/80 % of the
-   observed agent (at its true phase), condition (Eq. 16-18) with every
+   observed agent (at the phase the model will estimate: the open-end DTW
+   phase against the fold's own reference for ``phase_method="dtw"``, the
+   true phase for the accurate likelihood phase), condition (Eq. 16-18) with every
    candidate ``sigma^2`` and predict the whole movement of *all* DoFs (both
    agents) by integrating the DMPs from the start;
 3. score each ``(lambda, sigma^2, gamma)`` by the mean squared error of those
@@ -47,6 +49,7 @@ from __future__ import annotations
 import numpy as np
 
 from .gaussian import fit_prior, shrinkage_intensity
+from .phase import open_end_dtw
 from .phase_likelihood import observation_design
 from .preprocessing import time_normalise
 
@@ -211,6 +214,18 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
                        phase_cases)
 
 
+def _fold_references(model, latent, fold, K, n_o):
+    """The DTW reference (mean of the time-normalised observed agent, as in ``fit``) of each fold's training part."""
+    refs = {}
+    for f in range(K):
+        tr = [z for j, z in enumerate(latent) if fold[j] != f]
+        if len(tr) < 1:
+            continue
+        n_ref = max(int(round(np.mean([z.shape[0] for z in tr]))), 2)
+        refs[f] = np.mean([time_normalise(z[:, :n_o], n_ref) for z in tr], axis=0)
+    return refs
+
+
 def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, select_sigma2, n_out, phase_cases,
             cross_grid=(0.0, 0.25, 0.5, 0.75, 0.9, 1.0)):
     thetas = model.thetas_
@@ -234,13 +249,21 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     w_d = 1.0 / np.maximum(var_d, 1e-12 * max(float(var_d.max()), 1e-300))
     v0 = model.start_velocity_
 
-    # observation targets of every held-out case (independent of the fold's prior)
+    # observation targets of every held-out case (independent of the fold's prior).  The phase of a case is
+    # the one the model will use at prediction time: with the paper's DTW phase, the open-end DTW estimate
+    # against the reference of the demonstration's own fold (phase errors are then part of the held-out
+    # error, so a small sigma2 that only pays off at the true phase is not chosen); with the likelihood
+    # phase (accurate to a few % of the movement), the true phase.
+    dtw_refs = _fold_references(model, latent, fold, K, n_o) if model.phase_method == "dtw" else None
     cases = []
     for j, z in enumerate(latent):
         T = z.shape[0]
         for p in fractions:
             M = int(np.clip(round(p * T), max(3, model.min_observed), T))
             s_end = (M - 1) / (T - 1)
+            if dtw_refs is not None:
+                ref = dtw_refs[fold[j]]
+                s_end = max(open_end_dtw(ref, z[:M, :n_o], return_path=False).n_star, 1) / (ref.shape[0] - 1)
             zo = z[:M, :n_o]
             designs = {kind: observation_design(model, zo, s_end, kind) for kind in kinds}
             y0 = np.concatenate([zo[0], model.start_position_[n_o:]])

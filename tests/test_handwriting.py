@@ -97,7 +97,10 @@ def test_run_handwriting_small_subset(tmp_path):
         observations=("position",), true_phase=False, progress=False,
         extra_variants={"ip_position_8_basis": {"observation": "position", "n_basis": 8}},
     )  # fmt: skip
-    assert again["letters"]["a"]["ip_position"] == res["letters"]["a"]["ip_position"]
+    # (to 1e-9: the first fits may run the numpy fallback while the compiled kernels load, equal to ~1e-12)
+    for key in ("rmse", "rmse_unseen"):
+        assert again["letters"]["a"]["ip_position"][key] == pytest.approx(res["letters"]["a"]["ip_position"][key],
+                                                                         rel=1e-9)
     assert again["methods"] == ["ip_position", "ip_position_8_basis", "prior_mean", "nearest_neighbour"]
     assert again["config"]["variants"]["ip_position_8_basis"]["n_basis"] == 8
     assert again["letters"]["a"]["ip_position_8_basis"] != again["letters"]["a"]["ip_position"]

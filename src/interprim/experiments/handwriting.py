@@ -138,7 +138,8 @@ def open_end_dtw(query, ref):
 
 #: Extra variant using the core's options beyond the paper: phase by likelihood and
 #: ``sigma2`` chosen by cross-validation on the training demonstrations (slower).
-BEYOND_PAPER = {"ip_forcing_likelihood_cv": {"observation": "forcing", "sigma2": "cv", "phase_method": "likelihood"}}
+BEYOND_PAPER = {"ip_forcing_likelihood_cv": {"observation": "forcing", "sigma2": "cv", "phase_method": "likelihood"},
+                "ip_defaults": {}}  # the library's defaults
 
 
 def _dtw_phase() -> dict:
@@ -301,7 +302,8 @@ def run_handwriting(
     observations = list(observations)
     if not observations or any(o not in ("forcing", "position") for o in observations):
         raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
-    variants = {f"ip_{o}": {**kwargs, "observation": o, **_dtw_phase()} for o in observations}
+    # the paper's method per observation model: DTW phase, sigma2 from the fit residual
+    variants = {f"ip_{o}": {"sigma2": "auto", **kwargs, "observation": o, **_dtw_phase()} for o in observations}
     for name, kw in (extra_variants or {}).items():
         if name in variants or name in ("prior_mean", "nearest_neighbour"):
             raise ValueError(f"extra_variants: the name {name!r} is already used")

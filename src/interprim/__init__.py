@@ -20,12 +20,14 @@ _LAZY = {
     "InteractionPrimitive": "interprim.primitive",
     "Prediction": "interprim.primitive",
     "Stream": "interprim.primitive",
+    "Recogniser": "interprim.recognition",
 }
 
 __all__ = [
     "InteractionPrimitive",
     "Prediction",
     "Stream",
+    "Recogniser",
     "InterprimError",
     "NotFittedError",
     "ModelFileError",

@@ -30,10 +30,19 @@ The search evaluates a grid of candidates (plus the DTW estimate, when given),
 then refines the best one by a bounded scalar search.  :func:`track_phase` is
 the cheap online variant (a few candidates around the previous estimate,
 extrapolated at constant speed).
+
+All candidates of a search are evaluated in one batched computation
+(:func:`phase_log_likelihoods`): since the design of every observed DoF is the
+same ``H(s)``, each candidate needs only ``H^T H``, ``H^T r`` and ``|r|^2``
+(``O(M q (q + D_o))``) and factorisations independent of ``M``
+(:mod:`interprim._phase_kernels`, compiled; a numpy equivalent serves until it
+is loaded).  :func:`_phase_log_likelihood_reference` is the per-candidate
+evaluation it is tested against.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,10 +51,11 @@ from .dmp import forcing_values
 from .gaussian import condition
 from .preprocessing import derivatives
 
-__all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "estimate_phase", "track_phase",
-           "phase_noise"]
+__all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
+           "track_phase", "phase_noise"]
 
 _S_MIN = 0.02
+_LOG2PI = float(np.log(2.0 * np.pi))
 
 
 def single_thread():
@@ -164,6 +174,32 @@ def _factored(model):
 
 def phase_log_likelihood(model, z, s_end: float, sigma2: float | None = None) -> float:
     """``log p(z | s_end)``: marginal likelihood of the observed latent frames ``z`` (M, n_o) at phase ``s_end``."""
+    return float(phase_log_likelihoods(model, z, np.array([float(s_end)]), sigma2)[0])
+
+
+def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np.ndarray:
+    """:func:`phase_log_likelihood` at every phase in ``s_values`` (one batched evaluation).
+
+    With the diagonal-plus-low-rank prior of :func:`~interprim.gaussian.fit_prior` (the usual case) all
+    candidates go through one compiled kernel (:mod:`interprim._phase_kernels`; its numpy equivalent
+    until the kernel is loaded): per candidate only ``G = H^T H``, ``H^T r`` and ``|r|^2`` of the
+    ``M`` frames are formed, ``O(M q (q + D_o))``, plus ``O(D_o (q^3 + q^2 n + q n^2))`` for the
+    factorisations (``n`` demonstrations).  Otherwise (dense prior) each candidate uses the reference
+    evaluation.  Both equal :func:`_phase_log_likelihood_reference` to rounding.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    s_values = np.atleast_1d(np.asarray(s_values, dtype=np.float64))
+    s2 = phase_noise(model) if sigma2 is None else float(sigma2)
+    fs = _fast_state(model)
+    if fs is None:
+        with single_thread():
+            return np.array([_phase_log_likelihood_reference(model, z, s, s2) for s in s_values])
+    return fs.loglik(z, s_values, s2)
+
+
+def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None = None) -> float:
+    """The per-candidate evaluation (explicit design matrix, :func:`interprim.selection._lowrank_case` or
+    :func:`interprim.gaussian.condition`): the reference the batched paths are tested against."""
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)
@@ -176,6 +212,158 @@ def phase_log_likelihood(model, z, s_end: float, sigma2: float | None = None) ->
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
                      need_cov=False)
     return float(post.log_likelihood)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# batched evaluation (low-rank prior)
+
+_KERNEL: list = []  # [phase_loglik_batch] once loaded
+_KLOCK = threading.Lock()
+_KTHREAD: list = []
+_KERROR: list = []
+
+
+def _load_kernel():
+    try:
+        from ._phase_kernels import phase_loglik_batch
+
+        _warm_call(phase_loglik_batch)
+        _KERNEL.append(phase_loglik_batch)
+    except BaseException as exc:  # numba missing or broken: stay on numpy
+        _KERROR.append(exc)
+
+
+def _warm_call(fn):
+    """Compile (or load from numba's cache) with tiny inputs of the real types."""
+    rng = np.random.default_rng(0)
+    K, q, n_o, n, M = 8, 3, 2, 2, 4
+    sq = np.ones((n_o, q))
+    Uh = rng.normal(size=(n_o, q, n))
+    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
+    fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
+       np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
+
+
+def _kernel(block: bool = False):
+    """The compiled batch kernel, or ``None`` while it loads (see :mod:`interprim._fast` for the policy).
+
+    ``INTERPRIM_JIT=0``: never; ``=1``: load now; default: load in a background thread on first use
+    (numpy serves meanwhile) unless ``block``.
+    """
+    if _KERNEL:
+        return _KERNEL[0]
+    if _KERROR:
+        return None
+    from . import _fast
+
+    mode = _fast._mode()
+    if mode in ("0", "false", "no", "off"):
+        return None
+    with _KLOCK:
+        if not _KTHREAD:
+            th = threading.Thread(target=_load_kernel, name="interprim-phase-jit", daemon=True)
+            _KTHREAD.append(th)
+            th.start()
+        th = _KTHREAD[0]
+    if block or mode in ("1", "true", "yes", "on"):
+        th.join()
+    return _KERNEL[0] if _KERNEL else None
+
+
+def warmup() -> bool:
+    """Load (or compile) the phase kernel now and wait for it; returns whether it is in use."""
+    return _kernel(block=True) is not None
+
+
+class _FastState:
+    """Everything of the batched evaluation that depends only on the model (cached per prior object)."""
+
+    def __init__(self, model, pr):
+        n_o, q = model.n_observed_latent_, model._q
+        no_q = n_o * q
+        ro = model.rollout_
+        self.n_o, self.q = n_o, q
+        self.Zh = np.ascontiguousarray(ro._Z[:, 0, :])  # (K+1, q): H rows on the grid (s0 = 0)
+        self.Pf = np.ascontiguousarray(ro._powers[:, 0, :])  # (K+1, 2): free response rows on the grid
+        mu_o = np.asarray(pr.mean[:no_q], dtype=np.float64).reshape(n_o, q)
+        self.Hmu = np.ascontiguousarray(self.Zh @ mu_o.T)  # (K+1, n_o)
+        self.v0 = np.asarray(model.start_velocity_[:n_o], dtype=np.float64)
+        self.sq = np.ascontiguousarray(np.sqrt(pr.d[:no_q]).reshape(n_o, q))
+        W = np.asarray(pr.W[:, :no_q], dtype=np.float64)
+        n = W.shape[0]
+        Wt = W / self.sq.reshape(1, -1)  # (n, n_o q)
+        self.Uh = np.ascontiguousarray(Wt.reshape(n, n_o, q).transpose(1, 2, 0))  # (n_o, q, n)
+        self.K0 = np.eye(n) + Wt @ Wt.T
+        self._rg_key = None
+        self._rg = None
+
+    def mean_path(self, z0):
+        """``free [z0; v0] + H mu`` on the rollout grid, ``(K+1, n_o)`` (cached for the last ``z0``)."""
+        key = z0.tobytes()
+        if key != self._rg_key:
+            self._rg = np.ascontiguousarray(self.Hmu + self.Pf[:, :1] * z0[None, :] + self.Pf[:, 1:] * self.v0)
+            self._rg_key = key
+        return self._rg
+
+    def loglik(self, z, s_values, s2, block: bool = False):
+        z = np.ascontiguousarray(z, dtype=np.float64)
+        M = z.shape[0]
+        Rg = self.mean_path(z[0])
+        kern = _kernel(block)
+        if kern is not None:
+            return kern(self.Zh, Rg, z, M, np.ascontiguousarray(s_values, dtype=np.float64), self.sq, self.Uh,
+                        self.K0, float(s2), np.empty(s_values.shape[0]))
+        with single_thread():
+            return _loglik_batch_numpy(self.Zh, Rg, z, s_values, self.sq, self.Uh, self.K0, float(s2))
+
+
+def _fast_state(model):
+    """The :class:`_FastState` of ``model`` (``None`` when the prior is not diagonal plus low rank)."""
+    prior = model.prior_
+    cache = getattr(model, "_phase_fast", None)
+    if cache is not None and cache[0] is prior and cache[1] is model.rollout_:
+        return cache[2]
+    pr = _factored(model)
+    fs = None if pr is None else _FastState(model, pr)
+    model._phase_fast = (prior, model.rollout_, fs)
+    return fs
+
+
+def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
+    """Numpy equivalent of :func:`interprim._phase_kernels.phase_loglik_batch` (all candidates at once)."""
+    M, n_o = z.shape
+    n_steps = Zh.shape[0] - 1
+    q = Zh.shape[1]
+    n = Uh.shape[2]
+    C = s_values.shape[0]
+    sm = np.stack([np.linspace(0.0, s, M) for s in s_values]) if M > 1 else np.zeros((C, 1))
+    u = np.clip(sm * n_steps, 0, n_steps)
+    kf = np.minimum(np.floor(u).astype(np.intp), n_steps - 1)
+    a = (u - kf)[:, :, None]
+    E = (1.0 - a) * Zh[kf] + a * Zh[kf + 1]  # (C, M, q)
+    R = z[None] - ((1.0 - a) * Rg[kf] + a * Rg[kf + 1])  # (C, M, n_o)
+    Et = E.transpose(0, 2, 1)
+    G = Et @ E
+    b = Et @ R  # (C, q, n_o)
+    rr = np.einsum("cmi,cmi->c", R, R)
+    T = sq[None, :, :, None] * G[:, None] * sq[None, :, None, :]  # (C, n_o, q, q)
+    T[..., np.arange(q), np.arange(q)] += s2
+    L = np.linalg.cholesky(T)
+    ld_T = 2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=(1, 2))
+    c = sq[None] * b.transpose(0, 2, 1)  # (C, n_o, q)
+    rhs = np.concatenate([np.broadcast_to(Uh, (C, n_o, q, n)), c[..., None]], axis=-1)  # (C, n_o, q, n+1)
+    V = np.linalg.solve(L, rhs)
+    Sacc = np.einsum("ciqa,ciqb->cab", V, V)  # (C, n+1, n+1)
+    Kc = K0[None] - s2 * Sacc[:, :n, :n]
+    t = Sacc[:, :n, n]
+    cTc = Sacc[:, n, n]
+    Lk = np.linalg.cholesky(Kc)
+    ld_K = 2.0 * np.sum(np.log(np.diagonal(Lk, axis1=-2, axis2=-1)), axis=1)
+    w = np.linalg.solve(Lk, t[..., None])[..., 0]
+    tKt = np.sum(w * w, axis=1)
+    N = M * n_o
+    logdet = n_o * (M - q) * np.log(s2) + ld_T + ld_K
+    return -0.5 * (N * _LOG2PI + logdet + (rr - cTc) / s2 - tKt)
 
 
 def _log_speed_prior(model, M: int, s):
@@ -225,32 +413,75 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 40, refi
     if s_init is not None and np.isfinite(s_init):
         grid = np.unique(np.append(grid, np.clip(float(s_init), lo, hi)))
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
-
-    def score(s):
-        ll = phase_log_likelihood(model, z, s, s2)
-        lp = float(_log_speed_prior(model, M, s)) if speed_prior else 0.0
-        return ll + lp, ll
-
-    with single_thread():
-        return _search(model, z, grid, score, refine, s_init)
+    scores = _scorer(model, z, s2, speed_prior)
+    if scores.dense:
+        with single_thread():
+            return _search(grid, scores, refine)
+    return _search(grid, scores, refine)
 
 
-def _search(model, z, grid, score, refine, s_init):
-    vals = np.array([score(s) for s in grid])
-    curve = vals[:, 0]
+class _scorer:
+    """``s -> (log posterior, log likelihood)`` for one observation, batched over candidate phases."""
+
+    def __init__(self, model, z, s2, speed_prior=True):
+        self.z = np.ascontiguousarray(z, dtype=np.float64)
+        self.M = self.z.shape[0]
+        self.s2 = float(s2)
+        self.fs = _fast_state(model)
+        self.dense = self.fs is None
+        self.model = model
+        self.prior = _speed_prior_params(model, self.M) if speed_prior else None
+        if not self.dense:
+            self.Rg = self.fs.mean_path(self.z[0])
+
+    def __call__(self, s_values):
+        s_values = np.ascontiguousarray(s_values, dtype=np.float64)
+        if self.dense:
+            ll = np.array([_phase_log_likelihood_reference(self.model, self.z, s, self.s2) for s in s_values])
+        else:
+            kern = _kernel()
+            fs = self.fs
+            if kern is not None:
+                ll = kern(fs.Zh, self.Rg, self.z, self.M, s_values, fs.sq, fs.Uh, fs.K0, self.s2,
+                          np.empty(s_values.shape[0]))
+            else:
+                with single_thread():
+                    ll = _loglik_batch_numpy(fs.Zh, self.Rg, self.z, s_values, fs.sq, fs.Uh, fs.K0, self.s2)
+        if self.prior is None:
+            return ll, ll
+        logel, mu, sd = self.prior
+        logdur = logel - np.log(s_values)
+        return ll + (-0.5 * ((logdur - mu) / sd) ** 2 - np.log(s_values)), ll
+
+
+def _speed_prior_params(model, M):
+    """``(log elapsed time, mean, sd)`` of :func:`_log_speed_prior` (the log-duration statistics cached per model)."""
+    dur = model.durations_
+    cache = getattr(model, "_phase_speed_prior", None)
+    if cache is None or cache[0] is not dur:
+        d = np.log(np.asarray(dur, dtype=np.float64))
+        cache = (dur, float(d.mean()), max(float(d.std()), 0.1))
+        model._phase_speed_prior = cache
+    return float(np.log(max(M - 1, 1) * model.dt_)), cache[1], cache[2]
+
+
+def _search(grid, scores, refine):
+    lp, ll = scores(grid)
+    curve = lp
     i = int(np.argmax(curve))
-    best_s, best_lp, best_ll = float(grid[i]), float(curve[i]), float(vals[i, 1])
+    best_s, best_lp, best_ll = float(grid[i]), float(curve[i]), float(ll[i])
     if refine and grid.size > 2:
         from scipy.optimize import minimize_scalar
 
         a = float(grid[max(i - 1, 0)])
         b = float(grid[min(i + 1, grid.size - 1)])
         if b - a > 1e-4:
-            res = minimize_scalar(lambda s: -score(s)[0], bounds=(a, b), method="bounded",
+            res = minimize_scalar(lambda s: -float(scores(np.array([s]))[0][0]), bounds=(a, b), method="bounded",
                                   options={"xatol": 1e-3 * max(b, 1e-3), "maxiter": 20})
             if res.success and -res.fun > best_lp:
                 best_s = float(res.x)
-                best_lp, best_ll = score(best_s)
+                lp1, ll1 = scores(np.array([best_s]))
+                best_lp, best_ll = float(lp1[0]), float(ll1[0])
     return PhaseEstimate(best_s, float(best_ll), float(best_lp), grid, curve)
 
 
@@ -270,7 +501,10 @@ def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int =
         return estimate_phase(model, z, n_grid=20, refine=False, speed_prior=speed_prior).s_end
     s_pred = min(1.0, s_prev * (M - 1) / (m_prev - 1))
     cand = np.unique(np.clip(s_pred * np.exp(np.linspace(-spread, spread, int(n_candidates))), _S_MIN, 1.0))
-    s2 = phase_noise(model)
-    sc = [phase_log_likelihood(model, z, s, s2) + (float(_log_speed_prior(model, M, s)) if speed_prior else 0.0)
-          for s in cand]
+    scores = _scorer(model, z, phase_noise(model), speed_prior)
+    if scores.dense:
+        with single_thread():
+            sc = scores(cand)[0]
+    else:
+        sc = scores(cand)[0]
     return float(cand[int(np.argmax(sc))])

@@ -215,6 +215,57 @@ def bench_predict(model, test, quick):
         t_lit, agree_str(e_cov), note=f"cov error relative to max|prior cov|; log-likelihood rel. diff {ll_err:.1e}")
 
 
+def ref_likelihood_phase(model, z, s_init, n_grid=40):
+    """The likelihood phase as before the batched kernel: one reference evaluation per grid candidate + refine."""
+    from scipy.optimize import minimize_scalar
+
+    from interprim import phase_likelihood as PL
+
+    M = z.shape[0]
+    lo = max(PL._S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
+    grid = np.unique(np.append(np.exp(np.linspace(np.log(lo), 0.0, n_grid)), np.clip(s_init, lo, 1.0)))
+    s2 = PL.phase_noise(model)
+
+    def score(s):
+        return PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL._log_speed_prior(model, M, s))
+
+    curve = np.array([score(s) for s in grid])
+    i = int(np.argmax(curve))
+    a, b = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, grid.size - 1)])
+    res = minimize_scalar(lambda s: -score(s), bounds=(a, b), method="bounded",
+                          options={"xatol": 1e-3 * max(b, 1e-3), "maxiter": 20})
+    return float(res.x) if res.success and -res.fun > curve[i] else float(grid[i])
+
+
+def bench_likelihood_phase(quick):
+    """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
+    from interprim import phase_likelihood as PL
+
+    print("likelihood phase")
+    model, test = fitted_model(phase_method="likelihood")
+    PL.warmup()
+    partial = test[:250, :7]
+    ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
+    N1 = model.reference_.shape[0] - 1
+    s_ours = model.predict(partial).normalised_time
+    s_dtw = open_end_dtw(model.reference_, model._observed_to_latent(partial), return_path=False).n_star / N1
+    t_ref = timed(lambda: ref_likelihood_phase(model, partial, s_dtw), n=1 if quick else 3, warm=0)
+    s_ref = ref_likelihood_phase(model, partial, s_dtw)
+    row("predict, phase_method='likelihood'", "250 frames, 7+7 DoF", ours, "per-candidate reference phase only",
+        t_ref, f"phase diff {abs(s_ours - s_ref):.1e}")
+    st = model.stream()
+    walls = []
+    for _ in range(1 if quick else 3):
+        st.reset()
+        for i in range(test.shape[0]):
+            t0 = time.perf_counter()
+            p = st.update(test[i, :7])
+            p.response(100)
+            walls.append(time.perf_counter() - t0)
+    row("online step, phase_method='likelihood'", "7+7 DoF, 25 basis, 500 frames", np.array(walls), None, None,
+        None, note="update + response(100), whole interaction")
+
+
 def bench_dtw(quick):
     print("open-end DTW")
     rng = np.random.default_rng(0)
@@ -595,6 +646,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         model, test = bench_online(args.quick)
         bench_predict(model, test, args.quick)
+        bench_likelihood_phase(args.quick)
         bench_dtw(args.quick)
         bench_fit(args.quick)
         bench_promp(model, test, args.quick)

@@ -76,7 +76,7 @@ def test_time_stretched_prefix_gets_true_phase(stretch, frac):
     from interprim.synthetic import two_agent_demos
 
     train = two_agent_demos(20, seed=3)
-    model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15).fit(train, dt=0.01)
+    model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, phase_method="dtw").fit(train, dt=0.01)
     # a movement of the same shape as the reference, stretched in time
     ref = model.reference_
     T = int(round((len(ref) - 1) * stretch)) + 1

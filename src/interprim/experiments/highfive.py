@@ -53,7 +53,7 @@ DEFAULT_PERCENTS = (10, 20, 30, 40, 50, 60, 70, 80, 90, 100)
 METHODS = ("ip", "ip_likelihood", "ip_known_phase", "ip_default", "prior", "nn", "promp")
 METHOD_LABELS = {
     "ip": "IP, DTW phase (paper)",
-    "ip_default": "IP, library defaults (positions, CV sigma2)",
+    "ip_default": "IP, library defaults (positions, CV sigma2, likelihood phase)",
     "ip_likelihood": "IP, likelihood phase",
     "ip_known_phase": "IP, known phase",
     "prior": "prior mean",

@@ -137,6 +137,62 @@ def test_forcing_statistics_kernel_equals_numpy(fitted_paper, synthetic, M, s_en
     assert yy == pytest.approx(float(np.sum(Y * Y)), rel=1e-12)
 
 
+@pytest.fixture(scope="module")
+def fitted_smooth_pca(synthetic):
+    """Position observation with Savitzky-Golay smoothing of the start and PCA of both agents (fixed sigma2: fast)."""
+    train, _ = synthetic
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=20, sigma2=1e-3, smoothing_window=11,
+                                   pca_components=(2, 2), phase_method="dtw").fit(train, dt=0.01)
+
+
+@pytest.fixture(scope="module")
+def fitted_position_dtw(synthetic):
+    """The library defaults (position observation, sigma2 by CV) with the paper's DTW phase."""
+    train, _ = synthetic
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=20, phase_method="dtw").fit(train, dt=0.01)
+
+
+@pytest.fixture(scope="module")
+def fitted_smooth(synthetic):
+    train, _ = synthetic
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, sigma2=1e-3, smoothing_window=31,
+                                   phase_method="dtw").fit(train, dt=0.01)
+
+
+@pytest.mark.parametrize("T", [3, 4, 5, 6, 10, 11, 12, 40, 200])
+@pytest.mark.parametrize("window", [None, 3, 5, 11, 31, 51])
+def test_start_position_equals_smoothed_first_frame(T, window):
+    z = np.cumsum(np.random.default_rng(T).normal(size=(T, 3)), axis=0) + 5.0
+    ref = derivatives(z, 1.0 / max(T - 1, 1), window)[0][0]
+    got = _fast.start_position(z, window)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-13 * np.abs(z).max())
+    assert not np.shares_memory(got, z)
+
+
+@pytest.mark.parametrize("config", ["default", "smooth", "smooth_pca"])
+@pytest.mark.parametrize("M,s_end", [(3, 0.01), (4, 0.3), (57, 0.5), (64, 0.6), (65, 0.61), (129, 0.0004),
+                                     (250, 1.0), (400, 0.73)])
+def test_position_statistics_kernel_equals_numpy(fitted, fitted_smooth, fitted_smooth_pca, synthetic, config, M,
+                                                 s_end):
+    """Compiled position statistics (blocks of frames, no design matrix) == LinearRollout.design + numpy."""
+    m = {"default": fitted, "smooth": fitted_smooth, "smooth_pca": fitted_smooth_pca}[config]
+    assert m.observation == "position"
+    _, test = synthetic
+    d = np.concatenate([test[0], test[1]])
+    z = m._observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
+    ws = _fast.StatsWorkspace(8, z.shape[1], m._q, "position")
+    for workspace in (ws, None, ws):  # reused, fresh, reused after a call with other sizes
+        (G, B, yy, n), y0 = m._stats(z, s_end, workspace)
+        X, Y, y0r = m._observation(z, s_end)
+        Gr, Br = X.T @ X, X.T @ Y
+        np.testing.assert_allclose(G, Gr, rtol=1e-12, atol=1e-12 * np.abs(Gr).max())
+        np.testing.assert_allclose(B, Br, rtol=1e-12, atol=1e-12 * np.abs(Br).max())
+        assert yy == pytest.approx(float(np.sum(Y * Y)), rel=1e-12)
+        assert n == Y.size
+        np.testing.assert_allclose(y0, y0r, rtol=0, atol=1e-13 * np.abs(z).max())
+        m._stats(z[: max(3, M // 3)], 0.5 * s_end + 0.1, ws)
+
+
 @pytest.mark.parametrize("pca", [None, (2, 2)])
 def test_response_kernel_equals_rollout_design(synthetic, pca):
     train, test = synthetic
@@ -241,21 +297,37 @@ def test_rollout_discretisation_and_scan_equal_sequential():
     np.testing.assert_allclose(r._Z, Z, rtol=1e-11, atol=1e-13 * np.abs(Z).max())
 
 
-def test_stream_fast_path_equals_reference_path(fitted, synthetic):
-    """Each online step (compiled statistics, low-rank Eq. 18, compiled response) vs the reference pieces."""
+CONFIGS = ["default", "paper", "position_dtw", "smooth_pca"]
+
+
+def _config(config, request):
+    return request.getfixturevalue({"default": "fitted", "paper": "fitted_paper", "position_dtw": "fitted_position_dtw",
+                                    "smooth_pca": "fitted_smooth_pca"}[config])
+
+
+@pytest.mark.parametrize("config", CONFIGS)
+def test_stream_fast_path_equals_reference_path(synthetic, config, request):
+    """Each online step (compiled statistics, low-rank Eq. 18, compiled response) vs the reference pieces,
+    at the phase the stream estimated (with the DTW phase: the incremental DTW's)."""
+    fitted = _config(config, request)
     _, test = synthetic
     d = test[3]
     st = fitted.stream()
     dtw = IncrementalDTW(fitted.reference_)
     for i in range(120):
         p = st.update(d[i, :2])
-        n, c = dtw.update(d[i, :2])
-        if i in (2, 3, 10, 60, 119):
-            z = d[: i + 1, :2]
-            s_end, _ = fitted._phase_info(n, i + 1)
-            X, Y, _ = fitted._observation(z, s_end)
+        n, c = dtw.update(fitted._observed_to_latent(d[i : i + 1, :2])[0])
+        if i in (2, 3, 10, 60, 64, 119):
+            z = fitted._observed_to_latent(d[: i + 1, :2])
+            if fitted.phase_method == "dtw":
+                s_end, _ = fitted._phase_info(n, i + 1)
+                assert p.normalised_time == s_end
+            else:
+                s_end = p.normalised_time
+            X, Y, y0 = fitted._observation(z, s_end)
             ref = condition(fitted.prior_.mean, fitted.prior_.cov, fitted.obs_index_, X.T @ X, X.T @ Y,
                             fitted.sigma2_, yy=float(np.sum(Y * Y)), n_obs=Y.size, need_cov=True)
+            np.testing.assert_allclose(p._y0_obs, y0, rtol=0, atol=1e-13 * (1 + np.abs(z).max()))
             sc = 1 + np.abs(ref.mean).max()
             np.testing.assert_allclose(p.posterior_mean, ref.mean, atol=1e-8 * sc)
             assert p.log_likelihood == pytest.approx(ref.log_likelihood, rel=1e-8, abs=1e-6)
@@ -276,13 +348,13 @@ def test_numpy_fallback_predict_equals_compiled(fitted, synthetic, monkeypatch):
     np.testing.assert_allclose(a.response(50)[1], b.response(50)[1], atol=1e-8 * np.abs(a.response(50)[1]).max())
 
 
-@pytest.mark.parametrize("config", ["paper", "default"])
-def test_stream_allocation_does_not_grow_with_frames(fitted, fitted_paper, synthetic, config):
+@pytest.mark.parametrize("config", CONFIGS)
+def test_stream_allocation_does_not_grow_with_frames(synthetic, config, request):
     """tracemalloc: what one online step allocates is the same at 150 and at 380 frames seen (both conditioned;
     the frame buffer, 2x the reference length, does not double in between)."""
     _, test = synthetic
     d = np.ascontiguousarray(np.concatenate([test[1], test[1][::-1], test[1]])[:420, :2])
-    st = (fitted_paper if config == "paper" else fitted).stream()
+    st = _config(config, request).stream()
     peaks = {}
     for i in range(420):
         if i in (150, 380):

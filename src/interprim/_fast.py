@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import threading
+from functools import lru_cache
 
 import numpy as np
 
@@ -56,6 +57,9 @@ def _compile_all():
     B = np.empty((q, Do))
     k.design_stats(YT, M, 0.5, np.linspace(1.0, 0.1, q - 1), np.full(q - 1, 10.0), 3.0, const, np.empty((q, M)),
                    G, B, np.empty((4, M)), np.empty(M, dtype=np.int64))
+    Kr = 10
+    k.position_stats(z, M, 0.5, z[0], np.zeros(Do), rng.normal(size=(Kr + 1, 2, q)), rng.normal(size=(Kr + 1, 2, 2)),
+                     G, B, np.empty((q, 4)), np.empty((Do, 4)))
     P = 2 * Do * q
     idx = np.arange(Do * q, dtype=np.intp)
     other = np.arange(Do * q, P, dtype=np.intp)
@@ -113,15 +117,60 @@ def warmup() -> bool:
     return bool(_READY)
 
 
-class StatsWorkspace:
-    """Preallocated buffers for the observation statistics of up to ``cap`` frames (grown by doubling)."""
+@lru_cache(maxsize=64)
+def _savgol_start_coeffs(w: int, p: int) -> np.ndarray:
+    """Weights ``c`` (w,) with ``c @ y[:w]`` = the Savitzky-Golay (``mode="interp"``) smoothed first frame.
 
-    def __init__(self, cap: int, n_obs: int, q: int):
+    That frame is the value at the first sample of the degree-``p`` least-squares
+    polynomial through the first ``w`` samples, i.e. row 0 of the hat matrix
+    ``Q Q^T`` (``Q`` an orthonormal basis of the polynomials on the window,
+    from a QR of the Vandermonde matrix on ``[-1, 1]``: accurate to ~1e-16,
+    where ``scipy.signal.savgol_coeffs(w, p, pos=0)`` loses ~1e-12 at ``w = 31``).
+    """
+    x = np.linspace(-1.0, 1.0, w)
+    Q, _ = np.linalg.qr(np.vander(x, p + 1))
+    c = Q @ Q[0]
+    c.setflags(write=False)
+    return c
+
+
+def start_position(z, window, polyorder: int = 3) -> np.ndarray:
+    """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`interprim.preprocessing.derivatives`) in ``O(window D)``.
+
+    The first frame of the smoothed observation, with the same window rule
+    (shrunk to the largest odd number not above ``len(z)``); the raw first
+    frame when ``window`` is None or too short to smooth.  A new array.
+    """
+    T = z.shape[0]
+    if window is not None:
+        w = min(int(window), T if T % 2 == 1 else T - 1)
+        if w % 2 == 0:
+            w -= 1
+        p = min(polyorder, w - 1)
+        if w >= 3 and p >= 2:
+            return _savgol_start_coeffs(w, p) @ z[:w]
+    return z[0].copy()
+
+
+class StatsWorkspace:
+    """Preallocated buffers for the observation statistics of up to ``cap`` frames (grown by doubling).
+
+    ``observation="position"`` needs only fixed-size blocks (:func:`interprim._kernels.position_stats`);
+    the per-frame buffers of the forcing observation are then allocated on first use.
+    """
+
+    BLOCK = 64  # frames per block of the position statistics
+
+    def __init__(self, cap: int, n_obs: int, q: int, observation: str = "forcing"):
         self.n_obs = int(n_obs)
         self.q = int(q)
         self.G = np.empty((self.q, self.q))
         self.B = np.empty((self.q, self.n_obs))
-        self._alloc(max(int(cap), 3))
+        self.HT = np.empty((self.q, self.BLOCK))
+        self.YTb = np.empty((self.n_obs, self.BLOCK))
+        self.cap = 0
+        if observation == "forcing":
+            self._alloc(max(int(cap), 3))
 
     def _alloc(self, cap):
         self.cap = cap
@@ -146,4 +195,16 @@ class StatsWorkspace:
                                     self.yd, self.ydd, self.YT)
         yy = design_stats(self.YT, M, float(s_end), basis.centers, basis.widths, float(basis.alpha_x), const,
                           self.XT, self.G, self.B, self.work, self.ibuf)
+        return self.G, self.B, float(yy)
+
+    def position_stats(self, z, M, s_end, y0, v0, rollout):
+        """``(G, B, |Y|^2)`` of the position observation of ``z[:M]`` over ``[0, s_end]`` from start ``[y0; v0]``.
+
+        Reference: ``InteractionPrimitive._observation`` (``LinearRollout.design(0, s)``).
+        ``G`` and ``B`` are this workspace's buffers (overwritten by the next call).
+        """
+        from ._kernels import position_stats
+
+        yy = position_stats(z, M, float(s_end), y0, v0, rollout._Z, rollout._powers, self.G, self.B,
+                            self.HT, self.YTb)
         return self.G, self.B, float(yy)

@@ -8,6 +8,10 @@ tested against (``tests/test_fastpaths.py``):
   observed frames spread uniformly over ``[0, s_end]``; reference:
   ``InteractionPrimitive._observation`` (``np.gradient`` derivatives,
   :meth:`interprim.basis.Basis.phi_tilde`, :func:`interprim.dmp.forcing_values`).
+* :func:`position_stats` -- the same statistics for the position observation
+  (``observation="position"``: ``Y = z - free [y0; v0]``, ``X = H``, the rows of
+  :meth:`interprim.dmp.LinearRollout.design` from ``s0 = 0``), accumulated in
+  fixed-size blocks of frames; reference: ``InteractionPrimitive._observation``.
 * :func:`lowrank_condition_mean` -- posterior mean and marginal
   log-likelihood of Eq. 16-18 for a prior ``Sigma = diag(d) + U U^T``;
   reference: :func:`interprim.gaussian.condition` / ``condition_literal``.
@@ -183,6 +187,123 @@ def design_stats(YT, M, s_end, centers, widths, alpha_x, const, XT, G, B, work, 
         for j in range(M):
             acc += Yd[j] * Yd[j]
         yy += acc
+    return yy
+
+
+@njit(cache=True, fastmath=_FM)
+def position_stats(z, M, s_end, y0, v0, Z, powers, G, B, HT, YT):
+    """``G = H^T H``, ``B = H^T Y`` and ``|Y|^2`` of the position observation of ``z[:M]`` over ``[0, s_end]``.
+
+    Frame ``j`` is at ``s_j = linspace(0, s_end, M)[j]``; its design row is the
+    rollout map from rest at ``s = 0`` (``LinearRollout.design(0, s)``: grid
+    ``K = n_steps``, ``u = clip(s K, 0, K)``, linear interpolation between grid
+    points ``kf`` and ``kf + 1``)::
+
+        h_j = (1 - a) Z[kf, 0] + a Z[kf + 1, 0]          (Z[0] = 0, so P Z[0] drops out)
+        Y_j = z_j - ((1 - a) P[kf, 0] + a P[kf + 1, 0]) @ [y0; v0]
+
+    with ``Z`` (K+1, 2, q) and ``powers`` (K+1, 2, 2) of :class:`interprim.dmp.LinearRollout`.
+    Neither ``H`` nor ``Y`` is formed: frames are taken in blocks of
+    ``C = HT.shape[1]`` into the fixed workspaces ``HT`` (q, C) and ``YT``
+    (D, C), and each block is added to ``G`` (q, q) and ``B`` (q, D)
+    (outputs) with dot products along the block (vectorised; the lower
+    triangle of ``G`` is accumulated, entries above the diagonal of a 4-row
+    sweep are overwritten by the final symmetrisation).  Memory is
+    independent of ``M``; work is ``O(M q (q + D))``.  Returns ``|Y|^2``.
+    """
+    K = Z.shape[0] - 1
+    q = Z.shape[2]
+    D = z.shape[1]
+    C = HT.shape[1]
+    step = s_end / (M - 1) if M > 1 else 0.0
+    for i in range(q):
+        for k in range(q):
+            G[i, k] = 0.0
+        for d in range(D):
+            B[i, d] = 0.0
+    yy = 0.0
+    for j0 in range(0, M, C):
+        n = min(C, M - j0)
+        for t in range(n):
+            j = j0 + t
+            s = j * step if j < M - 1 else s_end  # np.linspace(0, s_end, M)
+            u = min(max(s * K, 0.0), float(K))
+            kf = min(int(np.floor(u)), K - 1)
+            kf = max(kf, 0)
+            a = u - kf
+            b = 1.0 - a
+            kf1 = min(kf + 1, K)
+            Za = Z[kf, 0]
+            Zb = Z[kf1, 0]
+            for i in range(q):
+                HT[i, t] = b * Za[i] + a * Zb[i]
+            f0 = b * powers[kf, 0, 0] + a * powers[kf1, 0, 0]
+            f1 = b * powers[kf, 0, 1] + a * powers[kf1, 0, 1]
+            for d in range(D):
+                YT[d, t] = z[j, d] - (f0 * y0[d] + f1 * v0[d])
+        i = 0
+        while i + 4 <= q:  # four rows of H per sweep: each loaded column serves four dot products
+            H0 = HT[i]
+            H1 = HT[i + 1]
+            H2 = HT[i + 2]
+            H3 = HT[i + 3]
+            for k in range(i + 4):
+                Hk = HT[k]
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                a3 = 0.0
+                for t in range(n):
+                    h = Hk[t]
+                    a0 += H0[t] * h
+                    a1 += H1[t] * h
+                    a2 += H2[t] * h
+                    a3 += H3[t] * h
+                G[i, k] += a0
+                G[i + 1, k] += a1
+                G[i + 2, k] += a2
+                G[i + 3, k] += a3
+            for d in range(D):
+                Yd = YT[d]
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                a3 = 0.0
+                for t in range(n):
+                    h = Yd[t]
+                    a0 += H0[t] * h
+                    a1 += H1[t] * h
+                    a2 += H2[t] * h
+                    a3 += H3[t] * h
+                B[i, d] += a0
+                B[i + 1, d] += a1
+                B[i + 2, d] += a2
+                B[i + 3, d] += a3
+            i += 4
+        while i < q:
+            Hi = HT[i]
+            for k in range(i + 1):
+                Hk = HT[k]
+                acc = 0.0
+                for t in range(n):
+                    acc += Hi[t] * Hk[t]
+                G[i, k] += acc
+            for d in range(D):
+                Yd = YT[d]
+                acc = 0.0
+                for t in range(n):
+                    acc += Hi[t] * Yd[t]
+                B[i, d] += acc
+            i += 1
+        for d in range(D):
+            Yd = YT[d]
+            acc = 0.0
+            for t in range(n):
+                acc += Yd[t] * Yd[t]
+            yy += acc
+    for i in range(q):
+        for k in range(i):
+            G[k, i] = G[i, k]
     return yy
 
 

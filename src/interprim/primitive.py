@@ -524,17 +524,31 @@ class InteractionPrimitive:
     def _stats(self, z, s_end, workspace=None):
         """Sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)`` of the observation (Eq. 13-15) and the start ``y0``.
 
-        The paper's forcing observation without smoothing runs in compiled
-        kernels on preallocated buffers (``workspace``, grown by doubling),
-        ``O(M q (q + D_o))`` for ``M`` frames because every frame gets a new
-        phase; other observation models use :meth:`_observation` (numpy).
-        Both give the same numbers (tested to 1e-12).
+        With the compiled kernels loaded, the position observation (any
+        ``smoothing_window``; only the smoothed start ``y0`` depends on it) and
+        the paper's forcing observation without smoothing run on preallocated
+        buffers (``workspace``; fixed-size blocks for positions, grown by
+        doubling for forcing values), so nothing proportional to ``M`` is
+        allocated.  The work stays ``O(M q (q + D_o))`` for ``M`` frames: every
+        frame gets a new phase ``s_j = j s_end / (M - 1)`` whenever the phase
+        estimate moves, so the statistics cannot be updated incrementally.
+        Otherwise :meth:`_observation` (numpy, the reference) is used; both
+        give the same numbers (tested to 1e-12).
         """
         M = z.shape[0]
-        if self.observation == "forcing" and self.smoothing_window is None and M >= 3 and _fast.ready():
-            ws = workspace if workspace is not None else _fast.StatsWorkspace(M, z.shape[1], self._q)
-            G, B, yy = ws.forcing_stats(z, M, s_end, self)
-            return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0]
+        if M >= 3 and _fast.ready():
+            if self.observation == "position":
+                z = np.ascontiguousarray(z, dtype=np.float64)
+                ws = workspace if workspace is not None else \
+                    _fast.StatsWorkspace(M, z.shape[1], self._q, "position")
+                y0 = _fast.start_position(z, self.smoothing_window)
+                v0 = self.start_velocity_[: self.n_observed_latent_]
+                G, B, yy = ws.position_stats(z, M, s_end, y0, v0, self.rollout_)
+                return (G.copy(), B.copy(), yy, M * z.shape[1]), y0
+            if self.observation == "forcing" and self.smoothing_window is None:
+                ws = workspace if workspace is not None else _fast.StatsWorkspace(M, z.shape[1], self._q)
+                G, B, yy = ws.forcing_stats(z, M, s_end, self)
+                return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0].copy()
         X, Y, y0 = self._observation(z, s_end)
         return (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size), y0
 
@@ -825,7 +839,8 @@ class Stream:
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
         # streaming needs the compiled per-frame step: load the kernels now (see interprim._fast)
-        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q) if _fast.warmup() else None
+        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation) \
+            if _fast.warmup() else None
         self._n = 0
 
     @property

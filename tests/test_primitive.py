@@ -81,7 +81,26 @@ def test_single_agent_recovers_its_own_demo():
     np.testing.assert_allclose(pred.goal, d[-1], atol=5e-3)
 
 
-def test_stream_equals_batch_predict(fitted, synthetic):
+def test_likelihood_stream_tracks_batch_phase(fitted, synthetic):
+    """The default stream (likelihood phase, local search around its last estimate) stays close to the
+    batch estimate, and given its phase it conditions exactly as the batch path does."""
+    _, test = synthetic
+    d = test[1]
+    assert fitted.phase_method == "likelihood"
+    st = fitted.stream()
+    T = d.shape[0]
+    for m in range(1, T + 1):
+        p = st.update(d[m - 1, :2])
+        if m in (20, T // 2, T - 1):
+            b = fitted.predict(d[:m, :2])
+            true = (m - 1) / (T - 1)
+            assert abs(p.phase - b.phase) < 0.05 and abs(p.phase - true) < 0.06
+            same = fitted.predict(d[:m, :2], phase=p.normalised_time)
+            np.testing.assert_allclose(p.trajectory(50), same.trajectory(50), rtol=1e-9, atol=1e-10)
+
+
+def test_stream_equals_batch_predict(fitted_paper, synthetic):
+    fitted = fitted_paper
     _, test = synthetic
     d = test[1]
     st = fitted.stream()

@@ -114,6 +114,10 @@ def warmup() -> bool:
             _THREAD = t = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
             t.start()
     t.join()
+    if _READY:  # the likelihood phase's kernel (its own module, loaded on first use otherwise)
+        from . import phase_likelihood
+
+        phase_likelihood.warmup()
     return bool(_READY)
 
 

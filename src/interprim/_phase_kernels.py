@@ -155,40 +155,61 @@ def _grams(ET, RT, M, G, b):
             b[q - 1, i] = _dot(ET[q - 1], RT[i], M)
 
 
+BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames
+
+
 @njit(cache=True, fastmath=_FM)
-def _statistics(Zh, Rg, z, M, s, ET, RT, G, b):
-    """``G = H^T H`` (upper triangle), ``b = H^T r`` and ``|r|^2`` of the first ``M`` frames of ``z`` at phase ``s``."""
+def _statistics(Zh, Rg, z, M, s, ET, RT, G, b, Gb, bb):
+    """``G = H^T H`` (upper triangle), ``b = H^T r`` and ``|r|^2`` of the first ``M`` frames of ``z`` at phase ``s``.
+
+    The frames are taken in blocks of ``ET.shape[1]`` (the rows of ``H`` and ``r`` of one block in ``ET``,
+    ``RT``; the block's sums in ``Gb``, ``bb``), so the memory does not grow with ``M``.
+    """
     K1, q = Zh.shape
     n_steps = K1 - 1
     n_o = Rg.shape[1]
+    W = ET.shape[1]
     step = s / (M - 1) if M > 1 else 0.0
     rr = 0.0
-    for m in range(M):
-        sm = m * step
-        if M > 1 and m == M - 1:
-            sm = s  # numpy.linspace sets the end point exactly
-        u = sm * n_steps
-        if u < 0.0:
-            u = 0.0
-        elif u > n_steps:
-            u = float(n_steps)
-        kf = int(np.floor(u))
-        if kf > n_steps - 1:
-            kf = n_steps - 1
-        a = u - kf
-        wa = 1.0 - a
-        Z0 = Zh[kf]
-        Z1 = Zh[kf + 1]
-        for j in range(q):
-            ET[j, m] = wa * Z0[j] + a * Z1[j]
-        R0 = Rg[kf]
-        R1 = Rg[kf + 1]
-        zm = z[m]
+    for j in range(q):
+        for l in range(q):
+            G[j, l] = 0.0
         for i in range(n_o):
-            rv = zm[i] - (wa * R0[i] + a * R1[i])
-            RT[i, m] = rv
-            rr += rv * rv
-    _grams(ET, RT, M, G, b)
+            b[j, i] = 0.0
+    for m0 in range(0, M, W):
+        nb = min(W, M - m0)
+        for k in range(nb):
+            m = m0 + k
+            sm = m * step
+            if M > 1 and m == M - 1:
+                sm = s  # numpy.linspace sets the end point exactly
+            u = sm * n_steps
+            if u < 0.0:
+                u = 0.0
+            elif u > n_steps:
+                u = float(n_steps)
+            kf = int(np.floor(u))
+            if kf > n_steps - 1:
+                kf = n_steps - 1
+            a = u - kf
+            wa = 1.0 - a
+            Z0 = Zh[kf]
+            Z1 = Zh[kf + 1]
+            for j in range(q):
+                ET[j, k] = wa * Z0[j] + a * Z1[j]
+            R0 = Rg[kf]
+            R1 = Rg[kf + 1]
+            zm = z[m]
+            for i in range(n_o):
+                rv = zm[i] - (wa * R0[i] + a * R1[i])
+                RT[i, k] = rv
+                rr += rv * rv
+        _grams(ET, RT, nb, Gb, bb)
+        for j in range(q):
+            for l in range(j, q):
+                G[j, l] += Gb[j, l]
+            for i in range(n_o):
+                b[j, i] += bb[j, i]
     return rr
 
 
@@ -206,17 +227,20 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     s2 : position noise variance.
     out : (C,) log-likelihoods (output); ``-inf`` where a factorisation failed.
 
-    Workspaces (``O(M (q + D_o))`` for the statistics, ``O(q n + n^2)`` otherwise) are allocated once per call.
+    Workspaces (``O(BLOCK (q + D_o))`` for the statistics, ``O(q n + n^2)`` otherwise) are allocated once per
+    call, independent of ``M``.
     """
     q = Zh.shape[1]
     n_o = Rg.shape[1]
     n = Uh.shape[2]
     r = n + 1
-    Mw = max(M, 1)
+    Mw = BLOCK
     ET = np.empty((q, Mw))
     RT = np.empty((n_o, Mw))
     G = np.empty((q, q))
     b = np.empty((q, n_o))
+    Gb = np.empty((q, q))
+    bb = np.empty((q, n_o))
     T = np.empty((q, q))
     Ub = np.empty((q, r))
     V = np.empty((q, r))
@@ -225,7 +249,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     gam = np.empty(n)
     log_s2 = np.log(s2)
     for ci in range(s_values.shape[0]):
-        rr = _statistics(Zh, Rg, z, M, s_values[ci], ET, RT, G, b)
+        rr = _statistics(Zh, Rg, z, M, s_values[ci], ET, RT, G, b, Gb, bb)
         for a in range(n):
             for c in range(a + 1):
                 Ka[a, c] = K0[a, c]

@@ -3,11 +3,11 @@
 :class:`InteractionPrimitive` is the public estimator.  ``fit`` turns each
 demonstration into DMP parameters (Eq. 3-4) of every DoF of both agents and
 learns ``p(theta)`` over ``theta = [theta_o, theta_c]`` (Eq. 10).  ``predict``
-estimates the phase of a partial observation of the observed agent by
-open-end DTW (Eq. 5-9), conditions ``p(theta)`` on it with
-``Omega~ = [Omega, 0]`` (Eq. 15-18, Sec. III-D) and returns a
-:class:`Prediction` of the whole interaction.  ``stream`` does the same one
-frame at a time with incremental DTW.
+estimates the phase of a partial observation of the observed agent (by
+open-end DTW, Eq. 5-9, or by the likelihood of the observation), conditions
+``p(theta)`` on it with ``Omega~ = [Omega, 0]`` (Eq. 15-18, Sec. III-D) and
+returns a :class:`Prediction` of the whole interaction.  ``stream`` does the
+same one frame at a time (incremental DTW, or a local likelihood search).
 
 Internally the DoFs are ordered observed agent first, then controlled agent
 (after the optional PCA of each agent, paper Sec. IV); every output is mapped
@@ -92,18 +92,24 @@ class InteractionPrimitive:
         Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
-    phase_method : {"dtw", "likelihood"}, default "dtw"
-        How ``predict`` estimates the phase: the paper's open-end DTW
-        (Eq. 5-9), or the maximum of the marginal likelihood of the observed
-        positions under the learned prior over candidate phases, started from
-        the DTW estimate (:mod:`interprim.phase_likelihood`; ``Stream`` uses a
-        cheap local search around its previous estimate).
+    phase_method : {"likelihood", "dtw"}, default "likelihood"
+        How ``predict`` estimates the phase: the maximum of the marginal
+        likelihood of the observed positions under the learned prior over
+        candidate phases, with a log-normal prior on the partner's speed learned
+        from the demonstrations (:mod:`interprim.phase_likelihood`; ``Stream`` uses a
+        local search around its previous estimate), or the paper's open-end DTW
+        (Eq. 5-9).  The likelihood is the default: on demonstrations that differ in
+        goal, DTW confuses "further along" with "aiming further" (phase errors
+        0.1-0.2 of the movement on the built-in data, 0.03-0.22 on NuiSI), the
+        likelihood does not (0.01-0.03).  DTW is faster (online step ~0.2 ms vs
+        ~0.8 ms at 7+7 DoF) and better for movements much faster or slower than
+        every demonstration (0.7x / 1.5x), which the speed prior penalises.
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "dtw"):
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
         self.alpha_y = alpha_y

@@ -92,7 +92,9 @@ def highfive_model(n_train: int = 40, n_test: int = 4, seed: int = 0, n_basis: i
     from ..sim import highfive_split
 
     train, test = highfive_split(n_train, n_test, seed=seed, progress=progress, n_jobs=n_jobs)
-    model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis)
+    # the page's input is a dragged mouse pointer (pixel-quantised, irregular): ~0.01 rad of noise that the
+    # simulated demonstrations do not have
+    model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, input_noise=0.01)
     model.fit(train.demos, dt=train.dt)
     oa, ca = test.observed_arm, test.controlled_arm
     replay = {
@@ -120,7 +122,7 @@ def letter_models(n: int = 20, seed: int = 0, n_basis: int = 15) -> dict:
     out = {}
     for letter in LETTERS:
         demos = synthetic_letters(letter, n, seed=seed)
-        model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis)
+        model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, input_noise=0.01)  # mouse input
         model.fit(demos, dt=0.01)
         test = synthetic_letters(letter, 2, seed=seed + 1)
         meta = {

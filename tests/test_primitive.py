@@ -276,3 +276,25 @@ def test_bad_inputs(synthetic):
     assert st.n_frames == 0  # a rejected frame does not corrupt the stream
     st.update([0.0, 0.0])
     assert st.n_frames == 1
+
+
+def test_input_noise_makes_clean_models_robust_to_noisy_input():
+    """Models learned from clean (simulated) demonstrations choose a tiny sigma2 by CV; noisy online input then
+    moves the predicted high-five point far.  ``input_noise`` adds the sensor's variance and fixes that."""
+    from interprim.sim import highfive_split
+
+    train, test = highfive_split(40, 4, seed=0, progress=False)
+    rng = np.random.default_rng(0)
+    cases = [(d[: int(0.6 * len(d)), :2] + 0.01 * rng.standard_normal((int(0.6 * len(d)), 2)), g)
+             for d, g in zip(test.demos, test.goals)]
+    ca = test.controlled_arm
+    err = {}
+    for noise in (None, 0.01):
+        m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, input_noise=noise).fit(train.demos,
+                                                                                             dt=train.dt)
+        err[noise] = np.mean([np.linalg.norm(ca.hand(m.predict(z).goal[2:]) - g) for z, g in cases])
+        if noise:
+            assert m.get_params()["input_noise"] == 0.01 and "input_noise=0.01" in repr(m)
+    assert err[0.01] < 0.5 * err[None] and err[0.01] < 0.08, err
+    with pytest.raises(ValueError, match="input_noise"):
+        ip.InteractionPrimitive(observed_dofs=[0, 1], input_noise=float("nan")).fit(train.demos, dt=train.dt)

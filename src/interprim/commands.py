@@ -92,6 +92,14 @@ def add_parser(subparsers) -> None:
         help="phase estimation: open-end DTW (paper Eq. 5-9) or likelihood (default: the model's)",
     )
     p.add_argument(
+        "--input-noise",
+        type=float,
+        default=None,
+        metavar="STD",
+        help="standard deviation (data units) of noise in the online input that the demonstrations lack "
+        "(sensor noise); makes predictions robust to it",
+    )
+    p.add_argument(
         "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
     )
     p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components")
@@ -249,6 +257,7 @@ def cmd_fit(args) -> int:
         ("covariance", args.covariance),
         ("sigma2", args.sigma2),
         ("phase_method", args.phase_method),
+        ("input_noise", args.input_noise),
         ("smoothing_window", args.smoothing_window),
         ("pca_components", args.pca),
     ):

@@ -104,12 +104,24 @@ class InteractionPrimitive:
         likelihood does not (0.01-0.03).  DTW is faster (online step ~0.2 ms vs
         ~0.8 ms at 7+7 DoF) and better for movements much faster or slower than
         every demonstration (0.7x / 1.5x), which the speed prior penalises.
+    input_noise : float, optional
+        Standard deviation (data units; latent units after PCA) of noise in the
+        online observations that the demonstrations do not have: sensor noise
+        of the robot's perception, quantised pointer input, a partner tracked by
+        another system.  Its variance is added to the position noise of the
+        conditioning (``observation="position"``) and of the likelihood phase.
+        ``sigma2="cv"`` learns the noise *of the demonstrations*; on clean (e.g.
+        simulated) demonstrations that noise is tiny, and a noisier input then
+        moves the prediction far more than it should (measured on the simulated
+        high five with 0.01 rad input noise: goal error 0.35 m without, 0.05 m
+        with ``input_noise=0.01``).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood"):
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood",
+                 input_noise: float | None = None):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
         self.alpha_y = alpha_y
@@ -125,6 +137,7 @@ class InteractionPrimitive:
         self.min_observed = min_observed
         self.n_steps = n_steps
         self.phase_method = phase_method
+        self.input_noise = input_noise
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
@@ -143,6 +156,7 @@ class InteractionPrimitive:
             "reference": self.reference if isinstance(self.reference, str) else int(self.reference),
             "min_observed": int(self.min_observed), "n_steps": int(self.n_steps),
             "phase_method": self.phase_method,
+            "input_noise": None if self.input_noise is None else float(self.input_noise),
         }
 
     def _check_params(self, n_dofs: int):
@@ -165,6 +179,8 @@ class InteractionPrimitive:
             check_positive(self.beta_y, "beta_y")
         if self.observation not in OBSERVATION_MODELS:
             raise ValueError(f"observation must be one of {OBSERVATION_MODELS}, got {self.observation!r}")
+        if self.input_noise is not None:
+            check_positive(self.input_noise, "input_noise")
         if not (isinstance(self.sigma2, str) and self.sigma2 in ("auto", "cv")):
             check_positive(self.sigma2, "sigma2")
         if self.phase_method not in PHASE_METHODS:
@@ -314,6 +330,12 @@ class InteractionPrimitive:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
 
             select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
+        if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
+            e2 = float(self.input_noise) ** 2
+            if self.observation == "position":
+                self.sigma2_ += e2
+            if self.phase_sigma2_ is not None:
+                self.phase_sigma2_ += e2
 
         # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
         n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
@@ -608,8 +630,12 @@ class InteractionPrimitive:
         return load_model(path)
 
     def __repr__(self):
+        import inspect
+
+        defaults = {k: v.default for k, v in inspect.signature(type(self).__init__).parameters.items()}
         p = self.get_params()
-        shown = ", ".join(f"{k}={v!r}" for k, v in p.items() if k in ("observed_dofs", "n_basis", "observation"))
+        shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
+                          if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         return f"InteractionPrimitive({shown})"
 
 

@@ -134,11 +134,10 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
     print(f"goal {goal}, human hand {human_end}, robot hand {robot}, meeting point {meet}: "
           f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
     assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
-    # Mouse input is quantised to pixels and irregular in time; the model's prediction from it is
-    # much noisier than from clean frames (the forcing-term observation differentiates the input twice), so this check is loose: the
-    # robot hand ends clearly closer to the high-five point than where it started.  The replay test
-    # below checks the accurate case.
-    assert d_robot < 0.75 * d_rest, (robot, goal)
+    # Mouse input is quantised to pixels and irregular in time (the demo model is fitted with
+    # input_noise=0.01 rad for it): the robot hand ends near the high-five point (0.15 m typical; 1.5 m
+    # before input_noise existed), well inside the 1.7 m from where it started.
+    assert d_robot < 0.3 and d_robot < 0.25 * d_rest, (robot, goal)
     assert driver.find_element("id", "hf-canvas").get_attribute("data-robot-hand")
 
 

@@ -232,10 +232,11 @@ def _n_observed(T: int, p: float) -> int:
 
 
 def _fit(train, n_basis, sigma2, **kw):
-    """The paper's model (forcing-value observation, Eq. 15) unless ``kw`` overrides it."""
+    """The paper's model (forcing-value observation, Eq. 15; open-end DTW phase, Eq. 5-9) unless ``kw`` overrides it."""
     import interprim as ip
 
     kw.setdefault("observation", "forcing")
+    kw.setdefault("phase_method", "dtw")
     return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, sigma2=sigma2, **kw).fit(
         train.demos, dt=train.dt)
 
@@ -529,11 +530,12 @@ def plot_fig8(ev, test, cfg, path, percent=60):
     dist = ev["goal_err"]["ip"][:, j]
     ax.plot(*pg.T, "o", mfc="none", mec="tab:red", ms=8, mew=1.5,
             label=f"predicted, {METHOD_LABELS['ip']}: {100 * np.mean(dist):.1f} cm")
-    lik = ev["pred_goals"].get("ip_likelihood")
-    if lik is not None and not np.all(np.isnan(lik)):
-        dl = ev["goal_err"]["ip_likelihood"][:, j]
-        ax.plot(*lik[:, j].T, "x", color="tab:orange", ms=6, mew=1.5,
-                label=f"predicted, {METHOD_LABELS['ip_likelihood']}: {100 * np.mean(dl):.1f} cm")
+    for name, mk, col in (("ip_likelihood", "x", "tab:orange"), ("ip_default", "+", "tab:green")):
+        pgm = ev["pred_goals"].get(name)
+        if pgm is not None and not np.all(np.isnan(pgm)):
+            dl = ev["goal_err"][name][:, j]
+            ax.plot(*pgm[:, j].T, mk, color=col, ms=7, mew=1.5,
+                    label=f"predicted, {METHOD_LABELS[name]}: {100 * np.mean(dl):.1f} cm")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")

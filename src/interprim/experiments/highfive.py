@@ -53,7 +53,7 @@ DEFAULT_PERCENTS = (10, 20, 30, 40, 50, 60, 70, 80, 90, 100)
 METHODS = ("ip", "ip_likelihood", "ip_known_phase", "ip_default", "prior", "nn", "promp")
 METHOD_LABELS = {
     "ip": "IP, DTW phase (paper)",
-    "ip_default": "IP, library defaults (positions, CV sigma2, likelihood phase)",
+    "ip_default": "IP, library defaults",
     "ip_likelihood": "IP, likelihood phase",
     "ip_known_phase": "IP, known phase",
     "prior": "prior mean",
@@ -522,7 +522,7 @@ def plot_fig8(ev, test, cfg, path, percent=60):
 
     j = list(cfg.percents).index(percent)
     pg = ev["pred_goals"]["ip"][:, j]
-    fig, ax = plt.subplots(figsize=(5.6, 4.8))
+    fig, ax = plt.subplots(figsize=(8.4, 4.8))
     _goal_box_patches(ax)
     for t, p in zip(test.goals, pg):
         ax.plot([t[0], p[0]], [t[1], p[1]], color="0.6", lw=0.8)
@@ -540,7 +540,7 @@ def plot_fig8(ev, test, cfg, path, percent=60):
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"Fig. 8: goals at {percent} % observed (FK of inferred goal joint angles)", fontsize=9)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)

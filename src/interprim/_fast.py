@@ -145,14 +145,11 @@ def start_position(z, window, polyorder: int = 3) -> np.ndarray:
     (shrunk to the largest odd number not above ``len(z)``); the raw first
     frame when ``window`` is None or too short to smooth.  A new array.
     """
-    T = z.shape[0]
-    if window is not None:
-        w = min(int(window), T if T % 2 == 1 else T - 1)
-        if w % 2 == 0:
-            w -= 1
-        p = min(polyorder, w - 1)
-        if w >= 3 and p >= 2:
-            return _savgol_start_coeffs(w, p) @ z[:w]
+    from .preprocessing import savgol_window
+
+    wp = savgol_window(z.shape[0], window, polyorder)
+    if wp is not None:
+        return _savgol_start_coeffs(*wp) @ z[:wp[0]]
     return z[0].copy()
 
 

@@ -63,6 +63,21 @@ def time_normalise(y, n: int) -> np.ndarray:
     return out
 
 
+def savgol_window(T: int, window, polyorder: int = 3):
+    """The Savitzky-Golay ``(window, polyorder)`` used for ``T`` frames, or ``None`` for no smoothing.
+
+    The window shrinks to the largest odd number not above ``T``; ``None`` when ``window`` is None or
+    too short to smooth (fewer than 3 frames, or a polynomial order below 2).
+    """
+    if window is None:
+        return None
+    w = min(int(window), T if T % 2 == 1 else T - 1)
+    if w % 2 == 0:
+        w -= 1
+    p = min(polyorder, w - 1)
+    return (w, p) if w >= 3 and p >= 2 else None
+
+
 def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
     """Smoothed position, first and second derivative of a uniformly sampled movement.
 
@@ -88,18 +103,15 @@ def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
     T = y.shape[0]
     if T < 3:
         raise ValueError(f"derivatives need at least 3 frames, got {T}")
-    if window is not None:
-        w = min(int(window), T if T % 2 == 1 else T - 1)
-        if w % 2 == 0:
-            w -= 1
-        p = min(polyorder, w - 1)
-        if w >= 3 and p >= 2:
-            from scipy.signal import savgol_filter  # lazy: scipy.signal takes ~0.5 s to import
+    wp = savgol_window(T, window, polyorder)
+    if wp is not None:
+        from scipy.signal import savgol_filter  # lazy: scipy.signal takes ~0.5 s to import
 
-            y_s = savgol_filter(y, w, p, deriv=0, axis=0, mode="interp")
-            yd = savgol_filter(y, w, p, deriv=1, delta=ds, axis=0, mode="interp")
-            ydd = savgol_filter(y, w, p, deriv=2, delta=ds, axis=0, mode="interp")
-            return y_s, yd, ydd
+        w, p = wp
+        y_s = savgol_filter(y, w, p, deriv=0, axis=0, mode="interp")
+        yd = savgol_filter(y, w, p, deriv=1, delta=ds, axis=0, mode="interp")
+        ydd = savgol_filter(y, w, p, deriv=2, delta=ds, axis=0, mode="interp")
+        return y_s, yd, ydd
     yd = np.gradient(y, ds, axis=0, edge_order=2)
     ydd = np.gradient(yd, ds, axis=0, edge_order=2)
     return y.copy(), yd, ydd

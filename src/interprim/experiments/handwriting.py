@@ -56,6 +56,7 @@ _FIG_PERCENTS = (20, 40, 60, 80)
 
 # ----------------------------------------------------------------------------- DTW baseline
 def _dtw_py(query, ref):
+    """Readable reference of :func:`open_end_dtw` (full accumulated-cost matrix), used by the tests."""
     t, n = query.shape[0], ref.shape[0]
     c = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)  # (t, n)
     D = np.empty((t, n))
@@ -66,48 +67,6 @@ def _dtw_py(query, ref):
             D[i, j] = c[i, j] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
     j = int(np.argmin(D[-1]))
     return float(D[-1, j]), j
-
-
-try:  # numba is a dependency of interprim; keep a Python fallback for clarity
-    from numba import njit
-
-    @njit(cache=True)
-    def _dtw_nb(query, ref):  # pragma: no cover - compiled
-        t, n = query.shape[0], ref.shape[0]
-        prev = np.empty(n)
-        cur = np.empty(n)
-        acc = 0.0
-        for j in range(n):
-            d = 0.0
-            for k in range(query.shape[1]):
-                e = query[0, k] - ref[j, k]
-                d += e * e
-            acc += d
-            prev[j] = acc
-        for i in range(1, t):
-            for j in range(n):
-                d = 0.0
-                for k in range(query.shape[1]):
-                    e = query[i, k] - ref[j, k]
-                    d += e * e
-                if j == 0:
-                    cur[j] = prev[0] + d
-                else:
-                    m = prev[j - 1]
-                    if prev[j] < m:
-                        m = prev[j]
-                    if cur[j - 1] < m:
-                        m = cur[j - 1]
-                    cur[j] = m + d
-            prev, cur = cur, prev
-        best = 0
-        for j in range(1, n):
-            if prev[j] < prev[best]:
-                best = j
-        return prev[best], best
-
-except ImportError:  # pragma: no cover
-    _dtw_nb = None
 
 
 def open_end_dtw(query, ref):
@@ -128,12 +87,10 @@ def open_end_dtw(query, ref):
     n_star : int
         0-based index of the reference frame the query's last frame is aligned to (Eq. 8).
     """
-    q = np.ascontiguousarray(query, dtype=np.float64)
-    r = np.ascontiguousarray(ref, dtype=np.float64)
-    if _dtw_nb is not None:
-        cost, j = _dtw_nb(q, r)
-        return float(cost), int(j)
-    return _dtw_py(q, r)
+    from ..phase import open_end_dtw as _core_open_end_dtw  # the compiled kernels of the core (Sec. III-B)
+
+    res = _core_open_end_dtw(ref, query, return_path=False)
+    return float(res.cost), int(res.n_star)
 
 
 #: Extra variant using the core's options beyond the paper: phase by likelihood and

@@ -135,45 +135,6 @@ def _prefix_costs_py(query, ref, out):
     return out
 
 
-try:  # numba is a dependency of interprim; the Python version above is the readable reference
-    from numba import njit
-
-    @njit(cache=False)
-    def _prefix_costs_nb(query, ref, out):  # pragma: no cover - compiled
-        M, N, D = query.shape[0], ref.shape[0], query.shape[1]
-        prev = np.empty(N)
-        cur = np.empty(N)
-        for m in range(M):
-            for n in range(N):
-                s = 0.0
-                for d in range(D):
-                    diff = ref[n, d] - query[m, d]
-                    s += diff * diff
-                if m == 0:
-                    prev[n] = s if n == 0 else prev[n - 1] + s
-                elif n == 0:
-                    cur[0] = prev[0] + s
-                else:
-                    a = prev[n - 1]
-                    if prev[n] < a:
-                        a = prev[n]
-                    if cur[n - 1] < a:
-                        a = cur[n - 1]
-                    cur[n] = s + a
-            if m > 0:
-                for n in range(N):
-                    prev[n] = cur[n]
-            best = prev[0]
-            for n in range(1, N):
-                if prev[n] < best:
-                    best = prev[n]
-            out[m] = best
-        return out
-
-except Exception:  # pragma: no cover - numba missing or broken
-    _prefix_costs_nb = None
-
-
 def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
     """Open-end DTW cost of every prefix of ``query`` against ``ref`` (paper Eq. 5-8).
 
@@ -184,7 +145,8 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
     ref : ndarray, shape (N, D)
         A complete reference movement.
     use_numba : bool
-        Use the compiled recursion (default) or the Python reference.
+        Use the core's compiled incremental DTW (:class:`interprim.phase.IncrementalDTW`, default) or the
+        Python reference.
 
     Returns
     -------
@@ -196,8 +158,13 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
     q = np.ascontiguousarray(query, dtype=np.float64)
     r = np.ascontiguousarray(ref, dtype=np.float64)
     out = np.empty(q.shape[0])
-    if use_numba and _prefix_costs_nb is not None:
-        return _prefix_costs_nb(q, r, out)
+    if use_numba:  # the core's incremental open-end DTW (compiled): one column per query frame
+        from ..phase import IncrementalDTW
+
+        inc = IncrementalDTW(r)
+        for m in range(q.shape[0]):
+            out[m] = inc.update(q[m], check=False)[1]
+        return out
     return _prefix_costs_py(q, r, out)
 
 

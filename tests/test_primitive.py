@@ -298,3 +298,17 @@ def test_input_noise_makes_clean_models_robust_to_noisy_input():
     assert err[0.01] < 0.5 * err[None] and err[0.01] < 0.08, err
     with pytest.raises(ValueError, match="input_noise"):
         ip.InteractionPrimitive(observed_dofs=[0, 1], input_noise=float("nan")).fit(train.demos, dt=train.dt)
+
+
+def test_fit_takes_a_demonstrations_object_and_keeps_column_names(synthetic, tmp_path):
+    from interprim.datasets import Demonstrations
+
+    train, _ = synthetic
+    cols = ["h_x", "h_y", "r_1", "r_2", "r_3"]
+    ds = Demonstrations(demos=train[:8], times=[np.arange(len(d)) * 0.02 for d in train[:8]], columns=cols)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8, sigma2="auto").fit(ds)
+    assert m.dt_ == pytest.approx(0.02) and m.columns_ == cols
+    m.save(tmp_path / "m.npz")
+    assert ip.InteractionPrimitive.load(tmp_path / "m.npz").columns_ == cols
+    with pytest.raises(ValueError, match="columns has 2 names"):
+        ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8).fit(train[:4], columns=["a", "b"])

@@ -192,33 +192,9 @@ def _positive(value, name):
     return value
 
 
-def _store_columns(path, columns) -> None:
-    """Add the demonstration column names to a model file as an extra array ``columns``.
-
-    The core's model reader ignores arrays it does not know, so the file stays a valid model;
-    ``interprim predict`` uses the names to pick the observed columns from PARTIAL.
-    """
-    import zipfile
-
-    import numpy as np
-
-    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
-        if "columns.npy" in zf.namelist():
-            return
-        with zf.open("columns.npy", "w") as fh:
-            np.lib.format.write_array(fh, np.array([str(c) for c in columns], dtype=str), allow_pickle=False)
-
-
-def _model_columns(path):
-    import numpy as np
-
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            if "columns" in f.files:
-                return [str(c) for c in f["columns"]]
-    except Exception:  # noqa: BLE001 - the model loader reports bad files
-        return None
-    return None
+def _model_columns(model):
+    """Column names of the demonstrations a model was fitted on (``None`` if it was fitted without names)."""
+    return getattr(model, "columns_", None)
 
 
 # ----------------------------------------------------------------------------- fit
@@ -265,10 +241,7 @@ def cmd_fit(args) -> int:
             kwargs[key] = val
     try:
         model = ip.InteractionPrimitive(observed_dofs=obs, **kwargs)
-        if ds.dt is not None:
-            model.fit(list(ds.demos), dt=ds.dt)
-        else:
-            model.fit(list(ds.demos), times=list(ds.times))
+        model.fit(ds)  # its dt or time stamps, and its column names (stored in the model file)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:
@@ -277,7 +250,6 @@ def cmd_fit(args) -> int:
     if out.parent and not out.parent.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
     model.save(out)
-    _store_columns(out, ds.columns)
     obs_names = [ds.columns[i] for i in model.observed_dofs_]
     ctrl_names = [ds.columns[i] for i in model.controlled_dofs_]
     print(
@@ -312,7 +284,7 @@ def cmd_predict(args) -> int:
     if not Path(args.model).exists():
         raise FileNotFoundError(f"model file not found: {args.model}")
     model = ip.InteractionPrimitive.load(args.model)
-    columns = _model_columns(args.model) or [f"dof_{j}" for j in range(model.n_dofs_)]
+    columns = _model_columns(model) or [f"dof_{j}" for j in range(model.n_dofs_)]
     obs_names = [columns[i] for i in model.observed_dofs_]
     part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1)
     if len(part) != 1:

@@ -52,6 +52,7 @@ def save_model(model, path) -> None:
         "covariance_method": model.prior_.method,
         "shrinkage": float(model.prior_.shrinkage),
         "n_demos": int(model.n_demos_),
+        "columns": getattr(model, "columns_", None),
     }
     arrays = {
         "prior_mean": model.prior_.mean,
@@ -116,6 +117,12 @@ def load_model(path):
         ps2 = meta.get("phase_sigma2")  # noise of the likelihood phase estimator (absent in older files)
         model.phase_sigma2_ = None if ps2 is None else float(ps2)
         model.n_demos_ = int(meta["n_demos"])
+        cols = meta.get("columns")  # column names (absent in older files; the CLI's legacy 'columns' array)
+        if cols is None and "columns" in data:
+            cols = [str(c) for c in data["columns"]]
+        _expect(cols is None or (isinstance(cols, list) and len(cols) == model.n_dofs_), path,
+                f"columns {cols!r} do not name the model's {model.n_dofs_} columns")
+        model.columns_ = None if cols is None else [str(c) for c in cols]
         model.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
                                      float(meta["shrinkage"]))
         model.thetas_ = data["thetas"]

@@ -202,7 +202,7 @@ class InteractionPrimitive:
         return obs, ctrl, kk
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, demos, dt: float | None = None, times=None):
+    def fit(self, demos, dt: float | None = None, times=None, columns=None):
         """Learn the Interaction Primitive from demonstrations of both agents.
 
         Parameters
@@ -213,14 +213,28 @@ class InteractionPrimitive:
         dt : float, optional
             Sampling interval in seconds of uniformly sampled demos (default 0.01 if
             neither ``dt`` nor ``times`` is given).
+            An :class:`interprim.datasets.Demonstrations` (any loader's result) is
+            taken as it is: its ``dt`` (or ``times``) and column names are used
+            unless given here.
         times : list of array_like, shape (T_j,), optional
             Time stamps in seconds per demonstration; irregular sampling is
             resampled onto a uniform grid at the median interval.
+        columns : list of str, optional
+            Names of the ``D`` columns; kept as ``columns_`` and in the model file.
 
         Returns
         -------
         self
         """
+        if hasattr(demos, "demos") and hasattr(demos, "times"):  # interprim.datasets.Demonstrations
+            if dt is None and times is None:
+                if getattr(demos, "dt", None) is not None:
+                    dt = demos.dt
+                else:
+                    times = list(demos.times)
+            if columns is None:
+                columns = getattr(demos, "columns", None)
+            demos = list(demos.demos)
         if isinstance(demos, np.ndarray) and demos.ndim == 3:
             demos = list(demos)
         if not isinstance(demos, (list, tuple)):
@@ -232,6 +246,10 @@ class InteractionPrimitive:
         for j, a in enumerate(arrays):
             if a.shape[1] != D:
                 raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
+        if columns is not None:
+            columns = [str(c) for c in columns]
+            if len(columns) != D:
+                raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
         obs, ctrl, kk = self._check_params(D)
         min_frames = max(5, self.smoothing_window or 0)
         if times is not None:
@@ -256,6 +274,7 @@ class InteractionPrimitive:
         self.durations_ = np.array([(a.shape[0] - 1) * dt for a in arrays])
         self.mean_duration_ = float(self.durations_.mean())
         self.n_demos_ = len(arrays)
+        self.columns_ = columns
 
         # optional PCA per agent (Sec. IV)
         self.pca_observed_ = self.pca_controlled_ = None

@@ -12,6 +12,13 @@ Arrays: ``prior_mean (P,)``, ``prior_cov (P, P)``, ``thetas (S, P)``,
 ``reference (N, D_o')``, ``start_position (D')``, ``start_velocity (D')``,
 ``durations (S,)`` and, with PCA, ``pca_{observed,controlled}_{mean,components}``;
 ``P = D' (n_basis + 1)`` and ``D'`` the number of (latent) DoFs, observed first.
+
+Metadata: ``params`` (every constructor argument, so the file reproduces the
+model's configuration, e.g. ``phase_method``), the column layout and names
+(``observed_dofs``, ``controlled_dofs``, ``columns`` or ``null``), and the fitted
+scalars (``dt``, ``sigma2``, ``phase_sigma2``, ``shrinkage``, ...).  Files of
+older interprim versions without ``columns``/``phase_sigma2``/``input_noise``
+load with those unset.
 """
 
 from __future__ import annotations

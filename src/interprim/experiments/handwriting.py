@@ -269,7 +269,7 @@ def run_handwriting(
     oracle = f"ip_{observations[-1]}_true_phase" if true_phase else None
     oracle_of = f"ip_{observations[-1]}"
     methods = tuple(ip_methods + ([oracle] if oracle else []) + ["prior_mean", "nearest_neighbour"])
-    shown = f"ip_{'position' if 'position' in observations else observations[0]}"
+    shown = "ip_defaults" if "ip_defaults" in variants else f"ip_{'position' if 'position' in observations else observations[0]}"
     items = _load_items(letters, max_per_letter, tuple(lasa_shapes or ()), lasa_subsample, data_path)
     s_grid = np.linspace(0.0, 1.0, n_points)
 
@@ -437,7 +437,7 @@ def _figures(out: Path, examples, results):
                 if c == 0:
                     ax.set_ylabel(name, fontsize=10)
         fig.suptitle(
-            f"Completion ({results['config']['figure_method']}, DTW phase): observed (black), prediction "
+            f"Completion ({results['config']['figure_method']}): observed (black), prediction "
             "(red: mean and samples), demonstrations (grey), hidden truth (dotted)",
             fontsize=8,
         )

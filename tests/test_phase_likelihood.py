@@ -231,3 +231,19 @@ def test_stream_phase_equals_reference_track_phase(observation):
         if k >= 1:
             assert pred.normalised_time == pytest.approx(s_ref, abs=1e-12)
             assert st._s_prev * N1 == pytest.approx(s_ref * N1, abs=1e-9)
+
+
+@pytest.mark.parametrize("n_basis, n_obs, n_demos", [(7, 3, 12), (8, 1, 5), (10, 2, 9)])
+def test_compiled_kernel_padding_shapes_equal_reference(n_basis, n_obs, n_demos):
+    """The kernel pads q, n + 1 and n to multiples of 4 and pairs the observed DoFs: sizes on and off those
+    multiples, an odd number of observed DoFs, and fewer demonstrations than basis functions."""
+    model = ip.InteractionPrimitive(observed_dofs=list(range(n_obs)), n_basis=n_basis, sigma2=1e-2,
+                                    phase_method="likelihood").fit(_demos(n_demos, D=4), dt=0.01)
+    s2 = PL.phase_noise(model)
+    s = np.exp(np.linspace(np.log(0.05), 0.0, 9))
+    for M in (2, 5, 64, 65, 120):
+        z = _latent(model, _demos(1, D=4, seed=3)[0][:M])
+        ref = np.array([PL._phase_log_likelihood_reference(model, z, x, s2) for x in s])
+        num, comp = _both_paths(model, z, s, s2)
+        np.testing.assert_allclose(comp, ref, rtol=1e-8, atol=0)
+        np.testing.assert_allclose(num, ref, rtol=1e-8, atol=0)

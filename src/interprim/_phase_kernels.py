@@ -24,7 +24,11 @@ demonstrations); with ``S_i = diag(sqrt(d_i))``, ``Uh_i = S_i^{-1} W_i^T`` and
     c_i = S_i b_i,  t = sum_i Uh_i^T T_i^{-1} c_i.
 
 Both ``T_i^{-1}`` terms come from one forward substitution of ``[Uh_i | c_i]``
-(``q x (n + 1)``) per DoF.  Cost per candidate ``O(M q (q + D_o))`` for the
+(``q x (n + 1)``) per DoF, ``V_i``; the ``(n + 1)^2`` products ``sum_i V_i^T V_i`` of all DoFs are then formed
+at once as dot products of length ``D_o q`` (the ``V_i`` stored transposed side by side), and ``K`` with
+``t`` is factorised as one bordered matrix (``log det K`` and ``t^T K^{-1} t`` from one Cholesky).  Sizes are
+padded to multiples of 4 (zero columns, identity rows) so that every inner loop is a regular register block.
+Cost per candidate ``O(M q (q + D_o))`` for the
 statistics plus ``O(D_o (q^3 + q^2 n + q n^2) + n^3)``, no ``M``-sized
 factorisation; no BLAS call (so no thread pool to limit).
 """
@@ -34,155 +38,111 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import _chol_inplace, _chol_solve_vec, _forward_rows
+from ._kernels import _chol_inplace, _forward_rows
 
 _FM = {"contract", "reassoc", "nsz", "arcp"}
 _LOG2PI = float(np.log(2.0 * np.pi))
-
-
-@njit(cache=True, fastmath=_FM)
-def _syrk_sub_lower(V, s2, K):
-    """``K -= s2 V^T V`` on the lower triangle of ``K`` (``V`` is ``(q, r)``), four rows of ``V`` per sweep."""
-    q, r = V.shape
-    a = 0
-    while a + 4 <= q:
-        V0 = V[a]
-        V1 = V[a + 1]
-        V2 = V[a + 2]
-        V3 = V[a + 3]
-        for c1 in range(r):
-            w0 = s2 * V0[c1]
-            w1 = s2 * V1[c1]
-            w2 = s2 * V2[c1]
-            w3 = s2 * V3[c1]
-            Kc = K[c1]
-            for c2 in range(c1 + 1):
-                Kc[c2] -= w0 * V0[c2] + w1 * V1[c2] + w2 * V2[c2] + w3 * V3[c2]
-        a += 4
-    while a < q:
-        Va = V[a]
-        for c1 in range(r):
-            w = s2 * Va[c1]
-            Kc = K[c1]
-            for c2 in range(c1 + 1):
-                Kc[c2] -= w * Va[c2]
-        a += 1
-
-
-@njit(cache=True, fastmath=_FM)
-def _dot(A, B, M):
-    acc = 0.0
-    for m in range(M):
-        acc += A[m] * B[m]
-    return acc
-
-
-@njit(cache=True, fastmath=_FM)
-def _grams(ET, RT, M, G, b):
-    """Upper triangle of ``G = ET ET^T`` and ``b = ET RT^T`` over the first ``M`` columns (4 x 2 register blocks)."""
-    q = ET.shape[0]
-    n_o = RT.shape[0]
-    for j in range(0, q, 4):
-        if j + 4 > q:  # remainder rows
-            for jj in range(j, q):
-                for l in range(jj, q):
-                    G[jj, l] = _dot(ET[jj], ET[l], M)
-            break
-        A0 = ET[j]
-        A1 = ET[j + 1]
-        A2 = ET[j + 2]
-        A3 = ET[j + 3]
-        # the 4 x 4 diagonal block
-        for jj in range(j, j + 4):
-            for l in range(jj, j + 4):
-                G[jj, l] = _dot(ET[jj], ET[l], M)
-        l = j + 4
-        while l < q:
-            if l + 2 <= q:
-                B0 = ET[l]
-                B1 = ET[l + 1]
-                s00 = 0.0
-                s01 = 0.0
-                s10 = 0.0
-                s11 = 0.0
-                s20 = 0.0
-                s21 = 0.0
-                s30 = 0.0
-                s31 = 0.0
-                for m in range(M):
-                    b0 = B0[m]
-                    b1 = B1[m]
-                    a0 = A0[m]
-                    a1 = A1[m]
-                    a2 = A2[m]
-                    a3 = A3[m]
-                    s00 += a0 * b0
-                    s01 += a0 * b1
-                    s10 += a1 * b0
-                    s11 += a1 * b1
-                    s20 += a2 * b0
-                    s21 += a2 * b1
-                    s30 += a3 * b0
-                    s31 += a3 * b1
-                G[j, l] = s00
-                G[j, l + 1] = s01
-                G[j + 1, l] = s10
-                G[j + 1, l + 1] = s11
-                G[j + 2, l] = s20
-                G[j + 2, l + 1] = s21
-                G[j + 3, l] = s30
-                G[j + 3, l + 1] = s31
-                l += 2
-            else:
-                for jj in range(j, j + 4):
-                    G[jj, l] = _dot(ET[jj], ET[l], M)
-                l += 1
-    for j in range(0, q - 1, 2):
-        A0 = ET[j]
-        A1 = ET[j + 1]
-        for i in range(n_o):
-            Ri = RT[i]
-            s0 = 0.0
-            s1 = 0.0
-            for m in range(M):
-                rv = Ri[m]
-                s0 += A0[m] * rv
-                s1 += A1[m] * rv
-            b[j, i] = s0
-            b[j + 1, i] = s1
-    if q % 2:
-        for i in range(n_o):
-            b[q - 1, i] = _dot(ET[q - 1], RT[i], M)
 
 
 BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames
 
 
 @njit(cache=True, fastmath=_FM)
-def _statistics(Zh, Rg, z, M, s, ET, RT, G, b, Gb, bb):
-    """``G = H^T H`` (upper triangle), ``b = H^T r`` and ``|r|^2`` of the first ``M`` frames of ``z`` at phase ``s``.
+def _chol_aug(A, p4, Wd):
+    """Upper Cholesky factor R (rows) of A[:p4, :p4] (full symmetric storage; p4 a multiple of 4) with the
+    columns p4..Wd replaced by R^{-T} A[:, p4:Wd]; right-looking, 4-pivot panels.  Returns log det or nan.
+    Entries below the diagonal are left as finite garbage."""
+    logdet = 0.0
+    for p in range(0, p4, 4):
+        for k in range(4):
+            Rk = A[p + k]
+            piv = Rk[p + k]
+            if not piv > 0.0:
+                return np.nan
+            logdet += np.log(piv)
+            inv = 1.0 / np.sqrt(piv)
+            for j in range(p, Wd):
+                Rk[j] *= inv
+            for kk in range(k + 1, 4):
+                Rkk = A[p + kk]
+                l = Rk[p + kk]
+                for j in range(p, Wd):
+                    Rkk[j] -= l * Rk[j]
+        R0 = A[p]; R1 = A[p + 1]; R2 = A[p + 2]; R3 = A[p + 3]
+        for a in range(p + 4, p4, 2):
+            T0 = A[a]; T1 = A[a + 1]
+            l00 = R0[a]; l01 = R1[a]; l02 = R2[a]; l03 = R3[a]
+            l10 = R0[a + 1]; l11 = R1[a + 1]; l12 = R2[a + 1]; l13 = R3[a + 1]
+            js = a - (a % 4)
+            for j in range(js, Wd):
+                r0 = R0[j]; r1 = R1[j]; r2 = R2[j]; r3 = R3[j]
+                T0[j] -= l00 * r0 + l01 * r1 + l02 * r2 + l03 * r3
+                T1[j] -= l10 * r0 + l11 * r1 + l12 * r2 + l13 * r3
+    return logdet
 
-    The frames are taken in blocks of ``ET.shape[1]`` (the rows of ``H`` and ``r`` of one block in ``ET``,
-    ``RT``; the block's sums in ``Gb``, ``bb``), so the memory does not grow with ``M``.
+@njit(cache=True, fastmath=_FM)
+def _syrk_T(VT, L, K):
+    """K[c1, c2] = dot(VT[c1, :L], VT[c2, :L]) for c2 < c1 rounded up to 4 (rows of VT: a multiple of 4)."""
+    r = VT.shape[0]
+    for c1 in range(0, r, 4):
+        A0 = VT[c1]; A1 = VT[c1 + 1]; A2 = VT[c1 + 2]; A3 = VT[c1 + 3]
+        for c2 in range(0, c1 + 4, 2):
+            B0 = VT[c2]; B1 = VT[c2 + 1]
+            s00 = 0.0; s01 = 0.0; s10 = 0.0; s11 = 0.0; s20 = 0.0; s21 = 0.0; s30 = 0.0; s31 = 0.0
+            for m in range(L):
+                b0 = B0[m]; b1 = B1[m]
+                a0 = A0[m]; a1 = A1[m]; a2 = A2[m]; a3 = A3[m]
+                s00 += a0 * b0; s01 += a0 * b1; s10 += a1 * b0; s11 += a1 * b1
+                s20 += a2 * b0; s21 += a2 * b1; s30 += a3 * b0; s31 += a3 * b1
+            K[c1, c2] = s00; K[c1, c2 + 1] = s01
+            K[c1 + 1, c2] = s10; K[c1 + 1, c2 + 1] = s11
+            K[c1 + 2, c2] = s20; K[c1 + 2, c2 + 1] = s21
+            K[c1 + 3, c2] = s30; K[c1 + 3, c2 + 1] = s31
+
+@njit(cache=True, fastmath=_FM)
+def _gram_block(ET, nb, q4, P, G):
+    """G[j, l] += dot(ET[j, :nb], ET[l, :nb]) for j < q4 (blocks of 4 rows), l from the block start to P (pairs)."""
+    for j in range(0, q4, 4):
+        A0 = ET[j]; A1 = ET[j + 1]; A2 = ET[j + 2]; A3 = ET[j + 3]
+        for l in range(j, P, 2):
+            B0 = ET[l]; B1 = ET[l + 1]
+            s00 = 0.0; s01 = 0.0; s10 = 0.0; s11 = 0.0; s20 = 0.0; s21 = 0.0; s30 = 0.0; s31 = 0.0
+            for m in range(nb):
+                b0 = B0[m]; b1 = B1[m]
+                a0 = A0[m]; a1 = A1[m]; a2 = A2[m]; a3 = A3[m]
+                s00 += a0 * b0; s01 += a0 * b1; s10 += a1 * b0; s11 += a1 * b1
+                s20 += a2 * b0; s21 += a2 * b1; s30 += a3 * b0; s31 += a3 * b1
+            G[j, l] += s00; G[j, l + 1] += s01
+            G[j + 1, l] += s10; G[j + 1, l + 1] += s11
+            G[j + 2, l] += s20; G[j + 2, l + 1] += s21
+            G[j + 3, l] += s30; G[j + 3, l + 1] += s31
+
+@njit(cache=True, fastmath=_FM)
+def _stats(Zh, Rg, z, M, s, q4, ET, G):
+    """Statistics of the first ``M`` frames of ``z`` at phase ``s``; returns ``|r|^2``.
+
+    The frames are taken in blocks of ``ET.shape[1]``: rows ``0..q-1`` of ``ET`` hold the rows of ``H``
+    (rows ``q..q4-1`` stay zero), rows ``q4..q4+D_o-1`` the residuals.  ``G`` (``q4 x P``) receives the upper
+    part of ``[H r]^T [H r]`` restricted to its first ``q4`` rows: ``G[:q, :q]`` (upper) ``= H^T H`` and
+    ``G[:q, q4 + i] = H^T r_i``.  Memory does not grow with ``M``.
     """
     K1, q = Zh.shape
     n_steps = K1 - 1
     n_o = Rg.shape[1]
     W = ET.shape[1]
+    P = ET.shape[0]
     step = s / (M - 1) if M > 1 else 0.0
     rr = 0.0
-    for j in range(q):
-        for l in range(q):
+    for j in range(q4):
+        for l in range(P):
             G[j, l] = 0.0
-        for i in range(n_o):
-            b[j, i] = 0.0
     for m0 in range(0, M, W):
         nb = min(W, M - m0)
         for k in range(nb):
             m = m0 + k
             sm = m * step
             if M > 1 and m == M - 1:
-                sm = s  # numpy.linspace sets the end point exactly
+                sm = s
             u = sm * n_steps
             if u < 0.0:
                 u = 0.0
@@ -202,16 +162,10 @@ def _statistics(Zh, Rg, z, M, s, ET, RT, G, b, Gb, bb):
             zm = z[m]
             for i in range(n_o):
                 rv = zm[i] - (wa * R0[i] + a * R1[i])
-                RT[i, k] = rv
+                ET[q4 + i, k] = rv
                 rr += rv * rv
-        _grams(ET, RT, nb, Gb, bb)
-        for j in range(q):
-            for l in range(j, q):
-                G[j, l] += Gb[j, l]
-            for i in range(n_o):
-                b[j, i] += bb[j, i]
+        _gram_block(ET, nb, q4, P, G)
     return rr
-
 
 @njit(cache=True, fastmath=_FM)
 def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
@@ -227,73 +181,83 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     s2 : position noise variance.
     out : (C,) log-likelihoods (output); ``-inf`` where a factorisation failed.
 
-    Workspaces (``O(BLOCK (q + D_o))`` for the statistics, ``O(q n + n^2)`` otherwise) are allocated once per
-    call, independent of ``M``.
+    Workspaces (``O(BLOCK (q + D_o))`` for the statistics, ``O(D_o q n + n^2)`` otherwise) are allocated once
+    per call, independent of ``M``.
     """
     q = Zh.shape[1]
     n_o = Rg.shape[1]
     n = Uh.shape[2]
+    q4 = (q + 3) // 4 * 4
     r = n + 1
-    Mw = BLOCK
-    ET = np.empty((q, Mw))
-    RT = np.empty((n_o, Mw))
-    G = np.empty((q, q))
-    b = np.empty((q, n_o))
-    Gb = np.empty((q, q))
-    bb = np.empty((q, n_o))
-    T = np.empty((q, q))
-    Ub = np.empty((q, r))
-    V = np.empty((q, r))
-    Ka = np.empty((r, r))
-    t = np.empty(n)
-    gam = np.empty(n)
+    r4 = (r + 3) // 4 * 4
+    n4 = (n + 3) // 4 * 4
+    P = q4 + (n_o + 1) // 2 * 2
+    ET = np.zeros((P, BLOCK))
+    G = np.zeros((q4, P))
+    T = np.zeros((q, q))
+    Ub = np.zeros((q, r4))
+    V = np.zeros((q, r4))
+    VT = np.zeros((r4, n_o * q))
+    Kacc = np.zeros((r4, r4))
+    F = np.zeros((n4, n4 + 4))
     log_s2 = np.log(s2)
     for ci in range(s_values.shape[0]):
-        rr = _statistics(Zh, Rg, z, M, s_values[ci], ET, RT, G, b, Gb, bb)
-        for a in range(n):
-            for c in range(a + 1):
-                Ka[a, c] = K0[a, c]
-        for c in range(r):
-            Ka[n, c] = 0.0
+        rr = _stats(Zh, Rg, z, M, s_values[ci], q4, ET, G)
         ld_T = 0.0
         ok = True
         for i in range(n_o):
             si = sq[i]
+            Ui = Uh[i]
             for a in range(q):
                 sa = si[a]
                 Ta = T[a]
                 for c in range(a + 1):
-                    Ta[c] = sa * G[c, a] * si[c]  # G holds the upper triangle
+                    Ta[c] = sa * G[c, a] * si[c]
                 Ta[a] += s2
             ld = _chol_inplace(T, q)
             if not np.isfinite(ld):
                 ok = False
                 break
             ld_T += ld
-            Ui = Uh[i]
             for a in range(q):
                 Ua = Ui[a]
                 Uba = Ub[a]
                 for c in range(n):
                     Uba[c] = Ua[c]
-                Uba[n] = si[a] * b[a, i]
+                Uba[n] = si[a] * G[a, q4 + i]
             _forward_rows(T, Ub, V)
-            _syrk_sub_lower(V, s2, Ka)
+            off = i * q
+            for a in range(q):
+                Va = V[a]
+                for c in range(r4):
+                    VT[c, off + a] = Va[c]
         if not ok:
             out[ci] = -np.inf
             continue
-        # Ka[n, :n] = -s2 t,  Ka[n, n] = -s2 sum_i c_i^T T_i^{-1} c_i
-        for c in range(n):
-            t[c] = -Ka[n, c] / s2
-        cTc = -Ka[n, n] / s2
-        ld_K = _chol_inplace(Ka, n)
+        _syrk_T(VT, n_o * q, Kacc)
+        for a in range(n):
+            Fa = F[a]
+            K0a = K0[a]
+            for c in range(a + 1):
+                Fa[c] = K0a[c] - s2 * Kacc[a, c]
+            for c in range(a + 1, n):
+                Fa[c] = K0a[c] - s2 * Kacc[c, a]
+            for c in range(n, n4 + 4):
+                Fa[c] = 0.0
+            Fa[n4] = Kacc[n, a]
+        for a in range(n, n4):
+            Fa = F[a]
+            for c in range(n4 + 4):
+                Fa[c] = 0.0
+            Fa[a] = 1.0
+        cTc = Kacc[n, n]
+        ld_K = _chol_aug(F, n4, n4 + 4)
         if not np.isfinite(ld_K):
             out[ci] = -np.inf
             continue
-        _chol_solve_vec(Ka, n, t, gam)
         tKt = 0.0
-        for c in range(n):
-            tKt += t[c] * gam[c]
+        for a in range(n4):
+            tKt += F[a, n4] * F[a, n4]
         N = M * n_o
         logdet = n_o * (M - q) * log_s2 + ld_T + ld_K
         quad = (rr - cTc) / s2 - tKt

@@ -29,8 +29,8 @@ PAPER = dict(observation="forcing", sigma2="auto", phase_method="dtw")
 CONFIGS = {
     "paper, reference=mean": dict(PAPER, reference="mean"),
     "paper, reference=demo 0": dict(PAPER, reference=0),
-    "defaults (position, cv), DTW phase": dict(phase_method="dtw"),
-    "defaults, likelihood phase": dict(phase_method="likelihood"),
+    "positions, sigma2=cv, DTW phase": dict(phase_method="dtw"),
+    "library defaults (positions, sigma2=cv, likelihood phase)": dict(),
 }
 
 

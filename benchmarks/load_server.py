@@ -6,8 +6,8 @@ connection per session, each sending a frame every 10 ms on its own schedule and
 frame-sent -> prediction-received).  Reports, per N: median and p99 latency, frames dropped (sent
 without a prediction back, or answered with an error), and the server's CPU use (from /proc).
 
-    python benchmarks/load_server.py                   # N = 1, 10, 50, 100; 5 s each; writes SERVER_RESULTS.md
-    python benchmarks/load_server.py --sessions 50 --seconds 10 --workers 2
+    python benchmarks/load_server.py                   # N = 1, 10, 20, 30, 50, 100; 5 s each; writes SERVER_RESULTS.md
+    python benchmarks/load_server.py --sessions 50 --seconds 10 --modes procs:2 --phase-method dtw
 
 Traffic goes to 127.0.0.1 only.
 """
@@ -28,12 +28,13 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 
-def _fit_model(path: Path, n_train: int) -> None:
+def _fit_model(path: Path, n_train: int, phase_method: str | None = None) -> None:
     import interprim as ip
     from interprim.sim import highfive_split
 
     train, test = highfive_split(n_train, 1, seed=0, progress=False)
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15).fit(train.demos, dt=train.dt)
+    kw = {"phase_method": phase_method} if phase_method else {}  # None: the library's default
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, **kw).fit(train.demos, dt=train.dt)
     m.save(str(path))
     import numpy as np
 
@@ -59,18 +60,21 @@ class _StubPrediction:
 
 class _StubModel:
     observed_dofs_, controlled_dofs_, n_dofs_, dt_, mean_duration_ = [0, 1], [2, 3, 4], 5, 0.01, 1.5
+    _pred = None
 
     def stream(self, robot_state=None):
         return self
 
     def update(self, frame, need_cov=True):
-        return _StubPrediction(len(frame))
+        if self._pred is None:  # one prediction, built once: the stub costs ~nothing per frame
+            type(self)._pred = _StubPrediction(len(frame))
+        return self._pred
 
     def reset(self):
         pass
 
 
-def _server_main(model_path, port_q, mode, ready_evt, stop_evt):
+def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="auto"):
     import logging
 
     logging.basicConfig(level=logging.WARNING)
@@ -83,7 +87,7 @@ def _server_main(model_path, port_q, mode, ready_evt, stop_evt):
         models = load_models([model_path])
     workers, processes = mode
     cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, processes=processes, max_rate_hz=1000,
-                       rate_burst=100)
+                       rate_burst=100, loop=loop)
 
     async def main():
         srv = InterprimServer(models, cfg)
@@ -94,7 +98,9 @@ def _server_main(model_path, port_q, mode, ready_evt, stop_evt):
             await asyncio.sleep(0.1)
         await srv.stop()
 
-    asyncio.run(main())
+    from interprim.server.app import run
+
+    run(main(), loop)
 
 
 def _stat(pid: int):
@@ -131,7 +137,7 @@ async def _open_session(url, points, std):
 async def _reader(ws, st, loop, n_total):
     while st["got"] + st["errors"] < n_total:
         raw = await ws.recv()
-        t = loop.time()
+        t = time.perf_counter()
         # Replies start with {"type":"...","seq":N,...}: read the head only, so that the client's own
         # CPU (JSON decoding of trajectories) does not dominate the measurement.
         head = raw[:48]
@@ -144,61 +150,211 @@ async def _reader(ws, st, loop, n_total):
             st["errors"] += 1
 
 
-def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0):
+def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0, client="raw", loop="auto"):
     """All sessions in one asyncio process: connect them all first, then one scheduler sends each
     session's frame every 1/rate_hz s, sessions staggered evenly over the period."""
     import heapq
 
+    from interprim.server.app import run
     from interprim.server.protocol import encode_binary_frame
 
     payloads = [encode_binary_frame(f) if binary else json.dumps({"type": "frame", "frame": list(f)}) for f in frames]
     reset = json.dumps({"type": "reset"})
 
     async def main():
-        loop = asyncio.get_running_loop()
-        # the first `heavy` sessions ask for 500 points with the std band: much more work per frame
-        wss = await asyncio.gather(*[_open_session(url, 500 if i < heavy else points, True if i < heavy else std)
-                                     for i in range(n)])
+        loop_ = asyncio.get_running_loop()
         n_total = int(seconds * rate_hz)
         states = [{"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
-        readers = [asyncio.create_task(_reader(ws, st, loop, n_total)) for ws, st in zip(wss, states)]
+        # the first `heavy` sessions ask for 500 points with the std band: much more work per frame
+        opts = [(500 if i < heavy else points, True if i < heavy else std) for i in range(n)]
+        if client == "raw":
+            conns = await asyncio.gather(*[_RawSession.open(url, st, n_total, *o) for st, o in zip(states, opts)])
+            readers = [c.done for c in conns]
+            frame_msgs = [_RawSession.encode(pl) for pl in payloads]
+            reset_msg = _RawSession.encode(reset)
+
+            def sender(c):
+                w = c.transport.write
+                return lambda data: w(data)
+
+            senders = [sender(c) for c in conns]
+        else:
+            conns = await asyncio.gather(*[_open_session(url, *o) for o in opts])
+            readers = [asyncio.create_task(_reader(ws, st, loop_, n_total)) for ws, st in zip(conns, states)]
+            frame_msgs, reset_msg = payloads, reset
+            senders = [ws.send for ws in conns]
         q.put("start")
-        t0 = loop.time() + 0.2
+        # time.perf_counter, not loop.time(): uvloop's clock and timers have a 1 ms resolution
+        clock = time.perf_counter
+        t0 = clock() + 0.2
         period = 1.0 / rate_hz
         heap = [(t0 + (i / n) * period, i, 0) for i in range(n)]
         heapq.heapify(heap)
+        is_async = client != "raw"
         while heap:
             when, i, k = heap[0]
-            delay = when - loop.time()
+            delay = when - clock()
             if delay > 0:
                 await asyncio.sleep(delay)
-            now = loop.time()
+            now = clock() + 0.0005  # a frame due within 0.5 ms goes now (timers may wake up early)
             while heap and heap[0][0] <= now:
                 when, i, k = heapq.heappop(heap)
-                ws, st = wss[i], states[i]
-                if k and k % len(payloads) == 0:
-                    await ws.send(reset)  # a new interaction; control replies are not counted
-                st["sent_at"][k + 1] = loop.time()
-                await ws.send(payloads[k % len(payloads)])
+                send, st = senders[i], states[i]
+                if k and k % len(frame_msgs) == 0:
+                    r = send(reset_msg)  # a new interaction; control replies are not counted
+                    if is_async:
+                        await r
+                st["sent_at"][k + 1] = clock()
+                r = send(frame_msgs[k % len(frame_msgs)])
+                if is_async:
+                    await r
                 if k + 1 < n_total:
                     heapq.heappush(heap, (t0 + (k + 1) * period + (i / n) * period, i, k + 1))
         done, pending = await asyncio.wait(readers, timeout=5.0)
         for t in pending:
             t.cancel()
-        await asyncio.gather(*[ws.close() for ws in wss], return_exceptions=True)
+        if client == "raw":
+            await asyncio.gather(*[c.close() for c in conns], return_exceptions=True)
+        else:
+            await asyncio.gather(*[ws.close() for ws in conns], return_exceptions=True)
         return [{"lat": st["lat"], "recv": st["recv"], "sent": n_total, "errors": st["errors"],
                  "missing": n_total - st["got"] - st["errors"]} for st in states]
 
     import resource
 
-    out = asyncio.run(main())
+    out = run(main(), loop)
     ru = resource.getrusage(resource.RUSAGE_SELF)
     q.put((out, ru.ru_utime + ru.ru_stime))
 
 
-def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0):
+class _RawSession(asyncio.Protocol):
+    """A minimal WebSocket client (RFC 6455, text/binary frames of one fragment, no extensions) so
+    that the load client costs little CPU next to the server on the same cores: client frames are
+    encoded (and masked) once per distinct payload, replies are read by their head only (``type`` and
+    ``seq`` come first in a prediction) without decoding the JSON.  One fixed mask key per process:
+    fine for a loopback benchmark, not for a real client (RFC 6455 wants a fresh key per frame)."""
+
+    MASK = os.urandom(4)
+
+    def __init__(self, st, n_total):
+        loop = asyncio.get_running_loop()
+        self.st, self.n_total, self.loop = st, n_total, loop
+        self.buf = bytearray()
+        self.handshaken = loop.create_future()
+        self.done = loop.create_future()
+        self.closed = loop.create_future()
+        self.control = asyncio.Queue()
+        self.transport = None
+
+    @classmethod
+    def encode(cls, payload, opcode=None) -> bytes:
+        data = payload.encode() if isinstance(payload, str) else bytes(payload)
+        if opcode is None:
+            opcode = 1 if isinstance(payload, str) else 2
+        n = len(data)
+        head = bytes([0x80 | opcode])
+        if n < 126:
+            head += bytes([0x80 | n])
+        elif n < 65536:
+            head += bytes([0x80 | 126]) + n.to_bytes(2, "big")
+        else:
+            head += bytes([0x80 | 127]) + n.to_bytes(8, "big")
+        m = cls.MASK
+        return head + m + bytes(b ^ m[i % 4] for i, b in enumerate(data))
+
+    @classmethod
+    async def open(cls, url, st, n_total, points, std):
+        import base64
+        from urllib.parse import urlsplit
+
+        u = urlsplit(url)
+        loop = asyncio.get_running_loop()
+        _, self = await loop.create_connection(lambda: cls(st, n_total), u.hostname, u.port)
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.transport.write(
+            f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
+        await self.handshaken
+        self.transport.write(cls.encode(json.dumps({"type": "hello", "version": 1})))
+        await self.control.get()
+        self.transport.write(cls.encode(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std})))
+        reply = await self.control.get()
+        assert reply.startswith(b'{"type":"opened"'), reply[:200]
+        return self
+
+    def connection_made(self, transport):
+        self.transport = transport
+
+    def data_received(self, data):
+        t = time.perf_counter()
+        buf = self.buf
+        buf += data
+        if not self.handshaken.done():
+            end = buf.find(b"\r\n\r\n")
+            if end < 0:
+                return
+            if not buf.startswith(b"HTTP/1.1 101"):
+                self.handshaken.set_exception(RuntimeError(bytes(buf[:200]).decode(errors="replace")))
+                return
+            del buf[:end + 4]
+            self.handshaken.set_result(None)
+        st = self.st
+        pos, size = 0, len(buf)
+        while size - pos >= 2:
+            b0, n = buf[pos], buf[pos + 1] & 0x7F
+            h = 2
+            if n == 126:
+                if size - pos < 4:
+                    break
+                n, h = int.from_bytes(buf[pos + 2:pos + 4], "big"), 4
+            elif n == 127:
+                if size - pos < 10:
+                    break
+                n, h = int.from_bytes(buf[pos + 2:pos + 10], "big"), 10
+            if size - pos < h + n:
+                break
+            start = pos + h
+            pos = start + n
+            op = b0 & 0x0F
+            if op == 1 or op == 2:
+                if buf.startswith(b'{"type":"prediction","seq":', start):
+                    seq = int(buf[start + 27:start + 48].split(b",", 1)[0])
+                    st["lat"].append(t - st["sent_at"].pop(seq))
+                    st["recv"].append(t)
+                    st["got"] += 1
+                elif buf.startswith(b'{"type":"error"', start):
+                    st["errors"] += 1
+                else:
+                    self.control.put_nowait(bytes(buf[start:pos]))
+                if st["got"] + st["errors"] >= self.n_total and not self.done.done():
+                    self.done.set_result(None)
+            elif op == 9:  # ping -> pong
+                self.transport.write(self.encode(bytes(buf[start:pos]), opcode=10))
+            elif op == 8:  # close: the server's answer to ours, or its own
+                if not self.closed.done():
+                    self.closed.set_result(bytes(buf[start:pos]))
+        del buf[:pos]
+
+    def connection_lost(self, exc):
+        if not self.handshaken.done():
+            self.handshaken.set_exception(ConnectionError("connection lost during the handshake"))
+        for f in (self.done, self.closed):  # unanswered frames are counted as missing
+            if not f.done():
+                f.set_result(None)
+
+    async def close(self):
+        self.transport.write(self.encode((1000).to_bytes(2, "big"), opcode=8))
+        try:
+            await asyncio.wait_for(asyncio.shield(self.closed), 2.0)
+        except Exception:
+            pass
+        self.transport.close()
+
+
+def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, client="raw", loop="auto"):
     q = mp.Queue()
-    p = mp.Process(target=_client_main, args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy))
+    p = mp.Process(target=_client_main,
+                   args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy, client, loop))
     p.start()
     assert q.get(timeout=120) == "start"
     time.sleep(0.5)  # the scheduler starts 0.2 s after "start"
@@ -223,7 +379,8 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0):
         "max_ms": lat[-1] * 1e3 if lat else float("nan"),
         "dropped": dropped,
         "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
-        "client_cpu_pct": 100.0 * client_cpu / (t1 - t0),
+        # the client's whole run (connect, stream, wait for the last replies) over the streaming time
+        "client_cpu_pct": 100.0 * client_cpu / seconds,
         "loadavg": os.getloadavg()[0],
         # CPU time the server spent per answered frame: independent of other load on the machine
         "cpu_ms_per_frame": 1e3 * (cpu1 - cpu0) / max(1, sum(t0 <= x <= t1 for r in res for x in r["recv"])),
@@ -232,7 +389,7 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sessions", type=int, nargs="*", default=[1, 10, 50, 100])
+    ap.add_argument("--sessions", type=int, nargs="*", default=[1, 10, 20, 30, 50, 100])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--modes", nargs="*", default=["inline", "procs:2"],
                     help="server compute modes: inline, threads:N (thread pool), procs:N (worker processes)")
@@ -247,6 +404,13 @@ def main(argv=None):
                     help="this many of the N sessions ask for 500 points + std band (noisy neighbours); "
                          "latencies are then reported for the other sessions")
     ap.add_argument("--append", action="store_true", help="append rows to the existing table")
+    ap.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
+                    help="event loop of the server and of the client (auto: uvloop if installed)")
+    ap.add_argument("--client", default="raw", choices=["raw", "websockets"],
+                    help="load client: raw = minimal WebSocket protocol (cheap, leaves the CPU to the server); "
+                         "websockets = the websockets library's client")
+    ap.add_argument("--phase-method", default=None, choices=["likelihood", "dtw"],
+                    help="phase estimator of the served model (default: the library's default)")
     args = ap.parse_args(argv)
 
     import numpy as np
@@ -255,7 +419,7 @@ def main(argv=None):
     tmp.mkdir(parents=True, exist_ok=True)
     model_path = tmp / "highfive.npz"
     print("fitting the high-five model ...", flush=True)
-    _fit_model(model_path, 30)
+    _fit_model(model_path, 30, args.phase_method)
     frames = np.load(str(model_path.with_suffix(".test.npy"))).tolist()
 
     rows = []
@@ -265,15 +429,21 @@ def main(argv=None):
         ctx = mp.get_context("spawn")
         port_q, ready, stop = ctx.Queue(), ctx.Event(), ctx.Event()
         srv = ctx.Process(target=_server_main,
-                          args=("stub" if args.stub else str(model_path), port_q, mode, ready, stop))
+                          args=("stub" if args.stub else str(model_path), port_q, mode, ready, stop, args.loop))
         srv.start()
         ready.wait(180)
         url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
         try:
             for n in args.sessions:
-                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std, args.heavy)
+                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std, args.heavy,
+                            args.client, args.loop)
                 r["mode"] = label + (" (stub model)" if args.stub else "") + (
-                    f" + {args.heavy} heavy session(s)" if args.heavy else "")
+                    f" + {args.heavy} heavy session(s)" if args.heavy else "") + (
+                    f", {args.phase_method} phase" if args.phase_method else "") + (
+                    ", binary frames" if args.binary else "") + (
+                    f", {args.points} points" if args.points != 50 else "") + (", std band" if args.std else "")
+                r["loop"] = _loop_name(args.loop)
+                r["client"] = args.client
                 rows.append(r)
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
@@ -290,6 +460,16 @@ def main(argv=None):
     if not args.no_write:
         write_results(Path(args.out), rows, args, append=args.append)
     return rows
+
+
+def _loop_name(kind: str) -> str:
+    from interprim.server.app import new_event_loop
+
+    ev = new_event_loop(kind)
+    try:
+        return "uvloop" if type(ev).__module__.startswith("uvloop") else "asyncio"
+    finally:
+        ev.close()
 
 
 def write_results(path: Path, rows, args, append=False):
@@ -310,13 +490,14 @@ def write_results(path: Path, rows, args, append=False):
         f"Machine: {os.cpu_count()} CPUs, {platform.platform()}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, websockets {websockets.__version__}.",
         "",
-        "| server compute | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | server CPU ms/frame | machine load (1 min) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| server compute | loop | client | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | server CPU ms/frame | client CPU % | machine load (1 min) |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
-            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['cpu_ms_per_frame']:.3f} | {r['loadavg']:.1f} |"
+            f"| {r['mode']} | {r['loop']} | {r['client']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
+            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['cpu_ms_per_frame']:.3f} | "
+            f"{r['client_cpu_pct']:.0f} | {r['loadavg']:.1f} |"
         )
     lines.append("")
     if append and path.exists():

@@ -745,3 +745,113 @@ def test_garbage_connections_are_logged(server, caplog):
             pass
         s.close()
         assert wait_until(lambda: "bad HTTP request" in caplog.text or "no complete handshake" in caplog.text)
+
+
+def _reply_text(op, frames):
+    import re
+
+    from interprim.server.app import compute_prediction
+
+    return [re.sub(r',"compute_ms":[0-9.]+', "", compute_prediction(op, f, k + 1, 0.5 * k if k % 2 else None))
+            for k, f in enumerate(frames)]
+
+
+@pytest.mark.parametrize("std,dofs", [(False, "controlled"), (True, "all")])
+def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, dofs):
+    """compute_prediction's cached rollout (mean) and its text head give the message that
+    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their precision."""
+    from interprim.server import app
+
+    e = models["pair"]
+    cols = e.controlled_dofs if dofs == "controlled" else list(range(e.n_dofs))
+    frames = test_demo[:25, :2]
+    op = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+    fast = [json.loads(t) for t in _reply_text(op, frames)]
+    assert op.heads[0][3].ok  # the cached rollout was checked against Prediction.trajectory and is used
+    ref_stream = e.model.stream()
+    for k, (f, msg) in enumerate(zip(frames, fast)):
+        p = ref_stream.update(f)
+        assert list(msg)[:2] == ["type", "seq"] and msg["seq"] == k + 1 and msg["model"] == "pair"
+        assert msg["columns"] == cols and (msg.get("t") == (0.5 * k if k % 2 else None))
+        for key in ("phase", "x", "speed", "duration", "log_likelihood"):
+            assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(msg["mean"], p.trajectory(17)[:, cols], rtol=2e-7, atol=1e-7)
+        np.testing.assert_allclose(msg["goal"], p.goal[cols], rtol=2e-7, atol=1e-7)
+        if std:
+            np.testing.assert_allclose(msg["std"], p.std(17)[:, cols], rtol=2e-7, atol=1e-7)
+    old = app._FORCE_PRINTF
+    app._FORCE_PRINTF = True  # the encoder used without orjson
+    try:
+        op2 = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+        slow = [json.loads(t) for t in _reply_text(op2, frames)]
+    finally:
+        app._FORCE_PRINTF = old
+    for a, b in zip(fast, slow):
+        assert a.keys() == b.keys()
+        np.testing.assert_allclose(a["mean"], b["mean"], rtol=1e-6, atol=1e-7)  # %.7g: 5e-7 relative
+
+
+def test_nonfinite_predictions_are_never_encoded():
+    from interprim.server import app
+
+    for force in (False, True):
+        old = app._FORCE_PRINTF
+        app._FORCE_PRINTF = force
+        try:
+            for bad in (np.nan, np.inf, -np.inf):
+                with pytest.raises(FloatingPointError):
+                    app._json_array(np.array([[0.0, 1.0], [bad, 2.0]]))
+            assert json.loads(app._json_array(np.array([1e-5, -2.5, 0.0]))) == pytest.approx([1e-5, -2.5, 0.0])
+        finally:
+            app._FORCE_PRINTF = old
+
+
+@pytest.mark.parametrize("kind", ["asyncio", "auto"])
+def test_event_loop_choice(models, test_demo, kind):
+    from interprim.server.app import new_event_loop
+
+    with pytest.raises(ValueError):
+        ServerConfig(loop="trio").validate()
+    srv = InterprimServer({"pair": models["pair"]}, ServerConfig(port=0, loop=kind))
+    with ServerThread(srv) as st, Client(st.ws_url) as c:
+        c.open("pair", points=5)
+        assert c.frame(test_demo[0, :2])["type"] == "prediction"
+        if kind == "asyncio":
+            assert type(st.loop).__module__.startswith("asyncio")
+    ev = new_event_loop("auto")
+    try:
+        uv = pytest.importorskip("uvloop") if kind == "auto" else None
+        if uv is not None:
+            assert type(ev).__module__.startswith("uvloop")
+    finally:
+        ev.close()
+
+
+def test_inline_lane_serves_at_once_only_sessions_not_ahead():
+    """The inline lane's shortcut (compute in the session's own task) is taken only while no frame is
+    waiting and the session has not used more compute than the others; else the frame is queued."""
+    import asyncio
+
+    from interprim.server.app import _Lane, _Session
+
+    def run(job):
+        name, cost = job
+        time.sleep(cost)
+        return name
+
+    async def go():
+        lane = _Lane(run, sync=True)
+        heavy = _Session(1, None, "a", asyncio.Queue(), None)
+        light = _Session(2, None, "b", asyncio.Queue(), None)
+        assert lane.run_now(heavy, ("heavy-1", 0.02)) == "heavy-1"
+        assert lane.run_now(heavy, ("heavy-2", 0.0)) is None  # 20 ms ahead: must queue
+        f2 = lane.submit(heavy, ("heavy-2", 0.0))
+        assert lane.run_now(light, ("light-1", 0.0)) is None  # a frame is waiting: queue behind it (fair order)
+        f3 = lane.submit(light, ("light-1", 0.0))
+        order = []
+        for f in asyncio.as_completed([f2, f3]):
+            order.append(await f)
+        assert order == ["light-1", "heavy-2"]  # the lighter session first
+        assert lane.run_now(light, ("light-2", 0.0)) == "light-2"
+
+    asyncio.run(go())

@@ -73,7 +73,7 @@ def _describe(v) -> str:
 def parse_text(data: str) -> dict:
     """Parse one text message into a dict with a valid ``type``."""
     try:
-        msg = json.loads(data, parse_constant=_reject_constant)
+        msg = _DECODER.decode(data)
     except ProtocolError:
         raise
     except (ValueError, RecursionError) as exc:
@@ -93,6 +93,9 @@ def parse_text(data: str) -> dict:
 def _reject_constant(name: str):
     # json.loads accepts the non-standard tokens NaN, Infinity, -Infinity; the protocol does not.
     raise ProtocolError("bad_json", f"message is not valid JSON: non-standard constant {name} (use finite numbers)")
+
+
+_DECODER = json.JSONDecoder(parse_constant=_reject_constant)  # one decoder: json.loads(...) with options builds one per call
 
 
 def check_hello(msg: dict) -> dict:
@@ -180,6 +183,12 @@ def check_frame(msg: dict, n: int) -> tuple[np.ndarray, float | None]:
         raise ProtocolError("bad_frame", f"frame.frame must be a list of {n} numbers, got {_describe(frame)}")
     if len(frame) != n:
         raise ProtocolError("bad_frame", f"frame.frame has {len(frame)} values; this model observes {n} DoFs")
+    t = msg.get("t")
+    if all(type(v) is float for v in frame) and (t is None or type(t) is float):
+        # fast path (the usual frame): floats from JSON; NaN/inf cannot come out of the parser
+        # (parse_constant rejects them) but 1e999 parses as inf, so still check
+        if all(map(math.isfinite, frame)) and (t is None or math.isfinite(t)):
+            return np.array(frame, dtype=np.float64), t
     for i, v in enumerate(frame):
         if not _is_number(v):
             raise ProtocolError("bad_frame", f"frame.frame[{i}] must be a number, got {_describe(v)}")
@@ -189,7 +198,6 @@ def check_frame(msg: dict, n: int) -> tuple[np.ndarray, float | None]:
         raise ProtocolError("bad_frame", "frame.frame has an integer too large for a float64") from None
     if not np.all(np.isfinite(arr)):
         raise ProtocolError("bad_frame", f"frame.frame contains NaN or inf: {_describe(frame)}")
-    t = msg.get("t")
     if t is not None and not (_is_number(t) and math.isfinite(t)):
         raise ProtocolError("bad_message", f"frame.t must be a finite number (echoed back), got {_describe(t)}")
     return arr, t

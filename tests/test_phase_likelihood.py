@@ -216,21 +216,162 @@ def _reference_track(model, z, s_prev, m_prev, n_candidates=7, spread=0.15):
     return float(cand[int(np.argmax(sc))])
 
 
+def _reference_lattice_track(model, frames_latent, n_candidates=7, spread=0.15, v0_override=None):
+    """The stream's tracker (speeds on a lattice) with one reference evaluation per candidate."""
+    s2 = PL.phase_noise(model)
+    nh, dlog = (n_candidates - 1) // 2, 2 * spread / (n_candidates - 1)
+    out, v0, kc = [], None, 0
+    for k in range(frames_latent.shape[0]):
+        M = k + 1
+        z = frames_latent[:M]
+        if M < 2:
+            out.append(PL._S_MIN)
+            continue
+        if v0 is None:
+            s = _reference_track(model, z, None, 0)
+            v0, kc = (s / (M - 1) if v0_override is None else v0_override), 0
+            out.append(s)
+            continue
+        js, cand = [], []
+        for j in range(kc - nh, kc + nh + 1):
+            s = float(np.clip(v0 * np.exp(dlog * j) * (M - 1), PL._S_MIN, 1.0))
+            if cand and cand[-1] == s:
+                if s == PL._S_MIN:
+                    js[-1] = j
+                continue
+            js.append(j)
+            cand.append(s)
+        sc = [PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL._log_speed_prior(model, M, s))
+              for s in cand]
+        i = int(np.argmax(sc))
+        kc = js[i]
+        out.append(cand[i])
+    return np.array(out)
+
+
+def _paused(frames, pre=20, post=40):
+    """Frames held still before and after the movement (the tracker's phase clips at _S_MIN and at 1)."""
+    return np.concatenate([np.repeat(frames[:1], pre, 0), frames, np.repeat(frames[-1:], post, 0)])
+
+
 @pytest.mark.parametrize("observation", ["position", "forcing"])
 def test_stream_phase_equals_reference_track_phase(observation):
+    """The stream's phases equal the lattice tracker evaluated candidate by candidate, and (no clipping here)
+    the previous ``track_phase`` chain, whose chosen speeds lie on the same lattice."""
     model = _small_model(observation, None, "shrinkage")
     assert PL.warmup()
     frames = _demos(1, seed=11)[0][:, model.observed_dofs_]
     st = model.stream()
-    N1 = model.reference_.shape[0] - 1
-    s_ref = None
+    got = np.array([st.update(f).normalised_time for f in frames])
+    ref = _reference_lattice_track(model, st._buf[: frames.shape[0]])
+    np.testing.assert_allclose(got[1:], ref[1:], rtol=0, atol=1e-12)
+    s_old = None
     for k in range(frames.shape[0]):
-        pred = st.update(frames[k])
-        z = st._buf[: k + 1]
-        s_ref = _reference_track(model, z, s_ref if k else None, k)
+        s_old = _reference_track(model, st._buf[: k + 1], s_old if k else None, k)
         if k >= 1:
-            assert pred.normalised_time == pytest.approx(s_ref, abs=1e-12)
-            assert st._s_prev * N1 == pytest.approx(s_ref * N1, abs=1e-9)
+            assert got[k] == pytest.approx(s_old, abs=1e-12)
+    N1 = model.reference_.shape[0] - 1
+    assert st._s_prev * N1 == pytest.approx(ref[-1] * N1, abs=1e-9)
+
+
+def test_stream_phase_with_clipping_equals_reference():
+    model = _small_model("position", None, "shrinkage")
+    assert PL.warmup()
+    frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
+    st = model.stream()
+    got = np.array([st.update(f).normalised_time for f in frames])
+    assert np.any(got == 1.0)
+    ref = _reference_lattice_track(model, st._buf[: frames.shape[0]])
+    np.testing.assert_allclose(got[1:], ref[1:], rtol=0, atol=1e-12)
+    # a slow anchor speed: candidates below _S_MIN for the first frames (merged into one at _S_MIN)
+    tr = PL._Tracker(model)
+    z = st._buf[: frames.shape[0]]
+    got = [tr.step(z[:1]), tr.step(z[:2])]
+    tr.v0 = 0.0015
+    got += [tr.step(z[:M]) for M in range(3, 80)]
+    ref = _reference_lattice_track(model, z[:79], v0_override=0.0015)
+    assert np.sum(ref == PL._S_MIN) > 3
+    np.testing.assert_allclose(got[1:], ref[1:], rtol=0, atol=1e-12)
+
+
+def _slot_errors(tr, z):
+    """Largest relative differences between the tracker's slots (extended frame by frame) and a recomputation
+    from scratch at the same lattice speeds: statistics, log-likelihood (same rows), log-likelihood of the
+    batch kernel at ``s = v (M - 1)``."""
+    from interprim import _phase_kernels as PK
+
+    M = z.shape[0]
+    fs, b = tr._fs, tr._buf
+    s2 = PL.phase_noise(tr.model)
+    tmp = PL._track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+    q, n_o = fs.q, fs.n_o
+    err = np.zeros(3)
+    live = np.nonzero((b[0] != PL._SLOT_FREE) & (b[1] == M))[0]
+    for k in live:
+        v = tr.v0 * np.exp(tr.dlog * b[0][k])
+        G = tmp[3][0]
+        q4 = G.shape[0]
+        rr = PK._stats_lattice(fs.Zh, tr.Rg, z, M, v * (fs.Zh.shape[0] - 1), q4, tmp[8], G, tmp[15][0], tmp[15][1])
+        ld = PK._dense_full(G, q4, fs.sq, fs.Uh, fs.K0, s2, tmp[5][0], tmp[6][0], *tmp[9:14])
+        ws = (tmp[14], tmp[15][6], tmp[15][7], tmp[15][8])
+        ll_f = PK._eval_slot(G, rr, ld, M, q4, fs.sq, fs.Uh, s2, tmp[5][0], tmp[6][0], *ws)
+        ll_i = PK._eval_slot(b[3][k], b[4][k], b[7][k], M, q4, fs.sq, fs.Uh, s2, b[5][k], b[6][k], *ws)
+        ll_b = PL._KERNEL[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
+        Gi, Gf = np.triu(b[3][k][:q, :q]), np.triu(G[:q, :q])
+        Bi, Bf = b[3][k][:q, q4:q4 + n_o], G[:q, q4:q4 + n_o]
+        err[0] = max(err[0], np.abs(Gi - Gf).max() / np.abs(Gf).max(), np.abs(Bi - Bf).max() / np.abs(Bf).max(),
+                     abs(b[4][k] - rr) / rr)
+        err[1] = max(err[1], abs(ll_i - ll_f) / abs(ll_f))
+        err[2] = max(err[2], abs(ll_i - ll_b) / abs(ll_b))
+    return err, live.size
+
+
+@pytest.mark.parametrize("kw", [{}, {"pca_components": 2}, {"smoothing_window": 7},
+                                {"pca_components": 2, "smoothing_window": 7, "observation": "forcing"}])
+def test_stream_incremental_statistics_equal_recomputation(kw):
+    """Each lattice point's statistics and factors, extended by one frame at a time (and caught up after
+    leaving the candidate window), equal a recomputation from all frames."""
+    model = ip.InteractionPrimitive(observed_dofs=[0, 1, 2, 3], n_basis=8, sigma2=1e-2, phase_method="likelihood",
+                                    **kw).fit(_demos(12), dt=0.01)
+    assert PL.warmup()
+    frames = _paused(_demos(1, seed=11)[0], 10, 20)[:, model.observed_dofs_]
+    st = model.stream()
+    worst, n_checked = np.zeros(3), 0
+    for k in range(frames.shape[0]):
+        st.update(frames[k])
+        if k >= 2:
+            e, c = _slot_errors(st._tracker, st._buf[: k + 1])
+            worst = np.maximum(worst, e)
+            n_checked += c
+    assert n_checked > 5 * frames.shape[0]
+    assert worst[0] < 1e-12
+    assert worst[1] < 1e-10
+    assert worst[2] < 1e-10
+
+
+def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
+    model = _small_model("position", 2, "shrinkage")
+    assert PL.warmup()
+    frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
+    st = model.stream()
+    got = np.array([st.update(f).normalised_time for f in frames])
+    st.reset()
+    again = np.array([st.update(f).normalised_time for f in frames[:50]])
+    np.testing.assert_array_equal(again, got[:50])
+    with monkeypatch.context() as mp:  # no compiled kernel: the same candidates scored by numpy
+        mp.setattr(PL, "_kernel", lambda block=False: None)
+        st.reset()
+        num = np.array([st.update(f).normalised_time for f in frames])
+    np.testing.assert_allclose(num, got, rtol=0, atol=1e-12)
+    st2 = model.stream()  # kernel back mid-stream (numpy first): the slots start afresh
+    for k, f in enumerate(frames):
+        if k < 40:
+            with monkeypatch.context() as mp:
+                mp.setattr(PL, "_kernel", lambda block=False: None)
+                p = st2.update(f)
+        else:
+            p = st2.update(f)
+        assert p.normalised_time == pytest.approx(got[k], abs=1e-12)
 
 
 @pytest.mark.parametrize("n_basis, n_obs, n_demos", [(7, 3, 12), (8, 1, 5), (10, 2, 9)])

@@ -263,3 +263,349 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
         quad = (rr - cTc) / s2 - tKt
         out[ci] = -0.5 * (N * _LOG2PI + logdet + quad)
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# online tracking on a lattice of speeds (interprim.phase_likelihood._Tracker)
+#
+# A stream's candidates are speeds ``v_j = v0 exp(dlog j)`` (integer ``j``): frame ``m`` of candidate ``j`` sits
+# at phase ``v_j m`` whatever the number of frames seen, so each lattice point keeps its statistics ``G``,
+# ``H^T r``, ``|r|^2`` and its dense factors (upper Cholesky factors ``R_i`` of ``T_i`` and the ``n x n`` matrix
+# ``K``, ``log det T``) in a slot, and a new frame changes them by one row ``h``: ``T_i += u_i u_i^T`` with
+# ``u_i = S_i h`` (rank-1 Cholesky update, ``O(q^2)``), ``K += sigma^2 / gamma_i (Uh_i^T T_i^{-1} u_i)(...)^T``
+# with ``gamma_i = 1 + u_i^T T_i^{-1} u_i`` (Sherman-Morrison; ``log det T_i += log gamma_i``).  Only ``t``,
+# ``c^T T^{-1} c`` (the new ``H^T r`` changes every entry) and the Cholesky of ``[K | t]`` are formed per frame:
+# ``O(D_o (q^2 + q n) + n^3)`` instead of ``O(M q (q + D_o) + D_o (q^3 + q^2 n + q n^2))``.
+
+SLOT_FREE = -(1 << 62)
+
+
+@njit(cache=True, fastmath=_FM)
+def _row(Zh, Rg, z, m, vn, h, rv):
+    """Row ``h`` of ``H`` and residual ``rv`` of frame ``m`` at grid position ``m * vn``; returns ``|rv|^2``."""
+    K1, q = Zh.shape
+    n_steps = K1 - 1
+    n_o = Rg.shape[1]
+    u = m * vn
+    if u < 0.0:
+        u = 0.0
+    elif u > n_steps:
+        u = float(n_steps)
+    kf = int(np.floor(u))
+    if kf > n_steps - 1:
+        kf = n_steps - 1
+    a = u - kf
+    wa = 1.0 - a
+    Z0 = Zh[kf]
+    Z1 = Zh[kf + 1]
+    for j in range(q):
+        h[j] = wa * Z0[j] + a * Z1[j]
+    R0 = Rg[kf]
+    R1 = Rg[kf + 1]
+    zm = z[m]
+    rr = 0.0
+    for i in range(n_o):
+        x = zm[i] - (wa * R0[i] + a * R1[i])
+        rv[i] = x
+        rr += x * x
+    return rr
+
+
+@njit(cache=True, fastmath=_FM)
+def _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv):
+    """:func:`_stats` with frame ``m`` at grid position ``m * vn`` (rows from :func:`_row`); returns ``|r|^2``."""
+    q = Zh.shape[1]
+    n_o = Rg.shape[1]
+    W = ET.shape[1]
+    P = ET.shape[0]
+    rr = 0.0
+    for j in range(q4):
+        for l in range(P):
+            G[j, l] = 0.0
+    for m0 in range(0, M, W):
+        nb = min(W, M - m0)
+        for k in range(nb):
+            rr += _row(Zh, Rg, z, m0 + k, vn, h, rv)
+            for j in range(q):
+                ET[j, k] = h[j]
+            for i in range(n_o):
+                ET[q4 + i, k] = rv[i]
+        _gram_block(ET, nb, q4, P, G)
+    return rr
+
+
+@njit(cache=True, fastmath=_FM)
+def _dense_full(G, q4, sq, Uh, K0, s2, Rs, Ks, T, Ub, V, VT, Kacc):
+    """Dense factors of a slot from its statistics: ``Rs[i]`` (upper Cholesky of ``T_i``), ``Ks`` (lower part of
+    ``K``); returns ``log det T`` (sum over DoFs) or nan."""
+    n_o, q = sq.shape
+    n = Uh.shape[2]
+    r4 = Ub.shape[1]
+    ld_T = 0.0
+    for i in range(n_o):
+        si = sq[i]
+        Ui = Uh[i]
+        for a in range(q):
+            sa = si[a]
+            Ta = T[a]
+            for c in range(a + 1):
+                Ta[c] = sa * G[c, a] * si[c]
+            Ta[a] += s2
+        ld = _chol_inplace(T, q)
+        if not np.isfinite(ld):
+            return np.nan
+        ld_T += ld
+        Ri = Rs[i]
+        for a in range(q):
+            for c in range(a):
+                Ri[a, c] = 0.0
+            for c in range(a, q):
+                Ri[a, c] = T[c, a]
+        for a in range(q):
+            Ua = Ui[a]
+            Uba = Ub[a]
+            for c in range(n):
+                Uba[c] = Ua[c]
+            for c in range(n, r4):
+                Uba[c] = 0.0
+        _forward_rows(T, Ub, V)
+        off = i * q
+        for a in range(q):
+            Va = V[a]
+            for c in range(r4):
+                VT[c, off + a] = Va[c]
+    _syrk_T(VT, n_o * q, Kacc)
+    for a in range(n):
+        for c in range(a + 1):
+            Ks[a, c] = K0[a, c] - s2 * Kacc[a, c]
+    return ld_T
+
+
+@njit(cache=True, fastmath=_FM)
+def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, u, p, x, w):
+    """Add one frame (row ``h``, residual ``rv``) to a slot's statistics and dense factors; returns the change
+    of ``log det T``."""
+    n_o, q = sq.shape
+    n = Uh.shape[2]
+    for j in range(q):
+        hj = h[j]
+        Gj = G[j]
+        for l in range(j, q):
+            Gj[l] += hj * h[l]
+        for i in range(n_o):
+            Gj[q4 + i] += hj * rv[i]
+    dld = 0.0
+    for i in range(n_o):
+        si = sq[i]
+        R = Rs[i]
+        for j in range(q):
+            u[j] = si[j] * h[j]
+            p[j] = u[j]
+        # p = R^{-T} u (forward, row-axpy form)
+        for k in range(q):
+            Rk = R[k]
+            pk = p[k] / Rk[k]
+            p[k] = pk
+            for j in range(k + 1, q):
+                p[j] -= pk * Rk[j]
+        g = 1.0
+        for j in range(q):
+            g += p[j] * p[j]
+        # x = R^{-1} p = T^{-1} u
+        for k in range(q - 1, -1, -1):
+            Rk = R[k]
+            acc = p[k]
+            for j in range(k + 1, q):
+                acc -= Rk[j] * x[j]
+            x[k] = acc / Rk[k]
+        for a in range(n):
+            w[a] = 0.0
+        Ui = Uh[i]
+        for j in range(q):
+            xj = x[j]
+            Uj = Ui[j]
+            for a in range(n):
+                w[a] += Uj[a] * xj
+        f = s2 / g
+        for a in range(n):
+            fa = f * w[a]
+            Ka = Ks[a]
+            for c in range(a + 1):
+                Ka[c] += fa * w[c]
+        dld += np.log(g)
+        # R^T R + u u^T (rank-1 Cholesky update; u is consumed)
+        for k in range(q):
+            Rk = R[k]
+            rkk = Rk[k]
+            uk = u[k]
+            rn = np.sqrt(rkk * rkk + uk * uk)
+            c = rn / rkk
+            sn = uk / rkk
+            Rk[k] = rn
+            ic = 1.0 / c
+            for j in range(k + 1, q):
+                rkj = (Rk[j] + sn * u[j]) * ic
+                Rk[j] = rkj
+                u[j] = c * u[j] - sn * rkj
+    return dld
+
+
+@njit(cache=True, fastmath=_FM)
+def _eval_slot(G, rr, ld_T, M, q4, sq, Uh, s2, Rs, Ks, F, y, x, t):
+    """Log-likelihood of a slot's ``M`` frames from its statistics and dense factors (``-inf`` on failure)."""
+    n_o, q = sq.shape
+    n = Uh.shape[2]
+    n4 = F.shape[0]
+    cTc = 0.0
+    for a in range(n):
+        t[a] = 0.0
+    for i in range(n_o):
+        si = sq[i]
+        R = Rs[i]
+        for j in range(q):
+            y[j] = si[j] * G[j, q4 + i]
+        for k in range(q):
+            Rk = R[k]
+            yk = y[k] / Rk[k]
+            y[k] = yk
+            cTc += yk * yk
+            for j in range(k + 1, q):
+                y[j] -= yk * Rk[j]
+        for k in range(q - 1, -1, -1):
+            Rk = R[k]
+            acc = y[k]
+            for j in range(k + 1, q):
+                acc -= Rk[j] * x[j]
+            x[k] = acc / Rk[k]
+        Ui = Uh[i]
+        for j in range(q):
+            xj = x[j]
+            Uj = Ui[j]
+            for a in range(n):
+                t[a] += Uj[a] * xj
+    for a in range(n):
+        Fa = F[a]
+        Ka = Ks[a]
+        for c in range(a + 1):
+            Fa[c] = Ka[c]
+        for c in range(a + 1, n):
+            Fa[c] = Ks[c, a]
+        for c in range(n, n4 + 4):
+            Fa[c] = 0.0
+        Fa[n4] = t[a]
+    for a in range(n, n4):
+        Fa = F[a]
+        for c in range(n4 + 4):
+            Fa[c] = 0.0
+        Fa[a] = 1.0
+    ld_K = _chol_aug(F, n4, n4 + 4)
+    if not np.isfinite(ld_K):
+        return -np.inf
+    tKt = 0.0
+    for a in range(n4):
+        tKt += F[a, n4] * F[a, n4]
+    N = M * n_o
+    logdet = n_o * (M - q) * np.log(s2) + ld_T + ld_K
+    return -0.5 * (N * _LOG2PI + logdet + (rr - cTc) / s2 - tKt)
+
+
+@njit(cache=True, fastmath=_FM)
+def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt, last, Gs, rrs, Rs, Ks, ldTs,
+                 ET, T, Ub, V, VT, Kacc, F, vec):
+    """Log-likelihood of lattice point ``j`` (speed ``v``) at ``M`` frames, from its slot (extended by the new
+    frames) or from a fresh slot."""
+    q = sq.shape[1]
+    q4 = Gs.shape[1]
+    NS = keys.shape[0]
+    vn = v * (Zh.shape[0] - 1)
+    h = vec[0]; rv = vec[1]; u = vec[2]; p = vec[3]; x = vec[4]; w = vec[5]
+    slot = -1
+    for k in range(NS):
+        if keys[k] == j:
+            slot = k
+            break
+    if slot >= 0 and (cnt[slot] > M or M - cnt[slot] > max_gap):
+        keys[slot] = SLOT_FREE
+        slot = -1
+    if slot < 0:  # a free slot, else the least recently used one outside the candidate window
+        best = -1
+        for k in range(NS):
+            kk = keys[k]
+            if kk == SLOT_FREE:
+                best = k
+                break
+            if kk >= kc - nh and kk <= kc + nh:
+                continue
+            if best < 0 or last[k] < last[best]:
+                best = k
+        slot = best
+        G = Gs[slot]
+        rrs[slot] = _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv)
+        ld = _dense_full(G, q4, sq, Uh, K0, s2, Rs[slot], Ks[slot], T, Ub, V, VT, Kacc)
+        if not np.isfinite(ld):
+            keys[slot] = SLOT_FREE
+            return -np.inf
+        ldTs[slot] = ld
+        keys[slot] = j
+        cnt[slot] = M
+    else:
+        G = Gs[slot]
+        for m in range(cnt[slot], M):
+            rrs[slot] += _row(Zh, Rg, z, m, vn, h, rv)
+            ldTs[slot] += _add_frame(h, rv, q4, sq, Uh, s2, G, Rs[slot], Ks[slot], u, p, x, w)
+        cnt[slot] = M
+    last[slot] = M
+    ll = _eval_slot(Gs[slot], rrs[slot], ldTs[slot], M, q4, sq, Uh, s2, Rs[slot], Ks[slot], F, vec[6], vec[7], vec[8])
+    if not np.isfinite(ll):
+        keys[slot] = SLOT_FREE
+    return ll
+
+
+@njit(cache=True, fastmath=_FM)
+def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, logel, mu, sd, max_gap,
+               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1):
+    """One online phase update on the speed lattice; returns ``(j, s)``: the chosen lattice index and phase.
+
+    Candidates: ``j = kc - nh .. kc + nh`` at ``s_j = v0 exp(dlog j) (M - 1)``; those above 1 are scored once at
+    ``s = 1`` (represented by the smallest such ``j``), those below ``s_min`` once at ``s_min`` (largest such
+    ``j``), both from scratch (:func:`phase_loglik_batch`); the others from their slots.  Score = log-likelihood
+    plus, with ``prior``, the log-normal duration prior (``logel`` = log elapsed time).  Ties: the smallest ``s``.
+    """
+    best_j = kc
+    best_s = -1.0
+    best_lp = -np.inf
+    lo_j = kc - nh - 1
+    hi_done = False
+    for j in range(kc - nh, kc + nh + 1):
+        v = v0 * np.exp(dlog * j)
+        if v * (M - 1) < s_min:
+            lo_j = j
+    if lo_j >= kc - nh:  # one candidate at s_min
+        s1[0] = s_min
+        phase_loglik_batch(Zh, Rg, z, M, s1, sq, Uh, K0, s2, o1)
+        lp = o1[0]
+        if prior:
+            d = (logel - np.log(s_min) - mu) / sd
+            lp += -0.5 * d * d - np.log(s_min)
+        best_j, best_s, best_lp = lo_j, s_min, lp
+    for j in range(lo_j + 1, kc + nh + 1):
+        v = v0 * np.exp(dlog * j)
+        s = v * (M - 1)
+        if s > 1.0:
+            if hi_done:
+                break
+            hi_done = True
+            s = 1.0
+            s1[0] = 1.0
+            phase_loglik_batch(Zh, Rg, z, M, s1, sq, Uh, K0, s2, o1)
+            ll = o1[0]
+        else:
+            ll = _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt, last, Gs, rrs, Rs, Ks,
+                              ldTs, ET, T, Ub, V, VT, Kacc, F, vec)
+        lp = ll
+        if prior:
+            d = (logel - np.log(s) - mu) / sd
+            lp += -0.5 * d * d - np.log(s)
+        if best_s < 0.0 or lp > best_lp:
+            best_j, best_s, best_lp = j, s, lp
+    return best_j, best_s

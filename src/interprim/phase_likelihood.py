@@ -225,10 +225,12 @@ _KERROR: list = []
 
 def _load_kernel():
     try:
-        from ._phase_kernels import phase_loglik_batch
+        from ._phase_kernels import phase_loglik_batch, track_step
 
         _warm_call(phase_loglik_batch)
+        _warm_track(track_step)
         _KERNEL.append(phase_loglik_batch)
+        _KERNEL.append(track_step)
     except BaseException as exc:  # numba missing or broken: stay on numpy
         _KERROR.append(exc)
 
@@ -242,6 +244,20 @@ def _warm_call(fn):
     K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
     fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
        np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
+
+
+def _warm_track(fn):
+    rng = np.random.default_rng(0)
+    K, q, n_o, n, M = 8, 3, 2, 2, 6
+    Uh = rng.normal(size=(n_o, q, n))
+    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
+    buf = _track_buffers(q, n_o, n, 4)
+    z = rng.normal(size=(M, n_o))
+    for v0 in (0.05, 0.3):
+        buf[0][:] = _SLOT_FREE
+        for m in (4, 5, 6):
+            fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), z, m, v0, 0, 3, 0.05, _S_MIN,
+               np.ones((n_o, q)), Uh, K0, 1.0, True, 0.0, 0.0, 1.0, 8, *buf)
 
 
 def _kernel(block: bool = False):
@@ -526,3 +542,122 @@ def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int =
     else:
         sc = scores(cand)[0]
     return float(cand[int(np.argmax(sc))])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# online tracking on a lattice of speeds (used by Stream)
+
+_SLOT_FREE = -(1 << 62)
+_N_SLOTS = 12
+_MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
+
+
+def _track_buffers(q: int, n_o: int, n: int, n_slots: int = _N_SLOTS):
+    """Slots and workspaces of :func:`interprim._phase_kernels.track_step` (sizes independent of the frames)."""
+    from ._phase_kernels import BLOCK
+
+    q4 = (q + 3) // 4 * 4
+    P = q4 + (n_o + 1) // 2 * 2
+    r4 = (n + 1 + 3) // 4 * 4
+    n4 = (n + 3) // 4 * 4
+    return (np.full(n_slots, _SLOT_FREE, dtype=np.int64), np.zeros(n_slots, dtype=np.int64),
+            np.zeros(n_slots, dtype=np.int64), np.zeros((n_slots, q4, P)), np.zeros(n_slots),
+            np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
+            np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
+            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((9, max(q, n, n_o))), np.zeros(1), np.zeros(1))
+
+
+def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
+    """Candidates of :func:`interprim._phase_kernels.track_step`: ``(js, s)`` in increasing ``s``, the clipped
+    ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
+    js, ss = [], []
+    for j in range(kc - nh, kc + nh + 1):
+        s = float(v0 * np.exp(dlog * j)) * (M - 1)
+        if s < _S_MIN:
+            if js and ss[-1] == _S_MIN:
+                js[-1] = j
+                continue
+            s = _S_MIN
+        elif s > 1.0:
+            if ss and ss[-1] == 1.0:
+                continue
+            s = 1.0
+        js.append(j)
+        ss.append(s)
+    return js, np.array(ss)
+
+
+class _Tracker:
+    """Online phase of one :class:`~interprim.primitive.Stream` (the likelihood phase, local search).
+
+    Like :func:`track_phase`, each frame scores ``n_candidates`` phases within ``exp(+-spread)`` of the
+    constant-speed extrapolation of the previous estimate; here the candidates are *speeds* on a fixed
+    lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread / (n_candidates - 1)``, anchored at the first estimate
+    (``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
+    to ``[_S_MIN, 1]`` (clipped candidates merged).  Without clipping these are :func:`track_phase`'s
+    candidates (whose chosen speeds also stay on such a lattice, up to rounding); after a clipped choice the
+    lattice keeps its index (the nearest unclipped-side point) where :func:`track_phase` would restart from the
+    clipped value.  Frame ``m`` of lattice point ``j`` always sits at phase ``v_j m``, so the compiled step
+    (:func:`interprim._phase_kernels.track_step`) extends each point's statistics and factors by the new frame
+    (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them (``O(M q (q + D_o) + D_o q^2 n + ...)``).
+    Without the kernel (or with a dense prior) the same candidates are scored from scratch.
+    """
+
+    def __init__(self, model, n_candidates: int = 7, spread: float = 0.15, speed_prior: bool = True):
+        if n_candidates < 1 or n_candidates % 2 == 0:
+            raise ValueError("n_candidates must be odd")
+        self.model = model
+        self.nh = (int(n_candidates) - 1) // 2
+        self.dlog = 2.0 * float(spread) / max(int(n_candidates) - 1, 1)
+        self.speed_prior = bool(speed_prior)
+        self._buf = None
+        self._fs = None
+        self.reset()
+
+    def reset(self):
+        self.v0 = None
+        self.kc = 0
+        self.Rg = None
+        if self._buf is not None:
+            self._buf[0][:] = _SLOT_FREE
+
+    def step(self, z) -> float:
+        """Phase of the last of the frames ``z`` (the frames seen so far, a prefix of the next call's)."""
+        M = z.shape[0]
+        model = self.model
+        if M < 2:
+            self.reset()
+            return _S_MIN
+        if self.v0 is None:
+            s = estimate_phase(model, z, n_grid=20, refine=False, speed_prior=self.speed_prior).s_end
+            self.v0, self.kc, self.Rg = s / (M - 1), 0, None
+            if self._buf is not None:
+                self._buf[0][:] = _SLOT_FREE
+            return s
+        fs = _fast_state(model)
+        kern = _KERNEL[1] if (fs is not None and _kernel() is not None) else None
+        s2 = phase_noise(model)
+        if kern is None:
+            if self._buf is not None:  # the slots are not kept up to date here
+                self._buf[0][:] = _SLOT_FREE
+            js, cand = _lattice_candidates(self.v0, self.kc, self.nh, self.dlog, M)
+            sc = _scorer(model, z, s2, self.speed_prior)
+            if sc.dense:
+                with single_thread():
+                    lp = sc(cand)[0]
+            else:
+                lp = sc(cand)[0]
+            i = int(np.argmax(lp))
+            self.kc = js[i]
+            return float(cand[i])
+        if fs is not self._fs or self._buf is None:
+            self._fs = fs
+            self._buf = _track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+            self.Rg = None
+        if self.Rg is None:
+            self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))
+        logel, mu, sd = _speed_prior_params(model, M) if self.speed_prior else (0.0, 0.0, 1.0)
+        j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, _S_MIN, fs.sq, fs.Uh, fs.K0, s2,
+                    self.speed_prior, logel, mu, sd, _MAX_GAP, *self._buf)
+        self.kc = int(j)
+        return float(s)

@@ -893,6 +893,8 @@ class Stream:
         self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation) \
             if _fast.warmup() else None
         self._n = 0
+        self._tracker = None  # likelihood phase: interprim.phase_likelihood._Tracker (created on first use)
+        self._s_prev = None
 
     @property
     def n_frames(self) -> int:
@@ -902,6 +904,9 @@ class Stream:
         """Forget all frames (start a new interaction)."""
         self._dtw.reset()
         self._n = 0
+        self._s_prev = None
+        if self._tracker is not None:
+            self._tracker.reset()
         if robot_state is not None:
             self.robot_state = robot_state
             self._robot_start = self._with_z0(self.model._robot_start(robot_state))
@@ -937,11 +942,13 @@ class Stream:
             self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
         self._buf[self._n] = f
         self._n += 1
-        if m.phase_method == "likelihood":  # local search around the previous estimate
-            from .phase_likelihood import track_phase
+        if m.phase_method == "likelihood":  # local search around the previous estimate, on a lattice of speeds
+            tr = self._tracker
+            if tr is None or tr.model is not m:
+                from .phase_likelihood import _Tracker
 
-            s_prev = getattr(self, "_s_prev", None) if self._n > 1 else None
-            self._s_prev = track_phase(m, self._buf[: self._n], s_prev, self._n - 1)
+                self._tracker = tr = _Tracker(m)
+            self._s_prev = tr.step(self._buf[: self._n])
             n_star = self._s_prev * (m.reference_.shape[0] - 1)
         return m._predict_latent(self._buf[: self._n], n_star, cost, None, need_cov=need_cov,
                                  robot_start=self._robot_start, workspace=self._ws)

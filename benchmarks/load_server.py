@@ -86,8 +86,9 @@ def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="auto"):
     else:
         models = load_models([model_path])
     workers, processes = mode
+    kw = {"loop": loop} if "loop" in ServerConfig.__dataclass_fields__ else {}  # (an older server: asyncio)
     cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, processes=processes, max_rate_hz=1000,
-                       rate_burst=100, loop=loop)
+                       rate_burst=100, **kw)
 
     async def main():
         srv = InterprimServer(models, cfg)
@@ -98,9 +99,15 @@ def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="auto"):
             await asyncio.sleep(0.1)
         await srv.stop()
 
-    from interprim.server.app import run
+    _run(main(), loop if kw else "asyncio")
 
-    run(main(), loop)
+
+def _run(main, loop):
+    try:
+        from interprim.server.app import run
+    except ImportError:  # an older interprim (comparisons): asyncio's loop
+        return asyncio.run(main)
+    return run(main, loop)
 
 
 def _stat(pid: int):
@@ -155,7 +162,6 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
     session's frame every 1/rate_hz s, sessions staggered evenly over the period."""
     import heapq
 
-    from interprim.server.app import run
     from interprim.server.protocol import encode_binary_frame
 
     payloads = [encode_binary_frame(f) if binary else json.dumps({"type": "frame", "frame": list(f)}) for f in frames]
@@ -222,7 +228,7 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
 
     import resource
 
-    out = run(main(), loop)
+    out = _run(main(), loop)
     ru = resource.getrusage(resource.RUSAGE_SELF)
     q.put((out, ru.ru_utime + ru.ru_stime))
 
@@ -463,7 +469,10 @@ def main(argv=None):
 
 
 def _loop_name(kind: str) -> str:
-    from interprim.server.app import new_event_loop
+    try:
+        from interprim.server.app import new_event_loop
+    except ImportError:
+        return "asyncio"
 
     ev = new_event_loop(kind)
     try:

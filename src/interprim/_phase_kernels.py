@@ -335,56 +335,94 @@ def _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv):
 
 
 @njit(cache=True, fastmath=_FM)
-def _dense_full(G, q4, sq, Uh, K0, s2, Rs, Ks, T, Ub, V, VT, Kacc):
-    """Dense factors of a slot from its statistics: ``Rs[i]`` (upper Cholesky of ``T_i``), ``Ks`` (lower part of
-    ``K``); returns ``log det T`` (sum over DoFs) or nan."""
+def _solve_R(R, b, p, out):
+    """``out = (R^T R)^{-1} b`` for an upper factor ``R`` (rows); ``p = R^{-T} b``; returns ``|p|^2``."""
+    q = R.shape[0]
+    for j in range(q):
+        p[j] = b[j]
+    pp = 0.0
+    for k in range(q):  # forward, row-axpy form
+        Rk = R[k]
+        pk = p[k] / Rk[k]
+        p[k] = pk
+        pp += pk * pk
+        for j in range(k + 1, q):
+            p[j] -= pk * Rk[j]
+    for k in range(q - 1, -1, -1):
+        Rk = R[k]
+        acc = p[k]
+        for j in range(k + 1, q):
+            acc -= Rk[j] * out[j]
+        out[k] = acc / Rk[k]
+    return pp
+
+
+@njit(cache=True, fastmath=_FM)
+def _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs, Ks, Ys, ts, T, Ub, V, VT, Kacc, c, p):
+    """Dense state of a slot from its statistics: ``Rs[i]`` (upper Cholesky factor of ``T_i``), ``Ks`` (lower
+    part of ``K``), ``Ys[i] = T_i^{-1} c_i``, ``ts = sum_i Uh_i^T Ys[i]``; returns ``(log det T, J)`` with
+    ``J = |r|^2 - sum_i c_i^T T_i^{-1} c_i`` (``log det T`` nan on failure)."""
     n_o, q = sq.shape
     n = Uh.shape[2]
     r4 = Ub.shape[1]
     ld_T = 0.0
+    J = rr
+    for a in range(n):
+        ts[a] = 0.0
     for i in range(n_o):
         si = sq[i]
         Ui = Uh[i]
         for a in range(q):
             sa = si[a]
             Ta = T[a]
-            for c in range(a + 1):
-                Ta[c] = sa * G[c, a] * si[c]
+            for cc in range(a + 1):
+                Ta[cc] = sa * G[cc, a] * si[cc]
             Ta[a] += s2
         ld = _chol_inplace(T, q)
         if not np.isfinite(ld):
-            return np.nan
+            return np.nan, 0.0
         ld_T += ld
         Ri = Rs[i]
         for a in range(q):
-            for c in range(a):
-                Ri[a, c] = 0.0
-            for c in range(a, q):
-                Ri[a, c] = T[c, a]
+            for cc in range(a):
+                Ri[a, cc] = 0.0
+            for cc in range(a, q):
+                Ri[a, cc] = T[cc, a]
         for a in range(q):
             Ua = Ui[a]
             Uba = Ub[a]
-            for c in range(n):
-                Uba[c] = Ua[c]
-            for c in range(n, r4):
-                Uba[c] = 0.0
+            for cc in range(n):
+                Uba[cc] = Ua[cc]
+            for cc in range(n, r4):
+                Uba[cc] = 0.0
         _forward_rows(T, Ub, V)
         off = i * q
         for a in range(q):
             Va = V[a]
-            for c in range(r4):
-                VT[c, off + a] = Va[c]
+            for cc in range(r4):
+                VT[cc, off + a] = Va[cc]
+        for a in range(q):
+            c[a] = si[a] * G[a, q4 + i]
+        y = Ys[i]
+        J -= _solve_R(Ri, c, p, y)
+        for a in range(q):
+            ya = y[a]
+            Ua = Ui[a]
+            for cc in range(n):
+                ts[cc] += Ua[cc] * ya
     _syrk_T(VT, n_o * q, Kacc)
     for a in range(n):
-        for c in range(a + 1):
-            Ks[a, c] = K0[a, c] - s2 * Kacc[a, c]
-    return ld_T
+        for cc in range(a + 1):
+            Ks[a, cc] = K0[a, cc] - s2 * Kacc[a, cc]
+    return ld_T, J
 
 
 @njit(cache=True, fastmath=_FM)
-def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, u, p, x, w):
-    """Add one frame (row ``h``, residual ``rv``) to a slot's statistics and dense factors; returns the change
-    of ``log det T``."""
+def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, Ys, ts, u, p, x, w):
+    """Add one frame (row ``h``, residual ``rv``) to a slot: statistics, ``R_i`` (rank-1 update with
+    ``u_i = S_i h``), ``K`` (Sherman-Morrison), ``y_i``, ``t`` (recursive least squares: innovation
+    ``e_i = r_i - u_i^T y_i``, ``y_i += T_i^{-1} u_i e_i / gamma_i``).  Returns the changes of ``log det T``
+    (``sum log gamma_i``) and of ``J`` (``sum e_i^2 / gamma_i``, no cancellation)."""
     n_o, q = sq.shape
     n = Uh.shape[2]
     for j in range(q):
@@ -395,29 +433,17 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, u, p, x, w):
         for i in range(n_o):
             Gj[q4 + i] += hj * rv[i]
     dld = 0.0
+    dJ = 0.0
     for i in range(n_o):
         si = sq[i]
         R = Rs[i]
+        y = Ys[i]
+        e = rv[i]
         for j in range(q):
-            u[j] = si[j] * h[j]
-            p[j] = u[j]
-        # p = R^{-T} u (forward, row-axpy form)
-        for k in range(q):
-            Rk = R[k]
-            pk = p[k] / Rk[k]
-            p[k] = pk
-            for j in range(k + 1, q):
-                p[j] -= pk * Rk[j]
-        g = 1.0
-        for j in range(q):
-            g += p[j] * p[j]
-        # x = R^{-1} p = T^{-1} u
-        for k in range(q - 1, -1, -1):
-            Rk = R[k]
-            acc = p[k]
-            for j in range(k + 1, q):
-                acc -= Rk[j] * x[j]
-            x[k] = acc / Rk[k]
+            uj = si[j] * h[j]
+            u[j] = uj
+            e -= uj * y[j]
+        g = 1.0 + _solve_R(R, u, p, x)  # x = T^{-1} u
         for a in range(n):
             w[a] = 0.0
         Ui = Uh[i]
@@ -432,7 +458,13 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, u, p, x, w):
             Ka = Ks[a]
             for c in range(a + 1):
                 Ka[c] += fa * w[c]
+        eg = e / g
+        for j in range(q):
+            y[j] += x[j] * eg
+        for a in range(n):
+            ts[a] += w[a] * eg
         dld += np.log(g)
+        dJ += e * eg
         # R^T R + u u^T (rank-1 Cholesky update; u is consumed)
         for k in range(q):
             Rk = R[k]
@@ -447,42 +479,15 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, u, p, x, w):
                 rkj = (Rk[j] + sn * u[j]) * ic
                 Rk[j] = rkj
                 u[j] = c * u[j] - sn * rkj
-    return dld
+    return dld, dJ
 
 
 @njit(cache=True, fastmath=_FM)
-def _eval_slot(G, rr, ld_T, M, q4, sq, Uh, s2, Rs, Ks, F, y, x, t):
-    """Log-likelihood of a slot's ``M`` frames from its statistics and dense factors (``-inf`` on failure)."""
-    n_o, q = sq.shape
-    n = Uh.shape[2]
+def _eval_slot(J, ld_T, M, n_o, q, s2, Ks, ts, F):
+    """Log-likelihood of a slot's ``M`` frames from ``J``, ``log det T``, ``K`` and ``t`` (``-inf`` on
+    failure): one bordered Cholesky of ``[K | t]``."""
+    n = Ks.shape[0]
     n4 = F.shape[0]
-    cTc = 0.0
-    for a in range(n):
-        t[a] = 0.0
-    for i in range(n_o):
-        si = sq[i]
-        R = Rs[i]
-        for j in range(q):
-            y[j] = si[j] * G[j, q4 + i]
-        for k in range(q):
-            Rk = R[k]
-            yk = y[k] / Rk[k]
-            y[k] = yk
-            cTc += yk * yk
-            for j in range(k + 1, q):
-                y[j] -= yk * Rk[j]
-        for k in range(q - 1, -1, -1):
-            Rk = R[k]
-            acc = y[k]
-            for j in range(k + 1, q):
-                acc -= Rk[j] * x[j]
-            x[k] = acc / Rk[k]
-        Ui = Uh[i]
-        for j in range(q):
-            xj = x[j]
-            Uj = Ui[j]
-            for a in range(n):
-                t[a] += Uj[a] * xj
     for a in range(n):
         Fa = F[a]
         Ka = Ks[a]
@@ -492,7 +497,7 @@ def _eval_slot(G, rr, ld_T, M, q4, sq, Uh, s2, Rs, Ks, F, y, x, t):
             Fa[c] = Ks[c, a]
         for c in range(n, n4 + 4):
             Fa[c] = 0.0
-        Fa[n4] = t[a]
+        Fa[n4] = ts[a]
     for a in range(n, n4):
         Fa = F[a]
         for c in range(n4 + 4):
@@ -506,15 +511,15 @@ def _eval_slot(G, rr, ld_T, M, q4, sq, Uh, s2, Rs, Ks, F, y, x, t):
         tKt += F[a, n4] * F[a, n4]
     N = M * n_o
     logdet = n_o * (M - q) * np.log(s2) + ld_T + ld_K
-    return -0.5 * (N * _LOG2PI + logdet + (rr - cTc) / s2 - tKt)
+    return -0.5 * (N * _LOG2PI + logdet + J / s2 - tKt)
 
 
 @njit(cache=True, fastmath=_FM)
 def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt, last, Gs, rrs, Rs, Ks, ldTs,
-                 ET, T, Ub, V, VT, Kacc, F, vec):
+                 Ys, ts, Js, ET, T, Ub, V, VT, Kacc, F, vec):
     """Log-likelihood of lattice point ``j`` (speed ``v``) at ``M`` frames, from its slot (extended by the new
     frames) or from a fresh slot."""
-    q = sq.shape[1]
+    n_o, q = sq.shape
     q4 = Gs.shape[1]
     NS = keys.shape[0]
     vn = v * (Zh.shape[0] - 1)
@@ -540,22 +545,27 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
                 best = k
         slot = best
         G = Gs[slot]
-        rrs[slot] = _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv)
-        ld = _dense_full(G, q4, sq, Uh, K0, s2, Rs[slot], Ks[slot], T, Ub, V, VT, Kacc)
+        rr = _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv)
+        rrs[slot] = rr
+        ld, J = _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs[slot], Ks[slot], Ys[slot], ts[slot], T, Ub, V, VT, Kacc,
+                            u, p)
         if not np.isfinite(ld):
             keys[slot] = SLOT_FREE
             return -np.inf
         ldTs[slot] = ld
+        Js[slot] = J
         keys[slot] = j
         cnt[slot] = M
     else:
         G = Gs[slot]
         for m in range(cnt[slot], M):
             rrs[slot] += _row(Zh, Rg, z, m, vn, h, rv)
-            ldTs[slot] += _add_frame(h, rv, q4, sq, Uh, s2, G, Rs[slot], Ks[slot], u, p, x, w)
+            dld, dJ = _add_frame(h, rv, q4, sq, Uh, s2, G, Rs[slot], Ks[slot], Ys[slot], ts[slot], u, p, x, w)
+            ldTs[slot] += dld
+            Js[slot] += dJ
         cnt[slot] = M
     last[slot] = M
-    ll = _eval_slot(Gs[slot], rrs[slot], ldTs[slot], M, q4, sq, Uh, s2, Rs[slot], Ks[slot], F, vec[6], vec[7], vec[8])
+    ll = _eval_slot(Js[slot], ldTs[slot], M, n_o, q, s2, Ks[slot], ts[slot], F)
     if not np.isfinite(ll):
         keys[slot] = SLOT_FREE
     return ll
@@ -563,7 +573,7 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
 
 @njit(cache=True, fastmath=_FM)
 def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, logel, mu, sd, max_gap,
-               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1):
+               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js):
     """One online phase update on the speed lattice; returns ``(j, s)``: the chosen lattice index and phase.
 
     Candidates: ``j = kc - nh .. kc + nh`` at ``s_j = v0 exp(dlog j) (M - 1)``; those above 1 are scored once at
@@ -601,7 +611,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
             ll = o1[0]
         else:
             ll = _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt, last, Gs, rrs, Rs, Ks,
-                              ldTs, ET, T, Ub, V, VT, Kacc, F, vec)
+                              ldTs, Ys, ts, Js, ET, T, Ub, V, VT, Kacc, F, vec)
         lp = ll
         if prior:
             d = (logel - np.log(s) - mu) / sd

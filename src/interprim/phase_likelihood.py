@@ -490,18 +490,77 @@ def _search(grid, scores, refine):
     i = int(np.argmax(curve))
     best_s, best_lp, best_ll = float(grid[i]), float(curve[i]), float(ll[i])
     if refine and grid.size > 2:
-        from scipy.optimize import minimize_scalar
-
         a = float(grid[max(i - 1, 0)])
         b = float(grid[min(i + 1, grid.size - 1)])
         if b - a > 1e-4:
-            res = minimize_scalar(lambda s: -float(scores(np.array([s]))[0][0]), bounds=(a, b), method="bounded",
-                                  options={"xatol": 1e-3 * max(b, 1e-3), "maxiter": 20})
-            if res.success and -res.fun > best_lp:
-                best_s = float(res.x)
-                lp1, ll1 = scores(np.array([best_s]))
-                best_lp, best_ll = float(lp1[0]), float(ll1[0])
+            seen = {}
+
+            def f(s):
+                lp1, ll1 = scores(np.array([s]))
+                seen[s] = float(ll1[0])
+                return -float(lp1[0])
+
+            s, neg = _brent_min(f, a, b, best_s, -best_lp, xatol=1e-3 * max(b, 1e-3), maxiter=20)
+            if -neg > best_lp:
+                best_s, best_lp, best_ll = s, -neg, seen[s]
     return PhaseEstimate(best_s, float(best_ll), float(best_lp), grid, curve)
+
+
+_GOLD = 0.5 * (3.0 - 5.0 ** 0.5)
+
+
+def _brent_min(f, a, b, x, fx, xatol, maxiter):
+    """Minimise ``f`` on ``[a, b]`` by Brent's method (golden-section steps, parabolic steps through the
+    three best points when they fall inside the bracket and shrink fast enough; Brent 1973, ch. 5), started
+    from an interior point ``x`` whose value ``fx`` is known.  Returns ``(x, f(x))``.  Replaces
+    ``scipy.optimize.minimize_scalar(method="bounded")`` on the online path: importing ``scipy.optimize``
+    costs about 0.5 s of a cold start."""
+    w = v = x
+    fw = fv = fx
+    d = e = 0.0
+    sqeps = 1.49e-8
+    for _ in range(maxiter):
+        m = 0.5 * (a + b)
+        tol1 = sqeps * abs(x) + xatol / 3.0
+        tol2 = 2.0 * tol1
+        if abs(x - m) <= tol2 - 0.5 * (b - a):
+            break
+        golden = True
+        if abs(e) > tol1:  # try a parabola through x, w, v
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            p = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = abs(q)
+            e_old, e = e, d
+            if abs(p) < abs(0.5 * q * e_old) and q * (a - x) < p < q * (b - x):
+                d = p / q
+                golden = False
+                if (x + d - a) < tol2 or (b - x - d) < tol2:
+                    d = tol1 if x < m else -tol1
+        if golden:
+            e = (a - x) if x >= m else (b - x)
+            d = _GOLD * e
+        u = x + (d if abs(d) >= tol1 else (tol1 if d > 0 else -tol1))
+        fu = f(u)
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, fv, w, fw = w, fw, u, fu
+            elif fu <= fv or v == x or v == w:
+                v, fv = u, fu
+    return x, fx
 
 
 _FACTORS: dict = {}
@@ -564,7 +623,8 @@ def _track_buffers(q: int, n_o: int, n: int, n_slots: int = _N_SLOTS):
             np.zeros(n_slots, dtype=np.int64), np.zeros((n_slots, q4, P)), np.zeros(n_slots),
             np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
             np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
-            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((9, max(q, n, n_o))), np.zeros(1), np.zeros(1))
+            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((6, max(q, n, n_o))), np.zeros(1), np.zeros(1),
+            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots))
 
 
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):

@@ -334,10 +334,13 @@ class InteractionPrimitive:
             if self.observation == "forcing":
                 s2 = float(np.mean(resid[:, :n_o]))
             else:
-                errs = []
+                errs, designs = [], {}  # one design matrix per demonstration length
                 for z, d, th in zip(latent, ders, theta):
-                    s = np.linspace(0.0, 1.0, z.shape[0])
-                    y = self.rollout_.rollout(th[:n_o], d[0][:n_o], d[1][:n_o], 0.0, s)
+                    T_z = z.shape[0]
+                    if T_z not in designs:
+                        designs[T_z] = self.rollout_.design(0.0, np.linspace(0.0, 1.0, T_z))
+                    free, H = designs[T_z]
+                    y = free @ np.stack([d[0][:n_o], d[1][:n_o]]) + H @ th[:n_o].T  # = rollout_.rollout(...)
                     errs.append(np.mean((y - z[:, :n_o]) ** 2))
                 s2 = float(np.mean(errs))
             scale = float(np.mean(var_obs))

@@ -858,3 +858,23 @@ def test_inline_lane_serves_at_once_only_sessions_not_ahead():
         assert lane.run_now(light, ("light-2", 0.0)) == "light-2"
 
     asyncio.run(go())
+
+
+@pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
+def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
+    """Worker-process replies of several hundred kB (many points + band) arrive whole under either
+    event loop (uvloop switches the pipe to non-blocking mode: a regression made it a 'dead worker')."""
+    if loop == "uvloop":
+        pytest.importorskip("uvloop")  # declared in the [serve] extra on Linux and macOS
+    srv = InterprimServer({"pair": models["pair"]}, ServerConfig(port=0, processes=1, loop=loop, max_points=5000,
+                                                                   max_rate_hz=100000, rate_burst=100000))
+    with ServerThread(srv) as st, Client(st.ws_url) as big, Client(st.ws_url) as small:
+        big.open("pair", points=5000, std=True)
+        small.open("pair", points=10)
+        ref = models["pair"].model.stream()
+        for f in test_demo[:12, :2]:
+            pb, ps = big.frame(f), small.frame(f)
+            e = ref.update(f)
+            assert pb["type"] == "prediction" and len(pb["mean"]) == 5000 and len(pb["std"]) == 5000
+            np.testing.assert_allclose(ps["mean"], e.trajectory(10)[:, 2:], atol=2e-6)
+        assert not st.server._procs.workers[0].dead

@@ -118,6 +118,10 @@ class ProcessPool:
         self._loop = loop
         for w in self.workers:
             loop.add_reader(w.conn.fileno(), self._on_readable, w)
+            # uvloop (libuv's poll handle) switches the descriptor to non-blocking mode; the pipe's framed
+            # recv_bytes/send_bytes need it blocking, or a reply larger than the socket buffer (500 points +
+            # band: ~35 kB) is read half and raises BlockingIOError.  Readiness polling works either way.
+            os.set_blocking(w.conn.fileno(), True)
 
     def _on_readable(self, w: _Worker) -> None:
         try:

@@ -412,7 +412,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
         interactions (5 held-out demonstrations each), the benchmark's 7 + 7 DoF data and the two-agent
         synthetic set; 20 points had in turn matched 40 on the test suite's observations.
     refine : bool
-        Refine the best candidate by a bounded scalar search between its neighbours.
+        Refine the best candidate by Brent's bounded search between its grid neighbours (:func:`_brent_min`).
     speed_prior : bool
         Add the log-normal duration prior of the training demonstrations.
     sigma2 : float, optional

@@ -436,3 +436,13 @@ def test_refined_phase_is_a_local_maximum(synthetic, lik_model):
         nb = nb[np.abs(nb - est.s_end) > 1e-12]
         if nb.size:
             assert est.log_posterior >= sc(nb)[0].max() - 1e-6
+
+
+def test_batch_predict_reports_the_dtw_cost_on_demand(synthetic, lik_model):
+    """The likelihood-phase predict skips the DTW; ``dtw_cost`` is still D(n*, M) of Eq. 5-8 when asked."""
+    _, test = synthetic
+    obs = test[2][:70, :2]
+    p = lik_model.predict(obs)
+    z = lik_model._observed_to_latent(obs)
+    assert p.dtw_cost == pytest.approx(open_end_dtw(lik_model.reference_, z, return_path=False).cost, rel=1e-12)
+    assert isinstance(p.dtw_cost, float)

@@ -312,3 +312,19 @@ def test_fit_takes_a_demonstrations_object_and_keeps_column_names(synthetic, tmp
     assert ip.InteractionPrimitive.load(tmp_path / "m.npz").columns_ == cols
     with pytest.raises(ValueError, match="columns has 2 names"):
         ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8).fit(train[:4], columns=["a", "b"])
+
+
+@pytest.mark.parametrize("phase_method", ["likelihood", "dtw"])
+def test_prediction_does_not_depend_on_the_callers_array_afterwards(synthetic, phase_method):
+    """A robot loop reuses its frame buffer: a Prediction must not keep views into it."""
+    train, test = synthetic
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2="auto", phase_method=phase_method).fit(
+        train[:12], dt=0.01)
+    buf = np.ascontiguousarray(test[0][:60, :2], dtype=np.float64)
+    p = m.predict(buf)
+    ref = m.predict(buf.copy())
+    buf[:] = 123.0  # the caller overwrites its buffer before reading the prediction
+    np.testing.assert_array_equal(p.trajectory(30), ref.trajectory(30))
+    for a, b in zip(p.completion(30), ref.completion(30)):
+        np.testing.assert_array_equal(a, b)
+    assert p.dtw_cost == ref.dtw_cost

@@ -500,8 +500,8 @@ class InteractionPrimitive:
             # the DTW phase (within 3e-4 on 720 partial observations); D(n*, M) is computed only if asked for
             N1 = self.reference_.shape[0] - 1
             est = estimate_phase(self, z)
-            ref = self.reference_
-            return self._predict_latent(z, est.s_end * N1, lambda: open_end_dtw(ref, z, return_path=False).cost,
+            ref, zc = self.reference_, z.copy()  # a copy: z may be the caller's array, reused after the call
+            return self._predict_latent(z, est.s_end * N1, lambda: open_end_dtw(ref, zc, return_path=False).cost,
                                         robot_state)
         res = open_end_dtw(self.reference_, z, return_path=False)
         return self._predict_latent(z, res.n_star, res.cost, robot_state)
@@ -707,9 +707,9 @@ class Prediction:
         self._dtw_cost = cost if callable(cost) else float(cost)
         self.n_observed = int(n_observed)
         self.log_likelihood = float(post.log_likelihood)
-        self._y0_obs = np.asarray(y0_obs, dtype=np.float64)
+        self._y0_obs = np.array(y0_obs, dtype=np.float64)  # a copy (see _last_obs)
         self._robot_start = robot_start
-        self._last_obs = last_obs
+        self._last_obs = np.array(last_obs, dtype=np.float64)  # a copy: it may be a row of the caller's array
 
     @property
     def dtw_cost(self) -> float:

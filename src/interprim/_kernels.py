@@ -379,7 +379,8 @@ def _forward_rows(L, U, W):
 
 @njit(cache=True, fastmath=_FM)
 def _syrk_sub(W, s2, K):
-    """``K -= s2 W^T W`` for ``W`` (q, r), four rows of ``W`` per sweep over ``K``."""
+    """``K -= s2 W^T W`` on the lower triangle of ``K`` (all that :func:`_chol_inplace` reads) for ``W`` (q, r),
+    four rows of ``W`` per sweep over ``K``."""
     q, r = W.shape
     a = 0
     while a + 4 <= q:
@@ -393,7 +394,7 @@ def _syrk_sub(W, s2, K):
             w2 = s2 * W2[c1]
             w3 = s2 * W3[c1]
             Kc = K[c1]
-            for c2 in range(r):
+            for c2 in range(c1 + 1):
                 Kc[c2] -= w0 * W0[c2] + w1 * W1[c2] + w2 * W2[c2] + w3 * W3[c2]
         a += 4
     while a < q:
@@ -401,7 +402,7 @@ def _syrk_sub(W, s2, K):
         for c1 in range(r):
             w = s2 * Wa[c1]
             Kc = K[c1]
-            for c2 in range(r):
+            for c2 in range(c1 + 1):
                 Kc[c2] -= w * Wa[c2]
         a += 1
 

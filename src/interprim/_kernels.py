@@ -485,17 +485,19 @@ def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, o
     """
     Do, q, r = Uh.shape
     return _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out,
-                         np.empty((Do, q, q)), np.empty((r, r)), np.empty((0, 0)))
+                         np.empty((Do, q, q)), np.empty((r, r)), np.empty((0, 0)), np.empty((1, q, r)),
+                         np.empty((3, Do, q)))
 
 
 @njit(cache=True, fastmath=_FM)
-def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, T, K, Kpre):
+def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, T, K, Kpre, Ws, ca):
     """Body of :func:`lowrank_condition_mean`: ``T`` (D_o, q, q) receives the lower Cholesky factors of the
     ``T_i``, ``K`` (r, r) that of ``K``; when ``Kpre`` is ``(r, r)`` (not empty) it receives the lower
-    triangle of ``K`` before factorisation (the state of :func:`lowrank_condition_step`)."""
+    triangle of ``K`` before factorisation (the state of :func:`lowrank_condition_step`).  Workspaces:
+    ``Ws`` (1 or D_o, q, r), which keeps ``L_i^{-1} Uh_i`` when it has ``D_o`` entries, and ``ca``
+    (3, D_o, q), which keeps ``c_i`` (``ca[0]``) and ``a_i = T_i^{-1} S_i c_i`` (``ca[1]``)."""
     Do, q, r = Uh.shape
-    W = np.empty((q, r))
-    ca = np.empty((3, Do, q))
+    keepW = Ws.shape[0] == Do
     for i in range(r):
         for j in range(r):
             K[i, j] = K0[i, j]
@@ -513,6 +515,7 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
         ld = _chol_inplace(Ti, q)
         logdet_T += ld
         Ui = Uh[i]
+        W = Ws[i] if keepW else Ws[0]
         _forward_rows(Ti, Ui, W)
         _syrk_sub(W, sigma2, K)
         # c_i = b_i - G mu_i ;  residual |f_i - X mu_i|^2 = yy_i - mu.b - mu.c
@@ -571,16 +574,39 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
 
 
 @njit(cache=True, fastmath=_FM)
-def lowrank_condition_seed(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, Rs, Ks):
+def _backward_rows(R, W, M):
+    """``M = R^{-1} W`` for an upper factor ``R`` (q, q, rows) and ``W`` (q, r); row updates vectorised over r."""
+    q, r = W.shape
+    for a in range(q - 1, -1, -1):
+        Ma = M[a]
+        Wa = W[a]
+        Ra = R[a]
+        for c in range(r):
+            Ma[c] = Wa[c]
+        for b in range(a + 1, q):
+            rab = Ra[b]
+            Mb = M[b]
+            for c in range(r):
+                Ma[c] -= rab * Mb[c]
+        inv = 1.0 / Ra[a]
+        for c in range(r):
+            Ma[c] *= inv
+
+
+@njit(cache=True, fastmath=_FM)
+def lowrank_condition_seed(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, Rs, Ks, Ms, As):
     """:func:`lowrank_condition_mean` (same arithmetic, same results) that also keeps the state of
     :func:`lowrank_condition_step`: ``Rs`` (D_o, q, q) the upper Cholesky factors ``R_i`` (``R_i^T R_i = T_i``,
-    rows; zero below the diagonal) and ``Ks`` (r, r) the lower triangle of
-    ``K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i`` (before its factorisation).  Returns the same
+    rows; zero below the diagonal), ``Ks`` (r, r) the lower triangle of
+    ``K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i`` (before its factorisation), ``Ms`` (D_o, q, r)
+    ``T_i^{-1} Uh_i`` and ``As`` (D_o, q) ``a_i = T_i^{-1} S_i c_i``.  Returns the same
     ``(sum_i log det T_i, log det K, residual)``."""
     Do, q, r = Uh.shape
     T = np.empty((Do, q, q))
+    Ws = np.empty((Do, q, r))
+    ca = np.empty((3, Do, q))
     res = _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, T, np.empty((r, r)),
-                        Ks)
+                        Ks, Ws, ca)
     for i in range(Do):
         Ti = T[i]
         Ri = Rs[i]
@@ -589,12 +615,15 @@ def lowrank_condition_seed(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, o
                 Ri[a, b] = 0.0
             for b in range(a, q):
                 Ri[a, b] = Ti[b, a]
+        _backward_rows(Ri, Ws[i], Ms[i])  # T_i^{-1} Uh_i = R_i^{-1} (L_i^{-1} Uh_i)
+        for a in range(q):
+            As[i, a] = ca[1, i, a]
     return res
 
 
 @njit(cache=True, fastmath=_FM)
 def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, mu_o, obs_flat, other, Uc,
-                           G, B, Rs, Ks, Kf, vec, C, out):
+                           G, B, Rs, Ks, Ms, As, Kf, vec, C, out):
     """One more observed frame for :func:`lowrank_condition_mean`: the posterior mean of Eq. 18 (Eq. 16-17 with
     ``Omega~ = [blockdiag(X), 0]``, low-rank + diagonal prior), updated instead of recomputed.
 
@@ -603,26 +632,30 @@ def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, m
     frame ``zm`` at phase ``s`` only appends one row to the observation: the position design row
     ``h = H(s)`` (:func:`position_stats`' row, ``LinearRollout.design(0, s)``) with residual
     ``y = zm - free(s) [y0; v0]``.  The statistics change by rank one, ``G += h h^T``, ``B += h y^T``,
-    ``|Y|^2 += |y|^2``, and so do the factors kept in the state:
+    ``|Y|^2 += |y|^2``, and so does everything kept in the state (per observed DoF ``i``, with
+    ``u_i = S_i h``, ``x_i = T_i^{-1} u_i`` from the factor before the update (:func:`_solve_R`),
+    ``g_i = 1 + u_i^T x_i`` and ``w_i = Uh_i^T x_i``; Sherman-Morrison:
+    ``T_i'^{-1} = T_i^{-1} - x_i x_i^T / g_i``):
 
-    * ``T_i = sigma^2 I + S_i G S_i`` gains ``u_i u_i^T`` with ``u_i = S_i h``: the upper Cholesky factor
-      ``R_i`` (``Rs[i]``) gets a rank-1 update (:func:`_chol_update_R`, ``O(q^2)``), and
-      ``log det T_i`` grows by ``log g_i`` with ``g_i = 1 + u_i^T x_i``, ``x_i = T_i^{-1} u_i``
-      (matrix determinant lemma; ``x_i`` from the factor before the update, :func:`_solve_R`);
+    * ``T_i = sigma^2 I + S_i G S_i`` gains ``u_i u_i^T``: its upper Cholesky factor ``R_i`` (``Rs[i]``)
+      gets a rank-1 update (:func:`_chol_update_R`, ``O(q^2)``) and ``log det T_i`` grows by ``log g_i``
+      (matrix determinant lemma);
     * ``K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i`` (lower triangle ``Ks``) gains
-      ``sigma^2 w_i w_i^T / g_i`` with ``w_i = Uh_i^T x_i`` (Sherman-Morrison:
-      ``T_i'^{-1} = T_i^{-1} - x_i x_i^T / g_i``).
+      ``sigma^2 w_i w_i^T / g_i``;
+    * ``T_i^{-1} Uh_i`` (``Ms[i]``) loses ``x_i w_i^T / g_i``;
+    * ``a_i = T_i^{-1} S_i c_i`` (``As[i]``, ``c_i = b_i - G mu_i`` gains ``h e_i`` with
+      ``e_i = y_i - h^T mu_i``) becomes ``a_i + x_i (e_i - u_i^T a_i) / g_i`` (recursive least squares).
 
-    The mean is then finished as in :func:`lowrank_condition_mean`: ``c_i = b_i - G mu_i``,
-    ``a_i = T_i^{-1} S_i c_i``, ``beta = sum_i Uh_i^T a_i``, one ``r x r`` Cholesky of ``K`` (into ``Kf``),
-    ``gamma = K^{-1} beta``, ``delta_i = S_i (a_i + sigma^2 T_i^{-1} Uh_i gamma)`` on the observed parameters and
-    ``U_c gamma`` on the others.  Cost ``O(D_o (q^2 + q r) + r^3)`` instead of
+    The mean is then finished as in :func:`lowrank_condition_mean`: ``beta = sum_i Uh_i^T a_i``, one
+    ``r x r`` Cholesky of ``K`` (into ``Kf``), ``gamma = K^{-1} beta``,
+    ``delta_i = S_i (a_i + sigma^2 T_i^{-1} Uh_i gamma)`` on the observed parameters and ``U_c gamma`` on
+    the others; ``c_i`` (for the residual) from ``G`` and ``B``.  Cost ``O(D_o (q^2 + q r) + r^3)`` instead of
     ``O(M q (q + D_o) + D_o (q^3 + q^2 r + q r^2))`` for the statistics and the factorisations from scratch.
-    Exact up to rounding (the same posterior; tested against the from-scratch path to 1e-9).
+    Exact up to rounding (the same posterior; tested against the from-scratch path).
 
-    ``yy`` is ``|Y|^2`` before the frame; ``G``, ``B``, ``Rs``, ``Ks`` (seeded by
+    ``yy`` is ``|Y|^2`` before the frame; ``G``, ``B``, ``Rs``, ``Ks``, ``Ms``, ``As`` (seeded by
     :func:`lowrank_condition_seed`) are updated in place; ``vec`` is a ``(>= 6, >= max(q, r, D_o))``
-    workspace, ``C`` a ``(2, D_o, q)`` one, ``Kf`` an ``(r, r)`` one; ``out`` (P,) receives the posterior mean.
+    workspace, ``C`` a ``(D_o, q)`` one, ``Kf`` an ``(r, r)`` one; ``out`` (P,) receives the posterior mean.
 
     Returns
     -------
@@ -663,13 +696,20 @@ def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, m
         Bj = B[j]
         for d in range(Do):
             Bj[d] += hj * y[d]
-    # -- factors: R_i (rank-1 Cholesky update), K (Sherman-Morrison), log det T_i (determinant lemma)
+    # -- state: R_i (rank-1 Cholesky update), K, T_i^{-1} Uh_i, a_i (Sherman-Morrison), log det T_i
     dld = 0.0
     for i in range(Do):
         si = sq[i]
         R = Rs[i]
+        ai = As[i]
+        mu = mu_o[i]
+        e = y[i]
+        ua = 0.0
         for j in range(q):
-            u[j] = si[j] * h[j]
+            uj = si[j] * h[j]
+            u[j] = uj
+            e -= h[j] * mu[j]
+            ua += uj * ai[j]
         g = 1.0 + _solve_R(R, u, p, x)  # x = T_i^{-1} u_i
         Ui = Uh[i]
         for k in range(r):
@@ -679,24 +719,32 @@ def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, m
             Uj = Ui[j]
             for k in range(r):
                 w[k] += Uj[k] * xj
-        f = sigma2 / g
+        ig = 1.0 / g
+        f = sigma2 * ig
         for k in range(r):
             fk = f * w[k]
             Kk = Ks[k]
             for l in range(k + 1):
                 Kk[l] += fk * w[l]
+        Mi = Ms[i]
+        for j in range(q):
+            xj = x[j] * ig
+            Mj = Mi[j]
+            for k in range(r):
+                Mj[k] -= xj * w[k]
+        ea = (e - ua) * ig
+        for j in range(q):
+            ai[j] += x[j] * ea
         dld += np.log(g)
         _chol_update_R(R, u)
-    # -- the mean (as lowrank_condition_mean, with the solves on R_i)
+    # -- the mean (as lowrank_condition_mean)
     beta = vec[5]
     gamma = vec[4]
-    tmp = vec[2]
     for k in range(r):
         beta[k] = 0.0
     resid = yy
     for i in range(Do):
-        si = sq[i]
-        c = C[0, i]
+        c = C[i]
         mu = mu_o[i]
         for j in range(q):
             acc = 0.0
@@ -706,9 +754,7 @@ def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, m
             cc = B[j, i] - acc
             c[j] = cc
             resid -= mu[j] * (B[j, i] + cc)
-            tmp[j] = si[j] * cc
-        ai = C[1, i]
-        _solve_R(Rs[i], tmp, p, ai)
+        ai = As[i]
         Ui = Uh[i]
         for j in range(q):
             aj = ai[j]
@@ -724,21 +770,17 @@ def lowrank_condition_step(zm, s, y0, v0, Z, powers, sigma2, yy, sq, Uh, mean, m
     if not np.isfinite(ld_K):
         return dld, np.nan, resid, yy
     _chol_solve_vec(Kf, r, beta, gamma)
-    wv = vec[3]
     for i in range(Do):
-        Ui = Uh[i]
+        Mi = Ms[i]
         si = sq[i]
+        c = C[i]
+        ai = As[i]
         for j in range(q):
-            Uj = Ui[j]
+            Mj = Mi[j]
             acc = 0.0
             for k in range(r):
-                acc += Uj[k] * gamma[k]
-            tmp[j] = acc
-        _solve_R(Rs[i], tmp, y, wv)
-        c = C[0, i]
-        ai = C[1, i]
-        for j in range(q):
-            delta = si[j] * (ai[j] + sigma2 * wv[j])
+                acc += Mj[k] * gamma[k]
+            delta = si[j] * (ai[j] + sigma2 * acc)
             idx = obs_flat[i * q + j]
             out[idx] = mean[idx] + delta
             resid -= c[j] * delta

@@ -365,7 +365,8 @@ class LowRankConditioner:
     def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None, state=None):
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed.
 
-        With ``state`` (an object with arrays ``R`` (D_o, q, q) and ``K`` (r, r)), the same numbers come from
+        With ``state`` (an object with arrays ``R`` (D_o, q, q), ``K`` (r, r), ``TiU`` (D_o, q, r) and ``A``
+        (D_o, q)), the same numbers come from
         :func:`interprim._kernels.lowrank_condition_seed`, which also leaves there the factors that
         :func:`interprim._kernels.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
         (``sum_i log det T_i``) and ``state.seeded = True``.
@@ -381,7 +382,7 @@ class LowRankConditioner:
         else:
             ld_T, ld_K, resid = lowrank_condition_seed(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
                                                        self.mean, self.mu_o, self.obs_flat, self.other, self.Uc,
-                                                       out, state.R, state.K)
+                                                       out, state.R, state.K, state.TiU, state.A)
         if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
             return None
         if state is not None:

@@ -895,8 +895,9 @@ class _IncrementalConditioning:
     """What a :class:`Stream` keeps between frames to update Eq. 16-18 instead of recomputing it.
 
     The statistics ``G``, ``B``, ``|Y|^2`` of the frames seen (position observation), the upper
-    Cholesky factors ``R`` of ``T_i = sigma^2 I + S_i G S_i``, the lower triangle of the ``r x r``
-    matrix ``K`` and ``sum_i log det T_i`` of :class:`~interprim.gaussian.LowRankConditioner`, for
+    Cholesky factors ``R`` of ``T_i = sigma^2 I + S_i G S_i``, ``TiU_i = T_i^{-1} Uh_i``,
+    ``A_i = T_i^{-1} S_i c_i``, the lower triangle of the ``r x r`` matrix ``K`` and
+    ``sum_i log det T_i`` of :class:`~interprim.gaussian.LowRankConditioner`, for
     ``M`` frames at phases ``v m`` (``m = 0 .. M - 1``) from the start ``[y0; v0]``.  Seeded by the
     from-scratch path (:func:`interprim._kernels.lowrank_condition_seed`), extended by one frame by
     :func:`interprim._kernels.lowrank_condition_step`.  Buffers are allocated once.
@@ -914,9 +915,11 @@ class _IncrementalConditioning:
         self.B = np.zeros((q, Do))
         self.R = np.zeros((Do, q, q))
         self.K = np.zeros((r, r))
+        self.TiU = np.zeros((Do, q, r))
+        self.A = np.zeros((Do, q))
         self.Kf = np.zeros((r, r))
         self.vec = np.zeros((6, max(q, r, Do)))
-        self.C = np.zeros((2, Do, q))
+        self.C = np.zeros((Do, q))
         self.invalidate()
 
     def invalidate(self):
@@ -1083,8 +1086,8 @@ class Stream:
         out = np.empty(cond.P)
         dld, ld_K, resid, yy = lowrank_condition_step(z[M - 1], s_end, inc.y0, inc.v0, ro._Z, ro._powers, s2, inc.yy,
                                                       cond.sq, cond.Uh, cond.mean, cond.mu_o, cond.obs_flat,
-                                                      cond.other, cond.Uc, inc.G, inc.B, inc.R, inc.K, inc.Kf,
-                                                      inc.vec, inc.C, out)
+                                                      cond.other, cond.Uc, inc.G, inc.B, inc.R, inc.K, inc.TiU,
+                                                      inc.A, inc.Kf, inc.vec, inc.C, out)
         if not np.isfinite(ld_K):
             inc.invalidate()
             return None

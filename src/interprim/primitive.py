@@ -585,7 +585,8 @@ class InteractionPrimitive:
         doubling for forcing values), so nothing proportional to ``M`` is
         allocated.  The work stays ``O(M q (q + D_o))`` for ``M`` frames: every
         frame gets a new phase ``s_j = j s_end / (M - 1)`` whenever the phase
-        estimate moves, so the statistics cannot be updated incrementally.
+        estimate moves (while it does not, :class:`Stream` updates the
+        statistics and Eq. 16-18 by one row instead of calling this).
         Otherwise :meth:`_observation` (numpy, the reference) is used; both
         give the same numbers (tested to 1e-12).
         """
@@ -1001,8 +1002,11 @@ class Stream:
         with ``need_cov=True``.  Work per frame: one DTW column ``O(N D_o)``,
         the observation statistics ``O(M q (q + D_o))`` for the ``M`` frames
         seen (every frame moves to a new phase), and a conditioning step
-        independent of ``M``; no buffer grows with ``M`` except the frame
-        buffer itself (doubling).
+        independent of ``M``; with the likelihood phase, while the estimated
+        speed stays on the same lattice point, only the new frame's row:
+        ``O(D_o (q^2 + q r) + r^3)`` for statistics and conditioning (see
+        :class:`Stream`).  No buffer grows with ``M`` except the frame buffer
+        itself (doubling).
         """
         m = self.model
         n_cols = len(m.observed_dofs_)

@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import _chol_inplace, _forward_rows
+from ._kernels import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
 
 _FM = {"contract", "reassoc", "nsz", "arcp"}
 _LOG2PI = float(np.log(2.0 * np.pi))
@@ -335,29 +335,6 @@ def _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv):
 
 
 @njit(cache=True, fastmath=_FM)
-def _solve_R(R, b, p, out):
-    """``out = (R^T R)^{-1} b`` for an upper factor ``R`` (rows); ``p = R^{-T} b``; returns ``|p|^2``."""
-    q = R.shape[0]
-    for j in range(q):
-        p[j] = b[j]
-    pp = 0.0
-    for k in range(q):  # forward, row-axpy form
-        Rk = R[k]
-        pk = p[k] / Rk[k]
-        p[k] = pk
-        pp += pk * pk
-        for j in range(k + 1, q):
-            p[j] -= pk * Rk[j]
-    for k in range(q - 1, -1, -1):
-        Rk = R[k]
-        acc = p[k]
-        for j in range(k + 1, q):
-            acc -= Rk[j] * out[j]
-        out[k] = acc / Rk[k]
-    return pp
-
-
-@njit(cache=True, fastmath=_FM)
 def _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs, Ks, Ys, ts, T, Ub, V, VT, Kacc, c, p):
     """Dense state of a slot from its statistics: ``Rs[i]`` (upper Cholesky factor of ``T_i``), ``Ks`` (lower
     part of ``K``), ``Ys[i] = T_i^{-1} c_i``, ``ts = sum_i Uh_i^T Ys[i]``; returns ``(log det T, J)`` with
@@ -465,20 +442,7 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, Ys, ts, u, p, x, w):
             ts[a] += w[a] * eg
         dld += np.log(g)
         dJ += e * eg
-        # R^T R + u u^T (rank-1 Cholesky update; u is consumed)
-        for k in range(q):
-            Rk = R[k]
-            rkk = Rk[k]
-            uk = u[k]
-            rn = np.sqrt(rkk * rkk + uk * uk)
-            c = rn / rkk
-            sn = uk / rkk
-            Rk[k] = rn
-            ic = 1.0 / c
-            for j in range(k + 1, q):
-                rkj = (Rk[j] + sn * u[j]) * ic
-                Rk[j] = rkj
-                u[j] = c * u[j] - sn * rkj
+        _chol_update_R(R, u)  # R^T R + u u^T (u is consumed)
     return dld, dJ
 
 

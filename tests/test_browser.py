@@ -118,9 +118,10 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
 
     n_pred = wait_for(driver, "return window.ipState.hf.predictions >= 20 && window.ipState.hf.predictions")
     assert n_pred >= 20
-    # after the human stops, the robot finishes its predicted movement
+    # after the human stops, every frame's reply arrives (one per frame, in order) and the robot finishes its
+    # predicted movement (robotPhase reaches 1): waited for as state, not as wall-clock time
     wait_for(driver, "return !window.ipState.hf.active")
-    time.sleep(2.5)
+    wait_for(driver, "const h = window.ipState.hf; return h.predictions >= h.frames && h.robotPhase >= 1")
     st = driver.execute_script("return window.ipState.hf")
     (ARTIFACTS / "browser_highfive_drag_frames.json").write_text(json.dumps(st["sent"]))
     assert st["error"] is None, st["error"]
@@ -160,7 +161,8 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     driver.find_element("id", "hf-replay").click()
     wait_for(driver, "return window.ipState.hf.predictions >= 30")
     wait_for(driver, "return !window.ipState.hf.active")
-    time.sleep(2.0)  # the robot finishes its predicted movement
+    # every reply in and the robot at the end of its predicted movement (state, not wall-clock time)
+    wait_for(driver, "const h = window.ipState.hf; return h.predictions >= h.frames && h.robotPhase >= 1")
     st = driver.execute_script("return window.ipState.hf")
     driver.save_screenshot(str(ARTIFACTS / "browser_highfive_replay60.png"))
     print("replay 60 %:", st["replayGoal"], st["meetingPoint"], st["robotHand"])
@@ -188,7 +190,7 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     ptr.pointer_up()
     actions.perform()
     wait_for(driver, "return window.ipState.hw.predictions >= 20 && !window.ipState.hw.active")
-    time.sleep(0.3)
+    wait_for(driver, "const h = window.ipState.hw; return h.predictions >= h.frames")  # every reply in
     hw = driver.execute_script("return window.ipState.hw")
     driver.save_screenshot(str(ARTIFACTS / "browser_handwriting_drawn.png"))
     assert hw["error"] is None and hw["model"] == "letter_s", hw["probabilities"]

@@ -2,18 +2,20 @@
 
 Every compiled kernel has a plain numpy equivalent that gives the same
 numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``).
-``ready()`` says which one runs:
+``ready()`` says which one runs, and the answer never changes within a process
+(one input, one answer: no result may depend on when a compilation finished):
 
-* ``INTERPRIM_JIT=1``: compiled kernels always (compiled or loaded from numba's
-  on-disk cache on first use, in the calling thread);
 * ``INTERPRIM_JIT=0``: numpy only;
-* default (``auto``): the first call starts loading the kernels in a
-  background thread (importing numba, reading its cache or compiling) and
-  the numpy equivalents serve until they are ready.  So ``import interprim``
-  plus a first ``predict`` never waits for numba, also in a fresh clone
-  without a compile cache.  :func:`warmup` blocks until the kernels are
-  ready; :meth:`InteractionPrimitive.stream` calls it, because streaming
-  needs the compiled per-frame step.
+* ``INTERPRIM_JIT=1`` or default (``auto``): the compiled kernels, compiled or
+  loaded from numba's on-disk cache on first use, in the calling thread (a
+  fresh install without a cache waits for the compilation once).  If numba is
+  missing or fails to compile, numpy serves for the rest of the process.
+
+``import interprim`` stays cheap: numba is imported on the first call that
+needs a kernel (``fit``, ``predict``, ``stream``), not at import.  An
+application that wants the first prediction to be fast calls :func:`warmup`
+(or :func:`prefetch`, which starts loading in a background thread while the
+caller does something else; the first kernel call then waits for it).
 """
 
 from __future__ import annotations
@@ -88,48 +90,60 @@ def _load():
     global _READY, _ERROR
     try:
         _compile_all()
+        from . import phase_likelihood  # the likelihood phase's kernels (their own module)
+
+        phase_likelihood._load_kernel()
         _READY = True
-    except BaseException as exc:  # numba missing or broken: stay on numpy
+    except BaseException as exc:  # numba missing or broken: numpy for the whole process
         _ERROR = exc
         _READY = False
 
 
 def ready() -> bool:
-    """True when the compiled kernels are to be used (see the module docstring)."""
-    global _READY, _THREAD
+    """True when the compiled kernels are to be used (see the module docstring).
+
+    The first call decides for the whole process: with ``INTERPRIM_JIT`` other than ``0`` it waits for the
+    kernels (loading them in the calling thread, or joining a :func:`prefetch` in progress), so a result
+    never depends on how far a background compilation has got.
+    """
     if _READY is not None:
         return _READY
-    mode = _mode()
-    if mode in ("0", "false", "no", "off"):
-        _READY = False
-        return False
-    if mode in ("1", "true", "yes", "on"):
-        warmup()
-        return bool(_READY)
+    return warmup()
+
+
+def _numpy_only() -> bool:
+    return _mode() in ("0", "false", "no", "off")
+
+
+def prefetch() -> None:
+    """Start loading the compiled kernels in a background thread and return at once.
+
+    Nothing runs on numpy meanwhile: the first call that needs a kernel waits for this load (so results are
+    the same as without the prefetch).  A no-op with ``INTERPRIM_JIT=0`` or once loaded.
+    """
+    global _THREAD
+    if _READY is not None or _numpy_only():
+        return
     with _LOCK:
         if _THREAD is None:
             _THREAD = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
             _THREAD.start()
-    return bool(_READY)
 
 
 def warmup() -> bool:
     """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use."""
-    global _THREAD
+    global _READY, _THREAD
     if _READY is not None:
         return _READY
-    if _mode() in ("0", "false", "no", "off"):
-        return ready()
+    if _numpy_only():
+        _READY = False
+        return False
     with _LOCK:
         t = _THREAD
         if t is None:
             _THREAD = t = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
             t.start()
     t.join()
-    if _READY:  # the likelihood phase's kernel (its own module, loaded on first use otherwise)
-        from . import phase_likelihood
-
-        phase_likelihood.warmup()
     return bool(_READY)
 
 

@@ -42,7 +42,6 @@ evaluation it is tested against.
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,22 +216,19 @@ def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None
 # ---------------------------------------------------------------------------------------------------------------
 # batched evaluation (low-rank prior)
 
-_KERNEL: list = []  # [phase_loglik_batch] once loaded
-_KLOCK = threading.Lock()
-_KTHREAD: list = []
-_KERROR: list = []
+_KERNEL: list = []  # [phase_loglik_batch, track_step] once loaded by interprim._fast
 
 
 def _load_kernel():
-    try:
-        from ._phase_kernels import phase_loglik_batch, track_step
+    """Compile (or load from numba's cache) the phase kernels; called by :func:`interprim._fast.warmup`
+    (one loader for every kernel: raises if they cannot be compiled, and numpy then serves everywhere)."""
+    if _KERNEL:
+        return
+    from ._phase_kernels import phase_loglik_batch, track_step
 
-        _warm_call(phase_loglik_batch)
-        _warm_track(track_step)
-        _KERNEL.append(phase_loglik_batch)
-        _KERNEL.append(track_step)
-    except BaseException as exc:  # numba missing or broken: stay on numpy
-        _KERROR.append(exc)
+    _warm_call(phase_loglik_batch)
+    _warm_track(track_step)
+    _KERNEL.extend([phase_loglik_batch, track_step])
 
 
 def _warm_call(fn):
@@ -261,34 +257,18 @@ def _warm_track(fn):
 
 
 def _kernel(block: bool = False):
-    """The compiled batch kernel, or ``None`` while it loads (see :mod:`interprim._fast` for the policy).
-
-    ``INTERPRIM_JIT=0``: never; ``=1``: load now; default: load in a background thread on first use
-    (numpy serves meanwhile) unless ``block``.
-    """
-    if _KERNEL:
-        return _KERNEL[0]
-    if _KERROR:
-        return None
+    """The compiled batch kernel, or ``None`` on the numpy path (:func:`interprim._fast.ready` decides, once
+    per process; ``block`` is kept for callers and has no effect: the first use always waits)."""
     from . import _fast
 
-    mode = _fast._mode()
-    if mode in ("0", "false", "no", "off"):
-        return None
-    with _KLOCK:
-        if not _KTHREAD:
-            th = threading.Thread(target=_load_kernel, name="interprim-phase-jit", daemon=True)
-            _KTHREAD.append(th)
-            th.start()
-        th = _KTHREAD[0]
-    if block or mode in ("1", "true", "yes", "on"):
-        th.join()
-    return _KERNEL[0] if _KERNEL else None
+    return _KERNEL[0] if _fast.ready() else None
 
 
 def warmup() -> bool:
-    """Load (or compile) the phase kernel now and wait for it; returns whether it is in use."""
-    return _kernel(block=True) is not None
+    """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use."""
+    from . import _fast
+
+    return _fast.warmup()
 
 
 class _FastState:

@@ -338,6 +338,7 @@ function hfAnimate(now) {
     if (!state.hf.active && hf.robotPhase < 1) hf.robotPhase = Math.min(1, hf.robotPhase + (now - last) / 1000 / hf.pred.duration);
     hf.robotQ = interpRow(hf.pred.mean, hf.robotPhase);
   }
+  state.hf.robotPhase = hf.robotPhase;
   hfDraw();
   requestAnimationFrame(hfAnimate);
 }

@@ -1,0 +1,228 @@
+"""Evaluation protocols in seconds, not in normalised time: real-time prediction, phase, calibration.
+
+The paper's Fig. 7 compares predictions with the truth on a normalised-time grid, which hides every
+timing error: a method that predicts the right shape at the wrong speed looks perfect.  A robot needs
+the partner's positions *in seconds from now*.  This module measures that, for any estimator with the
+small interface of :mod:`interprim.baselines` (``fit(demos, dt)``, ``predict(partial)`` returning an
+object with ``trajectory(n)``, ``std(n)`` and, when it estimates timing, ``phase`` and ``duration``),
+on any set of demonstrations (built-in data or a user's own recordings).
+
+Protocols (per held-out demonstration of ``T`` frames at ``dt``; leave-one-out or k-fold):
+
+* **Real time.** After each observed frame ``k`` (the first ``k`` frames seen, ``k/T`` from ``start`` to
+  ``stop``, default 20 ... 90 %), predict the controlled agent's positions at the next frames up to
+  ``horizon`` seconds ahead (default 0.25 s), placed in time by the method's own estimate of the phase
+  ``s`` (fraction of the movement at frame ``k``) and of the duration ``D``: the position at ``t`` seconds
+  after frame ``k`` is the prediction at normalised time ``s + t / D``.  Error: root mean square of the
+  point errors over the horizon frames.
+* **Phase.** ``|s - (k - 1) / (T - 1)|`` for the method's phase, and for the clock.
+* **Calibration.** Over the same horizon frames, both agents: the fraction of true coordinates inside the
+  pointwise 90 % predictive band ``mean +- 1.645 std`` (coverage) and RMS error / RMS predicted std
+  (1 = calibrated; > 1 over-confident).
+
+Baselines, always on the same splits:
+
+* ``clock``: the mean of the time-normalised training demonstrations, played from the first frame at the
+  mean training duration (what a robot without any perception of timing would do);
+* ``oracle-duration``: the same mean stretched to the true duration of the held-out demonstration (not
+  available online: a floor that shows how much of the error is timing).
+
+A method without a ``duration`` but with a ``phase`` (e.g. nearest neighbour) is placed in time at the
+speed implied by its phase (elapsed time / phase); a method with neither (the prior mean) is played by the
+clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .preprocessing import time_normalise
+
+__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "realtime_sweep", "summarise_realtime", "Z90"]
+
+Z90 = 1.6448536269514722  # two-sided 90 % band of a normal distribution
+
+
+@dataclass(frozen=True)
+class RealTimeConfig:
+    """Settings of the real-time protocol.
+
+    Parameters
+    ----------
+    horizon : float
+        Seconds ahead that are predicted after each observed frame.
+    start, stop : float
+        Fractions of the held-out movement between which frames are evaluated.
+    stride : int
+        Evaluate every ``stride``-th frame in that range (1 = every frame).
+    n_grid : int
+        Points of the normalised-time grid on which predictions are interpolated.
+    point_dim : int
+        Columns per point (3 for 3-D positions: errors are Euclidean distances of points), 1 for scalars.
+    """
+
+    horizon: float = 0.25
+    start: float = 0.2
+    stop: float = 0.9
+    stride: int = 1
+    n_grid: int = 201
+    point_dim: int = 1
+
+
+def mean_demo(demos, n: int = 201):
+    """``(mean (n, D), mean duration in frames - 1)`` of time-normalised demonstrations."""
+    Y = np.stack([time_normalise(np.asarray(d, dtype=np.float64), n) for d in demos])
+    return Y.mean(axis=0), float(np.mean([len(d) - 1 for d in demos]))
+
+
+def _interp_rows(u, grid, Y):
+    """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
+    u = np.clip(u, 0.0, 1.0)
+    return np.stack([np.interp(u, grid, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+
+
+def _point_rms(err, point_dim):
+    n, C = err.shape
+    pd = point_dim if C % point_dim == 0 else 1
+    return float(np.sqrt(np.mean(np.sum(err.reshape(n, C // pd, pd) ** 2, axis=2))))
+
+
+def _timing(pred, k, dt, mean_dur_s):
+    """``(phase s at frame k, duration in s)`` of a prediction, by the rules of the module docstring."""
+    elapsed = (k - 1) * dt
+    s = getattr(pred, "normalised_time", None)
+    if s is None:
+        s = getattr(pred, "phase", float("nan"))
+    s = float(s)
+    dur = getattr(pred, "duration", None)
+    if not math.isfinite(s):  # no timing at all: the clock
+        return min(elapsed / mean_dur_s, 1.0), mean_dur_s
+    if dur is None or not math.isfinite(float(dur)) or float(dur) <= 0:
+        dur = elapsed / s if s > 0 else mean_dur_s
+    return s, float(dur)
+
+
+def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
+                  name: str = "method", fitted: bool = False) -> list:
+    """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
+
+    Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
+    ``{"method", "k", "fraction", "phase_true", "phase", "phase_err", "rt_ctrl", "rt_obs", "cov_ctrl",
+    "cov_obs", "z_ctrl", "z_obs"}`` (``z_*``: RMS error / RMS std over the horizon; NaN without a std).
+    """
+    test = np.asarray(test, dtype=np.float64)
+    obs = [int(i) for i in observed_dofs]
+    ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
+    if not fitted:
+        estimator.fit(train, dt=dt)
+    grid = np.linspace(0.0, 1.0, cfg.n_grid)
+    mean, mean_dur = mean_demo(train, cfg.n_grid)
+    mean_dur_s = mean_dur * dt
+    T = test.shape[0]
+    true_dur_s = (T - 1) * dt
+    H = max(1, int(round(cfg.horizon / dt)))
+    k0 = max(3, int(math.ceil(cfg.start * T)))
+    k1 = max(k0, int(math.floor(cfg.stop * T)))
+    out = []
+    for k in range(k0, k1 + 1, max(1, int(cfg.stride))):
+        idx = np.minimum(np.arange(k, k + H), T - 1)  # frames k .. k+H-1 (0-based), held at the end
+        t_ahead = (np.arange(1, H + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
+        truth = test[idx]
+        phase_true = (k - 1) / (T - 1)
+        elapsed = (k - 1) * dt
+        pred = estimator.predict(test[:k, obs])
+        s, dur = _timing(pred, k, dt, mean_dur_s)
+        Y = pred.trajectory(cfg.n_grid)
+        S = pred.std(cfg.n_grid)
+        rows = {
+            name: (s, _interp_rows(s + t_ahead / dur, grid, Y),
+                   None if S is None else _interp_rows(s + t_ahead / dur, grid, S)),
+            "clock": (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean), None),
+            "oracle-duration": (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None),
+        }
+        for method, (sm, Yh, Sh) in rows.items():
+            err = Yh - truth
+            rec = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true, "phase": float(sm),
+                   "phase_err": abs(float(sm) - phase_true)}
+            for agent, cols in (("ctrl", ctrl), ("obs", obs)):
+                if not cols:
+                    continue
+                e = err[:, cols]
+                rec[f"rt_{agent}"] = _point_rms(e, cfg.point_dim)
+                if Sh is not None:
+                    sd = Sh[:, cols]
+                    rec[f"cov_{agent}"] = float(np.mean(np.abs(e) <= Z90 * sd + 1e-12))
+                    rec[f"z_{agent}"] = float(np.sqrt(np.mean(e ** 2)) / max(np.sqrt(np.mean(sd ** 2)), 1e-300))
+                else:
+                    rec[f"cov_{agent}"] = float("nan")
+                    rec[f"z_{agent}"] = float("nan")
+            out.append(rec)
+    return out
+
+
+def folds(n: int, k: int | None = None):
+    """Held-out index sets: leave-one-out (``k`` None or >= n) or ``k`` contiguous folds."""
+    if k is None or k >= n:
+        return [[j] for j in range(n)]
+    if k < 2:
+        raise ValueError(f"k-fold needs k >= 2, got {k}")
+    edges = np.linspace(0, n, k + 1).round().astype(int)
+    return [list(range(edges[i], edges[i + 1])) for i in range(k)]
+
+
+def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
+                   k: int | None = None, progress: bool = False) -> list:
+    """Cross-validated real-time protocol for several methods on one set of demonstrations.
+
+    ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
+    fits every method on the other demonstrations; clock and oracle rows are added once (from the first
+    method's pass).  Returns records with ``"demo"`` added.
+    """
+    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    if len(demos) < 3:
+        raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
+    recs = []
+    sets = folds(len(demos), k)
+    it = sets
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(sets, desc="folds", unit="fold")
+    for held in it:
+        train = [d for i, d in enumerate(demos) if i not in set(held)]
+        for first, (name, factory) in enumerate(make_estimators.items()):
+            est = factory().fit(train, dt=dt)
+            for j in held:
+                for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True):
+                    if r["method"] in ("clock", "oracle-duration") and first:
+                        continue
+                    r["demo"] = int(j)
+                    recs.append(r)
+    return recs
+
+
+def summarise_realtime(records) -> dict:
+    """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
+    the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
+    by = {}
+    for r in records:
+        by.setdefault(r["method"], []).append(r)
+    out = {}
+    keys = ("phase_err", "rt_ctrl", "rt_obs", "cov_ctrl", "cov_obs", "z_ctrl", "z_obs")
+    for m, rs in by.items():
+        out[m] = {key: float(np.nanmean([r.get(key, np.nan) for r in rs])) if any(
+            np.isfinite(r.get(key, np.nan)) for r in rs) else float("nan") for key in keys}
+        out[m]["n"] = len(rs)
+    clock = out.get("clock")
+    oracle = out.get("oracle-duration")
+    for m in out:
+        if clock:
+            for key in ("rt_ctrl", "rt_obs", "phase_err"):
+                if key in clock and clock[key] > 0:
+                    out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
+        if oracle and oracle.get("rt_ctrl", 0) > 0:
+            out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
+    return out

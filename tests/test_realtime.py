@@ -1,0 +1,86 @@
+"""The real-time protocol (interprim.realtime): placement in time, baselines, calibration, folds."""
+
+import numpy as np
+import pytest
+
+from interprim.baselines import PriorMean
+from interprim.preprocessing import time_normalise
+from interprim.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
+
+
+def _demos(n=6, seed=0):
+    """Two-agent demos with different durations: the controlled agent mirrors the observed one."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for j in range(n):
+        T = int(rng.integers(40, 80))
+        t = np.linspace(0.0, 1.0, T)
+        a = 1.0 + 0.3 * rng.normal()
+        obs = np.stack([a * np.sin(np.pi * t), t], axis=1)
+        out.append(np.hstack([obs, -obs[:, :1] * 2.0]))
+    return out
+
+
+class _Truth:
+    """Knows the held-out demonstration: predicts it exactly, with the true phase and duration."""
+
+    def __init__(self, demo, dt):
+        self.demo, self.dt = demo, dt
+
+    def fit(self, demos, dt=None):
+        return self
+
+    def predict(self, partial):
+        T = len(self.demo)
+        k = len(partial)
+        demo = self.demo
+
+        class P:
+            normalised_time = (k - 1) / (T - 1)
+            duration = (T - 1) * self.dt
+
+            @staticmethod
+            def trajectory(n):
+                return time_normalise(demo, n)
+
+            @staticmethod
+            def std(n):
+                return np.full((n, demo.shape[1]), 1e-6)
+
+        return P()
+
+
+def test_a_method_that_knows_the_truth_has_zero_error_and_the_clock_is_its_own_baseline():
+    demos = _demos()
+    dt = 0.02
+    test, train = demos[0], demos[1:]
+    cfg = RealTimeConfig(n_grid=2001)
+    recs = realtime_fold(_Truth(test, dt), train, test, [0, 1], dt, cfg, name="truth")
+    truth = [r for r in recs if r["method"] == "truth"]
+    assert len(truth) == int(np.floor(0.9 * len(test))) - int(np.ceil(0.2 * len(test))) + 1
+    assert max(r["phase_err"] for r in truth) < 1e-12
+    assert max(r["rt_ctrl"] for r in truth) < 1e-3  # interpolation of a 2001-point grid only
+    clock = [r for r in recs if r["method"] == "clock"]
+    assert min(r["rt_ctrl"] for r in clock) >= 0 and np.mean([r["rt_ctrl"] for r in clock]) > 0.01
+    # the oracle-duration mean has the true phase by construction
+    assert max(r["phase_err"] for r in recs if r["method"] == "oracle-duration") == 0.0
+
+
+def test_a_method_without_timing_is_played_by_the_clock():
+    demos = _demos(seed=1)
+    recs = realtime_sweep({"prior": lambda: PriorMean([0, 1], n=201)}, demos, [0, 1], 0.02, RealTimeConfig(stride=3))
+    s = summarise_realtime(recs)
+    assert s["prior"]["rt_ctrl_vs_clock"] == pytest.approx(1.0, rel=1e-9)
+    assert s["prior"]["phase_err_vs_clock"] == pytest.approx(1.0, rel=1e-9)
+    assert np.isfinite(s["prior"]["cov_ctrl"])  # PriorMean has a std: calibration is measured
+    assert s["oracle-duration"]["phase_err"] == 0.0
+
+
+def test_folds_cover_every_demo_once():
+    for n, k in [(7, None), (7, 3), (10, 10), (10, 4)]:
+        f = folds(n, k)
+        assert sorted(i for fold in f for i in fold) == list(range(n))
+    with pytest.raises(ValueError, match="k >= 2"):
+        folds(5, 1)
+    with pytest.raises(ValueError, match="at least 3 demonstrations"):
+        realtime_sweep({"prior": lambda: PriorMean([0])}, _demos()[:2], [0], 0.02)

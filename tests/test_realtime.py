@@ -84,3 +84,17 @@ def test_folds_cover_every_demo_once():
         folds(5, 1)
     with pytest.raises(ValueError, match="at least 3 demonstrations"):
         realtime_sweep({"prior": lambda: PriorMean([0])}, _demos()[:2], [0], 0.02)
+
+
+def test_verdict_says_plainly_whether_the_human_helps():
+    from interprim.realtime import markdown_table, verdict
+
+    base = {"clock": {"rt_ctrl": 0.1, "rt_ctrl_vs_clock": 1.0, "phase_err_vs_clock": 1.0}}
+    good = dict(base, ip={"rt_ctrl": 0.077, "rt_ctrl_vs_clock": 0.77, "phase_err_vs_clock": 0.6})
+    assert verdict(good).startswith("conditioning on the human improves the robot's real-time prediction by 23 %")
+    assert "40 % closer" in verdict(good)
+    same = dict(base, ip={"rt_ctrl": 0.099, "rt_ctrl_vs_clock": 0.99, "phase_err_vs_clock": 1.0})
+    assert verdict(same).startswith("does not help on this data")
+    worse = dict(base, ip={"rt_ctrl": 0.13, "rt_ctrl_vs_clock": 1.3, "phase_err_vs_clock": 1.2})
+    assert verdict(worse).startswith("hurts on this data")
+    assert "| clock |" in markdown_table(good) and "| ip |" in markdown_table(good)

@@ -226,3 +226,63 @@ def summarise_realtime(records) -> dict:
         if oracle and oracle.get("rt_ctrl", 0) > 0:
             out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
     return out
+
+
+def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, phase_method: str | None = None):
+    """Factories of the methods compared by default: the library's defaults (``ip``), the paper exactly
+    (``ip-paper``: forcing observation, DTW phase, ``sigma2="auto"``), nearest neighbour and the prior mean."""
+    from .baselines import NearestNeighbour, PriorMean
+    from .primitive import InteractionPrimitive
+
+    obs = [int(i) for i in observed_dofs]
+    common = dict(observed_dofs=obs, n_basis=n_basis, smoothing_window=smoothing_window)
+    extra = {} if phase_method is None else {"phase_method": phase_method}
+    return {
+        "ip": lambda: InteractionPrimitive(**common, **extra),
+        "ip-paper": lambda: InteractionPrimitive(**common, observation="forcing", sigma2="auto", phase_method="dtw"),
+        "nn": lambda: NearestNeighbour(obs),
+        "prior": lambda: PriorMean(obs),
+    }
+
+
+def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
+    """One plain sentence: does conditioning on the human help the robot's real-time prediction here?
+
+    Compares ``method``'s real-time error of the controlled agent with the clock's (the mean played at the
+    mean duration) and the prior mean's; ``threshold`` is the relative gain below which the answer is "no".
+    """
+    m = summary.get(method)
+    if m is None or "rt_ctrl_vs_clock" not in m:
+        return f"no verdict: {method!r} or the clock is missing from the results"
+    r = m["rt_ctrl_vs_clock"]
+    ph = m.get("phase_err_vs_clock", float("nan"))
+    timing = (f"its timing is {100 * (1 - ph):.0f} % closer to the truth than the clock's" if ph < 1 - threshold
+              else "its timing is no better than the clock's")
+    if r <= 1 - threshold:
+        return (f"conditioning on the human improves the robot's real-time prediction by {100 * (1 - r):.0f} % "
+                f"over the clock (RMSE {m['rt_ctrl']:.4g} vs {summary['clock']['rt_ctrl']:.4g}); {timing}.")
+    if r < 1 + threshold:
+        return (f"does not help on this data: the model does no better than replaying the mean at the mean "
+                f"speed (real-time RMSE {r:.2f}x the clock's); {timing}.")
+    return (f"hurts on this data: the model's real-time prediction is {100 * (r - 1):.0f} % worse than replaying "
+            f"the mean at the mean speed; {timing}. Use the mean (or more demonstrations).")
+
+
+def markdown_table(summary) -> str:
+    """The summary as a Markdown table (one row per method)."""
+    cols = [("rt_ctrl", "real-time RMSE, controlled", 4), ("rt_ctrl_vs_clock", "x clock", 2),
+            ("rt_ctrl_vs_oracle", "x oracle-duration", 2), ("phase_err", "phase error", 3),
+            ("phase_err_vs_clock", "x clock", 2), ("cov_ctrl", "90 % band coverage, controlled", 2),
+            ("cov_obs", "coverage, observed", 2), ("z_ctrl", "RMSE / std, controlled", 2),
+            ("z_obs", "RMSE / std, observed", 2)]
+    lines = ["| method | " + " | ".join(c[1] for c in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    order = [m for m in ("clock", "oracle-duration") if m in summary] + [m for m in summary
+                                                                          if m not in ("clock", "oracle-duration")]
+    for m in order:
+        v = summary[m]
+        cells = []
+        for key, _, dg in cols:
+            x = v.get(key, float("nan"))
+            cells.append("—" if not np.isfinite(x) else f"{x:.{dg}f}")
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

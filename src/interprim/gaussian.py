@@ -52,6 +52,34 @@ class GaussianPrior:
     factor: np.ndarray | None = None
 
 
+def shrink_cross(prior: GaussianPrior, gamma: float, n_first: int) -> GaussianPrior:
+    """Shrink the cross-agent block of ``prior.cov`` (first ``n_first`` parameters x the rest) by ``1 - gamma``,
+    in place; returns ``prior``.
+
+    The diagonal-plus-low-rank form stays exact: with ``cov = diag(d) + U U^T`` and ``U = [U_o; U_c]`` the
+    result is ``diag(d) + V V^T`` with ``V = [[U_o, 0], [(1 - gamma) U_c, sqrt(1 - (1 - gamma)^2) U_c]]`` (the
+    rank doubles).  ``gamma = 0`` leaves the prior unchanged; ``gamma = 1`` makes the agents independent.
+    """
+    gamma = float(gamma)
+    if not 0.0 <= gamma <= 1.0:
+        raise ValueError(f"gamma must be in [0, 1], got {gamma}")
+    if gamma == 0.0:
+        return prior
+    po = int(n_first)
+    prior.cov[:po, po:] *= 1.0 - gamma
+    prior.cov[po:, :po] *= 1.0 - gamma
+    U = getattr(prior, "factor", None)
+    if U is not None:
+        U = np.asarray(U, dtype=np.float64)
+        r = U.shape[1]
+        V = np.zeros((U.shape[0], 2 * r))
+        V[:po, :r] = U[:po]
+        V[po:, :r] = (1.0 - gamma) * U[po:]
+        V[po:, r:] = np.sqrt(1.0 - (1.0 - gamma) ** 2) * U[po:]
+        prior.factor = V
+    return prior
+
+
 def shrinkage_intensity(X: np.ndarray) -> float:
     """Analytic shrinkage intensity towards the diagonal (Schaefer & Strimmer 2005, target D).
 

@@ -115,13 +115,19 @@ class InteractionPrimitive:
         moves the prediction far more than it should (measured on the simulated
         high five with 0.01 rad input noise: goal error 0.35 m without, 0.05 m
         with ``input_noise=0.01``).
+    calibrate : bool or "auto", default "auto"
+        Calibrate the predictive uncertainty on held-out folds of the training demonstrations
+        (:mod:`interprim.calibration`): :meth:`Prediction.std` and :meth:`Prediction.samples` are the
+        posterior's, scaled per agent and per fraction seen so that their 90 % band covers about 90 % of
+        held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
+        least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
                  reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood",
-                 input_noise: float | None = None):
+                 input_noise: float | None = None, calibrate="auto"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
         self.alpha_y = alpha_y
@@ -138,6 +144,7 @@ class InteractionPrimitive:
         self.n_steps = n_steps
         self.phase_method = phase_method
         self.input_noise = input_noise
+        self.calibrate = calibrate
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
@@ -157,6 +164,7 @@ class InteractionPrimitive:
             "min_observed": int(self.min_observed), "n_steps": int(self.n_steps),
             "phase_method": self.phase_method,
             "input_noise": None if self.input_noise is None else float(self.input_noise),
+            "calibrate": self.calibrate if isinstance(self.calibrate, str) else bool(self.calibrate),
         }
 
     def _check_params(self, n_dofs: int):
@@ -370,6 +378,11 @@ class InteractionPrimitive:
             if not 0 <= r < len(latent):
                 raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
             self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
+        self.calibration_ = None
+        if self.calibrate is True or (self.calibrate == "auto" and self.sigma2 == "cv"):
+            from .calibration import fit_calibration  # predictive std scaled to held-out errors
+
+            self.calibration_ = fit_calibration(self, arrays)
         return self
 
     def _setup(self):
@@ -773,8 +786,31 @@ class Prediction:
         M, off = m._latent_map()
         return lat @ M.T + off
 
-    def std(self, n: int = 100) -> np.ndarray:
-        """Pointwise posterior standard deviation of :meth:`trajectory`, shape ``(n, D)``."""
+    def _calibration_scale(self):
+        """Per-column factors of the calibrated predictive std (:mod:`interprim.calibration`), or ``None``."""
+        m = self._m
+        cal = getattr(m, "calibration_", None)
+        if cal is None:
+            return None
+        c_o, c_c = cal.factors(self.normalised_time)
+        f = np.empty(m.n_dofs_)
+        f[m.observed_dofs_] = c_o
+        f[m.controlled_dofs_] = c_c
+        return f
+
+    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
+        """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
+
+        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled per agent by the model's
+        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations, at this
+        prediction's phase), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what
+        happens; ``False``, or a model without calibration: the posterior std itself.
+        """
+        sd = self._posterior_std(n)
+        f = self._calibration_scale() if calibrated else None
+        return sd if f is None else sd * f
+
+    def _posterior_std(self, n: int) -> np.ndarray:
         m = self._m
         s = np.linspace(0.0, 1.0, int(n))
         _, H = m.rollout_.design(0.0, s)
@@ -785,14 +821,20 @@ class Prediction:
         return np.sqrt(np.clip(var, 0.0, None))
 
     def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
-        """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``."""
+        """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
+        model their spread about :meth:`trajectory` is scaled per agent as in :meth:`std`."""
         m = self._m
         th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
         s = np.linspace(0.0, 1.0, int(n))
         y0, v0 = self._start_states()
         lat = self._latent_traj(self._theta(th), s, y0, v0)
         M, off = m._latent_map()
-        return lat @ M.T + off
+        out = lat @ M.T + off
+        f = self._calibration_scale()
+        if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
+            mean = self.trajectory(int(n))
+            out = mean + (out - mean) * f
+        return out
 
     def response(self, n: int = 100, state=None):
         """The controlled agent's mean movement from the current phase to the end.

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gaussian import fit_prior, shrinkage_intensity
+from .gaussian import fit_prior, shrink_cross, shrinkage_intensity
 from .phase import open_end_dtw
 from .phase_likelihood import observation_design
 from .preprocessing import time_normalise
@@ -329,20 +329,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         lam = lam_grid[a]
         gamma = float(gam[c])
         model.sigma2_ = float(s2_grid[kind0][b])
-        prior = fit_prior(thetas, method, model.ridge, shrinkage=lam)
-        if gamma > 0:  # shrink the cross-agent covariance (observed x controlled) towards zero
-            po = n_o * q
-            prior.cov[:po, po:] *= 1.0 - gamma
-            prior.cov[po:, :po] *= 1.0 - gamma
-            U = getattr(prior, "factor", None)
-            if U is not None:  # keep the diagonal + low-rank form (cov = diag + U U^T) exact: rank doubles
-                U = np.asarray(U, dtype=np.float64)
-                r = U.shape[1]
-                V = np.zeros((U.shape[0], 2 * r))
-                V[:po, :r] = U[:po]
-                V[po:, :r] = (1.0 - gamma) * U[po:]
-                V[po:, r:] = np.sqrt(1.0 - (1.0 - gamma) ** 2) * U[po:]
-                prior.factor = V
+        prior = shrink_cross(fit_prior(thetas, method, model.ridge, shrinkage=lam), gamma, n_o * q)
         model.prior_ = prior
     else:
         a = 0

@@ -1,5 +1,5 @@
 """Model files (interprim.io): exact round trip of every fitted attribute, checksums, corruption fuzzing,
-files of format version 1 and files that are not models at all."""
+files of format version 1, files that are not models at all, and the CLI's one-line errors."""
 
 from __future__ import annotations
 
@@ -7,6 +7,8 @@ import dataclasses
 import io
 import json
 import math
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -369,3 +371,54 @@ def test_loading_never_unpickles(saved, tmp_path, monkeypatch):
         ip.InteractionPrimitive.load(tmp_path / "p.npz")
     ip.InteractionPrimitive.load(saved["default"])
     assert calls == []
+
+
+# ----------------------------------------------------------------------------- CLI (item 5)
+def _cli(*args, timeout=120):
+    exe = Path(sys.executable).with_name("interprim")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "interprim.cli"]
+    return subprocess.run(cmd + list(args), capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def bad_models(saved, tmp_path_factory):
+    d = tmp_path_factory.mktemp("bad")
+    raw = saved["default"].read_bytes()
+    b = bytearray(raw)
+    with zipfile.ZipFile(saved["default"]) as z:
+        info = z.getinfo("prior_cov.npy")
+    b[info.header_offset + 30 + len(info.filename) + info.compress_size // 2] ^= 0xFF  # inside the deflate data
+    (d / "flipped.npz").write_bytes(bytes(b))
+    (d / "truncated.npz").write_bytes(raw[: len(raw) // 3])
+    (d / "demos.csv").write_text("time,x,y\n0,1,2\n0.1,1,2\n")
+    np.savez(d / "other.npz", a=np.zeros(3))
+    partial = d / "partial.csv"
+    partial.write_text("time,o1,o2\n" + "".join(f"{0.01 * i},{0.01 * i},0\n" for i in range(10)))
+    return d
+
+
+@pytest.mark.parametrize("bad", ["flipped.npz", "truncated.npz", "demos.csv", "other.npz"])
+def test_cli_predict_with_bad_model_file_prints_one_line(bad_models, bad, tmp_path):
+    path = bad_models / bad
+    r = _cli("predict", str(path), str(bad_models / "partial.csv"), "-o", str(tmp_path / "o.csv"))
+    assert r.returncode == 2, r.stderr
+    assert r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
+    line = r.stderr.strip()
+    assert line.startswith(f"interprim predict: error: {path}: "), line
+    assert "Traceback" not in line and "pickle" not in line.lower(), line
+    if bad in ("demos.csv", "other.npz"):
+        assert "not an interprim model file" in line, line
+    assert not (tmp_path / "o.csv").exists()
+
+
+@pytest.mark.parametrize("bad", ["flipped.npz", "demos.csv"])
+def test_cli_serve_with_bad_model_file_prints_one_line(bad_models, bad):
+    pytest.importorskip("websockets")
+    path = bad_models / bad
+    r = _cli("serve", str(path), "--port", "0")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
+    # the server names the model it could not serve, then the file and what is wrong with it
+    assert r.stderr.startswith(f"interprim serve: error: cannot serve model '{path.stem}': {path}: "), r.stderr
+    what = "truncated or corrupt model file" if bad == "flipped.npz" else "not an interprim model file"
+    assert what in r.stderr and "pickle" not in r.stderr.lower(), r.stderr

@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from .errors import InterprimError
+from .errors import InterprimError, ModelFileError
 
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
         return int(args.func(args) or 0)
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         print(f"interprim {args.command}: error: {exc}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(exc, ModelFileError) else 1  # a corrupt or non-model file given as MODEL
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -422,3 +422,51 @@ def test_cli_serve_with_bad_model_file_prints_one_line(bad_models, bad):
     assert r.stderr.startswith(f"interprim serve: error: cannot serve model '{path.stem}': {path}: "), r.stderr
     what = "truncated or corrupt model file" if bad == "flipped.npz" else "not an interprim model file"
     assert what in r.stderr and "pickle" not in r.stderr.lower(), r.stderr
+
+
+# ----------------------------------------------------------------------------- other CLI errors (item 5)
+def test_cli_evaluate_with_a_user_file_is_one_line(tmp_path):
+    (tmp_path / "demos.csv").write_text("time,x,y\n0,1,2\n0.1,1,2\n")
+    r = _cli("evaluate", "--data", "demos.csv", "--out", str(tmp_path / "ev"))
+    assert r.returncode == 1 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("interprim evaluate: error: --data demos.csv: not a built-in data set; expected nuisi,")
+    assert "interprim fit" in r.stderr and not (tmp_path / "ev").exists()
+    r = _cli("evaluate", "--data", "synthetic", "--methods", "ip-position,nope", "--out", str(tmp_path / "ev"))
+    assert r.returncode == 1 and r.stderr.count("\n") == 1, r.stderr
+    assert "--methods: unknown method 'nope'" in r.stderr
+
+
+def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
+    from interprim.cli import main
+
+    rows = [f"{0.1 * i:.1f},{i},{2 * i}" for i in range(8)]
+    rows[3] = rows[3].split(",")[0] + ",," + rows[3].split(",")[2]
+    rows[4] = rows[4].split(",")[0] + ",nan," + rows[4].split(",")[2]
+    (tmp_path / "gap.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
+    out = str(tmp_path / "m.npz")
+    assert main(["fit", str(tmp_path / "gap.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "max_nan_gap" not in err, err
+    assert "a run of 2 missing values (--max-nan-gap=1) starting at line 5" in err
+    assert err.rstrip().endswith("or interpolate interior gaps of up to 2 frames with --max-nan-gap=2"), err
+    # a run at the start cannot be interpolated: no advice to pass an option that cannot help
+    rows = [f"{0.1 * i:.1f},{i},{2 * i}" for i in range(8)]
+    rows[0] = "0.0,,0"
+    (tmp_path / "start.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
+    assert main(["fit", str(tmp_path / "start.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "3"]) == 1
+    err = capsys.readouterr().err
+    assert "at the start or end starting at line 2" in err and err.rstrip().endswith("fill or cut them"), err
+    assert "nan-gap" not in err and "max_nan_gap" not in err
+    # the Python API keeps naming its own argument
+    from interprim.datasets import load_demonstrations
+
+    with pytest.raises(ip.DataFileError, match=r"with max_nan_gap=2$"):
+        load_demonstrations(tmp_path / "gap.csv", max_nan_gap=1)
+    # a server option
+    pytest.importorskip("websockets")
+    assert main(["serve", "--max-sessions", "0", "--port", "0", "x.npz"]) == 1
+    err = capsys.readouterr().err
+    assert "--max-sessions must be" in err and "max_sessions" not in err, err
+    # a file name that contains an argument name is left alone
+    assert main(["fit", str(tmp_path / "max_nan_gap.csv"), "--observed", "x", "-o", out]) == 1
+    assert "max_nan_gap.csv" in capsys.readouterr().err

@@ -117,10 +117,10 @@ def test_predict_npz_output_and_extra_columns(files, tmp_path, capsys):
         np.testing.assert_allclose(f["time"], f["s"] * float(f["duration"]))
 
 
-def _err(capsys, argv):
+def _err(capsys, argv, status=1):
     code = main(argv)
     err = capsys.readouterr().err
-    assert code == 1, err
+    assert code == status, err
     assert err.count("\n") == 1, err  # one line, no traceback
     return err
 
@@ -153,7 +153,7 @@ def test_predict_errors(files, tmp_path, capsys):
     assert "model file not found" in _err(capsys, ["predict", str(tmp_path / "nope.npz"), partial, "-o", out])
     fake = tmp_path / "fake.npz"
     fake.write_bytes(b"garbage")
-    assert "fake.npz" in _err(capsys, ["predict", str(fake), partial, "-o", out])
+    assert "fake.npz" in _err(capsys, ["predict", str(fake), partial, "-o", out], status=2)  # bad model file: 2
     assert "not found" in _err(capsys, ["predict", model, str(tmp_path / "p.csv"), "-o", out])
     assert "must end in .csv or .npz" in _err(capsys, ["predict", model, partial, "-o", str(tmp_path / "o.txt")])
     wrong = tmp_path / "wrong.csv"
@@ -165,7 +165,8 @@ def test_predict_errors(files, tmp_path, capsys):
     assert "holds 2 demonstrations" in _err(capsys, ["predict", model, str(two), "-o", out])
     assert "--samples must be >= 0" in _err(capsys, ["predict", model, partial, "-o", out, "--samples", "-1"])
     # a demonstrations file is not a model
-    assert "interprim predict: error:" in _err(capsys, ["predict", str(files / "demos_meta.npz"), partial, "-o", out])
+    assert "interprim predict: error:" in _err(capsys, ["predict", str(files / "demos_meta.npz"), partial, "-o", out],
+                                               status=2)
 
 
 def test_console_script_round_trip(files, tmp_path):

@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from .errors import InterprimError
+from .errors import InterprimError, ModelFileError
 
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [
@@ -42,6 +42,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _flag_names(parser, command, exc) -> str:
+    """The message of ``exc`` in one line, with the command's Python argument names (``max_nan_gap``) as flags."""
+    msg = " ".join(str(exc).split("\n"))
+    try:
+        sub = parser._subparsers._group_actions[0].choices[command]
+    except (AttributeError, IndexError, KeyError, TypeError):  # pragma: no cover
+        return msg
+    import re
+
+    for action in sub._actions:
+        flags = [o for o in action.option_strings if o.startswith("--")]
+        if flags and "_" in action.dest:  # a whole word, not part of a file name
+            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}(?![\w/\\-]|\.\w)", flags[0], msg)
+    return msg
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -51,8 +67,8 @@ def main(argv=None) -> int:
     try:
         return int(args.func(args) or 0)
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"interprim {args.command}: error: {exc}", file=sys.stderr)
-        return 1
+        print(f"interprim {args.command}: error: {_flag_names(parser, args.command, exc)}", file=sys.stderr)
+        return 2 if isinstance(exc, ModelFileError) else 1  # a corrupt or non-model file given as MODEL
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

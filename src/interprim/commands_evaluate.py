@@ -44,6 +44,28 @@ def add_parser(subparsers):
     return p
 
 
+DATA_SETS = ("nuisi", "synthetic", "synthetic-noisy", "highfive-sim", "characters")
+
+
+def _check_names(datasets, methods, cfg):
+    """One-line errors (naming the flag) for unknown --data / --methods, before any work starts."""
+    from .errors import InterprimError
+    from .evaluation import make_estimator
+
+    bad = [d for d in datasets if d not in DATA_SETS] or ([] if datasets else ["''"])
+    if bad:
+        raise InterprimError(
+            f"--data {','.join(bad)}: not a built-in data set; expected {', '.join(DATA_SETS)} (evaluate runs "
+            "on these only; for your own demonstrations use 'interprim fit' and 'interprim predict')"
+        )
+    for m in methods:
+        try:
+            make_estimator(m, [0], cfg)
+        except ValueError:
+            raise InterprimError(f"--methods: unknown method {m!r}; expected comma-separated names such as "
+                                 f"{DEFAULT_METHODS}") from None
+
+
 def run(args) -> int:
     from dataclasses import replace
 
@@ -56,6 +78,7 @@ def run(args) -> int:
         cfg = replace(cfg, fractions=(0.2, 0.4, 0.6, 0.8, 1.0), recognition_fractions=(0.2, 0.4, 0.6))
     datasets = [d.strip() for d in args.data.split(",") if d.strip()]
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    _check_names(datasets, methods, cfg)
     res = run_sweep(datasets, methods, cfg, n_jobs=args.jobs, backend=args.backend,
                     recognition=not args.no_recognition, max_demos=4 if args.quick else None,
                     scheduler=args.scheduler)

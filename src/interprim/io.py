@@ -1,16 +1,34 @@
 """Safe model files.
 
-Format (``format = "interprim-model"``, ``format_version = 1``): a NumPy
-``.npz`` archive of plain numeric arrays plus one array ``metadata`` holding a
-UTF-8 JSON document (hyper-parameters, column layout, scalars).  It is read
-with ``allow_pickle=False``, so loading a model never executes code; every
-array's shape is checked against the metadata, and a missing, truncated,
-corrupt or unknown-version file raises :class:`~interprim.errors.ModelFileError`
-naming the problem.
+Format (``format = "interprim-model"``): a ZIP archive of ``.npy`` members (as
+written by ``numpy.savez_compressed``) holding plain numeric arrays, plus one
+member ``metadata``: a ``uint8`` array of a UTF-8 JSON document
+(hyper-parameters, column layout, fitted scalars, checksums).  It is read
+member by member with :mod:`zipfile` (whose CRC-32 of every member is checked)
+and a strict ``.npy`` parser that accepts only numeric, boolean and string
+dtypes, so loading a model never unpickles or executes anything.
+
+Versions (``format_version``):
+
+* **2** (written now): ``metadata`` also holds
+  ``checksums``, ``{name: {"dtype", "shape", "sha256"}}`` for every other array
+  (SHA-256 of the array's C-ordered bytes); ``selection`` (``selection_``,
+  the hyper-parameter selection record of ``fit``, or ``null``); and the
+  arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
+  prior covariance) and ``pca_*_explained_variance_ratio`` when the model has them.
+* **1**: the same without ``checksums``, ``selection`` and those arrays;
+  still read (every array's shape is checked, the rest is unset or rebuilt).
+
+Every problem -- a missing, empty, truncated or corrupt file, a checksum that
+does not match, a file that is not an interprim model at all (text, CSV, a
+plain ``.npy``, a ``.npz`` of other arrays) or an unknown version -- raises
+:class:`~interprim.errors.ModelFileError` with a message that names the file
+and what is wrong.
 
 Arrays: ``prior_mean (P,)``, ``prior_cov (P, P)``, ``thetas (S, P)``,
 ``reference (N, D_o')``, ``start_position (D')``, ``start_velocity (D')``,
-``durations (S,)`` and, with PCA, ``pca_{observed,controlled}_{mean,components}``;
+``durations (S,)``, optionally ``prior_diag (P,)``, ``prior_factor (P, r)`` and, with PCA,
+``pca_{observed,controlled}_{mean,components,explained_variance_ratio}``;
 ``P = D' (n_basis + 1)`` and ``D'`` the number of (latent) DoFs, observed first.
 
 Metadata: ``params`` (every constructor argument, so the file reproduces the
@@ -23,8 +41,13 @@ load with those unset.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
+import math
+import struct
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -34,15 +57,29 @@ from .gaussian import GaussianPrior
 from .preprocessing import PCA
 
 FORMAT = "interprim-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)
 
-__all__ = ["save_model", "load_model", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["save_model", "load_model", "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
+
+_ZIP_MAGIC = b"PK\x03\x04"
+_NPY_MAGIC = b"\x93NUMPY"
+# numeric, boolean and (for the legacy 'columns' array) unicode strings; never objects
+_DTYPE_KINDS = "biufcU"
+# exceptions that zipfile / zlib / the .npy header parser raise on damaged bytes
+_READ_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
+                IndexError, NotImplementedError, RuntimeError, struct.error, OverflowError, MemoryError,
+                SyntaxError, TypeError)
 
 
-def save_model(model, path) -> None:
-    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``)."""
-    path = Path(path)
-    meta = {
+def _checksum(arr: np.ndarray) -> dict:
+    arr = np.asarray(arr)
+    return {"dtype": arr.dtype.str, "shape": list(arr.shape),
+            "sha256": hashlib.sha256(np.ascontiguousarray(arr).tobytes()).hexdigest()}
+
+
+def _metadata(model) -> dict:
+    return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "params": model.get_params(),
@@ -61,6 +98,9 @@ def save_model(model, path) -> None:
         "n_demos": int(model.n_demos_),
         "columns": getattr(model, "columns_", None),
     }
+
+
+def _arrays(model) -> dict:
     arrays = {
         "prior_mean": model.prior_.mean,
         "prior_cov": model.prior_.cov,
@@ -75,6 +115,30 @@ def save_model(model, path) -> None:
         if pca is not None:
             arrays[f"pca_{agent}_mean"] = pca.mean_
             arrays[f"pca_{agent}_components"] = pca.components_
+    return arrays
+
+
+def save_model(model, path) -> None:
+    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 2)."""
+    path = Path(path)
+    meta = _metadata(model)
+    arrays = _arrays(model)
+    for name in ("diag", "factor"):  # the prior's diagonal + low-rank form (exact reload of the fast path)
+        value = getattr(model.prior_, name, None)
+        if value is not None:
+            arrays[f"prior_{name}"] = np.asarray(value)
+    for agent in ("observed", "controlled"):
+        pca = getattr(model, f"pca_{agent}_")
+        if pca is not None and getattr(pca, "explained_variance_ratio_", None) is not None:
+            arrays[f"pca_{agent}_explained_variance_ratio"] = pca.explained_variance_ratio_
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    meta["selection"] = getattr(model, "selection_", None)
+    meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
+    _write(path, meta, arrays)
+
+
+def _write(path: Path, meta: dict, arrays: dict) -> None:
+    arrays = dict(arrays)
     arrays["metadata"] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
     # write to a temporary file first so that a crash never leaves a half-written model behind
     tmp = path.with_name(path.name + ".tmp")
@@ -88,28 +152,99 @@ def _expect(cond: bool, path, msg: str):
         raise ModelFileError(f"{path}: {msg}")
 
 
+def _parse_npy(raw: bytes, path, name: str) -> np.ndarray:
+    """A ``.npy`` member's array; refuses object/structured dtypes and any size mismatch (never unpickles)."""
+    fh = io.BytesIO(raw)
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+    else:
+        raise ValueError(f".npy version {version} is not supported")
+    _expect(not dtype.hasobject and dtype.fields is None and dtype.kind in _DTYPE_KINDS, path,
+            f"not a readable interprim model file: array '{name}' has dtype {dtype}, "
+            "but model files hold only numeric arrays")
+    count = math.prod(shape)
+    offset = fh.tell()
+    _expect(len(raw) - offset == count * dtype.itemsize, path,
+            f"array '{name}' is truncated or corrupt ({len(raw) - offset} bytes of data for shape {shape}, {dtype})")
+    arr = np.frombuffer(raw, dtype=dtype, count=count, offset=offset)
+    return arr.reshape(shape, order="F" if fortran else "C").copy(order="K")
+
+
+def _read_archive(path: Path):
+    """``(meta, arrays)`` of a model file, every member's CRC-32 and (version 2) SHA-256 checked."""
+    if not path.exists():
+        raise ModelFileError(f"{path}: no such model file")
+    if path.is_dir():
+        raise ModelFileError(f"{path}: is a directory, not an interprim model file")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read the model file: {exc.strerror or exc}") from None
+    if not head:
+        raise ModelFileError(f"{path}: empty file; not an interprim model file")
+    if head.startswith(_NPY_MAGIC):
+        raise ModelFileError(f"{path}: a single NumPy array (.npy), not an interprim model file "
+                             "(save models with InteractionPrimitive.save or 'interprim fit')")
+    if not head.startswith(_ZIP_MAGIC):
+        raise ModelFileError(f"{path}: not an interprim model file (not a readable .npz archive; "
+                             "save models with InteractionPrimitive.save or 'interprim fit')")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = {}
+            for info in zf.infolist():
+                if info.filename.endswith(".npy"):
+                    members[info.filename[:-4]] = info
+            if "metadata" not in members and {"prior_mean", "prior_cov", "thetas"} & set(members):
+                raise ModelFileError(f"{path}: corrupt model file: its 'metadata' entry is missing")
+            if "metadata" not in members:
+                raise ModelFileError(f"{path}: not an interprim model file (a .npz archive without interprim "
+                                     f"model metadata; it holds {sorted(members) or 'no arrays'})")
+            meta_arr = _parse_npy(zf.read(members["metadata"]), path, "metadata")
+            try:
+                meta = json.loads(meta_arr.astype(np.uint8).tobytes().decode("utf-8"))
+            except (ValueError, UnicodeDecodeError) as exc:
+                raise ModelFileError(f"{path}: corrupt metadata: {exc}") from None
+            _expect(isinstance(meta, dict) and meta.get("format") == FORMAT, path,
+                    "not an interprim model file (format is "
+                    f"{meta.get('format') if isinstance(meta, dict) else None!r}, expected {FORMAT!r})")
+            version = meta.get("format_version")
+            _expect(type(version) is int and version in READ_VERSIONS, path,
+                    f"format_version {version!r} is not supported by this interprim (reads versions "
+                    f"{', '.join(map(str, READ_VERSIONS))}); a newer interprim wrote it?")
+            data = {}
+            for name, info in members.items():
+                if name != "metadata":
+                    data[name] = _parse_npy(zf.read(info), path, name)
+    except ModelFileError:
+        raise
+    except _READ_ERRORS as exc:
+        kind = type(exc).__name__ if type(exc).__name__ != "error" else f"{type(exc).__module__}.error"  # zlib.error
+        raise ModelFileError(f"{path}: truncated or corrupt model file, not a readable .npz archive "
+                             f"({kind}: {exc})") from None
+    if version >= 2:
+        sums = meta.get("checksums")
+        _expect(isinstance(sums, dict), path, "corrupt metadata: no 'checksums' table")
+        missing = sorted(set(sums) - set(data))
+        _expect(not missing, path, f"array(s) {missing} listed in the metadata are missing")
+        extra = sorted(set(data) - set(sums))
+        _expect(not extra, path, f"array(s) {extra} are not listed in the metadata's checksums")
+        for name, arr in data.items():
+            want = sums[name]
+            _expect(isinstance(want, dict) and _checksum(arr) == want, path,
+                    f"checksum of array '{name}' does not match: the file is corrupt")
+    return meta, data
+
+
 def load_model(path):
-    """Read a model written by :func:`save_model` (no pickle, every shape checked)."""
+    """Read a model written by :func:`save_model` (format version 1 or 2; no pickle, every array checked)."""
     from .primitive import InteractionPrimitive
 
     path = Path(path)
-    if not path.exists():
-        raise ModelFileError(f"{path}: no such model file")
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            data = {k: f[k] for k in f.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
-        raise ModelFileError(f"{path}: not a readable interprim model file (.npz): {exc}") from None
-    _expect("metadata" in data, path, "missing 'metadata' entry; not an interprim model file")
-    try:
-        meta = json.loads(data["metadata"].astype(np.uint8).tobytes().decode("utf-8"))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ModelFileError(f"{path}: corrupt metadata: {exc}") from None
-    _expect(isinstance(meta, dict) and meta.get("format") == FORMAT, path,
-            f"format is {meta.get('format') if isinstance(meta, dict) else None!r}, expected {FORMAT!r}")
-    version = meta.get("format_version")
-    _expect(version == FORMAT_VERSION, path,
-            f"format_version {version!r} is not supported by this interprim (reads version {FORMAT_VERSION})")
+    meta, data = _read_archive(path)
     try:
         model = InteractionPrimitive(**meta["params"])
         model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
@@ -130,8 +265,12 @@ def load_model(path):
         _expect(cols is None or (isinstance(cols, list) and len(cols) == model.n_dofs_), path,
                 f"columns {cols!r} do not name the model's {model.n_dofs_} columns")
         model.columns_ = None if cols is None else [str(c) for c in cols]
+        sel = meta.get("selection")  # hyper-parameter selection record (version 2; absent when fit made none)
+        _expect(sel is None or isinstance(sel, dict), path, "corrupt metadata: 'selection' is not a record")
+        if sel is not None:
+            model.selection_ = sel
         model.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
-                                     float(meta["shrinkage"]))
+                                     float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
         model.thetas_ = data["thetas"]
         model.reference_ = data["reference"]
         model.start_position_ = data["start_position"]
@@ -141,11 +280,17 @@ def load_model(path):
             pca = None
             if f"pca_{agent}_mean" in data:
                 comps = data[f"pca_{agent}_components"]
+                _expect(comps.ndim == 2, path, f"array 'pca_{agent}_components' has shape {comps.shape}")
                 pca = PCA(comps.shape[0])
                 pca.mean_ = data[f"pca_{agent}_mean"]
                 pca.components_ = comps
+                evr = data.get(f"pca_{agent}_explained_variance_ratio")
+                if evr is not None:
+                    pca.explained_variance_ratio_ = evr
             setattr(model, f"pca_{agent}_", pca)
-    except (KeyError, TypeError, ValueError) as exc:
+    except ModelFileError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
 
     q = model.n_basis + 1
@@ -154,16 +299,26 @@ def load_model(path):
         "prior_mean": (P,), "prior_cov": (P, P), "thetas": (model.n_demos_, P),
         "start_position": (model.n_latent_,), "start_velocity": (model.n_latent_,), "durations": (model.n_demos_,),
     }
+    if "prior_diag" in data or "prior_factor" in data:
+        _expect("prior_diag" in data and "prior_factor" in data, path,
+                "the prior's diagonal + low-rank form needs both 'prior_diag' and 'prior_factor'")
+        checks["prior_diag"] = (P,)
+        f = data["prior_factor"]
+        _expect(f.ndim == 2 and f.shape[0] == P, path, f"array 'prior_factor' has shape {f.shape}, expected ({P}, r)")
     for key, shape in checks.items():
         arr = data[key]
         _expect(arr.shape == shape, path, f"array '{key}' has shape {arr.shape}, expected {shape}")
+    for key in list(checks) + ["reference"] + [k for k in data if k.startswith(("pca_", "prior_"))]:
+        arr = data[key]
         _expect(np.issubdtype(arr.dtype, np.floating) and bool(np.all(np.isfinite(arr))), path,
                 f"array '{key}' is not finite floating point")
     ref = model.reference_
     _expect(ref.ndim == 2 and ref.shape[1] == model.n_observed_latent_ and ref.shape[0] >= 2, path,
             f"array 'reference' has shape {ref.shape}, expected (N>=2, {model.n_observed_latent_})")
-    _expect(bool(np.all(np.isfinite(ref))), path, "array 'reference' is not finite")
     _expect(sorted(model.observed_dofs_ + model.controlled_dofs_) == list(range(model.n_dofs_)), path,
             "observed_dofs and controlled_dofs do not partition the columns")
-    model._setup()
+    try:
+        model._setup()
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
     return model

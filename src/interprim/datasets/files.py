@@ -71,9 +71,10 @@ def _fill_nans(y, max_nan_gap, where, row_of):
                     if max_nan_gap == 0
                     else ("a run of missing values at the start or end" if (i == 0 or j == T) else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
                 )
+                edge = i == 0 or j == T  # interpolation cannot fill a run at the start or end
                 raise DataFileError(
-                    f"{where(d)}: {why} starting at {row_of(i)} ({run} frame(s)); "
-                    "fill or cut them, or pass max_nan_gap to interpolate short interior gaps"
+                    f"{where(d)}: {why} starting at {row_of(i)} ({run} frame(s)); fill or cut them"
+                    + ("" if edge else f", or interpolate interior gaps of up to {run} frames with max_nan_gap={run}")
                 )
             y[i:j, d] = np.interp(np.arange(i, j), [i - 1, j], [y[i - 1, d], y[j, d]])
             i = j

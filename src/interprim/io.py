@@ -15,7 +15,8 @@ Versions (``format_version``):
   (SHA-256 of the array's C-ordered bytes); ``selection`` (``selection_``,
   the hyper-parameter selection record of ``fit``, or ``null``); and the
   arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
-  prior covariance) and ``pca_*_explained_variance_ratio`` when the model has them.
+  prior covariance), ``pca_*_explained_variance_ratio`` and ``calibration_{fractions,scale_observed,
+  scale_controlled,n_cases}`` (:class:`~interprim.calibration.Calibration`) when the model has them.
 * **1**: the same without ``checksums``, ``selection`` and those arrays;
   still read (every array's shape is checked, the rest is unset or rebuilt).
 
@@ -132,6 +133,10 @@ def save_model(model, path) -> None:
         if pca is not None and getattr(pca, "explained_variance_ratio_", None) is not None:
             arrays[f"pca_{agent}_explained_variance_ratio"] = pca.explained_variance_ratio_
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    cal = getattr(model, "calibration_", None)  # calibrated predictive std (interprim.calibration)
+    if cal is not None:
+        for k, v in cal.to_arrays().items():
+            arrays[f"calibration_{k}"] = np.asarray(v)
     meta["selection"] = getattr(model, "selection_", None)
     meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
     _write(path, meta, arrays)
@@ -276,6 +281,19 @@ def load_model(path):
         model.start_position_ = data["start_position"]
         model.start_velocity_ = data["start_velocity"]
         model.durations_ = data["durations"]
+        model.calibration_ = None
+        if any(k.startswith("calibration_") for k in data):
+            from .calibration import Calibration
+
+            model.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
+                                                          if k.startswith("calibration_")})
+            c = model.calibration_
+            _expect(c.fractions.ndim == 1 and c.scale_observed.shape == c.fractions.shape
+                    and c.scale_controlled.shape == c.fractions.shape and c.fractions.size >= 1
+                    and bool(np.all(np.isfinite(c.scale_observed)) and np.all(c.scale_observed > 0)
+                             and np.all(np.isfinite(c.scale_controlled)) and np.all(c.scale_controlled > 0))
+                    and bool(np.all(np.diff(c.fractions) > 0)), path,
+                    "arrays 'calibration_*' are not a calibration (increasing fractions, positive finite scales)")
         for agent in ("observed", "controlled"):
             pca = None
             if f"pca_{agent}_mean" in data:

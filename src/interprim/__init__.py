@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import importlib
 
-from .errors import DataFileError, InterprimError, ModelFileError, NotFittedError
+from .errors import DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning
 
 __version__ = "0.1.0"
 
@@ -31,6 +31,7 @@ __all__ = [
     "InterprimError",
     "NotFittedError",
     "ModelFileError",
+    "OutOfRangeWarning",
     "DataFileError",
     "__version__",
 ]

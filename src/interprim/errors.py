@@ -23,3 +23,10 @@ class ModelFileError(InterprimError, ValueError):
 
 class DataFileError(InterprimError, ValueError):
     """A demonstration or observation file cannot be read or is malformed."""
+
+
+class OutOfRangeWarning(UserWarning):
+    """An observation lies far outside what the model was trained on (wrong units, a wrong column order, another
+    frame of reference, a tracking failure): the prediction extrapolates and is not to be trusted.  The
+    prediction carries ``input_distance`` and ``out_of_range``
+    (:attr:`interprim.primitive.Prediction.out_of_range`)."""

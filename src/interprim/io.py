@@ -16,7 +16,8 @@ Versions (``format_version``):
   the hyper-parameter selection record of ``fit``, or ``null``); and the
   arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
   prior covariance), ``pca_*_explained_variance_ratio`` and ``calibration_{fractions,scale_observed,
-  scale_controlled,n_cases}`` (:class:`~interprim.calibration.Calibration`) when the model has them.
+  scale_controlled,n_cases}`` (:class:`~interprim.calibration.Calibration`) and ``input_mean``/``input_std``
+  (with ``input_limit`` in the metadata: the out-of-range check of the observed frames) when the model has them.
 * **1**: the same without ``checksums``, ``selection`` and those arrays;
   still read (every array's shape is checked, the rest is unset or rebuilt).
 
@@ -133,6 +134,10 @@ def save_model(model, path) -> None:
         if pca is not None and getattr(pca, "explained_variance_ratio_", None) is not None:
             arrays[f"pca_{agent}_explained_variance_ratio"] = pca.explained_variance_ratio_
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    if getattr(model, "input_mean_", None) is not None:  # the out-of-range check's training statistics
+        arrays["input_mean"] = np.asarray(model.input_mean_)
+        arrays["input_std"] = np.asarray(model.input_std_)
+        meta["input_limit"] = float(model.input_limit_)
     cal = getattr(model, "calibration_", None)  # calibrated predictive std (interprim.calibration)
     if cal is not None:
         for k, v in cal.to_arrays().items():
@@ -281,6 +286,14 @@ def load_model(path):
         model.start_position_ = data["start_position"]
         model.start_velocity_ = data["start_velocity"]
         model.durations_ = data["durations"]
+        model.input_mean_ = model.input_std_ = model.input_limit_ = None  # absent in older files: no check
+        if "input_mean" in data:
+            model.input_mean_, model.input_std_ = data["input_mean"], data["input_std"]
+            model.input_limit_ = float(meta["input_limit"])
+            n_o = len(model.observed_dofs_)
+            _expect(model.input_mean_.shape == (n_o,) and model.input_std_.shape == (n_o,)
+                    and bool(np.all(model.input_std_ > 0)) and model.input_limit_ > 0, path,
+                    f"arrays 'input_mean'/'input_std' are not ({n_o},) statistics with a positive spread")
         model.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration
@@ -326,7 +339,7 @@ def load_model(path):
     for key, shape in checks.items():
         arr = data[key]
         _expect(arr.shape == shape, path, f"array '{key}' has shape {arr.shape}, expected {shape}")
-    for key in list(checks) + ["reference"] + [k for k in data if k.startswith(("pca_", "prior_"))]:
+    for key in list(checks) + ["reference"] + [k for k in data if k.startswith(("pca_", "prior_", "input_"))]:
         arr = data[key]
         _expect(np.issubdtype(arr.dtype, np.floating) and bool(np.all(np.isfinite(arr))), path,
                 f"array '{key}' is not finite floating point")

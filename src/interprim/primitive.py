@@ -18,13 +18,14 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 
 import numpy as np
 
 from ._validation import as_2d_finite, as_frame, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
-from .errors import NotFittedError
+from .errors import NotFittedError, OutOfRangeWarning
 from . import _fast
 from .gaussian import GaussianPrior, LowRankConditioner, Posterior, condition, fit_prior, sample
 from .phase import IncrementalDTW, open_end_dtw
@@ -378,6 +379,13 @@ class InteractionPrimitive:
             if not 0 <= r < len(latent):
                 raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
             self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
+        # what the observed agent's frames look like in training (the out-of-range check of predict/stream)
+        allo = np.concatenate([a[:, obs] for a in arrays], axis=0)
+        self.input_mean_ = allo.mean(axis=0)
+        sd = allo.std(axis=0)
+        self.input_std_ = np.where(sd > 0, sd, max(float(sd.max()), 1e-12))
+        train_dist = float(np.max(np.abs(allo - self.input_mean_) / self.input_std_))
+        self.input_limit_ = max(2.0 * train_dist, 6.0)
         self.calibration_ = None
         if self.calibrate is True or (self.calibrate == "auto" and self.sigma2 == "cv"):
             from .calibration import fit_calibration  # predictive std scaled to held-out errors
@@ -500,6 +508,32 @@ class InteractionPrimitive:
             o = resample_uniform(o, t, dt=self.dt_)[0] if o.shape[0] > 1 else o
         elif dt is not None and abs(check_positive(dt, "dt") - self.dt_) > 1e-12 * self.dt_ and o.shape[0] > 1:
             o = resample_uniform(o, np.arange(o.shape[0]) * dt, dt=self.dt_)[0]
+        dist = self.input_distance(o)
+        p = self._predict_observed(o, robot_state, phase)
+        return self._mark_range(p, dist)
+
+    def input_distance(self, frames) -> float:
+        """Largest standardised distance ``max_{t,i} |x_ti - mean_i| / std_i`` of observed frames ``(t, D_o)`` (data
+        columns) from the training demonstrations' frames; NaN for a model file without those statistics."""
+        mean = getattr(self, "input_mean_", None)
+        if mean is None:
+            return float("nan")
+        f = np.asarray(frames, dtype=np.float64)
+        return float(np.max(np.abs(f - mean) / self.input_std_)) if f.size else 0.0
+
+    def _mark_range(self, p, dist):
+        """Attach the out-of-range check to a prediction and warn (:class:`~interprim.errors.OutOfRangeWarning`)."""
+        p.input_distance = dist
+        limit = getattr(self, "input_limit_", None)
+        p.out_of_range = bool(limit is not None and dist > limit)
+        if p.out_of_range:
+            warnings.warn(OutOfRangeWarning(
+                f"the observed frames are {dist:.3g} standard deviations from the training demonstrations' mean "
+                f"(limit {limit:.3g}): wrong units, column order or frame of reference? The prediction "
+                "extrapolates (Prediction.out_of_range is True)"), stacklevel=3)
+        return p
+
+    def _predict_observed(self, o, robot_state, phase):
         z = self._observed_to_latent(o)
         if phase is not None:
             ph = float(phase)
@@ -726,6 +760,10 @@ class Prediction:
         self._y0_obs = np.array(y0_obs, dtype=np.float64)  # a copy (see _last_obs)
         self._robot_start = robot_start
         self._last_obs = np.array(last_obs, dtype=np.float64)  # a copy: it may be a row of the caller's array
+        #: largest standardised distance of an observed frame from the training frames (set by predict/stream)
+        self.input_distance = float("nan")
+        #: whether that distance passed the model's limit (wrong units, columns or frame of reference?)
+        self.out_of_range = False
 
     @property
     def dtw_cost(self) -> float:
@@ -1013,6 +1051,8 @@ class Stream:
         self._s_prev = None
         self._inc = None  # _IncrementalConditioning (created on first use)
         self.n_incremental = 0  # frames conditioned by the rank-1 update (the rest from scratch)
+        self._max_dist = 0.0  # largest standardised distance of a frame since reset (out-of-range check)
+        self._warned = False
 
     @property
     def n_frames(self) -> int:
@@ -1023,6 +1063,8 @@ class Stream:
         self._dtw.reset()
         self._n = 0
         self._s_prev = None
+        self._max_dist = 0.0
+        self._warned = False
         if self._tracker is not None:
             self._tracker.reset()
         if self._inc is not None:
@@ -1037,6 +1079,26 @@ class Stream:
         return (rs[0], rs[1], np.vstack([rs[0], rs[1]]))
 
     def update(self, frame, need_cov: bool = False) -> Prediction:
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
+
+        See :meth:`_update` for the work per frame.  The prediction's ``input_distance`` is the largest
+        standardised distance of any frame since the last :meth:`reset` from the training frames, and
+        ``out_of_range`` says whether it passed the model's limit (a warning is issued the first time).
+        """
+        p = self._update(frame, need_cov)
+        m = self.model
+        mean = getattr(m, "input_mean_", None)
+        if mean is not None:
+            d = float(np.max(np.abs(np.asarray(frame, dtype=np.float64) - mean) / m.input_std_))
+            self._max_dist = max(self._max_dist, d)
+            p.input_distance = self._max_dist
+            p.out_of_range = self._max_dist > m.input_limit_
+            if p.out_of_range and not self._warned:
+                self._warned = True
+                m._mark_range(p, self._max_dist)
+        return p
+
+    def _update(self, frame, need_cov: bool = False) -> Prediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
 
         The posterior mean is computed now; the covariance only when asked

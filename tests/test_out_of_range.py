@@ -1,0 +1,61 @@
+"""Input far outside the training demonstrations (wrong units, columns, frame) is flagged and warned about."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim.synthetic import two_agent_demos
+
+
+@pytest.fixture(scope="module")
+def model_and_demos():
+    demos = two_agent_demos(12, seed=0)
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2=1e-3).fit(demos, dt=0.01), demos
+
+
+def test_training_like_input_is_in_range_and_silent(model_and_demos):
+    m, demos = model_and_demos
+    held_out = two_agent_demos(4, seed=5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ip.OutOfRangeWarning)
+        for d in held_out:
+            p = m.predict(d[:50, :2])
+            assert not p.out_of_range and 0 < p.input_distance < m.input_limit_
+            s = m.stream()
+            for f in d[:30, :2]:
+                q = s.update(f)
+            assert not q.out_of_range
+
+
+@pytest.mark.parametrize("factor", [1000.0, 100.0])
+def test_wrong_units_are_flagged_in_batch_and_stream(model_and_demos, factor):
+    m, demos = model_and_demos
+    z = demos[0][:60, :2] * factor  # millimetres (or centimetres) given to a model trained in metres
+    with pytest.warns(ip.OutOfRangeWarning, match="standard deviations"):
+        p = m.predict(z)
+    assert p.out_of_range and p.input_distance > m.input_limit_
+    s = m.stream()
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        preds = [s.update(f) for f in z]
+    flags = [q.out_of_range for q in preds]
+    assert flags[-1] and flags == sorted(flags)  # flagged from the first far frame on, until reset
+    for k in (0, 10, 59):  # the stream's running distance is the batch one of the same prefix
+        assert preds[k].input_distance == pytest.approx(m.input_distance(z[: k + 1]), rel=1e-12)
+    assert sum(isinstance(x.message, ip.OutOfRangeWarning) for x in w) == 1  # once per interaction, not per frame
+    s.reset()
+    q = s.update(demos[0][0, :2])
+    assert not q.out_of_range  # reset forgets
+
+
+def test_the_check_survives_save_and_load(model_and_demos, tmp_path):
+    m, demos = model_and_demos
+    m.save(tmp_path / "m.npz")
+    loaded = ip.InteractionPrimitive.load(tmp_path / "m.npz")
+    np.testing.assert_array_equal(loaded.input_mean_, m.input_mean_)
+    np.testing.assert_array_equal(loaded.input_std_, m.input_std_)
+    assert loaded.input_limit_ == m.input_limit_
+    with pytest.warns(ip.OutOfRangeWarning):
+        assert loaded.predict(demos[1][:40, :2] * 1000).out_of_range

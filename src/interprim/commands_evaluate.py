@@ -24,7 +24,19 @@ def add_parser(subparsers):
     )
     p.add_argument("--data", default="nuisi",
                    help="comma-separated data sets: nuisi, synthetic, synthetic-noisy, highfive-sim, characters "
-                        "(default nuisi)")
+                        "(default nuisi); or YOUR recordings: a CSV/NPZ file or a folder of them (with --observed), "
+                        "evaluated by the real-time, phase, calibration and whole-movement protocols")
+    p.add_argument("--observed", default=None,
+                   help="with --data FILE: the observed agent's columns (names or 0-based indices, comma-separated; "
+                        "default: the file's '# observed:' entry)")
+    p.add_argument("--folds", type=int, default=None,
+                   help="with --data FILE: k-fold cross-validation (default: leave-one-out)")
+    p.add_argument("--horizon", type=float, default=0.25,
+                   help="with --data FILE: seconds ahead predicted after each observed frame (default 0.25)")
+    p.add_argument("--dt", type=float, default=None,
+                   help="with --data FILE: sampling interval in seconds of files without time stamps")
+    p.add_argument("--smoothing-window", type=int, default=None,
+                   help="with --data FILE: Savitzky-Golay window (frames) of the IP models (noisy recordings)")
     p.add_argument("--data-path", default=None, help="NuiSI file or data folder (default: ../shared/data)")
     p.add_argument("--methods", default=DEFAULT_METHODS, help=f"comma-separated methods (default {DEFAULT_METHODS})")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (-1: all cores)")
@@ -66,8 +78,56 @@ def _check_names(datasets, methods, cfg):
                                  f"{DEFAULT_METHODS}") from None
 
 
+def _is_user_data(data: str) -> bool:
+    from pathlib import Path
+
+    return data.strip() not in DATA_SETS and (Path(data).exists() or data.lower().endswith((".csv", ".npz")))
+
+
+def run_user_data(args) -> int:
+    """``--data FILE``: every protocol of :mod:`interprim.realtime` on the user's own demonstrations."""
+    from pathlib import Path
+
+    from .datasets import load_demonstrations
+    from .datasets._base import select_columns
+    from .errors import InterprimError
+    from .realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
+
+    if not Path(args.data).exists():
+        raise InterprimError(f"--data {args.data}: no such file or folder")
+    ds = load_demonstrations(args.data, dt=args.dt)
+    cols = [c.strip() for c in (args.observed or "").split(",") if c.strip()]
+    if cols:
+        obs = select_columns(ds.columns, cols, where=f"--observed (columns of {args.data})")
+    elif ds.observed_dofs:
+        obs = list(ds.observed_dofs)
+    else:
+        raise InterprimError(f"--observed is required: name the observed agent's columns among {', '.join(ds.columns)}")
+    if ds.dt is None:
+        raise InterprimError(f"--data {args.data}: the demonstrations are not uniformly sampled at one interval; "
+                             "resample them (interprim.datasets.load_demonstrations(..., resample_dt=...))")
+    if len(ds.demos) < 4:
+        raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstrations; the evaluation needs at least 4")
+    if args.folds is not None and args.folds < 2:
+        raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
+    cfg = RealTimeConfig(horizon=float(args.horizon))
+    recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
+                                                      smoothing_window=args.smoothing_window,
+                                                      n_basis=args.n_basis, progress=True)
+    paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
+                        horizon=float(args.horizon))
+    print(markdown_table(summary))
+    print(f"\nverdict: {sentence}")
+    for p in paths:
+        print(f"wrote {p}")
+    return 0
+
+
 def run(args) -> int:
     from dataclasses import replace
+
+    if _is_user_data(args.data):
+        return run_user_data(args)
 
     from .evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
 

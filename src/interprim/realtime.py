@@ -41,7 +41,8 @@ import numpy as np
 
 from .preprocessing import time_normalise
 
-__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "realtime_sweep", "summarise_realtime", "Z90"]
+__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
+           "default_methods", "verdict", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
 
 Z90 = 1.6448536269514722  # two-sided 90 % band of a normal distribution
 
@@ -163,6 +164,27 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     return out
 
 
+def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
+                        point_dim: int = 1, name: str = "method") -> list:
+    """The paper's Fig. 7 protocol for one held-out demonstration and a fitted ``estimator``: observe the first
+    ``p`` of the observed agent, predict the whole movement, RMSE of each agent on a normalised-time grid
+    (timing errors hidden by construction: compare with :func:`realtime_fold`)."""
+    test = np.asarray(test, dtype=np.float64)
+    obs = [int(i) for i in observed_dofs]
+    ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
+    truth = time_normalise(test, n)
+    T = test.shape[0]
+    out = []
+    for p in fractions:
+        M = int(min(T, max(3, round(p * T))))
+        err = estimator.predict(test[:M, obs]).trajectory(n) - truth
+        rec = {"method": name, "fraction": float(p), "wm_obs": _point_rms(err[:, obs], point_dim)}
+        if ctrl:
+            rec["wm_ctrl"] = _point_rms(err[:, ctrl], point_dim)
+        out.append(rec)
+    return out
+
+
 def folds(n: int, k: int | None = None):
     """Held-out index sets: leave-one-out (``k`` None or >= n) or ``k`` contiguous folds."""
     if k is None or k >= n:
@@ -174,12 +196,13 @@ def folds(n: int, k: int | None = None):
 
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                   k: int | None = None, progress: bool = False) -> list:
+                   k: int | None = None, progress: bool = False, whole_movement=None) -> list:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
     fits every method on the other demonstrations; clock and oracle rows are added once (from the first
-    method's pass).  Returns records with ``"demo"`` added.
+    method's pass).  ``whole_movement``: fractions at which :func:`whole_movement_fold` records (with
+    ``"protocol": "whole"``) are added too.  Returns records with ``"demo"`` added.
     """
     demos = [np.asarray(d, dtype=np.float64) for d in demos]
     if len(demos) < 3:
@@ -201,6 +224,12 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
                         continue
                     r["demo"] = int(j)
                     recs.append(r)
+                if whole_movement:
+                    for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
+                                                 point_dim=cfg.point_dim, name=name):
+                        r["demo"] = int(j)
+                        r["protocol"] = "whole"
+                        recs.append(r)
     return recs
 
 
@@ -208,8 +237,12 @@ def summarise_realtime(records) -> dict:
     """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
     the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
     by = {}
+    whole = {}
     for r in records:
-        by.setdefault(r["method"], []).append(r)
+        if r.get("protocol") == "whole":
+            whole.setdefault(r["method"], []).append(r)
+        else:
+            by.setdefault(r["method"], []).append(r)
     out = {}
     keys = ("phase_err", "rt_ctrl", "rt_obs", "cov_ctrl", "cov_obs", "z_ctrl", "z_obs")
     for m, rs in by.items():
@@ -225,6 +258,15 @@ def summarise_realtime(records) -> dict:
                     out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
         if oracle and oracle.get("rt_ctrl", 0) > 0:
             out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
+    prior = whole.get("prior")
+    for m, rs in whole.items():  # whole movement (Fig. 7): mean over demos per fraction, ratio to the prior mean
+        w = out.setdefault(m, {})
+        for key in ("wm_ctrl", "wm_obs"):
+            vals = [r[key] for r in rs if key in r]
+            if vals:
+                w[key] = float(np.mean(vals))
+                if prior and any(key in r for r in prior):
+                    w[f"{key}_vs_prior"] = w[key] / float(np.mean([r[key] for r in prior if key in r]))
     return out
 
 
@@ -274,7 +316,8 @@ def markdown_table(summary) -> str:
             ("rt_ctrl_vs_oracle", "x oracle-duration", 2), ("phase_err", "phase error", 3),
             ("phase_err_vs_clock", "x clock", 2), ("cov_ctrl", "90 % band coverage, controlled", 2),
             ("cov_obs", "coverage, observed", 2), ("z_ctrl", "RMSE / std, controlled", 2),
-            ("z_obs", "RMSE / std, observed", 2)]
+            ("z_obs", "RMSE / std, observed", 2), ("wm_ctrl", "whole movement RMSE, controlled", 4),
+            ("wm_ctrl_vs_prior", "x prior", 2)]
     lines = ["| method | " + " | ".join(c[1] for c in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     order = [m for m in ("clock", "oracle-duration") if m in summary] + [m for m in summary
                                                                           if m not in ("clock", "oracle-duration")]
@@ -286,3 +329,67 @@ def markdown_table(summary) -> str:
             cells.append("—" if not np.isfinite(x) else f"{x:.{dg}f}")
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
+                            cfg: RealTimeConfig = RealTimeConfig(), smoothing_window=None, n_basis: int = 20,
+                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False):
+    """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
+
+    Returns ``(records, summary, verdict_sentence)``; see :func:`realtime_sweep`, :func:`summarise_realtime`
+    and :func:`verdict`.  ``methods``: names among ``ip``, ``ip-paper``, ``nn``, ``prior`` (default all).
+    """
+    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    make = default_methods(observed_dofs, smoothing_window=smoothing_window, n_basis=n_basis)
+    if methods is not None:
+        unknown = [m for m in methods if m not in make]
+        if unknown:
+            raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(make)}")
+        make = {m: make[m] for m in methods}
+    if whole_movement and "prior" not in make:
+        make["prior"] = default_methods(observed_dofs)["prior"]
+    recs = realtime_sweep(make, demos, observed_dofs, dt, cfg, k=k, progress=progress,
+                          whole_movement=whole_movement)
+    summary = summarise_realtime(recs)
+    return recs, summary, verdict(summary, "ip" if "ip" in summary else next(iter(make)))
+
+
+def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = 0.25) -> list:
+    """Write ``realtime.json`` (records + summary), ``report.md`` (table + verdict) and, with matplotlib,
+    ``realtime.png`` (real-time error of the controlled agent against the fraction seen, per method)."""
+    import json
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / "realtime.json", out / "report.md"]
+    paths[0].write_text(json.dumps({"summary": summary, "verdict": sentence, "records": records}, indent=1))
+    paths[1].write_text((f"# {title}\n\n" if title else "") + markdown_table(summary) + f"\n\n**Verdict:** {sentence}\n")
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+    except ImportError:  # plotting is optional
+        return paths
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    bins = np.linspace(0.2, 0.9, 8)
+    for m in summary:
+        rs = [r for r in records if r["method"] == m and "rt_ctrl" in r and r.get("protocol") != "whole"]
+        if not rs:
+            continue
+        f = np.array([r["fraction"] for r in rs])
+        e = np.array([r["rt_ctrl"] for r in rs])
+        idx = np.clip(np.digitize(f, bins) - 1, 0, len(bins) - 2)
+        mids = 0.5 * (bins[:-1] + bins[1:])
+        y = [e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(mids))]
+        ax.plot(mids, y, marker="o", ms=3, label=m, ls="--" if m in ("clock", "oracle-duration") else "-")
+    ax.set_xlabel("fraction of the movement seen")
+    ax.set_ylabel(f"controlled agent: RMSE over the next {horizon:g} s")
+    ax.legend(fontsize=7)
+    ax.set_title(title or "real-time prediction", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / "realtime.png", dpi=110)
+    plt.close(fig)
+    return paths + [out / "realtime.png"]
+

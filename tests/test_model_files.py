@@ -431,11 +431,17 @@ def test_cli_serve_with_bad_model_file_prints_one_line(bad_models, bad):
 
 # ----------------------------------------------------------------------------- other CLI errors (item 5)
 def test_cli_evaluate_with_a_user_file_is_one_line(tmp_path):
+    # a user's file is evaluated (tests/test_realtime.py); a bad one is one line naming it, before any work
     (tmp_path / "demos.csv").write_text("time,x,y\n0,1,2\n0.1,1,2\n")
-    r = _cli("evaluate", "--data", "demos.csv", "--out", str(tmp_path / "ev"))
+    r = _cli("evaluate", "--data", str(tmp_path / "demos.csv"), "--out", str(tmp_path / "ev"))
     assert r.returncode == 1 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
-    assert r.stderr.startswith("interprim evaluate: error: --data demos.csv: not a built-in data set; expected nuisi,")
-    assert "interprim fit" in r.stderr and not (tmp_path / "ev").exists()
+    assert r.stderr.startswith(f"interprim evaluate: error: {tmp_path / 'demos.csv'}: only 2 frame(s)"), r.stderr
+    assert not (tmp_path / "ev").exists()
+    r = _cli("evaluate", "--data", str(tmp_path / "nothere.csv"), "--out", str(tmp_path / "ev"))
+    assert r.returncode == 1 and r.stderr.count("\n") == 1 and "no such file or folder" in r.stderr, r.stderr
+    r = _cli("evaluate", "--data", "nuisi,nope", "--out", str(tmp_path / "ev"))
+    assert r.returncode == 1 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("interprim evaluate: error: --data nope: not a built-in data set; expected nuisi,")
     r = _cli("evaluate", "--data", "synthetic", "--methods", "ip-position,nope", "--out", str(tmp_path / "ev"))
     assert r.returncode == 1 and r.stderr.count("\n") == 1, r.stderr
     assert "--methods: unknown method 'nope'" in r.stderr

@@ -67,8 +67,8 @@ def _check_names(datasets, methods, cfg):
     bad = [d for d in datasets if d not in DATA_SETS] or ([] if datasets else ["''"])
     if bad:
         raise InterprimError(
-            f"--data {','.join(bad)}: not a built-in data set; expected {', '.join(DATA_SETS)} (evaluate runs "
-            "on these only; for your own demonstrations use 'interprim fit' and 'interprim predict')"
+            f"--data {','.join(bad)}: not a built-in data set; expected {', '.join(DATA_SETS)}, or the path of "
+            "your own CSV/NPZ file or folder (with --observed)"
         )
     for m in methods:
         try:

@@ -82,8 +82,6 @@ def path_end_world(drv, q):
 
 
 def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
-    from selenium.webdriver.common.actions.action_builder import ActionBuilder
-
     ARTIFACTS.mkdir(exist_ok=True)
     driver.get(live_server.url)
     wait_for(driver, "return window.ipState && window.ipState.ready")
@@ -104,24 +102,31 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
              return window.ipView.worldToClient(x, y); });""",
         observed,
     )
-    step = 3  # a pointer move every 3 frames; the page interpolates between pointer events
-    actions = ActionBuilder(driver, duration=int(1000 * replay["dt"] * step))
-    ptr = actions.pointer_action
-    x0, y0 = path[0]
-    ptr.move_to_location(int(round(x0)), int(round(y0)))
-    ptr.pointer_down()
-    for x, y in path[step::step] + [path[-1]]:
-        ptr.move_to_location(int(round(x)), int(round(y)))
-    ptr.pause(0.1)
-    ptr.pointer_up()
-    actions.perform()
-
+    # A pointer move every 3 frames (the page interpolates between pointer events), dispatched to the page's
+    # own handlers on a virtual clock (window.ipClock): the frames the page samples and sends are then those
+    # of the path whatever the load of the machine (real-time input dispatch under load stalls the "human"
+    # and changes what the model sees; the replay test below still uses real clicks).
+    step = 3
+    dt_ms = 1000 * replay["dt"]
+    driver.execute_script(
+        """const c = document.getElementById('hf-canvas'), path = arguments[0], step = arguments[1],
+                 dt = arguments[2];
+           let t = 0; window.ipClock = () => t;
+           const ev = (type, p) => c.dispatchEvent(new PointerEvent(type, {clientX: p[0], clientY: p[1],
+                 pointerId: 7, isPrimary: true, bubbles: true, pointerType: 'mouse', buttons: 1}));
+           ev('pointerdown', path[0]);
+           const pts = path.filter((_, i) => i > 0 && i % step === 0).concat([path[path.length - 1]]);
+           for (const p of pts) { t += dt * step; ev('pointermove', p); }
+           t += 100; ev('pointerup', path[path.length - 1]);
+           t += 1e6;  // the sampler's grid reaches the last event: every frame becomes due""",
+        path, step, dt_ms)
     n_pred = wait_for(driver, "return window.ipState.hf.predictions >= 20 && window.ipState.hf.predictions")
     assert n_pred >= 20
     # after the human stops, every frame's reply arrives (one per frame, in order) and the robot finishes its
     # predicted movement (robotPhase reaches 1): waited for as state, not as wall-clock time
     wait_for(driver, "return !window.ipState.hf.active")
     wait_for(driver, "const h = window.ipState.hf; return h.predictions >= h.frames && h.robotPhase >= 1")
+    driver.execute_script("delete window.ipClock")
     st = driver.execute_script("return window.ipState.hf")
     (ARTIFACTS / "browser_highfive_drag_frames.json").write_text(json.dumps(st["sent"]))
     assert st["error"] is None, st["error"]
@@ -135,10 +140,11 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
     print(f"goal {goal}, human hand {human_end}, robot hand {robot}, meeting point {meet}: "
           f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
     assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
-    # Mouse input is quantised to pixels and irregular in time (the demo model is fitted with
-    # input_noise=0.01 rad for it): the robot hand ends near the high-five point (0.15 m typical; 1.5 m
-    # before input_noise existed), well inside the 1.7 m from where it started.
-    assert d_robot < 0.3 and d_robot < 0.25 * d_rest, (robot, goal)
+    # The frames are those of the path on the virtual clock, so the result is fixed (0.065 m here, with the
+    # demo model's input_noise=0.01 rad for pointer input; 1.5 m before input_noise existed): the bound
+    # 0.15 m is the size of a hand, the quantity the test is about, not the last run's figure.  Real-time
+    # pointer input under load (stalls of the "human") reached 0.34-0.56 m: that is why the clock is virtual.
+    assert d_robot < 0.15 and d_robot < 0.25 * d_rest, (robot, goal)
     assert driver.find_element("id", "hf-canvas").get_attribute("data-robot-hand")
 
 

@@ -55,6 +55,9 @@ function jacobian(arm, q) {
 }
 
 const POINTER_DELAY_MS = 40;
+// The sampler's clock: performance.now(), unless a test installs window.ipClock (a virtual clock that makes
+// the frames sent independent of how busy the machine is).
+const samplerNow = () => (window.ipClock ? window.ipClock() : performance.now());
 const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
 
 // Pointer events come every ~8-30 ms and timers jitter; a model wants frames every dt. This samples
@@ -64,19 +67,19 @@ const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
 class PointerSampler {
   constructor(dtMs) { this.dtMs = dtMs; this.log = []; this.gridT = 0; this.released = false; this.done = false; }
   start(p) {
-    const now = performance.now();
+    const now = samplerNow();
     this.log = [[now, p[0], p[1]]];
     this.gridT = now - POINTER_DELAY_MS;
     this.released = false;
     this.done = false;
   }
   add(p) {
-    this.log.push([performance.now(), p[0], p[1]]);
+    this.log.push([samplerNow(), p[0], p[1]]);
     if (this.log.length > 4000) this.log.splice(0, 2000);
   }
   release() { this.released = true; }
   due() {
-    const out = [], log = this.log, now = performance.now() - POINTER_DELAY_MS;
+    const out = [], log = this.log, now = samplerNow() - POINTER_DELAY_MS;
     while (!this.done && this.gridT <= now) {
       const T = this.gridT;
       this.gridT += this.dtMs;
@@ -377,7 +380,7 @@ async function hfInit(info) {
     const p = c2w(canvasPoint(hf.canvas, ev));
     const hand = fk(hf.world.observed_arm, hf.humanQ).pts.at(-1);
     if (Math.hypot(p[0] - hand[0], p[1] - hand[1]) * hf.scale > 30) return;
-    hf.canvas.setPointerCapture(ev.pointerId);
+    try { hf.canvas.setPointerCapture(ev.pointerId); } catch (e) { /* a synthetic pointer has nothing to capture */ }
     state.hf.replayGoal = null;
     $("hf-goal").textContent = "–";
     hf.humanQ = ik2(hf.world.observed_arm, p); // the first frame is where the hand really is

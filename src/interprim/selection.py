@@ -20,7 +20,8 @@ model by K-fold cross-validation on the training demonstrations:
    predictions, each DoF divided by its variance over the demonstrations, and
    keep the most conservative ``gamma`` (the largest) within one standard
    error of the best, with the best ``(lambda, sigma^2)`` for it (Hastie et al.'s
-   one-standard-error rule: a few dozen demonstrations make the CV noisy).  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
+   one-standard-error rule: a few dozen demonstrations make the CV noisy), the standard
+   error being that of the paired per-case differences from the best candidate.  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
    covariance (observed x controlled) towards zero: the controlled agent's
    posterior mean moves from the prior mean by ``(1 - gamma)`` times the
    conditioned shift, so spurious correlations between the agents (few
@@ -275,10 +276,10 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     kind0 = kinds[0]
     gam = np.asarray(cross_grid if n_lat > n_o else (0.0,), dtype=np.float64)
     err = np.zeros((len(lam_grid), len(sigma2_factors), gam.size))
-    err2 = np.zeros_like(err)  # sums of squares for the one-standard-error rule
     ll = np.zeros((len(lam_grid), len(sigma2_factors)))
     err_prior = np.zeros(len(lam_grid))
     n_cases = 0
+    per_case = {}  # lambda index -> one (S2, G) error array per held-out case (for the paired rule)
     for f in range(K):
         train = fold != f
         if train.sum() < 2:
@@ -304,7 +305,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                                  * w_d[n_o:], axis=2).T  # (S2, G)
                     e_all = (e_o[:, None] + e_c) / n_lat
                     err[a] += e_all
-                    err2[a] += e_all**2
+                    per_case.setdefault(a, []).append(e_all)
                     err_prior[a] += float(np.mean(((pm - truth) ** 2) * w_d))
                     if kind0 == "position":
                         ll[a] += lls
@@ -315,15 +316,18 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                 if a == 0:
                     n_cases += 1
     err /= max(n_cases, 1)
-    err2 /= max(n_cases, 1)
     err_prior /= max(n_cases, 1)
 
     if select_sigma2:
         a, b, c = np.unravel_index(int(np.argmin(err)), err.shape)
-        # one-standard-error rule: the most conservative choice (largest cross-agent shrinkage, then
-        # largest sigma^2) whose CV error is within one standard error of the best
-        se = float(np.sqrt(max(err2[a, b, c] - err[a, b, c] ** 2, 0.0) / max(n_cases - 1, 1)))
-        ok = np.argwhere(err <= err[a, b, c] + se)
+        # one-standard-error rule on paired differences: the most conservative cross-agent shrinkage whose
+        # CV error exceeds the best by less than one standard error of the per-case differences (every
+        # candidate is scored on the same held-out cases, so the cases' own spread cancels; the unpaired
+        # standard error counted it and kept gamma = 1, the prior mean, on NuiSI, where the coupling helps)
+        E = np.stack([np.stack(per_case[i]) for i in range(len(lam_grid))], axis=1)  # (cases, lam, s2, gamma)
+        Dif = E - E[:, a, b, c][:, None, None, None]
+        se_d = Dif.std(axis=0, ddof=1) / np.sqrt(max(Dif.shape[0], 1)) if Dif.shape[0] > 1 else np.inf
+        ok = np.argwhere(Dif.mean(axis=0) <= se_d)
         c = int(max(t[2] for t in ok))
         a, b = np.unravel_index(int(np.argmin(err[:, :, c])), err.shape[:2])
         lam = lam_grid[a]

@@ -33,7 +33,9 @@ model and its training distribution:
     Gaussian weights of the distance between their prefixes and the observed one (bandwidth
     ``b``; ``b -> inf`` is the mean, ``b -> 0`` the nearest neighbour).
 
-  and ``"mean"``, the prior mean (no coupling), is always a candidate.
+  and ``"mean"``, the prior mean (no coupling), is always a candidate; ``"blend"`` averages the
+  best ridge and the best kernel conditioning with a weight chosen by the same cross-validation
+  (model averaging of two linear smoothers).
 - **Selection.**  Method and hyper-parameter are chosen by demonstration-grouped K-fold
   cross-validation on the training data (as ``sigma2="cv"`` does for the IP): the held-out
   demonstrations' prefixes are cut at phases that differ from the phase the model is told by the
@@ -44,10 +46,12 @@ model and its training distribution:
   of the training trajectories; its parameter variance is ``h = sum_j (sum_{i in demo j}
   (alpha_i + 1/N))^2`` times the residual variance (leverage of a linear smoother, rows grouped
   by demonstration).  The residual variance ``v(s, t, d)`` is the cross-validated held-out squared
-  error divided by ``1 + h`` at each CV phase (interpolated in ``s``, made non-increasing in
-  ``s`` so that the std shrinks as more is observed); ``std^2 = c^2 v (1 + h)`` with a factor ``c``
-  per agent fitted on the held-out folds (jackknife: each case scored with a ``v`` that excludes
-  its own demonstration) so that the ``coverage`` band is calibrated.
+  error divided by ``1 + h`` at each CV phase (averaged over ``smooth_window`` neighbouring grid
+  times, interpolated in ``s``, made non-increasing in ``s`` so that the std shrinks as more is
+  observed); ``std^2 = c^2 v (1 + h)`` with a factor ``c`` per agent fitted on the held-out folds
+  (jackknife: each case is standardised by a ``v`` that excludes its own demonstration; ``c`` is
+  the ``coverage (1 + 1/n)`` quantile of the standardised errors, the split-conformal level for
+  ``n`` exchangeable held-out demonstrations) so that the ``coverage`` band is calibrated.
 
 Pure numpy.  References: H. Ben Amor, G. Neumann, S. Kamthe, O. Kroemer, J. Peters, "Interaction
 Primitives for Human-Robot Cooperation Tasks", ICRA 2014 (Eq. 10, 16-18); M. E. Tipping and
@@ -105,6 +109,19 @@ def _resample(frames, stop, n):
     i1 = np.minimum(i0 + 1, T - 1)
     out = frames[i0] * (1.0 - w) + frames[i1] * w
     return out[0] if scalar else out
+
+
+def _smooth_time(v, w):
+    """Moving average of ``v`` (..., n_out, D) over ``w`` neighbouring time points (axis -2)."""
+    if w <= 1:
+        return v
+    n = v.shape[-2]
+    r = int(w) // 2
+    c = np.cumsum(v, axis=-2)
+    c = np.concatenate([np.zeros_like(c[..., :1, :]), c], axis=-2)  # c[k] = sum of v[:k]
+    hi = np.minimum(np.arange(n) + r + 1, n)
+    lo = np.maximum(np.arange(n) - r, 0)
+    return (c[..., hi, :] - c[..., lo, :]) / (hi - lo)[:, None]
 
 
 class CouplingPrediction:
@@ -201,6 +218,11 @@ class CouplingModel:
         Nominal coverage of the band the scale factor is calibrated for (0.9: ``mean +- 1.645 std``).
     features : {"position", "displacement"}
         ``"displacement"`` subtracts the prefix's first frame (translation-invariant prefixes).
+    blend_weights : sequence of float
+        Weights ``w`` of the ``"blend"`` candidates ``w ridge + (1 - w) kernel`` (empty: no blends;
+        only when both ``"ridge"`` and ``"kernel"`` are among ``methods``).
+    smooth_window : int
+        Grid times over which the residual variance is averaged (1: none).
 
     Attributes
     ----------
@@ -211,8 +233,9 @@ class CouplingModel:
     fallback_to_mean_ : bool
         ``True`` when the cross-validation kept the prior mean.
     selection_ : dict
-        CV errors of every candidate (``"scores"``), the mean's error, the paired standard error
-        and a plain-language ``"reason"``.
+        CV errors of every candidate (``"scores"``, ``"scores_by_phase"``: mean squared error of the
+        controlled agent, each DoF divided by its variance), the mean's error, the paired standard
+        error and a plain-language ``"reason"``.
     scale_ : dict
         Calibration factor ``c`` per agent (``"observed"``, ``"controlled"``).
     residual_var_ : ndarray, shape (len(fractions), n_out, D)
@@ -222,7 +245,8 @@ class CouplingModel:
     def __init__(self, observed_dofs, n_in: int = 10, n_out: int = 50, methods=("ridge", "ppca", "kernel"),
                  ridge_grid=DEFAULT_RIDGE_GRID, rank_grid=DEFAULT_RANK_GRID, bandwidth_grid=DEFAULT_BANDWIDTH_GRID,
                  phase_std="clock", n_jitter: int = 5, fractions=tuple(np.round(np.arange(0.1, 1.01, 0.1), 2)),
-                 n_folds: int = 10, coverage: float = 0.9, features: str = "position"):
+                 n_folds: int = 10, coverage: float = 0.9, features: str = "position",
+                 blend_weights=(0.25, 0.5, 0.75), smooth_window: int = 5):
         self.observed_dofs = observed_dofs
         self.n_in = n_in
         self.n_out = n_out
@@ -236,6 +260,8 @@ class CouplingModel:
         self.n_folds = n_folds
         self.coverage = coverage
         self.features = features
+        self.blend_weights = blend_weights
+        self.smooth_window = smooth_window
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, D):
@@ -410,6 +436,9 @@ class CouplingModel:
             return w / w.sum(axis=1, keepdims=True) - 1.0 / R
         if method == "ppca":
             return self._ppca_weights(int(param), ctx)
+        if method == "blend":
+            lam, bw, w = param
+            return w * self._weights("ridge", lam, ctx) + (1.0 - w) * self._weights("kernel", bw, ctx)
         raise AssertionError(method)
 
     @staticmethod
@@ -479,7 +508,7 @@ class CouplingModel:
         nj = int(self.n_jitter)
         ctrl = self.controlled_dofs_
         w_ctrl = 1.0 / self.dof_scale_[ctrl] ** 2
-        loss = np.zeros((len(cands), n))
+        loss = np.zeros((len(cands), len(fr), n))
         resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
@@ -498,16 +527,26 @@ class CouplingModel:
                 for c, (m, prm) in enumerate(cands):
                     mean, h = self._predict_rows(m, prm, ctx)
                     e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
-                    loss[c, hold] += np.mean(np.sum(e[..., ctrl] ** 2 * w_ctrl, axis=-1), axis=(1, 2))
+                    loss[c, a, hold] = np.mean(np.sum(e[..., ctrl] ** 2 * w_ctrl, axis=-1), axis=(1, 2))
                     if keep is not None and c == keep:
                         resid[a, hold] = e
                         lev[a, hold] = h.reshape(len(hold), nj)
-        return loss / len(fr), resid, lev, K
+        return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):
         n = self.n_demos_
         cands = self._candidates()
         loss, _, _, K = self._cv_pass(cands, None)
+        if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:
+            # model averaging of the best ridge and the best kernel conditioning (both linear smoothers)
+            sc = loss.mean(axis=(1, 2))
+            br = min((i for i, c in enumerate(cands) if c[0] == "ridge"), key=lambda i: sc[i])
+            bk = min((i for i, c in enumerate(cands) if c[0] == "kernel"), key=lambda i: sc[i])
+            blends = [("blend", (cands[br][1], cands[bk][1], float(w))) for w in self.blend_weights]
+            loss = np.concatenate([loss, self._cv_pass(blends, None)[0]])
+            cands = cands + blends
+        by_phase = loss.mean(axis=2)  # (candidates, fractions)
+        loss = loss.mean(axis=1)  # per candidate and held-out demonstration
         scores = loss.mean(axis=1)
         best = int(np.argmin(scores))
         diff = loss[0] - loss[best]
@@ -527,6 +566,7 @@ class CouplingModel:
         self.selection_ = {
             "method": self.method_, "param": self.param_, "reason": reason,
             "scores": {f"{m}:{p}": float(v) for (m, p), v in zip(cands, scores)},
+            "scores_by_phase": {f"{m}:{p}": [float(x) for x in v] for (m, p), v in zip(cands, by_phase)},
             "error_mean": float(scores[0]), "error_best": float(scores[best]), "paired_se": se,
             "n_folds": K,
         }
@@ -538,7 +578,7 @@ class CouplingModel:
         # e: (F, n, nj, n_out, D); h: (F, n, nj)
         n = e.shape[1]
         e2 = e**2 / (1.0 + h)[..., None, None]
-        per_demo = e2.mean(axis=2)  # (F, n, n_out, D)
+        per_demo = _smooth_time(e2.mean(axis=2), int(self.smooth_window))  # (F, n, n_out, D)
         tot = per_demo.sum(axis=1)  # (F, n_out, D)
         floor = 1e-12 * self.dof_scale_**2
         v = np.maximum(tot / n, floor)
@@ -557,7 +597,9 @@ class CouplingModel:
                 t = np.linspace(0.0, 1.0, self.n_out)
                 mask = t[None, :] > self.fractions_[:, None]  # (F, n_out)
                 zz = zz[np.broadcast_to(mask[:, None, None, :, None], zz.shape)]
-            q = float(np.quantile(zz.ravel(), self.coverage)) if zz.size else zc
+            # the held-out demonstrations are exchangeable units: split-conformal level (1 + 1/n) coverage
+            level = min(1.0, self.coverage * (1.0 + 1.0 / n))
+            q = float(np.quantile(zz.ravel(), level)) if zz.size else zc
             self.scale_[name] = max(q / zc, 1e-6)
 
     # ------------------------------------------------------------------ predict

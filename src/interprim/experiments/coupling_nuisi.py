@@ -110,6 +110,11 @@ def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", 
                         "coverage_obs": float(np.mean(np.abs(eo) <= Z90 * so + 1e-12)),
                         "ms_ctrl": float(np.mean(ec**2)), "std_ctrl": float(np.mean(sc)),
                         "ms_obs": float(np.mean(eo**2)), "std_obs": float(np.mean(so)),
+                        # a calibrated Gaussian with this std profile has RMS / mean std = sqrt(var_*) / std_*
+                        "var_ctrl": float(np.mean(sc**2)), "var_obs": float(np.mean(so**2)),
+                        # standardised errors (1 = calibrated whatever the profile)
+                        "z2_ctrl": float(np.mean((ec / np.maximum(sc, 1e-12)) ** 2)),
+                        "z2_obs": float(np.mean((eo / np.maximum(so, 1e-12)) ** 2)),
                     })
                 if m == "coupling":
                     rec["coupling_method"] = models[m].method_
@@ -125,7 +130,7 @@ def summarise(records):
         label = r["method"] if r["phase_source"] == "none" else f"{r['method']}-{r['phase_source']}"
         d = acc.setdefault(r["action"], {}).setdefault(label, {}).setdefault(r["fraction"], {})
         for k in ("rmse_ctrl", "rmse_obs_rest", "coverage_ctrl", "coverage_obs", "ms_ctrl", "std_ctrl", "ms_obs",
-                  "std_obs"):
+                  "std_obs", "var_ctrl", "var_obs", "z2_ctrl", "z2_obs"):
             if k in r:
                 d.setdefault(k, []).append(r[k])
     return {a: {lab: {f: {k: float(np.mean(v)) for k, v in md.items()} for f, md in fm.items()}
@@ -164,17 +169,25 @@ def tables(summary, fractions):
     lines.append("|" + "---|" * (len(fractions) + 3))
     for lab in ("coupling-true", "coupling-clock", "ip-true", "ip-clock"):
         for agent in ("ctrl", "obs"):
-            cov, ratio = [], []
+            cov, ratio, ideal, zrms = [], [], [], []
             for f in fractions:
                 vals = [am[lab][f] for am in summary.values() if lab in am and f"coverage_{agent}" in am[lab][f]]
                 if not vals:
                     break
                 cov.append(np.mean([v[f"coverage_{agent}"] for v in vals]))
-                ratio.append(math.sqrt(np.mean([v[f"ms_{agent}"] for v in vals])) / np.mean([v[f"std_{agent}"] for v in vals]))
+                mstd = np.mean([v[f"std_{agent}"] for v in vals])
+                ratio.append(math.sqrt(np.mean([v[f"ms_{agent}"] for v in vals])) / mstd)
+                if all(f"var_{agent}" in v for v in vals):
+                    ideal.append(math.sqrt(np.mean([v[f"var_{agent}"] for v in vals])) / mstd)
+                    zrms.append(math.sqrt(np.mean([v[f"z2_{agent}"] for v in vals])))
             if cov:
                 name = "agent 2" if agent == "ctrl" else "agent 1 (rest)"
                 lines.append(f"| {lab} | {name} | coverage | " + " | ".join(f"{x:.3f}" for x in cov) + " |")
                 lines.append(f"| {lab} | {name} | RMS/std | " + " | ".join(f"{x:.2f}" for x in ratio) + " |")
+                if ideal:
+                    lines.append(f"| {lab} | {name} | same for a calibrated Gaussian | "
+                                 + " | ".join(f"{x:.2f}" for x in ideal) + " |")
+                    lines.append(f"| {lab} | {name} | RMS of error/std | " + " | ".join(f"{x:.2f}" for x in zrms) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -187,6 +200,7 @@ def main(argv=None):
     ap.add_argument("--observed", default="right_arm", help="agent-1 joints (a load_nuisi group or list)")
     ap.add_argument("--controlled", default="right_arm", help="agent-2 joints")
     ap.add_argument("--data", default=None, help="NuiSI file or data folder")
+    ap.add_argument("--coupling-kw", default="{}", help="JSON dict of CouplingModel keyword arguments")
     args = ap.parse_args(argv)
     from interprim.datasets import load_nuisi
     from interprim.phase_likelihood import single_thread
@@ -203,7 +217,8 @@ def main(argv=None):
             n = len(demos)
             idx = range(n) if args.max_demos is None else np.unique(np.linspace(0, n - 1, min(args.max_demos, n)).astype(int))
             for j in idx:
-                for r in run_fold(demos, obs, float(d.dt), int(j), methods=methods):
+                for r in run_fold(demos, obs, float(d.dt), int(j), methods=methods,
+                                  coupling_kw=json.loads(args.coupling_kw)):
                     r["action"] = a
                     records.append(r)
             print(f"{a}: {len(idx)} folds done ({time.time() - t_start:.0f} s)", file=sys.stderr, flush=True)

@@ -223,6 +223,10 @@ class CouplingModel:
         only when both ``"ridge"`` and ``"kernel"`` are among ``methods``).
     smooth_window : int
         Grid times over which the residual variance is averaged (1: none).
+    score : {"normalised", "raw"}
+        CV loss: the controlled agent's squared error with each DoF divided by its variance
+        (default; DoFs in different units weigh alike) or in the data's own units (``"raw"``: the
+        error a robot makes, when all controlled DoFs share a unit).
 
     Attributes
     ----------
@@ -246,7 +250,7 @@ class CouplingModel:
                  ridge_grid=DEFAULT_RIDGE_GRID, rank_grid=DEFAULT_RANK_GRID, bandwidth_grid=DEFAULT_BANDWIDTH_GRID,
                  phase_std="clock", n_jitter: int = 5, fractions=tuple(np.round(np.arange(0.1, 1.01, 0.1), 2)),
                  n_folds: int = 10, coverage: float = 0.9, features: str = "position",
-                 blend_weights=(0.25, 0.5, 0.75), smooth_window: int = 5):
+                 blend_weights=(0.25, 0.5, 0.75), smooth_window: int = 5, score: str = "normalised"):
         self.observed_dofs = observed_dofs
         self.n_in = n_in
         self.n_out = n_out
@@ -262,6 +266,7 @@ class CouplingModel:
         self.features = features
         self.blend_weights = blend_weights
         self.smooth_window = smooth_window
+        self.score = score
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, D):
@@ -284,6 +289,8 @@ class CouplingModel:
             raise ValueError(f"methods contains unknown coupling(s) {bad}; expected a subset of {METHODS}")
         if not (isinstance(self.coverage, numbers.Real) and 0.0 < self.coverage < 1.0):
             raise ValueError(f"coverage must be in (0, 1), got {self.coverage!r}")
+        if self.score not in ("normalised", "raw"):
+            raise ValueError(f"score must be 'normalised' or 'raw', got {self.score!r}")
         if self.features not in ("position", "displacement"):
             raise ValueError(f"features must be 'position' or 'displacement', got {self.features!r}")
         fr = np.asarray(self.fractions, dtype=np.float64)
@@ -507,7 +514,8 @@ class CouplingModel:
         fr = self.fractions_
         nj = int(self.n_jitter)
         ctrl = self.controlled_dofs_
-        w_ctrl = 1.0 / self.dof_scale_[ctrl] ** 2
+        w_ctrl = (1.0 / self.dof_scale_[ctrl] ** 2 if self.score == "normalised"
+                  else np.full(len(ctrl), 1.0 / float(np.mean(self.dof_scale_[ctrl] ** 2))))
         loss = np.zeros((len(cands), len(fr), n))
         resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None

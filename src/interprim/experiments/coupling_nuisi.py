@@ -49,6 +49,14 @@ def _point_rms(err):
     return float(np.sqrt(np.mean(np.sum(err.reshape(n, C // 3, 3) ** 2, axis=2))))
 
 
+def _fmt_param(p):
+    if p is None:
+        return ""
+    if isinstance(p, (list, tuple)):
+        return ":" + ",".join(f"{x:g}" for x in p)
+    return f":{p:g}"
+
+
 def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", "prior", "nn"), coupling_kw=None):
     """Fit every method without demonstration ``j``; records for every fraction and phase source."""
     import interprim
@@ -201,6 +209,8 @@ def main(argv=None):
     ap.add_argument("--controlled", default="right_arm", help="agent-2 joints")
     ap.add_argument("--data", default=None, help="NuiSI file or data folder")
     ap.add_argument("--coupling-kw", default="{}", help="JSON dict of CouplingModel keyword arguments")
+    ap.add_argument("--from-results", default=None, nargs="+",
+                    help="only summarise these results.json files (of earlier runs) into --out")
     args = ap.parse_args(argv)
     from interprim.datasets import load_nuisi
     from interprim.phase_likelihood import single_thread
@@ -210,6 +220,17 @@ def main(argv=None):
     methods = tuple(m for m in args.methods.split(",") if m)
     records = []
     t_start = time.time()
+    if args.from_results:
+        for f in args.from_results:
+            records += json.loads(Path(f).read_text())
+        methods = tuple(dict.fromkeys(r["method"] for r in records))
+    else:
+        records = _run(args, methods, out, load_nuisi, single_thread, t_start)
+    return _report(records, methods, out, args)
+
+
+def _run(args, methods, out, load_nuisi, single_thread, t_start):
+    records = []
     with single_thread():
         for a in args.actions.split(","):
             d = load_nuisi(args.data, action=a, observed=args.observed, controlled=args.controlled)
@@ -223,6 +244,11 @@ def main(argv=None):
                     records.append(r)
             print(f"{a}: {len(idx)} folds done ({time.time() - t_start:.0f} s)", file=sys.stderr, flush=True)
             (out / "results.json").write_text(json.dumps(records, indent=0, default=float))
+    return records
+
+
+def _report(records, methods, out, args):
+    (out / "results.json").write_text(json.dumps(records, indent=0, default=float))
     summary = summarise(records)
     fractions = tuple(sorted({r["fraction"] for r in records}))
     txt = tables(summary, fractions)
@@ -232,7 +258,7 @@ def main(argv=None):
     choices = {}
     for r in records:
         if r["method"] == "coupling" and r["fraction"] == fractions[0] and r["phase_source"] == "true":
-            key = r["coupling_method"] + ("" if r["coupling_param"] is None else f":{r['coupling_param']:g}")
+            key = r["coupling_method"] + _fmt_param(r["coupling_param"])
             choices.setdefault(r["action"], {}).setdefault(key, 0)
             choices[r["action"]][key] += 1
     txt += "\n## timing (median per fold)\n\n" + "\n".join(

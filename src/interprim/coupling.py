@@ -1,0 +1,669 @@
+"""Coupling between the agents learned where it is used: conditioning on a phase-uncertain prefix.
+
+The Interaction Primitive (Ben Amor et al., ICRA 2014, Sec. III-C/D) couples the agents through one
+joint Gaussian over the DMP parameters ``theta = [theta_o, theta_c]`` (Eq. 10) and conditions it on
+the forcing values of the observed prefix (Eq. 15-18, with ``Omega~ = [Omega, 0]``).  On real
+recordings two things break that chain: the prefix is placed in time by a phase estimate that is
+often wrong by 5-10 % of the movement, and 8-30 demonstrations cannot estimate a covariance with
+hundreds of rows.  Cross-validated conditioning then chooses to change nothing (issue 11).
+
+:class:`CouplingModel` keeps the *form* of the paper's conditioning and changes its observation
+model and its training distribution:
+
+- **Observation model.**  Instead of ``F* = Omega theta`` (Eq. 14-16) the observation is the
+  prefix itself, resampled at ``n_in`` points over ``[0, s]`` where ``s`` is the estimated fraction
+  of the movement seen: ``x(s) = [o(0), o(s / (n_in - 1)), ..., o(s)]``.  The latent quantity is the
+  whole trajectory of both agents on a normalised-time grid of ``n_out`` points, ``y`` (a ProMP
+  with one basis function per grid point, the role ``theta`` plays in Eq. 10).
+- **Joint Gaussian, Eq. 17 form.**  ``p(x, y) = N([mu_x; mu_y], [[S_xx, S_xy], [S_yx, S_yy]])``
+  estimated from pairs ``(x_j(s'), y_j)`` of the training demonstrations, where the prefixes are
+  cut at phases ``s' = s + sigma_s z_k`` jittered by the phase estimator's own error ``sigma_s``:
+  the model is trained on prefixes that are misplaced in time exactly as the ones it will see.
+  Conditioning on an observed prefix is Eq. 18 with ``Omega`` replaced by the selection of the
+  ``x`` block and ``A = S_xx + sigma^2 I``:
+  ``mu_y|x = mu_y + S_yx (S_xx + sigma^2 I)^-1 (x - mu_x)``.
+  Three covariance models are offered (``methods``):
+
+  * ``"ridge"`` - the sample covariance with the noise ``sigma^2 = lambda tr(S_xx) / p`` of Eq. 16
+    acting as the regulariser (this is ridge regression from the prefix to the trajectories);
+  * ``"ppca"`` - a probabilistic-PCA (reduced-rank) joint covariance ``W W^T + diag(s_x^2 I, s_y^2 I)``
+    of rank ``r`` over both blocks (the paper's PCA step, Sec. IV, is the special case without
+    the coupling term); conditioning reduces to a ``r x r`` solve;
+  * ``"kernel"`` - a locally weighted conditioning: the demonstrations' trajectories averaged with
+    Gaussian weights of the distance between their prefixes and the observed one (bandwidth
+    ``b``; ``b -> inf`` is the mean, ``b -> 0`` the nearest neighbour).
+
+  and ``"mean"``, the prior mean (no coupling), is always a candidate; ``"blend"`` averages the
+  best ridge and the best kernel conditioning with a weight chosen by the same cross-validation
+  (model averaging of two linear smoothers).
+- **Selection.**  Method and hyper-parameter are chosen by demonstration-grouped K-fold
+  cross-validation on the training data (as ``sigma2="cv"`` does for the IP): the held-out
+  demonstrations' prefixes are cut at phases that differ from the phase the model is told by the
+  phase error, and the error of the controlled agent's whole trajectory is scored.  The mean is
+  kept unless the best candidate beats it by more than one paired standard error; then
+  ``fallback_to_mean_`` is ``True`` and ``selection_["reason"]`` says so.
+- **Predictive std.**  Every method predicts ``mu_y + sum_i alpha_i (y_i - mu_y)``, a linear smoother
+  of the training trajectories; its parameter variance is ``h = sum_j (sum_{i in demo j}
+  (alpha_i + 1/N))^2`` times the residual variance (leverage of a linear smoother, rows grouped
+  by demonstration).  The residual variance ``v(s, t, d)`` is the cross-validated held-out squared
+  error divided by ``1 + h`` at each CV phase (averaged over ``smooth_window`` neighbouring grid
+  times, interpolated in ``s``, made non-increasing in ``s`` so that the std shrinks as more is
+  observed); ``std^2 = c^2 v (1 + h)`` with a factor ``c`` per agent fitted on the held-out folds
+  (jackknife: each case is standardised by a ``v`` that excludes its own demonstration; ``c`` is
+  the ``coverage (1 + 1/n)`` quantile of the standardised errors, the split-conformal level for
+  ``n`` exchangeable held-out demonstrations) so that the ``coverage`` band is calibrated.
+
+Pure numpy.  References: H. Ben Amor, G. Neumann, S. Kamthe, O. Kroemer, J. Peters, "Interaction
+Primitives for Human-Robot Cooperation Tasks", ICRA 2014 (Eq. 10, 16-18); M. E. Tipping and
+C. M. Bishop, "Probabilistic principal component analysis", JRSS-B 1999; T. Hastie, R. Tibshirani,
+J. Friedman, The Elements of Statistical Learning, Sec. 3.4.1 (ridge), 6.1 (kernel smoothers),
+7.10 (cross-validation).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from statistics import NormalDist
+
+import numpy as np
+
+from ._validation import as_2d_finite
+from .errors import NotFittedError
+
+__all__ = ["CouplingModel", "CouplingPrediction", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
+           "DEFAULT_BANDWIDTH_GRID"]
+
+METHODS = ("mean", "ridge", "ppca", "kernel")
+#: ``lambda`` candidates of ``"ridge"``: ``sigma^2 = lambda tr(S_xx) / p`` (Eq. 16's noise, relative)
+DEFAULT_RIDGE_GRID = tuple(float(v) for v in 10.0 ** np.arange(-3.0, 3.01, 0.5))
+#: ranks of ``"ppca"``
+DEFAULT_RANK_GRID = (1, 2, 3, 4, 6, 8)
+#: bandwidths of ``"kernel"``, relative to the root median squared distance of the query to the rows
+DEFAULT_BANDWIDTH_GRID = (0.25, 0.35, 0.5, 0.7, 1.0, 1.5, 2.5)
+
+_Z = {0.5: 0.6744897501960817, 0.8: 1.2815515655446004, 0.9: 1.6448536269514722, 0.95: 1.959963984540054}
+
+
+def _normal_quantile(q: float) -> float:
+    """Standard normal quantile."""
+    return _Z[q] if q in _Z else NormalDist().inv_cdf(float(q))
+
+
+def _jitter_nodes(k: int) -> np.ndarray:
+    """``k`` equally weighted standard-normal nodes (quantiles at ``(i + 1/2) / k``), deterministic."""
+    return np.array([NormalDist().inv_cdf((i + 0.5) / k) for i in range(int(k))]) if k > 1 else np.zeros(1)
+
+
+def _resample(frames, stop, n):
+    """Values of ``frames`` (T, D) at ``n`` equally spaced fractional frame indices ``0 .. stop``.
+
+    ``stop`` is a scalar or an array of shape (R,); the result is (n, D) or (R, n, D).
+    """
+    T = frames.shape[0]
+    scalar = np.ndim(stop) == 0
+    stops = np.atleast_1d(np.asarray(stop, dtype=np.float64))
+    pos = np.clip(stops[:, None] * np.linspace(0.0, 1.0, n)[None, :], 0.0, T - 1.0)  # (R, n)
+    i0 = np.minimum(np.floor(pos).astype(np.intp), T - 2 if T > 1 else 0)
+    w = (pos - i0)[..., None]
+    i1 = np.minimum(i0 + 1, T - 1)
+    out = frames[i0] * (1.0 - w) + frames[i1] * w
+    return out[0] if scalar else out
+
+
+def _smooth_time(v, w):
+    """Moving average of ``v`` (..., n_out, D) over ``w`` neighbouring time points (axis -2)."""
+    if w <= 1:
+        return v
+    n = v.shape[-2]
+    r = int(w) // 2
+    c = np.cumsum(v, axis=-2)
+    c = np.concatenate([np.zeros_like(c[..., :1, :]), c], axis=-2)  # c[k] = sum of v[:k]
+    hi = np.minimum(np.arange(n) + r + 1, n)
+    lo = np.maximum(np.arange(n) - r, 0)
+    return (c[..., hi, :] - c[..., lo, :]) / (hi - lo)[:, None]
+
+
+class CouplingPrediction:
+    """A prediction of the whole movement of both agents on normalised time ``0 .. 1``.
+
+    Parameters
+    ----------
+    times : ndarray, shape (K,)
+        Normalised times of ``mean`` and ``std``.
+    mean, std : ndarray, shape (K, D)
+        Predictive mean and standard deviation, columns in the demonstrations' order.
+    phase, phase_std : float
+        The phase estimate (fraction of the movement seen) the prediction was made with.
+    observed_dofs, controlled_dofs : list of int
+    method : str
+        The coupling that made it (``"mean"`` when the model fell back to the prior mean).
+    leverage : float
+        ``h`` of the module docstring (parameter variance / residual variance).
+    """
+
+    def __init__(self, times, mean, std, phase, phase_std, observed_dofs, controlled_dofs, method, leverage):
+        self.times = np.asarray(times, dtype=np.float64)
+        self.mean = np.asarray(mean, dtype=np.float64)
+        self._std = np.asarray(std, dtype=np.float64)
+        self.phase = float(phase)
+        self.phase_std = float(phase_std)
+        self.observed_dofs = list(observed_dofs)
+        self.controlled_dofs = list(controlled_dofs)
+        self.method = method
+        self.leverage = float(leverage)
+
+    def _interp(self, Y, n):
+        s = np.linspace(0.0, 1.0, int(n))
+        return np.stack([np.interp(s, self.times, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+
+    def trajectory(self, n: int = 100) -> np.ndarray:
+        """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)``."""
+        return self._interp(self.mean, n)
+
+    def std(self, n: int = 100) -> np.ndarray:
+        """Predictive standard deviation of all DoFs, shape ``(n, D)``."""
+        return self._interp(self._std, n)
+
+    def response(self, n: int = 100):
+        """The controlled agent's (robot's) mean and std, each ``(n, len(controlled_dofs))``."""
+        return self.trajectory(n)[:, self.controlled_dofs], self.std(n)[:, self.controlled_dofs]
+
+    def completion(self, n: int = 100):
+        """The observed agent's remaining movement: normalised times ``> phase`` and mean, std there."""
+        t = np.linspace(self.phase, 1.0, int(n))
+        m = np.stack([np.interp(t, self.times, self.mean[:, d]) for d in self.observed_dofs], axis=1)
+        s = np.stack([np.interp(t, self.times, self._std[:, d]) for d in self.observed_dofs], axis=1)
+        return t, m, s
+
+    def band(self, n: int = 100, coverage: float = 0.9):
+        """Lower and upper edge of the pointwise ``coverage`` band, each ``(n, D)``."""
+        z = _normal_quantile(0.5 + coverage / 2.0)
+        m, s = self.trajectory(n), self.std(n)
+        return m - z * s, m + z * s
+
+
+class CouplingModel:
+    """Conditioning of both agents' trajectories on a phase-uncertain prefix of the observed agent.
+
+    See the module docstring for the model (Eq. 17-18 form with a prefix observation model).
+
+    Parameters
+    ----------
+    observed_dofs : sequence of int
+        Columns of the demonstrations that belong to the observed agent (the human).
+    n_in : int
+        Points at which the observed prefix is resampled over ``[0, s]`` (the ``x`` block).
+    n_out : int
+        Points of the normalised-time grid of the predicted trajectories (the ``y`` block).
+    methods : sequence of str
+        Candidate couplings among :data:`METHODS` (``"mean"`` is always added).
+    ridge_grid, rank_grid, bandwidth_grid : sequence
+        Hyper-parameter candidates of ``"ridge"`` (relative noise ``lambda``), ``"ppca"`` (rank)
+        and ``"kernel"`` (relative bandwidth).
+    phase_std : "clock", float or callable
+        Standard deviation of the phase estimate the model will be given, as a function of the
+        estimated phase ``s``: ``"clock"`` (default) is the error of a clock that assumes the mean
+        duration, ``s * std(mean_T / T_j)`` over the training durations; a float is a constant;
+        a callable maps ``s`` (array) to the std.  It is used to jitter the training prefixes
+        and, in the cross-validation, the held-out ones; ``predict`` may override it.
+    n_jitter : int
+        Phases per demonstration and estimated phase (normal quantile nodes of the jitter).
+    fractions : sequence of float
+        Estimated phases at which the cross-validation scores the candidates and estimates the
+        residual variance (the predictive std is interpolated between them).
+    n_folds : int
+        Folds of the demonstration-grouped cross-validation (at most the number of demos).
+    coverage : float
+        Nominal coverage of the band the scale factor is calibrated for (0.9: ``mean +- 1.645 std``).
+    features : {"position", "displacement"}
+        ``"displacement"`` subtracts the prefix's first frame (translation-invariant prefixes).
+    blend_weights : sequence of float
+        Weights ``w`` of the ``"blend"`` candidates ``w ridge + (1 - w) kernel`` (empty: no blends;
+        only when both ``"ridge"`` and ``"kernel"`` are among ``methods``).
+    smooth_window : int
+        Grid times over which the residual variance is averaged (1: none).
+    score : {"normalised", "raw"}
+        CV loss: the controlled agent's squared error with each DoF divided by its variance
+        (default; DoFs in different units weigh alike) or in the data's own units (``"raw"``: the
+        error a robot makes, when all controlled DoFs share a unit).
+
+    Attributes
+    ----------
+    method_ : str
+        The chosen coupling (``"mean"`` when nothing beat the prior mean on held-out demos).
+    param_ : float or int or None
+        Its hyper-parameter.
+    fallback_to_mean_ : bool
+        ``True`` when the cross-validation kept the prior mean.
+    selection_ : dict
+        CV errors of every candidate (``"scores"``, ``"scores_by_phase"``: mean squared error of the
+        controlled agent, each DoF divided by its variance), the mean's error, the paired standard
+        error and a plain-language ``"reason"``.
+    scale_ : dict
+        Calibration factor ``c`` per agent (``"observed"``, ``"controlled"``).
+    residual_var_ : ndarray, shape (len(fractions), n_out, D)
+        Residual variance ``v(s, t, d)`` (non-increasing in ``s``).
+    """
+
+    def __init__(self, observed_dofs, n_in: int = 10, n_out: int = 50, methods=("ridge", "ppca", "kernel"),
+                 ridge_grid=DEFAULT_RIDGE_GRID, rank_grid=DEFAULT_RANK_GRID, bandwidth_grid=DEFAULT_BANDWIDTH_GRID,
+                 phase_std="clock", n_jitter: int = 5, fractions=tuple(np.round(np.arange(0.1, 1.01, 0.1), 2)),
+                 n_folds: int = 10, coverage: float = 0.9, features: str = "position",
+                 blend_weights=(0.25, 0.5, 0.75), smooth_window: int = 5, score: str = "normalised"):
+        self.observed_dofs = observed_dofs
+        self.n_in = n_in
+        self.n_out = n_out
+        self.methods = methods
+        self.ridge_grid = ridge_grid
+        self.rank_grid = rank_grid
+        self.bandwidth_grid = bandwidth_grid
+        self.phase_std = phase_std
+        self.n_jitter = n_jitter
+        self.fractions = fractions
+        self.n_folds = n_folds
+        self.coverage = coverage
+        self.features = features
+        self.blend_weights = blend_weights
+        self.smooth_window = smooth_window
+        self.score = score
+
+    # ------------------------------------------------------------------ checks
+    def _check_params(self, D):
+        obs = self.observed_dofs
+        if obs is None or isinstance(obs, (str, bytes)) or not hasattr(obs, "__len__"):
+            raise TypeError(f"observed_dofs must be a sequence of column indices, got {obs!r}")
+        obs = [int(i) for i in obs]
+        if not obs or len(set(obs)) != len(obs) or min(obs) < 0 or max(obs) >= D:
+            raise ValueError(f"observed_dofs must be distinct column indices in [0, {D}), got {list(obs)}")
+        if len(obs) == D:
+            raise ValueError(f"observed_dofs {obs} covers all {D} columns: no controlled agent is left")
+        for name in ("n_in", "n_out", "n_jitter", "n_folds"):
+            v = getattr(self, name)
+            lo = 2 if name in ("n_in", "n_out", "n_folds") else 1
+            if not isinstance(v, numbers.Integral) or v < lo:
+                raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+        methods = [self.methods] if isinstance(self.methods, str) else list(self.methods)
+        bad = [m for m in methods if m not in METHODS]
+        if bad:
+            raise ValueError(f"methods contains unknown coupling(s) {bad}; expected a subset of {METHODS}")
+        if not (isinstance(self.coverage, numbers.Real) and 0.0 < self.coverage < 1.0):
+            raise ValueError(f"coverage must be in (0, 1), got {self.coverage!r}")
+        if self.score not in ("normalised", "raw"):
+            raise ValueError(f"score must be 'normalised' or 'raw', got {self.score!r}")
+        if self.features not in ("position", "displacement"):
+            raise ValueError(f"features must be 'position' or 'displacement', got {self.features!r}")
+        fr = np.asarray(self.fractions, dtype=np.float64)
+        if fr.ndim != 1 or fr.size < 1 or np.any(~np.isfinite(fr)) or np.any(fr <= 0) or np.any(fr > 1) \
+                or np.any(np.diff(fr) <= 0):
+            raise ValueError(f"fractions must be increasing numbers in (0, 1], got {self.fractions!r}")
+        ps = self.phase_std
+        if not (ps == "clock" or callable(ps) or (isinstance(ps, numbers.Real) and ps >= 0 and math.isfinite(ps))):
+            raise ValueError(f"phase_std must be 'clock', a non-negative number or a callable, got {ps!r}")
+        return obs, ["mean"] + [m for m in methods if m != "mean"], fr
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, demos, dt=None):
+        """Learn the coupling and choose method, hyper-parameter and calibration by grouped CV.
+
+        Parameters
+        ----------
+        demos : list of array_like, shape (T_j, D)
+            Demonstrations of both agents (time on axis 0, uniformly sampled, from the start of the
+            movement to its end); lengths may differ.  An
+            :class:`interprim.datasets.Demonstrations` is accepted.
+        dt : float, optional
+            Sampling interval (s); only used to report durations (``mean_duration_``).
+
+        Returns
+        -------
+        self
+        """
+        if hasattr(demos, "demos") and not isinstance(demos, (list, tuple, np.ndarray)):
+            dt = getattr(demos, "dt", None) if dt is None else dt
+            demos = demos.demos
+        if isinstance(demos, np.ndarray) and demos.ndim == 2:
+            raise TypeError(f"demos must be a list of (T, D) arrays, got one array of shape {demos.shape}")
+        try:
+            demos = list(demos)
+        except TypeError:
+            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}") from None
+        if len(demos) < 4:
+            raise ValueError(f"demos has {len(demos)} demonstrations; the coupling needs at least 4 "
+                             "(its cross-validation holds some out)")
+        arrays = [as_2d_finite(d, f"demos[{j}]", min_rows=3) for j, d in enumerate(demos)]
+        D = arrays[0].shape[1]
+        for j, a in enumerate(arrays):
+            if a.shape[1] != D:
+                raise ValueError(f"demos[{j}] has {a.shape[1]} columns, expected {D} like demos[0]")
+        obs, methods, fr = self._check_params(D)
+        ctrl = [i for i in range(D) if i not in set(obs)]
+        self.observed_dofs_, self.controlled_dofs_, self.n_dofs_ = obs, ctrl, D
+        self.methods_ = methods
+        self.fractions_ = fr
+        n = len(arrays)
+        self.n_demos_ = n
+        self.obs_frames_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
+        lengths = np.array([a.shape[0] for a in arrays], dtype=np.float64)
+        self.durations_ = (lengths - 1) * (float(dt) if dt is not None else 1.0)
+        rel = lengths.mean() / lengths
+        self.clock_rel_std_ = float(np.std(rel - 1.0)) if n > 1 else 0.0
+        from .preprocessing import time_normalise
+
+        Y = np.stack([time_normalise(a, int(self.n_out)) for a in arrays])  # (n, n_out, D)
+        self.Y_ = Y
+        self.y_mean_ = Y.mean(axis=0)
+        sd = Y.reshape(-1, D).std(axis=0)
+        self.dof_scale_ = np.where(sd > 1e-12, sd, 1.0)
+        oscale = np.concatenate([a for a in self.obs_frames_]).std(axis=0)
+        self.feature_scale_ = np.where(oscale > 1e-12, oscale, 1.0)
+        self.mean_duration_ = float(self.durations_.mean())
+        self._cross_validate()
+        return self
+
+    # ------------------------------------------------------------------ phase error model
+    def _phase_std(self, s):
+        ps = self.phase_std
+        s = np.asarray(s, dtype=np.float64)
+        if ps == "clock":
+            return np.maximum(s * self.clock_rel_std_, 0.0)
+        if callable(ps):
+            return np.broadcast_to(np.asarray(ps(s), dtype=np.float64), s.shape).copy()
+        return np.full(s.shape, float(ps))
+
+    # ------------------------------------------------------------------ features
+    def _feat(self, pts):
+        """Scaled features from resampled prefix points (..., n_in, Do)."""
+        x = pts / self.feature_scale_
+        if self.features == "displacement":
+            x = x - x[..., :1, :]
+        return x.reshape(*x.shape[:-2], -1)
+
+    def _rows(self, idx, s_hat, sig):
+        """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
+        z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
+        s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
+        X, g = [], []
+        for j in idx:
+            fr = self.obs_frames_[j]
+            X.append(self._feat(_resample(fr, s_true * (fr.shape[0] - 1), int(self.n_in))))
+            g.append(np.full(s_true.size, j))
+        return np.concatenate(X), np.concatenate(g)
+
+    # ------------------------------------------------------------------ the smoothers
+    @staticmethod
+    def _context(X, groups, Ydemo, x):
+        """What every candidate of one training set and one batch of queries shares (computed once).
+
+        ``X`` (R, p) rows, ``groups`` (R,) the demonstration of each row (every demonstration has
+        the same number of rows), ``Ydemo`` (n, q) the targets of the demonstrations, ``x`` (Q, p).
+        """
+        R = X.shape[0]
+        mu = X.mean(axis=0)
+        ug, inv = np.unique(groups, return_inverse=True)
+        P = np.zeros((R, ug.size))
+        P[np.arange(R), inv] = 1.0
+        Yd = Ydemo[ug]
+        ybar = Yd.mean(axis=0)
+        return {"R": R, "Xc": X - mu, "xc": x - mu, "P": P, "ybar": ybar, "Ydc": Yd - ybar}
+
+    @staticmethod
+    def _ridge_svd(ctx):
+        if "svd" not in ctx:
+            U, S, Vt = np.linalg.svd(ctx["Xc"], full_matrices=False)
+            ctx["svd"] = (U, S, ctx["xc"] @ Vt.T)
+        return ctx["svd"]
+
+    def _weights(self, method, param, ctx):
+        """Row weights ``alpha`` (Q, R): the prediction is ``ybar + sum_i alpha_i (y_i - ybar)``.
+
+        Eq. 18 for the covariance model of ``method`` (module docstring):
+        ``mu_y|x - mu_y = S_yx (S_xx + sigma^2 I)^-1 (x - mu_x)`` with ``S_yx = Y_c^T X_c / R``, i.e.
+        ``alpha = X_c (S_xx + sigma^2 I)^-1 (x - mu_x) / R``.
+        """
+        R, xc = ctx["R"], ctx["xc"]
+        Q = xc.shape[0]
+        if method == "mean":
+            return np.zeros((Q, R))
+        if method == "ridge":
+            U, S, xv = self._ridge_svd(ctx)
+            sigma2 = float(param) * float(np.sum(S**2)) / (R * ctx["Xc"].shape[1])  # lambda tr(S_xx) / p
+            # (S_xx + s2 I)^-1 on the row space of X_c: V diag(1 / (S^2/R + s2)) V^T
+            return (xv * (S / (S**2 + R * sigma2))) @ U.T
+        if method == "kernel":
+            if "d2" not in ctx:
+                Xc = ctx["Xc"]
+                d2 = (np.sum(xc**2, axis=1)[:, None] + np.sum(Xc**2, axis=1)[None, :] - 2.0 * xc @ Xc.T)
+                d2 = np.maximum(d2, 0.0)
+                ctx["d2"] = d2
+                ctx["med"] = np.maximum(np.median(d2, axis=1, keepdims=True), 1e-300)
+            d2 = ctx["d2"]
+            logw = -0.5 * d2 / (float(param) ** 2 * ctx["med"])
+            w = np.exp(logw - logw.max(axis=1, keepdims=True))
+            return w / w.sum(axis=1, keepdims=True) - 1.0 / R
+        if method == "ppca":
+            return self._ppca_weights(int(param), ctx)
+        if method == "blend":
+            lam, bw, w = param
+            return w * self._weights("ridge", lam, ctx) + (1.0 - w) * self._weights("kernel", bw, ctx)
+        raise AssertionError(method)
+
+    @staticmethod
+    def _ppca_weights(rank, ctx):
+        """Row weights of the reduced-rank (probabilistic PCA) joint Gaussian conditioning.
+
+        The joint covariance of ``z = [x / a, y / b]`` (each block scaled to unit total variance) is
+        ``W W^T + diag(s_x^2 I, s_y^2 I)`` with ``W`` the first ``rank`` principal directions scaled
+        by ``sqrt(lambda_k - s^2)`` (Tipping & Bishop's ML solution; ``s_x^2`` = the x block's
+        variance the directions leave unexplained, per dimension).  Eq. 18 then gives
+        ``mu_y + W_y (W_x^T W_x + s_x^2 I)^-1 W_x^T (x - mu_x)``, a linear combination of the centred
+        training rows (``W_y = Y_c^T U_r diag(sqrt(lambda - s^2) / S_r) / b``).
+        """
+        R, Xc, xc = ctx["R"], ctx["Xc"], ctx["xc"]
+        p = Xc.shape[1]
+        if "pca" not in ctx:
+            P, Ydc = ctx["P"], ctx["Ydc"]
+            a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
+            Gy = P @ (Ydc @ Ydc.T) @ P.T  # Gram matrix of the centred target rows
+            b2 = max(float(np.trace(Gy)) / R, 1e-300)
+            # SVD of Z = [Xc / a, Yc / b] through its (R x R) Gram matrix
+            e, U = np.linalg.eigh(Xc @ Xc.T / a2 + Gy / b2)
+            e, U = e[::-1], U[:, ::-1]
+            keep = e > 1e-12 * max(float(e[0]), 1e-300)
+            U, S = U[:, keep], np.sqrt(e[keep])
+            Vx_all = (U.T @ (Xc / math.sqrt(a2))) / S[:, None]  # x block of the right singular vectors
+            ctx["pca"] = (math.sqrt(a2), U, S, Vx_all, Ydc.shape[1] + p)
+        a, U, S, Vx_all, dim = ctx["pca"]
+        r = int(min(rank, max(S.size - 1, 1)))
+        lam = S**2 / R
+        Vx = Vx_all[:r]  # (r, p)
+        sig2 = float(lam[r:].sum()) / max(dim - r, 1)
+        scale = np.sqrt(np.maximum(lam[:r] - sig2, 0.0))
+        Wx = Vx.T * scale  # (p, r)
+        sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
+        m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
+        coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
+        return (U[:, :r] @ coef).T
+
+    def _predict_rows(self, method, param, ctx):
+        """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""
+        A = self._weights(method, param, ctx)
+        R = ctx["R"]
+        G = A @ ctx["P"]  # per demonstration: the sum of its rows' weights
+        mean = ctx["ybar"] + G @ ctx["Ydc"]
+        G += 1.0 / ctx["P"].shape[1]  # the weights of the mean itself
+        return mean, np.sum(G**2, axis=1)
+
+    def _candidates(self):
+        c = [("mean", None)]
+        for m in self.methods_:
+            if m == "ridge":
+                c += [("ridge", float(v)) for v in self.ridge_grid]
+            elif m == "ppca":
+                c += [("ppca", int(v)) for v in self.rank_grid if int(v) <= self.n_demos_ - 2]
+            elif m == "kernel":
+                c += [("kernel", float(v)) for v in self.bandwidth_grid]
+        return c
+
+    # ------------------------------------------------------------------ cross-validation
+    def _cv_pass(self, cands, keep):
+        """One pass of the grouped CV: per-demo losses of every candidate; residuals of candidate ``keep``."""
+        n, D = self.n_demos_, self.n_dofs_
+        K = int(min(self.n_folds, n))
+        folds = [np.arange(n)[k::K] for k in range(K)]  # deterministic, demonstrations interleaved
+        fr = self.fractions_
+        nj = int(self.n_jitter)
+        ctrl = self.controlled_dofs_
+        w_ctrl = (1.0 / self.dof_scale_[ctrl] ** 2 if self.score == "normalised"
+                  else np.full(len(ctrl), 1.0 / float(np.mean(self.dof_scale_[ctrl] ** 2))))
+        loss = np.zeros((len(cands), len(fr), n))
+        resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
+        lev = np.zeros((len(fr), n, nj)) if keep is not None else None
+        Yflat = self.Y_.reshape(n, -1)
+        for hold in folds:
+            train = np.setdiff1d(np.arange(n), hold)
+            for a, s in enumerate(fr):
+                sig = float(self._phase_std(s))
+                X, g = self._rows(train, s, sig)
+                # held-out prefixes: true phases spread around the estimate s by the phase error
+                z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
+                s_true = np.clip(s - sig * z, 0.02, 1.0)
+                xq = np.concatenate([self._feat(_resample(self.obs_frames_[j], s_true * (self.obs_frames_[j].shape[0] - 1),
+                                                           int(self.n_in))) for j in hold])
+                truth = np.repeat(Yflat[hold], nj, axis=0)
+                ctx = self._context(X, g, Yflat, xq)
+                for c, (m, prm) in enumerate(cands):
+                    mean, h = self._predict_rows(m, prm, ctx)
+                    e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
+                    loss[c, a, hold] = np.mean(np.sum(e[..., ctrl] ** 2 * w_ctrl, axis=-1), axis=(1, 2))
+                    if keep is not None and c == keep:
+                        resid[a, hold] = e
+                        lev[a, hold] = h.reshape(len(hold), nj)
+        return loss, resid, lev, K  # loss: (candidates, fractions, demos)
+
+    def _cross_validate(self):
+        n = self.n_demos_
+        cands = self._candidates()
+        loss, _, _, K = self._cv_pass(cands, None)
+        if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:
+            # model averaging of the best ridge and the best kernel conditioning (both linear smoothers)
+            sc = loss.mean(axis=(1, 2))
+            br = min((i for i, c in enumerate(cands) if c[0] == "ridge"), key=lambda i: sc[i])
+            bk = min((i for i, c in enumerate(cands) if c[0] == "kernel"), key=lambda i: sc[i])
+            blends = [("blend", (cands[br][1], cands[bk][1], float(w))) for w in self.blend_weights]
+            loss = np.concatenate([loss, self._cv_pass(blends, None)[0]])
+            cands = cands + blends
+        by_phase = loss.mean(axis=2)  # (candidates, fractions)
+        loss = loss.mean(axis=1)  # per candidate and held-out demonstration
+        scores = loss.mean(axis=1)
+        best = int(np.argmin(scores))
+        diff = loss[0] - loss[best]
+        se = float(diff.std(ddof=1) / math.sqrt(n))
+        gain = float(scores[0] - scores[best])
+        if best == 0 or gain <= se:
+            choice = 0
+            reason = ("the prior mean: no coupling beat it on held-out demonstrations by more than one "
+                      f"paired standard error (best {cands[best][0]} {cands[best][1]}: "
+                      f"{scores[best] / max(scores[0], 1e-300):.3f}x the mean's error, gain {gain:.3g} <= se {se:.3g})")
+        else:
+            choice = best
+            reason = (f"{cands[best][0]} ({cands[best][1]}): {scores[best] / scores[0]:.3f}x the prior mean's "
+                      f"held-out error (gain {gain:.3g} > paired se {se:.3g})")
+        self.method_, self.param_ = cands[choice]
+        self.fallback_to_mean_ = choice == 0
+        self.selection_ = {
+            "method": self.method_, "param": self.param_, "reason": reason,
+            "scores": {f"{m}:{p}": float(v) for (m, p), v in zip(cands, scores)},
+            "scores_by_phase": {f"{m}:{p}": [float(x) for x in v] for (m, p), v in zip(cands, by_phase)},
+            "error_mean": float(scores[0]), "error_best": float(scores[best]), "paired_se": se,
+            "n_folds": K,
+        }
+        _, resid, lev, _ = self._cv_pass([cands[choice]], 0)
+        self._fit_variance(resid, lev)
+
+    def _fit_variance(self, e, h):
+        """Residual variance per (phase, t, dof) and the calibration factors (jackknife over demos)."""
+        # e: (F, n, nj, n_out, D); h: (F, n, nj)
+        n = e.shape[1]
+        e2 = e**2 / (1.0 + h)[..., None, None]
+        per_demo = _smooth_time(e2.mean(axis=2), int(self.smooth_window))  # (F, n, n_out, D)
+        tot = per_demo.sum(axis=1)  # (F, n_out, D)
+        floor = 1e-12 * self.dof_scale_**2
+        v = np.maximum(tot / n, floor)
+        v = np.minimum.accumulate(v, axis=0)  # the std never grows with the phase
+        self.residual_var_ = v
+        # jackknife: each demo's residual standardised by the variance of the other demos
+        v_jk = np.maximum((tot[:, None] - per_demo) / max(n - 1, 1), floor)  # (F, n, n_out, D)
+        v_jk = np.minimum.accumulate(v_jk, axis=0)
+        zabs = np.abs(e) / np.sqrt(v_jk[:, :, None] * (1.0 + h)[..., None, None])
+        zc = _normal_quantile(0.5 + self.coverage / 2.0)
+        self.scale_ = {}
+        for name, cols in (("observed", self.observed_dofs_), ("controlled", self.controlled_dofs_)):
+            zz = zabs[..., cols]
+            if name == "observed":
+                # only the part still to come matters for the observed agent: t > phase
+                t = np.linspace(0.0, 1.0, self.n_out)
+                mask = t[None, :] > self.fractions_[:, None]  # (F, n_out)
+                zz = zz[np.broadcast_to(mask[:, None, None, :, None], zz.shape)]
+            # the held-out demonstrations are exchangeable units: split-conformal level (1 + 1/n) coverage
+            level = min(1.0, self.coverage * (1.0 + 1.0 / n))
+            q = float(np.quantile(zz.ravel(), level)) if zz.size else zc
+            self.scale_[name] = max(q / zc, 1e-6)
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, partial, phase, phase_std=None) -> CouplingPrediction:
+        """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
+
+        Parameters
+        ----------
+        partial : array_like, shape (M, len(observed_dofs))
+            The observed agent's frames from the start of the movement (uniformly sampled).
+        phase : float
+            Estimated fraction of the movement seen, in (0, 1] (the prefix covers normalised time
+            ``[0, phase]``).
+        phase_std : float, optional
+            Standard deviation of ``phase``; default the model's ``phase_std`` at ``phase``.
+            ``0`` when the phase is known.
+
+        Returns
+        -------
+        CouplingPrediction
+            Both agents' mean and std on ``n_out`` normalised times.
+        """
+        if not hasattr(self, "method_"):
+            raise NotFittedError("this CouplingModel is not fitted yet: call fit(demos) before predict")
+        Do = len(self.observed_dofs_)
+        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=2)
+        if isinstance(phase, (bool, np.bool_)) or not isinstance(phase, numbers.Real) or not math.isfinite(phase) \
+                or not 0.0 < float(phase) <= 1.0:
+            raise ValueError(f"phase must be a number in (0, 1] (the fraction of the movement seen), got {phase!r}")
+        s = float(phase)
+        if phase_std is None:
+            sig = float(self._phase_std(s))
+        else:
+            if isinstance(phase_std, bool) or not isinstance(phase_std, numbers.Real) or not math.isfinite(phase_std) \
+                    or phase_std < 0:
+                raise ValueError(f"phase_std must be a non-negative number, got {phase_std!r}")
+            sig = float(phase_std)
+        n, D = self.n_demos_, self.n_dofs_
+        x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
+        X, g = self._rows(np.arange(n), s, sig)
+        mean, h = self._predict_rows(self.method_, self.param_, self._context(X, g, self.Y_.reshape(n, -1), x))
+        mean = mean[0].reshape(self.n_out, D)
+        h = float(h[0])
+        # residual variance at this phase (linear interpolation over the CV phases, constant outside)
+        fr = self.fractions_
+        if s <= fr[0] or fr.size == 1:
+            var = self.residual_var_[0]
+        elif s >= fr[-1]:
+            var = self.residual_var_[-1]
+        else:
+            k = int(np.searchsorted(fr, s)) - 1
+            w = (s - fr[k]) / (fr[k + 1] - fr[k])
+            var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
+        c = np.ones(D)
+        c[self.observed_dofs_] = self.scale_["observed"]
+        c[self.controlled_dofs_] = self.scale_["controlled"]
+        std = c[None, :] * np.sqrt(var * (1.0 + h))
+        return CouplingPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
+                                  self.controlled_dofs_, self.method_, h)

@@ -76,9 +76,11 @@ def test_phase_is_clipped_and_monotone_in_elapsed_time_for_the_clock():
 
 @pytest.mark.parametrize("model", ["kernel", "ridge"])
 @pytest.mark.parametrize("target", ["phase", "log_duration"])
-def test_tracker_equals_batch_estimate(model, target):
+@pytest.mark.parametrize("features", [None, FEATURE_GROUPS])
+def test_tracker_equals_batch_estimate(model, target, features):
     demos = _ramps(np.linspace(1.5, 3.0, 10), n_dofs=3)
-    lp = LearnedPhase(model=model, target=target, fallback_se=0.0).fit(demos, dt=DT)
+    kw = {} if features is None else {"features": features}
+    lp = LearnedPhase(model=model, target=target, fallback_se=0.0, **kw).fit(demos, dt=DT)
     assert lp.method_ == model
     test = _ramps([2.4], n_dofs=3, seed=3)[0] + 0.01 * np.random.default_rng(0).standard_normal((49, 3))
     tr = lp.tracker()
@@ -99,7 +101,7 @@ def test_incremental_features_equal_batch_features():
     for k in range(1, 30):
         Fk = _prefix_features(Y[: k + 1], DT, 3, FEATURE_GROUPS)
         np.testing.assert_allclose(Fk[-1], F[k], rtol=0, atol=1e-12)
-    assert F.shape == (30, 3 * 4 + 2)
+    assert F.shape == (30, 3 * 4 + 2 + 3 * 4)  # position, displacement, velocity; path, peak; history
 
 
 def test_times_equal_dt_for_uniform_sampling_and_irregular_times_work():

@@ -487,6 +487,9 @@ class LearnedPhase:
                 p = Z.shape[2]
                 self._Z = np.ascontiguousarray(Z / math.sqrt(max(p, 1)))
                 self._inv2h2 = 1.0 / (2.0 * self.bandwidth_ ** 2)
+                self._nrm = np.einsum("knp,knp->kn", self._Z, self._Z)
+                self._isd = 1.0 / (sd * math.sqrt(max(p, 1)))  # sd = inf (no variation) -> 0
+                self._mis = mu * self._isd
             else:
                 Zm = Z.mean(axis=1, keepdims=True)
                 Zc = Z - Zm
@@ -497,6 +500,8 @@ class LearnedPhase:
                 beta = np.linalg.solve(A, b[..., None])[..., 0]
                 self._beta = beta
                 self._c = ym - np.einsum("kp,kp->k", beta, Zm[:, 0, :])
+                self._beta_raw = beta / sd
+                self._c_raw = self._c - np.einsum("kp,kp->k", self._beta_raw, mu)
         return self
 
     @staticmethod
@@ -534,21 +539,37 @@ class LearnedPhase:
 
     def _raw_features(self, Y):
         """Features (p,) of a scaled, uniformly sampled prefix (T, D) for the selected groups."""
-        return _prefix_features(Y, self.dt_, self._w, self.features_, self.history)[-1]
+        if "path" in self.features_ or "peak_speed" in self.features_:  # these need every frame
+            return _prefix_features(Y, self.dt_, self._w, self.features_, self.history)[-1]
+        k = Y.shape[0] - 1
+        back = max(k - self._w, 0)
+        parts = []
+        for g in self.features_:
+            if g == "position":
+                parts.append(Y[k])
+            elif g == "displacement":
+                parts.append(Y[k] - Y[0])
+            elif g == "velocity":
+                parts.append((Y[k] - Y[back]) / ((k - back) * self.dt_))
+            else:  # history
+                x = np.arange(1, self.history + 1) / (self.history + 1) * k
+                lo = x.astype(np.int64)
+                f = (x - lo)[:, None]
+                parts.append(((1.0 - f) * Y[lo] + f * Y[np.minimum(lo + 1, k)] - Y[0]).ravel())
+        return np.concatenate(parts)
 
     def _predict_at(self, k: int, f) -> float:
         """Normalised time at grid index ``k`` (0..n_grid_-1) from raw features ``f``."""
         if self.method_ == "clock":
             return min(k * self.dt_ / self.mean_duration_, 1.0)
-        z = (f - self._mu[k]) / self._sd[k]
         if self.method_ == "kernel":
-            Zk = self._Z[k]
-            diff = Zk - z / math.sqrt(max(z.shape[0], 1))
-            d2 = np.einsum("ij,ij->i", diff, diff)
-            w = np.exp(-(d2 - d2.min()) * self._inv2h2)
+            # |Z_i - z|^2 - min_j |Z_j - z|^2 = e_i - min(e) with e_i = |Z_i|^2 - 2 Z_i . z (|z|^2 cancels)
+            u = f * self._isd[k] - self._mis[k]
+            e = self._nrm[k] - 2.0 * (self._Z[k] @ u)
+            w = np.exp((e.min() - e) * self._inv2h2)
             v = float(w @ self._y[k]) / float(w.sum())
         else:
-            v = float(self._c[k] + self._beta[k] @ z)
+            v = float(self._c_raw[k] + self._beta_raw[k] @ f)  # standardisation folded into the coefficients
         if self.target_ == "log_duration":
             return min(k * self.dt_ / math.exp(v), 1.0)
         return min(max(v, 0.0), 1.0)
@@ -640,6 +661,10 @@ class PhaseTracker:
         self._buf = np.zeros((model._w + 1, model.n_dofs_))
         self._hist = np.zeros((64, model.n_dofs_)) if "history" in model.features_ else None
         self._q = np.arange(1, model.history + 1) / (model.history + 1)
+        self._shape = (model.n_dofs_,)
+        dims = _group_dims(model.features_, model.n_dofs_, model.history)
+        self._slices = dict(zip(model.features_, (slice(a - b, a) for a, b in zip(np.cumsum(dims), dims))))
+        self._f = np.zeros(int(sum(dims)))
         self.reset()
 
     def reset(self):
@@ -650,7 +675,13 @@ class PhaseTracker:
     def update(self, frame) -> PhaseEstimate:
         """Add the next frame (shape ``(D,)``); returns the estimate after it."""
         m = self.model
-        y = as_frame(frame, "frame", m.n_dofs_) * self._inv_scale
+        if type(frame) is np.ndarray and frame.dtype == np.float64 and frame.shape == self._shape:
+            y = frame * self._inv_scale
+            if not math.isfinite(float(y.sum())):
+                as_frame(frame, "frame", m.n_dofs_)  # raises the usual message
+                raise ValueError("frame contains NaN or inf")
+        else:
+            y = as_frame(frame, "frame", m.n_dofs_) * self._inv_scale
         w = m._w
         k = self.n_frames
         buf = self._buf
@@ -674,23 +705,22 @@ class PhaseTracker:
         sp = math.sqrt(float(vel @ vel))
         if sp > self._peak:
             self._peak = sp
-        parts = []
-        for g in m.features_:
+        out = self._f
+        for g, sl in self._slices.items():
             if g == "position":
-                parts.append(y)
+                out[sl] = y
             elif g == "displacement":
-                parts.append(y - self._first)
+                np.subtract(y, self._first, out=out[sl])
             elif g == "velocity":
-                parts.append(vel)
+                out[sl] = vel
             elif g == "path":
-                parts.append(np.array([self._path]))
+                out[sl] = self._path
             elif g == "peak_speed":
-                parts.append(np.array([self._peak]))
+                out[sl] = self._peak
             elif g == "history":
                 x = self._q * k
-                lo = np.floor(x).astype(int)
-                hi = np.minimum(lo + 1, k)
+                lo = x.astype(np.int64)  # floor (x >= 0)
                 f = (x - lo)[:, None]
                 h = self._hist
-                parts.append(((1.0 - f) * h[lo] + f * h[hi] - self._first).ravel())
-        return m._finish(k * m.dt_, np.concatenate(parts))
+                out[sl] = ((1.0 - f) * h[lo] + f * h[np.minimum(lo + 1, k)] - self._first).ravel()
+        return m._finish(k * m.dt_, out)

@@ -15,7 +15,8 @@ last seen frame is compared with the true one, ``(M - 1) / (T - 1)``.  Methods:
   agent 2's right hand controlled);
 * ``dtw``: the same fitted model with ``phase_method="dtw"`` (the paper's Eq. 5-9);
 * ``learned``: :class:`interprim.phase_learned.LearnedPhase` with its defaults, fitted on the
-  training demonstrations' observed columns only.
+  training demonstrations' observed columns only;
+* ``learned+default``: the mean of the two (a measurement of whether they carry different information).
 
 ``--realtime`` adds the real-time protocol (issue 11, protocol 1): after each observed frame ``k``
 with ``k / (T - 1)`` in [0.2, 0.9], agent 2's hand at the next frames up to 0.25 s ahead, placed in
@@ -39,7 +40,7 @@ import numpy as np
 
 ACTIONS = ("clapfist2", "fistbump2", "handshake2", "highfive1", "rocket1", "wave1")
 FRACTIONS = tuple(round(0.1 * k, 1) for k in range(3, 10))
-PHASE_METHODS = ("clock", "default", "dtw", "learned")
+PHASE_METHODS = ("clock", "default", "dtw", "learned", "learned+default")
 RT_METHODS = ("clock-mean", "oracle-mean", "learned-mean", "ip-default", "ip-learned")
 
 
@@ -91,6 +92,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
             ip.phase_method = "dtw"
             out["phase"]["dtw"].append(float(ip.predict(prefix).phase))
             ip.phase_method = "likelihood"
+            out["phase"]["learned+default"].append(0.5 * (est.phase + out["phase"]["default"][-1]))
     if realtime:
         H = max(1, int(round(horizon / dt)))
         mean_c = _mean_ctrl(train, ctrl)
@@ -144,6 +146,8 @@ def run(actions=ACTIONS, observed="right_arm", ip_methods=True, realtime=False, 
             if errs.size:
                 res["phase_error"][m] = float(errs.mean())
                 res["by_fraction"][m] = dict(zip(map(str, FRACTIONS), errs.mean(axis=0).tolist()))
+        res["folds"] = [{"phase": f["phase"], "phase_true": f["phase_true"], "learned_std": f["learned_std"]}
+                        for f in folds]
         res["learned_methods"] = [f["learned_method"] for f in folds]
         res["learned_features"] = [f["learned_features"] for f in folds]
         res["learned_std_mean"] = float(np.mean([f["learned_std"] for f in folds]))
@@ -201,8 +205,8 @@ def main(argv=None):
               ip_methods=not args.no_ip, realtime=args.realtime, data_path=args.data_path,
               max_demos=args.max_demos, n_jobs=args.jobs)
     print("\nPhase error (mean |estimated - true| normalised time, 30-90 % observed, leave-one-out)\n")
-    print(_table(res, "phase_error", [m for m in PHASE_METHODS if not (args.no_ip and m in ("default", "dtw"))],
-                 "clock"))
+    print(_table(res, "phase_error", [m for m in PHASE_METHODS
+                                      if not (args.no_ip and m in ("default", "dtw", "learned+default"))], "clock"))
     if args.realtime:
         print("\nReal time: agent 2 hand RMSE (m) over the next 0.25 s, 20-90 % observed\n")
         print(_table(res, "realtime_rmse", list(RT_METHODS), "clock-mean"))

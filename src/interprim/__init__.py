@@ -21,6 +21,9 @@ _LAZY = {
     "Prediction": "interprim.primitive",
     "Stream": "interprim.primitive",
     "Recogniser": "interprim.recognition",
+    "LearnedInteraction": "interprim.learned",
+    "LearnedPhase": "interprim.phase_learned",
+    "CouplingModel": "interprim.coupling",
 }
 
 __all__ = [
@@ -28,6 +31,9 @@ __all__ = [
     "Prediction",
     "Stream",
     "Recogniser",
+    "LearnedInteraction",
+    "LearnedPhase",
+    "CouplingModel",
     "InterprimError",
     "NotFittedError",
     "ModelFileError",

@@ -5,6 +5,7 @@ import pytest
 
 import interprim as ip
 from interprim.phase import open_end_dtw
+from interprim import _fast
 from interprim.phase_likelihood import estimate_phase, phase_log_likelihood, track_phase
 
 
@@ -123,7 +124,7 @@ def _both_paths(model, z, s, s2):
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
-    assert PL.warmup()
+    assert _fast.phase_kernel(block=True) is not None
     comp = fs.loglik(z, s, s2)
     return num, comp
 
@@ -259,7 +260,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
     """The stream's phases equal the lattice tracker evaluated candidate by candidate, and (no clipping here)
     the previous ``track_phase`` chain, whose chosen speeds lie on the same lattice."""
     model = _small_model(observation, None, "shrinkage")
-    assert PL.warmup()
+    assert _fast.phase_kernel(block=True) is not None
     frames = _demos(1, seed=11)[0][:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -276,7 +277,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
 
 def test_stream_phase_with_clipping_equals_reference():
     model = _small_model("position", None, "shrinkage")
-    assert PL.warmup()
+    assert _fast.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -303,7 +304,7 @@ def _slot_errors(tr, z):
     M = z.shape[0]
     fs, b = tr._fs, tr._buf
     s2 = PL.phase_noise(tr.model)
-    tmp = PL._track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+    tmp = PK.track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
     q, n_o = fs.q, fs.n_o
     err = np.zeros(4)
     live = np.nonzero((b[0] != PL._SLOT_FREE) & (b[1] == M))[0]
@@ -336,7 +337,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
     leaving the candidate window), equal a recomputation from all frames."""
     model = ip.InteractionPrimitive(observed_dofs=[0, 1, 2, 3], n_basis=8, sigma2=1e-2, phase_method="likelihood",
                                     **kw).fit(_demos(12), dt=0.01)
-    assert PL.warmup()
+    assert _fast.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0], 10, 20)[:, model.observed_dofs_]
     st = model.stream()
     worst, n_checked = np.zeros(4), 0
@@ -355,7 +356,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
 
 def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     model = _small_model("position", 2, "shrinkage")
-    assert PL.warmup()
+    assert _fast.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])

@@ -750,7 +750,7 @@ def test_garbage_connections_are_logged(server, caplog):
 def _reply_text(op, frames):
     import re
 
-    from interprim.server.app import compute_prediction
+    from interprim.server.compute import compute_prediction
 
     return [re.sub(r',"compute_ms":[0-9.]+', "", compute_prediction(op, f, k + 1, 0.5 * k if k % 2 else None))
             for k, f in enumerate(frames)]
@@ -760,12 +760,12 @@ def _reply_text(op, frames):
 def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, dofs):
     """compute_prediction's cached rollout (mean) and its text head give the message that
     Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their precision."""
-    from interprim.server import app
+    from interprim.server import compute
 
     e = models["pair"]
     cols = e.controlled_dofs if dofs == "controlled" else list(range(e.n_dofs))
     frames = test_demo[:25, :2]
-    op = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+    op = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
     fast = [json.loads(t) for t in _reply_text(op, frames)]
     assert op.heads[0][3].ok  # the cached rollout was checked against Prediction.trajectory and is used
     ref_stream = e.model.stream()
@@ -777,36 +777,36 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
             assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
         # orjson: float32 written as its shortest round-trip text (rounding to float32, then the shortest
         # text parsed as float64: <= 2**-23 ~ 1.2e-7 relative); printf %.7g: <= 5e-7 relative
-        rtol = 1.2e-7 if (app._orjson is not None and not app._FORCE_PRINTF) else 5.0001e-7
+        rtol = 1.2e-7 if (compute._orjson is not None and not compute._FORCE_PRINTF) else 5.0001e-7
         np.testing.assert_allclose(msg["mean"], p.trajectory(17)[:, cols], rtol=rtol, atol=1e-30)
         np.testing.assert_allclose(msg["goal"], p.goal[cols], rtol=rtol, atol=1e-30)
         if std:
             np.testing.assert_allclose(msg["std"], p.std(17)[:, cols], rtol=rtol, atol=1e-30)
-    old = app._FORCE_PRINTF
-    app._FORCE_PRINTF = True  # the encoder used without orjson
+    old = compute._FORCE_PRINTF
+    compute._FORCE_PRINTF = True  # the encoder used without orjson
     try:
-        op2 = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+        op2 = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
         slow = [json.loads(t) for t in _reply_text(op2, frames)]
     finally:
-        app._FORCE_PRINTF = old
+        compute._FORCE_PRINTF = old
     for a, b in zip(fast, slow):
         assert a.keys() == b.keys()
         np.testing.assert_allclose(a["mean"], b["mean"], rtol=1e-6, atol=1e-7)  # %.7g: 5e-7 relative
 
 
 def test_nonfinite_predictions_are_never_encoded():
-    from interprim.server import app
+    from interprim.server import compute
 
     for force in (False, True):
-        old = app._FORCE_PRINTF
-        app._FORCE_PRINTF = force
+        old = compute._FORCE_PRINTF
+        compute._FORCE_PRINTF = force
         try:
             for bad in (np.nan, np.inf, -np.inf):
                 with pytest.raises(FloatingPointError):
-                    app._json_array(np.array([[0.0, 1.0], [bad, 2.0]]))
-            assert json.loads(app._json_array(np.array([1e-5, -2.5, 0.0]))) == pytest.approx([1e-5, -2.5, 0.0])
+                    compute._json_array(np.array([[0.0, 1.0], [bad, 2.0]]))
+            assert json.loads(compute._json_array(np.array([1e-5, -2.5, 0.0]))) == pytest.approx([1e-5, -2.5, 0.0])
         finally:
-            app._FORCE_PRINTF = old
+            compute._FORCE_PRINTF = old
 
 
 @pytest.mark.parametrize("kind", ["asyncio", "auto"])

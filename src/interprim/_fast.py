@@ -126,11 +126,54 @@ def warmup() -> bool:
             _THREAD = t = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
             t.start()
     t.join()
-    if _READY:  # the likelihood phase's kernel (its own module, loaded on first use otherwise)
-        from . import phase_likelihood
-
-        phase_likelihood.warmup()
+    if _READY:  # the likelihood phase's kernels (loaded on their own on first use otherwise)
+        phase_kernel(block=True)
     return bool(_READY)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the likelihood phase's kernels (interprim._phase_kernels), loaded on their own thread
+
+_PHASE_KERNELS: list = []  # [phase_loglik_batch, track_step] once loaded
+_KLOCK = threading.Lock()
+_KTHREAD: list = []
+_KERROR: list = []
+
+
+def _load_phase_kernels():
+    try:
+        from ._phase_kernels import phase_loglik_batch, track_step, warm_batch, warm_track
+
+        warm_batch(phase_loglik_batch)
+        warm_track(track_step)
+        _PHASE_KERNELS.append(phase_loglik_batch)
+        _PHASE_KERNELS.append(track_step)
+    except BaseException as exc:  # numba missing or broken: stay on numpy
+        _KERROR.append(exc)
+
+
+def phase_kernel(block: bool = False):
+    """The compiled batch kernel of the likelihood phase, or ``None`` while it loads (same policy as :func:`ready`).
+
+    ``INTERPRIM_JIT=0``: never; ``=1``: load now; default: load in a background thread on first use
+    (numpy serves meanwhile) unless ``block``.
+    """
+    if _PHASE_KERNELS:
+        return _PHASE_KERNELS[0]
+    if _KERROR:
+        return None
+    mode = _mode()
+    if mode in ("0", "false", "no", "off"):
+        return None
+    with _KLOCK:
+        if not _KTHREAD:
+            th = threading.Thread(target=_load_phase_kernels, name="interprim-phase-jit", daemon=True)
+            _KTHREAD.append(th)
+            th.start()
+        th = _KTHREAD[0]
+    if block or mode in ("1", "true", "yes", "on"):
+        th.join()
+    return _PHASE_KERNELS[0] if _PHASE_KERNELS else None
 
 
 @lru_cache(maxsize=64)

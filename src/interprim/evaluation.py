@@ -187,7 +187,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 
     Returns one record (dict) per fraction (see the module docstring for the metrics).
     """
-    from .phase_likelihood import single_thread
+    from ._blas import single_thread
 
     t = _task(dataset, task, cfg)
     demos = t.demos
@@ -259,7 +259,7 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
 
     The task's own model is fitted without ``j``; the other tasks' models on all their demonstrations.
     """
-    from .phase_likelihood import single_thread
+    from ._blas import single_thread
     from .recognition import Recogniser
 
     names = task_names(dataset)

@@ -88,10 +88,8 @@ def _expect(cond: bool, path, msg: str):
         raise ModelFileError(f"{path}: {msg}")
 
 
-def load_model(path):
-    """Read a model written by :func:`save_model` (no pickle, every shape checked)."""
-    from .primitive import InteractionPrimitive
-
+def load_model(path, model_class):
+    """Read a model written by :func:`save_model` (no pickle, every shape checked) as a ``model_class``."""
     path = Path(path)
     if not path.exists():
         raise ModelFileError(f"{path}: no such model file")
@@ -111,7 +109,7 @@ def load_model(path):
     _expect(version == FORMAT_VERSION, path,
             f"format_version {version!r} is not supported by this interprim (reads version {FORMAT_VERSION})")
     try:
-        model = InteractionPrimitive(**meta["params"])
+        model = model_class(**meta["params"])
         model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
         model.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
         model.n_dofs_ = int(meta["n_dofs"])

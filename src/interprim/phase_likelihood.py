@@ -42,13 +42,15 @@ evaluation it is tested against.
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 
 import numpy as np
 
+from ._blas import single_thread
+from ._fast import _PHASE_KERNELS as _KERNEL
+from ._fast import phase_kernel as _kernel
 from .dmp import forcing_values
-from .gaussian import condition
+from .gaussian import LowRankPrior, condition, lowrank_case
 from .preprocessing import derivatives
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
@@ -56,18 +58,6 @@ __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase
 
 _S_MIN = 0.02
 _LOG2PI = float(np.log(2.0 * np.pi))
-
-
-def single_thread():
-    """Context limiting BLAS to one thread (many tiny factorisations: threads only add overhead,
-    up to 100x on a loaded 2-core machine); a no-op without ``threadpoolctl``."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        from contextlib import nullcontext
-
-        return nullcontext()
-    return threadpool_limits(1)
 
 
 @dataclass(frozen=True)
@@ -145,7 +135,7 @@ def _marginal(model):
 
 
 def _factored(model):
-    """The observed block of the prior as diagonal + low rank (see :class:`interprim.selection._LowRankPrior`).
+    """The observed block of the prior as diagonal + low rank (see :class:`interprim.gaussian.LowRankPrior`).
 
     Exact when ``prior_`` was fitted by :func:`~interprim.gaussian.fit_prior` from ``thetas_`` (checked
     once); ``None`` otherwise (then the dense path is used).
@@ -154,13 +144,11 @@ def _factored(model):
     cache = getattr(model, "_phase_factored", None)
     if cache is not None and cache[0] is prior:
         return cache[1]
-    from .selection import _LowRankPrior
-
     pr = None
     th = getattr(model, "thetas_", None)
     if th is not None:
         n = model.n_observed_latent_ * model._q
-        cand = _LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
+        cand = LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
         cand.mean, cand.d, cand.W = cand.mean[:n], cand.d[:n], cand.W[:, :n]
         dense = prior.cov[:n, :n]
         approx = cand.W.T @ cand.W
@@ -198,15 +186,13 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
 
 
 def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None = None) -> float:
-    """The per-candidate evaluation (explicit design matrix, :func:`interprim.selection._lowrank_case` or
+    """The per-candidate evaluation (explicit design matrix, :func:`interprim.gaussian.lowrank_case` or
     :func:`interprim.gaussian.condition`): the reference the batched paths are tested against."""
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)
     if pr is not None:  # O(D_o k^3 + D_o k S^2) instead of O((D_o k)^3)
-        from .selection import _lowrank_case
-
-        return float(_lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
+        return float(lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
                                    need_ll=True)[1][0])
     mean_o, cov_o, idx = _marginal(model)
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
@@ -216,80 +202,6 @@ def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None
 
 # ---------------------------------------------------------------------------------------------------------------
 # batched evaluation (low-rank prior)
-
-_KERNEL: list = []  # [phase_loglik_batch] once loaded
-_KLOCK = threading.Lock()
-_KTHREAD: list = []
-_KERROR: list = []
-
-
-def _load_kernel():
-    try:
-        from ._phase_kernels import phase_loglik_batch, track_step
-
-        _warm_call(phase_loglik_batch)
-        _warm_track(track_step)
-        _KERNEL.append(phase_loglik_batch)
-        _KERNEL.append(track_step)
-    except BaseException as exc:  # numba missing or broken: stay on numpy
-        _KERROR.append(exc)
-
-
-def _warm_call(fn):
-    """Compile (or load from numba's cache) with tiny inputs of the real types."""
-    rng = np.random.default_rng(0)
-    K, q, n_o, n, M = 8, 3, 2, 2, 4
-    sq = np.ones((n_o, q))
-    Uh = rng.normal(size=(n_o, q, n))
-    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
-    fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
-       np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
-
-
-def _warm_track(fn):
-    rng = np.random.default_rng(0)
-    K, q, n_o, n, M = 8, 3, 2, 2, 6
-    Uh = rng.normal(size=(n_o, q, n))
-    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
-    buf = _track_buffers(q, n_o, n, 4)
-    z = rng.normal(size=(M, n_o))
-    for v0 in (0.05, 0.3):
-        buf[0][:] = _SLOT_FREE
-        for m in (4, 5, 6):
-            fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), z, m, v0, 0, 3, 0.05, _S_MIN,
-               np.ones((n_o, q)), Uh, K0, 1.0, True, 0.0, 0.0, 1.0, 8, *buf)
-
-
-def _kernel(block: bool = False):
-    """The compiled batch kernel, or ``None`` while it loads (see :mod:`interprim._fast` for the policy).
-
-    ``INTERPRIM_JIT=0``: never; ``=1``: load now; default: load in a background thread on first use
-    (numpy serves meanwhile) unless ``block``.
-    """
-    if _KERNEL:
-        return _KERNEL[0]
-    if _KERROR:
-        return None
-    from . import _fast
-
-    mode = _fast._mode()
-    if mode in ("0", "false", "no", "off"):
-        return None
-    with _KLOCK:
-        if not _KTHREAD:
-            th = threading.Thread(target=_load_kernel, name="interprim-phase-jit", daemon=True)
-            _KTHREAD.append(th)
-            th.start()
-        th = _KTHREAD[0]
-    if block or mode in ("1", "true", "yes", "on"):
-        th.join()
-    return _KERNEL[0] if _KERNEL else None
-
-
-def warmup() -> bool:
-    """Load (or compile) the phase kernel now and wait for it; returns whether it is in use."""
-    return _kernel(block=True) is not None
-
 
 class _FastState:
     """Everything of the batched evaluation that depends only on the model (cached per prior object)."""
@@ -607,25 +519,8 @@ def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int =
 # ---------------------------------------------------------------------------------------------------------------
 # online tracking on a lattice of speeds (used by Stream)
 
-_SLOT_FREE = -(1 << 62)
-_N_SLOTS = 12
+_SLOT_FREE = -(1 << 62)  # = interprim._phase_kernels.SLOT_FREE (a free slot; no numba import here)
 _MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
-
-
-def _track_buffers(q: int, n_o: int, n: int, n_slots: int = _N_SLOTS):
-    """Slots and workspaces of :func:`interprim._phase_kernels.track_step` (sizes independent of the frames)."""
-    from ._phase_kernels import BLOCK
-
-    q4 = (q + 3) // 4 * 4
-    P = q4 + (n_o + 1) // 2 * 2
-    r4 = (n + 1 + 3) // 4 * 4
-    n4 = (n + 3) // 4 * 4
-    return (np.full(n_slots, _SLOT_FREE, dtype=np.int64), np.zeros(n_slots, dtype=np.int64),
-            np.zeros(n_slots, dtype=np.int64), np.zeros((n_slots, q4, P)), np.zeros(n_slots),
-            np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
-            np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
-            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((6, max(q, n, n_o))), np.zeros(1), np.zeros(1),
-            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots))
 
 
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
@@ -713,7 +608,9 @@ class _Tracker:
             return float(cand[i])
         if fs is not self._fs or self._buf is None:
             self._fs = fs
-            self._buf = _track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+            from ._phase_kernels import track_buffers
+
+            self._buf = track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
             self.Rg = None
         if self.Rg is None:
             self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))

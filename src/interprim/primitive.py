@@ -656,7 +656,7 @@ class InteractionPrimitive:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
         from .io import load_model
 
-        return load_model(path)
+        return load_model(path, cls)
 
     def __repr__(self):
         import inspect

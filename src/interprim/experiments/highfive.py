@@ -606,9 +606,9 @@ def run_highfive(out_dir="interprim-demo", config: HighFiveConfig | None = None,
 
     matplotlib.use("Agg", force=True)
 
-    from ..sim.highfive import single_blas_thread
+    from .._blas import single_thread
 
-    with single_blas_thread():  # small matrices: one BLAS thread is fastest, see single_blas_thread
+    with single_thread():  # small matrices: one BLAS thread is fastest
         return _run_highfive(out_dir, config, progress, log)
 
 

@@ -129,46 +129,29 @@ def _column_slice(cols, n_dofs):
 
 
 class _MeanRollout:
-    """``pred.trajectory(n)[:, cols]`` for the predictions of one model, cheaper.
-
-    ``Prediction.trajectory(n)`` rebuilds the rollout's design matrices for the grid
-    ``linspace(0, 1, n)`` at every call (about 0.1 ms, half the cost of a frame); they depend only on
-    the model and ``n``, so they are built once here, and only the returned columns are mapped back
-    from the latent DoFs.  Uses the core's (private) Prediction internals; any model or prediction
-    without them (stand-ins, other kinds) falls back to the public ``trajectory``.
+    """``pred.trajectory(n)[:, cols]`` for the predictions of one model, cheaper: the core's
+    :class:`~interprim.prediction.MeanRollout` (the grid's design built once), checked once against the
+    public ``trajectory``; any prediction without it (stand-ins, other kinds) uses ``trajectory``.
     """
 
-    __slots__ = ("n", "sel", "free", "H", "MT", "off", "ok")
+    __slots__ = ("n", "sel", "fn", "ok")
 
     def __init__(self, n: int, sel):
-        self.n, self.sel, self.ok = n, sel, None
+        self.n, self.sel, self.fn, self.ok = n, sel, None, None
 
     def _setup(self, pred) -> bool:
         try:
-            m = pred._m
-            free, H = m.rollout_.design(0.0, np.linspace(0.0, 1.0, self.n))
-            M, off = m._latent_map()
-            y0, v0 = pred._start_states()
-            th = pred._theta()
-            if th.ndim != 2 or H.shape[1] != th.shape[1] or free.shape[1] != 2 or M.shape[1] != th.shape[0]:
-                return False
-            self.free, self.H = np.ascontiguousarray(free), np.ascontiguousarray(H)
-            self.MT, self.off = np.ascontiguousarray(M[self.sel].T), np.ascontiguousarray(off[self.sel])
-            return bool(np.allclose(self(pred), np.asarray(pred.trajectory(self.n))[:, self.sel], rtol=1e-9, atol=1e-9))
+            self.fn = pred.mean_rollout(self.n, self.sel)
+            return bool(np.allclose(self.fn(pred), np.asarray(pred.trajectory(self.n))[:, self.sel], rtol=1e-9,
+                                    atol=1e-9))
         except Exception:
             return False
-
-    def __call__(self, pred) -> np.ndarray:
-        y0, v0 = pred._start_states()
-        th = pred._theta()
-        lat = self.free @ np.vstack((y0, v0)) + self.H @ th.T
-        return lat @ self.MT + self.off
 
     def mean(self, pred) -> np.ndarray:
         if self.ok is None:
             self.ok = self._setup(pred)  # checked once against the public method
         if self.ok:
-            return self(pred)
+            return self.fn(pred)
         return np.asarray(pred.trajectory(self.n))[:, self.sel]
 
 

@@ -42,7 +42,7 @@ if str(ROOT / "src") not in sys.path:
 import interprim as ip  # noqa: E402
 from interprim import _fast  # noqa: E402
 from interprim.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
-from interprim.phase import IncrementalDTW, open_end_dtw  # noqa: E402
+from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
 
 ROWS: list[dict] = []
 
@@ -222,7 +222,7 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
     """The likelihood phase as before the batched kernel: one reference evaluation per grid candidate + refine."""
     from scipy.optimize import minimize_scalar
 
-    from interprim import phase_likelihood as PL
+    from interprim.phase import likelihood as PL
 
     M = z.shape[0]
     lo = max(PL._S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
@@ -242,7 +242,7 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
 def bench_likelihood_phase(quick):
     """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
-    from interprim import phase_likelihood as PL
+    from interprim.phase import likelihood as PL
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")

@@ -12,7 +12,7 @@ from interprim.basis import Basis
 from interprim.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
 from interprim.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
                                 shrinkage_intensity)
-from interprim.phase import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
+from interprim.phase.dtw import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
 from interprim.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")

@@ -1,12 +1,13 @@
-"""Phase estimation by the marginal likelihood of the observation (interprim.phase_likelihood)."""
+"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood, interprim.phase.tracking)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.phase import open_end_dtw
+from interprim.phase.dtw import open_end_dtw
 from interprim import _fast
-from interprim.phase_likelihood import estimate_phase, phase_log_likelihood, track_phase
+from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
+from interprim.phase.tracking import track_phase
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +89,8 @@ def test_phase_method_validated_and_saved(tmp_path, synthetic, lik_model):
 
 # --- batched / compiled evaluation against the per-candidate reference -------------------------------------------
 
-from interprim import phase_likelihood as PL  # noqa: E402
+from interprim.phase import likelihood as PL  # noqa: E402
+from interprim.phase import tracking as PT  # noqa: E402
 
 
 def _demos(n, D=4, T=120, seed=0):
@@ -285,7 +287,7 @@ def test_stream_phase_with_clipping_equals_reference():
     ref = _reference_lattice_track(model, st._buf[: frames.shape[0]])
     np.testing.assert_allclose(got[1:], ref[1:], rtol=0, atol=1e-12)
     # a slow anchor speed: candidates below _S_MIN for the first frames (merged into one at _S_MIN)
-    tr = PL._Tracker(model)
+    tr = PT._Tracker(model)
     z = st._buf[: frames.shape[0]]
     got = [tr.step(z[:1]), tr.step(z[:2])]
     tr.v0 = 0.0015
@@ -307,7 +309,7 @@ def _slot_errors(tr, z):
     tmp = PK.track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
     q, n_o = fs.q, fs.n_o
     err = np.zeros(4)
-    live = np.nonzero((b[0] != PL._SLOT_FREE) & (b[1] == M))[0]
+    live = np.nonzero((b[0] != PT._SLOT_FREE) & (b[1] == M))[0]
     for k in live:
         v = tr.v0 * np.exp(tr.dlog * b[0][k])
         G = tmp[3][0]
@@ -320,7 +322,7 @@ def _slot_errors(tr, z):
         for a, f in ((b[20][k], J), (b[7][k], ld), (b[18][k], tmp[18][0]), (b[19][k], tmp[19][0]),
                      (np.tril(b[6][k]), np.tril(tmp[6][0])), (b[5][k], tmp[5][0])):
             err[3] = max(err[3], np.abs(a - f).max() / np.abs(f).max())
-        ll_b = PL._KERNEL[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
+        ll_b = PT._KERNEL[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
         Gi, Gf = np.triu(b[3][k][:q, :q]), np.triu(G[:q, :q])
         Bi, Bf = b[3][k][:q, q4:q4 + n_o], G[:q, q4:q4 + n_o]
         err[0] = max(err[0], np.abs(Gi - Gf).max() / np.abs(Gf).max(), np.abs(Bi - Bf).max() / np.abs(Bf).max(),
@@ -365,6 +367,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     np.testing.assert_array_equal(again, got[:50])
     with monkeypatch.context() as mp:  # no compiled kernel: the same candidates scored by numpy
         mp.setattr(PL, "_kernel", lambda block=False: None)
+        mp.setattr(PT, "_kernel", lambda block=False: None)
         st.reset()
         num = np.array([st.update(f).normalised_time for f in frames])
     np.testing.assert_allclose(num, got, rtol=0, atol=1e-12)
@@ -373,6 +376,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
         if k < 40:
             with monkeypatch.context() as mp:
                 mp.setattr(PL, "_kernel", lambda block=False: None)
+                mp.setattr(PT, "_kernel", lambda block=False: None)
                 p = st2.update(f)
         else:
             p = st2.update(f)
@@ -400,7 +404,7 @@ def test_brent_search_matches_scipy_bounded_minimiser():
     minimiser that scipy.optimize.minimize_scalar(method='bounded') finds, to the requested tolerance."""
     from scipy.optimize import minimize_scalar
 
-    from interprim.phase_likelihood import _brent_min
+    from interprim.phase.likelihood import _brent_min
 
     rng = np.random.default_rng(3)
     for _ in range(40):
@@ -429,7 +433,7 @@ def test_refined_phase_is_a_local_maximum(synthetic, lik_model):
         est = estimate_phase(lik_model, z, refine=True)
         coarse = estimate_phase(lik_model, z, refine=False)
         assert est.log_posterior >= coarse.log_posterior - 1e-12
-        from interprim.phase_likelihood import _scorer, phase_noise
+        from interprim.phase.likelihood import _scorer, phase_noise
 
         sc = _scorer(lik_model, z, phase_noise(lik_model), True)
         h = 2e-3 * est.s_end

@@ -1,11 +1,11 @@
 """Compiled kernel of the likelihood phase estimator (numba, cached on disk).
 
 :func:`phase_loglik_batch` evaluates the marginal log-likelihood of the
-observed positions (``interprim.phase_likelihood.phase_log_likelihood``) at
+observed positions (``interprim.phase.likelihood.phase_log_likelihood``) at
 several candidate phases in one call.  Reference:
-``interprim.phase_likelihood._phase_log_likelihood_reference`` (the
-per-candidate design matrix and :func:`interprim.selection._lowrank_case`);
-plain numpy equivalent: ``interprim.phase_likelihood._loglik_batch_numpy``
+``interprim.phase.likelihood._phase_log_likelihood_reference`` (the
+per-candidate design matrix and :func:`interprim.gaussian.lowrank_case`);
+plain numpy equivalent: ``interprim.phase.likelihood._loglik_batch_numpy``
 (``tests/test_phase_likelihood.py`` checks all three agree).
 
 Per candidate ``s`` the ``M`` observed frames sit at ``s_m = s m / (M - 1)``.
@@ -266,7 +266,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# online tracking on a lattice of speeds (interprim.phase_likelihood._Tracker)
+# online tracking on a lattice of speeds (interprim.phase.tracking._Tracker)
 #
 # A stream's candidates are speeds ``v_j = v0 exp(dlog j)`` (integer ``j``): frame ``m`` of candidate ``j`` sits
 # at phase ``v_j m`` whatever the number of frames seen, so each lattice point keeps its statistics ``G``,

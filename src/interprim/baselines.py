@@ -120,7 +120,7 @@ class NearestNeighbour:
         return self
 
     def predict(self, partial) -> BaselinePrediction:
-        from .phase import open_end_dtw
+        from .phase.dtw import open_end_dtw
 
         v = np.asarray(partial, dtype=np.float64)
         best, best_c, frac = 0, np.inf, float("nan")

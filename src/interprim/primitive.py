@@ -26,7 +26,7 @@ from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forci
 from .errors import NotFittedError
 from . import _fast
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
-from .phase import open_end_dtw
+from .phase import estimate_phase, open_end_dtw
 from .prediction import Prediction
 from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 from .stream import Stream
@@ -97,7 +97,7 @@ class InteractionPrimitive:
         How ``predict`` estimates the phase: the maximum of the marginal
         likelihood of the observed positions under the learned prior over
         candidate phases, with a log-normal prior on the partner's speed learned
-        from the demonstrations (:mod:`interprim.phase_likelihood`; ``Stream`` uses a
+        from the demonstrations (:mod:`interprim.phase.likelihood`; ``Stream`` uses a
         local search around its previous estimate), or the paper's open-end DTW
         (Eq. 5-9).  The likelihood is the default: on demonstrations that differ in
         goal, DTW confuses "further along" with "aiming further" (phase errors
@@ -494,18 +494,8 @@ class InteractionPrimitive:
             if not 0.0 < ph <= 1.0:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
             return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
-        if self.phase_method == "likelihood" and z.shape[0] >= 2:
-            from .phase_likelihood import estimate_phase
-
-            # no DTW seed: the 12-point grid + Brent finds the same maximiser as a 20-point grid seeded with
-            # the DTW phase (within 3e-4 on 720 partial observations); D(n*, M) is computed only if asked for
-            N1 = self.reference_.shape[0] - 1
-            est = estimate_phase(self, z)
-            ref, zc = self.reference_, z.copy()  # a copy: z may be the caller's array, reused after the call
-            return self._predict_latent(z, est.s_end * N1, lambda: open_end_dtw(ref, zc, return_path=False).cost,
-                                        robot_state)
-        res = open_end_dtw(self.reference_, z, return_path=False)
-        return self._predict_latent(z, res.n_star, res.cost, robot_state)
+        n_star, cost = estimate_phase(self, z, self.phase_method)
+        return self._predict_latent(z, n_star, cost, robot_state)
 
     def _robot_start(self, robot_state):
         n_o = self.n_observed_latent_

@@ -39,7 +39,7 @@ see :mod:`interprim.gaussian`) ``= U diag(e) U^T`` the posterior mean for any
 The same loop gives the held-out marginal likelihood of the *positions* of the
 observation for every ``sigma^2``; its maximiser is the position noise
 ``phase_sigma2_`` used by the likelihood phase estimator
-(:mod:`interprim.phase_likelihood`).
+(:mod:`interprim.phase.likelihood`).
 
 The choice is reported in ``model.selection_``.
 """
@@ -50,8 +50,8 @@ import numpy as np
 
 from ._blas import single_thread
 from .gaussian import LowRankPrior, fit_prior, lowrank_case, shrinkage_intensity
-from .phase import open_end_dtw
-from .phase_likelihood import observation_design
+from .phase.dtw import open_end_dtw
+from .phase.likelihood import observation_design
 from .preprocessing import time_normalise
 
 __all__ = ["select_hyperparameters", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
@@ -278,7 +278,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):
     """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate."""
-    from .phase_likelihood import _S_MIN, _log_speed_prior
+    from .phase.likelihood import _S_MIN, _log_speed_prior
 
     if max_cases <= 0:
         return None

@@ -13,7 +13,7 @@ import numpy as np
 from . import _fast
 from ._validation import as_frame
 from .gaussian import Posterior
-from .phase import IncrementalDTW
+from .phase import IncrementalDTW, estimate_phase
 from .prediction import Prediction
 from .preprocessing import savgol_window
 
@@ -95,7 +95,7 @@ class Stream:
         self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation) \
             if _fast.warmup() else None
         self._n = 0
-        self._tracker = None  # likelihood phase: interprim.phase_likelihood._Tracker (created on first use)
+        self._tracker = None  # likelihood phase: interprim.phase.tracking._Tracker (created on first use)
         self._s_prev = None
         self._inc = None  # _IncrementalConditioning (created on first use)
         self.n_incremental = 0  # frames conditioned by the rank-1 update (the rest from scratch)
@@ -151,14 +151,16 @@ class Stream:
             self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
         self._buf[self._n] = f
         self._n += 1
+        tr = None
         if m.phase_method == "likelihood":  # local search around the previous estimate, on a lattice of speeds
             tr = self._tracker
             if tr is None or tr.model is not m:
-                from .phase_likelihood import _Tracker
+                from .phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
-            self._s_prev = tr.step(self._buf[: self._n])
-            n_star = self._s_prev * (m.reference_.shape[0] - 1)
+        n_star, cost = estimate_phase(m, self._buf[: self._n], m.phase_method, dtw=(n_star, cost), tracker=tr)
+        if tr is not None:
+            self._s_prev = n_star / (m.reference_.shape[0] - 1)
         z = self._buf[: self._n]
         inc = self._inc
         if inc is not None and inc.M == self._n - 1 and not need_cov:

@@ -87,7 +87,7 @@ def open_end_dtw(query, ref):
     n_star : int
         0-based index of the reference frame the query's last frame is aligned to (Eq. 8).
     """
-    from ..phase import open_end_dtw as _core_open_end_dtw  # the compiled kernels of the core (Sec. III-B)
+    from ..phase.dtw import open_end_dtw as _core_open_end_dtw  # the compiled kernels of the core (Sec. III-B)
 
     res = _core_open_end_dtw(ref, query, return_path=False)
     return float(res.cost), int(res.n_star)

@@ -145,7 +145,7 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
     ref : ndarray, shape (N, D)
         A complete reference movement.
     use_numba : bool
-        Use the core's compiled incremental DTW (:class:`interprim.phase.IncrementalDTW`, default) or the
+        Use the core's compiled incremental DTW (:class:`interprim.phase.dtw.IncrementalDTW`, default) or the
         Python reference.
 
     Returns
@@ -159,7 +159,7 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
     r = np.ascontiguousarray(ref, dtype=np.float64)
     out = np.empty(q.shape[0])
     if use_numba:  # the core's incremental open-end DTW (compiled): one column per query frame
-        from ..phase import IncrementalDTW
+        from ..phase.dtw import IncrementalDTW
 
         inc = IncrementalDTW(r)
         for m in range(q.shape[0]):

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _fast
-from ._validation import as_2d_finite, as_frame
+from .. import _fast
+from .._validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
 
@@ -99,7 +99,7 @@ def _backtrack_np(Dm, n_end):
 
 def _accumulate(u, v):
     if _fast.ready():
-        from ._dtw_kernels import _accumulate as k
+        from .._dtw_kernels import _accumulate as k
 
         return k(u, v)
     return _accumulate_np(u, v)
@@ -108,7 +108,7 @@ def _accumulate(u, v):
 def _open_end(u, v):
     """n* and D(n*, M) without storing the matrix (two columns of memory when compiled)."""
     if _fast.ready():
-        from ._dtw_kernels import _open_end_strips
+        from .._dtw_kernels import _open_end_strips
 
         N = u.shape[0]
         uT = np.ascontiguousarray(u.T)
@@ -125,7 +125,7 @@ def _argmin_first(col):
 
 def _backtrack(Dm, n_end):
     if _fast.ready():
-        from ._dtw_kernels import _backtrack as k
+        from .._dtw_kernels import _backtrack as k
 
         return k(Dm, n_end)
     return _backtrack_np(Dm, n_end)
@@ -196,7 +196,7 @@ _STEP: list = []
 
 
 def _load_step():
-    from ._dtw_kernels import _incremental_step
+    from .._dtw_kernels import _incremental_step
 
     _STEP.append(_incremental_step)
     return _incremental_step

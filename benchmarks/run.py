@@ -13,7 +13,7 @@ and writes ``benchmarks/RESULTS.md`` with that table, the scaling sweeps
 Fairness: BLAS is capped at one thread for everything (ours and peers) with
 threadpoolctl -- on a 2-core machine OpenBLAS threads only add spinning and
 jitter at these sizes -- and the compiled kernels are loaded before timing
-(``interprim._fast.warmup``).  Peers: dtaidistance, dtw-python,
+(``interprim._compiled.loader.warmup``).  Peers: dtaidistance, dtw-python,
 movement-primitives (``pip install -e .[bench]``); a peer that is missing is
 reported as such, the rest still runs.
 """
@@ -40,7 +40,7 @@ if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
 import interprim as ip  # noqa: E402
-from interprim import _fast  # noqa: E402
+from interprim._compiled import loader  # noqa: E402
 from interprim.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
 from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
 
@@ -246,7 +246,7 @@ def bench_likelihood_phase(quick):
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")
-    _fast.phase_kernel(block=True)
+    loader.phase_kernel(block=True)
     partial = test[:250, :7]
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1
@@ -648,7 +648,7 @@ def main(argv=None):
         print("threadpoolctl not installed: BLAS thread count left at its default", file=sys.stderr)
     t_start = time.perf_counter()
     info = machine_info()
-    _fast.warmup()
+    loader.warmup()
     print(f"{'operation':<46} {'median':>10} {'p99':>10}  {'peer':<42} {'peer med':>10} {'ratio':>9}  agree")
     with tempfile.TemporaryDirectory() as tmp:
         model, test = bench_online(args.quick)

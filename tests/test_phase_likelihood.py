@@ -5,7 +5,7 @@ import pytest
 
 import interprim as ip
 from interprim.phase.dtw import open_end_dtw
-from interprim import _fast
+from interprim._compiled import loader
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
 from interprim.phase.tracking import track_phase
 
@@ -126,7 +126,7 @@ def _both_paths(model, z, s, s2):
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
-    assert _fast.phase_kernel(block=True) is not None
+    assert loader.phase_kernel(block=True) is not None
     comp = fs.loglik(z, s, s2)
     return num, comp
 
@@ -262,7 +262,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
     """The stream's phases equal the lattice tracker evaluated candidate by candidate, and (no clipping here)
     the previous ``track_phase`` chain, whose chosen speeds lie on the same lattice."""
     model = _small_model(observation, None, "shrinkage")
-    assert _fast.phase_kernel(block=True) is not None
+    assert loader.phase_kernel(block=True) is not None
     frames = _demos(1, seed=11)[0][:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -279,7 +279,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
 
 def test_stream_phase_with_clipping_equals_reference():
     model = _small_model("position", None, "shrinkage")
-    assert _fast.phase_kernel(block=True) is not None
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -301,7 +301,7 @@ def _slot_errors(tr, z):
     """Largest relative differences between the tracker's slots (extended frame by frame) and a recomputation
     from scratch at the same lattice speeds: statistics, log-likelihood (same rows), log-likelihood of the
     batch kernel at ``s = v (M - 1)``."""
-    from interprim import _phase_kernels as PK
+    from interprim._compiled import phase_likelihood as PK
 
     M = z.shape[0]
     fs, b = tr._fs, tr._buf
@@ -322,7 +322,7 @@ def _slot_errors(tr, z):
         for a, f in ((b[20][k], J), (b[7][k], ld), (b[18][k], tmp[18][0]), (b[19][k], tmp[19][0]),
                      (np.tril(b[6][k]), np.tril(tmp[6][0])), (b[5][k], tmp[5][0])):
             err[3] = max(err[3], np.abs(a - f).max() / np.abs(f).max())
-        ll_b = PT._KERNEL[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
+        ll_b = loader._PHASE_KERNELS[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
         Gi, Gf = np.triu(b[3][k][:q, :q]), np.triu(G[:q, :q])
         Bi, Bf = b[3][k][:q, q4:q4 + n_o], G[:q, q4:q4 + n_o]
         err[0] = max(err[0], np.abs(Gi - Gf).max() / np.abs(Gf).max(), np.abs(Bi - Bf).max() / np.abs(Bf).max(),
@@ -339,7 +339,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
     leaving the candidate window), equal a recomputation from all frames."""
     model = ip.InteractionPrimitive(observed_dofs=[0, 1, 2, 3], n_basis=8, sigma2=1e-2, phase_method="likelihood",
                                     **kw).fit(_demos(12), dt=0.01)
-    assert _fast.phase_kernel(block=True) is not None
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0], 10, 20)[:, model.observed_dofs_]
     st = model.stream()
     worst, n_checked = np.zeros(4), 0
@@ -358,7 +358,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
 
 def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     model = _small_model("position", 2, "shrinkage")
-    assert _fast.phase_kernel(block=True) is not None
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])

@@ -367,11 +367,11 @@ class LowRankConditioner:
 
         With ``state`` (an object with arrays ``R`` (D_o, q, q), ``K`` (r, r), ``TiU`` (D_o, q, r) and ``A``
         (D_o, q)), the same numbers come from
-        :func:`interprim._kernels.lowrank_condition_seed`, which also leaves there the factors that
-        :func:`interprim._kernels.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
+        :func:`interprim._compiled.conditioning.lowrank_condition_seed`, which also leaves there the factors that
+        :func:`interprim._compiled.conditioning.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
         (``sum_i log det T_i``) and ``state.seeded = True``.
         """
-        from ._kernels import lowrank_condition_mean, lowrank_condition_seed
+        from ._compiled.conditioning import lowrank_condition_mean, lowrank_condition_seed
 
         if out is None:
             out = np.empty(self.P)

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from . import _fast
+from ._compiled import loader
 from .gaussian import Posterior, sample
 
 __all__ = ["Prediction", "MeanRollout"]
@@ -166,7 +166,7 @@ class Prediction:
             Seconds from now, at the partner's estimated speed.
         y : ndarray, shape (n, len(controlled_dofs))
         """
-        if not _fast.ready():
+        if not loader.ready():
             return self._response_reference(n, state)
         kern = _RESPONSE[0] if _RESPONSE else _load_response()
         m = self._m
@@ -245,7 +245,7 @@ _RESPONSE: list = []
 
 
 def _load_response():
-    from ._kernels import response_positions
+    from ._compiled.rollout import response_positions
 
     _RESPONSE.append(response_positions)
     return response_positions

@@ -24,7 +24,7 @@ from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
 from .errors import NotFittedError
-from . import _fast
+from ._compiled import loader
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
 from .phase import estimate_phase, open_end_dtw
 from .prediction import Prediction
@@ -302,8 +302,8 @@ class InteractionPrimitive:
             Zg = self._to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
             # DMP parameters (Eq. 3-4), normalised time s in [0, 1]; derivatives along time (axis 1)
             rdofs = slice(0, n_o) if want_resid else slice(0, 0)
-            if self.smoothing_window is None and _fast.ready():  # one compiled pass: derivatives + Eq. 3
-                from ._kernels import forcing_targets_batch
+            if self.smoothing_window is None and loader.ready():  # one compiled pass: derivatives + Eq. 3
+                from ._compiled.observation import forcing_targets_batch
 
                 F = np.empty_like(Zg)
                 yd0 = np.empty((len(idx), Zg.shape[2]))
@@ -582,17 +582,19 @@ class InteractionPrimitive:
         give the same numbers (tested to 1e-12).
         """
         M = z.shape[0]
-        if M >= 3 and _fast.ready():
+        if M >= 3 and loader.ready():
+            from ._compiled.observation import StatsWorkspace, start_position
+
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)
                 ws = workspace if workspace is not None else \
-                    _fast.StatsWorkspace(M, z.shape[1], self._q, "position")
-                y0 = _fast.start_position(z, self.smoothing_window)
+                    StatsWorkspace(M, z.shape[1], self._q, "position")
+                y0 = start_position(z, self.smoothing_window)
                 v0 = self.start_velocity_[: self.n_observed_latent_]
                 G, B, yy = ws.position_stats(z, M, s_end, y0, v0, self.rollout_)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), y0
             if self.observation == "forcing" and self.smoothing_window is None:
-                ws = workspace if workspace is not None else _fast.StatsWorkspace(M, z.shape[1], self._q)
+                ws = workspace if workspace is not None else StatsWorkspace(M, z.shape[1], self._q)
                 G, B, yy = ws.forcing_stats(z, M, s_end, self)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0].copy()
         X, Y, y0 = self._observation(z, s_end)
@@ -621,7 +623,7 @@ class InteractionPrimitive:
         G, B, yy, n = stats
         cond = self._conditioner()
         if cond is not None:
-            res = cond.mean_compiled(G, B, self.sigma2_, yy, n, state=seed) if _fast.ready() else \
+            res = cond.mean_compiled(G, B, self.sigma2_, yy, n, state=seed) if loader.ready() else \
                 cond.mean_numpy(G, B, self.sigma2_, yy, n)
             if res is not None:
                 cov = cond.cov(G, self.sigma2_) if need_cov else None

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _fast
+from ._compiled import loader
 from ._validation import as_frame
 from .gaussian import Posterior
 from .phase import IncrementalDTW, estimate_phase
@@ -28,8 +28,8 @@ class _IncrementalConditioning:
     ``A_i = T_i^{-1} S_i c_i``, the lower triangle of the ``r x r`` matrix ``K`` and
     ``sum_i log det T_i`` of :class:`~interprim.gaussian.LowRankConditioner`, for
     ``M`` frames at phases ``v m`` (``m = 0 .. M - 1``) from the start ``[y0; v0]``.  Seeded by the
-    from-scratch path (:func:`interprim._kernels.lowrank_condition_seed`), extended by one frame by
-    :func:`interprim._kernels.lowrank_condition_step`.  Buffers are allocated once.
+    from-scratch path (:func:`interprim._compiled.conditioning.lowrank_condition_seed`), extended by one frame by
+    :func:`interprim._compiled.conditioning.lowrank_condition_step`.  Buffers are allocated once.
     """
 
     def __init__(self, model, cond):
@@ -75,7 +75,7 @@ class Stream:
     With the likelihood phase (the default) the phase is chosen on a lattice of speeds, so
     while the chosen speed stays the same the frames already seen keep their phases and the new
     frame only adds one row to the observation: then Eq. 16-18 are updated by rank one
-    (:func:`interprim._kernels.lowrank_condition_step`, independent of the number of frames)
+    (:func:`interprim._compiled.conditioning.lowrank_condition_step`, independent of the number of frames)
     instead of recomputed; the result is the same (to rounding).  Everything else (a new speed,
     a phase clipped at 1, a start position still being smoothed, ``need_cov=True``, PCA, the
     forcing observation, a dense prior, no compiled kernels) recomputes from scratch and re-seeds.
@@ -91,9 +91,12 @@ class Stream:
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
-        # streaming needs the compiled per-frame step: load the kernels now (see interprim._fast)
-        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation) \
-            if _fast.warmup() else None
+        # streaming needs the compiled per-frame step: load the kernels now (see interprim._compiled.loader)
+        self._ws = None
+        if loader.warmup():
+            from ._compiled.observation import StatsWorkspace
+
+            self._ws = StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation)
         self._n = 0
         self._tracker = None  # likelihood phase: interprim.phase.tracking._Tracker (created on first use)
         self._s_prev = None
@@ -188,7 +191,7 @@ class Stream:
             inc.invalidate()
         m = self.model
         if not (self.incremental and m.phase_method == "likelihood" and m.observation == "position"
-                and m.pca_observed_ is None and self._ws is not None and self._n >= 3 and _fast.ready()):
+                and m.pca_observed_ is None and self._ws is not None and self._n >= 3 and loader.ready()):
             return None
         cond = m._conditioner()
         if cond is None:
@@ -200,7 +203,7 @@ class Stream:
     def _predict_incremental(self, z, n_star, cost):
         """This frame's :class:`Prediction` by the rank-1 update of Eq. 16-18, or ``None`` when it does not apply
         (the frames seen moved to other phases, or the start changed; see :class:`Stream`)."""
-        from ._kernels import lowrank_condition_step
+        from ._compiled.conditioning import lowrank_condition_step
 
         m = self.model
         inc = self._inc

@@ -3,7 +3,7 @@
 :func:`track_phase` re-scores a few candidates around the constant-speed
 extrapolation of the previous estimate; :class:`_Tracker` (used by
 :class:`~interprim.stream.Stream`) scores them on a fixed lattice of speeds, so
-the compiled step (:func:`interprim._phase_kernels.track_step`) extends each
+the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
 lattice point's statistics by the new frame instead of recomputing them.
 Both score with :mod:`interprim.phase.likelihood`.
 """
@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._blas import single_thread
-from .._fast import _PHASE_KERNELS as _KERNEL
-from .._fast import phase_kernel as _kernel
+from .._compiled.loader import _PHASE_KERNELS as _KERNEL
+from .._compiled.loader import phase_kernel as _kernel
 from .likelihood import _S_MIN, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
 
 __all__ = ["track_phase"]
@@ -63,12 +63,12 @@ def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int =
 # ---------------------------------------------------------------------------------------------------------------
 # online tracking on a lattice of speeds (used by Stream)
 
-_SLOT_FREE = -(1 << 62)  # = interprim._phase_kernels.SLOT_FREE (a free slot; no numba import here)
+_SLOT_FREE = -(1 << 62)  # = interprim._compiled.phase_likelihood.SLOT_FREE (a free slot; no numba import here)
 _MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
 
 
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
-    """Candidates of :func:`interprim._phase_kernels.track_step`: ``(js, s)`` in increasing ``s``, the clipped
+    """Candidates of :func:`interprim._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the clipped
     ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
     js, ss = [], []
     for j in range(kc - nh, kc + nh + 1):
@@ -98,7 +98,7 @@ class _Tracker:
     candidates (whose chosen speeds also stay on such a lattice, up to rounding); after a clipped choice the
     lattice keeps its index (the nearest unclipped-side point) where :func:`track_phase` would restart from the
     clipped value.  Frame ``m`` of lattice point ``j`` always sits at phase ``v_j m``, so the compiled step
-    (:func:`interprim._phase_kernels.track_step`) extends each point's statistics and factors by the new frame
+    (:func:`interprim._compiled.phase_likelihood.track_step`) extends each point's statistics and factors by the new frame
     (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them (``O(M q (q + D_o) + D_o q^2 n + ...)``).
     Without the kernel (or with a dense prior) the same candidates are scored from scratch.
     """
@@ -152,7 +152,7 @@ class _Tracker:
             return float(cand[i])
         if fs is not self._fs or self._buf is None:
             self._fs = fs
-            from .._phase_kernels import track_buffers
+            from .._compiled.phase_likelihood import track_buffers
 
             self._buf = track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
             self.Rg = None

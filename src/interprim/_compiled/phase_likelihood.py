@@ -1,4 +1,4 @@
-"""Compiled kernel of the likelihood phase estimator (numba, cached on disk).
+"""Compiled kernels of the likelihood phase estimator (numba, cached on disk).
 
 :func:`phase_loglik_batch` evaluates the marginal log-likelihood of the
 observed positions (``interprim.phase.likelihood.phase_log_likelihood``) at
@@ -38,9 +38,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
-
-_FM = {"contract", "reassoc", "nsz", "arcp"}
+from . import FASTMATH as _FM
+from .linalg import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
 _LOG2PI = float(np.log(2.0 * np.pi))
 
 
@@ -586,7 +585,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# workspaces of track_step, and the warm-up calls of the loader (interprim._fast)
+# workspaces of track_step, and the warm-up calls of the loader (interprim._compiled.loader)
 
 N_SLOTS = 12
 

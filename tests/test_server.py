@@ -579,7 +579,7 @@ def test_http_routes(server, validator):
 
 # ---------------------------------------------------------------------------- start-up
 def _serve_parser():
-    from interprim.server import cli
+    from interprim.cli import serve as cli
 
     parser = argparse.ArgumentParser(prog="interprim")
     cli.add_parser(parser.add_subparsers(dest="command"))
@@ -629,7 +629,7 @@ def test_cli_options(tmp_path):
 def test_cli_module_is_registered():
     from interprim import cli
 
-    assert "interprim.server.cli" in cli.COMMAND_MODULES
+    assert "interprim.cli.serve" in cli.COMMAND_MODULES
 
 
 def test_protocol_helpers():

@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..evaluation.protocol import observed_frames
+
 __all__ = [
     "run_handwriting",
     "open_end_dtw",
@@ -301,7 +303,7 @@ def run_handwriting(
                 T = y.shape[0]
                 truth = _normalise(y, n_points)
                 for pi, p in enumerate(percents):
-                    t_obs = max(3, int(round(p / 100.0 * T)))
+                    t_obs = observed_frames(T, p / 100.0)
                     prefix = y[:t_obs]
                     preds = {m: models[m].predict(prefix) for m in ip_methods}
                     ests = {m: np.asarray(pr.trajectory(n_points)) for m, pr in preds.items()}

@@ -195,7 +195,10 @@ def _time_normalise(y, n):
 
 
 def _n_observed(T: int, p: float) -> int:
-    return int(min(T, max(3, round(p / 100.0 * T))))
+    """Frames observed at ``p`` % (:func:`interprim.evaluation.protocol.observed_frames`)."""
+    from ..evaluation.protocol import observed_frames
+
+    return observed_frames(T, p / 100.0)
 
 
 def _fit(train, n_basis, sigma2, **kw):
@@ -215,7 +218,7 @@ def _fit_optional(train, cfg, sigma2, log):
       likelihood of the observation instead of DTW), same ``sigma2``.
     - ``ip_default``: the library's defaults (conditioning on positions, ``sigma2`` and shrinkage
       chosen by cross-validation on the training demonstrations, no validation set needed).
-    - ``promp``: :class:`interprim.baselines.InteractionProMP` (needs the ``bench`` extra).
+    - ``promp``: :class:`interprim.evaluation.baselines.InteractionProMP` (needs the ``bench`` extra).
     """
     import interprim as ip
 
@@ -227,7 +230,7 @@ def _fit_optional(train, cfg, sigma2, log):
     except (TypeError, ValueError) as exc:  # a core without likelihood phase estimation
         log(f"(skipping the likelihood-phase IP: {exc})")
     try:
-        from ..baselines import InteractionProMP
+        from ..evaluation.baselines import InteractionProMP
 
         extra["promp"] = InteractionProMP(observed_dofs=[0, 1]).fit(train.demos, dt=train.dt)
     except Exception as exc:  # ImportError without the bench extra, or an incompatible peer version

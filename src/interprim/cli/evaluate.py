@@ -1,6 +1,6 @@
 """``interprim evaluate``: leave-one-out sweeps of IPs and their peers (tables, JSON, figures).
 
-Top-level imports are light; the work happens in :mod:`interprim.evaluation`.
+Top-level imports are light; the work happens in :mod:`interprim.evaluation.sweep`.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def add_parser(subparsers):
 def run(args) -> int:
     from dataclasses import replace
 
-    from .evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
+    from ..evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
 
     cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis)
     if args.fractions:
@@ -62,10 +62,10 @@ def run(args) -> int:
     summary = summarise(res)
     paths = save_results(res, summary, args.out)
     if not args.no_figures:
-        from .plotting_eval import evaluation_figures
+        from ..evaluation.plots import evaluation_figures
 
         paths += evaluation_figures(res, summary, cfg, args.out, datasets)
-    from .evaluation import markdown_tables
+    from ..evaluation import markdown_tables
 
     print(markdown_tables(summary))
     print(recognition_table(summary))

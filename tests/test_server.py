@@ -1,6 +1,6 @@
 """The streaming server against real clients on loopback (ephemeral ports, background event loop).
 
-Covers the happy path, every kind of bad input of issue 6 (each must get a clear error on its own
+Covers the happy path, every kind of bad input (each must get a clear error on its own
 session or a clean close with code + reason, and a log line, without disturbing other sessions),
 limits, the token, the HTTP side, and a corrupt model at start-up.  No timing assertions.
 """
@@ -702,7 +702,7 @@ def test_fair_queueing_serves_the_cheaper_session_first():
     """The scheduler of a compute lane: among waiting frames, the session that used less compute goes first."""
     import asyncio
 
-    from interprim.server.app import _Lane, _Session
+    from interprim.server.lanes import _Lane, _Session
 
     order = []
 
@@ -835,7 +835,7 @@ def test_inline_lane_serves_at_once_only_sessions_not_ahead():
     waiting and the session has not used more compute than the others; else the frame is queued."""
     import asyncio
 
-    from interprim.server.app import _Lane, _Session
+    from interprim.server.lanes import _Lane, _Session
 
     def run(job):
         name, cost = job

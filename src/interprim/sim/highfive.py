@@ -246,7 +246,11 @@ def generate_highfive(
     -------
     HighFiveData
     """
-    from tqdm.auto import tqdm
+    if progress:  # the bar needs the experiments extra; without it, plain iteration
+        from tqdm.auto import tqdm
+    else:
+        def tqdm(it, **_):
+            return it
 
     n = int(n)
     if n < 1:

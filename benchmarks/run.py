@@ -1,4 +1,4 @@
-"""interprim benchmark suite (issue 5): our hot paths against their peers, side by side in one process.
+"""interprim benchmark suite: our hot paths against their peers, side by side in one process.
 
 Run from the repository root::
 

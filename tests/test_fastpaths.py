@@ -1,4 +1,4 @@
-"""Every fast path against its reference (issue 5).  Correctness only: no timing assertions here."""
+"""Every fast path against its reference.  Correctness only: no timing assertions here."""
 
 import tracemalloc
 

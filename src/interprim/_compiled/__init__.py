@@ -11,3 +11,6 @@ not import numba.
 #: fastmath flags of the kernels: reassociation lets LLVM vectorise reductions; no 'nnan'/'ninf'
 #: (inputs are checked finite upstream)
 FASTMATH = {"contract", "reassoc", "nsz", "arcp"}
+
+#: log(2 pi) of the Gaussian log-likelihoods (the same float as interprim.gaussian._LOG2PI)
+LOG2PI = 1.8378770664093453

@@ -39,8 +39,8 @@ import numpy as np
 from numba import njit
 
 from . import FASTMATH as _FM
+from . import LOG2PI as _LOG2PI
 from .linalg import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
-_LOG2PI = float(np.log(2.0 * np.pi))
 
 
 BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames

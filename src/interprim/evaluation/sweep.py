@@ -45,6 +45,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..preprocessing import time_normalise
+
 from .protocol import observed_frames
 
 __all__ = ["EvalConfig", "METHODS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
@@ -171,12 +173,6 @@ def make_estimator(method: str, observed_dofs, cfg: EvalConfig):
     raise ValueError(f"unknown method {method!r}; expected one of {METHODS} (optionally with '+pca')")
 
 
-def _time_normalise(y, n):
-    from ..preprocessing import time_normalise
-
-    return time_normalise(y, n)
-
-
 def _point_rms(err, point_dim):
     """Root mean square of the point errors: ``err`` (n, C) with C = k * point_dim columns."""
     n, C = err.shape
@@ -198,7 +194,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
     obs = t.observed_dofs
     ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
     n = cfg.n_out
-    truth = _time_normalise(test, n)
+    truth = time_normalise(test, n)
     base, plus, suffix = method.partition("+")
     variants = [(method, None)]
     if base in ("ip-forcing", "ip-position"):

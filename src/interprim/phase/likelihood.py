@@ -49,14 +49,13 @@ import numpy as np
 from .._blas import single_thread
 from .._compiled.loader import phase_kernel as _kernel
 from ..dmp import forcing_values
-from ..gaussian import LowRankPrior, condition, lowrank_case
+from ..gaussian import _LOG2PI, LowRankPrior, condition, lowrank_case
 from ..preprocessing import derivatives
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
            "phase_noise"]
 
 _S_MIN = 0.02
-_LOG2PI = float(np.log(2.0 * np.pi))
 
 
 @dataclass(frozen=True)

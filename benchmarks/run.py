@@ -1,4 +1,4 @@
-"""interprim benchmark suite (issue 5): our hot paths against their peers, side by side in one process.
+"""interprim benchmark suite: our hot paths against their peers, side by side in one process.
 
 Run from the repository root::
 
@@ -13,7 +13,7 @@ and writes ``benchmarks/RESULTS.md`` with that table, the scaling sweeps
 Fairness: BLAS is capped at one thread for everything (ours and peers) with
 threadpoolctl -- on a 2-core machine OpenBLAS threads only add spinning and
 jitter at these sizes -- and the compiled kernels are loaded before timing
-(``interprim._fast.warmup``).  Peers: dtaidistance, dtw-python,
+(``interprim._compiled.loader.warmup``).  Peers: dtaidistance, dtw-python,
 movement-primitives (``pip install -e .[bench]``); a peer that is missing is
 reported as such, the rest still runs.
 """
@@ -40,9 +40,9 @@ if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
 import interprim as ip  # noqa: E402
-from interprim import _fast  # noqa: E402
+from interprim._compiled import loader  # noqa: E402
 from interprim.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
-from interprim.phase import IncrementalDTW, open_end_dtw  # noqa: E402
+from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
 
 ROWS: list[dict] = []
 
@@ -222,7 +222,7 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
     """The likelihood phase as before the batched kernel: one reference evaluation per grid candidate + refine."""
     from scipy.optimize import minimize_scalar
 
-    from interprim import phase_likelihood as PL
+    from interprim.phase import likelihood as PL
 
     M = z.shape[0]
     lo = max(PL._S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
@@ -242,11 +242,11 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
 def bench_likelihood_phase(quick):
     """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
-    from interprim import phase_likelihood as PL
+    from interprim.phase import likelihood as PL
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")
-    PL.warmup()
+    loader.phase_kernel(block=True)
     partial = test[:250, :7]
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1
@@ -648,7 +648,7 @@ def main(argv=None):
         print("threadpoolctl not installed: BLAS thread count left at its default", file=sys.stderr)
     t_start = time.perf_counter()
     info = machine_info()
-    _fast.warmup()
+    loader.warmup()
     print(f"{'operation':<46} {'median':>10} {'p99':>10}  {'peer':<42} {'peer med':>10} {'ratio':>9}  agree")
     with tempfile.TemporaryDirectory() as tmp:
         model, test = bench_online(args.quick)

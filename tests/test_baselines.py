@@ -1,9 +1,9 @@
-"""Peer methods on small data (interprim.baselines)."""
+"""Peer methods on small data (interprim.evaluation.baselines)."""
 
 import numpy as np
 import pytest
 
-from interprim.baselines import InteractionProMP, NearestNeighbour, PriorMean
+from interprim.evaluation.baselines import InteractionProMP, NearestNeighbour, PriorMean
 from interprim.preprocessing import time_normalise
 from interprim.synthetic import two_agent_demos
 

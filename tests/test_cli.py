@@ -1,4 +1,4 @@
-"""Tests of the ``interprim fit`` / ``predict`` / ``handwriting`` commands (interprim.commands)."""
+"""Tests of the ``interprim fit`` / ``predict`` / ``handwriting`` commands (interprim.cli)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The leave-one-out evaluation and the 'interprim evaluate' command (interprim.evaluation)."""
+"""The leave-one-out evaluation and the 'interprim evaluate' command (interprim.evaluation.sweep)."""
 
 import json
 
@@ -39,7 +39,7 @@ def test_sweep_summary_tables_and_files(tmp_path):
 
 
 def test_point_rms_uses_3d_distance():
-    from interprim.evaluation import _point_rms
+    from interprim.evaluation.sweep import _point_rms
 
     err = np.tile([3.0, 4.0, 0.0], (10, 1))
     assert _point_rms(err, 3) == pytest.approx(5.0)
@@ -54,7 +54,7 @@ def test_cli_has_evaluate():
 
 
 def test_unknown_method_and_dataset():
-    from interprim.evaluation import _task, make_estimator
+    from interprim.evaluation.sweep import _task, make_estimator
 
     with pytest.raises(ValueError, match="unknown method"):
         make_estimator("magic", [0], CFG)

@@ -1,4 +1,4 @@
-"""Every fast path against its reference (issue 5).  Correctness only: no timing assertions here."""
+"""Every fast path against its reference.  Correctness only: no timing assertions here."""
 
 import tracemalloc
 
@@ -7,12 +7,13 @@ import pytest
 from scipy.linalg import expm
 
 import interprim as ip
-from interprim import _fast
+from interprim._compiled import loader
+from interprim._compiled.observation import StatsWorkspace, start_position
 from interprim.basis import Basis
 from interprim.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
 from interprim.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
                                 shrinkage_intensity)
-from interprim.phase import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
+from interprim.phase.dtw import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
 from interprim.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -20,7 +21,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
 @pytest.fixture(scope="module", autouse=True)
 def compiled():
-    assert _fast.warmup(), "numba kernels must load for these tests"
+    assert loader.warmup(), "numba kernels must load for these tests"
 
 
 def _problem(seed, q, D_o, D_c, T, S, method="shrinkage"):
@@ -112,7 +113,7 @@ def test_shrinkage_intensity_equals_matrix_formula(S, P):
 
 
 def test_vectorised_exp():
-    from interprim._kernels import vexp_nonpos
+    from interprim._compiled.observation import vexp_nonpos
 
     t = np.concatenate([-np.geomspace(1e-12, 700, 5000), [0.0, -1e-300, -707.9]])
     out = np.empty_like(t)
@@ -129,7 +130,7 @@ def test_forcing_statistics_kernel_equals_numpy(fitted_paper, synthetic, M, s_en
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
     z = np.ascontiguousarray(d[:M, :2])
-    ws = _fast.StatsWorkspace(8, 2, fitted._q)  # too small: grows
+    ws = StatsWorkspace(8, 2, fitted._q)  # too small: grows
     G, B, yy = ws.forcing_stats(z, M, s_end, fitted)
     X, Y, _ = fitted._observation(z, s_end)
     np.testing.assert_allclose(G, X.T @ X, rtol=1e-12, atol=1e-12 * np.abs(G).max())
@@ -164,7 +165,7 @@ def fitted_smooth(synthetic):
 def test_start_position_equals_smoothed_first_frame(T, window):
     z = np.cumsum(np.random.default_rng(T).normal(size=(T, 3)), axis=0) + 5.0
     ref = derivatives(z, 1.0 / max(T - 1, 1), window)[0][0]
-    got = _fast.start_position(z, window)
+    got = start_position(z, window)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-13 * np.abs(z).max())
     assert not np.shares_memory(got, z)
 
@@ -180,7 +181,7 @@ def test_position_statistics_kernel_equals_numpy(fitted, fitted_smooth, fitted_s
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
     z = m._observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
-    ws = _fast.StatsWorkspace(8, z.shape[1], m._q, "position")
+    ws = StatsWorkspace(8, z.shape[1], m._q, "position")
     for workspace in (ws, None, ws):  # reused, fresh, reused after a call with other sizes
         (G, B, yy, n), y0 = m._stats(z, s_end, workspace)
         X, Y, y0r = m._observation(z, s_end)
@@ -255,7 +256,7 @@ def test_fit_fast_path_equals_per_demo_reference(synthetic):
 
 
 def test_forcing_targets_kernel():
-    from interprim._kernels import forcing_targets_batch
+    from interprim._compiled.observation import forcing_targets_batch
 
     rng = np.random.default_rng(2)
     Z = np.cumsum(rng.normal(size=(3, 50, 4)), axis=1)
@@ -340,7 +341,7 @@ def test_numpy_fallback_predict_equals_compiled(fitted, synthetic, monkeypatch):
     _, test = synthetic
     z = test[2][:90, :2]
     a = fitted.predict(z)
-    monkeypatch.setattr(_fast, "_READY", False)
+    monkeypatch.setattr(loader, "_READY", False)
     b = fitted.predict(z)
     assert a.n_star == b.n_star
     np.testing.assert_allclose(a.posterior_mean, b.posterior_mean, atol=1e-8 * np.abs(a.posterior_mean).max())

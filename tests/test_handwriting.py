@@ -9,7 +9,7 @@ import pytest
 
 from interprim.cli import main
 from interprim.datasets import data_dir
-from interprim.experiments.handwriting import _dtw_py, open_end_dtw, run_handwriting
+from interprim.experiments.handwriting import open_end_dtw, run_handwriting
 
 
 def _has_data():
@@ -32,6 +32,20 @@ def _dtw_full_matrix(u, v):
             D[i, j] = c[i - 1, j - 1] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
     j = int(np.argmin(D[-1, 1:]))
     return D[-1, j + 1], j
+
+
+def _dtw_py(query, ref):
+    """Readable reference of :func:`open_end_dtw` (full accumulated-cost matrix)."""
+    t, n = query.shape[0], ref.shape[0]
+    c = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)  # (t, n)
+    D = np.empty((t, n))
+    D[0] = np.cumsum(c[0])
+    for i in range(1, t):
+        D[i, 0] = D[i - 1, 0] + c[i, 0]
+        for j in range(1, n):
+            D[i, j] = c[i, j] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
+    j = int(np.argmin(D[-1]))
+    return float(D[-1, j]), j
 
 
 def test_open_end_dtw_matches_the_literal_recursion():

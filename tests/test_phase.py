@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from interprim.phase import IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
+from interprim.phase.dtw import IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
 
 
 def brute_force(u, v):

@@ -1,11 +1,13 @@
-"""Phase estimation by the marginal likelihood of the observation (interprim.phase_likelihood)."""
+"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood, interprim.phase.tracking)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.phase import open_end_dtw
-from interprim.phase_likelihood import estimate_phase, phase_log_likelihood, track_phase
+from interprim.phase.dtw import open_end_dtw
+from interprim._compiled import loader
+from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
+from interprim.phase.tracking import track_phase
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +89,8 @@ def test_phase_method_validated_and_saved(tmp_path, synthetic, lik_model):
 
 # --- batched / compiled evaluation against the per-candidate reference -------------------------------------------
 
-from interprim import phase_likelihood as PL  # noqa: E402
+from interprim.phase import likelihood as PL  # noqa: E402
+from interprim.phase import tracking as PT  # noqa: E402
 
 
 def _demos(n, D=4, T=120, seed=0):
@@ -123,7 +126,7 @@ def _both_paths(model, z, s, s2):
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
-    assert PL.warmup()
+    assert loader.phase_kernel(block=True) is not None
     comp = fs.loglik(z, s, s2)
     return num, comp
 
@@ -259,7 +262,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
     """The stream's phases equal the lattice tracker evaluated candidate by candidate, and (no clipping here)
     the previous ``track_phase`` chain, whose chosen speeds lie on the same lattice."""
     model = _small_model(observation, None, "shrinkage")
-    assert PL.warmup()
+    assert loader.phase_kernel(block=True) is not None
     frames = _demos(1, seed=11)[0][:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -276,7 +279,7 @@ def test_stream_phase_equals_reference_track_phase(observation):
 
 def test_stream_phase_with_clipping_equals_reference():
     model = _small_model("position", None, "shrinkage")
-    assert PL.warmup()
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -284,7 +287,7 @@ def test_stream_phase_with_clipping_equals_reference():
     ref = _reference_lattice_track(model, st._buf[: frames.shape[0]])
     np.testing.assert_allclose(got[1:], ref[1:], rtol=0, atol=1e-12)
     # a slow anchor speed: candidates below _S_MIN for the first frames (merged into one at _S_MIN)
-    tr = PL._Tracker(model)
+    tr = PT._Tracker(model)
     z = st._buf[: frames.shape[0]]
     got = [tr.step(z[:1]), tr.step(z[:2])]
     tr.v0 = 0.0015
@@ -298,15 +301,15 @@ def _slot_errors(tr, z):
     """Largest relative differences between the tracker's slots (extended frame by frame) and a recomputation
     from scratch at the same lattice speeds: statistics, log-likelihood (same rows), log-likelihood of the
     batch kernel at ``s = v (M - 1)``."""
-    from interprim import _phase_kernels as PK
+    from interprim._compiled import phase_likelihood as PK
 
     M = z.shape[0]
     fs, b = tr._fs, tr._buf
     s2 = PL.phase_noise(tr.model)
-    tmp = PL._track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+    tmp = PK.track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
     q, n_o = fs.q, fs.n_o
     err = np.zeros(4)
-    live = np.nonzero((b[0] != PL._SLOT_FREE) & (b[1] == M))[0]
+    live = np.nonzero((b[0] != PT._SLOT_FREE) & (b[1] == M))[0]
     for k in live:
         v = tr.v0 * np.exp(tr.dlog * b[0][k])
         G = tmp[3][0]
@@ -319,7 +322,7 @@ def _slot_errors(tr, z):
         for a, f in ((b[20][k], J), (b[7][k], ld), (b[18][k], tmp[18][0]), (b[19][k], tmp[19][0]),
                      (np.tril(b[6][k]), np.tril(tmp[6][0])), (b[5][k], tmp[5][0])):
             err[3] = max(err[3], np.abs(a - f).max() / np.abs(f).max())
-        ll_b = PL._KERNEL[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
+        ll_b = loader._PHASE_KERNELS[0](fs.Zh, tr.Rg, z, M, np.array([v * (M - 1)]), fs.sq, fs.Uh, fs.K0, s2, np.empty(1))[0]
         Gi, Gf = np.triu(b[3][k][:q, :q]), np.triu(G[:q, :q])
         Bi, Bf = b[3][k][:q, q4:q4 + n_o], G[:q, q4:q4 + n_o]
         err[0] = max(err[0], np.abs(Gi - Gf).max() / np.abs(Gf).max(), np.abs(Bi - Bf).max() / np.abs(Bf).max(),
@@ -336,7 +339,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
     leaving the candidate window), equal a recomputation from all frames."""
     model = ip.InteractionPrimitive(observed_dofs=[0, 1, 2, 3], n_basis=8, sigma2=1e-2, phase_method="likelihood",
                                     **kw).fit(_demos(12), dt=0.01)
-    assert PL.warmup()
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0], 10, 20)[:, model.observed_dofs_]
     st = model.stream()
     worst, n_checked = np.zeros(4), 0
@@ -355,7 +358,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
 
 def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     model = _small_model("position", 2, "shrinkage")
-    assert PL.warmup()
+    assert loader.phase_kernel(block=True) is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -364,6 +367,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     np.testing.assert_array_equal(again, got[:50])
     with monkeypatch.context() as mp:  # no compiled kernel: the same candidates scored by numpy
         mp.setattr(PL, "_kernel", lambda block=False: None)
+        mp.setattr(PT, "_kernel", lambda block=False: None)
         st.reset()
         num = np.array([st.update(f).normalised_time for f in frames])
     np.testing.assert_allclose(num, got, rtol=0, atol=1e-12)
@@ -372,6 +376,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
         if k < 40:
             with monkeypatch.context() as mp:
                 mp.setattr(PL, "_kernel", lambda block=False: None)
+                mp.setattr(PT, "_kernel", lambda block=False: None)
                 p = st2.update(f)
         else:
             p = st2.update(f)
@@ -399,7 +404,7 @@ def test_brent_search_matches_scipy_bounded_minimiser():
     minimiser that scipy.optimize.minimize_scalar(method='bounded') finds, to the requested tolerance."""
     from scipy.optimize import minimize_scalar
 
-    from interprim.phase_likelihood import _brent_min
+    from interprim.phase.likelihood import _brent_min
 
     rng = np.random.default_rng(3)
     for _ in range(40):
@@ -428,7 +433,7 @@ def test_refined_phase_is_a_local_maximum(synthetic, lik_model):
         est = estimate_phase(lik_model, z, refine=True)
         coarse = estimate_phase(lik_model, z, refine=False)
         assert est.log_posterior >= coarse.log_posterior - 1e-12
-        from interprim.phase_likelihood import _scorer, phase_noise
+        from interprim.phase.likelihood import _scorer, phase_noise
 
         sc = _scorer(lik_model, z, phase_noise(lik_model), True)
         h = 2e-3 * est.s_end

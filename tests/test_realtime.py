@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from interprim.baselines import PriorMean
+from interprim.evaluation.baselines import PriorMean
 from interprim.preprocessing import time_normalise
 from interprim.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
 

@@ -83,7 +83,7 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
 
 def test_lowrank_cv_equals_dense_conditioning():
     from interprim.gaussian import condition, fit_prior
-    from interprim.selection import _LowRankPrior, _lowrank_case
+    from interprim.gaussian import LowRankPrior, lowrank_case
 
     rng = np.random.default_rng(0)
     n_o, q, n_c = 3, 6, 2
@@ -93,9 +93,9 @@ def test_lowrank_cv_equals_dense_conditioning():
     Y = rng.standard_normal((9, n_o))
     idx = np.arange(n_o * q).reshape(n_o, q)
     for method, lam in (("shrinkage", 0.3), ("ridge", None), ("empirical", None)):
-        pr = _LowRankPrior(th, method, 1e-3, lam)
+        pr = LowRankPrior(th, method, 1e-3, lam)
         fp = fit_prior(th, method, 1e-3, shrinkage=lam)
-        means, ll = _lowrank_case(pr, n_o, q, X, Y, np.array([0.1, 2.0]), need_ll=True)
+        means, ll = lowrank_case(pr, n_o, q, X, Y, np.array([0.1, 2.0]), need_ll=True)
         for i, s2 in enumerate((0.1, 2.0)):
             post = condition(fp.mean, fp.cov, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size)
             np.testing.assert_allclose(means[i], post.mean, rtol=1e-8, atol=1e-8)

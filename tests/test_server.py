@@ -1,6 +1,6 @@
 """The streaming server against real clients on loopback (ephemeral ports, background event loop).
 
-Covers the happy path, every kind of bad input of issue 6 (each must get a clear error on its own
+Covers the happy path, every kind of bad input (each must get a clear error on its own
 session or a clean close with code + reason, and a log line, without disturbing other sessions),
 limits, the token, the HTTP side, and a corrupt model at start-up.  No timing assertions.
 """
@@ -8,7 +8,6 @@ limits, the token, the HTTP side, and a corrupt model at start-up.  No timing as
 from __future__ import annotations
 
 import argparse
-import base64
 import json
 import logging
 import os
@@ -17,7 +16,6 @@ import struct
 import time
 import urllib.error
 import urllib.request
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,164 +23,31 @@ import pytest
 pytest.importorskip("websockets")
 
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
-from websockets.sync.client import connect as _connect  # noqa: E402
 
-import interprim as ip  # noqa: E402
 from interprim.errors import ModelFileError  # noqa: E402
 from interprim.server import protocol as P  # noqa: E402
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.client import Client, ServerError  # noqa: E402
-from interprim.server.demo import letter_models, synthetic_letters  # noqa: E402
+from interprim.server.demo import synthetic_letters  # noqa: E402
 from interprim.server.models import entry_for, load_models  # noqa: E402
-from interprim.synthetic import two_agent_demos  # noqa: E402
-
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "src" / "interprim" / "server" / "static" / "protocol.schema.json"
 
 
-# ---------------------------------------------------------------------------- fixtures and helpers
-def connect(url, **kw):
-    kw.setdefault("close_timeout", 2)
-    try:
-        return _connect(url, legacy=True, **kw)
-    except TypeError:  # websockets < 16
-        return _connect(url, **kw)
-
-
-@pytest.fixture(scope="module")
-def models():
-    train = two_agent_demos(12, seed=0, frames=100)
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8).fit(train, dt=0.01)
-    one = ip.InteractionPrimitive(observed_dofs=[0], n_basis=6).fit(train, dt=0.01)
-    out = {"pair": entry_for("pair", m), "one": entry_for("one", one)}
-    out.update(letter_models(n=8, n_basis=10))
-    return out
-
-
-@pytest.fixture(scope="module")
-def test_demo():
-    return two_agent_demos(1, seed=99, frames=100)[0]
-
-
-@pytest.fixture(scope="module")
-def server(models):
-    srv = InterprimServer(models, ServerConfig(port=0, max_rate_hz=100000, rate_burst=100000))
-    with ServerThread(srv) as st:
-        yield st
-
-
-@pytest.fixture(scope="module")
-def strict(models):
-    """A server with small limits."""
-    cfg = ServerConfig(port=0, max_sessions=3, max_message_bytes=2048, max_rate_hz=50, rate_burst=5,
-                       send_queue=8, write_limit=4096, max_errors=20, max_points=100)
-    srv = InterprimServer({"pair": models["pair"]}, cfg)
-    with ServerThread(srv) as st:
-        yield st
-
-
-@pytest.fixture(scope="module")
-def validator():
-    jsonschema = pytest.importorskip("jsonschema")
-    schema = json.loads(SCHEMA_PATH.read_text())
-    cls = jsonschema.validators.validator_for(schema)
-    cls.check_schema(schema)
-    server_msg = dict(schema, **{"$ref": "#/$defs/server_message"})
-    server_msg.pop("oneOf")
-    client_msg = dict(schema, **{"$ref": "#/$defs/client_message"})
-    client_msg.pop("oneOf")
-    return cls(server_msg), cls(client_msg)
-
-
-def hello(ws, token=None):
-    msg = {"type": "hello", "version": 1}
-    if token is not None:
-        msg["token"] = token
-    ws.send(json.dumps(msg))
-    return json.loads(ws.recv(timeout=10))
-
-
-def opened(url, model="pair", **kw):
-    ws = connect(url)
-    assert hello(ws)["type"] == "welcome"
-    ws.send(json.dumps({"type": "open", "model": model, **kw}))
-    reply = json.loads(ws.recv(timeout=10))
-    assert reply["type"] == "opened", reply
-    return ws
-
-
-def rpc(ws, msg) -> dict:
-    ws.send(msg if isinstance(msg, (str, bytes)) else json.dumps(msg))
-    return json.loads(ws.recv(timeout=10))
-
-
-def frame_msg(f, **kw):
-    return json.dumps({"type": "frame", "frame": [float(v) for v in f], **kw})
-
-
-def wait_until(pred, timeout=20.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return pred()
-
-
-def n_sessions(st):
-    return st.call(lambda: len(st.server.sessions))
-
-
-def closed_with(ws, timeout=10):
-    """Read until the server closes; returns (close code, reason, messages received before)."""
-    got = []
-    try:
-        while True:
-            got.append(ws.recv(timeout=timeout))
-    except ConnectionClosed as exc:
-        rcvd = exc.rcvd
-        return (rcvd.code, rcvd.reason, got) if rcvd is not None else (None, "", got)
-
-
-class RawWS:
-    """A hand-made WebSocket client over a plain socket: sends anything, reads only when asked."""
-
-    def __init__(self, port, rcvbuf=None, path="/ws"):
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        if rcvbuf:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
-        s.settimeout(10)
-        s.connect(("127.0.0.1", port))
-        key = base64.b64encode(os.urandom(16)).decode()
-        s.sendall(
-            f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode()
-        )
-        buf = b""
-        while b"\r\n\r\n" not in buf:
-            chunk = s.recv(4096)
-            assert chunk, "server closed during the handshake"
-            buf += chunk
-        assert buf.startswith(b"HTTP/1.1 101"), buf[:100]
-        self.sock = s
-
-    def send(self, payload: bytes | str, opcode=None, fin=True):
-        if isinstance(payload, str):
-            payload, opcode = payload.encode(), opcode or 1
-        opcode = opcode or 2
-        head = bytes([(0x80 if fin else 0) | opcode])
-        n = len(payload)
-        if n < 126:
-            head += bytes([0x80 | n])
-        elif n < 65536:
-            head += bytes([0x80 | 126]) + struct.pack(">H", n)
-        else:
-            head += bytes([0x80 | 127]) + struct.pack(">Q", n)
-        mask = os.urandom(4)
-        body = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-        self.sock.sendall(head + mask + body)
-
-    def close(self):
-        self.sock.close()
+from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
+    connect,
+    models,
+    test_demo,
+    server,
+    strict,
+    validator,
+    hello,
+    opened,
+    rpc,
+    frame_msg,
+    wait_until,
+    n_sessions,
+    closed_with,
+    RawWS,
+)
 
 
 # ---------------------------------------------------------------------------- happy path
@@ -579,7 +444,7 @@ def test_http_routes(server, validator):
 
 # ---------------------------------------------------------------------------- start-up
 def _serve_parser():
-    from interprim.server import cli
+    from interprim.cli import serve as cli
 
     parser = argparse.ArgumentParser(prog="interprim")
     cli.add_parser(parser.add_subparsers(dest="command"))
@@ -629,7 +494,7 @@ def test_cli_options(tmp_path):
 def test_cli_module_is_registered():
     from interprim import cli
 
-    assert "interprim.server.cli" in cli.COMMAND_MODULES
+    assert "interprim.cli.serve" in cli.COMMAND_MODULES
 
 
 def test_protocol_helpers():
@@ -639,242 +504,3 @@ def test_protocol_helpers():
     assert P.decode_binary_frame(P.encode_binary_frame([1.5, -2.0]), 2).tolist() == [1.5, -2.0]
     with pytest.raises(ValueError):
         P.dumps({"x": float("nan")})
-
-
-# ---------------------------------------------------------------------------- worker processes
-def test_worker_processes_give_the_same_predictions(models, test_demo):
-    srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},
-                          ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
-    with ServerThread(srv) as st:
-        assert len(st.server._procs.workers) == 2
-        with Client(st.ws_url) as a, Client(st.ws_url) as b:  # consecutive session ids: different workers
-            a.open("pair", points=10, std=True)
-            b.open("pair", points=10)
-            da, db = models["pair"].model.stream(), models["pair"].model.stream()
-            for k, f in enumerate(test_demo[:30, :2]):
-                pa, pb = a.frame(f), b.frame(f, binary=True)
-                ea, eb = da.update(f), db.update(f)
-                np.testing.assert_allclose(pa["mean"], ea.trajectory(10)[:, 2:], atol=2e-6)
-                np.testing.assert_allclose(pa["std"], ea.std(10)[:, 2:], atol=2e-6)
-                np.testing.assert_allclose(pb["mean"], eb.trajectory(10)[:, 2:], atol=2e-6)
-                if k == 10:
-                    b.reset()
-                    db = models["pair"].model.stream()
-            with pytest.raises(ServerError) as e:
-                a.frame([1.0])
-            assert e.value.code == "bad_frame"
-            a.close_session()
-            with pytest.raises(ServerError) as e:
-                a.frame(test_demo[0, :2])
-            assert e.value.code == "not_open"
-            a.open("letter_c", points=5)
-            assert a.frame([0.5, 0.5])["model"] == "letter_c"
-        assert wait_until(lambda: n_sessions(st) == 0)
-
-
-def test_async_client_pipelines_frames(server, models, test_demo):
-    import asyncio
-
-    from interprim.server.client import AsyncClient
-
-    async def go():
-        c = await AsyncClient.connect(server.ws_url)
-        async with c:
-            assert c.welcome["type"] == "welcome"
-            await c.open("pair", points=8)
-            for f in test_demo[:20, :2]:  # pipelined: send all, then read all
-                await c.send_frame(f, binary=True)
-            replies = [await c.recv() for _ in range(20)]
-            await c.send_frame([1.0, 2.0, 3.0])
-            err = await c.recv_raw()
-            return replies, err
-
-    replies, err = asyncio.run(go())
-    assert [r["seq"] for r in replies] == list(range(1, 21))
-    direct = models["pair"].model.stream()
-    for f in test_demo[:20, :2]:
-        d = direct.update(f)
-    np.testing.assert_allclose(replies[-1]["mean"], d.trajectory(8)[:, 2:], atol=2e-6)
-    assert err["type"] == "error" and err["code"] == "bad_frame" and err["seq"] == 21
-
-
-def test_fair_queueing_serves_the_cheaper_session_first():
-    """The scheduler of a compute lane: among waiting frames, the session that used less compute goes first."""
-    import asyncio
-
-    from interprim.server.app import _Lane, _Session
-
-    order = []
-
-    async def run(job):
-        name, cost = job
-        order.append(name)
-        time.sleep(cost)  # compute time charged to the session
-        return name
-
-    async def go():
-        lane = _Lane(run)
-        heavy = _Session(1, None, "a", asyncio.Queue(), None)
-        light = _Session(2, None, "b", asyncio.Queue(), None)
-        # the heavy session queues first; while its first frame runs, both queue one more frame
-        f1 = lane.submit(heavy, ("heavy-1", 0.05))
-        await asyncio.sleep(0)
-        f2 = lane.submit(heavy, ("heavy-2", 0.05))
-        f3 = lane.submit(light, ("light-1", 0.0))
-        assert await f1 == "heavy-1" and await f2 == "heavy-2" and await f3 == "light-1"
-        assert heavy.vtime > light.vtime
-        # the light session, having used less compute, overtakes frames the heavy one queued earlier
-        f4 = lane.submit(heavy, ("heavy-3", 0.0))
-        f5 = lane.submit(light, ("light-2", 0.0))
-        await asyncio.gather(f4, f5)
-
-    asyncio.run(go())
-    assert order[0] == "heavy-1"
-    assert order.index("light-1") < order.index("heavy-2")
-    assert order.index("light-2") < order.index("heavy-3")
-
-
-def test_garbage_connections_are_logged(server, caplog):
-    with caplog.at_level(logging.WARNING, logger="interprim.server"):
-        s = socket.create_connection(("127.0.0.1", server.server.port), timeout=5)
-        s.sendall(b"\x00\x01garbage that is not HTTP\r\n\r\n")
-        try:
-            while s.recv(4096):
-                pass
-        except OSError:
-            pass
-        s.close()
-        assert wait_until(lambda: "bad HTTP request" in caplog.text or "no complete handshake" in caplog.text)
-
-
-def _reply_text(op, frames):
-    import re
-
-    from interprim.server.app import compute_prediction
-
-    return [re.sub(r',"compute_ms":[0-9.]+', "", compute_prediction(op, f, k + 1, 0.5 * k if k % 2 else None))
-            for k, f in enumerate(frames)]
-
-
-@pytest.mark.parametrize("std,dofs", [(False, "controlled"), (True, "all")])
-def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, dofs):
-    """compute_prediction's cached rollout (mean) and its text head give the message that
-    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their precision."""
-    from interprim.server import app
-
-    e = models["pair"]
-    cols = e.controlled_dofs if dofs == "controlled" else list(range(e.n_dofs))
-    frames = test_demo[:25, :2]
-    op = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
-    fast = [json.loads(t) for t in _reply_text(op, frames)]
-    assert op.heads[0][3].ok  # the cached rollout was checked against Prediction.trajectory and is used
-    ref_stream = e.model.stream()
-    for k, (f, msg) in enumerate(zip(frames, fast)):
-        p = ref_stream.update(f)
-        assert list(msg)[:2] == ["type", "seq"] and msg["seq"] == k + 1 and msg["model"] == "pair"
-        assert msg["columns"] == cols and (msg.get("t") == (0.5 * k if k % 2 else None))
-        for key in ("phase", "x", "speed", "duration", "log_likelihood"):
-            assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
-        # orjson: float32 written as its shortest round-trip text (rounding to float32, then the shortest
-        # text parsed as float64: <= 2**-23 ~ 1.2e-7 relative); printf %.7g: <= 5e-7 relative
-        rtol = 1.2e-7 if (app._orjson is not None and not app._FORCE_PRINTF) else 5.0001e-7
-        np.testing.assert_allclose(msg["mean"], p.trajectory(17)[:, cols], rtol=rtol, atol=1e-30)
-        np.testing.assert_allclose(msg["goal"], p.goal[cols], rtol=rtol, atol=1e-30)
-        if std:
-            np.testing.assert_allclose(msg["std"], p.std(17)[:, cols], rtol=rtol, atol=1e-30)
-    old = app._FORCE_PRINTF
-    app._FORCE_PRINTF = True  # the encoder used without orjson
-    try:
-        op2 = app._Open("pair", [e], [e.model.stream()], [cols], 17, std)
-        slow = [json.loads(t) for t in _reply_text(op2, frames)]
-    finally:
-        app._FORCE_PRINTF = old
-    for a, b in zip(fast, slow):
-        assert a.keys() == b.keys()
-        np.testing.assert_allclose(a["mean"], b["mean"], rtol=1e-6, atol=1e-7)  # %.7g: 5e-7 relative
-
-
-def test_nonfinite_predictions_are_never_encoded():
-    from interprim.server import app
-
-    for force in (False, True):
-        old = app._FORCE_PRINTF
-        app._FORCE_PRINTF = force
-        try:
-            for bad in (np.nan, np.inf, -np.inf):
-                with pytest.raises(FloatingPointError):
-                    app._json_array(np.array([[0.0, 1.0], [bad, 2.0]]))
-            assert json.loads(app._json_array(np.array([1e-5, -2.5, 0.0]))) == pytest.approx([1e-5, -2.5, 0.0])
-        finally:
-            app._FORCE_PRINTF = old
-
-
-@pytest.mark.parametrize("kind", ["asyncio", "auto"])
-def test_event_loop_choice(models, test_demo, kind):
-    from interprim.server.app import new_event_loop
-
-    with pytest.raises(ValueError):
-        ServerConfig(loop="trio").validate()
-    srv = InterprimServer({"pair": models["pair"]}, ServerConfig(port=0, loop=kind))
-    with ServerThread(srv) as st, Client(st.ws_url) as c:
-        c.open("pair", points=5)
-        assert c.frame(test_demo[0, :2])["type"] == "prediction"
-        if kind == "asyncio":
-            assert type(st.loop).__module__.startswith("asyncio")
-    ev = new_event_loop("auto")
-    try:
-        uv = pytest.importorskip("uvloop") if kind == "auto" else None
-        if uv is not None:
-            assert type(ev).__module__.startswith("uvloop")
-    finally:
-        ev.close()
-
-
-def test_inline_lane_serves_at_once_only_sessions_not_ahead():
-    """The inline lane's shortcut (compute in the session's own task) is taken only while no frame is
-    waiting and the session has not used more compute than the others; else the frame is queued."""
-    import asyncio
-
-    from interprim.server.app import _Lane, _Session
-
-    def run(job):
-        name, cost = job
-        time.sleep(cost)
-        return name
-
-    async def go():
-        lane = _Lane(run, sync=True)
-        heavy = _Session(1, None, "a", asyncio.Queue(), None)
-        light = _Session(2, None, "b", asyncio.Queue(), None)
-        assert lane.run_now(heavy, ("heavy-1", 0.02)) == "heavy-1"
-        assert lane.run_now(heavy, ("heavy-2", 0.0)) is None  # 20 ms ahead: must queue
-        f2 = lane.submit(heavy, ("heavy-2", 0.0))
-        assert lane.run_now(light, ("light-1", 0.0)) is None  # a frame is waiting: queue behind it (fair order)
-        f3 = lane.submit(light, ("light-1", 0.0))
-        order = []
-        for f in asyncio.as_completed([f2, f3]):
-            order.append(await f)
-        assert order == ["light-1", "heavy-2"]  # the lighter session first
-        assert lane.run_now(light, ("light-2", 0.0)) == "light-2"
-
-    asyncio.run(go())
-
-
-@pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
-def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
-    """Worker-process replies of several hundred kB (many points + band) arrive whole under either
-    event loop (uvloop switches the pipe to non-blocking mode: a regression made it a 'dead worker')."""
-    if loop == "uvloop":
-        pytest.importorskip("uvloop")  # declared in the [serve] extra on Linux and macOS
-    srv = InterprimServer({"pair": models["pair"]}, ServerConfig(port=0, processes=1, loop=loop, max_points=5000,
-                                                                   max_rate_hz=100000, rate_burst=100000))
-    with ServerThread(srv) as st, Client(st.ws_url) as big, Client(st.ws_url) as small:
-        big.open("pair", points=5000, std=True)
-        small.open("pair", points=10)
-        ref = models["pair"].model.stream()
-        for f in test_demo[:12, :2]:
-            pb, ps = big.frame(f), small.frame(f)
-            e = ref.update(f)
-            assert pb["type"] == "prediction" and len(pb["mean"]) == 5000 and len(pb["std"]) == 5000
-            np.testing.assert_allclose(ps["mean"], e.trajectory(10)[:, 2:], atol=2e-6)
-        assert not st.server._procs.workers[0].dead

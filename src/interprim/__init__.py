@@ -18,8 +18,8 @@ __version__ = "0.1.0"
 
 _LAZY = {
     "InteractionPrimitive": "interprim.primitive",
-    "Prediction": "interprim.primitive",
-    "Stream": "interprim.primitive",
+    "Prediction": "interprim.prediction",
+    "Stream": "interprim.stream",
     "Recogniser": "interprim.recognition",
     "LearnedInteraction": "interprim.learned",
     "LearnedPhase": "interprim.phase_learned",

@@ -413,11 +413,11 @@ class LowRankConditioner:
 
         With ``state`` (an object with arrays ``R`` (D_o, q, q), ``K`` (r, r), ``TiU`` (D_o, q, r) and ``A``
         (D_o, q)), the same numbers come from
-        :func:`interprim._kernels.lowrank_condition_seed`, which also leaves there the factors that
-        :func:`interprim._kernels.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
+        :func:`interprim._compiled.conditioning.lowrank_condition_seed`, which also leaves there the factors that
+        :func:`interprim._compiled.conditioning.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
         (``sum_i log det T_i``) and ``state.seeded = True``.
         """
-        from ._kernels import lowrank_condition_mean, lowrank_condition_seed
+        from ._compiled.conditioning import lowrank_condition_mean, lowrank_condition_seed
 
         if out is None:
             out = np.empty(self.P)
@@ -482,3 +482,67 @@ class LowRankConditioner:
             out[np.ix_(idx, idx)] += blocks[i]
         out[self.other, self.other] += self.d_other
         return out
+
+
+class LowRankPrior:
+    """``N(mean, diag(d) + W^T W)``: the covariance of :func:`~interprim.gaussian.fit_prior` in factored form.
+
+    Every covariance method of ``fit_prior`` is ``(1 - lam) S + lam diag(S) + floor I`` with the
+    sample covariance ``S = Xc^T Xc / n`` of ``n`` demonstrations (``lam = 0`` for ``"ridge"`` and
+    ``"empirical"``), i.e. a diagonal plus a rank-``n`` term.  Conditioning then needs only
+    ``k x k`` eigendecompositions per observed DoF and ``n x n`` solves (Woodbury), for all
+    ``sigma^2`` candidates at once, instead of a ``(D_o k)``-sized eigendecomposition.
+    """
+
+    def __init__(self, thetas, method, ridge, lam):
+        X = np.asarray(thetas, dtype=np.float64)
+        n, P = X.shape
+        self.mean = X.mean(axis=0)
+        Xc = X - self.mean
+        diag = np.sum(Xc * Xc, axis=0) / n
+        scale = float(np.mean(diag)) if P else 0.0
+        floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
+        lam = 0.0 if (method != "shrinkage" or lam is None) else float(lam)
+        self.d = lam * diag + floor
+        self.W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
+
+
+def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False):
+    """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation."""
+    L, zc = _compress(X.T @ X, X.T @ Y, tol=1e-10)
+    k = L.shape[0]
+    no_q = n_o * q
+    mu_o = pr.mean[:no_q].reshape(n_o, q)
+    d_o = pr.d[:no_q].reshape(n_o, q)
+    W_o = pr.W[:, :no_q].reshape(-1, n_o, q)  # (n, n_o, q)
+    # block i of B = L diag(d_i) L^T, eigendecomposed per observed DoF
+    B = np.einsum("kq,iq,jq->ikj", L, d_o, L)  # (n_o, k, k)
+    E, V = np.linalg.eigh(B)  # (n_o, k), (n_o, k, k)
+    E = np.clip(E, 0.0, None)
+    LW = np.einsum("kq,niq->ikn", L, W_o)  # (n_o, k, n)  = L W_i^T
+    Ut = np.einsum("ikj,ikn->ijn", V, LW).reshape(n_o * k, -1)  # V_i^T L W_i^T, stacked
+    r = (zc - L @ mu_o.T).T  # (n_o, k)
+    rt = np.einsum("ikj,ik->ij", V, r).reshape(-1)  # (n_o k,)
+    e = E.reshape(-1)
+    s2 = np.asarray(s2, dtype=np.float64)
+    g = 1.0 / (e[None, :] + s2[:, None])  # (S2, n_o k)
+    nW = Ut.shape[1]
+    C = np.einsum("ks,nk,kt->nst", Ut, g, Ut)
+    C[:, np.arange(nW), np.arange(nW)] += 1.0
+    gr = g * rt[None, :]
+    sol = np.linalg.solve(C, (gr @ Ut)[:, :, None])[:, :, 0]  # (S2, n)
+    at = gr - g * (sol @ Ut.T)  # A^-1 r in the eigenbases, (S2, n_o k)
+    means = ll = None
+    if need_mean:
+        alpha = np.einsum("ikj,sij->sik", V, at.reshape(-1, n_o, k))  # back to the compressed basis
+        v = np.einsum("kq,sik->siq", L, alpha).reshape(len(s2), no_q)  # Lb^T alpha
+        means = pr.mean[None, :] + (v @ pr.W[:, :no_q].T) @ pr.W
+        means[:, :no_q] += v * pr.d[None, :no_q]
+    if need_ll:
+        resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
+        resid_perp = max(resid_total - float(r.reshape(-1) @ r.reshape(-1)), 0.0)
+        n_obs, dk = Y.size, n_o * k
+        logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
+        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2
+                     + np.einsum("sk,k->s", at, rt))
+    return means, ll

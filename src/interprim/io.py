@@ -249,14 +249,13 @@ def _read_archive(path: Path):
     return meta, data
 
 
-def load_model(path):
-    """Read a model written by :func:`save_model` (format version 1 or 2; no pickle, every array checked)."""
-    from .primitive import InteractionPrimitive
-
+def load_model(path, model_class):
+    """Read a model written by :func:`save_model` (format version 1 or 2; no pickle, every array checked) as a
+    ``model_class`` (:class:`~interprim.primitive.InteractionPrimitive`)."""
     path = Path(path)
     meta, data = _read_archive(path)
     try:
-        model = InteractionPrimitive(**meta["params"])
+        model = model_class(**meta["params"])
         model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
         model.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
         model.n_dofs_ = int(meta["n_dofs"])

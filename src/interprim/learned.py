@@ -13,7 +13,7 @@ clock, a response better than the mean):
 
 The phase error the coupling is trained with is the learned phase's cross-validated error at each elapsed
 time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The prediction has the small
-interface every method of :mod:`interprim.realtime` and :mod:`interprim.baselines` shares: ``trajectory(n)``,
+interface every method of :mod:`interprim.realtime` and :mod:`interprim.evaluation.baselines` shares: ``trajectory(n)``,
 ``std(n)`` on normalised time, and ``normalised_time``, ``duration``, ``phase`` for placing it in seconds.
 
 It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP, no rollout from a

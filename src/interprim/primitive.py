@@ -16,20 +16,21 @@ back to the demonstrations' column order.
 
 from __future__ import annotations
 
-import math
 import numbers
 import warnings
 
 import numpy as np
 
-from ._validation import as_2d_finite, as_frame, check_positive, check_times
+from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
 from .errors import NotFittedError, OutOfRangeWarning
-from . import _fast
-from .gaussian import GaussianPrior, LowRankConditioner, Posterior, condition, fit_prior, sample
-from .phase import IncrementalDTW, open_end_dtw
-from .preprocessing import PCA, derivatives, resample_uniform, savgol_window, time_normalise
+from ._compiled import loader
+from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
+from .phase import estimate_phase, open_end_dtw
+from .prediction import Prediction
+from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
+from .stream import Stream
 
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
@@ -97,7 +98,7 @@ class InteractionPrimitive:
         How ``predict`` estimates the phase: the maximum of the marginal
         likelihood of the observed positions under the learned prior over
         candidate phases, with a log-normal prior on the partner's speed learned
-        from the demonstrations (:mod:`interprim.phase_likelihood`; ``Stream`` uses a
+        from the demonstrations (:mod:`interprim.phase.likelihood`; ``Stream`` uses a
         local search around its previous estimate), or the paper's open-end DTW
         (Eq. 5-9).  The likelihood is the default: on demonstrations that differ in
         goal, DTW confuses "further along" with "aiming further" (phase errors
@@ -310,8 +311,8 @@ class InteractionPrimitive:
             Zg = self._to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
             # DMP parameters (Eq. 3-4), normalised time s in [0, 1]; derivatives along time (axis 1)
             rdofs = slice(0, n_o) if want_resid else slice(0, 0)
-            if self.smoothing_window is None and _fast.ready():  # one compiled pass: derivatives + Eq. 3
-                from ._kernels import forcing_targets_batch
+            if self.smoothing_window is None and loader.ready():  # one compiled pass: derivatives + Eq. 3
+                from ._compiled.observation import forcing_targets_batch
 
                 F = np.empty_like(Zg)
                 yd0 = np.empty((len(idx), Zg.shape[2]))
@@ -540,18 +541,8 @@ class InteractionPrimitive:
             if not 0.0 < ph <= 1.0:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
             return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
-        if self.phase_method == "likelihood" and z.shape[0] >= 2:
-            from .phase_likelihood import estimate_phase
-
-            # no DTW seed: the 12-point grid + Brent finds the same maximiser as a 20-point grid seeded with
-            # the DTW phase (within 3e-4 on 720 partial observations); D(n*, M) is computed only if asked for
-            N1 = self.reference_.shape[0] - 1
-            est = estimate_phase(self, z)
-            ref, zc = self.reference_, z.copy()  # a copy: z may be the caller's array, reused after the call
-            return self._predict_latent(z, est.s_end * N1, lambda: open_end_dtw(ref, zc, return_path=False).cost,
-                                        robot_state)
-        res = open_end_dtw(self.reference_, z, return_path=False)
-        return self._predict_latent(z, res.n_star, res.cost, robot_state)
+        n_star, cost = estimate_phase(self, z, self.phase_method)
+        return self._predict_latent(z, n_star, cost, robot_state)
 
     def _robot_start(self, robot_state):
         n_o = self.n_observed_latent_
@@ -638,17 +629,19 @@ class InteractionPrimitive:
         give the same numbers (tested to 1e-12).
         """
         M = z.shape[0]
-        if M >= 3 and _fast.ready():
+        if M >= 3 and loader.ready():
+            from ._compiled.observation import StatsWorkspace, start_position
+
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)
                 ws = workspace if workspace is not None else \
-                    _fast.StatsWorkspace(M, z.shape[1], self._q, "position")
-                y0 = _fast.start_position(z, self.smoothing_window)
+                    StatsWorkspace(M, z.shape[1], self._q, "position")
+                y0 = start_position(z, self.smoothing_window)
                 v0 = self.start_velocity_[: self.n_observed_latent_]
                 G, B, yy = ws.position_stats(z, M, s_end, y0, v0, self.rollout_)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), y0
             if self.observation == "forcing" and self.smoothing_window is None:
-                ws = workspace if workspace is not None else _fast.StatsWorkspace(M, z.shape[1], self._q)
+                ws = workspace if workspace is not None else StatsWorkspace(M, z.shape[1], self._q)
                 G, B, yy = ws.forcing_stats(z, M, s_end, self)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0].copy()
         X, Y, y0 = self._observation(z, s_end)
@@ -677,7 +670,7 @@ class InteractionPrimitive:
         G, B, yy, n = stats
         cond = self._conditioner()
         if cond is not None:
-            res = cond.mean_compiled(G, B, self.sigma2_, yy, n, state=seed) if _fast.ready() else \
+            res = cond.mean_compiled(G, B, self.sigma2_, yy, n, state=seed) if loader.ready() else \
                 cond.mean_numpy(G, B, self.sigma2_, yy, n)
             if res is not None:
                 cov = cond.cov(G, self.sigma2_) if need_cov else None
@@ -703,7 +696,7 @@ class InteractionPrimitive:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
         from .io import load_model
 
-        return load_model(path)
+        return load_model(path, cls)
 
     def __repr__(self):
         import inspect
@@ -713,497 +706,3 @@ class InteractionPrimitive:
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         return f"InteractionPrimitive({shown})"
-
-
-class Prediction:
-    """The model's belief about the whole interaction after a partial observation.
-
-    Attributes
-    ----------
-    phase : float
-        Fraction of the movement already seen, in (0, 1] (DTW, Eq. 8).
-    x : float
-        Canonical-system phase ``exp(-alpha_x * phase)`` (Eq. 9).
-    speed : float
-        Partner's speed relative to the mean demonstration (1 = as fast).
-    duration : float
-        Estimated duration of the whole movement in seconds.
-    tau : float
-        Time scaling ``1 / duration`` of Eq. 1.
-    n_star, dtw_cost : int, float
-        Matched reference frame (0-based) and ``D(n*, M)``.
-    n_observed : int
-        Number of observed frames used.
-    log_likelihood : float
-        ``log p(observation | model)`` at the estimated phase (0 when
-        nothing was conditioned on); compare across models for recognition.
-    posterior_mean, posterior_cov : ndarray
-        ``p(theta | tau_o)`` in the internal (latent) parameter layout.
-    """
-
-    def __init__(self, model, post: Posterior, stats, s_end, duration, n_star, cost, n_observed, y0_obs,
-                 robot_start, last_obs):
-        self._m = model
-        self._post = post
-        self._stats = stats
-        self.normalised_time = float(s_end)
-        N = model.reference_.shape[0]
-        self.phase = float(max(s_end, 0.5 / (N - 1)))
-        self.x = math.exp(-float(model.alpha_x) * self.phase)  # Eq. 9 (canonical_phase, scalar)
-        self.duration = float(duration)
-        self.tau = 1.0 / self.duration
-        self.speed = float(model.mean_duration_ / self.duration)
-        self.n_star = int(round(n_star))
-        self._dtw_cost = cost if callable(cost) else float(cost)
-        self.n_observed = int(n_observed)
-        self.log_likelihood = float(post.log_likelihood)
-        self._y0_obs = np.array(y0_obs, dtype=np.float64)  # a copy (see _last_obs)
-        self._robot_start = robot_start
-        self._last_obs = np.array(last_obs, dtype=np.float64)  # a copy: it may be a row of the caller's array
-        #: largest standardised distance of an observed frame from the training frames (set by predict/stream)
-        self.input_distance = float("nan")
-        #: whether that distance passed the model's limit (wrong units, columns or frame of reference?)
-        self.out_of_range = False
-
-    @property
-    def dtw_cost(self) -> float:
-        """``D(n*, M)`` of the open-end DTW of the observation against the reference (Eq. 5-8); with the
-        likelihood phase of a batch ``predict`` it is computed on first access."""
-        if callable(self._dtw_cost):
-            self._dtw_cost = float(self._dtw_cost())
-        return self._dtw_cost
-
-    # -- parameters
-    @property
-    def posterior_mean(self) -> np.ndarray:
-        return self._post.mean
-
-    @property
-    def posterior_cov(self) -> np.ndarray:
-        if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
-            self._post = self._m._condition(self._stats, need_cov=True)
-        return self._post.cov
-
-    @property
-    def goal(self) -> np.ndarray:
-        """Posterior mean goal attractor ``g`` of every DoF, in data columns, shape ``(D,)``."""
-        m = self._m
-        q = m._q
-        g_lat = self._post.mean.reshape(m.n_latent_, q)[:, -1]
-        M, off = m._latent_map()
-        return M @ g_lat + off
-
-    def _start_states(self):
-        m = self._m
-        n_o = m.n_observed_latent_
-        y0 = np.concatenate([self._y0_obs, self._robot_start[0]])
-        v0 = np.concatenate([m.start_velocity_[:n_o], self._robot_start[1]])
-        return y0, v0
-
-    def _latent_traj(self, Th, s_out, y0, v0, s0=0.0):
-        """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``."""
-        free, H = self._m.rollout_.design(s0, s_out)
-        return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
-
-    def _theta(self, flat=None):
-        m = self._m
-        flat = self._post.mean if flat is None else flat
-        return flat.reshape(*flat.shape[:-1], m.n_latent_, m._q)
-
-    # -- trajectories
-    def trajectory(self, n: int = 100) -> np.ndarray:
-        """Posterior mean of all DoFs over the whole movement, shape ``(n, D)``.
-
-        Uniform normalised-time grid from 0 to 1; the observed agent starts at
-        its first observed frame, the controlled agent at ``robot_state``.
-        """
-        m = self._m
-        s = np.linspace(0.0, 1.0, int(n))
-        y0, v0 = self._start_states()
-        lat = self._latent_traj(self._theta(), s, y0, v0)
-        M, off = m._latent_map()
-        return lat @ M.T + off
-
-    def _calibration_scale(self):
-        """Per-column factors of the calibrated predictive std (:mod:`interprim.calibration`), or ``None``."""
-        m = self._m
-        cal = getattr(m, "calibration_", None)
-        if cal is None:
-            return None
-        c_o, c_c = cal.factors(self.normalised_time)
-        f = np.empty(m.n_dofs_)
-        f[m.observed_dofs_] = c_o
-        f[m.controlled_dofs_] = c_c
-        return f
-
-    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
-        """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
-
-        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled per agent by the model's
-        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations, at this
-        prediction's phase), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what
-        happens; ``False``, or a model without calibration: the posterior std itself.
-        """
-        sd = self._posterior_std(n)
-        f = self._calibration_scale() if calibrated else None
-        return sd if f is None else sd * f
-
-    def _posterior_std(self, n: int) -> np.ndarray:
-        m = self._m
-        s = np.linspace(0.0, 1.0, int(n))
-        _, H = m.rollout_.design(0.0, s)
-        C = self.posterior_cov.reshape(m.n_latent_, m._q, m.n_latent_, m._q)
-        S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
-        M, _ = m._latent_map()
-        var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
-        return np.sqrt(np.clip(var, 0.0, None))
-
-    def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
-        """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
-        model their spread about :meth:`trajectory` is scaled per agent as in :meth:`std`."""
-        m = self._m
-        th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
-        s = np.linspace(0.0, 1.0, int(n))
-        y0, v0 = self._start_states()
-        lat = self._latent_traj(self._theta(th), s, y0, v0)
-        M, off = m._latent_map()
-        out = lat @ M.T + off
-        f = self._calibration_scale()
-        if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
-            mean = self.trajectory(int(n))
-            out = mean + (out - mean) * f
-        return out
-
-    def response(self, n: int = 100, state=None):
-        """The controlled agent's mean movement from the current phase to the end.
-
-        Parameters
-        ----------
-        n : int
-            Number of points from the current phase to the end.
-        state : array_like, optional
-            Current robot position ``(n_c,)`` or position and velocity
-            ``(2, n_c)`` (velocity per second); default: the mean prediction's
-            state at the current phase.
-
-        Returns
-        -------
-        t : ndarray, shape (n,)
-            Seconds from now, at the partner's estimated speed.
-        y : ndarray, shape (n, len(controlled_dofs))
-        """
-        if not _fast.ready():
-            return self._response_reference(n, state)
-        kern = _RESPONSE[0] if _RESPONSE else _load_response()
-        m = self._m
-        n = int(n)
-        n_o = m.n_observed_latent_
-        s0 = self.normalised_time
-        th = self._post.mean.reshape(m.n_latent_, m._q)[n_o:]
-        if state is None:
-            rs = self._robot_start
-            z0 = rs[2] if len(rs) > 2 else np.vstack(rs[:2])
-            at_s0 = False
-        else:
-            y0, v0 = m._robot_start(state)
-            z0 = np.vstack([y0, v0 / m.mean_duration_ * self.duration])
-            at_s0 = True
-        ro = m.rollout_
-        t = np.empty(n)
-        lat = kern(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])), self.duration, t)
-        Mc, offc = m._controlled_map()
-        return t, (lat if Mc is None else lat @ Mc + offc)
-
-    def _response_reference(self, n: int = 100, state=None):
-        """:meth:`response` with :meth:`interprim.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
-        m = self._m
-        n_o = m.n_observed_latent_
-        s0 = self.normalised_time
-        s = np.linspace(s0, 1.0, int(n))
-        th = self._theta()[n_o:]
-        if state is None:
-            rs = self._robot_start
-            free, H = m.rollout_.design(0.0, np.array([s0]))
-            freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
-            z0 = np.vstack([rs[0], rs[1]])
-            y0 = (free @ z0 + H @ th.T)[0]
-            v0 = (freed @ z0 + Hd @ th.T)[0]
-        else:
-            y0, v0 = m._robot_start(state)
-            v0 = v0 / m.mean_duration_ * self.duration
-        lat = self._latent_traj(th, s, y0, v0, s0=s0)
-        M, off = m._latent_map()
-        ctrl = m.controlled_dofs_
-        y = lat @ M[ctrl, n_o:].T + off[ctrl]
-        return (s - s0) * self.duration, y
-
-    def completion(self, n: int = 100):
-        """Pattern completion (paper Fig. 3): continue the observed agent from its last observed frame.
-
-        Returns ``(s, y)``: normalised times from the current phase to 1 and
-        positions ``(n, len(observed_dofs))``.
-        """
-        m = self._m
-        n_o = m.n_observed_latent_
-        s0 = self.normalised_time
-        s = np.linspace(s0, 1.0, int(n))
-        th = self._theta()[:n_o]
-        # velocity at the current phase from the posterior mean movement
-        freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
-        z0 = np.vstack([self._y0_obs, m.start_velocity_[:n_o]])
-        v0 = (freed @ z0 + Hd @ th.T)[0]
-        lat = self._latent_traj(th, s, self._last_obs, v0, s0=s0)
-        M, off = m._latent_map()
-        obs = m.observed_dofs_
-        return s, lat @ M[obs, :n_o].T + off[obs]
-
-    def __repr__(self):
-        return (f"Prediction(phase={self.phase:.3f}, speed={self.speed:.3f}, n_observed={self.n_observed}, "
-                f"log_likelihood={self.log_likelihood:.3g})")
-
-
-_RESPONSE: list = []
-
-
-def _load_response():
-    from ._kernels import response_positions
-
-    _RESPONSE.append(response_positions)
-    return response_positions
-
-
-class _IncrementalConditioning:
-    """What a :class:`Stream` keeps between frames to update Eq. 16-18 instead of recomputing it.
-
-    The statistics ``G``, ``B``, ``|Y|^2`` of the frames seen (position observation), the upper
-    Cholesky factors ``R`` of ``T_i = sigma^2 I + S_i G S_i``, ``TiU_i = T_i^{-1} Uh_i``,
-    ``A_i = T_i^{-1} S_i c_i``, the lower triangle of the ``r x r`` matrix ``K`` and
-    ``sum_i log det T_i`` of :class:`~interprim.gaussian.LowRankConditioner`, for
-    ``M`` frames at phases ``v m`` (``m = 0 .. M - 1``) from the start ``[y0; v0]``.  Seeded by the
-    from-scratch path (:func:`interprim._kernels.lowrank_condition_seed`), extended by one frame by
-    :func:`interprim._kernels.lowrank_condition_step`.  Buffers are allocated once.
-    """
-
-    def __init__(self, model, cond):
-        self.model = model
-        self.cond = cond
-        self.sigma2 = model.sigma2_
-        self.rollout = model.rollout_
-        self.start_velocity = model.start_velocity_
-        Do, q, r = cond.D_o, cond.q, cond.r
-        self.v0 = np.ascontiguousarray(model.start_velocity_[:Do], dtype=np.float64)
-        self.G = np.zeros((q, q))
-        self.B = np.zeros((q, Do))
-        self.R = np.zeros((Do, q, q))
-        self.K = np.zeros((r, r))
-        self.TiU = np.zeros((Do, q, r))
-        self.A = np.zeros((Do, q))
-        self.Kf = np.zeros((r, r))
-        self.vec = np.zeros((6, max(q, r, Do)))
-        self.C = np.zeros((Do, q))
-        self.invalidate()
-
-    def invalidate(self):
-        self.seeded = False
-        self.M = -1
-        self.v = 0.0
-        self.yy = 0.0
-        self.ld_T = 0.0
-        self.y0 = None
-        self.wp = None
-
-    def matches(self, model, cond) -> bool:
-        return (cond is self.cond and model.sigma2_ == self.sigma2 and model.rollout_ is self.rollout
-                and model.start_velocity_ is self.start_velocity)
-
-
-class Stream:
-    """Online use of a fitted :class:`InteractionPrimitive`: one observed frame at a time.
-
-    Each :meth:`update` adds one column to the open-end DTW (Eq. 5-8, ``O(N D)``)
-    and conditions on all frames seen so far at their new phases (Eq. 15-18).
-    The frame buffer is preallocated and grows by doubling.
-
-    With the likelihood phase (the default) the phase is chosen on a lattice of speeds, so
-    while the chosen speed stays the same the frames already seen keep their phases and the new
-    frame only adds one row to the observation: then Eq. 16-18 are updated by rank one
-    (:func:`interprim._kernels.lowrank_condition_step`, independent of the number of frames)
-    instead of recomputed; the result is the same (to rounding).  Everything else (a new speed,
-    a phase clipped at 1, a start position still being smoothed, ``need_cov=True``, PCA, the
-    forcing observation, a dense prior, no compiled kernels) recomputes from scratch and re-seeds.
-    ``incremental = False`` (class or instance attribute) always recomputes.
-    """
-
-    incremental = True
-
-    def __init__(self, model: InteractionPrimitive, robot_state=None):
-        self.model = model
-        self.robot_state = robot_state
-        self._robot_start = self._with_z0(model._robot_start(robot_state))
-        self._dtw = IncrementalDTW(model.reference_)
-        cap = max(2 * model.reference_.shape[0], 16)
-        self._buf = np.empty((cap, model.n_observed_latent_))
-        # streaming needs the compiled per-frame step: load the kernels now (see interprim._fast)
-        self._ws = _fast.StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation) \
-            if _fast.warmup() else None
-        self._n = 0
-        self._tracker = None  # likelihood phase: interprim.phase_likelihood._Tracker (created on first use)
-        self._s_prev = None
-        self._inc = None  # _IncrementalConditioning (created on first use)
-        self.n_incremental = 0  # frames conditioned by the rank-1 update (the rest from scratch)
-        self._max_dist = 0.0  # largest standardised distance of a frame since reset (out-of-range check)
-        self._warned = False
-
-    @property
-    def n_frames(self) -> int:
-        return self._n
-
-    def reset(self, robot_state=None):
-        """Forget all frames (start a new interaction)."""
-        self._dtw.reset()
-        self._n = 0
-        self._s_prev = None
-        self._max_dist = 0.0
-        self._warned = False
-        if self._tracker is not None:
-            self._tracker.reset()
-        if self._inc is not None:
-            self._inc.invalidate()
-        if robot_state is not None:
-            self.robot_state = robot_state
-            self._robot_start = self._with_z0(self.model._robot_start(robot_state))
-
-    @staticmethod
-    def _with_z0(rs):
-        """``(y0, v0, [y0; v0])``: the stacked start state is reused by every :meth:`Prediction.response`."""
-        return (rs[0], rs[1], np.vstack([rs[0], rs[1]]))
-
-    def update(self, frame, need_cov: bool = False) -> Prediction:
-        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
-
-        See :meth:`_update` for the work per frame.  The prediction's ``input_distance`` is the largest
-        standardised distance of any frame since the last :meth:`reset` from the training frames, and
-        ``out_of_range`` says whether it passed the model's limit (a warning is issued the first time).
-        """
-        p = self._update(frame, need_cov)
-        m = self.model
-        mean = getattr(m, "input_mean_", None)
-        if mean is not None:
-            d = float(np.max(np.abs(np.asarray(frame, dtype=np.float64) - mean) / m.input_std_))
-            self._max_dist = max(self._max_dist, d)
-            p.input_distance = self._max_dist
-            p.out_of_range = self._max_dist > m.input_limit_
-            if p.out_of_range and not self._warned:
-                self._warned = True
-                m._mark_range(p, self._max_dist)
-        return p
-
-    def _update(self, frame, need_cov: bool = False) -> Prediction:
-        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
-
-        The posterior mean is computed now; the covariance only when asked
-        for (:attr:`Prediction.posterior_cov`, :meth:`Prediction.std`, ...) or
-        with ``need_cov=True``.  Work per frame: one DTW column ``O(N D_o)``,
-        the observation statistics ``O(M q (q + D_o))`` for the ``M`` frames
-        seen (every frame moves to a new phase), and a conditioning step
-        independent of ``M``; with the likelihood phase, while the estimated
-        speed stays on the same lattice point, only the new frame's row:
-        ``O(D_o (q^2 + q r) + r^3)`` for statistics and conditioning (see
-        :class:`Stream`).  No buffer grows with ``M`` except the frame buffer
-        itself (doubling).
-        """
-        m = self.model
-        n_cols = len(m.observed_dofs_)
-        if (m.pca_observed_ is None and type(frame) is np.ndarray and frame.dtype == np.float64
-                and frame.shape == (n_cols,)):
-            f = frame  # validated (finite) by the DTW step below, before anything is stored
-            n_star, cost = self._dtw.update(f, check=True)
-        else:
-            f = as_frame(frame, "frame", n_cols)
-            if m.pca_observed_ is not None:
-                f = m.pca_observed_.transform(f[None])[0]
-            n_star, cost = self._dtw.update(f, check=False)
-        if self._n == self._buf.shape[0]:
-            self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
-        self._buf[self._n] = f
-        self._n += 1
-        if m.phase_method == "likelihood":  # local search around the previous estimate, on a lattice of speeds
-            tr = self._tracker
-            if tr is None or tr.model is not m:
-                from .phase_likelihood import _Tracker
-
-                self._tracker = tr = _Tracker(m)
-            self._s_prev = tr.step(self._buf[: self._n])
-            n_star = self._s_prev * (m.reference_.shape[0] - 1)
-        z = self._buf[: self._n]
-        inc = self._inc
-        if inc is not None and inc.M == self._n - 1 and not need_cov:
-            p = self._predict_incremental(z, n_star, cost)
-            if p is not None:
-                return p
-        seed = self._seed()
-        p = m._predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
-                              workspace=self._ws, seed=seed)
-        if seed is not None and seed.seeded:
-            G, B, yy, _ = p._stats
-            np.copyto(seed.G, G)
-            np.copyto(seed.B, B)
-            seed.yy = float(yy)
-            seed.y0 = np.ascontiguousarray(p._y0_obs, dtype=np.float64)
-            seed.M = self._n
-            seed.v = p.normalised_time / (self._n - 1)
-            seed.wp = savgol_window(self._n, m.smoothing_window)
-        return p
-
-    def _seed(self):
-        """The incremental state to (re)seed by this frame's from-scratch conditioning, or ``None``."""
-        inc = self._inc
-        if inc is not None:
-            inc.invalidate()
-        m = self.model
-        if not (self.incremental and m.phase_method == "likelihood" and m.observation == "position"
-                and m.pca_observed_ is None and self._ws is not None and self._n >= 3 and _fast.ready()):
-            return None
-        cond = m._conditioner()
-        if cond is None:
-            return None
-        if inc is None or not inc.matches(m, cond):
-            self._inc = inc = _IncrementalConditioning(m, cond)
-        return inc
-
-    def _predict_incremental(self, z, n_star, cost):
-        """This frame's :class:`Prediction` by the rank-1 update of Eq. 16-18, or ``None`` when it does not apply
-        (the frames seen moved to other phases, or the start changed; see :class:`Stream`)."""
-        from ._kernels import lowrank_condition_step
-
-        m = self.model
-        inc = self._inc
-        M = self._n
-        cond = m._conditioner()
-        if not (self.incremental and inc.matches(m, cond) and M >= m.min_observed):
-            return None
-        s_end, duration = m._phase_info(n_star, M)
-        v = s_end / (M - 1)
-        # same speed: frame j of the from-scratch statistics sits at j s_end / (M - 1) = v j (to rounding)
-        if not (s_end > 0 and abs(v - inc.v) <= 1e-12 * inc.v):
-            return None
-        if m.smoothing_window is not None and savgol_window(M, m.smoothing_window) != inc.wp:
-            return None  # the smoothed start y0 still changes
-        s2 = inc.sigma2
-        ro = inc.rollout
-        out = np.empty(cond.P)
-        dld, ld_K, resid, yy = lowrank_condition_step(z[M - 1], s_end, inc.y0, inc.v0, ro._Z, ro._powers, s2, inc.yy,
-                                                      cond.sq, cond.Uh, cond.mean, cond.mu_o, cond.obs_flat,
-                                                      cond.other, cond.Uc, inc.G, inc.B, inc.R, inc.K, inc.TiU,
-                                                      inc.A, inc.Kf, inc.vec, inc.C, out)
-        if not np.isfinite(ld_K):
-            inc.invalidate()
-            return None
-        inc.ld_T += dld
-        inc.yy = yy
-        inc.M = M  # inc.v stays the seeding frame's speed: no drift of the tolerance above
-        n = M * cond.D_o
-        post = Posterior(out, None, cond._loglik(inc.ld_T, ld_K, resid, s2, n))
-        self.n_incremental += 1
-        return Prediction(m, post, (inc.G.copy(), inc.B.copy(), yy, n), s_end, duration, n_star, cost, M, inc.y0,
-                          self._robot_start, z[-1])

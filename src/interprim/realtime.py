@@ -3,7 +3,7 @@
 The paper's Fig. 7 compares predictions with the truth on a normalised-time grid, which hides every
 timing error: a method that predicts the right shape at the wrong speed looks perfect.  A robot needs
 the partner's positions *in seconds from now*.  This module measures that, for any estimator with the
-small interface of :mod:`interprim.baselines` (``fit(demos, dt)``, ``predict(partial)`` returning an
+small interface of :mod:`interprim.evaluation.baselines` (``fit(demos, dt)``, ``predict(partial)`` returning an
 object with ``trajectory(n)``, ``std(n)`` and, when it estimates timing, ``phase`` and ``duration``),
 on any set of demonstrations (built-in data or a user's own recordings).
 
@@ -211,9 +211,12 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     sets = folds(len(demos), k)
     it = sets
     if progress:
-        from tqdm import tqdm
-
-        it = tqdm(sets, desc="folds", unit="fold")
+        try:
+            from tqdm import tqdm  # the [experiments] extra
+        except ImportError:
+            tqdm = None
+        if tqdm is not None:
+            it = tqdm(sets, desc="folds", unit="fold")
     for held in it:
         train = [d for i, d in enumerate(demos) if i not in set(held)]
         for first, (name, factory) in enumerate(make_estimators.items()):
@@ -274,7 +277,7 @@ def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, pha
     """Factories of the methods compared by default: the library's defaults (``ip``), learned timing + coupling
     (``learned``: :class:`~interprim.learned.LearnedInteraction`), the paper exactly (``ip-paper``: forcing
     observation, DTW phase, ``sigma2="auto"``), nearest neighbour and the prior mean."""
-    from .baselines import NearestNeighbour, PriorMean
+    from .evaluation.baselines import NearestNeighbour, PriorMean
     from .primitive import InteractionPrimitive
 
     obs = [int(i) for i in observed_dofs]

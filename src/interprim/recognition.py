@@ -7,7 +7,7 @@ probability of interaction ``k`` after observing the prefix ``y_1..y_M`` is::
     p(k | y) ∝ p(k) max_s p(y | s, k) p(s | k)
 
 the marginal likelihood of the observed *positions* under model ``k`` at its
-own most probable phase ``s`` (:func:`interprim.phase_likelihood.estimate_phase`,
+own most probable phase ``s`` (:func:`interprim.phase.likelihood.estimate_phase`,
 which includes the speed prior ``p(s | k)`` of that interaction), times a
 prior over the interactions; a softmax of the log scores normalises it.
 Positions are used because their densities are comparable across models and
@@ -95,7 +95,7 @@ class Recogniser:
         if not tot > 0:
             raise ValueError("prior probabilities must be positive")
         self.log_prior = {k: float(np.log(max(prior[k] / tot, 1e-300))) for k in models}
-        from .phase_likelihood import phase_noise
+        from .phase.likelihood import phase_noise
 
         if isinstance(noise, str):
             if noise not in ("shared", "own"):
@@ -111,8 +111,8 @@ class Recogniser:
     def recognise(self, partial, respond: bool = False) -> Recognition:
         """Posterior probability of each interaction given the observed prefix ``partial`` (M, n_observed)."""
         from ._validation import as_2d_finite
-        from .phase import open_end_dtw
-        from .phase_likelihood import estimate_phase
+        from .phase.dtw import open_end_dtw
+        from .phase.likelihood import estimate_phase
 
         scores, phases = {}, {}
         for k, m in self.models.items():

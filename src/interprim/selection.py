@@ -40,7 +40,7 @@ see :mod:`interprim.gaussian`) ``= U diag(e) U^T`` the posterior mean for any
 The same loop gives the held-out marginal likelihood of the *positions* of the
 observation for every ``sigma^2``; its maximiser is the position noise
 ``phase_sigma2_`` used by the likelihood phase estimator
-(:mod:`interprim.phase_likelihood`).
+(:mod:`interprim.phase.likelihood`).
 
 The choice is reported in ``model.selection_``.
 """
@@ -49,120 +49,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gaussian import fit_prior, shrink_cross, shrinkage_intensity
-from .phase import open_end_dtw
-from .phase_likelihood import observation_design
+from ._blas import single_thread
+from .gaussian import LowRankPrior, fit_prior, lowrank_case, shrink_cross, shrinkage_intensity
+from .phase.dtw import open_end_dtw
+from .phase.likelihood import observation_design
 from .preprocessing import time_normalise
 
 __all__ = ["select_hyperparameters", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
-
-_LOG2PI = float(np.log(2.0 * np.pi))
 
 DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
 DEFAULT_SHRINKAGE_GRID = (0.0, 0.02, 0.1, 0.3, 0.6, 0.95)
 #: ``sigma^2`` candidates relative to the mean square of the observation targets
 DEFAULT_SIGMA2_FACTORS = tuple(10.0 ** np.arange(-6.0, 6.01, 0.5))
-
-
-def _compress(G, B, tol=1e-10):
-    e, V = np.linalg.eigh(0.5 * (G + G.T))
-    keep = e > tol * max(float(e[-1]), 1e-300)
-    e, V = e[keep], V[:, keep]
-    se = np.sqrt(e)
-    return se[:, None] * V.T, (V.T @ B) / se[:, None]
-
-
-def _case_terms(cov, mean, n_o, q, X, Y):
-    """Everything of one conditioning that does not depend on ``sigma^2``."""
-    L, zc = _compress(X.T @ X, X.T @ Y)
-    k = L.shape[0]
-    mu_o = mean[: n_o * q].reshape(n_o, q)
-    Lb = np.kron(np.eye(n_o), L)  # (n_o k, n_o q)
-    SLt = cov[:, : n_o * q] @ Lb.T  # (P, n_o k)
-    A0 = Lb @ SLt[: n_o * q]
-    e, U = np.linalg.eigh(0.5 * (A0 + A0.T))
-    e = np.clip(e, 0.0, None)
-    r = (zc - L @ mu_o.T).T.reshape(-1)
-    Ur = U.T @ r
-    resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
-    resid_perp = max(resid_total - float(r @ r), 0.0)
-    return SLt, U, e, Ur, resid_perp, Y.size, n_o * k
-
-
-def _posterior_means(mean, SLt, U, e, Ur, s2):
-    """Posterior means for every ``sigma^2`` in ``s2``, shape ``(P, len(s2))``."""
-    alpha = U @ (Ur[:, None] / (e[:, None] + s2[None, :]))
-    return mean[:, None] + SLt @ alpha
-
-
-def _log_likelihoods(U, e, Ur, resid_perp, n, dk, s2):
-    """Marginal log-likelihood of the observation for every ``sigma^2`` (Eq. 16-18 evidence)."""
-    return -0.5 * (n * _LOG2PI + (n - dk) * np.log(s2) + np.sum(np.log(e[:, None] + s2[None, :]), axis=0)
-                   + resid_perp / s2 + np.sum(Ur[:, None] ** 2 / (e[:, None] + s2[None, :]), axis=0))
-
-
-class _LowRankPrior:
-    """``N(mean, diag(d) + W^T W)``: the covariance of :func:`~interprim.gaussian.fit_prior` in factored form.
-
-    Every covariance method of ``fit_prior`` is ``(1 - lam) S + lam diag(S) + floor I`` with the
-    sample covariance ``S = Xc^T Xc / n`` of ``n`` demonstrations (``lam = 0`` for ``"ridge"`` and
-    ``"empirical"``), i.e. a diagonal plus a rank-``n`` term.  Conditioning then needs only
-    ``k x k`` eigendecompositions per observed DoF and ``n x n`` solves (Woodbury), for all
-    ``sigma^2`` candidates at once, instead of a ``(D_o k)``-sized eigendecomposition.
-    """
-
-    def __init__(self, thetas, method, ridge, lam):
-        X = np.asarray(thetas, dtype=np.float64)
-        n, P = X.shape
-        self.mean = X.mean(axis=0)
-        Xc = X - self.mean
-        diag = np.sum(Xc * Xc, axis=0) / n
-        scale = float(np.mean(diag)) if P else 0.0
-        floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
-        lam = 0.0 if (method != "shrinkage" or lam is None) else float(lam)
-        self.d = lam * diag + floor
-        self.W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
-
-
-def _lowrank_case(pr: _LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False):
-    """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation."""
-    L, zc = _compress(X.T @ X, X.T @ Y)
-    k = L.shape[0]
-    no_q = n_o * q
-    mu_o = pr.mean[:no_q].reshape(n_o, q)
-    d_o = pr.d[:no_q].reshape(n_o, q)
-    W_o = pr.W[:, :no_q].reshape(-1, n_o, q)  # (n, n_o, q)
-    # block i of B = L diag(d_i) L^T, eigendecomposed per observed DoF
-    B = np.einsum("kq,iq,jq->ikj", L, d_o, L)  # (n_o, k, k)
-    E, V = np.linalg.eigh(B)  # (n_o, k), (n_o, k, k)
-    E = np.clip(E, 0.0, None)
-    LW = np.einsum("kq,niq->ikn", L, W_o)  # (n_o, k, n)  = L W_i^T
-    Ut = np.einsum("ikj,ikn->ijn", V, LW).reshape(n_o * k, -1)  # V_i^T L W_i^T, stacked
-    r = (zc - L @ mu_o.T).T  # (n_o, k)
-    rt = np.einsum("ikj,ik->ij", V, r).reshape(-1)  # (n_o k,)
-    e = E.reshape(-1)
-    s2 = np.asarray(s2, dtype=np.float64)
-    g = 1.0 / (e[None, :] + s2[:, None])  # (S2, n_o k)
-    nW = Ut.shape[1]
-    C = np.einsum("ks,nk,kt->nst", Ut, g, Ut)
-    C[:, np.arange(nW), np.arange(nW)] += 1.0
-    gr = g * rt[None, :]
-    sol = np.linalg.solve(C, (gr @ Ut)[:, :, None])[:, :, 0]  # (S2, n)
-    at = gr - g * (sol @ Ut.T)  # A^-1 r in the eigenbases, (S2, n_o k)
-    means = ll = None
-    if need_mean:
-        alpha = np.einsum("ikj,sij->sik", V, at.reshape(-1, n_o, k))  # back to the compressed basis
-        v = np.einsum("kq,sik->siq", L, alpha).reshape(len(s2), no_q)  # Lb^T alpha
-        means = pr.mean[None, :] + (v @ pr.W[:, :no_q].T) @ pr.W
-        means[:, :no_q] += v * pr.d[None, :no_q]
-    if need_ll:
-        resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
-        resid_perp = max(resid_total - float(r.reshape(-1) @ r.reshape(-1)), 0.0)
-        n_obs, dk = Y.size, n_o * k
-        logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
-        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2
-                     + np.einsum("sk,k->s", at, rt))
-    return means, ll
 
 
 def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
@@ -208,8 +106,6 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
         ``phase_sigma2``, ``cv_error`` (normalised MSE of the choice),
         ``cv_error_prior`` (of the prior mean), ``cv_error_auto``-free grids and scores.
     """
-    from .phase_likelihood import single_thread
-
     with single_thread():
         return _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, select_sigma2, n_out,
                        phase_cases)
@@ -285,14 +181,14 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         if train.sum() < 2:
             continue
         for a, lam in enumerate(lam_grid):
-            prior = _LowRankPrior(thetas[train], method, model.ridge, lam)
+            prior = LowRankPrior(thetas[train], method, model.ridge, lam)
             for j, designs, base in cases:
                 if fold[j] != f:
                     continue
                 truth = truths[j]
                 if select_sigma2:
                     X, Y = designs[kind0]
-                    Th, lls = _lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position")
+                    Th, lls = lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position")
                     Th = Th.T.reshape(n_lat, q, -1)
                     pred = base[None] + np.einsum("tq,dqs->std", H, Th)
                     pm = base + H @ prior.mean.reshape(n_lat, q).T
@@ -311,7 +207,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                         ll[a] += lls
                 if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                     X, Y = designs["position"]
-                    ll[a] += _lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
+                    ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
                                            need_ll=True)[1]
                 if a == 0:
                     n_cases += 1
@@ -373,7 +269,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):
     """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate."""
-    from .phase_likelihood import _S_MIN, _log_speed_prior
+    from .phase.likelihood import _S_MIN, _log_speed_prior
 
     if max_cases <= 0:
         return None
@@ -387,7 +283,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
     for j, p in cases:
         f = fold[j]
         if f not in priors:
-            pr = _LowRankPrior(model.thetas_[fold != f], model.covariance, model.ridge, lam)
+            pr = LowRankPrior(model.thetas_[fold != f], model.covariance, model.ridge, lam)
             pr.mean, pr.d, pr.W = pr.mean[: n_o * q], pr.d[: n_o * q], pr.W[:, : n_o * q]  # observed block
             priors[f] = pr
         prior = priors[f]
@@ -400,7 +296,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         curves = np.empty((grid.size, len(s2_grid)))
         for i, s in enumerate(grid):
             X, Y = observation_design(model, z[:M, :n_o], float(s), "position")
-            curves[i] = (_lowrank_case(prior, n_o, q, X, Y, s2_grid, need_mean=False, need_ll=True)[1]
+            curves[i] = (lowrank_case(prior, n_o, q, X, Y, s2_grid, need_mean=False, need_ll=True)[1]
                          + _log_speed_prior(model, M, s))
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
     return errs / len(cases)

@@ -15,7 +15,7 @@ Methods:
 
 - ``coupling`` - :class:`interprim.coupling.CouplingModel` with its defaults;
 - ``ip`` - :class:`interprim.InteractionPrimitive` with its defaults;
-- ``prior`` - :class:`interprim.baselines.PriorMean`; ``nn`` - :class:`interprim.baselines.NearestNeighbour`.
+- ``prior`` - :class:`interprim.evaluation.baselines.PriorMean`; ``nn`` - :class:`interprim.evaluation.baselines.NearestNeighbour`.
 
 ``coupling`` and ``ip`` are given the phase in two ways: ``true`` (the true fraction seen; the
 coupling is told its std is 0) and ``clock`` (elapsed time / mean training duration, clipped to 1;
@@ -60,7 +60,7 @@ def _fmt_param(p):
 def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", "prior", "nn"), coupling_kw=None):
     """Fit every method without demonstration ``j``; records for every fraction and phase source."""
     import interprim
-    from interprim.baselines import NearestNeighbour, PriorMean
+    from interprim.evaluation.baselines import NearestNeighbour, PriorMean
     from interprim.coupling import CouplingModel
     from interprim.preprocessing import time_normalise
 
@@ -213,7 +213,7 @@ def main(argv=None):
                     help="only summarise these results.json files (of earlier runs) into --out")
     args = ap.parse_args(argv)
     from interprim.datasets import load_nuisi
-    from interprim.phase_likelihood import single_thread
+    from interprim._blas import single_thread
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

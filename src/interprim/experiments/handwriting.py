@@ -38,6 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..evaluation.protocol import observed_frames
+from ..preprocessing import time_normalise
+
 __all__ = [
     "run_handwriting",
     "open_end_dtw",
@@ -55,20 +58,6 @@ _FIG_PERCENTS = (20, 40, 60, 80)
 
 
 # ----------------------------------------------------------------------------- DTW baseline
-def _dtw_py(query, ref):
-    """Readable reference of :func:`open_end_dtw` (full accumulated-cost matrix), used by the tests."""
-    t, n = query.shape[0], ref.shape[0]
-    c = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)  # (t, n)
-    D = np.empty((t, n))
-    D[0] = np.cumsum(c[0])
-    for i in range(1, t):
-        D[i, 0] = D[i - 1, 0] + c[i, 0]
-        for j in range(1, n):
-            D[i, j] = c[i, j] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
-    j = int(np.argmin(D[-1]))
-    return float(D[-1, j]), j
-
-
 def open_end_dtw(query, ref):
     """Open-end DTW of a partial movement against a reference (paper Eq. 5-8).
 
@@ -87,7 +76,7 @@ def open_end_dtw(query, ref):
     n_star : int
         0-based index of the reference frame the query's last frame is aligned to (Eq. 8).
     """
-    from ..phase import open_end_dtw as _core_open_end_dtw  # the compiled kernels of the core (Sec. III-B)
+    from ..phase.dtw import open_end_dtw as _core_open_end_dtw  # the compiled kernels of the core (Sec. III-B)
 
     res = _core_open_end_dtw(ref, query, return_path=False)
     return float(res.cost), int(res.n_star)
@@ -99,23 +88,7 @@ BEYOND_PAPER = {"ip_forcing_likelihood_cv": {"observation": "forcing", "sigma2":
                 "ip_defaults": {}}  # the library's defaults
 
 
-def _dtw_phase() -> dict:
-    """``{"phase_method": "dtw"}`` if the core has that option (pins the paper's DTW phase)."""
-    import inspect
-
-    from ..primitive import InteractionPrimitive
-
-    params = inspect.signature(InteractionPrimitive.__init__).parameters
-    return {"phase_method": "dtw"} if "phase_method" in params else {}
-
-
 # ----------------------------------------------------------------------------- helpers
-def _normalise(y, n):
-    from ..preprocessing import time_normalise
-
-    return time_normalise(y, n)
-
-
 def _rmse(pred, truth, mask=None):
     d2 = ((pred - truth) ** 2).sum(axis=1)
     if mask is not None:
@@ -260,7 +233,7 @@ def run_handwriting(
     if not observations or any(o not in ("forcing", "position") for o in observations):
         raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
     # the paper's method per observation model: DTW phase, sigma2 from the fit residual
-    variants = {f"ip_{o}": {"sigma2": "auto", **kwargs, "observation": o, **_dtw_phase()} for o in observations}
+    variants = {f"ip_{o}": {"sigma2": "auto", **kwargs, "observation": o, "phase_method": "dtw"} for o in observations}
     for name, kw in (extra_variants or {}).items():
         if name in variants or name in ("prior_mean", "nearest_neighbour"):
             raise ValueError(f"extra_variants: the name {name!r} is already used")
@@ -294,14 +267,14 @@ def run_handwriting(
                 )
                 for m, kw in variants.items()
             }
-            train_norm = np.stack([_normalise(y, n_points) for y in train])
+            train_norm = np.stack([time_normalise(y, n_points) for y in train])
             prior = train_norm.mean(axis=0)
             for k, i in enumerate(test_idx):
                 y = it.demos[i]
                 T = y.shape[0]
-                truth = _normalise(y, n_points)
+                truth = time_normalise(y, n_points)
                 for pi, p in enumerate(percents):
-                    t_obs = max(3, int(round(p / 100.0 * T)))
+                    t_obs = observed_frames(T, p / 100.0)
                     prefix = y[:t_obs]
                     preds = {m: models[m].predict(prefix) for m in ip_methods}
                     ests = {m: np.asarray(pr.trajectory(n_points)) for m, pr in preds.items()}

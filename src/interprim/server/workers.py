@@ -29,7 +29,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
     import numpy as np
 
     from ..primitive import InteractionPrimitive
-    from .app import _Open, _accepts_need_cov, compute_prediction, warm_up
+    from .compute import _Open, _accepts_need_cov, compute_prediction, warm_up
     from .models import entry_for
 
     entries = {n: entry_for(n, InteractionPrimitive.load(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}

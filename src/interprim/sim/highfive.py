@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._blas import single_thread
 from .arm import PlanarArm, controlled_arm, observed_arm
 
 __all__ = [
@@ -172,22 +173,6 @@ def _sample_attractor(rng, arm: PlanarArm, goal, forward_sign: float):
     return mid + np.array([forward_sign * fwd, up])
 
 
-def single_blas_thread():
-    """Context manager capping the BLAS thread pools at one thread (no-op without ``threadpoolctl``).
-
-    The optimisation problems are tiny; on a loaded 2-core machine the default
-    two-thread OpenBLAS pools of numpy and scipy oversubscribe the cores and
-    make SLSQP up to 20x slower (570 ms instead of 34 ms per solve, measured).
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        import contextlib
-
-        return contextlib.nullcontext()
-    return threadpool_limits(1)
-
-
 def _solve_one(args):
     """Worker: one interaction (both arms).  ``args`` = (seed_seq, region, duration, jitter, dt, kwargs)."""
     from .optimal_control import solve_reach
@@ -200,7 +185,7 @@ def _solve_one(args):
     a_ctrl = _sample_attractor(rng, ca, goal, -1.0)
     T = duration * (1.0 + rng.uniform(-jitter, jitter))
     n_frames = int(round(T / dt)) + 1
-    with single_blas_thread():
+    with single_thread():  # tiny problems: one BLAS thread is fastest (SLSQP up to 20x slower with two)
         sol_o = solve_reach(oa, goal, a_obs[None], _basis_cache=cache, **kw)
         sol_c = solve_reach(ca, goal, a_ctrl[None], _basis_cache=cache, **kw)
     qo = np.clip(sol_o.sample(n_frames), oa.joint_limits[:, 0], oa.joint_limits[:, 1])
@@ -261,7 +246,11 @@ def generate_highfive(
     -------
     HighFiveData
     """
-    from tqdm.auto import tqdm
+    if progress:  # the bar needs the experiments extra; without it, plain iteration
+        from tqdm.auto import tqdm
+    else:
+        def tqdm(it, **_):
+            return it
 
     n = int(n)
     if n < 1:

@@ -27,7 +27,7 @@ data (forcing values of Eq. 15 change with ``s`` through their derivatives).
 demonstrations' durations.
 
 The search evaluates a grid of candidates (plus the DTW estimate, when given),
-then refines the best one by a bounded scalar search.  :func:`track_phase` is
+then refines the best one by a bounded scalar search.  :func:`interprim.phase.tracking.track_phase` is
 the cheap online variant (a few candidates around the previous estimate,
 extrapolated at constant speed).
 
@@ -35,7 +35,7 @@ All candidates of a search are evaluated in one batched computation
 (:func:`phase_log_likelihoods`): since the design of every observed DoF is the
 same ``H(s)``, each candidate needs only ``H^T H``, ``H^T r`` and ``|r|^2``
 (``O(M q (q + D_o))``) and factorisations independent of ``M``
-(:mod:`interprim._phase_kernels`, compiled; a numpy equivalent serves until it
+(:mod:`interprim._compiled.phase_likelihood`, compiled; a numpy equivalent serves until it
 is loaded).  :func:`_phase_log_likelihood_reference` is the per-candidate
 evaluation it is tested against.
 """
@@ -46,27 +46,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dmp import forcing_values
-from .gaussian import condition
-from .preprocessing import derivatives
+from .._blas import single_thread
+from .._compiled.loader import phase_kernel as _kernel
+from ..dmp import forcing_values
+from ..gaussian import _LOG2PI, LowRankPrior, condition, lowrank_case
+from ..preprocessing import derivatives
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
-           "track_phase", "phase_noise"]
+           "phase_noise"]
 
 _S_MIN = 0.02
-_LOG2PI = float(np.log(2.0 * np.pi))
-
-
-def single_thread():
-    """Context limiting BLAS to one thread (many tiny factorisations: threads only add overhead,
-    up to 100x on a loaded 2-core machine); a no-op without ``threadpoolctl``."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        from contextlib import nullcontext
-
-        return nullcontext()
-    return threadpool_limits(1)
 
 
 @dataclass(frozen=True)
@@ -144,7 +133,7 @@ def _marginal(model):
 
 
 def _factored(model):
-    """The observed block of the prior as diagonal + low rank (see :class:`interprim.selection._LowRankPrior`).
+    """The observed block of the prior as diagonal + low rank (see :class:`interprim.gaussian.LowRankPrior`).
 
     Exact when ``prior_`` was fitted by :func:`~interprim.gaussian.fit_prior` from ``thetas_`` (checked
     once); ``None`` otherwise (then the dense path is used).
@@ -153,13 +142,11 @@ def _factored(model):
     cache = getattr(model, "_phase_factored", None)
     if cache is not None and cache[0] is prior:
         return cache[1]
-    from .selection import _LowRankPrior
-
     pr = None
     th = getattr(model, "thetas_", None)
     if th is not None:
         n = model.n_observed_latent_ * model._q
-        cand = _LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
+        cand = LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
         cand.mean, cand.d, cand.W = cand.mean[:n], cand.d[:n], cand.W[:, :n]
         dense = prior.cov[:n, :n]
         approx = cand.W.T @ cand.W
@@ -180,7 +167,7 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
     """:func:`phase_log_likelihood` at every phase in ``s_values`` (one batched evaluation).
 
     With the diagonal-plus-low-rank prior of :func:`~interprim.gaussian.fit_prior` (the usual case) all
-    candidates go through one compiled kernel (:mod:`interprim._phase_kernels`; its numpy equivalent
+    candidates go through one compiled kernel (:mod:`interprim._compiled.phase_likelihood`; its numpy equivalent
     until the kernel is loaded): per candidate only ``G = H^T H``, ``H^T r`` and ``|r|^2`` of the
     ``M`` frames are formed, ``O(M q (q + D_o))``, plus ``O(D_o (q^3 + q^2 n + q n^2))`` for the
     factorisations (``n`` demonstrations).  Otherwise (dense prior) each candidate uses the reference
@@ -197,15 +184,13 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
 
 
 def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None = None) -> float:
-    """The per-candidate evaluation (explicit design matrix, :func:`interprim.selection._lowrank_case` or
+    """The per-candidate evaluation (explicit design matrix, :func:`interprim.gaussian.lowrank_case` or
     :func:`interprim.gaussian.condition`): the reference the batched paths are tested against."""
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)
     if pr is not None:  # O(D_o k^3 + D_o k S^2) instead of O((D_o k)^3)
-        from .selection import _lowrank_case
-
-        return float(_lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
+        return float(lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
                                    need_ll=True)[1][0])
     mean_o, cov_o, idx = _marginal(model)
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
@@ -215,61 +200,6 @@ def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None
 
 # ---------------------------------------------------------------------------------------------------------------
 # batched evaluation (low-rank prior)
-
-_KERNEL: list = []  # [phase_loglik_batch, track_step] once loaded by interprim._fast
-
-
-def _load_kernel():
-    """Compile (or load from numba's cache) the phase kernels; called by :func:`interprim._fast.warmup`
-    (one loader for every kernel: raises if they cannot be compiled, and numpy then serves everywhere)."""
-    if _KERNEL:
-        return
-    from ._phase_kernels import phase_loglik_batch, track_step
-
-    _warm_call(phase_loglik_batch)
-    _warm_track(track_step)
-    _KERNEL.extend([phase_loglik_batch, track_step])
-
-
-def _warm_call(fn):
-    """Compile (or load from numba's cache) with tiny inputs of the real types."""
-    rng = np.random.default_rng(0)
-    K, q, n_o, n, M = 8, 3, 2, 2, 4
-    sq = np.ones((n_o, q))
-    Uh = rng.normal(size=(n_o, q, n))
-    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
-    fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
-       np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
-
-
-def _warm_track(fn):
-    rng = np.random.default_rng(0)
-    K, q, n_o, n, M = 8, 3, 2, 2, 6
-    Uh = rng.normal(size=(n_o, q, n))
-    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
-    buf = _track_buffers(q, n_o, n, 4)
-    z = rng.normal(size=(M, n_o))
-    for v0 in (0.05, 0.3):
-        buf[0][:] = _SLOT_FREE
-        for m in (4, 5, 6):
-            fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), z, m, v0, 0, 3, 0.05, _S_MIN,
-               np.ones((n_o, q)), Uh, K0, 1.0, True, 0.0, 0.0, 1.0, 8, *buf)
-
-
-def _kernel(block: bool = False):
-    """The compiled batch kernel, or ``None`` on the numpy path (:func:`interprim._fast.ready` decides, once
-    per process; ``block`` is kept for callers and has no effect: the first use always waits)."""
-    from . import _fast
-
-    return _KERNEL[0] if _fast.ready() else None
-
-
-def warmup() -> bool:
-    """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use."""
-    from . import _fast
-
-    return _fast.warmup()
-
 
 class _FastState:
     """Everything of the batched evaluation that depends only on the model (cached per prior object)."""
@@ -326,7 +256,7 @@ def _fast_state(model):
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
-    """Numpy equivalent of :func:`interprim._phase_kernels.phase_loglik_batch` (all candidates at once)."""
+    """Numpy equivalent of :func:`interprim._compiled.phase_likelihood.phase_loglik_batch` (all candidates at once)."""
     M, n_o = z.shape
     n_steps = Zh.shape[0] - 1
     q = Zh.shape[1]
@@ -542,163 +472,3 @@ def _brent_min(f, a, b, x, fx, xatol, maxiter):
             elif fu <= fv or v == x or v == w:
                 v, fv = u, fu
     return x, fx
-
-
-_FACTORS: dict = {}
-
-
-def _spread_factors(n: int, spread: float) -> np.ndarray:
-    """``exp(linspace(-spread, spread, n))`` (cached: it is the same for every frame of a stream)."""
-    f = _FACTORS.get((n, spread))
-    if f is None:
-        f = np.exp(np.linspace(-spread, spread, n))
-        f.flags.writeable = False
-        _FACTORS[(n, spread)] = f
-    return f
-
-
-def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int = 7, spread: float = 0.15,
-                speed_prior: bool = True) -> float:
-    """Cheap online phase update for :class:`~interprim.primitive.Stream`.
-
-    Extrapolates the previous estimate ``s_prev`` (made with ``m_prev``
-    frames) at constant speed to the current ``M`` frames and evaluates
-    ``n_candidates`` values within a factor ``exp(+-spread)`` of it; the first
-    estimate (``s_prev is None``) uses a coarse full grid.
-    """
-    M = z.shape[0]
-    if M < 2:
-        return _S_MIN
-    if s_prev is None or m_prev < 2:
-        return estimate_phase(model, z, n_grid=20, refine=False, speed_prior=speed_prior).s_end
-    s_pred = min(1.0, s_prev * (M - 1) / (m_prev - 1))
-    cand = s_pred * _spread_factors(int(n_candidates), float(spread))
-    if cand[0] < _S_MIN or cand[-1] > 1.0:  # clipped: duplicates at the bounds
-        cand = np.unique(np.clip(cand, _S_MIN, 1.0))
-    scores = _scorer(model, z, phase_noise(model), speed_prior)
-    if scores.dense:
-        with single_thread():
-            sc = scores(cand)[0]
-    else:
-        sc = scores(cand)[0]
-    return float(cand[int(np.argmax(sc))])
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# online tracking on a lattice of speeds (used by Stream)
-
-_SLOT_FREE = -(1 << 62)
-_N_SLOTS = 12
-_MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
-
-
-def _track_buffers(q: int, n_o: int, n: int, n_slots: int = _N_SLOTS):
-    """Slots and workspaces of :func:`interprim._phase_kernels.track_step` (sizes independent of the frames)."""
-    from ._phase_kernels import BLOCK
-
-    q4 = (q + 3) // 4 * 4
-    P = q4 + (n_o + 1) // 2 * 2
-    r4 = (n + 1 + 3) // 4 * 4
-    n4 = (n + 3) // 4 * 4
-    return (np.full(n_slots, _SLOT_FREE, dtype=np.int64), np.zeros(n_slots, dtype=np.int64),
-            np.zeros(n_slots, dtype=np.int64), np.zeros((n_slots, q4, P)), np.zeros(n_slots),
-            np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
-            np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
-            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((6, max(q, n, n_o))), np.zeros(1), np.zeros(1),
-            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots))
-
-
-def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
-    """Candidates of :func:`interprim._phase_kernels.track_step`: ``(js, s)`` in increasing ``s``, the clipped
-    ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
-    js, ss = [], []
-    for j in range(kc - nh, kc + nh + 1):
-        s = float(v0 * np.exp(dlog * j)) * (M - 1)
-        if s < _S_MIN:
-            if js and ss[-1] == _S_MIN:
-                js[-1] = j
-                continue
-            s = _S_MIN
-        elif s > 1.0:
-            if ss and ss[-1] == 1.0:
-                continue
-            s = 1.0
-        js.append(j)
-        ss.append(s)
-    return js, np.array(ss)
-
-
-class _Tracker:
-    """Online phase of one :class:`~interprim.primitive.Stream` (the likelihood phase, local search).
-
-    Like :func:`track_phase`, each frame scores ``n_candidates`` phases within ``exp(+-spread)`` of the
-    constant-speed extrapolation of the previous estimate; here the candidates are *speeds* on a fixed
-    lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread / (n_candidates - 1)``, anchored at the first estimate
-    (``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
-    to ``[_S_MIN, 1]`` (clipped candidates merged).  Without clipping these are :func:`track_phase`'s
-    candidates (whose chosen speeds also stay on such a lattice, up to rounding); after a clipped choice the
-    lattice keeps its index (the nearest unclipped-side point) where :func:`track_phase` would restart from the
-    clipped value.  Frame ``m`` of lattice point ``j`` always sits at phase ``v_j m``, so the compiled step
-    (:func:`interprim._phase_kernels.track_step`) extends each point's statistics and factors by the new frame
-    (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them (``O(M q (q + D_o) + D_o q^2 n + ...)``).
-    Without the kernel (or with a dense prior) the same candidates are scored from scratch.
-    """
-
-    def __init__(self, model, n_candidates: int = 7, spread: float = 0.15, speed_prior: bool = True):
-        if n_candidates < 1 or n_candidates % 2 == 0:
-            raise ValueError("n_candidates must be odd")
-        self.model = model
-        self.nh = (int(n_candidates) - 1) // 2
-        self.dlog = 2.0 * float(spread) / max(int(n_candidates) - 1, 1)
-        self.speed_prior = bool(speed_prior)
-        self._buf = None
-        self._fs = None
-        self.reset()
-
-    def reset(self):
-        self.v0 = None
-        self.kc = 0
-        self.Rg = None
-        if self._buf is not None:
-            self._buf[0][:] = _SLOT_FREE
-
-    def step(self, z) -> float:
-        """Phase of the last of the frames ``z`` (the frames seen so far, a prefix of the next call's)."""
-        M = z.shape[0]
-        model = self.model
-        if M < 2:
-            self.reset()
-            return _S_MIN
-        if self.v0 is None:
-            s = estimate_phase(model, z, n_grid=20, refine=False, speed_prior=self.speed_prior).s_end
-            self.v0, self.kc, self.Rg = s / (M - 1), 0, None
-            if self._buf is not None:
-                self._buf[0][:] = _SLOT_FREE
-            return s
-        fs = _fast_state(model)
-        kern = _KERNEL[1] if (fs is not None and _kernel() is not None) else None
-        s2 = phase_noise(model)
-        if kern is None:
-            if self._buf is not None:  # the slots are not kept up to date here
-                self._buf[0][:] = _SLOT_FREE
-            js, cand = _lattice_candidates(self.v0, self.kc, self.nh, self.dlog, M)
-            sc = _scorer(model, z, s2, self.speed_prior)
-            if sc.dense:
-                with single_thread():
-                    lp = sc(cand)[0]
-            else:
-                lp = sc(cand)[0]
-            i = int(np.argmax(lp))
-            self.kc = js[i]
-            return float(cand[i])
-        if fs is not self._fs or self._buf is None:
-            self._fs = fs
-            self._buf = _track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
-            self.Rg = None
-        if self.Rg is None:
-            self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))
-        logel, mu, sd = _speed_prior_params(model, M) if self.speed_prior else (0.0, 0.0, 1.0)
-        j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, _S_MIN, fs.sq, fs.Uh, fs.K0, s2,
-                    self.speed_prior, logel, mu, sd, _MAX_GAP, *self._buf)
-        self.kc = int(j)
-        return float(s)

@@ -1,6 +1,6 @@
 """``interprim evaluate``: leave-one-out sweeps of IPs and their peers (tables, JSON, figures).
 
-Top-level imports are light; the work happens in :mod:`interprim.evaluation`.
+Top-level imports are light; the work happens in :mod:`interprim.evaluation.sweep`.
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ DATA_SETS = ("nuisi", "synthetic", "synthetic-noisy", "highfive-sim", "character
 
 def _check_names(datasets, methods, cfg):
     """One-line errors (naming the flag) for unknown --data / --methods, before any work starts."""
-    from .errors import InterprimError
-    from .evaluation import make_estimator
+    from ..errors import InterprimError
+    from ..evaluation import make_estimator
 
     bad = [d for d in datasets if d not in DATA_SETS] or ([] if datasets else ["''"])
     if bad:
@@ -88,10 +88,10 @@ def run_user_data(args) -> int:
     """``--data FILE``: every protocol of :mod:`interprim.realtime` on the user's own demonstrations."""
     from pathlib import Path
 
-    from .datasets import load_demonstrations
-    from .datasets._base import select_columns
-    from .errors import InterprimError
-    from .realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
+    from ..datasets import load_demonstrations
+    from ..datasets._base import select_columns
+    from ..errors import InterprimError
+    from ..realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
@@ -129,7 +129,7 @@ def run(args) -> int:
     if _is_user_data(args.data):
         return run_user_data(args)
 
-    from .evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
+    from ..evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
 
     cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis)
     if args.fractions:
@@ -145,10 +145,10 @@ def run(args) -> int:
     summary = summarise(res)
     paths = save_results(res, summary, args.out)
     if not args.no_figures:
-        from .plotting_eval import evaluation_figures
+        from ..evaluation.plots import evaluation_figures
 
         paths += evaluation_figures(res, summary, cfg, args.out, datasets)
-    from .evaluation import markdown_tables
+    from ..evaluation import markdown_tables
 
     print(markdown_tables(summary))
     print(recognition_table(summary))

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .protocol import observed_frames
+
 __all__ = ["evaluation_figures", "error_curves", "recognition_curves", "trajectory_figure", "skeleton_animation"]
 
 _STYLE = {
@@ -82,7 +84,7 @@ def recognition_curves(summary, path):
 def trajectory_figure(model, test, observed_dofs, controlled_dofs, path, fractions=(0.4, 0.6, 0.8), title="",
                       labels=("x", "y", "z"), n=100):
     """Agent 2's true and predicted hand coordinates at several fractions observed, with the 90 % band."""
-    from .preprocessing import time_normalise
+    from ..preprocessing import time_normalise
 
     plt = _plt()
     truth = time_normalise(test, n)
@@ -92,7 +94,7 @@ def trajectory_figure(model, test, observed_dofs, controlled_dofs, path, fractio
                              sharex=True)
     T = test.shape[0]
     for j, p in enumerate(fractions):
-        M = int(round(p * T))
+        M = observed_frames(T, p)
         pred = model.predict(test[:M, observed_dofs])
         Y, S = pred.trajectory(n), pred.std(n)
         for i, c in enumerate(controlled_dofs):
@@ -129,7 +131,7 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    from .datasets import JOINT_GROUPS, NUISI_JOINTS, load_nuisi
+    from ..datasets import JOINT_GROUPS, NUISI_JOINTS, load_nuisi
 
     plt = _plt()
     d = load_nuisi(data_path, action=action, observed="all", controlled="all", dt=dt, demos=[demo_index])
@@ -184,7 +186,7 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
 
 def evaluation_figures(results, summary, cfg, out_dir, datasets, traj_method="ip-position", animate=True):
     """All figures of an evaluation run; returns the paths written."""
-    from .evaluation import _task, make_estimator, task_names
+    from .sweep import _task, make_estimator, task_names
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

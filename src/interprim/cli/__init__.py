@@ -1,6 +1,6 @@
 """The ``interprim`` command line.
 
-Each sub-command lives in its own module, which exposes
+Each sub-command lives in its own module of this package, which exposes
 ``add_parser(subparsers)`` (registering one or more sub-commands with
 ``set_defaults(func=...)``).  Those modules keep their top-level imports
 light; heavy imports happen inside the command functions, so ``--help`` is fast.
@@ -12,14 +12,16 @@ import argparse
 import importlib
 import sys
 
-from .errors import InterprimError, ModelFileError
+from ..errors import InterprimError, ModelFileError
 
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [
-    "interprim.commands_demo",
-    "interprim.commands",
-    "interprim.server.cli",
-    "interprim.commands_evaluate",
+    "interprim.cli.demo",
+    "interprim.cli.fit",
+    "interprim.cli.predict",
+    "interprim.cli.handwriting",
+    "interprim.cli.serve",
+    "interprim.cli.evaluate",
 ]
 
 
@@ -33,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog="Run 'interprim COMMAND --help' for the options of one command.",
     )
-    from . import __version__
+    from .. import __version__
 
     parser.add_argument("--version", action="version", version=f"interprim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -1,6 +1,6 @@
 """Peer methods evaluated on the same splits as Interaction Primitives.
 
-Every method has the same small interface, used by :mod:`interprim.evaluation`::
+Every method has the same small interface, used by :mod:`interprim.evaluation.sweep`::
 
     est = Method(observed_dofs, ...).fit(demos, dt=...)
     out = est.predict(partial)          # partial: (M, len(observed_dofs)) frames from the start
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .preprocessing import time_normalise
+from ..preprocessing import time_normalise
 
 __all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction"]
 
@@ -120,7 +120,7 @@ class NearestNeighbour:
         return self
 
     def predict(self, partial) -> BaselinePrediction:
-        from .phase import open_end_dtw
+        from ..phase.dtw import open_end_dtw
 
         v = np.asarray(partial, dtype=np.float64)
         best, best_c, frac = 0, np.inf, float("nan")
@@ -201,7 +201,7 @@ class InteractionProMP:
 
     def phase_log_likelihood(self, partial, s) -> float:
         """``log p(partial | s)`` under the weight distribution (exact, structured evaluation)."""
-        from .gaussian import condition
+        from ..gaussian import condition
 
         K = int(self.n_weights)
         G, B, yy, n = self._stats(partial, s)

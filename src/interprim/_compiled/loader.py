@@ -1,4 +1,4 @@
-"""Glue between the public objects and the compiled kernels (:mod:`interprim._kernels`, :mod:`interprim._dtw_kernels`).
+"""The one loader of the compiled kernels (:mod:`interprim._compiled`).
 
 Every compiled kernel has a plain numpy equivalent that gives the same
 numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``).
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import os
 import threading
-from functools import lru_cache
 
 import numpy as np
 
@@ -38,8 +37,10 @@ def _mode() -> str:
 
 def _compile_all():
     """Import numba and compile (or load from the cache) every kernel once, with tiny inputs of the real types."""
-    from . import _dtw_kernels as dk
-    from . import _kernels as k
+    from . import conditioning as k
+    from . import dtw as dk
+    from . import observation as ko
+    from . import rollout as kr
 
     rng = np.random.default_rng(0)
     u = rng.normal(size=(6, 2))
@@ -54,13 +55,13 @@ def _compile_all():
     yd = np.empty((M, Do))
     ydd = np.empty((M, Do))
     YT = np.empty((Do, M))
-    const = k.forcing_values_into(z, M, 0.5, 25.0, 6.25, yd, ydd, YT)
+    const = ko.forcing_values_into(z, M, 0.5, 25.0, 6.25, yd, ydd, YT)
     G = np.empty((q, q))
     B = np.empty((q, Do))
-    k.design_stats(YT, M, 0.5, np.linspace(1.0, 0.1, q - 1), np.full(q - 1, 10.0), 3.0, const, np.empty((q, M)),
+    ko.design_stats(YT, M, 0.5, np.linspace(1.0, 0.1, q - 1), np.full(q - 1, 10.0), 3.0, const, np.empty((q, M)),
                    G, B, np.empty((4, M)), np.empty(M, dtype=np.int64))
     Kr = 10
-    k.position_stats(z, M, 0.5, z[0], np.zeros(Do), rng.normal(size=(Kr + 1, 2, q)), rng.normal(size=(Kr + 1, 2, 2)),
+    ko.position_stats(z, M, 0.5, z[0], np.zeros(Do), rng.normal(size=(Kr + 1, 2, q)), rng.normal(size=(Kr + 1, 2, 2)),
                      G, B, np.empty((q, 4)), np.empty((Do, 4)))
     P = 2 * Do * q
     idx = np.arange(Do * q, dtype=np.intp)
@@ -80,23 +81,25 @@ def _compile_all():
                              idx, other, np.zeros((P - Do * q, r)), Gs, Bs, *st, np.empty((r, r)),
                              np.empty((6, max(q, r, Do))), np.empty((Do, q)), np.empty(P))
     Kn = 8
-    k.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
+    kr.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))
     Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
-    k.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
+    ko.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
 
 
 def _load():
     global _READY, _ERROR
     try:
         _compile_all()
-        from . import phase_likelihood  # the likelihood phase's kernels (their own module)
-
-        phase_likelihood._load_kernel()
+        _load_phase_kernels()  # the likelihood phase's kernels: one loader, one decision for all kernels
         _READY = True
     except BaseException as exc:  # numba missing or broken: numpy for the whole process
         _ERROR = exc
         _READY = False
+
+
+def _numpy_only() -> bool:
+    return _mode() in ("0", "false", "no", "off")
 
 
 def ready() -> bool:
@@ -109,10 +112,6 @@ def ready() -> bool:
     if _READY is not None:
         return _READY
     return warmup()
-
-
-def _numpy_only() -> bool:
-    return _mode() in ("0", "false", "no", "off")
 
 
 def prefetch() -> None:
@@ -147,91 +146,24 @@ def warmup() -> bool:
     return bool(_READY)
 
 
-@lru_cache(maxsize=64)
-def _savgol_start_coeffs(w: int, p: int) -> np.ndarray:
-    """Weights ``c`` (w,) with ``c @ y[:w]`` = the Savitzky-Golay (``mode="interp"``) smoothed first frame.
+# ---------------------------------------------------------------------------------------------------------------
+# the likelihood phase's kernels (interprim._compiled.phase_likelihood), loaded by _load with the others
 
-    That frame is the value at the first sample of the degree-``p`` least-squares
-    polynomial through the first ``w`` samples, i.e. row 0 of the hat matrix
-    ``Q Q^T`` (``Q`` an orthonormal basis of the polynomials on the window,
-    from a QR of the Vandermonde matrix on ``[-1, 1]``: accurate to ~1e-16,
-    where ``scipy.signal.savgol_coeffs(w, p, pos=0)`` loses ~1e-12 at ``w = 31``).
-    """
-    x = np.linspace(-1.0, 1.0, w)
-    Q, _ = np.linalg.qr(np.vander(x, p + 1))
-    c = Q @ Q[0]
-    c.setflags(write=False)
-    return c
+_PHASE_KERNELS: list = []  # [phase_loglik_batch, track_step] once loaded
 
 
-def start_position(z, window, polyorder: int = 3) -> np.ndarray:
-    """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`interprim.preprocessing.derivatives`) in ``O(window D)``.
+def _load_phase_kernels():
+    """Compile (or load from numba's cache) the phase kernels; raises if they cannot be compiled."""
+    if _PHASE_KERNELS:
+        return
+    from .phase_likelihood import phase_loglik_batch, track_step, warm_batch, warm_track
 
-    The first frame of the smoothed observation, with the same window rule
-    (shrunk to the largest odd number not above ``len(z)``); the raw first
-    frame when ``window`` is None or too short to smooth.  A new array.
-    """
-    from .preprocessing import savgol_window
-
-    wp = savgol_window(z.shape[0], window, polyorder)
-    if wp is not None:
-        return _savgol_start_coeffs(*wp) @ z[:wp[0]]
-    return z[0].copy()
+    warm_batch(phase_loglik_batch)
+    warm_track(track_step)
+    _PHASE_KERNELS.extend([phase_loglik_batch, track_step])
 
 
-class StatsWorkspace:
-    """Preallocated buffers for the observation statistics of up to ``cap`` frames (grown by doubling).
-
-    ``observation="position"`` needs only fixed-size blocks (:func:`interprim._kernels.position_stats`);
-    the per-frame buffers of the forcing observation are then allocated on first use.
-    """
-
-    BLOCK = 64  # frames per block of the position statistics
-
-    def __init__(self, cap: int, n_obs: int, q: int, observation: str = "forcing"):
-        self.n_obs = int(n_obs)
-        self.q = int(q)
-        self.G = np.empty((self.q, self.q))
-        self.B = np.empty((self.q, self.n_obs))
-        self.HT = np.empty((self.q, self.BLOCK))
-        self.YTb = np.empty((self.n_obs, self.BLOCK))
-        self.cap = 0
-        if observation == "forcing":
-            self._alloc(max(int(cap), 3))
-
-    def _alloc(self, cap):
-        self.cap = cap
-        self.yd = np.empty((cap, self.n_obs))
-        self.ydd = np.empty((cap, self.n_obs))
-        self.YT = np.empty((self.n_obs, cap))
-        self.XT = np.empty((self.q, cap))
-        self.work = np.empty((4, cap))
-        self.ibuf = np.empty(cap, dtype=np.int64)
-
-    def forcing_stats(self, z, M, s_end, model):
-        """``(G, B, |Y|^2)`` of the forcing observation (Eq. 13-15) of ``z[:M]`` over ``[0, s_end]``.
-
-        ``G`` and ``B`` are this workspace's buffers (overwritten by the next call).
-        """
-        from ._kernels import design_stats, forcing_values_into
-
-        if M > self.cap:
-            self._alloc(max(M, 2 * self.cap))
-        basis = model.basis_
-        const = forcing_values_into(z, M, float(s_end), float(model.alpha_y), float(model.beta_y_),
-                                    self.yd, self.ydd, self.YT)
-        yy = design_stats(self.YT, M, float(s_end), basis.centers, basis.widths, float(basis.alpha_x), const,
-                          self.XT, self.G, self.B, self.work, self.ibuf)
-        return self.G, self.B, float(yy)
-
-    def position_stats(self, z, M, s_end, y0, v0, rollout):
-        """``(G, B, |Y|^2)`` of the position observation of ``z[:M]`` over ``[0, s_end]`` from start ``[y0; v0]``.
-
-        Reference: ``InteractionPrimitive._observation`` (``LinearRollout.design(0, s)``).
-        ``G`` and ``B`` are this workspace's buffers (overwritten by the next call).
-        """
-        from ._kernels import position_stats
-
-        yy = position_stats(z, M, float(s_end), y0, v0, rollout._Z, rollout._powers, self.G, self.B,
-                            self.HT, self.YTb)
-        return self.G, self.B, float(yy)
+def phase_kernel(block: bool = False):
+    """The compiled batch kernel of the likelihood phase, or ``None`` on the numpy path (:func:`ready` decides,
+    once per process; ``block`` is kept for callers and has no effect: the first use always waits)."""
+    return _PHASE_KERNELS[0] if ready() else None

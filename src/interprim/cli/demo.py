@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from .errors import InterprimError
+from ..errors import InterprimError
 
 
 class DemoArgumentError(InterprimError, ValueError):
@@ -63,7 +63,7 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from .experiments.highfive import HighFiveConfig, format_summary, run_highfive
+    from ..experiments.highfive import HighFiveConfig, format_summary, run_highfive
 
     _check_positive(args.n_train, "--n-train")
     _check_positive(args.n_test, "--n-test")

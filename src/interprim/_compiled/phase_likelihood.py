@@ -1,11 +1,11 @@
-"""Compiled kernel of the likelihood phase estimator (numba, cached on disk).
+"""Compiled kernels of the likelihood phase estimator (numba, cached on disk).
 
 :func:`phase_loglik_batch` evaluates the marginal log-likelihood of the
-observed positions (``interprim.phase_likelihood.phase_log_likelihood``) at
+observed positions (``interprim.phase.likelihood.phase_log_likelihood``) at
 several candidate phases in one call.  Reference:
-``interprim.phase_likelihood._phase_log_likelihood_reference`` (the
-per-candidate design matrix and :func:`interprim.selection._lowrank_case`);
-plain numpy equivalent: ``interprim.phase_likelihood._loglik_batch_numpy``
+``interprim.phase.likelihood._phase_log_likelihood_reference`` (the
+per-candidate design matrix and :func:`interprim.gaussian.lowrank_case`);
+plain numpy equivalent: ``interprim.phase.likelihood._loglik_batch_numpy``
 (``tests/test_phase_likelihood.py`` checks all three agree).
 
 Per candidate ``s`` the ``M`` observed frames sit at ``s_m = s m / (M - 1)``.
@@ -38,10 +38,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
-
-_FM = {"contract", "reassoc", "nsz", "arcp"}
-_LOG2PI = float(np.log(2.0 * np.pi))
+from . import FASTMATH as _FM
+from . import LOG2PI as _LOG2PI
+from .linalg import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
 
 
 BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames
@@ -266,7 +265,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# online tracking on a lattice of speeds (interprim.phase_likelihood._Tracker)
+# online tracking on a lattice of speeds (interprim.phase.tracking._Tracker)
 #
 # A stream's candidates are speeds ``v_j = v0 exp(dlog j)`` (integer ``j``): frame ``m`` of candidate ``j`` sits
 # at phase ``v_j m`` whatever the number of frames seen, so each lattice point keeps its statistics ``G``,
@@ -583,3 +582,49 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
         if best_s < 0.0 or lp > best_lp:
             best_j, best_s, best_lp = j, s, lp
     return best_j, best_s
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# workspaces of track_step, and the warm-up calls of the loader (interprim._compiled.loader)
+
+N_SLOTS = 12
+
+
+def track_buffers(q: int, n_o: int, n: int, n_slots: int = N_SLOTS):
+    """Slots and workspaces of :func:`track_step` (sizes independent of the frames)."""
+    q4 = (q + 3) // 4 * 4
+    P = q4 + (n_o + 1) // 2 * 2
+    r4 = (n + 1 + 3) // 4 * 4
+    n4 = (n + 3) // 4 * 4
+    return (np.full(n_slots, SLOT_FREE, dtype=np.int64), np.zeros(n_slots, dtype=np.int64),
+            np.zeros(n_slots, dtype=np.int64), np.zeros((n_slots, q4, P)), np.zeros(n_slots),
+            np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
+            np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
+            np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((6, max(q, n, n_o))), np.zeros(1), np.zeros(1),
+            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots))
+
+
+def warm_batch(fn):
+    """Compile (or load from numba's cache) :func:`phase_loglik_batch` with tiny inputs of the real types."""
+    rng = np.random.default_rng(0)
+    K, q, n_o, n, M = 8, 3, 2, 2, 4
+    sq = np.ones((n_o, q))
+    Uh = rng.normal(size=(n_o, q, n))
+    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
+    fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
+       np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
+
+
+def warm_track(fn, s_min=0.02):
+    """Compile (or load from numba's cache) :func:`track_step` with tiny inputs of the real types."""
+    rng = np.random.default_rng(0)
+    K, q, n_o, n, M = 8, 3, 2, 2, 6
+    Uh = rng.normal(size=(n_o, q, n))
+    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
+    buf = track_buffers(q, n_o, n, 4)
+    z = rng.normal(size=(M, n_o))
+    for v0 in (0.05, 0.3):
+        buf[0][:] = SLOT_FREE
+        for m in (4, 5, 6):
+            fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), z, m, v0, 0, 3, 0.05, s_min,
+               np.ones((n_o, q)), Uh, K0, 1.0, True, 0.0, 0.0, 1.0, 8, *buf)

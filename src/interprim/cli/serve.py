@@ -81,9 +81,9 @@ def run(args) -> int:
         import websockets  # noqa: F401
     except ImportError:
         raise InterprimError("interprim serve needs the 'websockets' package: pip install 'interprim[serve]'") from None
-    from .app import InterprimServer, ServerConfig, new_event_loop
-    from .app import run as run_loop
-    from .models import load_models
+    from ..server.app import InterprimServer, ServerConfig, new_event_loop
+    from ..server.app import run as run_loop
+    from ..server.models import load_models
 
     if not args.models and not args.demo:
         raise InterprimError("give at least one MODEL file, or --demo to fit demo models")
@@ -109,7 +109,7 @@ def run(args) -> int:
     models = load_models(args.models)  # fails here, before listening, on a corrupt file
     extra = {}
     if args.demo:
-        from .demo import demo_models
+        from ..server.demo import demo_models
 
         log.info("fitting demo models (simulated high-five + letters) ...")
         for name, entry in demo_models(progress=True).items():
@@ -118,7 +118,7 @@ def run(args) -> int:
             models[name] = entry
     if any(e.meta.get("world") == "highfive" for e in models.values()) or _has_sim():
         try:
-            from .demo import highfive_world
+            from ..server.demo import highfive_world
 
             extra["highfive_world"] = highfive_world()
         except Exception:  # the page then draws the arms with default lengths

@@ -16,7 +16,7 @@ movement seen and ``x = exp(-alpha_x (n*/N) tau)`` the phase (Eq. 9).
 Code uses 0-based indices: ``n_star`` in ``0..N-1``; the paper's fraction
 ``n*/N`` is ``(n_star + 1) / N``.  Ties in Eq. 8 go to the smallest ``n``.
 
-The recursion is compiled with numba (cached on disk; :mod:`interprim._dtw_kernels`),
+The recursion is compiled with numba (cached on disk; :mod:`interprim._compiled.dtw`),
 with bitwise-equal numpy equivalents used until the kernels are loaded.  :class:`IncrementalDTW`
 adds one query frame at a time in ``O(N D)`` by computing one new column of
 ``D`` and gives exactly the batch result.
@@ -28,14 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _fast
-from ._validation import as_2d_finite, as_frame
+from .._compiled import loader
+from .._validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
 
 
 # ----------------------------------------------------------------------------- numpy equivalents
-# Used until the compiled kernels (interprim._dtw_kernels) are loaded (see interprim._fast), e.g. for the
+# Used until the compiled kernels (interprim._compiled.dtw) are loaded (see interprim._compiled.loader), e.g. for the
 # first prediction of a fresh process.  They perform exactly the operations of the compiled recursion
 # (the same cost summation order, min, then one addition per cell), so results are bitwise equal.
 
@@ -98,8 +98,8 @@ def _backtrack_np(Dm, n_end):
 
 
 def _accumulate(u, v):
-    if _fast.ready():
-        from ._dtw_kernels import _accumulate as k
+    if loader.ready():
+        from .._compiled.dtw import _accumulate as k
 
         return k(u, v)
     return _accumulate_np(u, v)
@@ -107,8 +107,8 @@ def _accumulate(u, v):
 
 def _open_end(u, v):
     """n* and D(n*, M) without storing the matrix (two columns of memory when compiled)."""
-    if _fast.ready():
-        from ._dtw_kernels import _open_end_strips
+    if loader.ready():
+        from .._compiled.dtw import _open_end_strips
 
         N = u.shape[0]
         uT = np.ascontiguousarray(u.T)
@@ -124,8 +124,8 @@ def _argmin_first(col):
 
 
 def _backtrack(Dm, n_end):
-    if _fast.ready():
-        from ._dtw_kernels import _backtrack as k
+    if loader.ready():
+        from .._compiled.dtw import _backtrack as k
 
         return k(Dm, n_end)
     return _backtrack_np(Dm, n_end)
@@ -196,7 +196,7 @@ _STEP: list = []
 
 
 def _load_step():
-    from ._dtw_kernels import _incremental_step
+    from .._compiled.dtw import _incremental_step
 
     _STEP.append(_incremental_step)
     return _incremental_step
@@ -233,7 +233,7 @@ class IncrementalDTW:
     def update(self, frame, check: bool = True):
         """Add one query frame; returns ``(n_star, cost)``."""
         D = self.reference.shape[1]
-        step = _STEP[0] if _STEP else (_load_step() if _fast.ready() else None)
+        step = _STEP[0] if _STEP else (_load_step() if loader.ready() else None)
         fast_in = (step is not None and type(frame) is np.ndarray and frame.dtype == np.float64
                    and frame.shape == (D,))
         v = frame if (fast_in or not check) else as_frame(frame, "frame", D)

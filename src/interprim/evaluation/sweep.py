@@ -1,9 +1,9 @@
 """Leave-one-out evaluation of Interaction Primitives and their peers ("% observed" sweeps, Fig. 7).
 
-Protocol (``docs/GUIDE`` Sec. 4, issue 4): for every task (one NuiSI
+Protocol: for every task (one NuiSI
 interaction, the synthetic set, ...) and every demonstration ``j``: fit each
 method on the other demonstrations, observe the first ``p`` % of demonstration
-``j``'s observed agent (``p`` = 10, 20, ..., 100), predict the whole
+``j``'s observed agent (:func:`~interprim.evaluation.protocol.observed_frames`) (``p`` = 10, 20, ..., 100), predict the whole
 interaction and compare it with the truth on a common normalised-time grid.
 
 Metrics per (task, method, held-out demo, fraction):
@@ -23,9 +23,9 @@ Methods (:data:`METHODS`): ``ip-forcing`` and ``ip-position`` (this library with
 ``sigma2="cv"`` and ``phase_method="likelihood"``, conditioning on forcing
 values, Eq. 15, or on positions), ``ip-paper`` (the paper exactly: forcing,
 DTW phase, ``sigma2="auto"``), ``*-dtw`` variants (same but DTW phase),
-``iprompt`` (:class:`~interprim.baselines.InteractionProMP`), ``nn``
-(:class:`~interprim.baselines.NearestNeighbour`) and ``prior``
-(:class:`~interprim.baselines.PriorMean`); a ``+pca`` suffix projects each
+``iprompt`` (:class:`~interprim.evaluation.baselines.InteractionProMP`), ``nn``
+(:class:`~interprim.evaluation.baselines.NearestNeighbour`) and ``prior``
+(:class:`~interprim.evaluation.baselines.PriorMean`); a ``+pca`` suffix projects each
 agent on ``pca_components`` principal components first (paper Sec. IV).
 
 Recognition (:func:`recognition_fold`): one model per interaction; the held-out
@@ -44,6 +44,10 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 
 import numpy as np
+
+from ..preprocessing import time_normalise
+
+from .protocol import observed_frames
 
 __all__ = ["EvalConfig", "METHODS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
            "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
@@ -106,26 +110,26 @@ class Task:
 @lru_cache(maxsize=64)
 def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     if dataset == "nuisi":
-        from .datasets import load_nuisi
+        from ..datasets import load_nuisi
 
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)
         return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns))
     if dataset == "synthetic":
-        from .synthetic import two_agent_demos
+        from ..synthetic import two_agent_demos
 
         return Task("synthetic", two_agent_demos(30, seed=0), [0, 1], 0.01, 1, ["o1", "o2", "c1", "c2", "c3"])
     if dataset == "synthetic-noisy":
-        from .synthetic import two_agent_demos
+        from ..synthetic import two_agent_demos
 
         return Task("synthetic-noisy", two_agent_demos(30, seed=0, noise=0.02), [0, 1], 0.01, 1,
                     ["o1", "o2", "c1", "c2", "c3"])
     if dataset == "highfive-sim":
-        from .sim import generate_highfive
+        from ..sim import generate_highfive
 
         data = generate_highfive(30, seed=0, progress=False)
         return Task("highfive-sim", list(data.demos), list(data.observed_dofs), float(data.dt), 1)
     if dataset == "characters":
-        from .datasets import load_character_trajectories
+        from ..datasets import load_character_trajectories
 
         d = load_character_trajectories(None, letters=name, max_per_letter=30)[name]
         return Task(f"characters/{name}", [np.asarray(x)[:, :2] for x in d.demos], [0, 1], float(d.dt or 0.005), 2)
@@ -144,7 +148,7 @@ def task_names(dataset: str) -> list:
 def make_estimator(method: str, observed_dofs, cfg: EvalConfig):
     """An unfitted estimator for a method name of :data:`METHODS` (optionally with a ``+pca`` suffix)."""
     from .baselines import InteractionProMP, NearestNeighbour, PriorMean
-    from .primitive import InteractionPrimitive
+    from ..primitive import InteractionPrimitive
 
     base, _, suffix = method.partition("+")
     pca = cfg.pca_components if suffix == "pca" else None
@@ -169,12 +173,6 @@ def make_estimator(method: str, observed_dofs, cfg: EvalConfig):
     raise ValueError(f"unknown method {method!r}; expected one of {METHODS} (optionally with '+pca')")
 
 
-def _time_normalise(y, n):
-    from .preprocessing import time_normalise
-
-    return time_normalise(y, n)
-
-
 def _point_rms(err, point_dim):
     """Root mean square of the point errors: ``err`` (n, C) with C = k * point_dim columns."""
     n, C = err.shape
@@ -187,7 +185,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 
     Returns one record (dict) per fraction (see the module docstring for the metrics).
     """
-    from .phase_likelihood import single_thread
+    from .._blas import single_thread
 
     t = _task(dataset, task, cfg)
     demos = t.demos
@@ -196,7 +194,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
     obs = t.observed_dofs
     ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
     n = cfg.n_out
-    truth = _time_normalise(test, n)
+    truth = time_normalise(test, n)
     base, plus, suffix = method.partition("+")
     variants = [(method, None)]
     if base in ("ip-forcing", "ip-position"):
@@ -208,7 +206,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
         out = []
         T = test.shape[0]
         for (name, variant), p in ((v, p) for v in variants for p in cfg.fractions):
-            M = int(min(T, max(3, round(p * T))))
+            M = observed_frames(T, p)
             if variant == "oracle":
                 pred = est.predict(test[:M, obs], phase=max((M - 1) / (T - 1), 1e-3))
             else:
@@ -244,7 +242,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 
 @lru_cache(maxsize=32)
 def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int):
-    from .primitive import InteractionPrimitive
+    from ..primitive import InteractionPrimitive
 
     t = _task(dataset, task, cfg)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
@@ -259,8 +257,8 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
 
     The task's own model is fitted without ``j``; the other tasks' models on all their demonstrations.
     """
-    from .phase_likelihood import single_thread
-    from .recognition import Recogniser
+    from .._blas import single_thread
+    from ..recognition import Recogniser
 
     names = task_names(dataset)
     with single_thread():
@@ -271,7 +269,7 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
         T = test.shape[0]
         out = []
         for p in cfg.recognition_fractions:
-            M = int(min(T, max(3, round(p * T))))
+            M = observed_frames(T, p)
             r = rec.recognise(test[:M, obs])
             out.append({"dataset": dataset, "task": task, "demo": int(j), "fraction": float(p),
                         "predicted": r.label, "correct": bool(r.label == task),

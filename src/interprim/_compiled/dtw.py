@@ -1,7 +1,7 @@
-"""Compiled kernels of the open-end DTW (paper Eq. 5-8); see :mod:`interprim.phase` for the maths.
+"""Compiled kernels of the open-end DTW (paper Eq. 5-8); see :mod:`interprim.phase.dtw` for the maths.
 
-Kept apart from :mod:`interprim.phase` so that importing the package and the
-first prediction do not need numba (see :mod:`interprim._fast`).
+Kept apart from :mod:`interprim.phase.dtw` so that importing the package and the
+first prediction do not need numba (see :mod:`interprim._compiled.loader`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,167 @@
+"""``interprim fit``: learn an Interaction Primitive from demonstration files and save it.
+
+Only :mod:`argparse` is imported at module level; numpy and the core are imported
+inside the command function, so ``interprim --help`` stays fast.  File formats are
+described in ``docs/data-formats.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import InterprimError
+from ._common import CommandError, _positive, _split_cols
+
+__all__ = ["add_parser", "CommandError"]
+
+_FIT_EPILOG = """\
+DEMOS is a CSV file (header of column names, a 'time' column in seconds, optionally a 'demo'
+column splitting several demonstrations), a folder of such files, or an NPZ archive with
+demo_000, demo_001, ... (T, D) arrays, time_000, ... and 'columns' (see docs/data-formats.md).
+
+examples:
+  interprim fit demos.csv --observed hand_x,hand_y,hand_z -o model.npz
+  interprim fit recordings/ --observed 0,1,2 --n-basis 15 --smoothing-window 7 -o model.npz
+"""
+
+
+def add_parser(subparsers) -> None:
+    """Register ``fit`` with an ``argparse`` sub-parser set."""
+    fmt = argparse.RawDescriptionHelpFormatter
+
+    p = subparsers.add_parser(
+        "fit",
+        help="learn an Interaction Primitive from demonstration files",
+        description="Learn an Interaction Primitive from demonstrations of two agents (or one) and save it.",
+        epilog=_FIT_EPILOG,
+        formatter_class=fmt,
+    )
+    p.add_argument("demos", metavar="DEMOS", help="CSV file, NPZ file or folder of demonstrations")
+    p.add_argument(
+        "--observed",
+        action="append",
+        metavar="COLS",
+        help="the observed agent's (human's) columns: names or 0-based indices, comma-separated "
+        "(repeatable). All other columns are the controlled agent (robot); naming every column "
+        "gives a single-agent model. Default: the file's '# observed:' entry",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write (.npz)")
+    p.add_argument("--columns", metavar="COLS", help="use only these columns (names or indices, comma-separated)")
+    p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
+    p.add_argument(
+        "--observation",
+        choices=("forcing", "position"),
+        default=None,
+        help="condition on forcing terms (paper Eq. 15) or on positions (default: the model's)",
+    )
+    p.add_argument(
+        "--covariance", choices=("shrinkage", "ridge", "empirical"), default=None, help="covariance regularisation"
+    )
+    p.add_argument(
+        "--sigma2",
+        type=_sigma2,
+        default=None,
+        help="observation noise variance: a number, 'auto' or 'cv' (cross-validated) (default: the model's)",
+    )
+    p.add_argument(
+        "--phase-method",
+        choices=("dtw", "likelihood"),
+        default=None,
+        help="phase estimation: open-end DTW (paper Eq. 5-9) or likelihood (default: the model's)",
+    )
+    p.add_argument(
+        "--input-noise",
+        type=float,
+        default=None,
+        metavar="STD",
+        help="standard deviation (data units) of noise in the online input that the demonstrations lack "
+        "(sensor noise); makes predictions robust to it",
+    )
+    p.add_argument(
+        "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
+    )
+    p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components")
+    p.add_argument("--dt", type=float, default=None, help="sampling interval (s) for files without time stamps")
+    p.add_argument(
+        "--resample", type=float, default=None, metavar="DT", help="resample the demonstrations to this interval (s)"
+    )
+    p.add_argument("--max-nan-gap", type=int, default=0, help="fill interior gaps of up to this many missing frames")
+    p.set_defaults(func=cmd_fit)
+
+
+def _sigma2(text):
+    if text in ("auto", "cv"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, 'auto' or 'cv', got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return v
+
+
+def cmd_fit(args) -> int:
+    """``interprim fit``: load demonstrations, fit an InteractionPrimitive, save it."""
+    from pathlib import Path
+
+    import interprim as ip
+    from interprim.datasets import load_demonstrations
+    from interprim.datasets._base import select_columns
+
+    _positive(args.n_basis, "--n-basis")
+    _positive(args.dt, "--dt")
+    _positive(args.resample, "--resample")
+    ds = load_demonstrations(
+        args.demos,
+        columns=args.columns,
+        dt=args.dt,
+        resample_dt=args.resample,
+        max_nan_gap=args.max_nan_gap,
+    )
+    observed = _split_cols(args.observed)
+    if observed:
+        obs = select_columns(ds.columns, observed, where=f"--observed (columns of {args.demos})")
+    elif ds.observed_dofs:
+        obs = list(ds.observed_dofs)
+    else:
+        raise CommandError(
+            f"--observed is required: name the observed agent's columns among {', '.join(ds.columns)}"
+        )
+    if len(ds) < 2:
+        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution")
+    kwargs = {"n_basis": args.n_basis}
+    for key, val in (
+        ("observation", args.observation),
+        ("covariance", args.covariance),
+        ("sigma2", args.sigma2),
+        ("phase_method", args.phase_method),
+        ("input_noise", args.input_noise),
+        ("smoothing_window", args.smoothing_window),
+        ("pca_components", args.pca),
+    ):
+        if val is not None:
+            kwargs[key] = val
+    try:
+        model = ip.InteractionPrimitive(observed_dofs=obs, **kwargs)
+        model.fit(ds)  # its dt or time stamps, and its column names (stored in the model file)
+    except InterprimError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
+    out = Path(args.output)
+    if out.parent and not out.parent.exists():
+        out.parent.mkdir(parents=True, exist_ok=True)
+    model.save(out)
+    obs_names = [ds.columns[i] for i in model.observed_dofs_]
+    ctrl_names = [ds.columns[i] for i in model.controlled_dofs_]
+    print(
+        f"fitted {len(ds)} demonstrations, {ds.n_dofs} columns, dt={model.dt_:.4g} s, "
+        f"mean duration {model.mean_duration_:.3g} s\n"
+        f"  observed:   {', '.join(obs_names)}\n"
+        f"  controlled: {', '.join(ctrl_names) or '(none: single-agent model)'}\n"
+        f"saved {out}"
+    )
+    return 0
+
+

@@ -1,0 +1,165 @@
+"""Online phase tracking for streams: the likelihood phase by local search (beyond the paper's DTW).
+
+:func:`track_phase` re-scores a few candidates around the constant-speed
+extrapolation of the previous estimate; :class:`_Tracker` (used by
+:class:`~interprim.stream.Stream`) scores them on a fixed lattice of speeds, so
+the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
+lattice point's statistics by the new frame instead of recomputing them.
+Both score with :mod:`interprim.phase.likelihood`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._blas import single_thread
+from .._compiled.loader import _PHASE_KERNELS as _KERNEL
+from .._compiled.loader import phase_kernel as _kernel
+from .likelihood import _S_MIN, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
+
+__all__ = ["track_phase"]
+
+
+_FACTORS: dict = {}
+
+
+def _spread_factors(n: int, spread: float) -> np.ndarray:
+    """``exp(linspace(-spread, spread, n))`` (cached: it is the same for every frame of a stream)."""
+    f = _FACTORS.get((n, spread))
+    if f is None:
+        f = np.exp(np.linspace(-spread, spread, n))
+        f.flags.writeable = False
+        _FACTORS[(n, spread)] = f
+    return f
+
+
+def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int = 7, spread: float = 0.15,
+                speed_prior: bool = True) -> float:
+    """Cheap online phase update for :class:`~interprim.primitive.Stream`.
+
+    Extrapolates the previous estimate ``s_prev`` (made with ``m_prev``
+    frames) at constant speed to the current ``M`` frames and evaluates
+    ``n_candidates`` values within a factor ``exp(+-spread)`` of it; the first
+    estimate (``s_prev is None``) uses a coarse full grid.
+    """
+    M = z.shape[0]
+    if M < 2:
+        return _S_MIN
+    if s_prev is None or m_prev < 2:
+        return estimate_phase(model, z, n_grid=20, refine=False, speed_prior=speed_prior).s_end
+    s_pred = min(1.0, s_prev * (M - 1) / (m_prev - 1))
+    cand = s_pred * _spread_factors(int(n_candidates), float(spread))
+    if cand[0] < _S_MIN or cand[-1] > 1.0:  # clipped: duplicates at the bounds
+        cand = np.unique(np.clip(cand, _S_MIN, 1.0))
+    scores = _scorer(model, z, phase_noise(model), speed_prior)
+    if scores.dense:
+        with single_thread():
+            sc = scores(cand)[0]
+    else:
+        sc = scores(cand)[0]
+    return float(cand[int(np.argmax(sc))])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# online tracking on a lattice of speeds (used by Stream)
+
+_SLOT_FREE = -(1 << 62)  # = interprim._compiled.phase_likelihood.SLOT_FREE (a free slot; no numba import here)
+_MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
+
+
+def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
+    """Candidates of :func:`interprim._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the clipped
+    ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
+    js, ss = [], []
+    for j in range(kc - nh, kc + nh + 1):
+        s = float(v0 * np.exp(dlog * j)) * (M - 1)
+        if s < _S_MIN:
+            if js and ss[-1] == _S_MIN:
+                js[-1] = j
+                continue
+            s = _S_MIN
+        elif s > 1.0:
+            if ss and ss[-1] == 1.0:
+                continue
+            s = 1.0
+        js.append(j)
+        ss.append(s)
+    return js, np.array(ss)
+
+
+class _Tracker:
+    """Online phase of one :class:`~interprim.primitive.Stream` (the likelihood phase, local search).
+
+    Like :func:`track_phase`, each frame scores ``n_candidates`` phases within ``exp(+-spread)`` of the
+    constant-speed extrapolation of the previous estimate; here the candidates are *speeds* on a fixed
+    lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread / (n_candidates - 1)``, anchored at the first estimate
+    (``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
+    to ``[_S_MIN, 1]`` (clipped candidates merged).  Without clipping these are :func:`track_phase`'s
+    candidates (whose chosen speeds also stay on such a lattice, up to rounding); after a clipped choice the
+    lattice keeps its index (the nearest unclipped-side point) where :func:`track_phase` would restart from the
+    clipped value.  Frame ``m`` of lattice point ``j`` always sits at phase ``v_j m``, so the compiled step
+    (:func:`interprim._compiled.phase_likelihood.track_step`) extends each point's statistics and factors by the new frame
+    (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them (``O(M q (q + D_o) + D_o q^2 n + ...)``).
+    Without the kernel (or with a dense prior) the same candidates are scored from scratch.
+    """
+
+    def __init__(self, model, n_candidates: int = 7, spread: float = 0.15, speed_prior: bool = True):
+        if n_candidates < 1 or n_candidates % 2 == 0:
+            raise ValueError("n_candidates must be odd")
+        self.model = model
+        self.nh = (int(n_candidates) - 1) // 2
+        self.dlog = 2.0 * float(spread) / max(int(n_candidates) - 1, 1)
+        self.speed_prior = bool(speed_prior)
+        self._buf = None
+        self._fs = None
+        self.reset()
+
+    def reset(self):
+        self.v0 = None
+        self.kc = 0
+        self.Rg = None
+        if self._buf is not None:
+            self._buf[0][:] = _SLOT_FREE
+
+    def step(self, z) -> float:
+        """Phase of the last of the frames ``z`` (the frames seen so far, a prefix of the next call's)."""
+        M = z.shape[0]
+        model = self.model
+        if M < 2:
+            self.reset()
+            return _S_MIN
+        if self.v0 is None:
+            s = estimate_phase(model, z, n_grid=20, refine=False, speed_prior=self.speed_prior).s_end
+            self.v0, self.kc, self.Rg = s / (M - 1), 0, None
+            if self._buf is not None:
+                self._buf[0][:] = _SLOT_FREE
+            return s
+        fs = _fast_state(model)
+        kern = _KERNEL[1] if (fs is not None and _kernel() is not None) else None
+        s2 = phase_noise(model)
+        if kern is None:
+            if self._buf is not None:  # the slots are not kept up to date here
+                self._buf[0][:] = _SLOT_FREE
+            js, cand = _lattice_candidates(self.v0, self.kc, self.nh, self.dlog, M)
+            sc = _scorer(model, z, s2, self.speed_prior)
+            if sc.dense:
+                with single_thread():
+                    lp = sc(cand)[0]
+            else:
+                lp = sc(cand)[0]
+            i = int(np.argmax(lp))
+            self.kc = js[i]
+            return float(cand[i])
+        if fs is not self._fs or self._buf is None:
+            self._fs = fs
+            from .._compiled.phase_likelihood import track_buffers
+
+            self._buf = track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+            self.Rg = None
+        if self.Rg is None:
+            self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))
+        logel, mu, sd = _speed_prior_params(model, M) if self.speed_prior else (0.0, 0.0, 1.0)
+        j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, _S_MIN, fs.sq, fs.Uh, fs.K0, s2,
+                    self.speed_prior, logel, mu, sd, _MAX_GAP, *self._buf)
+        self.kc = int(j)
+        return float(s)

@@ -1,0 +1,320 @@
+"""The model's belief about the whole interaction after a partial observation (paper Sec. III-C/D, Eq. 1, 18).
+
+A :class:`Prediction` holds the posterior ``p(theta | tau_o)`` (Eq. 18) of one
+:meth:`~interprim.primitive.InteractionPrimitive.predict` or
+:meth:`~interprim.stream.Stream.update` and integrates the DMPs (Eq. 1) from it:
+the whole movement of both agents, its uncertainty and samples, the robot's
+response from the current phase and the completion of the observed agent.
+:class:`MeanRollout` is the mean trajectory of many predictions of one model on
+one grid, with the grid's design built once (what the streaming server sends
+per frame).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._compiled import loader
+from .gaussian import Posterior, sample
+
+__all__ = ["Prediction", "MeanRollout"]
+
+
+class Prediction:
+    """The model's belief about the whole interaction after a partial observation.
+
+    Attributes
+    ----------
+    phase : float
+        Fraction of the movement already seen, in (0, 1] (DTW, Eq. 8).
+    x : float
+        Canonical-system phase ``exp(-alpha_x * phase)`` (Eq. 9).
+    speed : float
+        Partner's speed relative to the mean demonstration (1 = as fast).
+    duration : float
+        Estimated duration of the whole movement in seconds.
+    tau : float
+        Time scaling ``1 / duration`` of Eq. 1.
+    n_star, dtw_cost : int, float
+        Matched reference frame (0-based) and ``D(n*, M)``.
+    n_observed : int
+        Number of observed frames used.
+    log_likelihood : float
+        ``log p(observation | model)`` at the estimated phase (0 when
+        nothing was conditioned on); compare across models for recognition.
+    posterior_mean, posterior_cov : ndarray
+        ``p(theta | tau_o)`` in the internal (latent) parameter layout.
+    """
+
+    def __init__(self, model, post: Posterior, stats, s_end, duration, n_star, cost, n_observed, y0_obs,
+                 robot_start, last_obs):
+        self._m = model
+        self._post = post
+        self._stats = stats
+        self.normalised_time = float(s_end)
+        N = model.reference_.shape[0]
+        self.phase = float(max(s_end, 0.5 / (N - 1)))
+        self.x = math.exp(-float(model.alpha_x) * self.phase)  # Eq. 9 (canonical_phase, scalar)
+        self.duration = float(duration)
+        self.tau = 1.0 / self.duration
+        self.speed = float(model.mean_duration_ / self.duration)
+        self.n_star = int(round(n_star))
+        self._dtw_cost = cost if callable(cost) else float(cost)
+        self.n_observed = int(n_observed)
+        self.log_likelihood = float(post.log_likelihood)
+        self._y0_obs = np.array(y0_obs, dtype=np.float64)  # a copy (see _last_obs)
+        self._robot_start = robot_start
+        self._last_obs = np.array(last_obs, dtype=np.float64)  # a copy: it may be a row of the caller's array
+        #: largest standardised distance of an observed frame from the training frames (set by predict/stream)
+        self.input_distance = float("nan")
+        #: whether that distance passed the model's limit (wrong units, columns or frame of reference?)
+        self.out_of_range = False
+
+    @property
+    def dtw_cost(self) -> float:
+        """``D(n*, M)`` of the open-end DTW of the observation against the reference (Eq. 5-8); with the
+        likelihood phase of a batch ``predict`` it is computed on first access."""
+        if callable(self._dtw_cost):
+            self._dtw_cost = float(self._dtw_cost())
+        return self._dtw_cost
+
+    # -- parameters
+    @property
+    def posterior_mean(self) -> np.ndarray:
+        return self._post.mean
+
+    @property
+    def posterior_cov(self) -> np.ndarray:
+        if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
+            self._post = self._m._condition(self._stats, need_cov=True)
+        return self._post.cov
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Posterior mean goal attractor ``g`` of every DoF, in data columns, shape ``(D,)``."""
+        m = self._m
+        q = m._q
+        g_lat = self._post.mean.reshape(m.n_latent_, q)[:, -1]
+        M, off = m._latent_map()
+        return M @ g_lat + off
+
+    def _start_states(self):
+        m = self._m
+        n_o = m.n_observed_latent_
+        y0 = np.concatenate([self._y0_obs, self._robot_start[0]])
+        v0 = np.concatenate([m.start_velocity_[:n_o], self._robot_start[1]])
+        return y0, v0
+
+    def _latent_traj(self, Th, s_out, y0, v0, s0=0.0):
+        """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``."""
+        free, H = self._m.rollout_.design(s0, s_out)
+        return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
+
+    def _theta(self, flat=None):
+        m = self._m
+        flat = self._post.mean if flat is None else flat
+        return flat.reshape(*flat.shape[:-1], m.n_latent_, m._q)
+
+    # -- trajectories
+    def trajectory(self, n: int = 100) -> np.ndarray:
+        """Posterior mean of all DoFs over the whole movement, shape ``(n, D)``.
+
+        Uniform normalised-time grid from 0 to 1; the observed agent starts at
+        its first observed frame, the controlled agent at ``robot_state``.
+        """
+        m = self._m
+        s = np.linspace(0.0, 1.0, int(n))
+        y0, v0 = self._start_states()
+        lat = self._latent_traj(self._theta(), s, y0, v0)
+        M, off = m._latent_map()
+        return lat @ M.T + off
+
+    def _calibration_scale(self):
+        """Per-column factors of the calibrated predictive std (:mod:`interprim.calibration`), or ``None``."""
+        m = self._m
+        cal = getattr(m, "calibration_", None)
+        if cal is None:
+            return None
+        c_o, c_c = cal.factors(self.normalised_time)
+        f = np.empty(m.n_dofs_)
+        f[m.observed_dofs_] = c_o
+        f[m.controlled_dofs_] = c_c
+        return f
+
+    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
+        """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
+
+        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled per agent by the model's
+        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations, at this
+        prediction's phase), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what
+        happens; ``False``, or a model without calibration: the posterior std itself.
+        """
+        sd = self._posterior_std(n)
+        f = self._calibration_scale() if calibrated else None
+        return sd if f is None else sd * f
+
+    def _posterior_std(self, n: int) -> np.ndarray:
+        m = self._m
+        s = np.linspace(0.0, 1.0, int(n))
+        _, H = m.rollout_.design(0.0, s)
+        C = self.posterior_cov.reshape(m.n_latent_, m._q, m.n_latent_, m._q)
+        S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
+        M, _ = m._latent_map()
+        var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
+        return np.sqrt(np.clip(var, 0.0, None))
+
+    def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
+        """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
+        model their spread about :meth:`trajectory` is scaled per agent as in :meth:`std`."""
+        m = self._m
+        th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
+        s = np.linspace(0.0, 1.0, int(n))
+        y0, v0 = self._start_states()
+        lat = self._latent_traj(self._theta(th), s, y0, v0)
+        M, off = m._latent_map()
+        out = lat @ M.T + off
+        f = self._calibration_scale()
+        if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
+            mean = self.trajectory(int(n))
+            out = mean + (out - mean) * f
+        return out
+
+    def response(self, n: int = 100, state=None):
+        """The controlled agent's mean movement from the current phase to the end.
+
+        Parameters
+        ----------
+        n : int
+            Number of points from the current phase to the end.
+        state : array_like, optional
+            Current robot position ``(n_c,)`` or position and velocity
+            ``(2, n_c)`` (velocity per second); default: the mean prediction's
+            state at the current phase.
+
+        Returns
+        -------
+        t : ndarray, shape (n,)
+            Seconds from now, at the partner's estimated speed.
+        y : ndarray, shape (n, len(controlled_dofs))
+        """
+        if not loader.ready():
+            return self._response_reference(n, state)
+        kern = _RESPONSE[0] if _RESPONSE else _load_response()
+        m = self._m
+        n = int(n)
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        th = self._post.mean.reshape(m.n_latent_, m._q)[n_o:]
+        if state is None:
+            rs = self._robot_start
+            z0 = rs[2] if len(rs) > 2 else np.vstack(rs[:2])
+            at_s0 = False
+        else:
+            y0, v0 = m._robot_start(state)
+            z0 = np.vstack([y0, v0 / m.mean_duration_ * self.duration])
+            at_s0 = True
+        ro = m.rollout_
+        t = np.empty(n)
+        lat = kern(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])), self.duration, t)
+        Mc, offc = m._controlled_map()
+        return t, (lat if Mc is None else lat @ Mc + offc)
+
+    def _response_reference(self, n: int = 100, state=None):
+        """:meth:`response` with :meth:`interprim.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
+        m = self._m
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        s = np.linspace(s0, 1.0, int(n))
+        th = self._theta()[n_o:]
+        if state is None:
+            rs = self._robot_start
+            free, H = m.rollout_.design(0.0, np.array([s0]))
+            freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
+            z0 = np.vstack([rs[0], rs[1]])
+            y0 = (free @ z0 + H @ th.T)[0]
+            v0 = (freed @ z0 + Hd @ th.T)[0]
+        else:
+            y0, v0 = m._robot_start(state)
+            v0 = v0 / m.mean_duration_ * self.duration
+        lat = self._latent_traj(th, s, y0, v0, s0=s0)
+        M, off = m._latent_map()
+        ctrl = m.controlled_dofs_
+        y = lat @ M[ctrl, n_o:].T + off[ctrl]
+        return (s - s0) * self.duration, y
+
+    def completion(self, n: int = 100):
+        """Pattern completion (paper Fig. 3): continue the observed agent from its last observed frame.
+
+        Returns ``(s, y)``: normalised times from the current phase to 1 and
+        positions ``(n, len(observed_dofs))``.
+        """
+        m = self._m
+        n_o = m.n_observed_latent_
+        s0 = self.normalised_time
+        s = np.linspace(s0, 1.0, int(n))
+        th = self._theta()[:n_o]
+        # velocity at the current phase from the posterior mean movement
+        freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
+        z0 = np.vstack([self._y0_obs, m.start_velocity_[:n_o]])
+        v0 = (freed @ z0 + Hd @ th.T)[0]
+        lat = self._latent_traj(th, s, self._last_obs, v0, s0=s0)
+        M, off = m._latent_map()
+        obs = m.observed_dofs_
+        return s, lat @ M[obs, :n_o].T + off[obs]
+
+    def mean_rollout(self, n: int = 100, columns=None) -> "MeanRollout":
+        """A :class:`MeanRollout`: ``trajectory(n)[:, columns]`` for this and every later prediction of the same
+        model, with the design of the grid built once."""
+        return MeanRollout(self._m, n, columns)
+
+    def __repr__(self):
+        return (f"Prediction(phase={self.phase:.3f}, speed={self.speed:.3f}, n_observed={self.n_observed}, "
+                f"log_likelihood={self.log_likelihood:.3g})")
+
+
+_RESPONSE: list = []
+
+
+def _load_response():
+    from ._compiled.rollout import response_positions
+
+    _RESPONSE.append(response_positions)
+    return response_positions
+
+
+class MeanRollout:
+    """``pred.trajectory(n)[:, columns]`` for the predictions of one model, cheaper.
+
+    :meth:`Prediction.trajectory` rebuilds the rollout's design matrices for the grid
+    ``linspace(0, 1, n)`` at every call (about 0.1 ms, half the cost of a streamed frame); they depend
+    only on the model and ``n``, so they are built once here, and only the requested columns are mapped
+    back from the latent DoFs.  Made by :meth:`Prediction.mean_rollout`; call it with a prediction of the
+    same model.
+
+    Parameters
+    ----------
+    model : InteractionPrimitive
+        A fitted model.
+    n : int
+        Points of the uniform normalised-time grid from 0 to 1.
+    columns : slice or list of int, optional
+        Data columns to return (default: all).
+    """
+
+    __slots__ = ("free", "H", "MT", "off")
+
+    def __init__(self, model, n: int, columns=None):
+        sel = slice(None) if columns is None else columns
+        free, H = model.rollout_.design(0.0, np.linspace(0.0, 1.0, int(n)))
+        M, off = model._latent_map()
+        self.free, self.H = np.ascontiguousarray(free), np.ascontiguousarray(H)
+        self.MT, self.off = np.ascontiguousarray(M[sel].T), np.ascontiguousarray(off[sel])
+
+    def __call__(self, pred: Prediction) -> np.ndarray:
+        """The posterior mean of ``pred`` on the grid, shape ``(n, len(columns))``."""
+        y0, v0 = pred._start_states()
+        th = pred._theta()
+        lat = self.free @ np.vstack((y0, v0)) + self.H @ th.T
+        return lat @ self.MT + self.off

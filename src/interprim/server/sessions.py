@@ -1,0 +1,292 @@
+"""The WebSocket side of the server: one session per connection, its messages, frames and replies.
+
+:class:`SessionSide` is a part of :class:`~interprim.server.app.InterprimServer` (which owns
+``config``, ``models``, ``sessions``, the compute lanes and the statistics it updates).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from . import protocol as P
+from .compute import _Open, _accepts_need_cov
+from .lanes import _Bucket, _Session
+
+log = logging.getLogger("interprim.server")
+
+_CLOSE = object()
+_OPEN = object()  # websockets.protocol.State.OPEN, set by InterprimServer.start (imported lazily)
+
+
+class SessionSide:
+    """A session's life: handshake, ``hello``/``open``/``close`` messages, frames, replies and errors."""
+
+    async def _handler(self, ws):
+        c = self.config
+        sid = next(self._ids)
+        try:
+            peer = "%s:%s" % tuple(ws.remote_address[:2])
+        except Exception:
+            peer = "?"
+        if len(self.sessions) >= c.max_sessions:
+            self.stats["rejected"] += 1
+            log.warning("session %d from %s refused: server full (%d sessions)", sid, peer, c.max_sessions)
+            await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {c.max_sessions} sessions; try again later")
+            return
+        s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
+        self.sessions[sid] = s
+        self.stats["sessions"] += 1
+        s.writer = asyncio.get_running_loop().create_task(self._writer(s))
+        log.info("session %d: connected from %s (%d active)", sid, peer, len(self.sessions))
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while not s.closing:
+                try:
+                    if not s.ready:
+                        data = await asyncio.wait_for(ws.recv(), c.hello_timeout)  # (3.10: no asyncio.timeout)
+                    else:
+                        data = await ws.recv()
+                except (TimeoutError, asyncio.TimeoutError):
+                    self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
+                    break
+                except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
+                    self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
+                    break
+                await self._on_message(s, data)
+                if not s.out.empty():
+                    # Let the writer push the reply to the socket now: the queue then only fills up
+                    # when the socket's write buffer is full, i.e. when the client is not reading.
+                    await asyncio.sleep(0)
+        except ConnectionClosed as exc:
+            rcvd, sent = exc.rcvd, exc.sent
+            if s.closing:
+                pass
+            elif sent is not None and sent.code not in (1000, 1001):
+                log.warning("session %d: closed by server: %d %s", sid, sent.code, sent.reason)
+            elif rcvd is None:
+                log.warning("session %d: client disconnected without a close frame after %d frame(s)", sid, s.seq)
+            else:
+                log.info("session %d: client closed (%d %s)", sid, rcvd.code, rcvd.reason)
+        except Exception:  # never let a session bug escape to the library's handler
+            log.exception("session %d: internal error; closing the session", sid)
+            self._fatal(s, P.CLOSE_INTERNAL, "internal server error (logged)")
+        finally:
+            self.sessions.pop(sid, None)
+            if self._procs is not None and s.open is not None:
+                s.open = None
+                try:
+                    await self._procs.call(sid, "drop")
+                except Exception:
+                    pass
+            if s.closing and s.writer is not None:
+                try:  # let the writer send the queued error + close frame
+                    await asyncio.wait_for(asyncio.shield(s.writer), c.close_timeout + 1.0)
+                except (TimeoutError, asyncio.CancelledError, Exception):
+                    pass
+            if s.writer is not None and not s.writer.done():
+                s.writer.cancel()
+            extra = f", errors {s.error_counts}" if s.error_counts else ""
+            log.info("session %d: ended (%d frames, %d predictions%s)", sid, s.seq, s.predictions, extra)
+
+    async def _writer(self, s: _Session):
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while True:
+                item = await s.out.get()
+                if isinstance(item, tuple) and item and item[0] is _CLOSE:
+                    await s.ws.close(item[1], item[2])
+                    return
+                await s.ws.send(item)
+                s.unsent -= 1
+        except ConnectionClosed:
+            return
+
+    def _send(self, s: _Session, text: str) -> None:
+        if s.closing:
+            return
+        try:
+            s.out.put_nowait(text)
+            s.unsent += 1
+        except asyncio.QueueFull:
+            reason = f"client is not reading: {self.config.send_queue} replies pending"
+            log.warning("session %d: closing 1008: %s", s.id, reason)
+            s.closing = True
+            s.close_reason = reason
+            # Bypass the full queue: close now (the library aborts the TCP connection after close_timeout).
+            s.writer.cancel()
+            s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
+
+    def _fatal(self, s: _Session, code: int, reason: str, message: dict | None = None) -> None:
+        if s.closing:
+            return
+        log.warning("session %d: closing %d: %s", s.id, code, reason)
+        if message is not None:
+            self._send(s, P.dumps(message))
+        if s.closing:  # _send found the queue full
+            return
+        s.closing = True
+        s.close_reason = reason
+        try:
+            s.out.put_nowait((_CLOSE, code, reason[:120]))
+        except asyncio.QueueFull:
+            s.writer.cancel()
+            s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
+
+    def _error(self, s: _Session, exc: P.ProtocolError, seq=None) -> None:
+        s.errors += 1
+        if exc.code != "rate_limited":  # dropping is the limit's own answer; not a protocol violation
+            s.consecutive_errors += 1
+        s.error_counts[exc.code] = s.error_counts.get(exc.code, 0) + 1
+        self.stats["errors"] += 1
+        if s.errors <= self.config.log_errors_per_session:
+            log.warning("session %d: %s: %s%s", s.id, exc.code, exc.message, f" (seq {seq})" if seq else "")
+        elif s.errors == self.config.log_errors_per_session + 1:
+            log.warning("session %d: further errors are counted, not logged", s.id)
+        msg = P.error(exc.code, exc.message, seq=seq)
+        if exc.fatal:
+            self._fatal(s, P.CLOSE_POLICY, exc.message, msg)
+        elif s.consecutive_errors >= self.config.max_errors:
+            self._send(s, P.dumps(msg))
+            self._fatal(s, P.CLOSE_POLICY, f"too many protocol errors ({s.consecutive_errors} in a row)")
+        else:
+            self._send(s, P.dumps(msg))
+
+    async def _on_message(self, s: _Session, data) -> None:
+        c = self.config
+        is_frame = isinstance(data, (bytes, bytearray, memoryview))
+        msg = None
+        if not is_frame:
+            try:
+                msg = P.parse_text(data)
+            except P.ProtocolError as exc:
+                if not s.bucket.take():
+                    return self._error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"))
+                return self._error(s, exc)
+            is_frame = msg["type"] == "frame"
+        seq = None
+        if is_frame:
+            s.seq += 1
+            seq = s.seq
+        if not s.bucket.take():
+            return self._error(
+                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"), seq
+            )
+        try:
+            if msg is None or msg["type"] == "frame":
+                await self._on_frame(s, data, msg, seq)
+            else:
+                await self._on_control(s, msg)
+        except P.ProtocolError as exc:
+            self._error(s, exc, seq)
+
+    async def _on_control(self, s: _Session, msg: dict) -> None:
+        mtype = msg["type"]
+        if mtype == "hello":
+            h = P.check_hello(msg)
+            if not self._token_ok(h["token"]):
+                raise P.ProtocolError("unauthorized", "missing or wrong token in hello", fatal=True)
+            s.ready = True
+            s.consecutive_errors = 0
+            reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
+            reply.update({k: v for k, v in self.info().items() if k in ("server", "models", "limits")})
+            self._send(s, P.dumps(reply))
+            return
+        if not s.ready:
+            raise P.ProtocolError("not_ready", f"send hello first (got {mtype!r})")
+        if mtype == "open":
+            o = P.check_open(msg, self.models, default_points=self.config.default_points, max_points=self.config.max_points)
+            entries = [self.models[n] for n in o["candidates"]]
+            streams, cols = [], []
+            for e in entries:
+                dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
+                cols.append(list(range(e.n_dofs)) if dofs == "all" else e.controlled_dofs)
+                if self._procs is None:
+                    try:
+                        streams.append(e.model.stream(robot_state=o["robot_state"]))
+                    except (ValueError, TypeError) as exc:
+                        raise P.ProtocolError("bad_message", f"open.robot_state for model {e.name!r}: {exc}") from None
+            if self._procs is not None:
+                s.open = None
+                try:
+                    await self._procs.call(s.id, "open", model=o["model"], candidates=o["candidates"], cols=cols,
+                                           points=o["points"], std=o["std"], robot_state=o["robot_state"])
+                except RuntimeError as exc:
+                    raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
+            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
+            if streams and _accepts_need_cov(streams[0]):  # mean-only updates are much cheaper without a band
+                s.open.update_kw = {"need_cov": o["std"]}
+            s.consecutive_errors = 0
+            log.info("session %d: opened %s%s", s.id, o["model"],
+                     f" among {o['candidates']}" if o["model"] == "auto" else "")
+            self._send(s, P.dumps({
+                "type": "opened",
+                "model": o["model"],
+                "candidates": o["candidates"],
+                "n_observed": entries[0].n_observed,
+                "columns": cols[0] if len(cols) == 1 else {e.name: cl for e, cl in zip(entries, cols)},
+                "points": o["points"],
+                "std": o["std"],
+            }))
+            return
+        if s.open is None:
+            raise P.ProtocolError("not_open", f"{mtype!r} needs an open session: send open first")
+        if mtype == "reset":
+            if self._procs is not None:
+                try:
+                    await self._procs.call(s.id, "reset")
+                except RuntimeError as exc:
+                    raise P.ProtocolError("internal", f"reset failed: {exc}") from None
+            for st in s.open.streams:
+                st.reset()
+            s.open.frames = 0
+            s.consecutive_errors = 0
+            self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
+        elif mtype == "close":
+            s.open = None
+            if self._procs is not None:
+                try:
+                    await self._procs.call(s.id, "drop")
+                except RuntimeError:
+                    pass
+            s.consecutive_errors = 0
+            self._send(s, P.dumps({"type": "closed", "seq": s.seq}))
+
+    async def _on_frame(self, s: _Session, data, msg, seq: int) -> None:
+        if not s.ready:
+            raise P.ProtocolError("not_ready", "send hello first (got a frame)")
+        op = s.open
+        if op is None:
+            raise P.ProtocolError("not_open", "frame needs an open session: send open first")
+        n = op.entries[0].n_observed
+        if msg is None:
+            frame, t = P.decode_binary_frame(bytes(data), n), None
+        else:
+            frame, t = P.check_frame(msg, n)
+        try:
+            lane = self._lanes[s.id % len(self._lanes)]
+            job = (s, op, frame, seq, t)
+            text = lane.run_now(s, job) if lane.sync else None
+            if text is None:
+                text = await lane.submit(s, job)
+        except Exception as exc:
+            self.stats["errors"] += 1
+            log.exception("session %d: prediction failed at seq %d", s.id, seq)
+            self._send(s, P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq)))
+            return
+        if s.open is not op:  # closed/reopened while computing
+            return
+        s.consecutive_errors = 0
+        s.predictions += 1
+        self.stats["predictions"] += 1
+        ws = s.ws
+        if (not s.unsent and not s.closing and ws.state is _OPEN and getattr(ws, "paused", True) is False
+                and ws.transport.get_write_buffer_size() + len(text) + 16 <= self.config.write_limit):
+            # Fast path: nothing queued before this reply and room in the socket's write buffer, so
+            # ws.send() writes and returns without suspending (no flow-control wait).  Skips the
+            # queue + writer task; a client that does not read fills the buffer and then the queue.
+            await ws.send(text)
+        else:
+            self._send(s, text)

@@ -138,6 +138,11 @@ def save_model(model, path) -> None:
         arrays["input_mean"] = np.asarray(model.input_mean_)
         arrays["input_std"] = np.asarray(model.input_std_)
         meta["input_limit"] = float(model.input_limit_)
+    pm = getattr(model, "phase_model_", None)  # the learned phase (phase_method="learned")
+    if pm is not None:
+        pm_arrays, meta["phase_model"] = pm.to_state()
+        for k, v in pm_arrays.items():
+            arrays[f"phase_model_{k}"] = np.asarray(v)
     cal = getattr(model, "calibration_", None)  # calibrated predictive std (interprim.calibration)
     if cal is not None:
         for k, v in cal.to_arrays().items():
@@ -293,6 +298,15 @@ def load_model(path, model_class):
             _expect(model.input_mean_.shape == (n_o,) and model.input_std_.shape == (n_o,)
                     and bool(np.all(model.input_std_ > 0)) and model.input_limit_ > 0, path,
                     f"arrays 'input_mean'/'input_std' are not ({n_o},) statistics with a positive spread")
+        model.phase_model_ = None
+        if meta.get("phase_model") is not None:
+            from .phase_learned import LearnedPhase
+
+            model.phase_model_ = LearnedPhase.from_state(
+                {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
+                meta["phase_model"])
+        _expect(model.phase_method != "learned" or model.phase_model_ is not None, path,
+                "phase_method is 'learned' but the file holds no phase model")
         model.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration

@@ -631,6 +631,29 @@ class LearnedPhase:
             return self._finish(elapsed, None)
         return self._finish(elapsed, self._raw_features(Y / self.scale_))
 
+    def to_state(self):
+        """``(arrays, meta)``: everything of a fitted estimator, arrays apart and the rest JSON-friendly (for the
+        model files of :mod:`interprim.io`; no pickle).  :meth:`from_state` restores it."""
+        self._check_fitted()
+        arrays, meta = {}, {}
+        for k, v in vars(self).items():
+            if isinstance(v, np.ndarray):
+                arrays[k] = v
+            else:
+                meta[k] = _jsonable(v)
+        return arrays, meta
+
+    @classmethod
+    def from_state(cls, arrays, meta) -> "LearnedPhase":
+        """The estimator saved by :meth:`to_state`."""
+        obj = cls.__new__(cls)
+        for k, v in meta.items():
+            setattr(obj, k, tuple(v) if k in ("features", "features_", "cv_range") and isinstance(v, list) else v)
+        for k, v in arrays.items():
+            setattr(obj, k, np.asarray(v))
+        obj._check_fitted()
+        return obj
+
     def tracker(self) -> "PhaseTracker":
         """An online estimator fed one frame at a time (features updated in ``O(D)`` per frame)."""
         self._check_fitted()
@@ -724,3 +747,14 @@ class PhaseTracker:
                 h = self._hist
                 out[sl] = ((1.0 - f) * h[lo] + f * h[np.minimum(lo + 1, k)] - self._first).ravel()
         return m._finish(k * m.dt_, out)
+
+
+def _jsonable(v):
+    """``v`` with numpy scalars as Python numbers and tuples as lists (JSON; inf/nan as JSON's Infinity/NaN)."""
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from .dtw import DTWResult, IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
 
 __all__ = ["estimate_phase", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
@@ -27,7 +29,7 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         A fitted model (its ``reference_`` has ``N`` frames).
     z : ndarray, shape (M, n_observed_latent)
         The frames seen so far, in the model's latent space, at the training ``dt``.
-    method : {"dtw", "likelihood"}
+    method : {"dtw", "likelihood", "learned"}
         ``"dtw"``: open-end DTW against ``model.reference_`` (Eq. 5-8); ``"likelihood"``: the maximum of
         the observation's likelihood (:func:`interprim.phase.likelihood.estimate_phase`; with fewer than
         two frames the DTW phase).
@@ -44,6 +46,14 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         ``D(n*, M)`` of the open-end DTW; a callable that computes it on demand where the likelihood
         phase did not need it.
     """
+    if method == "learned":  # regressed on the prefix (interprim.phase_learned): a pure function of z
+        est = model.phase_model_.estimate(z)
+        N1 = model.reference_.shape[0] - 1
+        n_star = float(np.clip(est.phase, 0.5 / N1, 1.0)) * N1
+        if dtw is not None:
+            return n_star, dtw[1]
+        ref, zc = model.reference_, z.copy()
+        return n_star, lambda: open_end_dtw(ref, zc, return_path=False).cost
     if method == "likelihood" and tracker is not None:  # local search around the previous estimate
         n_star = tracker.step(z) * (model.reference_.shape[0] - 1)
         return n_star, dtw[1]

@@ -1,0 +1,49 @@
+"""InteractionPrimitive(phase_method="learned"): the learned phase inside the estimator, batch and stream, files."""
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim.synthetic import two_agent_demos
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    demos = two_agent_demos(16, seed=6)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, sigma2=1e-3, phase_method="learned")
+    return m.fit(demos[:12], dt=0.01), demos[12:]
+
+
+def test_predict_uses_the_learned_phase(fitted):
+    m, test = fitted
+    assert m.phase_model_ is not None
+    d = test[0]
+    k = 70
+    p = m.predict(d[:k, :2])
+    est = m.phase_model_.estimate(d[:k, :2])
+    assert p.normalised_time == pytest.approx(est.phase, abs=1e-12)
+    errs = [abs(m.predict(d[:k, :2]).normalised_time - (k - 1) / (len(d) - 1)) for d in test]
+    assert np.mean(errs) < 0.1
+
+
+def test_stream_equals_batch_with_the_learned_phase(fitted):
+    """The learned phase is a function of the prefix: every frame of a stream gives the batch prediction."""
+    m, test = fitted
+    d = test[1]
+    s = m.stream()
+    for k in range(1, 90):
+        q = s.update(d[k - 1, :2])
+        if k in (5, 30, 60, 89):
+            p = m.predict(d[:k, :2])
+            assert q.normalised_time == pytest.approx(p.normalised_time, abs=1e-12), k
+            np.testing.assert_allclose(q.trajectory(40), p.trajectory(40), rtol=1e-9, atol=1e-12)
+
+
+def test_learned_phase_survives_save_and_load(fitted, tmp_path):
+    m, test = fitted
+    m.save(tmp_path / "m.npz")
+    loaded = ip.InteractionPrimitive.load(tmp_path / "m.npz")
+    assert loaded.phase_method == "learned" and loaded.phase_model_.method_ == m.phase_model_.method_
+    z = test[2][:50, :2]
+    assert loaded.predict(z).normalised_time == m.predict(z).normalised_time
+    np.testing.assert_array_equal(loaded.predict(z).trajectory(30), m.predict(z).trajectory(30))

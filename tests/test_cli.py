@@ -219,3 +219,17 @@ def test_fit_model_options(files, tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         main(argv + ["--sigma2", "-1"])
     assert info.value.code == 2 and "must be positive" in capsys.readouterr().err
+
+
+def test_predict_says_when_the_input_is_out_of_range(files, tmp_path, capsys):
+    """A partial observation in other units (x1000) is predicted, marked in the file and said on the console."""
+    partial = load_demonstrations(files / "partial.csv").demos[0]
+    path = tmp_path / "mm.csv"
+    np.savetxt(path, partial * 1000.0, delimiter=",", header="human_x,human_y", comments="")
+    out = tmp_path / "pred.csv"
+    with pytest.warns(UserWarning, match="standard deviations"):
+        assert main(["predict", str(files / "model.npz"), str(path), "-o", str(out), "--dt", "0.02"]) == 0
+    assert "WARNING: the observed frames are" in capsys.readouterr().out
+    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in out.read_text().splitlines()
+                if l.startswith("#") and ":" in l}
+    assert float(comments["out_of_range"]) == 1.0 and float(comments["input_distance"]) > 8

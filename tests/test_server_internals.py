@@ -152,6 +152,8 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
         assert msg["columns"] == cols and (msg.get("t") == (0.5 * k if k % 2 else None))
         for key in ("phase", "x", "speed", "duration", "log_likelihood"):
             assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
+        assert msg["out_of_range"] is p.out_of_range is False
+        assert msg["input_distance"] == pytest.approx(p.input_distance, rel=1e-5)  # %.6g
         # orjson: float32 written as its shortest round-trip text (rounding to float32, then the shortest
         # text parsed as float64: <= 2**-23 ~ 1.2e-7 relative); printf %.7g: <= 5e-7 relative
         rtol = 1.2e-7 if (compute._orjson is not None and not compute._FORCE_PRINTF) else 5.0001e-7
@@ -169,6 +171,17 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     for a, b in zip(fast, slow):
         assert a.keys() == b.keys()
         np.testing.assert_allclose(a["mean"], b["mean"], rtol=1e-6, atol=1e-7)  # %.7g: 5e-7 relative
+
+
+def test_reply_marks_out_of_range_input(models, test_demo):
+    """Frames in millimetres given to a model trained in metres: every reply says so."""
+    from interprim.server import compute
+
+    e = models["pair"]
+    op = compute._Open("pair", [e], [e.model.stream()], [e.controlled_dofs], 17, False)
+    with pytest.warns(UserWarning, match="standard deviations"):
+        msgs = [json.loads(t) for t in _reply_text(op, test_demo[:10, :2] * 1000.0)]
+    assert msgs[-1]["out_of_range"] is True and msgs[-1]["input_distance"] > 8
 
 
 def test_nonfinite_predictions_are_never_encoded():

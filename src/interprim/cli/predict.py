@@ -115,6 +115,8 @@ def cmd_predict(args) -> int:
         "speed": float(pred.speed),
         "duration": float(pred.duration),
         "log_likelihood": float(pred.log_likelihood),
+        "input_distance": float(getattr(pred, "input_distance", float("nan"))),
+        "out_of_range": float(bool(getattr(pred, "out_of_range", False))),
     }
     if out.parent and not out.parent.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -151,6 +153,10 @@ def cmd_predict(args) -> int:
         f"phase {scalars['phase']:.3f} (of the movement seen), speed {scalars['speed']:.3f}, "
         f"duration {scalars['duration']:.3g} s, {frames.shape[0]} frames observed\nwrote {out}"
     )
+    if scalars["out_of_range"]:
+        print(f"WARNING: the observed frames are {scalars['input_distance']:.3g} standard deviations from the "
+              "training demonstrations: wrong units, column order or frame of reference? The prediction "
+              "extrapolates.")
     return 0
 
 

@@ -192,5 +192,11 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
     ]
     if op.std:
         parts += [',"std":', _json_array(np.asarray(pred.std(op.points))[:, sel])]
+    # input far outside the training demonstrations (wrong units, columns, frame of reference): the flag and
+    # the largest standardised distance seen since the session's last reset (null for an old model file)
+    dist = float(getattr(pred, "input_distance", float("nan")))
+    parts.append(',"out_of_range":%s,"input_distance":%s' % (
+        "true" if getattr(pred, "out_of_range", False) else "false",
+        ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null")))
     parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
     return "".join(parts)

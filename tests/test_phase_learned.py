@@ -1,4 +1,4 @@
-"""Tests of the learned phase estimator (interprim.phase_learned)."""
+"""Tests of the learned phase estimator (interprim.phase.learned)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from interprim.errors import NotFittedError
-from interprim.phase_learned import FEATURE_GROUPS, LearnedPhase, _prefix_features
+from interprim.phase.learned import FEATURE_GROUPS, LearnedPhase, _prefix_features
 
 DT = 0.05
 

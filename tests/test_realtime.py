@@ -1,11 +1,11 @@
-"""The real-time protocol (interprim.realtime): placement in time, baselines, calibration, folds."""
+"""The real-time protocol (interprim.evaluation.realtime): placement in time, baselines, calibration, folds."""
 
 import numpy as np
 import pytest
 
 from interprim.evaluation.baselines import PriorMean
 from interprim.preprocessing import time_normalise
-from interprim.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
+from interprim.evaluation.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
 
 
 def _demos(n=6, seed=0):
@@ -87,7 +87,7 @@ def test_folds_cover_every_demo_once():
 
 
 def test_verdict_says_plainly_whether_the_human_helps():
-    from interprim.realtime import markdown_table, verdict
+    from interprim.evaluation.realtime import markdown_table, verdict
 
     base = {"clock": {"rt_ctrl": 0.1, "rt_ctrl_vs_clock": 1.0, "phase_err_vs_clock": 1.0}}
     good = dict(base, ip={"rt_ctrl": 0.077, "rt_ctrl_vs_clock": 0.77, "phase_err_vs_clock": 0.6})

@@ -22,7 +22,7 @@ _LAZY = {
     "Stream": "interprim.stream",
     "Recogniser": "interprim.recognition",
     "LearnedInteraction": "interprim.learned",
-    "LearnedPhase": "interprim.phase_learned",
+    "LearnedPhase": "interprim.phase.learned",
     "CouplingModel": "interprim.coupling",
 }
 

@@ -15,7 +15,7 @@ dominates).  A calibrated predictive std is ``c_a(p) * std``: 1 means the poster
 interpolated linearly in the estimated phase ``p``.  Because the held-out errors shrink as more is seen, the
 calibrated band shrinks with them, whether or not the posterior does.
 
-Future frames are placed in time as a robot would use them (:mod:`interprim.realtime`): the frame ``j``
+Future frames are placed in time as a robot would use them (:mod:`interprim.evaluation.realtime`): the frame ``j``
 steps after the last observed one is compared with the prediction at normalised time ``s + j dt / D``, with
 the model's own phase ``s`` and duration ``D``.
 """

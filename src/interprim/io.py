@@ -300,7 +300,7 @@ def load_model(path, model_class):
                     f"arrays 'input_mean'/'input_std' are not ({n_o},) statistics with a positive spread")
         model.phase_model_ = None
         if meta.get("phase_model") is not None:
-            from .phase_learned import LearnedPhase
+            from .phase.learned import LearnedPhase
 
             model.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},

@@ -3,7 +3,7 @@
 It chains the two estimators that make the human matter on recordings of people (issue: timing better than a
 clock, a response better than the mean):
 
-1. **timing** -- :class:`~interprim.phase_learned.LearnedPhase` (extends Sec. III-B): the phase and the duration
+1. **timing** -- :class:`~interprim.phase.learned.LearnedPhase` (extends Sec. III-B): the phase and the duration
    regressed on features of the observed prefix, trained on the demonstrations' own prefixes and chosen by
    leave-one-demonstration-out CV (the clock when nothing beats it);
 2. **coupling** -- :class:`~interprim.coupling.CouplingModel` (Eq. 17-18 with the observed prefix resampled on
@@ -13,7 +13,7 @@ clock, a response better than the mean):
 
 The phase error the coupling is trained with is the learned phase's cross-validated error at each elapsed
 time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The prediction has the small
-interface every method of :mod:`interprim.realtime` and :mod:`interprim.evaluation.baselines` shares: ``trajectory(n)``,
+interface every method of :mod:`interprim.evaluation.realtime` and :mod:`interprim.evaluation.baselines` shares: ``trajectory(n)``,
 ``std(n)`` on normalised time, and ``normalised_time``, ``duration``, ``phase`` for placing it in seconds.
 
 It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP, no rollout from a
@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .coupling import CouplingModel
-from .phase_learned import LearnedPhase
+from .phase.learned import LearnedPhase
 
 __all__ = ["LearnedInteraction"]
 
@@ -67,7 +67,7 @@ class LearnedInteraction:
     observed_dofs : sequence of int
         Columns of the observed agent.
     phase_kwargs, coupling_kwargs : dict, optional
-        Extra arguments of :class:`~interprim.phase_learned.LearnedPhase` and
+        Extra arguments of :class:`~interprim.phase.learned.LearnedPhase` and
         :class:`~interprim.coupling.CouplingModel`.
     """
 

@@ -129,7 +129,7 @@ class InteractionPrimitive:
     ``phase_method="learned"``: the phase is regressed on features of the observed prefix (last position,
     displacement, velocity, path length, peak speed), trained on the demonstrations' own prefixes at every
     elapsed time and chosen by leave-one-demonstration-out CV, the clock when nothing beats it
-    (:class:`~interprim.phase_learned.LearnedPhase`, fitted as ``phase_model_``).  On recordings of people it is
+    (:class:`~interprim.phase.learned.LearnedPhase`, fitted as ``phase_model_``).  On recordings of people it is
     the one that beats a clock (NuiSI, real time 0.25 s ahead: 0.76-0.94x the clock against 0.82-1.0x for
     the likelihood phase; ``docs/evaluation.md``); on clean simulated data the likelihood phase is far better.
     """
@@ -372,8 +372,8 @@ class InteractionPrimitive:
 
             select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
         self.phase_model_ = None
-        if self.phase_method == "learned":  # the phase regressed on the prefix (interprim.phase_learned)
-            from .phase_learned import LearnedPhase
+        if self.phase_method == "learned":  # the phase regressed on the prefix (interprim.phase.learned)
+            from .phase.learned import LearnedPhase
 
             self.phase_model_ = LearnedPhase().fit([z[:, :n_o] for z in latent], dt=dt)
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack

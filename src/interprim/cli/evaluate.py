@@ -85,13 +85,13 @@ def _is_user_data(data: str) -> bool:
 
 
 def run_user_data(args) -> int:
-    """``--data FILE``: every protocol of :mod:`interprim.realtime` on the user's own demonstrations."""
+    """``--data FILE``: every protocol of :mod:`interprim.evaluation.realtime` on the user's own demonstrations."""
     from pathlib import Path
 
     from ..datasets import load_demonstrations
     from ..datasets._base import select_columns
     from ..errors import InterprimError
-    from ..realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
+    from ..evaluation.realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")

@@ -14,7 +14,7 @@ last seen frame is compared with the true one, ``(M - 1) / (T - 1)``.  Methods:
   (likelihood phase; 20 basis functions, Savitzky-Golay window 7 as in ``docs/evaluation.md``;
   agent 2's right hand controlled);
 * ``dtw``: the same fitted model with ``phase_method="dtw"`` (the paper's Eq. 5-9);
-* ``learned``: :class:`interprim.phase_learned.LearnedPhase` with its defaults, fitted on the
+* ``learned``: :class:`interprim.phase.learned.LearnedPhase` with its defaults, fitted on the
   training demonstrations' observed columns only;
 * ``learned+default``: the mean of the two (a measurement of whether they carry different information).
 
@@ -61,7 +61,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
              ip_kwargs=None):
     """Phase errors (and real-time errors) of held-out demonstration ``j``; returns a dict of lists."""
     from interprim import InteractionPrimitive
-    from interprim.phase_learned import LearnedPhase
+    from interprim.phase.learned import LearnedPhase
 
     train = [d for i, d in enumerate(demos) if i != j]
     test = demos[j]

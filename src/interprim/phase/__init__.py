@@ -4,6 +4,8 @@
 * :mod:`interprim.phase.likelihood`: the phase that makes the observation most probable under the
   learned distribution of movements (beyond the paper);
 * :mod:`interprim.phase.tracking`: the likelihood phase online, by local search on a lattice of speeds.
+* :mod:`interprim.phase.learned`: the phase regressed on features of the observed prefix, trained on the
+  demonstrations' own prefixes (beyond the paper; the one that beats a clock on recordings of people).
 
 :func:`estimate_phase` is the one dispatch on ``phase_method`` that both
 :meth:`~interprim.primitive.InteractionPrimitive.predict` and
@@ -46,7 +48,7 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         ``D(n*, M)`` of the open-end DTW; a callable that computes it on demand where the likelihood
         phase did not need it.
     """
-    if method == "learned":  # regressed on the prefix (interprim.phase_learned): a pure function of z
+    if method == "learned":  # regressed on the prefix (interprim.phase.learned): a pure function of z
         est = model.phase_model_.estimate(z)
         N1 = model.reference_.shape[0] - 1
         n_star = float(np.clip(est.phase, 0.5 / N1, 1.0)) * N1

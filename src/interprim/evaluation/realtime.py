@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .preprocessing import time_normalise
+from ..preprocessing import time_normalise
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
            "default_methods", "verdict", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
@@ -277,13 +277,13 @@ def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, pha
     """Factories of the methods compared by default: the library's defaults (``ip``), learned timing + coupling
     (``learned``: :class:`~interprim.learned.LearnedInteraction`), the paper exactly (``ip-paper``: forcing
     observation, DTW phase, ``sigma2="auto"``), nearest neighbour and the prior mean."""
-    from .evaluation.baselines import NearestNeighbour, PriorMean
-    from .primitive import InteractionPrimitive
+    from .baselines import NearestNeighbour, PriorMean
+    from ..primitive import InteractionPrimitive
 
     obs = [int(i) for i in observed_dofs]
     common = dict(observed_dofs=obs, n_basis=n_basis, smoothing_window=smoothing_window)
     extra = {} if phase_method is None else {"phase_method": phase_method}
-    from .learned import LearnedInteraction
+    from ..learned import LearnedInteraction
 
     return {
         "ip": lambda: InteractionPrimitive(**common, **extra),

@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import as_2d_finite, as_frame, check_positive, check_times
+from .._validation import as_2d_finite, as_frame, check_positive, check_times
 
 __all__ = ["LearnedPhase", "PhaseEstimate", "PhaseTracker", "FEATURE_GROUPS", "DEFAULT_FEATURES"]
 
@@ -533,7 +533,7 @@ class LearnedPhase:
     # ------------------------------------------------------------------ estimate
     def _check_fitted(self):
         if not hasattr(self, "method_"):
-            from .errors import NotFittedError
+            from ..errors import NotFittedError
 
             raise NotFittedError("this LearnedPhase is not fitted yet; call fit(demos, dt=...) first")
 

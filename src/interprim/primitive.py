@@ -17,14 +17,14 @@ back to the demonstrations' column order.
 from __future__ import annotations
 
 import numbers
-import warnings
 
 import numpy as np
 
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
-from .errors import NotFittedError, OutOfRangeWarning
+from .errors import NotFittedError
+from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
 from .phase import estimate_phase, open_end_dtw
@@ -95,6 +95,9 @@ class InteractionPrimitive:
     n_steps : int, default 2000
         Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
     phase_method : {"likelihood", "dtw", "learned"}, default "likelihood"
+        ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
+        prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
+        recordings of people, where the likelihood phase is not; worse on clean simulated data.
         How ``predict`` estimates the phase: the maximum of the marginal
         likelihood of the observed positions under the learned prior over
         candidate phases, with a log-normal prior on the partner's speed learned
@@ -123,15 +126,6 @@ class InteractionPrimitive:
         posterior's, scaled per agent and per fraction seen so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
-
-    Notes
-    -----
-    ``phase_method="learned"``: the phase is regressed on features of the observed prefix (last position,
-    displacement, velocity, path length, peak speed), trained on the demonstrations' own prefixes at every
-    elapsed time and chosen by leave-one-demonstration-out CV, the clock when nothing beats it
-    (:class:`~interprim.phase.learned.LearnedPhase`, fitted as ``phase_model_``).  On recordings of people it is
-    the one that beats a clock (NuiSI, real time 0.25 s ahead: 0.76-0.94x the clock against 0.82-1.0x for
-    the likelihood phase; ``docs/evaluation.md``); on clean simulated data the likelihood phase is far better.
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
@@ -394,13 +388,9 @@ class InteractionPrimitive:
             if not 0 <= r < len(latent):
                 raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
             self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
-        # what the observed agent's frames look like in training (the out-of-range check of predict/stream)
-        allo = np.concatenate([a[:, obs] for a in arrays], axis=0)
-        self.input_mean_ = allo.mean(axis=0)
-        sd = allo.std(axis=0)
-        self.input_std_ = np.where(sd > 0, sd, max(float(sd.max()), 1e-12))
-        train_dist = float(np.max(np.abs(allo - self.input_mean_) / self.input_std_))
-        self.input_limit_ = max(3.0 * train_dist, 8.0)  # held-out data of the benchmarks reaches 2x
+        # what the observed agent's frames look like in training (the out-of-range check, interprim.input_range)
+        self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
+            np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
         if self.calibrate is True or (self.calibrate == "auto" and self.sigma2 == "cv"):
             from .calibration import fit_calibration  # predictive std scaled to held-out errors
@@ -528,25 +518,12 @@ class InteractionPrimitive:
         return self._mark_range(p, dist)
 
     def input_distance(self, frames) -> float:
-        """Largest standardised distance ``max_{t,i} |x_ti - mean_i| / std_i`` of observed frames ``(t, D_o)`` (data
-        columns) from the training demonstrations' frames; NaN for a model file without those statistics."""
-        mean = getattr(self, "input_mean_", None)
-        if mean is None:
-            return float("nan")
-        f = np.asarray(frames, dtype=np.float64)
-        return float(np.max(np.abs(f - mean) / self.input_std_)) if f.size else 0.0
+        """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
+        (:mod:`interprim.input_range`); NaN for a model file without those statistics."""
+        return input_distance(self, frames)
 
-    def _mark_range(self, p, dist):
-        """Attach the out-of-range check to a prediction and warn (:class:`~interprim.errors.OutOfRangeWarning`)."""
-        p.input_distance = dist
-        limit = getattr(self, "input_limit_", None)
-        p.out_of_range = bool(limit is not None and dist > limit)
-        if p.out_of_range:
-            warnings.warn(OutOfRangeWarning(
-                f"the observed frames are {dist:.3g} standard deviations from the training demonstrations' mean "
-                f"(limit {limit:.3g}): wrong units, column order or frame of reference? The prediction "
-                "extrapolates (Prediction.out_of_range is True)"), stacklevel=3)
-        return p
+    def _mark_range(self, p, dist, warn: bool = True):
+        return mark(self, p, dist, warn)
 
     def _predict_observed(self, o, robot_state, phase):
         z = self._observed_to_latent(o)

@@ -1,0 +1,52 @@
+"""Is an observation like the training demonstrations?  The out-of-range check of predict, Stream and server.
+
+A partial observation in millimetres given to a model trained in metres, a wrong column order or another frame
+of reference is still "a partial observation": conditioning (Eq. 16-18) would extrapolate without a word and the
+robot would be sent to (343.9, 277.9) rad.  The check is the largest standardised distance
+``max_{t,i} |x_ti - mean_i| / std_i`` of the observed frames from the training frames' per-column mean and std,
+against a limit of 3x the largest such distance within the training frames themselves (at least 8): held-out
+demonstrations of every built-in data set stay below 2x, a change of units (x10 and more) is far above.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .errors import OutOfRangeWarning
+
+__all__ = ["fit_input_range", "input_distance", "mark"]
+
+
+def fit_input_range(frames):
+    """``(mean, std, limit)`` of the observed agent's training frames ``(n, D_o)`` (data columns)."""
+    f = np.asarray(frames, dtype=np.float64)
+    mean = f.mean(axis=0)
+    sd = f.std(axis=0)
+    std = np.where(sd > 0, sd, max(float(sd.max()), 1e-12))
+    train = float(np.max(np.abs(f - mean) / std))
+    return mean, std, max(3.0 * train, 8.0)
+
+
+def input_distance(model, frames) -> float:
+    """Largest standardised distance of frames ``(t, D_o)`` from ``model``'s training frames; NaN for a model
+    (file) without the statistics."""
+    mean = getattr(model, "input_mean_", None)
+    if mean is None:
+        return float("nan")
+    f = np.asarray(frames, dtype=np.float64)
+    return float(np.max(np.abs(f - mean) / model.input_std_)) if f.size else 0.0
+
+
+def mark(model, prediction, dist, warn: bool = True):
+    """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.errors.OutOfRangeWarning`)."""
+    prediction.input_distance = dist
+    limit = getattr(model, "input_limit_", None)
+    prediction.out_of_range = bool(limit is not None and dist > limit)
+    if prediction.out_of_range and warn:
+        warnings.warn(OutOfRangeWarning(
+            f"the observed frames are {dist:.3g} standard deviations from the training demonstrations' mean "
+            f"(limit {limit:.3g}): wrong units, column order or frame of reference? The prediction "
+            "extrapolates (Prediction.out_of_range is True)"), stacklevel=4)
+    return prediction

@@ -170,3 +170,18 @@ def test_errors_have_clear_messages():
         lp.estimate(np.full((5, 2), np.nan))
     with pytest.raises(ValueError, match=r"frame must have shape \(2,\)"):
         lp.tracker().update(np.zeros(3))
+
+
+def test_a_tracking_glitch_is_not_extrapolated():
+    """Query features are clipped to the demonstrations' range at the same elapsed time."""
+    durs = np.linspace(1.5, 3.0, 16)
+    demos = [d + 0.01 * np.random.default_rng(i).standard_normal(d.shape)
+             for i, d in enumerate(_ramps(durs, n_dofs=4))]
+    for model in ("ridge", "kernel"):
+        lp = LearnedPhase(model=model, fallback_se=0.0).fit(demos, dt=DT)
+        q = _ramps([2.2], n_dofs=4, seed=7)[0][:25].copy()
+        clean = lp.estimate(q).phase
+        q[-1, 3] += 50.0  # one DoF jumps by 50 standard deviations in the last frame
+        glitch = lp.estimate(q).phase
+        assert 0.0 <= glitch <= 1.0
+        assert abs(glitch - clean) < 0.15

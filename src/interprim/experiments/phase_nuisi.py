@@ -165,6 +165,29 @@ def run(actions=ACTIONS, observed="right_arm", ip_methods=True, realtime=False, 
     return results
 
 
+def run_builtin(datasets=("synthetic", "synthetic-noisy", "highfive-sim"), max_demos=10, learned_kwargs=None,
+                progress=True):
+    """The phase protocol on built-in data sets (:func:`interprim.evaluation.task_names`), for comparison."""
+    from interprim.evaluation import EvalConfig, _task
+
+    results = {}
+    for ds in datasets:
+        t = _task(ds, ds, EvalConfig())
+        demos, obs = list(t.demos), list(t.observed_dofs)
+        ctrl = [c for c in range(demos[0].shape[1]) if c not in set(obs)]
+        idx = np.unique(np.linspace(0, len(demos) - 1, min(max_demos, len(demos))).astype(int))
+        folds = [run_fold(demos, obs, ctrl, t.dt, int(j), True, False, learned_kwargs=learned_kwargs,
+                          ip_kwargs={"n_basis": 20, "smoothing_window": None}) for j in idx]
+        res = {"n_demos": len(demos), "phase_error": {}}
+        for m in PHASE_METHODS:
+            errs = np.array([np.abs(np.array(f["phase"][m]) - np.array(f["phase_true"])) for f in folds])
+            res["phase_error"][m] = float(errs.mean())
+        results[ds] = res
+        if progress:
+            print(f"  {ds}: " + ", ".join(f"{m} {v:.4f}" for m, v in res["phase_error"].items()), flush=True)
+    return results
+
+
 def _table(results, key, methods, base):
     lines = ["| interaction | " + " | ".join(methods) + " | " + " | ".join(f"{m}/{base}" for m in methods
                                                                            if m != base) + " |",
@@ -200,7 +223,18 @@ def main(argv=None):
     ap.add_argument("--max-demos", type=int, default=None, help="hold out only this many demos per interaction")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--data-path", default=None)
+    ap.add_argument("--builtin", default=None,
+                    help="instead of NuiSI: built-in data sets, e.g. synthetic,synthetic-noisy,highfive-sim "
+                         "(phase protocol only, --max-demos held out, default 10)")
     args = ap.parse_args(argv)
+    if args.builtin:
+        res = run_builtin([d.strip() for d in args.builtin.split(",") if d.strip()], max_demos=args.max_demos or 10)
+        print("\nPhase error (30-90 % observed)\n")
+        print(_table(res, "phase_error", list(PHASE_METHODS), "clock"))
+        with open(args.out, "w") as fh:
+            json.dump({"builtin": True, "fractions": FRACTIONS, "results": res}, fh, indent=1)
+        print(f"wrote {args.out}")
+        return res
     res = run(actions=[a.strip() for a in args.actions.split(",") if a.strip()], observed=args.observed,
               ip_methods=not args.no_ip, realtime=args.realtime, data_path=args.data_path,
               max_demos=args.max_demos, n_jobs=args.jobs)

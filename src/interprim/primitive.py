@@ -27,7 +27,7 @@ from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
-from .phase import estimate_phase, open_end_dtw
+from .phase import estimate_phase
 from .prediction import Prediction
 from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 from .stream import Stream

@@ -656,6 +656,8 @@ def main(argv=None):
         m_dtw, _ = bench_online(args.quick, label="phase_method='dtw' (paper)", phase_method="dtw")
         bench_predict(m_dtw, test, args.quick, label="phase_method='dtw' (paper)")
         bench_likelihood_phase(args.quick)
+        from benchmarks.learned import bench_learned
+        bench_learned(args.quick, fitted_model, make_demos, timed, row)
         bench_dtw(args.quick)
         bench_fit(args.quick)
         bench_promp(model, test, args.quick)

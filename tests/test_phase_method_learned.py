@@ -47,3 +47,19 @@ def test_learned_phase_survives_save_and_load(fitted, tmp_path):
     z = test[2][:50, :2]
     assert loaded.predict(z).normalised_time == m.predict(z).normalised_time
     np.testing.assert_array_equal(loaded.predict(z).trajectory(30), m.predict(z).trajectory(30))
+
+
+def test_auto_chooses_the_phase_with_the_smaller_held_out_error(tmp_path):
+    """phase_method="auto" on clean synthetic data keeps the likelihood phase (far more accurate there), and
+    the choice it made is used by predict and stream and kept in the model file."""
+    demos = two_agent_demos(16, seed=6)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, sigma2=1e-3, phase_method="auto").fit(demos, dt=0.01)
+    lik = min(m.selection_["phase_error"])
+    lp = ip.LearnedPhase().fit([d[:, :2] for d in demos], dt=0.01)
+    assert m.phase_method_ == ("learned" if lp.cv_error_ < lik else "likelihood")
+    assert m.phase_method_ == "likelihood" and m.phase_model_ is None  # 0.2x vs 0.3x the clock on this data
+    z = demos[3][:60, :2]
+    ref = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, sigma2=1e-3).fit(demos, dt=0.01)
+    assert m.predict(z).normalised_time == ref.predict(z).normalised_time
+    m.save(tmp_path / "a.npz")
+    assert ip.InteractionPrimitive.load(tmp_path / "a.npz").phase_method_ == "likelihood"

@@ -138,6 +138,7 @@ def save_model(model, path) -> None:
         arrays["input_mean"] = np.asarray(model.input_mean_)
         arrays["input_std"] = np.asarray(model.input_std_)
         meta["input_limit"] = float(model.input_limit_)
+    meta["phase_method_used"] = model._phase()
     pm = getattr(model, "phase_model_", None)  # the learned phase (phase_method="learned")
     if pm is not None:
         pm_arrays, meta["phase_model"] = pm.to_state()
@@ -305,8 +306,11 @@ def load_model(path, model_class):
             model.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
                 meta["phase_model"])
-        _expect(model.phase_method != "learned" or model.phase_model_ is not None, path,
-                "phase_method is 'learned' but the file holds no phase model")
+        model.phase_method_ = str(meta.get("phase_method_used", model.phase_method))  # older files: as set
+        _expect(model.phase_method_ in ("dtw", "likelihood", "learned"), path,
+                f"unknown phase method {model.phase_method_!r} in the metadata")
+        _expect(model._phase() != "learned" or model.phase_model_ is not None, path,
+                "the phase method is 'learned' but the file holds no phase model")
         model.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration

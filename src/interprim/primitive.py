@@ -27,7 +27,7 @@ from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
-from .phase import estimate_phase
+from .phase import estimate_phase, fit_phase_model
 from .prediction import Prediction
 from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 from .stream import Stream
@@ -35,7 +35,7 @@ from .stream import Stream
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
-PHASE_METHODS = ("dtw", "likelihood", "learned")
+PHASE_METHODS = ("dtw", "likelihood", "learned", "auto")
 
 
 class InteractionPrimitive:
@@ -94,10 +94,12 @@ class InteractionPrimitive:
         Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
-    phase_method : {"likelihood", "dtw", "learned"}, default "likelihood"
+    phase_method : {"likelihood", "dtw", "learned", "auto"}, default "likelihood"
         ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
         prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
-        recordings of people, where the likelihood phase is not; worse on clean simulated data.
+        recordings of people, where the likelihood phase is not; worse on clean simulated data.  ``"auto"``:
+        whichever of the two has the smaller held-out phase error on the training demonstrations
+        (``phase_method_`` says which).
         How ``predict`` estimates the phase: the maximum of the marginal
         likelihood of the observed positions under the learned prior over
         candidate phases, with a log-normal prior on the partner's speed learned
@@ -361,15 +363,11 @@ class InteractionPrimitive:
         else:
             self.sigma2_ = float(self.sigma2)
         self.phase_sigma2_ = None
-        if self.sigma2 == "cv" or self.phase_method == "likelihood":
+        if self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto"):
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
 
             select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
-        self.phase_model_ = None
-        if self.phase_method == "learned":  # the phase regressed on the prefix (interprim.phase.learned)
-            from .phase.learned import LearnedPhase
-
-            self.phase_model_ = LearnedPhase().fit([z[:, :n_o] for z in latent], dt=dt)
+        self.phase_model_, self.phase_method_ = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
             e2 = float(self.input_noise) ** 2
             if self.observation == "position":
@@ -515,15 +513,12 @@ class InteractionPrimitive:
             o = resample_uniform(o, np.arange(o.shape[0]) * dt, dt=self.dt_)[0]
         dist = self.input_distance(o)
         p = self._predict_observed(o, robot_state, phase)
-        return self._mark_range(p, dist)
+        return mark(self, p, dist)
 
     def input_distance(self, frames) -> float:
         """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
         (:mod:`interprim.input_range`); NaN for a model file without those statistics."""
         return input_distance(self, frames)
-
-    def _mark_range(self, p, dist, warn: bool = True):
-        return mark(self, p, dist, warn)
 
     def _predict_observed(self, o, robot_state, phase):
         z = self._observed_to_latent(o)
@@ -532,8 +527,12 @@ class InteractionPrimitive:
             if not 0.0 < ph <= 1.0:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
             return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
-        n_star, cost = estimate_phase(self, z, self.phase_method)
+        n_star, cost = estimate_phase(self, z, self._phase())
         return self._predict_latent(z, n_star, cost, robot_state)
+
+    def _phase(self) -> str:
+        """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""
+        return getattr(self, "phase_method_", "likelihood") if self.phase_method == "auto" else self.phase_method
 
     def _robot_start(self, robot_state):
         n_o = self.n_observed_latent_

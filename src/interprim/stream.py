@@ -13,6 +13,7 @@ import numpy as np
 from ._compiled import loader
 from ._validation import as_frame
 from .gaussian import Posterior
+from .input_range import mark
 from .phase import IncrementalDTW, estimate_phase
 from .prediction import Prediction
 from .preprocessing import savgol_window
@@ -146,7 +147,7 @@ class Stream:
             p.out_of_range = self._max_dist > m.input_limit_
             if p.out_of_range and not self._warned:
                 self._warned = True
-                m._mark_range(p, self._max_dist)
+                mark(m, p, self._max_dist)
         return p
 
     def _update(self, frame, need_cov: bool = False) -> Prediction:
@@ -179,13 +180,13 @@ class Stream:
         self._buf[self._n] = f
         self._n += 1
         tr = None
-        if m.phase_method == "likelihood":  # local search around the previous estimate, on a lattice of speeds
+        if m._phase() == "likelihood":  # local search around the previous estimate, on a lattice of speeds
             tr = self._tracker
             if tr is None or tr.model is not m:
                 from .phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
-        n_star, cost = estimate_phase(m, self._buf[: self._n], m.phase_method, dtw=(n_star, cost), tracker=tr)
+        n_star, cost = estimate_phase(m, self._buf[: self._n], m._phase(), dtw=(n_star, cost), tracker=tr)
         if tr is not None:
             self._s_prev = n_star / (m.reference_.shape[0] - 1)
         z = self._buf[: self._n]
@@ -214,7 +215,7 @@ class Stream:
         if inc is not None:
             inc.invalidate()
         m = self.model
-        if not (self.incremental and m.phase_method == "likelihood" and m.observation == "position"
+        if not (self.incremental and m._phase() == "likelihood" and m.observation == "position"
                 and m.pca_observed_ is None and self._ws is not None and self._n >= 3 and loader.ready()):
             return None
         cond = m._conditioner()

@@ -18,7 +18,7 @@ import numpy as np
 
 from .dtw import DTWResult, IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
 
-__all__ = ["estimate_phase", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
+__all__ = ["estimate_phase", "fit_phase_model", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
            "phase_from_index"]
 
 
@@ -72,3 +72,25 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         return dtw
     res = open_end_dtw(model.reference_, z, return_path=False)
     return res.n_star, res.cost
+
+
+def fit_phase_model(model, observed_latent, dt: float):
+    """``(phase_model, method used)`` for ``model.phase_method`` at the end of ``fit``.
+
+    ``"learned"`` and ``"auto"`` fit a :class:`~interprim.phase.learned.LearnedPhase` on the observed (latent)
+    columns of the demonstrations; ``"auto"`` keeps it only if its leave-one-demonstration-out phase error
+    (``cv_error_``) is below the held-out error of the likelihood phase measured by the hyper-parameter selection
+    (``selection_["phase_error"]``, its best noise): each on held-out training demonstrations, mean absolute
+    error in fractions of the movement.
+    """
+    method = model.phase_method
+    if method not in ("learned", "auto"):
+        return None, method
+    from .learned import LearnedPhase
+
+    lp = LearnedPhase().fit(observed_latent, dt=dt)
+    if method == "learned":
+        return lp, "learned"
+    errs = (getattr(model, "selection_", None) or {}).get("phase_error")
+    lik = float(np.min(errs)) if errs else np.inf
+    return (lp, "learned") if float(lp.cv_error_) < lik else (None, "likelihood")

@@ -306,7 +306,9 @@ def load_model(path, model_class):
             model.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
                 meta["phase_model"])
-        model.phase_method_ = str(meta.get("phase_method_used", model.phase_method))  # older files: as set
+        used = meta.get("phase_method_used")  # absent in files older than phase_method="auto": as set there
+        model.phase_method_ = str(used if used is not None else
+                                  (model.phase_method if model.phase_method != "auto" else "likelihood"))
         _expect(model.phase_method_ in ("dtw", "likelihood", "learned"), path,
                 f"unknown phase method {model.phase_method_!r} in the metadata")
         _expect(model._phase() != "learned" or model.phase_model_ is not None, path,

@@ -133,7 +133,7 @@ class InteractionPrimitive:
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood",
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "auto",
                  input_noise: float | None = None, calibrate="auto"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis

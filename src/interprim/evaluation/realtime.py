@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..preprocessing import time_normalise
+from .sweep import _point_rms
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
            "default_methods", "verdict", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
@@ -83,12 +84,6 @@ def _interp_rows(u, grid, Y):
     """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
     u = np.clip(u, 0.0, 1.0)
     return np.stack([np.interp(u, grid, Y[:, d]) for d in range(Y.shape[1])], axis=1)
-
-
-def _point_rms(err, point_dim):
-    n, C = err.shape
-    pd = point_dim if C % point_dim == 0 else 1
-    return float(np.sqrt(np.mean(np.sum(err.reshape(n, C // pd, pd) ** 2, axis=2))))
 
 
 def _timing(pred, k, dt, mean_dur_s):

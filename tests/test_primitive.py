@@ -86,7 +86,7 @@ def test_likelihood_stream_tracks_batch_phase(fitted, synthetic):
     batch estimate, and given its phase it conditions exactly as the batch path does."""
     _, test = synthetic
     d = test[1]
-    assert fitted._phase() == "likelihood"  # phase_method="auto" keeps it on this clean synthetic data
+    assert fitted._phase() == "likelihood"
     st = fitted.stream()
     T = d.shape[0]
     for m in range(1, T + 1):

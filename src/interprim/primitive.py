@@ -97,9 +97,10 @@ class InteractionPrimitive:
     phase_method : {"likelihood", "dtw", "learned", "auto"}, default "likelihood"
         ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
         prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
-        recordings of people, where the likelihood phase is not; worse on clean simulated data.  ``"auto"``:
-        whichever of the two has the smaller held-out phase error on the training demonstrations
-        (``phase_method_`` says which).
+        recordings of people, where the likelihood phase is not; worse on clean simulated data.  ``"auto"``
+        (experimental): whichever of the two has the smaller held-out phase error on the training
+        demonstrations (``phase_method_``); the likelihood error it compares is measured on a coarse grid and
+        can favour "learned" where it is worse (the simulated high five of ``interprim demo``).
         How ``predict`` estimates the phase: the maximum of the marginal
         likelihood of the observed positions under the learned prior over
         candidate phases, with a log-normal prior on the partner's speed learned
@@ -133,7 +134,7 @@ class InteractionPrimitive:
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "auto",
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood",
                  input_noise: float | None = None, calibrate="auto"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis

@@ -91,10 +91,7 @@ def fold_model(model, keep):
     from .gaussian import fit_prior, shrink_cross
 
     keep = np.asarray(keep, dtype=np.intp)
-    m = copy.copy(model)
-    for k in [k for k in m.__dict__ if k.startswith("_") and k not in ("_q",)]:
-        if k.endswith("cache") or k.startswith("_phase_"):
-            del m.__dict__[k]  # caches keyed by the prior or the durations
+    m = copy.copy(model)  # the model's caches are keyed by the identity of prior_ / durations_, replaced below
     m.thetas_ = model.thetas_[keep]
     m.durations_ = model.durations_[keep]
     m.mean_duration_ = float(m.durations_.mean())

@@ -372,9 +372,8 @@ def test_stream_allocation_does_not_grow_with_frames(synthetic, config, request)
 
 
 @pytest.fixture(scope="module")
-def fitted_incremental(synthetic, fitted):
-    """Likelihood-phase models: the default (incremental path), a smoothed start (incremental once the
-    smoothing window is full), PCA and the forcing observation (always from scratch)."""
+def stream_models(synthetic, fitted):
+    """Likelihood-phase models: the default, a smoothed start, PCA and the forcing observation."""
     train, _ = synthetic
     return {"default": fitted,
             "smooth": ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, smoothing_window=31,
@@ -385,80 +384,57 @@ def fitted_incremental(synthetic, fitted):
                                                sigma2=1e-3).fit(train, dt=0.01)}
 
 
-def _rounding_tol(m):
-    """Relative tolerance between two exact evaluations of Eq. 18 that differ only in the order of operations.
-
-    Both paths solve with the ``r x r`` capacitance ``K = K0 - sigma^2 Uh^T T^{-1} Uh`` (low-rank form of
-    ``A^{-1}`` in Eq. 18): one factorises it afresh, the other carries it by rank-1 (Sherman-Morrison)
-    updates.  A backward-stable solve with a matrix of condition number ``kappa`` is accurate to
-    ``~ c eps kappa`` relative (Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., Thm 7.2);
-    ``kappa(K0)`` bounds that of ``K`` here (``K0 - K`` is positive semi-definite) and ``c = 4`` covers the
-    few solves chained per frame.  At the benchmark size ``kappa(K0) ~ 1.3e7``: tol ~ 1.2e-8 (the worst
-    difference seen is 1e-9); the small synthetic priors have ``kappa ~ 1e7`` as well.  A floor of 1e-9."""
-    kappa = float(np.linalg.cond(m._conditioner().K0))
-    return max(1e-9, 4.0 * np.finfo(float).eps * kappa)
+# Stream vs batch (issue 12): both phases are the same local maximum of the log posterior reached by the same
+# last step (interprim.phase.likelihood._finish), so they differ by O(c e^2 / k) ~ 1e-8 of the movement plus the
+# scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  The issue's
+# bounds: phase within 1e-3 of the movement, trajectories within 1e-3 relative (measured: 1e-6 and 1e-6).
+PHASE_TOL = 1e-3
+TRAJ_TOL = 1e-3
 
 
-def _assert_same_prediction(p, q, where, tol=1e-9):
-    """``p`` (incremental stream) equals ``q`` (from scratch) to ``tol`` relative; returns the largest differences."""
-    assert p.normalised_time == q.normalised_time and p.n_observed == q.n_observed, where
-    diffs = {}
-    for name, a, b in [("posterior_mean", p.posterior_mean, q.posterior_mean),
-                       ("trajectory", p.trajectory(50)[1], q.trajectory(50)[1]),
+def _compare_stream_batch(p, q, where):
+    """``p`` (stream) vs ``q`` (``predict`` on the same frames): phase and trajectories; returns the differences."""
+    assert p.n_observed == q.n_observed, where
+    d_s = abs(p.normalised_time - q.normalised_time)
+    assert d_s <= PHASE_TOL, (where, "phase", d_s)
+    out = {"phase": d_s}
+    for name, a, b in [("trajectory", p.trajectory(50), q.trajectory(50)),
                        ("response", p.response(100)[1], q.response(100)[1])]:
         d = float(np.abs(a - b).max() / (np.abs(b).max() + 1e-300))
-        assert d <= tol, (where, name, d)
-        diffs[name] = d
-    # the log-likelihood is a sum of terms of size ~ n_obs (it crosses 0): relative to that scale
-    ll_scale = abs(q.log_likelihood) + q.n_observed * len(p._m.obs_index_)
-    d = abs(p.log_likelihood - q.log_likelihood) / ll_scale
-    assert d <= tol, (where, "log_likelihood", p.log_likelihood, q.log_likelihood)
-    diffs["log_likelihood"] = d
-    return diffs
+        assert d <= TRAJ_TOL, (where, name, d)
+        out[name] = d
+    return out
 
 
 @pytest.mark.parametrize("variant", ["default", "smooth", "pca", "forcing"])
-def test_stream_incremental_conditioning_equals_from_scratch(synthetic, fitted_incremental, variant):
-    """Stream.update with the rank-1 update of Eq. 16-18 (lowrank_condition_step) vs the same stream
-    recomputing every frame from scratch: every frame's posterior mean, log-likelihood, trajectory and
-    response agree to 1e-9 relative, with reset(), a robot_state, need_cov=True frames and a lost
-    phase mixed in (those take the from-scratch path and re-seed).
-
-    Tolerance :func:`_rounding_tol`: these small priors have ``kappa(K0) ~ 1e7`` (``K = K0 - sigma^2 Uh^T T^{-1} Uh``
-    cancels), so the result is only defined to ``~ eps kappa ~ 2e-9``: the numpy and the compiled from-scratch
-    paths (``LowRankConditioner.mean_numpy`` / ``mean_compiled``) already differ by up to ~1e-9 here."""
-    m = fitted_incremental[variant]
+def test_stream_equals_predict_at_every_frame(synthetic, stream_models, variant):
+    """Stream.update vs predict on the same frames (robot_state, reset() and need_cov=True frames mixed in):
+    phase and trajectories agree at every frame."""
+    m = stream_models[variant]
     _, test = synthetic
     rs = np.array([0.1, -0.2, 0.3])
-    tol = _rounding_tol(m)
     a = m.stream(robot_state=rs)
-    b = m.stream(robot_state=rs)
-    b.incremental = False
     worst = {}
     for k, (d, n) in enumerate([(test[3], 160), (test[1], 120), (test[5][::-1], 60)]):
         if k:
             a.reset(robot_state=rs if k == 1 else None)
-            b.reset(robot_state=rs if k == 1 else None)
         for i in range(n):
             need_cov = i in (40, 41, 90)
             p = a.update(d[i, :2], need_cov=need_cov)
-            q = b.update(d[i, :2], need_cov=need_cov)
-            for key, v in _assert_same_prediction(p, q, (variant, k, i), tol=tol).items():
+            if i < 2 or (i % 4 and not need_cov):
+                continue
+            q = m.predict(d[: i + 1, :2], robot_state=rs)  # reset(None) keeps the stream's
+            for key, v in _compare_stream_batch(p, q, (variant, k, i)).items():
                 worst[key] = max(worst.get(key, 0.0), v)
             if need_cov:
                 sc = np.abs(q.posterior_cov).max()
-                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=1e-9 * sc)
-    assert b.n_incremental == 0
-    if variant in ("default", "smooth"):
-        assert a.n_incremental > 0.5 * (160 + 120 + 60)  # the incremental path is the common one
-    else:
-        assert a.n_incremental == 0  # PCA, forcing observation: from scratch only
-    print(variant, a.n_incremental, worst)
+                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=1e-2 * sc)
+    print(variant, worst)
 
 
-def test_stream_incremental_benchmark_size():
-    """The reference size of the benchmarks (7 + 7 DoF, 25 basis functions, 30 demos, sigma2 by CV): the
-    incremental stream equals the from-scratch one on a whole interaction."""
+def test_stream_equals_predict_at_benchmark_size():
+    """The reference size of the benchmarks (7 + 7 DoF, 25 basis functions, 30 demos, sigma2 by CV): the stream
+    equals predict on the same frames over a whole interaction."""
     import sys
     from pathlib import Path
 
@@ -467,12 +443,10 @@ def test_stream_incremental_benchmark_size():
 
     m, test = fitted_model()
     a = m.stream()
-    b = m.stream()
-    b.incremental = False
     worst = {}
-    tol = _rounding_tol(m)
     for i, f in enumerate(test[:, :7]):
-        for key, v in _assert_same_prediction(a.update(f), b.update(f), i, tol=tol).items():
-            worst[key] = max(worst.get(key, 0.0), v)
-    assert a.n_incremental > 0.8 * test.shape[0]
-    print(a.n_incremental, worst)
+        p = a.update(f)
+        if i >= 2 and i % 10 == 0:
+            for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i).items():
+                worst[key] = max(worst.get(key, 0.0), v)
+    print(worst)

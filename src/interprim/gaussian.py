@@ -408,32 +408,16 @@ class LowRankConditioner:
         logdet = n_obs * np.log(sigma2) + ld_T - D_o * q * np.log(sigma2) + ld_K
         return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
-    def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None, state=None):
-        """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed.
-
-        With ``state`` (an object with arrays ``R`` (D_o, q, q), ``K`` (r, r), ``TiU`` (D_o, q, r) and ``A``
-        (D_o, q)), the same numbers come from
-        :func:`interprim._compiled.conditioning.lowrank_condition_seed`, which also leaves there the factors that
-        :func:`interprim._compiled.conditioning.lowrank_condition_step` updates frame by frame, and sets ``state.ld_T``
-        (``sum_i log det T_i``) and ``state.seeded = True``.
-        """
-        from ._compiled.conditioning import lowrank_condition_mean, lowrank_condition_seed
+    def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
+        """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
+        from ._compiled.conditioning import lowrank_condition_mean
 
         if out is None:
             out = np.empty(self.P)
-        if state is None:
-            ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
-                                                       self.mean, self.mu_o, self.obs_flat, self.other, self.Uc,
-                                                       out)
-        else:
-            ld_T, ld_K, resid = lowrank_condition_seed(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
-                                                       self.mean, self.mu_o, self.obs_flat, self.other, self.Uc,
-                                                       out, state.R, state.K, state.TiU, state.A)
+        ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
+                                                   self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, out)
         if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
             return None
-        if state is not None:
-            state.ld_T = float(ld_T)
-            state.seeded = True
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
 
     def _factors(self, G, sigma2):

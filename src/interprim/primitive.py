@@ -589,14 +589,14 @@ class InteractionPrimitive:
         return X, Y, y0
 
     def _predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
-                        workspace=None, seed=None) -> "Prediction":
+                        workspace=None) -> "Prediction":
         M = z.shape[0]
         s_end, duration = self._phase_info(n_star, M)
         prior = self.prior_
         stats = None
         if M >= self.min_observed and s_end > 0:
             stats, y0 = self._stats(z, s_end, workspace)
-            post = self._condition(stats, need_cov, seed)
+            post = self._condition(stats, need_cov)
         else:
             y0 = z[0]
             post = Posterior(prior.mean, prior.cov, 0.0)
@@ -614,8 +614,7 @@ class InteractionPrimitive:
         doubling for forcing values), so nothing proportional to ``M`` is
         allocated.  The work stays ``O(M q (q + D_o))`` for ``M`` frames: every
         frame gets a new phase ``s_j = j s_end / (M - 1)`` whenever the phase
-        estimate moves (while it does not, :class:`Stream` updates the
-        statistics and Eq. 16-18 by one row instead of calling this).
+        estimate moves.
         Otherwise :meth:`_observation` (numpy, the reference) is used; both
         give the same numbers (tested to 1e-12).
         """
@@ -648,20 +647,18 @@ class InteractionPrimitive:
         self._conditioner_cache = (self.prior_, self.obs_index_, cond)
         return cond
 
-    def _condition(self, stats, need_cov: bool, seed=None) -> Posterior:
+    def _condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
 
         Uses the exact low-rank form of :class:`~interprim.gaussian.LowRankConditioner`
         (compiled) when the prior has it, else the structured dense form of
         :func:`~interprim.gaussian.condition`; the covariance is computed only
         when asked for (``need_cov``; :attr:`Prediction.posterior_cov` asks lazily).
-        ``seed``: a :class:`_IncrementalConditioning` to seed when the compiled low-rank form runs
-        (``seed.seeded`` says whether it did).
         """
         G, B, yy, n = stats
         cond = self._conditioner()
         if cond is not None:
-            res = cond.mean_compiled(G, B, self.sigma2_, yy, n, state=seed) if loader.ready() else \
+            res = cond.mean_compiled(G, B, self.sigma2_, yy, n) if loader.ready() else \
                 cond.mean_numpy(G, B, self.sigma2_, yy, n)
             if res is not None:
                 cov = cond.cov(G, self.sigma2_) if need_cov else None

@@ -68,18 +68,6 @@ def _compile_all():
     other = np.arange(Do * q, P, dtype=np.intp)
     k.lowrank_condition_mean(G, B, 1.0, 1.0, np.ones((Do, q)), rng.normal(size=(Do, q, r)), np.eye(r) * 5.0,
                              np.zeros(P), np.zeros((Do, q)), idx, other, np.zeros((P - Do * q, r)), np.empty(P))
-    # the incremental conditioning of a Stream (seed, then one step)
-    Gs = np.eye(q) * 3.0
-    Bs = np.zeros((q, Do))
-    Uh = rng.normal(size=(Do, q, r))
-    K0 = np.eye(r) + np.einsum("iqa,iqb->ab", Uh, Uh)
-    st = [np.empty((Do, q, q)), np.empty((r, r)), np.empty((Do, q, r)), np.empty((Do, q))]
-    k.lowrank_condition_seed(Gs, Bs, 1.0, 1.0, np.ones((Do, q)), Uh, K0, np.zeros(P), np.zeros((Do, q)), idx, other,
-                             np.zeros((P - Do * q, r)), np.empty(P), *st)
-    k.lowrank_condition_step(z[M - 1], 0.5, z[0].copy(), np.zeros(Do), np.zeros((Kr + 1, 2, q)),
-                             np.zeros((Kr + 1, 2, 2)), 1.0, 1.0, np.ones((Do, q)), Uh, np.zeros(P), np.zeros((Do, q)),
-                             idx, other, np.zeros((P - Do * q, r)), Gs, Bs, *st, np.empty((r, r)),
-                             np.empty((6, max(q, r, Do))), np.empty((Do, q)), np.empty(P))
     Kn = 8
     kr.response_positions(np.zeros((Kn + 1, 2, q)), np.zeros((Kn + 1, 2, 2)), 0.3, 3, np.zeros((Do, q)),
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))

@@ -536,14 +536,20 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
 
 @njit(cache=True, fastmath=_FM)
 def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, logel, mu, sd, max_gap,
-               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js):
+               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js, s_out, lp_out):
     """One online phase update on the speed lattice; returns ``(j, s)``: the chosen lattice index and phase.
 
     Candidates: ``j = kc - nh .. kc + nh`` at ``s_j = v0 exp(dlog j) (M - 1)``; those above 1 are scored once at
     ``s = 1`` (represented by the smallest such ``j``), those below ``s_min`` once at ``s_min`` (largest such
     ``j``), both from scratch (:func:`phase_loglik_batch`); the others from their slots.  Score = log-likelihood
     plus, with ``prior``, the log-normal duration prior (``logel`` = log elapsed time).  Ties: the smallest ``s``.
+    Every scored candidate's phase and score are written to ``s_out[j - kc + nh]``, ``lp_out[j - kc + nh]``
+    (``-inf`` where a candidate was merged into a clipped one), for the refinement of
+    :class:`interprim.phase.tracking._Tracker`.
     """
+    for t in range(2 * nh + 1):
+        s_out[t] = -1.0
+        lp_out[t] = -np.inf
     best_j = kc
     best_s = -1.0
     best_lp = -np.inf
@@ -561,6 +567,8 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
             d = (logel - np.log(s_min) - mu) / sd
             lp += -0.5 * d * d - np.log(s_min)
         best_j, best_s, best_lp = lo_j, s_min, lp
+        s_out[lo_j - kc + nh] = s_min
+        lp_out[lo_j - kc + nh] = lp
     for j in range(lo_j + 1, kc + nh + 1):
         v = v0 * np.exp(dlog * j)
         s = v * (M - 1)
@@ -579,6 +587,8 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
         if prior:
             d = (logel - np.log(s) - mu) / sd
             lp += -0.5 * d * d - np.log(s)
+        s_out[j - kc + nh] = s
+        lp_out[j - kc + nh] = lp
         if best_s < 0.0 or lp > best_lp:
             best_j, best_s, best_lp = j, s, lp
     return best_j, best_s
@@ -588,6 +598,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
 # workspaces of track_step, and the warm-up calls of the loader (interprim._compiled.loader)
 
 N_SLOTS = 12
+MAX_CANDIDATES = 63  # candidates per track_step call (its s_out, lp_out)
 
 
 def track_buffers(q: int, n_o: int, n: int, n_slots: int = N_SLOTS):
@@ -601,7 +612,8 @@ def track_buffers(q: int, n_o: int, n: int, n_slots: int = N_SLOTS):
             np.zeros((n_slots, n_o, q, q)), np.zeros((n_slots, n, n)), np.zeros(n_slots),
             np.zeros((P, BLOCK)), np.zeros((q, q)), np.zeros((q, r4)), np.zeros((q, r4)), np.zeros((r4, n_o * q)),
             np.zeros((r4, r4)), np.zeros((n4, n4 + 4)), np.zeros((6, max(q, n, n_o))), np.zeros(1), np.zeros(1),
-            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots))
+            np.zeros((n_slots, n_o, q)), np.zeros((n_slots, n)), np.zeros(n_slots), np.zeros(MAX_CANDIDATES),
+            np.zeros(MAX_CANDIDATES))
 
 
 def warm_batch(fn):

@@ -333,9 +333,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     """
     z = np.asarray(z, dtype=np.float64)
     M = z.shape[0]
-    lo, hi = (_S_MIN, 1.0) if bounds is None else (float(bounds[0]), float(bounds[1]))
-    elapsed = (M - 1) * model.dt_
-    lo = max(lo, min(hi, elapsed / (4.0 * float(np.max(model.durations_)))))
+    lo, hi = _bounds(model, M, bounds)
     if M < 2:
         s = float(np.clip(s_init if s_init is not None else lo, lo, hi))
         return PhaseEstimate(s, 0.0, 0.0, np.array([s]), np.array([0.0]))
@@ -346,8 +344,16 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     scores = _scorer(model, z, s2, speed_prior)
     if scores.dense:
         with single_thread():
-            return _search(grid, scores, refine)
-    return _search(grid, scores, refine)
+            return _search(grid, scores, refine, lo, hi)
+    return _search(grid, scores, refine, lo, hi)
+
+
+def _bounds(model, M, bounds=None):
+    """``(lo, hi)``: the phases searched for ``M`` frames (default ``(0.02, 1)``, ``lo`` raised so that the implied
+    duration stays below 4x the longest demonstration)."""
+    lo, hi = (_S_MIN, 1.0) if bounds is None else (float(bounds[0]), float(bounds[1]))
+    elapsed = (M - 1) * model.dt_
+    return max(lo, min(hi, elapsed / (4.0 * float(np.max(model.durations_))))), hi
 
 
 class _scorer:
@@ -395,7 +401,10 @@ def _speed_prior_params(model, M):
     return float(np.log(max(M - 1, 1) * model.dt_)), cache[1], cache[2]
 
 
-def _search(grid, scores, refine):
+def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
+    """Grid search, then (``refine``) Brent's method between the best point's grid neighbours to ``1e-3 s``,
+    then three points ``_POLISH`` apart around it (moved towards the maximum while it is not the middle one)
+    and :func:`_finish` on them: the same last step as the stream's tracker, whose lattice has that spacing."""
     lp, ll = scores(grid)
     curve = lp
     i = int(np.argmax(curve))
@@ -414,10 +423,26 @@ def _search(grid, scores, refine):
             s, neg = _brent_min(f, a, b, best_s, -best_lp, xatol=1e-3 * max(b, 1e-3), maxiter=20)
             if -neg > best_lp:
                 best_s, best_lp, best_ll = s, -neg, seen[s]
+        ss = np.unique(np.clip(best_s * np.exp(np.array([-_POLISH, 0.0, _POLISH])), lo, hi))
+        lps = scores(ss)[0]
+        k = int(np.argmax(lps))
+        for _ in range(8):  # the maximum beyond an end of the three: move them one spacing that way
+            if ss.size < 3 or k == 1 or ss[k] <= lo or ss[k] >= hi:
+                break
+            x = float(np.clip(ss[k] * np.exp(_POLISH if k == 2 else -_POLISH), lo, hi))
+            ss = np.array([ss[1], ss[2], x]) if k == 2 else np.array([x, ss[0], ss[1]])
+            new = float(scores(np.array([x]))[0][0])
+            lps = np.array([lps[1], lps[2], new]) if k == 2 else np.array([new, lps[0], lps[1]])
+            k = int(np.argmax(lps))
+        s = _finish(scores, ss, lps, k, lo, hi)
+        lp1, ll1 = scores(np.array([s]))
+        best_s, best_lp, best_ll = s, float(lp1[0]), float(ll1[0])
     return PhaseEstimate(best_s, float(best_ll), float(best_lp), grid, curve)
 
 
 _GOLD = 0.5 * (3.0 - 5.0 ** 0.5)
+_POLISH = 0.01  # spacing in log s of the last refinement (batch) = the stream's lattice spacing (tracking._Tracker)
+_H_FINAL = 2e-3  # spacing in log s of the last parabola (_finish)
 
 
 def _brent_min(f, a, b, x, fx, xatol, maxiter):
@@ -425,7 +450,8 @@ def _brent_min(f, a, b, x, fx, xatol, maxiter):
     three best points when they fall inside the bracket and shrink fast enough; Brent 1973, ch. 5), started
     from an interior point ``x`` whose value ``fx`` is known.  Returns ``(x, f(x))``.  Replaces
     ``scipy.optimize.minimize_scalar(method="bounded")`` on the online path: importing ``scipy.optimize``
-    costs about 0.5 s of a cold start."""
+    costs about 0.5 s of a cold start.
+    """
     w = v = x
     fw = fv = fx
     d = e = 0.0
@@ -472,3 +498,54 @@ def _brent_min(f, a, b, x, fx, xatol, maxiter):
             elif fu <= fv or v == x or v == w:
                 v, fv = u, fu
     return x, fx
+
+
+def _vertex(x, y):
+    """Abscissa of the maximum of the parabola through three points ``(x_k, y_k)`` (``x`` increasing), or
+    ``None`` when it is not concave (the middle point not above the chord of the outer two)."""
+    (x0, x1, x2), (y0, y1, y2) = x, y
+    den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
+    if not (den != 0.0 and y1 * (x2 - x0) > y0 * (x2 - x1) + y2 * (x1 - x0)):
+        return None
+    return x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
+
+
+def _finish(scores, ss, lps, i, lo, hi, max_rounds: int = 6) -> float:
+    """The phase from candidates ``ss`` (increasing, log posteriors ``lps``, best ``i``): the last step of
+    both the batch search (:func:`_search`) and the stream's tracker (:class:`~interprim.phase.tracking._Tracker`).
+
+    1. ``u1``: the vertex (in ``log s``) of the parabola through the best candidate and its neighbours,
+       within their bracket (the best candidate itself when the parabola is not concave or there is no
+       neighbour on one side, i.e. at a clipped bound);
+    2. the vertex of the parabola through ``u1 - h, u1, u1 + h`` (``h = _H_FINAL``), the three points moved
+       by ``h`` towards the maximum while it is not the middle one.
+
+    Step 2 makes the answer independent of where the candidates of step 1 were (a grid and Brent's method, or
+    a lattice of speeds): for a log posterior ``-k d^2 + c d^3`` around its maximum the vertex is off by
+    ``c h^2 / (2 k)`` plus ``O(c e^2 / k)`` for a centre ``e`` away from the maximum, so two searches whose
+    ``u1`` are within ``e ~ 1e-4`` agree to ``~1e-8``; and points ``h`` apart keep the rounding of the scores
+    ``d_lp`` from moving the vertex by more than ``d_lp / (2 k h)``.
+    """
+    n = len(ss)
+    x = float(np.log(ss[i]))
+    if 0 < i < n - 1 and np.isfinite(lps[i - 1]) and np.isfinite(lps[i + 1]):
+        u = _vertex(np.log(ss[i - 1:i + 2]), lps[i - 1:i + 2])
+        if u is not None:
+            x = min(max(u, float(np.log(ss[i - 1]))), float(np.log(ss[i + 1])))
+    a, b = float(np.log(lo)), float(np.log(hi))
+    h = _H_FINAL
+    if b - a < 2.0 * h:
+        return float(np.exp(x))
+    for _ in range(max_rounds):
+        c = min(max(x, a + h), b - h)  # the three points inside [lo, hi]
+        us = np.array([c - h, c, c + h])
+        lp = scores(np.exp(us))[0]
+        k = int(np.argmax(lp))
+        if k != 1 and min(max(us[k], a + h), b - h) != c:  # the maximum is beyond an end: move that way
+            x = us[k]
+            continue
+        u = _vertex(us, lp)
+        if u is None:
+            return float(np.exp(us[k]))
+        return float(np.exp(min(max(u, a), b, us[2]) if u > us[0] else us[0]))
+    return float(np.exp(x))

@@ -57,6 +57,7 @@ class Calibration:
                 float(np.interp(p, self.fractions, self.scale_controlled)))
 
     def to_arrays(self) -> dict:
+        """The calibration as plain numeric arrays (for the model file; inverse of :meth:`from_arrays`)."""
         return {"fractions": np.asarray(self.fractions, dtype=np.float64),
                 "scale_observed": np.asarray(self.scale_observed, dtype=np.float64),
                 "scale_controlled": np.asarray(self.scale_controlled, dtype=np.float64),
@@ -64,6 +65,7 @@ class Calibration:
 
     @classmethod
     def from_arrays(cls, d) -> "Calibration":
+        """Rebuild a calibration from the arrays written by :meth:`to_arrays` (a mapping of the four names)."""
         return cls(np.asarray(d["fractions"], dtype=np.float64), np.asarray(d["scale_observed"], dtype=np.float64),
                    np.asarray(d["scale_controlled"], dtype=np.float64), int(d["n_cases"]))
 

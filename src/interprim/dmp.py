@@ -226,6 +226,7 @@ class LinearRollout:
 
     @property
     def n_params(self) -> int:
+        """Parameters ``q`` of one DoF (``[w, g]``: ``n_basis + 1``), the columns of the design per DoF."""
         return self._Z.shape[2]
 
     def index(self, s) -> np.ndarray:

@@ -219,6 +219,13 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
     need_cov : bool
         Compute the posterior covariance (``O(P^2 P_o)``); the mean alone is cheaper.
 
+    Returns
+    -------
+    Posterior
+        Posterior mean, covariance (``None`` without ``need_cov``) and marginal log-likelihood.
+
+    Notes
+    -----
     The observation is whitened by the prior of the observed parameters
     (``Sigma_oo = L L^T``), so that every matrix factorised is
     ``sigma^2 I + L^T J L`` with ``J = blockdiag(G)``: exact for any ``G``,

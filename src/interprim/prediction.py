@@ -83,10 +83,13 @@ class Prediction:
     # -- parameters
     @property
     def posterior_mean(self) -> np.ndarray:
+        """Mean of ``p(theta | tau_o)`` (Eq. 18), both agents, in the internal (latent) parameter layout."""
         return self._post.mean
 
     @property
     def posterior_cov(self) -> np.ndarray:
+        """Covariance of ``p(theta | tau_o)`` (Eq. 18) in the layout of :attr:`posterior_mean`; computed on first
+        access after a mean-only (streaming) update."""
         if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
             self._post = self._m._condition(self._stats, need_cov=True)
         return self._post.cov

@@ -137,6 +137,19 @@ class PCA:
         self.n_components = int(n_components)
 
     def fit(self, frames):
+        """Fit the components to all frames.
+
+        Parameters
+        ----------
+        frames : array_like, shape (n_frames, D)
+            At least 2 finite frames (e.g. the frames of all demonstrations stacked), ``D >= n_components``.
+
+        Returns
+        -------
+        PCA
+            ``self``, with ``mean_`` (D,), ``components_`` (k, D; orthonormal rows, each with its largest
+            loading positive so the result is deterministic) and ``explained_variance_ratio_`` (k,).
+        """
         X = as_2d_finite(frames, "frames", min_rows=2)
         if self.n_components > X.shape[1]:
             raise ValueError(f"n_components={self.n_components} exceeds the {X.shape[1]} dimensions of the data")
@@ -152,7 +165,9 @@ class PCA:
         return self
 
     def transform(self, X):
+        """Project frames ``(..., D)`` on the components: ``(X - mean_) @ components_.T``, shape ``(..., k)``."""
         return (np.asarray(X, dtype=np.float64) - self.mean_) @ self.components_.T
 
     def inverse_transform(self, Z):
+        """Map component scores ``(..., k)`` back to frames ``(..., D)``: ``Z @ components_ + mean_``."""
         return np.asarray(Z, dtype=np.float64) @ self.components_ + self.mean_

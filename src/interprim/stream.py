@@ -55,6 +55,7 @@ class Stream:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames received since the stream was created or last :meth:`reset`."""
         return self._n
 
     def reset(self, robot_state=None):

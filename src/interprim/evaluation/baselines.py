@@ -56,9 +56,13 @@ class BaselinePrediction:
         return np.stack([np.interp(s, self._t, Y[:, d]) for d in range(Y.shape[1])], axis=1)
 
     def trajectory(self, n: int = 100) -> np.ndarray:
+        """Predicted mean of every DoF at ``n`` evenly spaced normalised times in [0, 1], shape ``(n, D)``
+        (linear interpolation of ``mean``)."""
         return self._interp(self._mean, n)
 
     def std(self, n: int = 100):
+        """Pointwise predictive standard deviation on the same grid as :meth:`trajectory`, shape ``(n, D)``;
+        ``None`` when the method gives no uncertainty."""
         return None if self._std is None else self._interp(self._std, n)
 
 
@@ -88,6 +92,20 @@ class PriorMean:
         self.n = n
 
     def fit(self, demos, dt=None):
+        """Average the time-normalised demonstrations.
+
+        Parameters
+        ----------
+        demos : list of ndarray, shape (T_j, D)
+            At least 2 finite demonstrations with the same columns.
+        dt : float, optional
+            Ignored (the interface of the other methods).
+
+        Returns
+        -------
+        PriorMean
+            ``self``, with ``mean_`` and ``std_`` (sample std, ``ddof=1``) of shape ``(n, D)``.
+        """
         arrays = _check_demos(demos)
         Y = np.stack([time_normalise(a, self.n) for a in arrays])
         self.mean_ = Y.mean(axis=0)
@@ -95,6 +113,7 @@ class PriorMean:
         return self
 
     def predict(self, partial) -> BaselinePrediction:
+        """The mean demonstration whatever ``partial`` holds (no conditioning, phase NaN)."""
         return BaselinePrediction(np.linspace(0.0, 1.0, self.n), self.mean_, self.std_)
 
 
@@ -113,6 +132,20 @@ class NearestNeighbour:
         self.n = n
 
     def fit(self, demos, dt=None):
+        """Keep the demonstrations: their observed columns as DTW references, and each time-normalised.
+
+        Parameters
+        ----------
+        demos : list of ndarray, shape (T_j, D)
+            At least 2 finite demonstrations with the same columns.
+        dt : float, optional
+            Ignored (the interface of the other methods).
+
+        Returns
+        -------
+        NearestNeighbour
+            ``self``.
+        """
         arrays = _check_demos(demos)
         obs = [int(i) for i in self.observed_dofs]
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
@@ -120,6 +153,11 @@ class NearestNeighbour:
         return self
 
     def predict(self, partial) -> BaselinePrediction:
+        """The nearest demonstration to ``partial`` (``(M, len(observed_dofs))`` frames from the start).
+
+        Sets ``neighbour_`` to its index; the prediction's phase is its matched fraction ``(n*+1)/N_j``
+        and its ``std`` is ``None``.
+        """
         from ..phase.dtw import open_end_dtw
 
         v = np.asarray(partial, dtype=np.float64)
@@ -166,6 +204,25 @@ class InteractionProMP:
         return self.promp_._rbfs_1d_sequence(T.copy())[:, :-1]
 
     def fit(self, demos, dt=None):
+        """Fit ProMP weights to every demonstration and a Gaussian over the stacked weights of both agents.
+
+        Parameters
+        ----------
+        demos : list of ndarray, shape (T_j, D)
+            At least 2 finite demonstrations with the same columns; each is put on normalised time [0, 1].
+        dt : float, optional
+            Ignored (the interface of the other methods).
+
+        Returns
+        -------
+        InteractionProMP
+            ``self``, with ``mean_``, ``cov_`` (observed DoFs' weights first) and ``sigma2_``.
+
+        Raises
+        ------
+        ImportError
+            Without the ``bench`` extra (``movement_primitives``).
+        """
         from movement_primitives.promp import ProMP
 
         arrays = _check_demos(demos)

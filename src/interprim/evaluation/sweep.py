@@ -413,6 +413,8 @@ def markdown_tables(summary, fractions=(0.4, 0.6, 0.8), metric: str = "rmse_ctrl
 
 
 def recognition_table(summary, fractions=(0.2, 0.4, 0.6, 0.8, 1.0)) -> str:
+    """Markdown table of the recognition accuracy per interaction (and ``all``) at the given fractions;
+    an empty string when the summary has no recognition results."""
     rec = summary.get("recognition", {})
     if not rec:
         return ""

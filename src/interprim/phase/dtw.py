@@ -226,6 +226,7 @@ class IncrementalDTW:
         self.cost = np.inf
 
     def reset(self):
+        """Forget all query frames (start a new query against the same reference)."""
         self.n_frames = 0
         self.n_star = -1
         self.cost = np.inf

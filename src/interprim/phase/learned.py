@@ -217,6 +217,7 @@ class LearnedPhase:
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
+        """The constructor's arguments as a dict (what a copy or a model file needs to rebuild the estimator)."""
         return {k: getattr(self, k) for k in ("features", "model", "target", "select_features", "bandwidths",
                                               "alphas", "velocity_window", "standardise", "fallback_se", "history",
                                               "cv_range")}
@@ -634,6 +635,7 @@ class PhaseTracker:
         self.reset()
 
     def reset(self):
+        """Forget all frames (start a new movement)."""
         self.n_frames = 0
         self._path = 0.0
         self._peak = 0.0

@@ -70,6 +70,12 @@ class ServerConfig:
     loop: str = "auto"  # event loop: "auto" (uvloop if installed), "uvloop", "asyncio" (see new_event_loop)
 
     def validate(self) -> None:
+        """Check the limits and options; raises ``ValueError`` naming the first one that is wrong.
+
+        Listening on a non-loopback host needs a ``token``; the counts must be at least 1, the rate
+        positive, ``default_points`` in ``[2, max_points]``, ``loop`` one of ``auto``/``uvloop``/``asyncio``
+        and ``max_message_bytes`` at least 256.
+        """
         if not is_loopback(self.host) and not self.token:
             raise ValueError(
                 f"refusing to listen on {self.host!r} without a token: anyone who can reach it could use the "
@@ -173,6 +179,11 @@ class InterprimServer(HttpSide, SessionSide):
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self):
+        """Start listening (on the running event loop) and return ``self``; the port is then in ``port``.
+
+        First streams a few frames through each model (so the compiled kernels are loaded before the first
+        client) or, with ``processes``, starts the worker processes.
+        """
         from websockets.asyncio.server import ServerConnection, serve
         from websockets.protocol import State
 
@@ -261,11 +272,13 @@ class InterprimServer(HttpSide, SessionSide):
         return [_Lane(run_inline, sync=True)]
 
     async def serve_forever(self):
+        """:meth:`start` if needed, then serve until the task is cancelled or :meth:`stop` is called."""
         if self._server is None:
             await self.start()
         await self._server.serve_forever()
 
     async def stop(self):
+        """Close every connection and the listening socket, and shut down the worker threads or processes."""
         if self._server is not None:
             self._server.close(close_connections=True)
             await self._server.wait_closed()
@@ -278,6 +291,7 @@ class InterprimServer(HttpSide, SessionSide):
 
     @property
     def url(self) -> str:
+        """``http://host:port/``, the live page (the port once :meth:`start` has bound it)."""
         host = self.config.host
         if ":" in host:
             host = f"[{host}]"
@@ -285,6 +299,7 @@ class InterprimServer(HttpSide, SessionSide):
 
     @property
     def ws_url(self) -> str:
+        """``ws://host:port/ws``, the WebSocket endpoint for the clients."""
         return self.url.replace("http://", "ws://", 1) + "ws"
 
 
@@ -303,6 +318,10 @@ class ServerThread:
         self._error = None
 
     def start(self) -> "ServerThread":
+        """Start the server in a daemon thread; returns ``self`` once it listens (waits up to 30 s).
+
+        An error while starting (e.g. the port is taken) is raised here, in the caller's thread.
+        """
         def run():
             loop = new_event_loop(self.server.config.loop)
             self.loop = loop
@@ -329,16 +348,19 @@ class ServerThread:
         return self
 
     def stop(self) -> None:
+        """Stop the event loop, which stops the server (see :meth:`InterprimServer.stop`); waits up to 15 s."""
         if self.loop is not None and self._thread is not None and self._thread.is_alive():
             self.loop.call_soon_threadsafe(self.loop.stop)
             self._thread.join(15)
 
     @property
     def url(self) -> str:
+        """The server's ``http://host:port/``."""
         return self.server.url
 
     @property
     def ws_url(self) -> str:
+        """The server's ``ws://host:port/ws``."""
         return self.server.ws_url
 
     def call(self, fn, *args):

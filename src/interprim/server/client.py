@@ -92,6 +92,7 @@ class Client:
 
     @property
     def models(self) -> list:
+        """The server's models as listed in its ``welcome`` reply (dicts with ``name``, ``n_dofs``, ``dt``, ...)."""
         return self.welcome["models"]
 
     def recv(self, timeout: float | None = None) -> dict:
@@ -111,14 +112,24 @@ class Client:
         return self.recv()
 
     def reset(self) -> dict:
+        """Start a new interaction with the same model (the frames so far are forgotten).
+
+        Returns the ``reset_done`` reply (``seq``: frames received so far); raises :class:`ServerError`
+        (``not_open``) when no model is open.
+        """
         self.ws.send(json.dumps({"type": "reset"}))
         return self.recv()
 
     def close_session(self) -> dict:
+        """Close the open model; the connection stays open (``open`` again to go on).
+
+        Returns the ``closed`` reply (``seq``: frames received so far).
+        """
         self.ws.send(json.dumps({"type": "close"}))
         return self.recv()
 
     def close(self) -> None:
+        """Close the WebSocket connection (also done on leaving a ``with`` block)."""
         self.ws.close()
 
     def __enter__(self):
@@ -141,6 +152,22 @@ class AsyncClient:
 
     @classmethod
     async def connect(cls, url: str, token: str | None = None, **connect_kwargs) -> "AsyncClient":
+        """Connect to ``url`` (``ws://host:port/ws``) and say ``hello``; returns the client once welcomed.
+
+        Parameters
+        ----------
+        url : str
+            ``ws://host:port/ws``.
+        token : str, optional
+            Shared token if the server was started with ``--token``.
+        **connect_kwargs
+            Passed to ``websockets.asyncio.client.connect``.
+
+        Raises
+        ------
+        ServerError
+            If the server refuses the ``hello`` (wrong token or protocol version).
+        """
         from websockets.asyncio.client import connect
 
         ws = await connect(url, close_timeout=2, **connect_kwargs)
@@ -149,6 +176,7 @@ class AsyncClient:
         return cls(ws, welcome)
 
     async def recv(self) -> dict:
+        """Next reply; raises :class:`ServerError` on an error reply."""
         return _check(json.loads(await self.ws.recv()))
 
     async def recv_raw(self) -> dict:
@@ -157,22 +185,34 @@ class AsyncClient:
 
     async def open(self, model: str = "auto", *, candidates=None, points: int | None = None, std: bool = False,
                    dofs: str | None = None, robot_state=None) -> dict:
+        """Open a model (or ``"auto"``: recognise among ``candidates``, default all). Returns ``opened``.
+
+        The keyword arguments are the fields of the protocol's ``open`` message (``points``, ``std``,
+        ``dofs``, ``robot_state``), as for :meth:`Client.open`.
+        """
         await self.ws.send(_open_msg(model, candidates, points, std, dofs, robot_state))
         self.opened = await self.recv()
         return self.opened
 
     async def send_frame(self, frame, *, t=None, binary: bool = False) -> None:
+        """Send one observed frame without waiting for its reply (read it later with :meth:`recv`).
+
+        ``t`` is echoed back in the reply; ``binary=True`` sends the frame as little-endian float64 bytes.
+        """
         await self.ws.send(_frame_msg(frame, t, binary))
 
     async def frame(self, frame, *, t=None, binary: bool = False) -> dict:
+        """Send one observed frame and return its ``prediction`` (raises :class:`ServerError` on an error)."""
         await self.send_frame(frame, t=t, binary=binary)
         return await self.recv()
 
     async def reset(self) -> dict:
+        """Start a new interaction with the same model; returns the ``reset_done`` reply."""
         await self.ws.send(json.dumps({"type": "reset"}))
         return await self.recv()
 
     async def close(self) -> None:
+        """Close the WebSocket connection (also done on leaving an ``async with`` block)."""
         await self.ws.close()
 
     async def __aenter__(self):

@@ -39,6 +39,8 @@ class HttpSide:
         return files
 
     def info(self) -> dict:
+        """The JSON of ``GET /api/info``: server version, protocol version, whether a token is required,
+        the models (:meth:`ModelEntry.describe`), the limits, and the server's ``extra_info``."""
         c = self.config
         from .. import __version__
 

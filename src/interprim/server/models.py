@@ -24,21 +24,27 @@ class ModelEntry:
 
     @property
     def observed_dofs(self) -> list[int]:
+        """Data columns of the observed agent (the frames clients send), in the model's order."""
         return [int(i) for i in self.model.observed_dofs_]
 
     @property
     def controlled_dofs(self) -> list[int]:
+        """Data columns of the controlled agent (empty for a single-agent model)."""
         return [int(i) for i in self.model.controlled_dofs_]
 
     @property
     def n_observed(self) -> int:
+        """Number of values in one frame."""
         return len(self.model.observed_dofs_)
 
     @property
     def n_dofs(self) -> int:
+        """Number of data columns of the model (both agents)."""
         return int(self.model.n_dofs_)
 
     def describe(self) -> dict:
+        """The model's entry in ``welcome`` and ``/api/info``: name, kind, columns, ``dt``, mean duration
+        and the JSON-able extras (``title``, ``extent``, ``columns``, ``world``) of ``meta``."""
         out = {
             "name": self.name,
             "kind": self.kind,

@@ -343,8 +343,9 @@ def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
     allowed = _OPTIONS.get(kind, ())
     for name, value in opts.items():
         if value is not None and value is not False and name not in allowed:
-            fmts = [k if k != "ros" else "ROS bags" for k, v in _OPTIONS.items() if name in v]
-            raise DataFileError(f"{p}: the option {name} applies to {' and '.join(fmts)} files, not to this {kind} file")
+            fmts = [k if k != "ros" else "ROS bag" for k, v in _OPTIONS.items() if name in v]
+            this = "ROS bag" if kind == "ros" else (kind or "extension-less") + " file"
+            raise DataFileError(f"{p}: the option {name}= applies to {', '.join(fmts)} files, not to this {this}")
     if kind == ".csv":
         return _read_csv(p, dt, max_nan_gap, min_frames)
     if kind == ".npz":

@@ -277,7 +277,9 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     if joints is not None:
         for name in joints:
             if name not in names:
-                raise DataFileError(f"{path}: unknown joint {name!r} (joints); the joints are: {', '.join(names)}")
+                raise DataFileError(
+                    f"{path}: unknown joint {name!r} (joints={','.join(joints)}); the joints are: {', '.join(names)}"
+                )
         if len(set(joints)) != len(joints):
             raise DataFileError(f"{path}: a joint is selected twice in joints={list(joints)!r}")
     chosen = skel if joints is None else [next(j for j in skel if j.name == name) for name in joints]

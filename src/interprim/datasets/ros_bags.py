@@ -160,7 +160,10 @@ def _read_streams(path, streams, split_topic, orientation):
         shown = ", ".join(f"{k} ({v})" for k, v in sorted(topics.items())) or "none"
         for s in streams:
             if s.topic not in topics:
-                raise DataFileError(f"{path}: no topic {s.topic!r} ({s.role} agent, topics); the bag has: {shown}")
+                raise DataFileError(
+                    f"{path}: no topic {s.topic!r} ({s.role} agent, topics={','.join(x.spec for x in streams)}); "
+                    f"the bag has: {shown}"
+                )
             s.msgtype = topics[s.topic]
             if s.msgtype not in SUPPORTED:
                 raise DataFileError(
@@ -177,7 +180,7 @@ def _read_streams(path, streams, split_topic, orientation):
         if split_topic is not None:
             split_topic = split_topic if split_topic.startswith("/") else "/" + split_topic
             if split_topic not in topics:
-                raise DataFileError(f"{path}: no topic {split_topic!r} (split_topic); the bag has: {shown}")
+                raise DataFileError(f"{path}: no topic {split_topic!r} (split_topic={split_topic}); the bag has: {shown}")
         wanted = {s.topic for s in streams} | ({split_topic} if split_topic else set())
         conns = [c for c in reader.connections if c.topic in wanted]
         start = int(reader.start_time)
@@ -240,7 +243,8 @@ def _finish_stream(path, s, joints):
             unknown = [j for j in joints if j not in names]
             if unknown:
                 raise DataFileError(
-                    f"{path}: topic {s.topic!r} has no joint {unknown[0]!r} (joints); its joints are: {', '.join(names)}"
+                    f"{path}: topic {s.topic!r} has no joint {unknown[0]!r} (joints={','.join(joints)}); "
+                    f"its joints are: {', '.join(names)}"
                 )
             names = [j for j in joints if j in names]
             if not names:
@@ -330,7 +334,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
 
     path = Path(path)
     if topics is None:
-        raise DataFileError(f"{path}: a ROS bag needs topics=(observed, controlled): the topics (or tf:FRAME) to read")
+        raise DataFileError(f"{path}: a ROS bag needs topics=OBSERVED,CONTROLLED: the two agents' topics (or tf:FRAME)")
     if isinstance(topics, str):
         topics = [x.strip() for x in topics.split(",") if x.strip()]
     topics = list(topics)

@@ -356,3 +356,109 @@ def test_bvh_binary_garbage_and_unknown_joint(tmp_path):
         load_bvh(path, joints="Leg")
     with pytest.raises(DataFileError, match=r"the option markers= applies to \.c3d files, not to this \.bvh file"):
         load_demonstrations(path, markers="x")
+
+
+# ----------------------------------------------------------------------------- command line
+def _cli(argv, capsys):
+    from interprim.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_fit_and_predict_on_c3d_takes(tmp_path, capsys):
+    import interprim as ip
+
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    for k in range(5):
+        write_c3d(takes / f"take{k}.c3d", handover(30 + 3 * k, seed=k), LABELS, rate=50.0)
+    model = tmp_path / "m.npz"
+    code, out, err = _cli(["fit", takes, "--observed", "A:*", "--controlled", "B:RHand_*", "--n-basis", "5",
+                           "-o", model], capsys)
+    assert code == 0, err
+    assert "dropped:    3 columns named in neither --observed nor --controlled" in out
+    m = ip.InteractionPrimitive.load(model)
+    assert list(m.columns_) == [f"{lab}_{a}" for lab in LABELS[:3] for a in "xyz"]
+    assert [m.columns_[i] for i in m.observed_dofs_] == [f"{lab}_{a}" for lab in LABELS[:2] for a in "xyz"]
+    code, out, err = _cli(["predict", model, takes / "take1.c3d", "-o", tmp_path / "p.csv"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "p.csv").read_text().count("\n") > 100
+
+
+def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
+    path = write_c3d(tmp_path / "one.c3d", handover(20), LABELS)
+    code, _, err = _cli(["fit", path, "--observed", "A:*", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and err.count("\n") == 1
+    assert "one.c3d holds 1 demonstration; at least 2 are needed" in err
+    code, _, err = _cli(["fit", path, "--markers", "Nose", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and err.count("\n") == 1 and "unknown marker 'Nose' (--markers=Nose)" in err
+    code, _, err = _cli(["fit", path, "--observed", "C:*", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and "--observed: the pattern 'C:*' matches no column" in err
+    code, _, err = _cli(["fit", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o", tmp_path / "m.npz"],
+                        capsys)
+    assert code == 1 and "--observed and --controlled both name A:RHand_x" in err
+    (tmp_path / "cut.c3d").write_bytes(path.read_bytes()[:-600])
+    code, _, err = _cli(["fit", tmp_path / "cut.c3d", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and err.count("\n") == 1 and "cut.c3d: truncated file" in err and "frame" in err
+    code, _, err = _cli(["fit", path, "--split-gap", "2", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and "the option --split-gap= applies to ROS bag files, not to this .c3d file" in err
+
+
+SKELETON = """HIERARCHY
+ROOT A_Shoulder
+{
+  OFFSET 0 140 0
+  CHANNELS 3 Zrotation Xrotation Yrotation
+  JOINT A_Hand
+  {
+    OFFSET 60 0 0
+    CHANNELS 0
+    End Site
+    {
+      OFFSET 5 0 0
+    }
+  }
+}
+ROOT B_Shoulder
+{
+  OFFSET 100 140 0
+  CHANNELS 3 Zrotation Xrotation Yrotation
+  JOINT B_Hand
+  {
+    OFFSET -60 0 0
+    CHANNELS 0
+    End Site
+    {
+      OFFSET -5 0 0
+    }
+  }
+}
+MOTION
+"""
+
+
+def test_cli_fit_on_bvh_recordings(tmp_path, capsys):
+    import interprim as ip
+
+    rng = np.random.default_rng(0)
+    folder = tmp_path / "bvh"
+    folder.mkdir()
+    for k in range(5):
+        T = 35 + 2 * k
+        s = np.linspace(0, 1, T)
+        lift = rng.uniform(30, 60) * (3 * s**2 - 2 * s**3)  # both arms rise towards each other
+        rows = np.column_stack([lift, 0 * s, 10 * s, -lift * 0.9, 0 * s, -10 * s])
+        write_bvh(folder / f"h{k}.bvh", rows, frame_time=1 / 30, head=SKELETON)
+    model = tmp_path / "m.npz"
+    code, out, err = _cli(["fit", folder, "--joints", "A_Hand,B_Hand", "--length-unit", "cm", "--observed", "A_Hand_*",
+                           "--n-basis", "5", "-o", model], capsys)
+    assert code == 0, err
+    m = ip.InteractionPrimitive.load(model)
+    assert list(m.columns_) == ["A_Hand_x", "A_Hand_y", "A_Hand_z", "B_Hand_x", "B_Hand_y", "B_Hand_z"]
+    assert m.dt_ == pytest.approx(1 / 30)
+    code, out, err = _cli(["fit", folder, "--bvh-mode", "angles", "--observed", "A_*", "--n-basis", "5",
+                           "-o", tmp_path / "a.npz"], capsys)
+    assert code == 0, err
+    assert "controlled: B_Shoulder_Zrotation, B_Shoulder_Xrotation, B_Shoulder_Yrotation" in out

@@ -296,7 +296,8 @@ def _segments(streams_t, markers, split_gap):
                 if c0 >= cur:
                     out.append((cur, c0))
                 cur = max(cur, c1)
-            out.append((cur, b))
+            if cur <= b:
+                out.append((cur, b))
         segs = out
     return segs
 

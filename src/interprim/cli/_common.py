@@ -14,6 +14,8 @@ class CommandError(InterprimError, ValueError):
 def _split_cols(values):
     out = []
     for v in values or []:
+        if v is None:
+            continue
         out.extend(s.strip() for s in v.split(",") if s.strip())
     return out
 

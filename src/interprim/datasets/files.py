@@ -485,7 +485,10 @@ def load_demonstrations(
             key=_natural_key,
         )
         if not files:
-            raise DataFileError(f"{p}: the folder holds no {', '.join(_FOLDER_SUFFIXES)} files or rosbag2 folders")
+            raise DataFileError(
+                f"{p}: the folder holds no .csv or .npz files (nor recordings: .c3d, .bvh, .bag, .db3, .mcap files "
+                "or rosbag2 folders)"
+            )
     else:
         files = [p]
     demos, times, labels = [], [], []

@@ -383,6 +383,9 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
     assert list(m.observed_dofs_) == [0, 1, 2]
     assert main(argv[:-1] + [str(tmp_path / "g.npz"), "--resample", "0.05"]) == 0
     assert ip.InteractionPrimitive.load(tmp_path / "g.npz").dt_ == pytest.approx(0.05)
+    assert main(["evaluate", "--data", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
+                 "/demo_start", "--resample", "0.05", "--n-basis", "5", "--out", str(tmp_path / "ev")]) == 0
+    assert (tmp_path / "ev" / "report.md").is_file()
     capsys.readouterr()
     assert main(["fit", str(path), "-o", str(model)]) == 1
     err = capsys.readouterr().err

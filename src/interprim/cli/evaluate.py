@@ -120,9 +120,14 @@ def run_user_data(args) -> int:
     if args.folds is not None and args.folds < 2:
         raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
     cfg = RealTimeConfig(horizon=float(args.horizon))
-    recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
-                                                      smoothing_window=args.smoothing_window,
-                                                      n_basis=args.n_basis, progress=True)
+    try:
+        recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
+                                                          smoothing_window=args.smoothing_window,
+                                                          n_basis=args.n_basis, progress=True)
+    except InterprimError:
+        raise
+    except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
+        raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
     paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
                         horizon=float(args.horizon))
     print(markdown_table(summary))

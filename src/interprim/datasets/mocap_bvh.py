@@ -345,8 +345,8 @@ def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     joints : sequence of str or str, optional
         Joints to keep, in this order (default all, in the file's order).
     length_unit : str, optional
-        The unit of the file's lengths (BVH does not say; ``"cm"`` is common, e.g. the CMU
-        database, some exporters use ``"m"`` or ``"in"``).  Given, positions are converted to
+        The unit of the file's lengths (BVH does not say; ``"cm"`` is common, some
+        exporters use ``"m"`` or ``"in"``).  Given, positions are converted to
         metres and ``Demonstrations.units`` is ``"m"``; otherwise they are kept in the file's
         unit and the units are unknown (``None``).
     end_sites : bool

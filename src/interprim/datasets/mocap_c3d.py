@@ -1,9 +1,10 @@
 """Marker trajectories from C3D motion-capture files (Vicon, OptiTrack, Qualisys, ... exports).
 
 Needs the optional extra ``pip install 'interprim[mocap]'``, which installs the pure-Python
-`c3d <https://pypi.org/project/c3d/>`_ package.  ``ezc3d`` (a C++ reader) was considered and
-not used: on damaged files it crashes the Python process (segmentation faults) or hangs instead
-of raising an error, and a loader must report a damaged recording, not take the program down.
+`c3d <https://pypi.org/project/c3d/>`_ package.  ``ezc3d`` (a C++ reader, 1.7.2) was considered and
+not used: on randomly damaged copies of a small file it crashed the Python process (segmentation
+fault) or did not return within two minutes, instead of raising an error; a loader must report a
+damaged recording, not take the program down.
 """
 
 from __future__ import annotations

@@ -70,7 +70,7 @@ def test_c3d_columns_metres_and_time_stamps(tmp_path):
     path = write_c3d(tmp_path / "take.c3d", xyz, LABELS, rate=200.0, first_frame=7)
     ds = load_c3d(path)
     assert ds.columns == [f"{m}_{a}" for m in LABELS for a in "xyz"]
-    assert ds.units == ["m"] * 12
+    assert ds.units == ["m"] * 12 and ds.select(["B:RHand_z", "A:RHand_x"]).units == ["m", "m"]
     assert len(ds) == 1 and ds.labels == ["take"]
     np.testing.assert_array_equal(ds.times[0], np.arange(30) / 200.0)
     assert ds.dt == pytest.approx(1 / 200.0)
@@ -332,6 +332,7 @@ def test_bvh_missing_values_gap_rules(tmp_path):
         (lambda t: t.replace("Frames: 6", "Frames: 9"), r"truncated file: 'Frames: 9' but the file ends at line 40 "
                                                         r"after 6 frames"),
         (lambda t: t.replace("Frames: 6", "Frames: 4"), r"line 39: more frame lines than 'Frames: 4'"),
+        (lambda t: t.replace("Frames: 6", "Frames: 999999999999"), r"truncated file: 'Frames: 999999999999' but"),
         (lambda t: t[: t.rindex(" ")] + "\n", r"line 40 \(frame 5\): 15 values, the hierarchy declares 16"),
         (lambda t: t[: t.rindex(" ")] + " 1e999\n", r"line 40 \(frame 5\): infinite value"),
         (lambda t: t[: t.rindex(" ")] + " oops\n", r"line 40 \(frame 5\): non-numeric value 'oops'"),

@@ -227,8 +227,8 @@ def test_a_pause_inside_a_demonstration_is_missing_data(tmp_path):
             b.joints("/robot/joint_states", t + 0.005, ["j1", "j2"], robot(t + 0.005))
     path = b.write(tmp_path / "pause.bag")
     # human stamps 2.40 ... 2.60 fall inside the robot's pause (2.385 to 2.605): 11 frames
-    with pytest.raises(DataFileError, match=r"pause\.bag, demonstration 0 .*column 'j1': missing value\(s\) starting at "
-                                            r"0\.400 s after the bag start \(11 frame\(s\)\)"):
+    with pytest.raises(DataFileError, match=r"pause\.bag, demonstration 0 .*column 'j1': missing value\(s\) "
+                                            r"starting at 0\.400 s after the bag start \(11 frame\(s\)\)"):
         load_rosbag(path, ["/human/wrist", "/robot/joint_states"])
     ds = load_rosbag(path, ["/human/wrist", "/robot/joint_states"], max_nan_gap=11)
     np.testing.assert_allclose(ds.demos[0][:, 3], 4 * ds.demos[0][:, 0], rtol=1e-9)  # linear: filled exactly

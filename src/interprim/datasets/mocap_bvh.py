@@ -244,8 +244,9 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise DataFileError(f"{path}, line {i}: 'Frame Time:' must be a positive number of seconds, got {frame_time!r}")
     n_frames = int(n_frames)
-    values = np.empty((n_frames, n_ch))
-    lineno = np.empty(n_frames, dtype=np.int64)
+    room = min(n_frames, len(lines) - i)  # not more than the file can hold (a damaged 'Frames:' may be huge)
+    values = np.empty((room, n_ch))
+    lineno = np.empty(room, dtype=np.int64)
     k = 0
     for li in range(i, len(lines)):
         row = lines[li].split()

@@ -160,7 +160,8 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
             if str(m) not in labels:
                 shown = ", ".join(labels[i] for i in available[:40]) + (" ..." if len(available) > 40 else "")
                 raise DataFileError(
-                    f"{path}: unknown marker {m!r} (markers={','.join(map(str, markers))}); the file's markers are: {shown}"
+                    f"{path}: unknown marker {m!r} (markers={','.join(map(str, markers))}); "
+                    f"the file's markers are: {shown}"
                 )
             keep.append(labels.index(str(m)))
         if len(set(keep)) != len(keep):

@@ -171,16 +171,18 @@ def _read_streams(path, streams, split_topic, orientation):
                     f"expected one of {', '.join(SUPPORTED)}"
                 )
             if (s.msgtype == TF) != (s.frame is not None):
-                raise DataFileError(
-                    f"{path}: {s.spec!r} ({s.role} agent): " + (
-                        f"topic {s.topic!r} holds tf transforms; name the child frame as {s.topic}:FRAME or tf:FRAME"
-                        if s.frame is None else f"a frame ':{s.frame}' is only meaningful on a tf2_msgs/msg/TFMessage topic"
-                    )
+                why = (
+                    f"topic {s.topic!r} holds tf transforms; name the child frame as {s.topic}:FRAME or tf:FRAME"
+                    if s.frame is None
+                    else f"a frame ':{s.frame}' is only meaningful on a tf2_msgs/msg/TFMessage topic"
                 )
+                raise DataFileError(f"{path}: {s.spec!r} ({s.role} agent): {why}")
         if split_topic is not None:
             split_topic = split_topic if split_topic.startswith("/") else "/" + split_topic
             if split_topic not in topics:
-                raise DataFileError(f"{path}: no topic {split_topic!r} (split_topic={split_topic}); the bag has: {shown}")
+                raise DataFileError(
+                    f"{path}: no topic {split_topic!r} (split_topic={split_topic}); the bag has: {shown}"
+                )
         wanted = {s.topic for s in streams} | ({split_topic} if split_topic else set())
         conns = [c for c in reader.connections if c.topic in wanted]
         start = int(reader.start_time)
@@ -239,6 +241,8 @@ def _finish_stream(path, s, joints):
         t = stamps.astype(np.int64)
     if s.msgtype == JOINT_STATE:
         names = list(s.names)
+        if not names:
+            raise DataFileError(f"{path}: topic {s.topic!r} ({s.role} agent): the JointState messages name no joints")
         if joints is not None:
             unknown = [j for j in joints if j not in names]
             if unknown:
@@ -359,7 +363,8 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
         cols = [[f"{s.topic.lstrip('/')}/{c}" for c in cc] if s.msgtype == JOINT_STATE else cc
                 for s, cc in zip(streams, cols)]
         if set(cols[0]) & set(cols[1]):
-            raise DataFileError(f"{path}: the two agents give the same column names {sorted(set(cols[0]) & set(cols[1]))}")
+            same = sorted(set(cols[0]) & set(cols[1]))
+            raise DataFileError(f"{path}: the two agents give the same column names {same}")
     columns = cols[0] + (cols[1] if len(cols) > 1 else [])
     units = [u for _, _, _, uu in done for u in uu]
     segs = _segments([d[0] for d in done], markers, split_gap)

@@ -25,6 +25,11 @@ class DataFileError(InterprimError, ValueError):
     """A demonstration or observation file cannot be read or is malformed."""
 
 
+class MissingExtraError(InterprimError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install
+    (``pip install 'interprim[mocap]'``)."""
+
+
 class OutOfRangeWarning(UserWarning):
     """An observation lies far outside what the model was trained on (wrong units, a wrong column order, another
     frame of reference, a tracking failure): the prediction extrapolates and is not to be trusted.  The

@@ -57,6 +57,8 @@ def _flag_names(parser, command, exc) -> str:
         flags = [o for o in action.option_strings if o.startswith("--")]
         if flags and "_" in action.dest:  # a whole word, not part of a file name
             msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}(?![\w/\\-]|\.\w)", flags[0], msg)
+        elif flags:  # a one-word option only where a message writes it as a keyword argument: 'markers=...'
+            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}=", flags[0] + "=", msg)
     return msg
 
 

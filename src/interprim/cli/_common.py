@@ -14,6 +14,8 @@ class CommandError(InterprimError, ValueError):
 def _split_cols(values):
     out = []
     for v in values or []:
+        if v is None:
+            continue
         out.extend(s.strip() for s in v.split(",") if s.strip())
     return out
 
@@ -22,3 +24,103 @@ def _positive(value, name):
     if value is not None and not value > 0:
         raise CommandError(f"{name} must be positive, got {value!r}")
     return value
+
+
+# ----------------------------------------------------------------------------- recordings
+RECORDING_HELP = (
+    "recordings: motion capture (.c3d, .bvh) and ROS bags (.bag, .db3, .mcap, rosbag2 folder); "
+    "see docs/data-formats.md"
+)
+
+
+def add_recording_args(p, what="DEMOS") -> None:
+    """The options of the motion-capture and ROS-bag readers (``load_demonstrations``), as one argument group."""
+    g = p.add_argument_group(RECORDING_HELP)
+    g.add_argument("--topics", metavar="OBS,CTRL",
+                   help=f"ROS bag {what}: the observed and the controlled agent's topic (JointState, PoseStamped, "
+                        "PointStamped, TransformStamped) or tf frame (tf:FRAME), comma-separated; required for bags. "
+                        "The controlled stream is interpolated onto the observed stream's time stamps "
+                        "(with --resample DT: both onto a uniform grid)")
+    g.add_argument("--split-topic", metavar="TOPIC",
+                   help="ROS bag: a topic whose messages (e.g. std_msgs/Empty) mark the start of each demonstration")
+    g.add_argument("--split-gap", type=float, metavar="SECONDS",
+                   help="ROS bag: a pause longer than SECONDS in either stream starts a new demonstration")
+    g.add_argument("--orientation", action="store_true",
+                   help="ROS bag: also read the orientation quaternion of poses and tf frames (_qx, _qy, _qz, _qw)")
+    g.add_argument("--joints", metavar="J1,J2",
+                   help="BVH: joints to keep; ROS JointState: joints to read (default all)")
+    g.add_argument("--markers", metavar="M1,M2", help="C3D: markers to keep (default all)")
+    g.add_argument("--bvh-mode", choices=("positions", "angles"), default=None,
+                   help="BVH: joint world positions <joint>_x/_y/_z by forward kinematics (default) or joint angles "
+                        "<joint>_<channel> in radians")
+    g.add_argument("--length-unit", metavar="UNIT", choices=("mm", "cm", "m", "in", "ft"),
+                   help="BVH: the file's length unit (positions are converted to metres); C3D: overrides the file's "
+                        "POINT:UNITS (C3D positions are always converted to metres)")
+    g.add_argument("--end-sites", action="store_true", help="BVH positions: also the End Site points (<joint>_end_x)")
+
+
+def recording_options(args) -> dict:
+    """The keyword arguments of ``load_demonstrations`` given by :func:`add_recording_args` flags."""
+    _positive(args.split_gap, "--split-gap")
+    return dict(
+        topics=_split_cols([args.topics]) if args.topics else None,
+        split_topic=args.split_topic,
+        split_gap=args.split_gap,
+        orientation=bool(args.orientation),
+        joints=_split_cols([args.joints]) if args.joints else None,
+        markers=_split_cols([args.markers]) if args.markers else None,
+        bvh_mode=args.bvh_mode,
+        length_unit=args.length_unit,
+        end_sites=bool(args.end_sites),
+    )
+
+
+def expand_columns(columns, names, flag: str) -> list:
+    """Column names for ``names`` (names, 0-based indices or shell patterns such as ``A:*`` or ``RHand_?``)."""
+    import fnmatch
+
+    out = []
+    for n in names:
+        if n in columns or n.lstrip("-").isdigit() or not any(ch in n for ch in "*?["):
+            out.append(n)
+            continue
+        hits = [c for c in columns if fnmatch.fnmatchcase(c, n)]
+        if not hits:
+            raise CommandError(f"{flag}: the pattern {n!r} matches no column; the columns are: {', '.join(columns)}")
+        out.extend(h for h in hits if h not in out)
+    return out
+
+
+def agent_columns(ds, observed, controlled, source: str):
+    """The set restricted to the two agents' columns, and the observed columns' indices in it.
+
+    ``observed``/``controlled`` are lists from ``--observed``/``--controlled`` (may be empty).  Without
+    ``--observed`` the file's own entry is used (CSV ``# observed:``, the first ROS topic); without
+    ``--controlled`` every other column is controlled; with it, columns named in neither are dropped.
+    """
+    from ..datasets._base import select_columns
+
+    obs_names = expand_columns(ds.columns, observed, "--observed")
+    ctrl_names = expand_columns(ds.columns, controlled, "--controlled")
+    if obs_names:
+        obs = select_columns(ds.columns, obs_names, where=f"--observed (columns of {source})")
+    elif ds.observed_dofs:
+        obs = list(ds.observed_dofs)
+    elif ctrl_names:
+        obs = None
+    else:
+        raise CommandError(f"--observed is required: name the observed agent's columns among {', '.join(ds.columns)}")
+    if not ctrl_names:
+        return ds, obs
+    ctrl = select_columns(ds.columns, ctrl_names, where=f"--controlled (columns of {source})")
+    if obs is None:
+        obs = [i for i in range(ds.n_dofs) if i not in set(ctrl)]
+        if not obs:
+            raise CommandError("--controlled names every column; name the observed agent's columns with --observed")
+    both = sorted(set(obs) & set(ctrl))
+    if both:
+        raise CommandError(f"--observed and --controlled both name {', '.join(ds.columns[i] for i in both)}")
+    keep = sorted(set(obs) | set(ctrl))
+    sub = ds.select([ds.columns[i] for i in keep])
+    sub.observed_dofs = None
+    return sub, [keep.index(i) for i in obs]

@@ -29,6 +29,14 @@ def add_parser(subparsers):
     p.add_argument("--observed", default=None,
                    help="with --data FILE: the observed agent's columns (names or 0-based indices, comma-separated; "
                         "default: the file's '# observed:' entry)")
+    p.add_argument("--controlled", default=None,
+                   help="with --data FILE: the controlled agent's columns (names, indices or patterns); columns named "
+                        "in neither --observed nor --controlled are dropped")
+    p.add_argument("--resample", type=float, default=None, metavar="DT",
+                   help="with --data FILE: resample the demonstrations to this interval (s) (needed for irregular "
+                        "time stamps; ROS bags: the grid both agents are interpolated onto)")
+    p.add_argument("--max-nan-gap", type=int, default=0,
+                   help="with --data FILE: fill interior gaps of up to this many missing frames")
     p.add_argument("--folds", type=int, default=None,
                    help="with --data FILE: k-fold cross-validation (default: leave-one-out)")
     p.add_argument("--horizon", type=float, default=0.25,
@@ -52,6 +60,9 @@ def add_parser(subparsers):
     p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF of the IP models")
     p.add_argument("--fractions", default=None,
                    help="comma-separated observed fractions (default 0.1,0.2,...,1.0)")
+    from ._common import add_recording_args
+
+    add_recording_args(p, what="--data")
     p.set_defaults(func=run)
     return p
 
@@ -81,7 +92,8 @@ def _check_names(datasets, methods, cfg):
 def _is_user_data(data: str) -> bool:
     from pathlib import Path
 
-    return data.strip() not in DATA_SETS and (Path(data).exists() or data.lower().endswith((".csv", ".npz")))
+    suffixes = (".csv", ".npz", ".c3d", ".bvh", ".bag", ".db3", ".mcap")
+    return data.strip() not in DATA_SETS and (Path(data).exists() or data.lower().endswith(suffixes))
 
 
 def run_user_data(args) -> int:
@@ -89,31 +101,33 @@ def run_user_data(args) -> int:
     from pathlib import Path
 
     from ..datasets import load_demonstrations
-    from ..datasets._base import select_columns
     from ..errors import InterprimError
     from ..evaluation.realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
-    ds = load_demonstrations(args.data, dt=args.dt)
-    cols = [c.strip() for c in (args.observed or "").split(",") if c.strip()]
-    if cols:
-        obs = select_columns(ds.columns, cols, where=f"--observed (columns of {args.data})")
-    elif ds.observed_dofs:
-        obs = list(ds.observed_dofs)
-    else:
-        raise InterprimError(f"--observed is required: name the observed agent's columns among {', '.join(ds.columns)}")
+    from ._common import _positive, _split_cols, agent_columns, recording_options
+
+    _positive(args.resample, "--resample")
+    ds = load_demonstrations(args.data, dt=args.dt, resample_dt=args.resample, max_nan_gap=args.max_nan_gap,
+                             **recording_options(args))
+    ds, obs = agent_columns(ds, _split_cols([args.observed]), _split_cols([args.controlled]), args.data)
     if ds.dt is None:
         raise InterprimError(f"--data {args.data}: the demonstrations are not uniformly sampled at one interval; "
-                             "resample them (interprim.datasets.load_demonstrations(..., resample_dt=...))")
+                             "resample them with --resample DT")
     if len(ds.demos) < 4:
         raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstrations; the evaluation needs at least 4")
     if args.folds is not None and args.folds < 2:
         raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
     cfg = RealTimeConfig(horizon=float(args.horizon))
-    recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
-                                                      smoothing_window=args.smoothing_window,
-                                                      n_basis=args.n_basis, progress=True)
+    try:
+        recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
+                                                          smoothing_window=args.smoothing_window,
+                                                          n_basis=args.n_basis, progress=True)
+    except InterprimError:
+        raise
+    except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
+        raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
     paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
                         horizon=float(args.horizon))
     print(markdown_table(summary))

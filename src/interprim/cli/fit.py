@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InterprimError
-from ._common import CommandError, _positive, _split_cols
+from ._common import CommandError, _positive, _split_cols, add_recording_args, agent_columns, recording_options
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -18,10 +18,16 @@ _FIT_EPILOG = """\
 DEMOS is a CSV file (header of column names, a 'time' column in seconds, optionally a 'demo'
 column splitting several demonstrations), a folder of such files, or an NPZ archive with
 demo_000, demo_001, ... (T, D) arrays, time_000, ... and 'columns' (see docs/data-formats.md).
+It may also be a recording: a folder of C3D files (markers <marker>_x/_y/_z in metres; needs
+pip install 'interprim[mocap]') or BVH files (one demonstration per file), or a ROS bag (.bag,
+.db3, .mcap or a rosbag2 folder; needs pip install 'interprim[ros]') with --topics.
+--observed and --controlled take names, 0-based indices or shell patterns ('A:*', 'RHand_?').
 
 examples:
   interprim fit demos.csv --observed hand_x,hand_y,hand_z -o model.npz
   interprim fit recordings/ --observed 0,1,2 --n-basis 15 --smoothing-window 7 -o model.npz
+  interprim fit takes/ --observed 'A:RHand_*' --controlled 'B:RHand_*' -o model.npz   (folder of .c3d)
+  interprim fit handovers.bag --topics /human/wrist,/robot/joint_states --split-gap 1.0 -o model.npz
 """
 
 
@@ -36,14 +42,22 @@ def add_parser(subparsers) -> None:
         epilog=_FIT_EPILOG,
         formatter_class=fmt,
     )
-    p.add_argument("demos", metavar="DEMOS", help="CSV file, NPZ file or folder of demonstrations")
+    p.add_argument("demos", metavar="DEMOS", help="CSV, NPZ, C3D, BVH file, ROS bag, or a folder of demonstrations")
     p.add_argument(
         "--observed",
         action="append",
         metavar="COLS",
         help="the observed agent's (human's) columns: names or 0-based indices, comma-separated "
         "(repeatable). All other columns are the controlled agent (robot); naming every column "
-        "gives a single-agent model. Default: the file's '# observed:' entry",
+        "gives a single-agent model. Default: the file's '# observed:' entry (ROS bags: the first of --topics)",
+    )
+    p.add_argument(
+        "--controlled",
+        action="append",
+        metavar="COLS",
+        help="the controlled agent's (robot's) columns, as for --observed (repeatable). Given, the columns "
+        "named in neither --observed nor --controlled are dropped; without --observed, every column not "
+        "named here is observed",
     )
     p.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write (.npz)")
     p.add_argument("--columns", metavar="COLS", help="use only these columns (names or indices, comma-separated)")
@@ -83,9 +97,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) for files without time stamps")
     p.add_argument(
-        "--resample", type=float, default=None, metavar="DT", help="resample the demonstrations to this interval (s)"
+        "--resample", type=float, default=None, metavar="DT",
+        help="resample the demonstrations to this interval (s); ROS bags: the uniform grid both agents are "
+        "interpolated onto"
     )
-    p.add_argument("--max-nan-gap", type=int, default=0, help="fill interior gaps of up to this many missing frames")
+    p.add_argument(
+        "--max-nan-gap", type=int, default=0,
+        help="fill interior gaps of up to this many missing frames (missing values, lost mocap markers)",
+    )
+    add_recording_args(p)
     p.set_defaults(func=cmd_fit)
 
 
@@ -107,7 +127,6 @@ def cmd_fit(args) -> int:
 
     import interprim as ip
     from interprim.datasets import load_demonstrations
-    from interprim.datasets._base import select_columns
 
     _positive(args.n_basis, "--n-basis")
     _positive(args.dt, "--dt")
@@ -118,16 +137,10 @@ def cmd_fit(args) -> int:
         dt=args.dt,
         resample_dt=args.resample,
         max_nan_gap=args.max_nan_gap,
+        **recording_options(args),
     )
-    observed = _split_cols(args.observed)
-    if observed:
-        obs = select_columns(ds.columns, observed, where=f"--observed (columns of {args.demos})")
-    elif ds.observed_dofs:
-        obs = list(ds.observed_dofs)
-    else:
-        raise CommandError(
-            f"--observed is required: name the observed agent's columns among {', '.join(ds.columns)}"
-        )
+    n_read = ds.n_dofs
+    ds, obs = agent_columns(ds, _split_cols(args.observed), _split_cols(args.controlled), args.demos)
     if len(ds) < 2:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution")
     kwargs = {"n_basis": args.n_basis}
@@ -160,7 +173,9 @@ def cmd_fit(args) -> int:
         f"mean duration {model.mean_duration_:.3g} s\n"
         f"  observed:   {', '.join(obs_names)}\n"
         f"  controlled: {', '.join(ctrl_names) or '(none: single-agent model)'}\n"
-        f"saved {out}"
+        + (f"  dropped:    {n_read - ds.n_dofs} columns named in neither --observed nor --controlled\n"
+           if ds.n_dofs < n_read else "")
+        + f"saved {out}"
     )
     return 0
 

@@ -9,14 +9,15 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataFileError, InterprimError
-from ._common import CommandError, _positive
+from ._common import CommandError, _positive, add_recording_args, recording_options
 
 __all__ = ["add_parser"]
 
 _PREDICT_EPILOG = """\
 PARTIAL holds the frames of the observed agent seen so far (CSV or NPZ, one demonstration, same
 column names as the training data; other columns are ignored; without a 'time' column the frames
-are taken at the model's sampling interval).
+are taken at the model's sampling interval). It may also be a recording: a C3D or BVH file, or a
+ROS bag with --topics naming the observed agent's topic (and, optionally, the controlled one).
 
 OUT (.csv or .npz) gets the prediction of the whole movement on a normalised-time grid:
   phase            fraction of the movement already observed (DTW, paper Eq. 8-9, or the
@@ -50,6 +51,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--n-points", type=int, default=100, help="points of the normalised-time grid (default 100)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the samples (default 0)")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) of PARTIAL if it has no time column")
+    add_recording_args(p, what="PARTIAL")
     p.set_defaults(func=cmd_predict)
 
 
@@ -81,7 +83,7 @@ def cmd_predict(args) -> int:
     model = ip.InteractionPrimitive.load(args.model)
     columns = _model_columns(model) or [f"dof_{j}" for j in range(model.n_dofs_)]
     obs_names = [columns[i] for i in model.observed_dofs_]
-    part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1)
+    part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1, **recording_options(args))
     if len(part) != 1:
         raise CommandError(f"{args.partial} holds {len(part)} demonstrations; give the frames of one movement")
     missing = [c for c in obs_names if c not in part.columns]

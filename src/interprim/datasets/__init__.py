@@ -9,7 +9,10 @@ sources and licences):
   ``pip install "interprim[lasa]"``.
 
 Users' files (formats in ``docs/data-formats.md``): :func:`load_demonstrations` and
-:func:`save_demonstrations` for CSV files, NPZ archives and folders of them.
+:func:`save_demonstrations` for CSV files, NPZ archives and folders of them;
+:func:`load_demonstrations` also reads recordings by their extension: motion capture
+(:func:`load_c3d`, :func:`load_bvh`; C3D needs ``pip install 'interprim[mocap]'``) and ROS 1/2
+bags (:func:`load_rosbag`; ``pip install 'interprim[ros]'``).
 
 The default data folder is ``$INTERPRIM_DATA`` or ``../shared/data`` beside the checkout
 (:func:`data_dir`).
@@ -19,7 +22,10 @@ from ._base import DataNotFoundError, Demonstrations, data_dir
 from .character_trajectories import load_character_trajectories
 from .files import load_demonstrations, save_demonstrations
 from .lasa import lasa_shapes, load_lasa
+from .mocap_bvh import load_bvh
+from .mocap_c3d import load_c3d
 from .nuisi import JOINT_GROUPS, NUISI_JOINTS, load_nuisi, nuisi_actions
+from .ros_bags import load_rosbag
 
 __all__ = [
     "Demonstrations",
@@ -34,4 +40,7 @@ __all__ = [
     "lasa_shapes",
     "load_demonstrations",
     "save_demonstrations",
+    "load_c3d",
+    "load_bvh",
+    "load_rosbag",
 ]

@@ -50,6 +50,11 @@ class Demonstrations(Sequence):
         Where it was loaded from.
     labels : list of str
         One identifier per demonstration (demo number, file name, ...).
+    units : list of (str or None) or None
+        The unit of each column when the source says it (``"m"`` for motion-capture
+        markers converted from the file's unit, ``"rad"`` for joint angles, ``""`` for
+        unitless quaternion components); ``None`` for a column (or for the whole set)
+        whose unit is not known.
     """
 
     demos: list
@@ -60,10 +65,13 @@ class Demonstrations(Sequence):
     name: str = ""
     source: str = ""
     labels: list = field(default_factory=list)
+    units: list | None = None
 
     def __post_init__(self):
         if not self.labels:
             self.labels = [f"{i:03d}" for i in range(len(self.demos))]
+        if self.units is not None and len(self.units) != len(self.columns):
+            raise ValueError(f"units has {len(self.units)} entries for {len(self.columns)} columns")
 
     # -- sequence protocol -------------------------------------------------
     def __len__(self) -> int:
@@ -123,6 +131,7 @@ class Demonstrations(Sequence):
             name=self.name,
             source=self.source,
             labels=list(self.labels),
+            units=None if self.units is None else [self.units[i] for i in idx],
         )
 
 

@@ -1,5 +1,8 @@
 """Reading and writing users' own demonstrations (CSV and NPZ; see ``docs/data-formats.md``).
 
+:func:`load_demonstrations` also reads motion-capture recordings (C3D, BVH: :mod:`.mocap_c3d`,
+:mod:`.mocap_bvh`) and ROS bags (:mod:`.ros_bags`), choosing the reader by extension.
+
 Formats
 -------
 CSV (one file)
@@ -322,13 +325,52 @@ def _read_npz(path: Path, dt, max_nan_gap, min_frames):
 
 
 # --------------------------------------------------------------------------- public
-def _read_file(p: Path, dt, max_nan_gap, min_frames):
+RECORDING_SUFFIXES = (".c3d", ".bvh", ".bag", ".db3", ".mcap")
+_FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
+# Which format reads which option (the options not listed for a format must be left at None).
+_OPTIONS = {
+    ".c3d": ("markers", "length_unit"),
+    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites"),
+    "ros": ("topics", "joints", "orientation", "split_topic", "split_gap"),
+}
+
+
+def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
+    from .ros_bags import is_rosbag2_folder
+
     suffix = p.suffix.lower()
-    if suffix == ".csv":
+    kind = "ros" if (suffix in (".bag", ".db3", ".mcap") or is_rosbag2_folder(p)) else suffix
+    allowed = _OPTIONS.get(kind, ())
+    for name, value in opts.items():
+        if value is not None and value is not False and name not in allowed:
+            fmts = [k if k != "ros" else "ROS bag" for k, v in _OPTIONS.items() if name in v]
+            this = "ROS bag" if kind == "ros" else (kind or "extension-less") + " file"
+            raise DataFileError(f"{p}: the option {name}= applies to {', '.join(fmts)} files, not to this {this}")
+    if kind == ".csv":
         return _read_csv(p, dt, max_nan_gap, min_frames)
-    if suffix == ".npz":
+    if kind == ".npz":
         return _read_npz(p, dt, max_nan_gap, min_frames)
-    raise DataFileError(f"{p}: unsupported file type {p.suffix!r}; expected .csv, .npz or a folder of them")
+    if kind == ".c3d":
+        from .mocap_c3d import read_c3d
+
+        return read_c3d(p, markers=opts["markers"], length_unit=opts["length_unit"], max_nan_gap=max_nan_gap,
+                        min_frames=min_frames)
+    if kind == ".bvh":
+        from .mocap_bvh import read_bvh
+
+        return read_bvh(p, mode=opts["bvh_mode"] or "positions", joints=opts["joints"],
+                        length_unit=opts["length_unit"], end_sites=bool(opts["end_sites"]),
+                        max_nan_gap=max_nan_gap, min_frames=min_frames)
+    if kind == "ros":
+        from .ros_bags import read_rosbag
+
+        return read_rosbag(p, topics=opts["topics"], joints=opts["joints"], orientation=bool(opts["orientation"]),
+                           split_topic=opts["split_topic"], split_gap=opts["split_gap"], grid_dt=resample_dt,
+                           max_nan_gap=max_nan_gap, min_frames=min_frames)
+    raise DataFileError(
+        f"{p}: unsupported file type {p.suffix!r}; expected .csv, .npz, .c3d, .bvh, a ROS bag (.bag, .db3, .mcap, "
+        "a rosbag2 folder) or a folder of such files"
+    )
 
 
 def load_demonstrations(
@@ -339,17 +381,32 @@ def load_demonstrations(
     resample_dt: float | None = None,
     max_nan_gap: int = 0,
     min_frames: int = 5,
+    markers=None,
+    joints=None,
+    length_unit: str | None = None,
+    bvh_mode: str | None = None,
+    end_sites: bool = False,
+    topics=None,
+    orientation: bool = False,
+    split_topic: str | None = None,
+    split_gap: float | None = None,
 ) -> Demonstrations:
-    """Load demonstrations from a CSV file, an NPZ file or a folder of them.
+    """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
-    See ``docs/data-formats.md`` for the formats.  Every problem is reported as a
-    :class:`~interprim.errors.DataFileError` naming the file and the line (CSV, 1-based,
-    counting the header and comments) or row (NPZ, 0-based frame index).
+    The format follows the extension (see ``docs/data-formats.md``): ``.csv``, ``.npz``,
+    ``.c3d`` (:func:`~interprim.datasets.mocap_c3d.load_c3d`), ``.bvh``
+    (:func:`~interprim.datasets.mocap_bvh.load_bvh`), ``.bag``/``.db3``/``.mcap`` or a rosbag2
+    folder with ``metadata.yaml`` (:func:`~interprim.datasets.ros_bags.load_rosbag`); any other
+    folder is read file by file (every ``.csv``, ``.npz``, ``.c3d``, ``.bvh``, ``.bag``, ``.db3``
+    and ``.mcap`` in it, natural order).  Every problem is reported as a
+    :class:`~interprim.errors.DataFileError` naming the file and the position: the line (CSV,
+    1-based, counting the header and comments; BVH), the row (NPZ, 0-based frame index), the
+    frame (C3D, as the capture software numbers it) or the topic, message and time (ROS bags).
 
     Parameters
     ----------
     path : str or Path
-        A ``.csv`` file, an ``.npz`` file or a folder holding ``.csv``/``.npz`` files.
+        A file, a rosbag2 folder or a folder of files.
     columns : sequence of str or int, or str, optional
         Columns to keep, in this order (names, indices or a comma-separated string);
         default all data columns.  Unknown names raise ``DataFileError``.
@@ -359,20 +416,43 @@ def load_demonstrations(
         has time stamps.
     resample_dt : float, optional
         If given, every demonstration is linearly interpolated onto a uniform grid with this
-        interval (:func:`interprim.preprocessing.resample_uniform`).
+        interval (:func:`interprim.preprocessing.resample_uniform`).  For a ROS bag both
+        agents' streams are interpolated onto that grid directly (instead of onto the
+        observed agent's stamps).
     max_nan_gap : int
         Longest interior run of missing values (per column) that is filled by linear
         interpolation (default 0: any missing value is an error).  Missing values at the
-        start or end of a demonstration are always an error.
+        start or end of a demonstration are always an error.  Missing motion-capture markers
+        and joints absent from a JointState message are missing values.
     min_frames : int
         Fewest frames a demonstration may have (default 5).
+    markers : sequence of str or str, optional
+        C3D: the markers to keep (default all).
+    joints : sequence of str or str, optional
+        BVH: the joints to keep; ROS JointState: the joints to read (default all).
+    length_unit : str, optional
+        C3D: overrides the file's ``POINT:UNITS``; BVH: the file's length unit (positions are
+        then converted to metres).
+    bvh_mode : {"positions", "angles"}, optional
+        BVH: joint world positions by forward kinematics (default) or joint angles (radians).
+    end_sites : bool
+        BVH positions: also the End Site points.
+    topics : sequence of str or str, optional
+        ROS bags (required): ``(observed, controlled)`` topics or ``tf:FRAME`` streams.
+    orientation : bool
+        ROS bags: also read orientation quaternions of poses and tf frames.
+    split_topic : str, optional
+        ROS bags: a topic whose messages mark the start of each demonstration.
+    split_gap : float, optional
+        ROS bags: a pause longer than this many seconds starts a new demonstration.
 
     Returns
     -------
     Demonstrations
-        The demonstrations, time stamps (seconds, as in the file), column names, ``dt``
-        (when uniformly sampled), ``observed_dofs`` (from an ``observed`` entry in the
-        file, if any) and labels (``demo`` values, file names or NPZ keys).
+        The demonstrations, time stamps (seconds), column names, ``dt`` (when uniformly
+        sampled), ``observed_dofs`` (from an ``observed`` entry in the file or the first of
+        two ROS topics), labels (``demo`` values, file names, NPZ keys, bag start times) and
+        ``units`` (when the format says them).
 
     Raises
     ------
@@ -380,26 +460,46 @@ def load_demonstrations(
         If ``path`` does not exist (also a ``FileNotFoundError``).
     DataFileError
         For a malformed file: missing ``time`` column, unknown columns, non-numeric cells,
-        missing values, non-increasing time, too few frames, inconsistent columns.
+        missing values, non-increasing time, too few frames, inconsistent columns, a damaged
+        or truncated recording, a missing topic, marker or joint.
+    MissingExtraError
+        If the format needs an optional extra that is not installed (``interprim[mocap]``
+        for C3D, ``interprim[ros]`` for ROS bags); also an ``ImportError``.
     """
+    from .ros_bags import is_rosbag2_folder
+
     p = Path(path).expanduser()
     if not p.exists():
         raise DataNotFoundError(f"demonstrations not found: {p}")
     if dt is not None and not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    if p.is_dir():
+    if resample_dt is not None and not (np.isfinite(resample_dt) and resample_dt > 0):
+        raise ValueError(f"resample_dt must be a positive number of seconds, got {resample_dt!r}")
+    if bvh_mode is not None and bvh_mode not in ("positions", "angles"):
+        raise ValueError(f"bvh_mode must be 'positions' or 'angles', got {bvh_mode!r}")
+    opts = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
+                topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap)
+    if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
-            (f for f in p.iterdir() if f.is_file() and f.suffix.lower() in (".csv", ".npz")), key=_natural_key
+            (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
+            key=_natural_key,
         )
         if not files:
-            raise DataFileError(f"{p}: the folder holds no .csv or .npz files")
+            raise DataFileError(
+                f"{p}: the folder holds no .csv or .npz files (nor recordings: .c3d, .bvh, .bag, .db3, .mcap files "
+                "or rosbag2 folders)"
+            )
     else:
         files = [p]
     demos, times, labels = [], [], []
     cols = None
     meta = {}
+    all_bags = True  # bags are interpolated onto the resample_dt grid by their reader
     for f in files:
-        d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames))
+        is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
+        all_bags = all_bags and is_bag
+        d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames), opts,
+                                     resample_dt=resample_dt if is_bag else None)
         if cols is None:
             cols, first = c, f
             meta = m
@@ -421,13 +521,11 @@ def load_demonstrations(
         observed = select_columns(cols, meta["observed"], where=f"{files[0]} ('observed')")
     ds = Demonstrations(
         demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
-        name=p.stem, source=str(p), labels=labels,
+        name=p.stem, source=str(p), labels=labels, units=meta.get("units"),
     )  # fmt: skip
     if columns is not None:
         ds = ds.select(columns)
-    if resample_dt is not None:
-        if not (np.isfinite(resample_dt) and resample_dt > 0):
-            raise ValueError(f"resample_dt must be a positive number of seconds, got {resample_dt!r}")
+    if resample_dt is not None and not all_bags:
         new_d, new_t = [], []
         for y, t in zip(ds.demos, ds.times):
             n = int(np.floor((t[-1] - t[0]) / resample_dt + 1e-9)) + 1
@@ -438,6 +536,8 @@ def load_demonstrations(
             new_d.append(yy)
             new_t.append(t_new)
         ds.demos, ds.times, ds.dt = new_d, new_t, float(resample_dt)
+    elif resample_dt is not None:
+        ds.dt = float(resample_dt)
     return ds
 
 

@@ -1,0 +1,225 @@
+"""Marker trajectories from C3D motion-capture files (Vicon, OptiTrack, Qualisys, ... exports).
+
+Needs the optional extra ``pip install 'interprim[mocap]'``, which installs the pure-Python
+`c3d <https://pypi.org/project/c3d/>`_ package.  ``ezc3d`` (a C++ reader, 1.7.2) was considered and
+not used: on randomly damaged copies of a small file it crashed the Python process (segmentation
+fault) or did not return within two minutes, instead of raising an error; a loader must report a
+damaged recording, not take the program down.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataFileError, MissingExtraError
+
+__all__ = ["load_c3d", "read_c3d", "LENGTH_UNITS"]
+
+#: Metres per unit, for C3D ``POINT:UNITS`` and BVH ``length_unit`` values (lower case, stripped).
+LENGTH_UNITS = {
+    "mm": 1e-3,
+    "millimeter": 1e-3,
+    "millimeters": 1e-3,
+    "millimetre": 1e-3,
+    "millimetres": 1e-3,
+    "cm": 1e-2,
+    "dm": 1e-1,
+    "m": 1.0,
+    "meter": 1.0,
+    "meters": 1.0,
+    "metre": 1.0,
+    "metres": 1.0,
+    "in": 0.0254,
+    "inch": 0.0254,
+    "inches": 0.0254,
+    "ft": 0.3048,
+}
+
+# POINT parameters that list points which are model outputs (angles in degrees, forces, ...), not markers.
+_NON_MARKER_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
+_AXES = ("x", "y", "z")
+_HINT = "reading .c3d files needs the optional extra: pip install 'interprim[mocap]' (the c3d package)"
+
+
+def _import_c3d():
+    try:
+        import c3d
+    except ImportError as exc:
+        raise MissingExtraError(f"{_HINT} ({exc})") from None
+    return c3d
+
+
+def metres_per_unit(unit: str, where: str, what: str) -> float:
+    """Metres per ``unit`` (see :data:`LENGTH_UNITS`), or a :class:`DataFileError` naming ``what``."""
+    key = str(unit).strip().lower()
+    if key not in LENGTH_UNITS:
+        raise DataFileError(
+            f"{where}: unknown length unit {unit!r} ({what}); expected one of mm, cm, m, in, ft"
+            " - pass length_unit= to say which unit the file uses"
+        )
+    return LENGTH_UNITS[key]
+
+
+def _strings(reader, key):
+    p = reader.get(key)
+    if p is None:
+        return []
+    try:
+        arr = p.string_array
+    except Exception:  # noqa: BLE001 - a scalar string parameter
+        arr = [p.string_value]
+    return [str(s).strip() for s in np.atleast_1d(arr)]
+
+
+def _labels(reader, n_points):
+    labels = []
+    for key in ("POINT:LABELS", "POINT:LABELS2", "POINT:LABELS3", "POINT:LABELS4"):
+        labels.extend(_strings(reader, key))
+    labels = labels[:n_points]
+    labels += [f"point{i + 1}" for i in range(len(labels), n_points)]
+    return [lab or f"point{i + 1}" for i, lab in enumerate(labels)]
+
+
+def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=5):
+    """Read one C3D file; returns ``(demos, times, columns, labels, meta)`` as the other readers do.
+
+    See :func:`load_c3d` for the parameters and what is read.
+    """
+    from .files import _check_frames, _fill_nans  # the CSV/NPZ reader's rules for gaps and lengths
+
+    c3d = _import_c3d()
+    path = Path(path)
+    size = path.stat().st_size
+    if size == 0:
+        raise DataFileError(f"{path}: empty file, expected a C3D file")
+    with open(path, "rb") as fh, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            reader = c3d.Reader(fh)
+            n_points = int(reader.point_used)
+            rate = float(reader.point_rate)
+            first = int(reader.first_frame)
+            n_frames = int(reader.frame_count)
+            unit_param = reader.get("POINT:UNITS")
+            file_unit = unit_param.string_value.strip() if unit_param is not None else None
+            labels = _labels(reader, n_points)
+            skip = set()
+            for grp in _NON_MARKER_GROUPS:
+                skip.update(s for s in _strings(reader, f"POINT:{grp}") if s)
+            data_start = (int(reader.header.data_block) - 1) * 512
+        except Exception as exc:  # noqa: BLE001 - the c3d package raises many kinds on damaged headers
+            raise DataFileError(
+                f"{path}: not a readable C3D file (header or parameter section, byte {fh.tell()} of {size}: {exc})"
+            ) from None
+        if n_points == 0:
+            raise DataFileError(f"{path}: the file holds no 3-D points (POINT:USED is 0)")
+        if not (np.isfinite(rate) and rate > 0):
+            raise DataFileError(f"{path}: the point rate (POINT:RATE) is {rate!r}; expected a positive number")
+        if not 0 < n_frames <= size:  # a frame takes at least one byte
+            raise DataFileError(f"{path}: the header announces {n_frames} frames in a file of {size} bytes")
+        if not 0 <= data_start < size:
+            raise DataFileError(f"{path}: the data section starts at byte {data_start}, past the end ({size} bytes)")
+        frames, lost = [], []  # grown frame by frame: a damaged header cannot make us allocate more than the file
+        k = 0
+        try:
+            for _, pts, _analog in reader.read_frames(copy=True):
+                if k >= n_frames:
+                    break
+                frames.append(pts[:, :3].astype(np.float64))
+                lost.append((pts[:, 3] < 0) | np.all(pts[:, :3] == 0, axis=1))
+                k += 1
+        except Exception as exc:  # noqa: BLE001
+            raise DataFileError(
+                f"{path}, frame {first + k}: unreadable point data at byte {fh.tell()} of {size} ({exc})"
+            ) from None
+        if k < n_frames:
+            raise DataFileError(
+                f"{path}: truncated file: the header announces frames {first}-{first + n_frames - 1} ({n_frames}) "
+                f"but the data ends at byte {fh.tell()} of {size}, in frame {first + k} ({k} complete frames)"
+            )
+    del caught  # the package's warnings (no analog data, ...) are replaced by the checks above
+    xyz, missing = np.stack(frames), np.stack(lost)
+    unit = length_unit if length_unit is not None else (file_unit or "mm")
+    scale = metres_per_unit(unit, str(path), "length_unit" if length_unit is not None else "POINT:UNITS")
+    dup = sorted({lab for lab in labels if labels.count(lab) > 1})
+    if dup:
+        raise DataFileError(f"{path}: duplicate marker label(s) {dup} in POINT:LABELS")
+    available = [i for i, lab in enumerate(labels) if lab not in skip]
+    if markers is None:
+        keep = available
+        if not keep:
+            raise DataFileError(f"{path}: every point is a model output ({', '.join(sorted(skip))}); no markers")
+    else:
+        if isinstance(markers, str):
+            markers = [m.strip() for m in markers.split(",") if m.strip()]
+        keep = []
+        for m in markers:
+            if str(m) not in labels:
+                shown = ", ".join(labels[i] for i in available[:40]) + (" ..." if len(available) > 40 else "")
+                raise DataFileError(
+                    f"{path}: unknown marker {m!r} (markers={','.join(map(str, markers))}); "
+                    f"the file's markers are: {shown}"
+                )
+            keep.append(labels.index(str(m)))
+        if len(set(keep)) != len(keep):
+            raise DataFileError(f"{path}: a marker is selected twice in markers={list(markers)!r}")
+    y = xyz[:, keep, :] * scale
+    y[missing[:, keep]] = np.nan
+    y = y.reshape(n_frames, 3 * len(keep))
+    columns = [f"{labels[i]}_{a}" for i in keep for a in _AXES]
+    where = f"{path}"
+    _check_frames(n_frames, min_frames, where)
+
+    def where_col(d):
+        return f"{path}, marker {labels[keep[d // 3]]!r} (column {columns[d]!r})"
+
+    y = _fill_nans(y, max_nan_gap, where_col, lambda i: f"frame {first + i}")
+    t = np.arange(n_frames) / rate
+    meta = {"units": ["m"] * len(columns)}
+    return [y], [t], columns, [path.stem], meta
+
+
+def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5):
+    """Load the marker trajectories of a C3D motion-capture file (or a folder of them).
+
+    Each file is one demonstration.  Every marker becomes three columns ``<marker>_x``,
+    ``<marker>_y``, ``<marker>_z`` in the file's order (labels from ``POINT:LABELS``, then
+    ``LABELS2``, ...), **converted to metres** from the file's ``POINT:UNITS`` (``mm`` is the
+    usual unit; ``cm``, ``m``, ``in`` and ``ft`` are understood; a file without ``POINT:UNITS``
+    is taken as millimetres).  ``Demonstrations.units`` is ``"m"`` for every column.  Points
+    the file lists as model outputs (``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS``,
+    ``SCALARS``, ``REACTIONS``) are not markers and are left out.
+
+    Time stamps are ``k / POINT:RATE`` seconds for frame ``k`` counted from 0 at the file's
+    first frame.  A marker that is missing in a frame (residual < 0, or the coordinates
+    ``(0, 0, 0)``, which some exporters write for a lost marker) is a missing value: interior
+    gaps of up to ``max_nan_gap`` frames are filled by linear interpolation, any other gap is a
+    :class:`~interprim.errors.DataFileError` naming the file, the marker and the frame number
+    (as the capture software numbers it).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.c3d`` file or a folder of them (natural order, one demonstration per file;
+        all files must have the same markers).
+    markers : sequence of str or str, optional
+        Marker labels to keep, in this order (default all markers).
+    length_unit : str, optional
+        Overrides the file's ``POINT:UNITS`` (for files that state a wrong unit).
+    max_nan_gap : int
+        Longest interior gap (frames) filled by interpolation (default 0: none).
+    min_frames : int
+        Fewest frames a file may have (default 5).
+
+    Returns
+    -------
+    Demonstrations
+    """
+    from .files import load_demonstrations
+
+    return load_demonstrations(
+        path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames
+    )

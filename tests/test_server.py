@@ -70,8 +70,13 @@ def test_happy_path_matches_direct_stream(server, models, test_demo, validator):
             d = direct.update(f)
             np.testing.assert_allclose(mean, d.trajectory(30)[:, 2:], atol=2e-6)
             np.testing.assert_allclose(p["goal"], d.goal[2:], atol=2e-6)
-            assert p["phase"] == pytest.approx(d.phase)
-            phases.append(p["phase"])
+            assert p["frames"] == k and p["conditioned"] is d.conditioned is (k >= op["min_frames"])
+            if d.conditioned:
+                assert p["phase"] == pytest.approx(d.phase) and p["log_likelihood"] == pytest.approx(d.log_likelihood)
+                phases.append(p["phase"])
+            else:  # the prior: nothing estimated yet
+                assert p["phase"] is p["x"] is p["speed"] is p["duration"] is p["log_likelihood"] is None
+        assert op["min_frames"] == 3 and len(phases) == len(test_demo) - 2
         assert phases[-1] > 0.8 and phases[0] < 0.2
         r = c.reset()
         server_v.validate(r)

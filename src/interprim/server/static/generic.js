@@ -188,6 +188,7 @@ function send(frame) {
   g.sent.push(frame.slice());
   g.client.sendFrame(frame);
   state.gen.frames += 1;
+  state.gen.lastFrame = frame.slice();
   $("gen-frames").textContent = String(state.gen.frames);
 }
 
@@ -301,6 +302,9 @@ export async function genInit(info, pageState) {
     const r = g.canvas.getBoundingClientRect();
     return [r.left + (cx * r.width) / g.canvas.width, r.top + (cy * r.height) / g.canvas.height];
   };
+  const observedRow = (k) => g.rows.find((r) => r.role === "observed" && r.frameIndex === k);
+  window.ipView.genRange = (k) => observedRow(k).range;
+  window.ipView.genRowHeight = (k) => (observedRow(k).height * g.canvas.getBoundingClientRect().height) / g.canvas.height;
   const sel = $("gen-model");
   for (const m of info.models) {
     const o = document.createElement("option");

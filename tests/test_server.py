@@ -509,3 +509,38 @@ def test_protocol_helpers():
     assert P.decode_binary_frame(P.encode_binary_frame([1.5, -2.0]), 2).tolist() == [1.5, -2.0]
     with pytest.raises(ValueError):
         P.dumps({"x": float("nan")})
+
+
+def test_cli_replay_and_units_for_a_model_file(tmp_path):
+    """``interprim serve m.npz --replay m=demos.csv --units m=...``: the page's replay data and labels."""
+    import interprim as ip
+    from interprim.cli.serve import _attach_replays, _attach_units
+    from interprim.datasets import save_demonstrations
+    from interprim.errors import InterprimError
+    from interprim.synthetic import two_agent_demos
+
+    names = ["a", "b", "c", "d", "e"]
+    demos = two_agent_demos(6, seed=1, frames=60)
+    save_demonstrations(tmp_path / "d.csv", demos, dt=0.01, columns=names)
+    ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6).fit(demos, dt=0.01, columns=names).save(tmp_path / "m.npz")
+    models = load_models([tmp_path / "m.npz"])
+    _attach_units(models, ["m=rad,,rad,m,m"])
+    _attach_replays(models, [f"m={tmp_path / 'd.csv'}"])
+    e = models["m"]
+    assert e.units == ["rad", None, "rad", "m", "m"] and e.describe()["replay"] is True
+    r = e.meta["replay"]
+    assert r["columns"] == names and r["units"] == e.units and len(r["interactions"]) == 6 and "d.csv" in r["source"]
+    np.testing.assert_allclose(r["interactions"][0]["observed"], demos[0][:, :2], atol=1e-6)
+    np.testing.assert_allclose(r["interactions"][0]["controlled_truth"], demos[0][:, 2:], atol=1e-6)
+    # columns are matched by name: a file with the columns in another order gives the same replay
+    save_demonstrations(tmp_path / "shuffled.csv", [d[:, ::-1] for d in demos], dt=0.01, columns=names[::-1])
+    _attach_replays(models, [f"m={tmp_path / 'shuffled.csv'}"])
+    np.testing.assert_allclose(e.meta["replay"]["interactions"][0]["observed"], demos[0][:, :2], atol=1e-6)
+    save_demonstrations(tmp_path / "other.csv", [d[:, :4] for d in demos], dt=0.01, columns=names[:4])
+    for call, arg, match in ((_attach_units, "m=rad,rad", "2 units for 5 columns"),
+                             (_attach_units, "x=rad", "no model named 'x'"),
+                             (_attach_units, "m", "MODEL=VALUE"),
+                             (_attach_replays, f"m={tmp_path / 'missing.csv'}", "missing.csv"),
+                             (_attach_replays, f"m={tmp_path / 'other.csv'}", "'e'")):
+        with pytest.raises(InterprimError, match=match):
+            call(models, [arg])

@@ -51,7 +51,22 @@ def _open_msg(model, candidates, points, std, dofs, robot_state):
     if dofs is not None:
         msg["dofs"] = dofs
     if robot_state is not None:
-        msg["robot_state"] = [float(v) for v in robot_state]
+        msg["robot_state"] = _robot_state(robot_state)
+    return json.dumps(msg)
+
+
+def _robot_state(rs):
+    if rs is None:
+        return None
+    if len(rs) == 2 and all(hasattr(r, "__len__") for r in rs):  # [positions, velocities]
+        return [[float(v) for v in r] for r in rs]
+    return [float(v) for v in rs]
+
+
+def _reset_msg(robot_state):
+    msg = {"type": "reset"}
+    if robot_state is not None:
+        msg["robot_state"] = _robot_state(robot_state)
     return json.dumps(msg)
 
 
@@ -110,8 +125,10 @@ class Client:
         self.ws.send(_frame_msg(frame, t, binary))
         return self.recv()
 
-    def reset(self) -> dict:
-        self.ws.send(json.dumps({"type": "reset"}))
+    def reset(self, robot_state=None) -> dict:
+        """Start a new interaction; ``robot_state`` (positions, or ``[positions, velocities]``) replaces the
+        controlled agent's start for it and later ones."""
+        self.ws.send(_reset_msg(robot_state))
         return self.recv()
 
     def close_session(self) -> dict:
@@ -168,8 +185,8 @@ class AsyncClient:
         await self.send_frame(frame, t=t, binary=binary)
         return await self.recv()
 
-    async def reset(self) -> dict:
-        await self.ws.send(json.dumps({"type": "reset"}))
+    async def reset(self, robot_state=None) -> dict:
+        await self.ws.send(_reset_msg(robot_state))
         return await self.recv()
 
     async def close(self) -> None:

@@ -82,6 +82,7 @@ class ModelEntry:
             "controlled_dofs": self.controlled_dofs,
             "dt": float(self.model.dt_),
             "mean_duration": float(self.model.mean_duration_),
+            "alpha_x": float(getattr(self.model, "alpha_x", 3.0)),
             "names": self.names,
             "units": self.units,
             "min_frames": self.min_frames,

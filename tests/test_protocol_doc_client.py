@@ -232,6 +232,14 @@ def test_unparseable_frame_keeps_its_seq_and_garbage_resyncs(server):
         c.send({"type": "frame", "frame": ["1", 2], "t": 7.5}, is_frame=True)
         e = c.recv()[0]
         assert e["code"] == "bad_frame" and e["seq"] == 6 and e["t"] == 7.5
+        # something we meant as a frame but the server cannot recognise as one ("Resynchronising")
+        c.send('{"frame": [0.0, 0.0]', is_frame=True)
+        e, _, ours = c.recv()
+        assert e["type"] == "error" and "seq" not in e and ours == 7
+        c.frames_sent -= 1  # the server did not count it
+        c.frame([0.03, 0.01])
+        p, _, ours = c.recv()
+        assert p["type"] == "prediction" and p["seq"] == ours == 7
     finally:
         c.close()
 

@@ -544,3 +544,36 @@ def test_cli_replay_and_units_for_a_model_file(tmp_path):
                              (_attach_replays, f"m={tmp_path / 'other.csv'}", "'e'")):
         with pytest.raises(InterprimError, match=match):
             call(models, [arg])
+
+
+def test_schema_covers_labels_first_frames_and_recovered_seq(server, validator, test_demo):
+    """The schema accepts what the server now sends (labels per candidate, unconditioned replies, an error with
+    a recovered seq and t) and the client messages the protocol allows (both robot_state forms, reset's)."""
+    server_v, client_v = validator
+    names = ["letter_c", "letter_s"]
+    ws = connect(server.ws_url)
+    try:
+        hello(ws)
+        op = rpc(ws, {"type": "open", "model": "auto", "candidates": names, "std": True, "points": 4})
+        server_v.validate(op)
+        assert set(op["column_names"]) == set(names) and op["observed_units"] == {n: [None, None] for n in names}
+        p = rpc(ws, frame_msg([0.5, 0.5]))
+        server_v.validate(p)
+        assert p["conditioned"] is False and p["phase"] is None and p["probabilities"] == {n: 0.5 for n in names}
+        e = rpc(ws, '{"type": "frame", "frame": [NaN, 1], "t": 4}')
+        server_v.validate(e)
+        assert e["code"] == "bad_json" and e["seq"] == 2 and e["t"] == 4
+        op = rpc(ws, {"type": "open", "model": "pair", "robot_state": [[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]]})
+        server_v.validate(op)
+        assert op["column_names"] == ["dof_2", "dof_3", "dof_4"] and op["column_units"] == [None] * 3
+    finally:
+        ws.close()
+    for msg in ({"type": "open", "model": "pair", "robot_state": [0.1, 0.2, 0.3]},
+                {"type": "open", "model": "pair", "robot_state": [[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]]},
+                {"type": "reset", "robot_state": [0.1, 0.2, 0.3]}, {"type": "reset"}):
+        client_v.validate(msg)
+    import jsonschema
+
+    for bad in ({"type": "open", "robot_state": [[0.1], [0.2], [0.3]]}, {"type": "open", "robot_state": "x"}):
+        with pytest.raises(jsonschema.ValidationError):
+            client_v.validate(bad)

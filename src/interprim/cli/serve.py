@@ -12,13 +12,16 @@ or on "auto" to let the server recognise the interaction among the loaded models
 observed agent's frames and gets after each frame the phase, the recognised model and the
 controlled agent's predicted trajectory (mean, optionally a std band).
 
-Open http://127.0.0.1:8765/ for the page (simulated high-five and handwriting completion:
-start with --demo to fit demo models at start-up)."""
+Open http://127.0.0.1:8765/ for the page: any served model on its "Any model" tab (replay its
+demonstrations given with --replay, or drag an observed DoF, and see both agents' predicted DoFs
+over time), plus the simulated high-five and handwriting completion (start with --demo to fit the
+demo models at start-up)."""
 
 EPILOG = """\
 examples:
   interprim serve --demo                      # fit the demo models, open http://127.0.0.1:8765/
   interprim serve highfive.npz letters/a.npz  # model names are the file stems
+  interprim serve mine.npz --replay mine=demos.csv --units mine=rad,rad,m,m,m
   interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
 
 Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in

@@ -70,8 +70,13 @@ def test_happy_path_matches_direct_stream(server, models, test_demo, validator):
             d = direct.update(f)
             np.testing.assert_allclose(mean, d.trajectory(30)[:, 2:], atol=2e-6)
             np.testing.assert_allclose(p["goal"], d.goal[2:], atol=2e-6)
-            assert p["phase"] == pytest.approx(d.phase)
-            phases.append(p["phase"])
+            assert p["frames"] == k and p["conditioned"] is d.conditioned is (k >= op["min_frames"])
+            if d.conditioned:
+                assert p["phase"] == pytest.approx(d.phase) and p["log_likelihood"] == pytest.approx(d.log_likelihood)
+                phases.append(p["phase"])
+            else:  # the prior: nothing estimated yet
+                assert p["phase"] is p["x"] is p["speed"] is p["duration"] is p["log_likelihood"] is None
+        assert op["min_frames"] == 3 and len(phases) == len(test_demo) - 2
         assert phases[-1] > 0.8 and phases[0] < 0.2
         r = c.reset()
         server_v.validate(r)
@@ -504,3 +509,71 @@ def test_protocol_helpers():
     assert P.decode_binary_frame(P.encode_binary_frame([1.5, -2.0]), 2).tolist() == [1.5, -2.0]
     with pytest.raises(ValueError):
         P.dumps({"x": float("nan")})
+
+
+def test_cli_replay_and_units_for_a_model_file(tmp_path):
+    """``interprim serve m.npz --replay m=demos.csv --units m=...``: the page's replay data and labels."""
+    import interprim as ip
+    from interprim.cli.serve import _attach_replays, _attach_units
+    from interprim.datasets import save_demonstrations
+    from interprim.errors import InterprimError
+    from interprim.synthetic import two_agent_demos
+
+    names = ["a", "b", "c", "d", "e"]
+    demos = two_agent_demos(6, seed=1, frames=60)
+    save_demonstrations(tmp_path / "d.csv", demos, dt=0.01, columns=names)
+    ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6).fit(demos, dt=0.01, columns=names).save(tmp_path / "m.npz")
+    models = load_models([tmp_path / "m.npz"])
+    _attach_units(models, ["m=rad,,rad,m,m"])
+    _attach_replays(models, [f"m={tmp_path / 'd.csv'}"])
+    e = models["m"]
+    assert e.units == ["rad", None, "rad", "m", "m"] and e.describe()["replay"] is True
+    r = e.meta["replay"]
+    assert r["columns"] == names and r["units"] == e.units and len(r["interactions"]) == 6 and "d.csv" in r["source"]
+    np.testing.assert_allclose(r["interactions"][0]["observed"], demos[0][:, :2], atol=1e-6)
+    np.testing.assert_allclose(r["interactions"][0]["controlled_truth"], demos[0][:, 2:], atol=1e-6)
+    # columns are matched by name: a file with the columns in another order gives the same replay
+    save_demonstrations(tmp_path / "shuffled.csv", [d[:, ::-1] for d in demos], dt=0.01, columns=names[::-1])
+    _attach_replays(models, [f"m={tmp_path / 'shuffled.csv'}"])
+    np.testing.assert_allclose(e.meta["replay"]["interactions"][0]["observed"], demos[0][:, :2], atol=1e-6)
+    save_demonstrations(tmp_path / "other.csv", [d[:, :4] for d in demos], dt=0.01, columns=names[:4])
+    for call, arg, match in ((_attach_units, "m=rad,rad", "2 units for 5 columns"),
+                             (_attach_units, "x=rad", "no model named 'x'"),
+                             (_attach_units, "m", "MODEL=VALUE"),
+                             (_attach_replays, f"m={tmp_path / 'missing.csv'}", "missing.csv"),
+                             (_attach_replays, f"m={tmp_path / 'other.csv'}", "'e'")):
+        with pytest.raises(InterprimError, match=match):
+            call(models, [arg])
+
+
+def test_schema_covers_labels_first_frames_and_recovered_seq(server, validator, test_demo):
+    """The schema accepts what the server now sends (labels per candidate, unconditioned replies, an error with
+    a recovered seq and t) and the client messages the protocol allows (both robot_state forms, reset's)."""
+    server_v, client_v = validator
+    names = ["letter_c", "letter_s"]
+    ws = connect(server.ws_url)
+    try:
+        hello(ws)
+        op = rpc(ws, {"type": "open", "model": "auto", "candidates": names, "std": True, "points": 4})
+        server_v.validate(op)
+        assert set(op["column_names"]) == set(names) and op["observed_units"] == {n: [None, None] for n in names}
+        p = rpc(ws, frame_msg([0.5, 0.5]))
+        server_v.validate(p)
+        assert p["conditioned"] is False and p["phase"] is None and p["probabilities"] == {n: 0.5 for n in names}
+        e = rpc(ws, '{"type": "frame", "frame": [NaN, 1], "t": 4}')
+        server_v.validate(e)
+        assert e["code"] == "bad_json" and e["seq"] == 2 and e["t"] == 4
+        op = rpc(ws, {"type": "open", "model": "pair", "robot_state": [[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]]})
+        server_v.validate(op)
+        assert op["column_names"] == ["dof_2", "dof_3", "dof_4"] and op["column_units"] == [None] * 3
+    finally:
+        ws.close()
+    for msg in ({"type": "open", "model": "pair", "robot_state": [0.1, 0.2, 0.3]},
+                {"type": "open", "model": "pair", "robot_state": [[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]]},
+                {"type": "reset", "robot_state": [0.1, 0.2, 0.3]}, {"type": "reset"}):
+        client_v.validate(msg)
+    import jsonschema
+
+    for bad in ({"type": "open", "robot_state": [[0.1], [0.2], [0.3]]}, {"type": "open", "robot_state": "x"}):
+        with pytest.raises(jsonschema.ValidationError):
+            client_v.validate(bad)

@@ -35,8 +35,9 @@ def test_worker_processes_give_the_same_predictions(models, test_demo):
                 np.testing.assert_allclose(pa["std"], ea.std(10)[:, 2:], atol=2e-6)
                 np.testing.assert_allclose(pb["mean"], eb.trajectory(10)[:, 2:], atol=2e-6)
                 if k == 10:
-                    b.reset()
-                    db = models["pair"].model.stream()
+                    rs = [[0.1, -0.2, 0.3], [0.5, 0.0, -0.5]]  # positions and velocities, in the worker too
+                    b.reset(robot_state=rs)
+                    db = models["pair"].model.stream(robot_state=rs)
             with pytest.raises(ServerError) as e:
                 a.frame([1.0])
             assert e.value.code == "bad_frame"
@@ -150,8 +151,12 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
         p = ref_stream.update(f)
         assert list(msg)[:2] == ["type", "seq"] and msg["seq"] == k + 1 and msg["model"] == "pair"
         assert msg["columns"] == cols and (msg.get("t") == (0.5 * k if k % 2 else None))
+        assert msg["conditioned"] is p.conditioned and msg["frames"] == k + 1
         for key in ("phase", "x", "speed", "duration", "log_likelihood"):
-            assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
+            if p.conditioned:
+                assert msg[key] == pytest.approx(float(getattr(p, key)), rel=1e-9, abs=1e-12)
+            else:  # the first frames: the prior, no estimates
+                assert msg[key] is None
         assert msg["out_of_range"] is p.out_of_range is False
         assert msg["input_distance"] == pytest.approx(p.input_distance, rel=1e-5)  # %.6g
         # orjson: float32 written as its shortest round-trip text (rounding to float32, then the shortest

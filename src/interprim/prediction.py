@@ -73,6 +73,14 @@ class Prediction:
         self.out_of_range = False
 
     @property
+    def conditioned(self) -> bool:
+        """Whether the posterior is conditioned on the observed frames.  ``False`` while fewer than the
+        model's ``min_observed`` frames (or only a phase of 0) were seen: the prediction is then the prior
+        (the mean interaction from the first frame), ``log_likelihood`` is 0 and ``phase``/``speed``/``duration``
+        come from too few frames to mean anything."""
+        return self._stats is not None
+
+    @property
     def dtw_cost(self) -> float:
         """``D(n*, M)`` of the open-end DTW of the observation against the reference (Eq. 5-8); with the
         likelihood phase of a batch ``predict`` it is computed on first access."""

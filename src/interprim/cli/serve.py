@@ -12,13 +12,16 @@ or on "auto" to let the server recognise the interaction among the loaded models
 observed agent's frames and gets after each frame the phase, the recognised model and the
 controlled agent's predicted trajectory (mean, optionally a std band).
 
-Open http://127.0.0.1:8765/ for the page (simulated high-five and handwriting completion:
-start with --demo to fit demo models at start-up)."""
+Open http://127.0.0.1:8765/ for the page: any served model on its "Any model" tab (replay its
+demonstrations given with --replay, or drag an observed DoF, and see both agents' predicted DoFs
+over time), plus the simulated high-five and handwriting completion (start with --demo to fit the
+demo models at start-up)."""
 
 EPILOG = """\
 examples:
   interprim serve --demo                      # fit the demo models, open http://127.0.0.1:8765/
   interprim serve highfive.npz letters/a.npz  # model names are the file stems
+  interprim serve mine.npz --replay mine=demos.csv --units mine=rad,rad,m,m,m
   interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
 
 Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in
@@ -36,6 +39,12 @@ def add_parser(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("models", nargs="*", metavar="MODEL", help="saved model files (.npz); name = file stem")
+    p.add_argument("--replay", action="append", default=[], metavar="MODEL=DEMOS",
+                   help="demonstrations the page can replay to MODEL (served at /api/replay/MODEL): a data file "
+                        "or folder as 'interprim fit' reads, e.g. the training CSV (repeatable)")
+    p.add_argument("--units", action="append", default=[], metavar="MODEL=U1,U2,...",
+                   help="units of MODEL's data columns, in column order (e.g. rad,rad,m; empty = unknown), sent to "
+                        "clients to label values (repeatable)")
     p.add_argument("--demo", action="store_true",
                    help="also fit demo models at start-up: 'highfive' (interprim.sim) and letters c/s/u")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
@@ -107,6 +116,8 @@ def run(args) -> int:
     except ValueError as exc:
         raise InterprimError(f"bad option: {exc}") from None  # printed as a clean CLI error
     models = load_models(args.models)  # fails here, before listening, on a corrupt file
+    _attach_units(models, args.units)
+    _attach_replays(models, args.replay)
     extra = {}
     if args.demo:
         from ..server.demo import demo_models
@@ -142,6 +153,48 @@ def run(args) -> int:
     except OSError as exc:
         raise InterprimError(f"cannot listen on {args.host}:{args.port}: {exc}") from None
     return 0
+
+
+def _pairs(values, flag):
+    from ..errors import InterprimError
+
+    for text in values:
+        name, sep, value = text.partition("=")
+        if not sep or not name or not value:
+            raise InterprimError(f"{flag} expects MODEL=VALUE, got {text!r}")
+        yield name, value
+
+
+def _entry(models, name, flag, text):
+    from ..errors import InterprimError
+
+    if name not in models:
+        raise InterprimError(f"{flag} {text!r}: no model named {name!r} (loaded: {', '.join(sorted(models))})")
+    return models[name]
+
+
+def _attach_units(models, values) -> None:
+    from ..errors import InterprimError
+
+    for name, value in _pairs(values, "--units"):
+        e = _entry(models, name, "--units", f"{name}={value}")
+        units = [u.strip() or None for u in value.split(",")]
+        if len(units) != e.n_dofs:
+            raise InterprimError(f"--units {name}={value!r}: {len(units)} units for {e.n_dofs} columns "
+                                 f"({', '.join(e.names)})")
+        e.meta["units"] = units
+
+
+def _attach_replays(models, values) -> None:
+    from ..errors import InterprimError
+    from ..server.models import load_replay
+
+    for name, path in _pairs(values, "--replay"):
+        e = _entry(models, name, "--replay", f"{name}={path}")
+        try:
+            e.meta["replay"] = load_replay(e, path)
+        except (OSError, ValueError) as exc:  # DataFileError is a ValueError
+            raise InterprimError(f"--replay {name}={path}: {exc}") from None
 
 
 def _has_sim() -> bool:

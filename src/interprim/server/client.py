@@ -51,7 +51,22 @@ def _open_msg(model, candidates, points, std, dofs, robot_state):
     if dofs is not None:
         msg["dofs"] = dofs
     if robot_state is not None:
-        msg["robot_state"] = [float(v) for v in robot_state]
+        msg["robot_state"] = _robot_state(robot_state)
+    return json.dumps(msg)
+
+
+def _robot_state(rs):
+    if rs is None:
+        return None
+    if len(rs) == 2 and all(hasattr(r, "__len__") for r in rs):  # [positions, velocities]
+        return [[float(v) for v in r] for r in rs]
+    return [float(v) for v in rs]
+
+
+def _reset_msg(robot_state):
+    msg = {"type": "reset"}
+    if robot_state is not None:
+        msg["robot_state"] = _robot_state(robot_state)
     return json.dumps(msg)
 
 
@@ -111,13 +126,14 @@ class Client:
         self.ws.send(_frame_msg(frame, t, binary))
         return self.recv()
 
-    def reset(self) -> dict:
+    def reset(self, robot_state=None) -> dict:
         """Start a new interaction with the same model (the frames so far are forgotten).
 
-        Returns the ``reset_done`` reply (``seq``: frames received so far); raises :class:`ServerError`
-        (``not_open``) when no model is open.
+        ``robot_state`` (positions, or ``[positions, velocities]``) replaces the controlled agent's start for
+        this interaction and later ones.  Returns the ``reset_done`` reply (``seq``: frames received so far);
+        raises :class:`ServerError` (``not_open``) when no model is open.
         """
-        self.ws.send(json.dumps({"type": "reset"}))
+        self.ws.send(_reset_msg(robot_state))
         return self.recv()
 
     def close_session(self) -> dict:
@@ -206,9 +222,9 @@ class AsyncClient:
         await self.send_frame(frame, t=t, binary=binary)
         return await self.recv()
 
-    async def reset(self) -> dict:
-        """Start a new interaction with the same model; returns the ``reset_done`` reply."""
-        await self.ws.send(json.dumps({"type": "reset"}))
+    async def reset(self, robot_state=None) -> dict:
+        """Start a new interaction with the same model (see :meth:`Client.reset`); returns the ``reset_done`` reply."""
+        await self.ws.send(_reset_msg(robot_state))
         return await self.recv()
 
     async def close(self) -> None:

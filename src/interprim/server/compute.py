@@ -107,6 +107,7 @@ _FORCE_PRINTF = False  # tests: the fallback encoder even when orjson is install
 
 
 _HEAD_FMT = '"phase":%r,"x":%r,"speed":%r,"duration":%r,"log_likelihood":%r,'
+_UNCONDITIONED = '"phase":null,"x":null,"speed":null,"duration":null,"log_likelihood":null,"conditioned":false,'
 
 
 def _head_parts(op: _Open) -> list:
@@ -176,10 +177,16 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
         best = int(np.argmax(probs))
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
-    vals = (float(pred.phase), float(pred.x), float(pred.speed), float(pred.duration), float(pred.log_likelihood))
-    if not all(map(math.isfinite, vals)):  # nan / inf: never put them on the wire
-        raise FloatingPointError(_NONFINITE)
-    nums = _HEAD_FMT % vals
+    if getattr(pred, "conditioned", True):
+        vals = (float(pred.phase), float(pred.x), float(pred.speed), float(pred.duration), float(pred.log_likelihood))
+        if not all(map(math.isfinite, vals)):  # nan / inf: never put them on the wire
+            raise FloatingPointError(_NONFINITE)
+        nums = _HEAD_FMT % vals + '"conditioned":true,'
+    else:  # the prior (too few frames): no phase, speed or likelihood to report
+        nums = _UNCONDITIONED
+    n_frames = getattr(pred, "n_observed", None)
+    if n_frames is not None:
+        nums += '"frames":%d,' % n_frames
     parts = ['{"type":"prediction","seq":%d' % seq, model_part, nums, cols_part]
     # "type" and "seq" first: clients may read them without a full parse
     if probs is not None:

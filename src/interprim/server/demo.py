@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .models import entry_for
+from .models import entry_for, replay_json
 
 LETTERS = ("c", "s", "u")
 
@@ -96,22 +96,15 @@ def highfive_model(n_train: int = 40, n_test: int = 4, seed: int = 0, n_basis: i
     # simulated demonstrations do not have
     model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=n_basis, input_noise=0.01)
     model.fit(train.demos, dt=train.dt)
-    oa, ca = test.observed_arm, test.controlled_arm
-    replay = {
-        "dt": float(test.dt),
-        "columns": ["obs_shoulder", "obs_elbow", "ctrl_shoulder", "ctrl_elbow", "ctrl_wrist"],
-        "interactions": [
-            {
-                "observed": np.round(d[:, :2], 6).tolist(),
-                "controlled_truth": np.round(d[:, 2:], 6).tolist(),
-                "goal": np.asarray(g, dtype=float).tolist(),
-                "observed_hand_path": np.round(oa.hand(d[:, :2]), 6).tolist() if hasattr(oa, "hand") else None,
-            }
-            for d, g in zip(test.demos, test.goals)
-        ],
-    }
+    oa = test.observed_arm
+    names = ["obs_shoulder", "obs_elbow", "ctrl_shoulder", "ctrl_elbow", "ctrl_wrist"]
+    units = ["rad"] * 5
+    replay = replay_json(model, test.demos, names=names, units=units, source="held-out simulated interactions")
+    for it, d, g in zip(replay["interactions"], test.demos, test.goals):
+        it["goal"] = np.asarray(g, dtype=float).tolist()
+        it["observed_hand_path"] = np.round(oa.hand(d[:, :2]), 6).tolist() if hasattr(oa, "hand") else None
     meta = {"title": "Simulated high-five (interprim.sim)", "world": "highfive", "replay": replay,
-            "columns": replay["columns"]}
+            "columns": names, "units": units}
     return entry_for("highfive", model, source="demo: interprim.sim", kind="interaction", meta=meta)
 
 
@@ -130,8 +123,7 @@ def letter_models(n: int = 20, seed: int = 0, n_basis: int = 15) -> dict:
             "world": "handwriting",
             "extent": [[-0.1, 1.1], [-0.1, 1.1]],
             "columns": ["x", "y"],
-            "replay": {"dt": 0.01, "columns": ["x", "y"],
-                       "interactions": [{"observed": np.round(d, 6).tolist()} for d in test]},
+            "replay": replay_json(model, test, names=["x", "y"], source="synthetic test strokes"),
         }
         name = f"letter_{letter}"
         out[name] = entry_for(name, model, source="demo: synthetic letters", kind="single", meta=meta)

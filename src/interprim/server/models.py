@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..errors import ModelFileError
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
@@ -42,6 +44,39 @@ class ModelEntry:
         """Number of data columns of the model (both agents)."""
         return int(self.model.n_dofs_)
 
+    @property
+    def names(self) -> list[str]:
+        """Names of the model's data columns (all ``n_dofs``): the served metadata's, the model file's, or
+        ``dof_0``, ``dof_1``, ... (the default of :func:`interprim.datasets.save_demonstrations`)."""
+        names = self.meta.get("columns") or getattr(self.model, "columns_", None)
+        if names is None or len(names) != self.n_dofs:
+            return [f"dof_{i}" for i in range(self.n_dofs)]
+        return [str(c) for c in names]
+
+    @property
+    def units(self) -> list:
+        """Unit of each data column (a string), or ``None`` where unknown (model files store no units;
+        ``meta["units"]``: a list of ``n_dofs`` entries or a dict name -> unit)."""
+        units = self.meta.get("units")
+        if isinstance(units, dict):
+            return [None if units.get(n) is None else str(units[n]) for n in self.names]
+        if isinstance(units, (list, tuple)) and len(units) == self.n_dofs:
+            return [None if u is None else str(u) for u in units]
+        return [None] * self.n_dofs
+
+    @property
+    def min_frames(self) -> int:
+        """Frames of an interaction before predictions are conditioned on them (``min_observed``)."""
+        return int(getattr(self.model, "min_observed", 1))
+
+    def start(self) -> list | None:
+        """Mean start position of the demonstrations in every data column, or ``None`` if unknown."""
+        try:
+            M, off = self.model._latent_map()
+            return [float(v) for v in M @ np.asarray(self.model.start_position_, dtype=np.float64) + off]
+        except Exception:  # a stand-in model without these attributes
+            return None
+
     def describe(self) -> dict:
         """The model's entry in ``welcome`` and ``/api/info``: name, kind, columns, ``dt``, mean duration
         and the JSON-able extras (``title``, ``extent``, ``columns``, ``world``) of ``meta``."""
@@ -53,6 +88,12 @@ class ModelEntry:
             "controlled_dofs": self.controlled_dofs,
             "dt": float(self.model.dt_),
             "mean_duration": float(self.model.mean_duration_),
+            "alpha_x": float(getattr(self.model, "alpha_x", 3.0)),
+            "names": self.names,
+            "units": self.units,
+            "min_frames": self.min_frames,
+            "start": self.start(),
+            "replay": "replay" in self.meta,
         }
         out.update({k: v for k, v in self.meta.items() if k in ("title", "extent", "columns", "world")})
         return out
@@ -116,3 +157,71 @@ def load_models(paths) -> dict[str, ModelEntry]:
             raise ModelFileError(f"cannot serve model {name!r}: {path} is not a readable model file: {exc}") from None
         out[name] = entry_for(name, model, source=str(path))
     return out
+
+
+def replay_json(model, demos, *, names=None, units=None, source: str = "", max_interactions: int = 20) -> dict:
+    """The JSON of ``GET /api/replay/MODEL``: demonstrations to stream to the model (the page's *Replay*).
+
+    Parameters
+    ----------
+    model : fitted InteractionPrimitive
+    demos : list of ndarray, shape (T_i, n_dofs)
+        Whole interactions in the model's data columns, sampled at the model's ``dt_``.
+    names, units : list, optional
+        Column names / units (default: the model's names, units unknown).
+    source : str
+        Where they come from (shown by the page), e.g. ``"training demonstrations (demos.csv)"``.
+    max_interactions : int
+        At most this many are kept (the first ones).
+
+    Returns
+    -------
+    dict
+        ``dt`` (s), ``columns`` (names of all data columns), ``units``, ``observed_dofs``,
+        ``controlled_dofs``, ``source`` and ``interactions``: per interaction ``observed``
+        (``T x len(observed_dofs)``, the frames to send, in frame order), ``controlled_truth``
+        (``T x len(controlled_dofs)``, what the controlled agent did; absent for single-agent models)
+        and ``duration`` (s).
+    """
+    obs = [int(i) for i in model.observed_dofs_]
+    ctrl = [int(i) for i in model.controlled_dofs_]
+    D = int(model.n_dofs_)
+    dt = float(model.dt_)
+    if names is None:
+        names = getattr(model, "columns_", None) or [f"dof_{i}" for i in range(D)]
+    out = []
+    for i, d in enumerate(list(demos)[: int(max_interactions)]):
+        d = np.asarray(d, dtype=np.float64)
+        if d.ndim != 2 or d.shape[1] != D or d.shape[0] < 2 or not np.all(np.isfinite(d)):
+            raise ValueError(f"replay interaction {i}: expected a finite (T >= 2, {D}) array, got shape {d.shape}")
+        it = {"observed": np.round(d[:, obs], 6).tolist(), "duration": (d.shape[0] - 1) * dt}
+        if ctrl:
+            it["controlled_truth"] = np.round(d[:, ctrl], 6).tolist()
+        out.append(it)
+    return {"dt": dt, "columns": [str(n) for n in names], "units": list(units) if units is not None else [None] * D,
+            "observed_dofs": obs, "controlled_dofs": ctrl, "source": source, "interactions": out}
+
+
+def load_replay(entry: ModelEntry, path) -> dict:
+    """Read demonstrations for ``entry`` from a data file (as ``interprim fit`` reads them) into :func:`replay_json`.
+
+    Columns are matched by name when the model knows its column names, else by position; frames are
+    resampled to the model's ``dt``.
+
+    Raises
+    ------
+    interprim.DataFileError
+        The file cannot be read or lacks one of the model's columns.
+    ValueError
+        The file has a different number of columns than a model without column names.
+    """
+    from ..datasets import load_demonstrations
+
+    model = entry.model
+    named = getattr(model, "columns_", None)
+    dt = float(model.dt_)
+    ds = load_demonstrations(path, columns=list(named) if named else None, dt=dt, resample_dt=dt)
+    if ds.n_dofs != entry.n_dofs:
+        raise ValueError(f"{path} has {ds.n_dofs} columns; model {entry.name!r} has {entry.n_dofs}")
+    return replay_json(model, ds.demos, names=entry.names, units=entry.units,
+                       source=f"demonstrations from {Path(path).name}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 
 import numpy as np
@@ -160,12 +161,7 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
     dofs = msg.get("dofs")
     if dofs is not None and dofs not in ("controlled", "all"):
         raise ProtocolError("bad_message", f"open.dofs must be 'controlled' or 'all', got {_describe(dofs)}")
-    robot_state = msg.get("robot_state")
-    if robot_state is not None:
-        if not isinstance(robot_state, list) or not all(_is_number(v) for v in robot_state):
-            raise ProtocolError("bad_message", "open.robot_state must be a list of numbers or null")
-        if not all(math.isfinite(v) for v in robot_state):
-            raise ProtocolError("bad_message", "open.robot_state contains NaN or inf")
+    robot_state = check_robot_state(msg.get("robot_state"), "open.robot_state")
     return {
         "model": name,
         "candidates": cands,
@@ -174,6 +170,87 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
         "dofs": dofs,
         "robot_state": robot_state,
     }
+
+
+def check_robot_state(value, where: str):
+    """Validate a ``robot_state``: ``null``, the controlled agent's current positions ``[p1, ..., pn]``, or
+    positions and velocities (units per second) ``[[p1, ..., pn], [v1, ..., vn]]``.  The length ``n``
+    is checked against each model by :func:`check_robot_state_for`."""
+    if value is None:
+        return None
+    rows = value if isinstance(value, list) and value and all(isinstance(r, list) for r in value) else None
+    if rows is not None:
+        if len(rows) != 2 or len(rows[0]) != len(rows[1]):
+            raise ProtocolError("bad_message", f"{where} as positions and velocities must be two lists of the same "
+                                "length [[p1, ..., pn], [v1, ..., vn]], got " + _describe(value))
+        flat = rows[0] + rows[1]
+    elif isinstance(value, list):
+        flat = value
+    else:
+        flat = None
+    if flat is None or not flat or not all(_is_number(v) for v in flat):
+        raise ProtocolError("bad_message", f"{where} must be null, a list of numbers (the controlled agent's "
+                            "positions) or [[positions], [velocities]], got " + _describe(value))
+    try:
+        finite = all(math.isfinite(v) for v in flat)
+    except OverflowError:  # an integer beyond float range
+        finite = False
+    if not finite:
+        raise ProtocolError("bad_message", f"{where} contains NaN, inf or a number too large for a float64")
+    return value
+
+
+def check_robot_state_for(robot_state, name: str, n_controlled: int, where: str) -> None:
+    """``robot_state`` (validated by :func:`check_robot_state`) must have ``n_controlled`` values per row."""
+    if robot_state is None:
+        return
+    n = len(robot_state[0]) if isinstance(robot_state[0], list) else len(robot_state)
+    if n_controlled == 0:
+        raise ProtocolError("bad_message", f"{where}: model {name!r} has no controlled agent; send null")
+    if n != n_controlled:
+        raise ProtocolError("bad_message", f"{where} has {n} values per row; model {name!r} controls "
+                            f"{n_controlled} DoFs (its controlled_dofs, in that order)")
+
+
+def check_reset(msg: dict):
+    """Validate a ``reset``; returns its optional ``robot_state``."""
+    return check_robot_state(msg.get("robot_state"), "reset.robot_state")
+
+
+_FRAME_TYPE = re.compile(r'"type"\s*:\s*"frame"')
+_T_FIELD = re.compile(r'"t"\s*:\s*(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][+-]?[0-9]+)?)\s*[,}]')
+
+
+def scan_unparsed(text: str) -> tuple[bool, float | None]:
+    """For a text message that is not valid JSON: is it a frame, and its echo stamp ``t`` if readable.
+
+    Lenient on purpose (regular expressions on the raw text): a message containing ``"type": "frame"``
+    (any white space) counts as a frame, so that the server's frame numbering (``seq``) stays the one
+    the client counts; ``"t": <number>`` gives the stamp to echo in the error.
+    """
+    if not isinstance(text, str) or len(text) > 1 << 20:
+        return False, None
+    if _FRAME_TYPE.search(text) is None:
+        return False, None
+    m = _T_FIELD.search(text)
+    t = None
+    if m is not None:
+        v = float(m.group(1))
+        t = v if math.isfinite(v) else None
+    return True, t
+
+
+def frame_stamp(msg: dict | None):
+    """A parsed frame message's ``t`` if it is a finite number (echoed in replies and errors), else ``None``."""
+    if msg is None:
+        return None
+    t = msg.get("t")
+    if _is_number(t):
+        try:
+            return t if math.isfinite(t) else None
+        except OverflowError:
+            return None
+    return None
 
 
 def check_frame(msg: dict, n: int) -> tuple[np.ndarray, float | None]:

@@ -135,7 +135,7 @@ class SessionSide:
             s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
 
-    def _error(self, s: _Session, exc: P.ProtocolError, seq=None) -> None:
+    def _error(self, s: _Session, exc: P.ProtocolError, seq=None, t=None) -> None:
         s.errors += 1
         if exc.code != "rate_limited":  # dropping is the limit's own answer; not a protocol violation
             s.consecutive_errors += 1
@@ -145,7 +145,7 @@ class SessionSide:
             log.warning("session %d: %s: %s%s", s.id, exc.code, exc.message, f" (seq {seq})" if seq else "")
         elif s.errors == self.config.log_errors_per_session + 1:
             log.warning("session %d: further errors are counted, not logged", s.id)
-        msg = P.error(exc.code, exc.message, seq=seq)
+        msg = P.error(exc.code, exc.message, seq=seq, t=t)
         if exc.fatal:
             self._fatal(s, P.CLOSE_POLICY, exc.message, msg)
         elif s.consecutive_errors >= self.config.max_errors:
@@ -162,25 +162,32 @@ class SessionSide:
             try:
                 msg = P.parse_text(data)
             except P.ProtocolError as exc:
+                seq = t = None
+                if exc.code == "bad_json":  # a frame that is not JSON (e.g. NaN) still counts as a frame
+                    looks_like_frame, t = P.scan_unparsed(data)
+                    if looks_like_frame:
+                        s.seq += 1
+                        seq = s.seq
                 if not s.bucket.take():
-                    return self._error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"))
-                return self._error(s, exc)
+                    return self._error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"), seq, t)
+                return self._error(s, exc, seq, t)
             is_frame = msg["type"] == "frame"
-        seq = None
+        seq = t = None
         if is_frame:
             s.seq += 1
             seq = s.seq
+            t = P.frame_stamp(msg)
         if not s.bucket.take():
             return self._error(
-                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"), seq
-            )
+                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"),
+                seq, t)
         try:
             if msg is None or msg["type"] == "frame":
                 await self._on_frame(s, data, msg, seq)
             else:
                 await self._on_control(s, msg)
         except P.ProtocolError as exc:
-            self._error(s, exc, seq)
+            self._error(s, exc, seq, t)
 
     async def _on_control(self, s: _Session, msg: dict) -> None:
         mtype = msg["type"]
@@ -199,6 +206,8 @@ class SessionSide:
         if mtype == "open":
             o = P.check_open(msg, self.models, default_points=self.config.default_points, max_points=self.config.max_points)
             entries = [self.models[n] for n in o["candidates"]]
+            for e in entries:
+                P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
             streams, cols = [], []
             for e in entries:
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
@@ -221,26 +230,21 @@ class SessionSide:
             s.consecutive_errors = 0
             log.info("session %d: opened %s%s", s.id, o["model"],
                      f" among {o['candidates']}" if o["model"] == "auto" else "")
-            self._send(s, P.dumps({
-                "type": "opened",
-                "model": o["model"],
-                "candidates": o["candidates"],
-                "n_observed": entries[0].n_observed,
-                "columns": cols[0] if len(cols) == 1 else {e.name: cl for e, cl in zip(entries, cols)},
-                "points": o["points"],
-                "std": o["std"],
-            }))
+            self._send(s, P.dumps(_opened(o, entries, cols)))
             return
         if s.open is None:
             raise P.ProtocolError("not_open", f"{mtype!r} needs an open session: send open first")
         if mtype == "reset":
+            rs = P.check_reset(msg)
+            for e in s.open.entries:
+                P.check_robot_state_for(rs, e.name, len(e.controlled_dofs), "reset.robot_state")
             if self._procs is not None:
                 try:
-                    await self._procs.call(s.id, "reset")
+                    await self._procs.call(s.id, "reset", robot_state=rs)
                 except RuntimeError as exc:
                     raise P.ProtocolError("internal", f"reset failed: {exc}") from None
             for st in s.open.streams:
-                st.reset()
+                st.reset(robot_state=rs)
             s.open.frames = 0
             s.consecutive_errors = 0
             self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
@@ -274,7 +278,7 @@ class SessionSide:
         except Exception as exc:
             self.stats["errors"] += 1
             log.exception("session %d: prediction failed at seq %d", s.id, seq)
-            self._send(s, P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq)))
+            self._send(s, P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq, t=t)))
             return
         if s.open is not op:  # closed/reopened while computing
             return
@@ -290,3 +294,28 @@ class SessionSide:
             await ws.send(text)
         else:
             self._send(s, text)
+
+
+def _opened(o: dict, entries: list, cols: list) -> dict:
+    """The ``opened`` reply: what was opened and how to label it (names and units of the returned columns
+    and of the frame's values); one list per candidate (an object keyed by name) with ``"auto"``."""
+    def per(fn):
+        vals = [fn(e, cl) for e, cl in zip(entries, cols)]
+        return vals[0] if len(vals) == 1 else {e.name: v for e, v in zip(entries, vals)}
+
+    return {
+        "type": "opened",
+        "model": o["model"],
+        "candidates": o["candidates"],
+        "n_observed": entries[0].n_observed,
+        "columns": per(lambda e, cl: list(cl)),
+        "points": o["points"],
+        "std": o["std"],
+        "column_names": per(lambda e, cl: [e.names[i] for i in cl]),
+        "column_units": per(lambda e, cl: [e.units[i] for i in cl]),
+        "observed_dofs": per(lambda e, cl: e.observed_dofs),
+        "observed_names": per(lambda e, cl: [e.names[i] for i in e.observed_dofs]),
+        "observed_units": per(lambda e, cl: [e.units[i] for i in e.observed_dofs]),
+        "min_frames": max(e.min_frames for e in entries),
+        "robot_state": o["robot_state"],
+    }

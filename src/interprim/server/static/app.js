@@ -1,12 +1,10 @@
 // The interprim live page: simulated high-five and handwriting completion, driven by the server.
 // State is exposed on window.ipState (and data-* attributes of the canvases) for tests.
 import { InterprimClient } from "/static/ipclient.js";
+import { PointerSampler, TOKEN, WS_URL, clamp, fetchJSON, fmt, interpRow } from "/static/common.js";
+import { genInit } from "/static/generic.js";
 
-const params = new URLSearchParams(location.search);
-const TOKEN = params.get("token");
-const WS_URL = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
 const $ = (id) => document.getElementById(id);
-const fmt = (v, d = 2) => (v === undefined || v === null ? "–" : Number(v).toFixed(d));
 
 const state = (window.ipState = {
   ready: false,
@@ -54,49 +52,6 @@ function jacobian(arm, q) {
   return J;
 }
 
-const POINTER_DELAY_MS = 40;
-// The sampler's clock: performance.now(), unless a test installs window.ipClock (a virtual clock that makes
-// the frames sent independent of how busy the machine is).
-const samplerNow = () => (window.ipClock ? window.ipClock() : performance.now());
-const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
-
-// Pointer events come every ~8-30 ms and timers jitter; a model wants frames every dt. This samples
-// the pointer path on an exact dt grid (catching up after a late timer), by linear interpolation
-// between pointer events, POINTER_DELAY_MS behind real time, so that frames are smooth and evenly
-// spaced (no staircase, which the model would read as jerky movement).
-class PointerSampler {
-  constructor(dtMs) { this.dtMs = dtMs; this.log = []; this.gridT = 0; this.released = false; this.done = false; }
-  start(p) {
-    const now = samplerNow();
-    this.log = [[now, p[0], p[1]]];
-    this.gridT = now - POINTER_DELAY_MS;
-    this.released = false;
-    this.done = false;
-  }
-  add(p) {
-    this.log.push([samplerNow(), p[0], p[1]]);
-    if (this.log.length > 4000) this.log.splice(0, 2000);
-  }
-  release() { this.released = true; }
-  due() {
-    const out = [], log = this.log, now = samplerNow() - POINTER_DELAY_MS;
-    while (!this.done && this.gridT <= now) {
-      const T = this.gridT;
-      this.gridT += this.dtMs;
-      let i = 1;
-      while (i < log.length && log[i][0] < T) i++;
-      if (i >= log.length) out.push([log[log.length - 1][1], log[log.length - 1][2]]);
-      else {
-        const [t0, x0, y0] = log[i - 1], [t1, x1, y1] = log[i];
-        const w = t1 > t0 ? clamp((T - t0) / (t1 - t0), 0, 1) : 1;
-        out.push([x0 + w * (x1 - x0), y0 + w * (y1 - y0)]);
-      }
-      if (this.released && T >= log[log.length - 1][0]) this.done = true;
-    }
-    return out;
-  }
-}
-
 // Analytic IK of a 2-link arm, "elbow bends upwards" branch (positive elbow angle).
 function ik2(arm, target) {
   const [l1, l2] = arm.link_lengths;
@@ -109,15 +64,6 @@ function ik2(arm, target) {
   q1 = Math.atan2(Math.sin(q1), Math.cos(q1));
   const lim = arm.joint_limits;
   return [clamp(q1, lim[0][0], lim[0][1]), clamp(bend, lim[1][0], lim[1][1])];
-}
-
-function interpRow(rows, s) {
-  // rows: trajectory on a uniform normalised-time grid 0..1; s in [0, 1]
-  const n = rows.length;
-  const f = clamp(s, 0, 1) * (n - 1);
-  const i = Math.min(Math.floor(f), n - 2);
-  const w = f - i;
-  return rows[i].map((v, k) => v * (1 - w) + rows[i + 1][k] * w);
 }
 
 // ---------------------------------------------------------------- connection
@@ -278,9 +224,10 @@ function hfApplyPrediction(p) {
   const meet = fk(hf.world.controlled_arm, p.mean.at(-1)).pts.at(-1);
   state.hf.meetingPoint = meet;
   hf.canvas.dataset.meetingPoint = meet.map((v) => v.toFixed(4)).join(",");
-  hf.canvas.dataset.phase = p.phase.toFixed(4);
+  hf.canvas.dataset.phase = p.phase === null ? "" : p.phase.toFixed(4);
   hf.canvas.dataset.predictions = String(state.hf.predictions);
-  if (hf.dragging || hf.replay) hf.robotPhase = p.phase;
+  // phase is null while the prediction is the prior (the first frames): the robot waits at its start
+  if ((hf.dragging || hf.replay) && p.phase !== null) hf.robotPhase = p.phase;
   $("hf-model").textContent = p.model;
   $("hf-phase").textContent = fmt(p.phase);
   $("hf-speed").textContent = fmt(p.speed);
@@ -338,7 +285,7 @@ function hfAnimate(now) {
   const last = hfAnimate.last ?? now;
   hfAnimate.last = now;
   if (hf.pred) {
-    if (!state.hf.active && hf.robotPhase < 1) hf.robotPhase = Math.min(1, hf.robotPhase + (now - last) / 1000 / hf.pred.duration);
+    if (!state.hf.active && hf.robotPhase < 1) hf.robotPhase = Math.min(1, hf.robotPhase + (now - last) / 1000 / (hf.pred.duration || hf.model.mean_duration));
     hf.robotQ = interpRow(hf.pred.mean, hf.robotPhase);
   }
   state.hf.robotPhase = hf.robotPhase;
@@ -353,7 +300,10 @@ function canvasPoint(canvas, ev) {
 
 async function hfInit(info) {
   hf.world = info.highfive_world || DEFAULT_WORLD;
-  hf.model = info.models.find((m) => m.world === "highfive") || info.models.find((m) => m.controlled_dofs.length === 3 && m.observed_dofs.length === 2);
+  // the demo's model, or a saved copy of it (a file named highfive*.npz with its 2 + 3 joints); any other model
+  // is shown by the generic view (generic.js)
+  hf.model = info.models.find((m) => m.world === "highfive") ||
+    info.models.find((m) => m.name.startsWith("highfive") && m.controlled_dofs.length === 3 && m.observed_dofs.length === 2);
   hfSetupView();
   hf.restHuman = hf.world.observed_arm.rest.slice();
   hf.restRobot = hf.world.controlled_arm.rest.slice();
@@ -361,7 +311,7 @@ async function hfInit(info) {
   hf.robotQ = hf.restRobot.slice();
   requestAnimationFrame(hfAnimate);
   if (!hf.model) {
-    $("hf-error").textContent = "no high-five model loaded (start the server with --demo)";
+    $("hf-error").textContent = "no high-five model loaded (start the server with --demo); your models are on the Any model tab";
     return;
   }
   // Start postures of the model's interactions (the arms' rest postures may differ from the data's).
@@ -513,7 +463,7 @@ function hwStop() {
 async function hwInit(info) {
   hw.models = info.models.filter((m) => m.world === "handwriting" || (m.kind === "single" && m.n_dofs === 2));
   requestAnimationFrame(hwDraw);
-  if (!hw.models.length) { $("hw-error").textContent = "no handwriting model loaded (start with --demo)"; return; }
+  if (!hw.models.length) { $("hw-error").textContent = "no handwriting model loaded (start with --demo); your models are on the Any model tab"; return; }
   hw.extent = hw.models[0].extent || hw.extent;
   hw.dt = hw.models[0].dt;
   $("hw-letters").textContent = hw.models.map((m) => m.name.replace(/^letter_/, "")).join(", ");
@@ -547,19 +497,15 @@ async function hwInit(info) {
 
 // ---------------------------------------------------------------- tabs, start-up
 function showTab(name) {
-  for (const t of ["highfive", "writing"]) {
+  for (const t of ["highfive", "writing", "generic"]) {
     $(`view-${t}`).hidden = t !== name;
     $(`tab-${t}`).classList.toggle("active", t === name);
   }
 }
 $("tab-highfive").onclick = () => showTab("highfive");
 $("tab-writing").onclick = () => showTab("writing");
+$("tab-generic").onclick = () => showTab("generic");
 
-async function fetchJSON(path) {
-  const url = TOKEN ? `${path}?token=${encodeURIComponent(TOKEN)}` : path;
-  const r = await fetch(url);
-  return r.ok ? r.json() : null;
-}
 
 (async () => {
   try {
@@ -568,6 +514,8 @@ async function fetchJSON(path) {
     state.info = info;
     await hfInit(info);
     await hwInit(info);
+    await genInit(info, state);
+    if (!hf.model && !hw.models.length) showTab("generic"); // only the user's own models: the generic view
     state.ready = true;
     document.body.dataset.ready = "1";
     setStatus(`connected · ${info.server} · protocol v${info.protocol} · models: ${info.models.map((m) => m.name).join(", ")}`);

@@ -5,7 +5,7 @@
 //   const c = new InterprimClient("ws://127.0.0.1:8765/ws", { token });
 //   const welcome = await c.connect();
 //   await c.open("highfive", { points: 50, std: true });
-//   c.onPrediction = (p) => console.log(p.seq, p.phase, p.mean);
+//   c.onPrediction = (p) => console.log(p.seq, p.phase, p.mean);  // phase null until p.conditioned
 //   c.sendFrame([q0, q1]);          // one reply (prediction or error) per frame, in order
 
 export const PROTOCOL_VERSION = 1;
@@ -82,11 +82,12 @@ export class InterprimClient {
     }
   }
 
-  open(model = "auto", { points, std = false, candidates, dofs } = {}) {
+  open(model = "auto", { points, std = false, candidates, dofs, robotState } = {}) {
     const msg = { type: "open", model, std };
     if (points !== undefined) msg.points = points;
     if (candidates !== undefined) msg.candidates = candidates;
     if (dofs !== undefined) msg.dofs = dofs;
+    if (robotState !== undefined) msg.robot_state = robotState; // positions, or [positions, velocities]
     return this._request(msg);
   }
 
@@ -105,8 +106,10 @@ export class InterprimClient {
     return this.seq;
   }
 
-  reset() {
-    return this._request({ type: "reset" });
+  reset(robotState) {
+    const msg = { type: "reset" };
+    if (robotState !== undefined) msg.robot_state = robotState;
+    return this._request(msg);
   }
 
   closeSession() {

@@ -328,3 +328,15 @@ def test_prediction_does_not_depend_on_the_callers_array_afterwards(synthetic, p
     for a, b in zip(p.completion(30), ref.completion(30)):
         np.testing.assert_array_equal(a, b)
     assert p.dtw_cost == ref.dtw_cost
+
+
+def test_two_demonstrations_need_explicit_noise():
+    """sigma2='cv' cannot cross-validate two demonstrations: a clear error that says what to do (was a KeyError
+    deep in the selection); with sigma2 and covariance given, two demonstrations fit."""
+    from interprim.synthetic import two_agent_demos
+
+    d = two_agent_demos(2)
+    with pytest.raises(ValueError, match="at least 3 demonstrations, got 2"):
+        ip.InteractionPrimitive(observed_dofs=[0, 1]).fit(d, dt=0.01)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], sigma2=1e-3, covariance="ridge").fit(d, dt=0.01)
+    assert 0.0 < m.predict(d[0][:50, :2]).normalised_time <= 1.0

@@ -364,7 +364,11 @@ class InteractionPrimitive:
         else:
             self.sigma2_ = float(self.sigma2)
         self.phase_sigma2_ = None
-        if self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto"):
+        if self.sigma2 == "cv" and len(latent) < 3:
+            raise ValueError(f"choosing the noise and shrinkage by cross-validation (sigma2='cv', the default) needs "
+                             f"at least 3 demonstrations, got {len(latent)}: record more, or give sigma2 and "
+                             f"covariance explicitly (e.g. sigma2=1e-3, covariance='ridge')")
+        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto")) and len(latent) >= 3:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
 
             select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")

@@ -80,8 +80,8 @@ def fit_phase_model(model, observed_latent, dt: float):
     ``"learned"`` and ``"auto"`` fit a :class:`~interprim.phase.learned.LearnedPhase` on the observed (latent)
     columns of the demonstrations; ``"auto"`` keeps it only if its leave-one-demonstration-out phase error
     (``cv_error_``) is below the held-out error of the likelihood phase measured by the hyper-parameter selection
-    (``selection_["phase_error"]``, its best noise): each on held-out training demonstrations, mean absolute
-    error in fractions of the movement.
+    at its chosen noise, each estimate refined like ``predict``'s (``selection_["phase_error_refined"]``): each on
+    held-out training demonstrations, mean absolute error in fractions of the movement.
     """
     method = model.phase_method
     if method not in ("learned", "auto"):
@@ -91,6 +91,10 @@ def fit_phase_model(model, observed_latent, dt: float):
     lp = LearnedPhase().fit(observed_latent, dt=dt)
     if method == "learned":
         return lp, "learned"
-    errs = (getattr(model, "selection_", None) or {}).get("phase_error")
-    lik = float(np.min(errs)) if errs else np.inf
+    sel = getattr(model, "selection_", None) or {}
+    lik = sel.get("phase_error_refined")
+    lik = np.inf if lik is None else float(lik)
+    if isinstance(getattr(model, "selection_", None), dict):  # both figures of the choice, for the user
+        model.selection_["learned_phase_error"] = float(lp.cv_error_)
+        model.selection_["clock_phase_error"] = float(lp.cv_error_clock_)
     return (lp, "learned") if float(lp.cv_error_) < lik else (None, "likelihood")

@@ -273,8 +273,9 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
         with all frames seen), ``true_phase`` (1), ``distance_m`` (robot hand at the end of its predicted
         response to the true high-five point) and ``label``.
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import PillowWriter
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
     panels = [p for p in ANIMATION_PANELS if p[0] in models]
     if not panels:
@@ -286,23 +287,31 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
     obs_hand = oa.hand(d[:, :2])
     goal = test.goals[idx]
 
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 4.6), squeeze=False)
+    fig = Figure(figsize=(4.3 * len(panels), 4.7), dpi=72)
+    canvas = FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False)
     art = {}
     for ax, (key, name, details, col) in zip(axes[0], panels):
         _setup_axes(ax, f"{name}\n({details})")
         ax.set_xlim(-0.2, 1.8)
         ax.set_ylim(-1.35, 0.95)
-        ax.plot(*goal, "o", mfc="none", mec="k", ms=11, mew=1.5, zorder=6, label="true high-five point")
+        ax.plot(*goal, "o", mfc="none", mec="k", ms=11, mew=1.5, zorder=6)
         cloud = [ax.plot([], [], color=col, lw=0.6, alpha=0.3)[0] for _ in range(n_samples)]
         (trace,) = ax.plot([], [], color="tab:blue", lw=1)
-        obs_line = _draw_arm(ax, oa, d[0, :2], color="tab:blue", label="human (replayed)")
-        ctrl_line = _draw_arm(ax, ca, ca.rest, color=col, label="robot (predicted mean)")
-        (path_line,) = ax.plot([], [], "--", color=col, lw=1.2, label="predicted hand path (samples faint)")
+        obs_line = _draw_arm(ax, oa, d[0, :2], color="tab:blue")
+        ctrl_line = _draw_arm(ax, ca, ca.rest, color=col)
+        (path_line,) = ax.plot([], [], "--", color=col, lw=1.2)
         (end_pt,) = ax.plot([], [], "x", color=col, ms=9, mew=2)
         txt = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=7.5)
-        ax.legend(loc="lower center", fontsize=6.5)
         art[key] = (cloud, trace, obs_line, ctrl_line, path_line, end_pt, txt)
-    fig.tight_layout()
+    handles = [Line2D([], [], ls="", marker="o", mfc="none", mec="k", ms=9, mew=1.5, label="true high-five point"),
+               Line2D([], [], color="tab:blue", lw=3, marker="o", ms=5, label="human (replayed; its hand's path)")]
+    handles += [Line2D([], [], color=col, lw=3, marker="o", ms=5, label=f"robot, {name}: predicted mean")
+                for _, name, _, col in panels]
+    handles += [Line2D([], [], color="0.3", ls="--", lw=1.2, label="predicted hand path to come (x: its end)"),
+                Line2D([], [], color="0.3", lw=0.6, alpha=0.4, label=f"{n_samples} posterior samples of it")]
+    fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=7, frameon=False)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.235, wspace=0.18)
 
     def draw(st):
         k = st["k"]
@@ -323,14 +332,31 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
             txt.set_text(f"seen {100 * k / T:.0f} %, estimated phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
                          f"robot hand–goal distance {100 * ps['dist']:.1f} cm\n{note}")
 
-    writer = PillowWriter(fps=fps)
-    with writer.saving(fig, str(path), dpi=72):  # one render per frame
-        for st in states:
-            draw(st)
-            writer.grab_frame()
-    plt.close(fig)
+    # the static part (axes, titles, legend) is rendered once; each frame redraws only what moves
+    dynamic = [a for v in art.values() for a in (*v[0], *v[1:])]
+    _write_gif(fig, canvas, dynamic, states, draw, path, fps)
     final = states[-1]
     out = {"test_index": int(idx), "n_frames": len(states)}
     for key, name, details, _ in panels:
-        out[key] = {"label": f"{name} ({details})", "phase": final[key]["phase"], "true_phase": 1.0, "distance_m": final[key]["dist"]}
+        out[key] = {"label": f"{name} ({details})", "phase": final[key]["phase"], "true_phase": 1.0,
+                    "distance_m": final[key]["dist"]}
     return out
+
+
+def _write_gif(fig, canvas, dynamic, states, draw, path, fps):
+    """Write one GIF frame per state: the figure without the ``dynamic`` artists is rendered once, then per
+    frame it is restored, ``draw(state)`` updates the artists and only they are drawn (blitting)."""
+    from PIL import Image  # a dependency of matplotlib
+
+    for a in dynamic:
+        a.set_animated(True)
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    frames = []
+    for st in states:
+        canvas.restore_region(background)
+        draw(st)
+        for a in dynamic:
+            fig.draw_artist(a)
+        frames.append(Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy()))
+    frames[0].save(str(path), save_all=True, append_images=frames[1:], duration=int(round(1000 / fps)), loop=0)

@@ -54,6 +54,8 @@ def test_highfive_animation_numbers_are_those_of_predict_on_the_whole_observatio
         assert res[key]["phase"] == pytest.approx(pred.phase, abs=1e-12)
         assert res[key]["distance_m"] == pytest.approx(float(np.linalg.norm(end - goal)), abs=1e-9)
         assert res[key]["true_phase"] == 1.0
+        at_true = ca.hand(model.predict(d[:, :2], phase=1.0).trajectory(cfg.n_points)[-1, 2:])
+        assert res[key]["distance_at_true_phase_m"] == pytest.approx(float(np.linalg.norm(at_true - goal)), abs=1e-9)
     # the states behind the frames: every frame predicts from the frames seen; the robot ends at s = 1
     states = animation_states(models, test, 0, cfg, n_samples=2)
     assert len(states) == cfg.gif_frames

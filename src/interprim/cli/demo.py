@@ -118,7 +118,7 @@ def _nuisi_figure(action, demo, out):
     r = nuisi_realtime_figure(action, demo, out)
     names = {k: Path(v).name for k, v in r["files"].items()}
     (out / "nuisi_realtime.json").write_text(json.dumps(r, indent=1))
-    lines = [f"## Real time on a real interaction: NuiSI {action}, recording {demo} held out", "",
+    lines = ["", f"## Real time on a real interaction: NuiSI {action}, recording {demo} held out", "",
              f"Models fitted on the other {r['n_train']} recordings; after every frame, agent 2's right hand over "
              f"the next {r['horizon_s']:g} s (RMSE over the frames from 20 to 90 % seen):", ""]
     for label, m in r["models"].items():

@@ -589,7 +589,8 @@ def write_report(results) -> str:
         for key in ("default", "paper"):
             if key in a:
                 L.append(f"- {a[key]['label']}: with 100 % seen, estimated phase {a[key]['phase']:.2f} (true 1.00), "
-                         f"robot hand {100 * a[key]['distance_m']:.1f} cm from the high-five point")
+                         f"robot hand {100 * a[key]['distance_m']:.1f} cm from the high-five point "
+                         f"({100 * a[key]['distance_at_true_phase_m']:.1f} cm when conditioned at the true phase)")
         L += ["", "![animation](highfive.gif)", ""]
     L += ["## Run time", "", ", ".join(f"{k.replace('_s', '')}: {v:.1f} s" for k, v in t.items()), ""]
     return "\n".join(L)

@@ -271,7 +271,8 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
     dict
         ``test_index``, ``n_frames`` and, per panel key, the numbers of the last frame: ``phase`` (estimated
         with all frames seen), ``true_phase`` (1), ``distance_m`` (robot hand at the end of its predicted
-        response to the true high-five point) and ``label``.
+        response to the true high-five point), ``distance_at_true_phase_m`` (the same with the model conditioned
+        at the true phase instead of its estimate) and ``label``.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -338,8 +339,10 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
     final = states[-1]
     out = {"test_index": int(idx), "n_frames": len(states)}
     for key, name, details, _ in panels:
+        at_true = models[key].predict(d[:, :2], phase=1.0).trajectory(cfg.n_points)  # what the phase estimate costs
         out[key] = {"label": f"{name} ({details})", "phase": final[key]["phase"], "true_phase": 1.0,
-                    "distance_m": final[key]["dist"]}
+                    "distance_m": final[key]["dist"],
+                    "distance_at_true_phase_m": float(np.linalg.norm(ca.hand(at_true[-1, 2:]) - goal))}
     return out
 
 

@@ -229,3 +229,28 @@ def test_demo_nuisi_flag_is_checked_before_the_run(capsys, tmp_path):
     assert main(["demo", "--quick", "--quiet", "--out", str(tmp_path), "--nuisi", "wave1", "--nuisi-demo", "27"]) == 1
     assert "--nuisi-demo" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # nothing ran
+
+
+@needs_nuisi
+def test_demo_nuisi_section(monkeypatch, tmp_path, capsys):
+    """What ``interprim demo --nuisi`` adds: the figure files, nuisi_realtime.json and a report section whose numbers
+    are the figure's (fast models patched in; the code path is the demo's)."""
+    import json
+
+    from interprim.cli.demo import _nuisi_figure
+    from interprim.evaluation import realtime_plots
+
+    monkeypatch.setattr(realtime_plots, "NUISI_FIGURE_METHODS", {"fast": {"sigma2": 1e-3}})
+    (tmp_path / "report.md").write_text("# earlier part\n")
+    files = _nuisi_figure("wave1", 1, tmp_path)
+    assert files == {"nuisi_gif": "nuisi_wave1_01_realtime.gif", "nuisi_png": "nuisi_wave1_01_realtime.png",
+                     "nuisi_results": "nuisi_realtime.json"}
+    r = json.loads((tmp_path / "nuisi_realtime.json").read_text())
+    m = r["models"]["fast"]
+    report = (tmp_path / "report.md").read_text()
+    assert report.startswith("# earlier part\n")
+    line = f"fast: {100 * m['rt_ctrl']:.1f} cm vs clock {100 * m['clock_rt_ctrl']:.1f} cm ({m['rt_ctrl_vs_clock']:.2f}x)"
+    assert line in report and line in capsys.readouterr().out
+    assert "![gif](nuisi_wave1_01_realtime.gif)" in report
+    n, _ = _gif_frames(tmp_path / "nuisi_wave1_01_realtime.gif")
+    assert n == r["n_frames"] <= 60

@@ -25,7 +25,10 @@ Reproduce the simulated high-five of Ben Amor et al. (ICRA 2014, Sec. IV):
      observe 10 %, 20 %, ..., 100 % of the observed arm and predict both arms;
   4. write the figures (Fig. 5 set-up, Fig. 6 posterior samples, Fig. 7 errors
      with prior-mean and nearest-neighbour baselines, Fig. 8 goals), an animated
-     GIF of the IP controlling the arm online, report.md and results.json.
+     GIF of the library's defaults beside the paper's IP on a held-out high five,
+     report.md and results.json;
+  5. with --nuisi: the same kind of figure for one real NuiSI recording held out
+     (real-time prediction of the partner's hand with its 90 % band, and a clock).
 
 Takes about 30 s (under 2 minutes) on 2 cores; --quick takes about 10 s."""
 

@@ -120,4 +120,11 @@ def test_demo_quick_results_are_sane(quick_run):
     assert abs(r["phase"]["mean_estimate"][P.index(50)] - r["phase"]["mean_true"][P.index(50)]) < 0.1
     # the data really reach the goals
     assert r["data"]["max_hand_error_m"] < 1e-3
+    # the animation: the library's defaults beside the paper's IP, numbers of its last frame in results and report
+    a = r["animation"]
+    assert a["n_frames"] == r["config"]["gif_frames"] and a["test_index"] == r["fig6"]["example_test_index"]
+    for key in ("default", "paper"):
+        assert 0 < a[key]["phase"] <= 1 and a[key]["true_phase"] == 1.0
+        assert 0 <= a[key]["distance_m"] < 1 and 0 <= a[key]["distance_at_true_phase_m"] < 1
+        assert f"robot hand {100 * a[key]['distance_m']:.1f} cm" in (out / "report.md").read_text()
     assert "controlled" in format_summary(r)

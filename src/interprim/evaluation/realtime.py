@@ -102,12 +102,18 @@ def _timing(pred, k, dt, mean_dur_s):
 
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                  name: str = "method", fitted: bool = False) -> list:
+                  name: str = "method", fitted: bool = False, frames=None, trace: bool = False) -> list:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
     ``{"method", "k", "fraction", "phase_true", "phase", "phase_err", "rt_ctrl", "rt_obs", "cov_ctrl",
     "cov_obs", "z_ctrl", "z_obs"}`` (``z_*``: RMS error / RMS std over the horizon; NaN without a std).
+
+    ``frames``: the numbers of frames seen ``k`` to evaluate instead of the protocol's (``cfg.start`` to
+    ``cfg.stop``, every ``cfg.stride``-th), e.g. every frame for a figure.  ``trace=True`` adds what the
+    numbers were computed from to every record (for figures; not JSON-serialisable): ``"t_ahead"`` (seconds
+    after frame ``k``, ``(H,)``), ``"truth"`` (the held-out frames there, ``(H, D)``), ``"mean"`` and ``"std"``
+    (the prediction placed in time there, ``(H, D)``; ``std`` None without one).
     """
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
@@ -120,10 +126,15 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     T = test.shape[0]
     true_dur_s = (T - 1) * dt
     H = max(1, int(round(cfg.horizon / dt)))
-    k0 = max(3, int(math.ceil(cfg.start * T)))
-    k1 = max(k0, int(math.floor(cfg.stop * T)))
+    if frames is None:
+        k0 = max(3, int(math.ceil(cfg.start * T)))
+        k1 = max(k0, int(math.floor(cfg.stop * T)))
+        frames = range(k0, k1 + 1, max(1, int(cfg.stride)))
     out = []
-    for k in range(k0, k1 + 1, max(1, int(cfg.stride))):
+    for k in frames:
+        k = int(k)
+        if not 1 <= k <= T:
+            raise ValueError(f"frames must be numbers of frames seen in 1..{T}, got {k}")
         idx = np.minimum(np.arange(k, k + H), T - 1)  # frames k .. k+H-1 (0-based), held at the end
         t_ahead = (np.arange(1, H + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
         truth = test[idx]
@@ -155,6 +166,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
                 else:
                     rec[f"cov_{agent}"] = float("nan")
                     rec[f"z_{agent}"] = float("nan")
+            if trace:
+                rec.update(t_ahead=t_ahead, truth=truth, mean=Yh, std=Sh)
             out.append(rec)
     return out
 

@@ -172,69 +172,194 @@ def plot_fig8(ev, test, cfg, path, percent=60):
     plt.close(fig)
 
 
-def animate(model, test, idx, cfg, path, fps=15):
-    """GIF: the observed arm replays a test interaction; the controlled arm follows the IP's online response.
+#: Panels of the animation: (key of the ``models`` argument of :func:`animate`, name, details, colour).
+ANIMATION_PANELS = (
+    ("default", "library defaults", "positions, CV σ², likelihood phase", "tab:green"),
+    ("paper", "the paper's IP", "forcing values, DTW phase", "tab:red"),
+)
 
-    The controlled arm is driven by ``model.stream()``: after every observed frame the
-    prediction is updated, and the arm tracks the posterior-mean response at the
-    estimated phase (first-order tracking, time constant ~3 frames).  The dashed red
-    curve is the currently predicted hand path, the red cross the predicted goal.
+
+def _interp_rows(s, grid, Y):
+    """Rows of ``Y`` (on the normalised-time ``grid``) at ``s`` (a scalar, clipped to [0, 1])."""
+    s = min(max(float(s), 0.0), 1.0)
+    return np.array([np.interp(s, grid, Y[:, c]) for c in range(Y.shape[1])])
+
+
+def animation_states(models, test, idx, cfg, n_frames=None, n_samples=8):
+    """What :func:`animate` draws, frame by frame: batch predictions from the growing observation.
+
+    Observed frames: ``k = 3 .. T`` (evenly spread, the last one ``T``); for every model and frame,
+    ``model.predict(d[:k, :2])`` (the same call as the Fig. 7 evaluation), the robot arm at the posterior
+    mean at the estimated phase, ``n_samples`` posterior samples (same random draws in every frame) and
+    the predicted hand path.  Then a few *hold* frames: the human has stopped and the robot completes its
+    predicted response from the estimated phase to the end (``s = 1``) with the last prediction.  The
+    robot hand--goal distance is that of the drawn robot hand (forward kinematics) from the true
+    high-five point; in the last frame it is the distance of the end of the predicted response.
+
+    Returns
+    -------
+    states : list of dict
+        One per frame: ``k`` (frames seen), ``hold`` (bool) and, per model key, ``phase``, ``s_robot``
+        (where on the predicted response the robot is), ``q`` (robot joint angles), ``hand``, ``dist``
+        (m), ``path`` (predicted hand path from ``s_robot`` to the end), ``cloud`` (sampled hand paths)
+        and ``end`` (predicted end of the hand).
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import PillowWriter
+    ca = test.controlled_arm
+    d = test.demos[idx]
+    T = len(d)
+    n_frames = int(cfg.gif_frames if n_frames is None else n_frames)
+    n_hold = max(2, n_frames // 8)
+    ks = np.unique(np.linspace(3, T, max(2, n_frames - n_hold)).round().astype(int))
+    grid = np.linspace(0.0, 1.0, cfg.n_points)
+    goal = np.asarray(test.goals[idx], dtype=float)
+    states = []
+    last = {}
+    for k in ks:
+        st = {"k": int(k), "hold": False}
+        for key, model in models.items():
+            pred = model.predict(d[:k, :2])
+            traj = pred.trajectory(cfg.n_points)
+            S = pred.samples(n_samples, cfg.n_points, random_state=cfg.seed) if n_samples else None
+            last[key] = (pred.phase, traj, S)
+            st[key] = _panel_state(ca, goal, grid, pred.phase, pred.phase, traj, S)
+        states.append(st)
+    for j in range(1, n_hold + 1):  # the human has stopped; the robot finishes its predicted response
+        st = {"k": T, "hold": True}
+        for key, (ph, traj, S) in last.items():
+            st[key] = _panel_state(ca, goal, grid, ph, ph + (1.0 - ph) * j / n_hold, traj, S)
+        states.append(st)
+    return states
 
+
+def _panel_state(ca, goal, grid, phase, s_robot, traj, S):
+    q = _interp_rows(s_robot, grid, traj[:, 2:])
+    hand = ca.hand(q)
+    fut = grid >= s_robot - 1e-12
+    hp = ca.hand(traj[:, 2:])
+    return {
+        "phase": float(phase), "s_robot": float(s_robot), "q": q, "hand": hand,
+        "dist": float(np.linalg.norm(hand - goal)),
+        "path": np.vstack([hand, hp[fut]]), "end": hp[-1],
+        "cloud": None if S is None else ca.hand(S[:, fut, 2:]),
+    }
+
+
+def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
+    """GIF: the library's defaults beside the paper's IP on one held-out simulated high five.
+
+    Each panel replays the observed (human) arm of test interaction ``idx``; the controlled (robot) arm
+    follows the posterior-mean response of that panel's model at its estimated phase, predicted from the
+    frames seen so far; the faint cloud is ``n_samples`` posterior samples of the robot's hand path (their
+    spread is the model's predictive uncertainty), the dashed curve the mean path still to come.  After
+    the human's last frame the robot completes its predicted response (see :func:`animation_states`).
+
+    Parameters
+    ----------
+    models : dict
+        ``{"default": fitted model, "paper": fitted model}`` (keys of :data:`ANIMATION_PANELS`; a missing
+        key drops its panel).
+    test : HighFiveData
+    idx : int
+        Test interaction shown.
+    cfg : HighFiveConfig
+        ``gif_frames`` (frames of the GIF), ``n_points``, ``seed``.
+    path : str or Path
+        Where the GIF is written.
+
+    Returns
+    -------
+    dict
+        ``test_index``, ``n_frames`` and, per panel key, the numbers of the last frame: ``phase`` (estimated
+        with all frames seen), ``true_phase`` (1), ``distance_m`` (robot hand at the end of its predicted
+        response to the true high-five point), ``distance_at_true_phase_m`` (the same with the model conditioned
+        at the true phase instead of its estimate) and ``label``.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    panels = [p for p in ANIMATION_PANELS if p[0] in models]
+    if not panels:
+        raise ValueError(f"models must contain some of {[p[0] for p in ANIMATION_PANELS]}, got {list(models)}")
+    states = animation_states({p[0]: models[p[0]] for p in panels}, test, idx, cfg, n_samples=n_samples)
     oa, ca = test.observed_arm, test.controlled_arm
     d = test.demos[idx]
     T = len(d)
-    n_hold = max(3, T // 10)
-    stream = model.stream()
-    q_ctrl = ca.rest.copy()
-    states = []
-    s_grid = np.linspace(0.0, 1.0, cfg.n_points)
-    pred = None
-    for t in range(T + n_hold):
-        if t < T:
-            try:  # the mean is enough here; skip the posterior covariance where the core allows it
-                pred = stream.update(d[t, :2], need_cov=False)
-            except TypeError:
-                pred = stream.update(d[t, :2])
-        traj = pred.trajectory(cfg.n_points)
-        target = np.array([np.interp(min(pred.phase, 1.0) if t < T else 1.0, s_grid, traj[:, c]) for c in range(2, 5)])
-        q_ctrl = q_ctrl + 0.35 * (target - q_ctrl)
-        states.append((min(t, T - 1), q_ctrl.copy(), ca.hand(traj[:, 2:]), ca.hand(pred.goal[2:]), pred.phase))
-    sel = np.unique(np.linspace(0, len(states) - 1, max(2, cfg.gif_frames)).round().astype(int))
-
-    fig, ax = plt.subplots(figsize=(4.4, 4.4))
-    _setup_axes(ax)
-    ax.set_title("IP controls the right arm online", fontsize=9)
-    ax.plot(*test.goals[idx], "o", mfc="none", mec="k", ms=10, label="true high-five point")
-    obs_line = _draw_arm(ax, oa, d[0, :2], color="tab:blue", label="observed (replayed)")
-    ctrl_line = _draw_arm(ax, ca, ca.rest, color="tab:green", label="controlled (IP)")
-    (trace,) = ax.plot([], [], color="tab:blue", lw=1)
-    (path_line,) = ax.plot([], [], "--", color="tab:red", lw=1, label="predicted hand path")
-    (goal_pt,) = ax.plot([], [], "x", color="tab:red", ms=9, mew=2)
-    txt = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8)
-    ax.legend(loc="lower center", fontsize=6.5)
-    fig.tight_layout()
     obs_hand = oa.hand(d[:, :2])
+    goal = test.goals[idx]
 
-    def draw(f):
-        t, qc, hp, g, ph = states[sel[f]]
-        po = oa.forward_kinematics(d[t, :2])
-        pc = ca.forward_kinematics(qc)
-        obs_line.set_data(po[:, 0], po[:, 1])
-        ctrl_line.set_data(pc[:, 0], pc[:, 1])
-        trace.set_data(obs_hand[: t + 1, 0], obs_hand[: t + 1, 1])
-        path_line.set_data(hp[:, 0], hp[:, 1])
-        goal_pt.set_data([g[0]], [g[1]])
-        txt.set_text(f"seen {100 * (t + 1) / T:3.0f} %   estimated phase {ph:.2f}")
-        return obs_line, ctrl_line, trace, path_line, goal_pt, txt
+    fig = Figure(figsize=(4.3 * len(panels), 4.7), dpi=72)
+    canvas = FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False)
+    art = {}
+    for ax, (key, name, details, col) in zip(axes[0], panels):
+        _setup_axes(ax, f"{name}\n({details})")
+        ax.set_xlim(-0.2, 1.8)
+        ax.set_ylim(-1.35, 0.95)
+        ax.plot(*goal, "o", mfc="none", mec="k", ms=11, mew=1.5, zorder=6)
+        cloud = [ax.plot([], [], color=col, lw=0.6, alpha=0.3)[0] for _ in range(n_samples)]
+        (trace,) = ax.plot([], [], color="tab:blue", lw=1)
+        obs_line = _draw_arm(ax, oa, d[0, :2], color="tab:blue")
+        ctrl_line = _draw_arm(ax, ca, ca.rest, color=col)
+        (path_line,) = ax.plot([], [], "--", color=col, lw=1.2)
+        (end_pt,) = ax.plot([], [], "x", color=col, ms=9, mew=2)
+        txt = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=7.5)
+        art[key] = (cloud, trace, obs_line, ctrl_line, path_line, end_pt, txt)
+    handles = [Line2D([], [], ls="", marker="o", mfc="none", mec="k", ms=9, mew=1.5, label="true high-five point"),
+               Line2D([], [], color="tab:blue", lw=3, marker="o", ms=5, label="human (replayed; its hand's path)")]
+    handles += [Line2D([], [], color=col, lw=3, marker="o", ms=5, label=f"robot, {name}: predicted mean")
+                for _, name, _, col in panels]
+    handles += [Line2D([], [], color="0.3", ls="--", lw=1.2, label="predicted hand path to come (x: its end)"),
+                Line2D([], [], color="0.3", lw=0.6, alpha=0.4, label=f"{n_samples} posterior samples of it")]
+    fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=7, frameon=False)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.235, wspace=0.18)
 
-    writer = PillowWriter(fps=fps)
-    with writer.saving(fig, str(path), dpi=72):  # one render per frame
-        for f in range(len(sel)):
-            draw(f)
-            writer.grab_frame()
-    plt.close(fig)
+    def draw(st):
+        k = st["k"]
+        po = oa.forward_kinematics(d[k - 1, :2])
+        for key, *_ in panels:
+            cloud, trace, obs_line, ctrl_line, path_line, end_pt, txt = art[key]
+            ps = st[key]
+            obs_line.set_data(po[:, 0], po[:, 1])
+            trace.set_data(obs_hand[:k, 0], obs_hand[:k, 1])
+            pc = ca.forward_kinematics(ps["q"])
+            ctrl_line.set_data(pc[:, 0], pc[:, 1])
+            path_line.set_data(ps["path"][:, 0], ps["path"][:, 1])
+            end_pt.set_data([ps["end"][0]], [ps["end"][1]])
+            for i, line in enumerate(cloud):
+                c = ps["cloud"][i] if ps["cloud"] is not None else np.empty((0, 2))
+                line.set_data(c[:, 0], c[:, 1])
+            note = "human stopped: robot completes its response" if st["hold"] else ""
+            txt.set_text(f"seen {100 * k / T:.0f} %, estimated phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
+                         f"robot hand–goal distance {100 * ps['dist']:.1f} cm\n{note}")
+
+    # the static part (axes, titles, legend) is rendered once; each frame redraws only what moves
+    dynamic = [a for v in art.values() for a in (*v[0], *v[1:])]
+    _write_gif(fig, canvas, dynamic, states, draw, path, fps)
+    final = states[-1]
+    out = {"test_index": int(idx), "n_frames": len(states)}
+    for key, name, details, _ in panels:
+        at_true = models[key].predict(d[:, :2], phase=1.0).trajectory(cfg.n_points)  # what the phase estimate costs
+        out[key] = {"label": f"{name} ({details})", "phase": final[key]["phase"], "true_phase": 1.0,
+                    "distance_m": final[key]["dist"],
+                    "distance_at_true_phase_m": float(np.linalg.norm(ca.hand(at_true[-1, 2:]) - goal))}
+    return out
 
 
+def _write_gif(fig, canvas, dynamic, states, draw, path, fps):
+    """Write one GIF frame per state: the figure without the ``dynamic`` artists is rendered once, then per
+    frame it is restored, ``draw(state)`` updates the artists and only they are drawn (blitting)."""
+    from PIL import Image  # a dependency of matplotlib
+
+    for a in dynamic:
+        a.set_animated(True)
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    frames = []
+    for st in states:
+        canvas.restore_region(background)
+        draw(st)
+        for a in dynamic:
+            fig.draw_artist(a)
+        frames.append(Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy()))
+    frames[0].save(str(path), save_all=True, append_images=frames[1:], duration=int(round(1000 / fps)), loop=0)

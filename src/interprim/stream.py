@@ -1,9 +1,9 @@
 """Online use of a fitted Interaction Primitive: one observed frame at a time (paper Sec. III-B/C/D).
 
-:class:`Stream` keeps the frames seen, the incremental open-end DTW (Eq. 5-8) or the
-likelihood phase tracker, and the state of the incremental conditioning
-(:class:`_IncrementalConditioning`: Eq. 16-18 updated by rank one while the frames seen keep
-their phases), and returns a :class:`~interprim.prediction.Prediction` per frame.
+:class:`Stream` keeps the frames seen and the incremental open-end DTW (Eq. 5-8) or the
+likelihood phase tracker (:class:`interprim.phase.tracking._Tracker`, which ends where the batch
+search ends), conditions on all frames seen at the phase found (Eq. 15-18), and returns a
+:class:`~interprim.prediction.Prediction` per frame: the one ``predict`` gives for the same frames.
 """
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ def lowrank_condition_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, o
 def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc, out, T, K, Kpre, Ws, ca):
     """Body of :func:`lowrank_condition_mean`: ``T`` (D_o, q, q) receives the lower Cholesky factors of the
     ``T_i``, ``K`` (r, r) that of ``K``; when ``Kpre`` is ``(r, r)`` (not empty) it receives the lower
-    triangle of ``K`` before factorisation (the state of :func:`lowrank_condition_step`).  Workspaces:
+    triangle of ``K`` before factorisation.  Workspaces:
     ``Ws`` (1 or D_o, q, r), which keeps ``L_i^{-1} Uh_i`` when it has ``D_o`` entries, and ``ca``
     (3, D_o, q), which keeps ``c_i`` (``ca[0]``) and ``a_i = T_i^{-1} S_i c_i`` (``ca[1]``)."""
     Do, q, r = Uh.shape

@@ -612,14 +612,16 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "| frames T | online median | online, last 10 % | predict (T/2 frames) |", "|---|---|---|---|"]
     md += [f"| {T} | {fmt_t(a)} | {fmt_t(b)} | {fmt_t(c)} |" for T, a, b, c in scal["length"]]
     md += ["", "## How cost grows", "",
-           "- **Phase** per online frame: the likelihood phase (default) scores 7 candidate speeds on a fixed "
-           "log-lattice; a lattice point seen at the previous frame keeps its statistics and dense factors and "
-           "adds the new frame by rank-1 updates, O(D_o (q^2 + q r) + r^3) per candidate, independent of M "
+           "- **Phase** per online frame: the likelihood phase (default) scores 3 candidate speeds 1 % apart on "
+           "a fixed log-lattice (more when the best one is at an edge of them); a lattice point seen at the previous frame keeps its statistics and dense factors "
+           "and adds the new frame by rank-1 updates, O(D_o (q^2 + q r) + r^3) per candidate, independent of M "
            "(a point entering the window, or clipped at s = 1, is scored from scratch: O(M q (q + D_o)) for the "
-           "statistics in 64-frame blocks plus O(D_o (q^3 + q^2 r + q r^2))); the paper's DTW phase is one DTW "
-           "column O(N D_o).  Batch predict with the likelihood phase: ~18 candidates (12-point grid + Brent "
-           "refinement), each O(M q (q + D_o)) + O(D_o (q^3 + q^2 r + q r^2)): at the reference size ~40 us of "
-           "dense factorisation + 0.08 us per observed frame per candidate, ~1.1 ms of the batch predict.",
+           "statistics in 64-frame blocks plus O(D_o (q^3 + q^2 r + q r^2))); then the batch search's last step "
+           "(a parabola through the best lattice points, then one through 3 points 0.2 % apart: about 3 "
+           "evaluations from scratch per frame) so that the stream's phase is predict's; the paper's DTW phase is "
+           "one DTW column O(N D_o).  Batch predict with the likelihood phase: ~22 candidates (12-point grid, "
+           "Brent refinement, the last parabolas), each O(M q (q + D_o)) + O(D_o (q^3 + q^2 r + q r^2)): at the "
+           "reference size ~40 us of dense factorisation + 0.08 us per observed frame per candidate.",
            "- **Online step**, per frame with M frames seen, N reference frames, D_o observed DoF, q = n_basis + 1, "
            "r <= number of demonstrations (rank of the prior's low-rank part), P parameters: DTW column O(N D_o); "
            "observation statistics O(M q (q + D_o)) -- every earlier frame moves to a new phase when n* changes, so "

@@ -370,7 +370,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
             e, c = _slot_errors(st._tracker, st._buf[: k + 1])
             worst = np.maximum(worst, e)
             n_checked += c
-    assert n_checked > 5 * frames.shape[0]
+    assert n_checked > 2 * frames.shape[0]  # 3 lattice candidates per frame, fewer where clipped ones merge
     assert worst[0] < 1e-12
     assert worst[1] < 1e-10
     assert worst[2] < 1e-10

@@ -90,20 +90,19 @@ def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
 class _Tracker:
     """Online phase of one :class:`~interprim.primitive.Stream` (the likelihood phase, local search).
 
-    Like :func:`track_phase`, each frame scores ``n_candidates`` phases within ``exp(+-spread)`` of the
-    constant-speed extrapolation of the previous estimate; here the candidates are *speeds* on a fixed
-    lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread / (n_candidates - 1)``, anchored at the first estimate
-    (``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
-    to ``[_S_MIN, 1]`` (clipped candidates merged).  Without clipping these are :func:`track_phase`'s
-    candidates (whose chosen speeds also stay on such a lattice, up to rounding); after a clipped choice the
-    lattice keeps its index (the nearest unclipped-side point) where :func:`track_phase` would restart from the
-    clipped value.  Frame ``m`` of lattice point ``j`` always sits at phase ``v_j m``, so the compiled step
-    (:func:`interprim._compiled.phase_likelihood.track_step`) extends each point's statistics and factors by the new frame
-    (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them (``O(M q (q + D_o) + D_o q^2 n + ...)``).
+    The candidates are *speeds* on a fixed lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread /
+    (n_candidates - 1)`` (default: 3 candidates 1 % apart), anchored at the first estimate (the batch search's,
+    ``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
+    to ``[_S_MIN, 1]`` (clipped candidates merged).  Frame ``m`` of lattice point ``j`` always sits at phase
+    ``v_j m``, so the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
+    point's statistics and factors by the new frame (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them
+    (``O(M q (q + D_o) + D_o q^2 n + ...)``).  While the best candidate is at an unclipped edge the window is
+    re-centred on it (:meth:`_lattice_step`); the phase returned is then taken off the lattice to the maximum
+    of the log posterior by :func:`~interprim.phase.likelihood._finish`, the batch search's own last step.
     Without the kernel (or with a dense prior) the same candidates are scored from scratch.
     """
 
-    def __init__(self, model, n_candidates: int = 7, spread: float = 0.03, speed_prior: bool = True):
+    def __init__(self, model, n_candidates: int = 3, spread: float = 0.01, speed_prior: bool = True):
         if n_candidates < 1 or n_candidates % 2 == 0:
             raise ValueError("n_candidates must be odd")
         self.model = model
@@ -201,4 +200,4 @@ class _Tracker:
         return cand, lp, int(np.searchsorted(cand, s))
 
 
-_MAX_HOPS = 4  # window re-centrings per frame before a full search (each moves the speed by up to exp(spread))
+_MAX_HOPS = 8  # window re-centrings per frame before a full search (each moves the speed by up to exp(spread))

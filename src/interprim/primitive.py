@@ -94,24 +94,24 @@ class InteractionPrimitive:
         Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
-    phase_method : {"likelihood", "dtw", "learned", "auto"}, default "likelihood"
-        ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
-        prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
-        recordings of people, where the likelihood phase is not; worse on clean simulated data.  ``"auto"``
-        (experimental): whichever of the two has the smaller held-out phase error on the training
-        demonstrations (``phase_method_``); the likelihood error it compares is measured on a coarse grid and
-        can favour "learned" where it is worse (the simulated high five of ``interprim demo``).
-        How ``predict`` estimates the phase: the maximum of the marginal
-        likelihood of the observed positions under the learned prior over
-        candidate phases, with a log-normal prior on the partner's speed learned
-        from the demonstrations (:mod:`interprim.phase.likelihood`; ``Stream`` uses a
-        local search around its previous estimate), or the paper's open-end DTW
-        (Eq. 5-9).  The likelihood is the default: on demonstrations that differ in
-        goal, DTW confuses "further along" with "aiming further" (phase errors
-        0.1-0.2 of the movement on the built-in data, 0.03-0.22 on NuiSI), the
-        likelihood does not (0.01-0.03).  DTW is faster (online step ~0.2 ms vs
-        ~0.8 ms at 7+7 DoF) and better for movements much faster or slower than
-        every demonstration (0.7x / 1.5x), which the speed prior penalises.
+    phase_method : {"auto", "likelihood", "learned", "dtw"}, default "auto"
+        How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
+
+        * ``"likelihood"``: the maximum of the marginal likelihood of the observed positions under the learned
+          prior over candidate phases, with a log-normal prior on the partner's speed learned from the
+          demonstrations (:mod:`interprim.phase.likelihood`; a stream tracks it and ends where the batch search
+          ends).  On demonstrations that differ in goal, DTW confuses "further along" with "aiming further"
+          (phase errors 0.1-0.2 of the movement on the built-in data), the likelihood does not (0.003-0.016).
+        * ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
+          prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
+          recordings of people (NuiSI: 0.71x its error), where the likelihood phase is not; worse on clean
+          simulated data.
+        * ``"auto"`` (default): whichever of the two has the smaller held-out phase error on the training
+          demonstrations (``phase_method_``; both figures in ``selection_``: ``phase_error_refined`` and
+          ``learned_phase_error``).  It picks the likelihood on the built-in simulated and synthetic data and
+          the learned phase on all six NuiSI interactions.
+        * ``"dtw"``: the paper's open-end DTW (Eq. 5-9); faster, and better for movements much faster or slower
+          than every demonstration (0.7x / 1.5x), which the speed prior penalises.
     input_noise : float, optional
         Standard deviation (data units; latent units after PCA) of noise in the
         online observations that the demonstrations do not have: sensor noise
@@ -134,7 +134,7 @@ class InteractionPrimitive:
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "likelihood",
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "auto",
                  input_noise: float | None = None, calibrate="auto"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis

@@ -88,13 +88,13 @@ def fit_phase_model(model, observed_latent, dt: float):
         return None, method
     from .learned import LearnedPhase
 
-    lp = LearnedPhase().fit(observed_latent, dt=dt)
     if method == "learned":
-        return lp, "learned"
-    sel = getattr(model, "selection_", None) or {}
-    lik = sel.get("phase_error_refined")
-    lik = np.inf if lik is None else float(lik)
-    if isinstance(getattr(model, "selection_", None), dict):  # both figures of the choice, for the user
-        model.selection_["learned_phase_error"] = float(lp.cv_error_)
-        model.selection_["clock_phase_error"] = float(lp.cv_error_clock_)
-    return (lp, "learned") if float(lp.cv_error_) < lik else (None, "likelihood")
+        return LearnedPhase().fit(observed_latent, dt=dt), "learned"
+    sel = getattr(model, "selection_", None)
+    lik = (sel or {}).get("phase_error_refined")
+    if lik is None or len(observed_latent) < 3:  # no held-out measure to compare with: the likelihood phase
+        return None, "likelihood"
+    lp = LearnedPhase().fit(observed_latent, dt=dt)
+    sel["learned_phase_error"] = float(lp.cv_error_)  # both figures of the choice, for the user
+    sel["clock_phase_error"] = float(lp.cv_error_clock_)
+    return (lp, "learned") if float(lp.cv_error_) < float(lik) else (None, "likelihood")

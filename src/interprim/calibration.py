@@ -81,13 +81,16 @@ def _fill(x):
     return x
 
 
-def fold_model(model, keep):
+def fold_model(model, keep, observed=None):
     """A copy of a fitted ``model`` whose prior (Eq. 10) is re-estimated from the demonstrations ``keep`` only,
     with the hyper-parameters ``model`` chose (shrinkage ``lambda``, cross-agent damping ``gamma``, ``sigma^2``,
     phase noise): the model a fold of cross-validation would have, without repeating the selection.
 
     The DMP basis, PCA, start state and DTW reference stay those of ``model`` (they use all demonstrations: a
-    small optimism of the calibration, far smaller than the prior's share)."""
+    small optimism of the calibration, far smaller than the prior's share).  A learned phase model
+    (``phase_model_``) is refitted on the kept demonstrations' observed columns ``observed`` (one array per
+    demonstration, the model's latent space) when given: it is fitted on the very prefixes it is asked about,
+    and kept as is it would make the held-out timing, and so the calibrated band, optimistic."""
     import copy
 
     from .gaussian import fit_prior, shrink_cross
@@ -103,6 +106,11 @@ def fold_model(model, keep):
     gamma = float((getattr(model, "selection_", None) or {}).get("cross_shrinkage", 0.0) or 0.0)
     shrink_cross(m.prior_, gamma, model.n_observed_latent_ * model._q)
     m.calibration_ = None
+    if observed is not None and getattr(model, "phase_model_", None) is not None:
+        from .phase.learned import LearnedPhase
+
+        m.phase_model_ = LearnedPhase(**model.phase_model_.get_params()).fit([observed[i] for i in keep],
+                                                                             dt=model.dt_)
     return m
 
 
@@ -136,6 +144,10 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
         return None
     dt = float(model.dt_)
     obs = [int(i) for i in model.observed_dofs_]
+    observed = None
+    if getattr(model, "phase_model_", None) is not None:  # refitted per fold (fold_model)
+        n_o = model.n_observed_latent_
+        observed = [np.asarray(model._observed_to_latent(d[:, obs]))[:, :n_o] for d in demos]
     ctrl = [int(i) for i in model.controlled_dofs_]
     D = demos[0].shape[1]
     spread = np.std(np.concatenate(demos, axis=0), axis=0)
@@ -150,7 +162,7 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
     grid = np.linspace(0.0, 1.0, n)
     for f in range(k):
         held = set(range(edges[f], edges[f + 1]))
-        m = fold_model(model, [i for i in range(S) if i not in held])
+        m = fold_model(model, [i for i in range(S) if i not in held], observed)
         for j in sorted(held):
             d = demos[j]
             T = d.shape[0]

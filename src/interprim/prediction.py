@@ -171,9 +171,13 @@ class Prediction:
         s = np.linspace(0.0, 1.0, int(n))
         _, H = m.rollout_.design(0.0, s)
         C = self.posterior_cov.reshape(m.n_latent_, m._q, m.n_latent_, m._q)
-        S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
         M, _ = m._latent_map()
-        var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
+        if M.shape[0] == M.shape[1] and np.array_equal(M, np.eye(M.shape[0])):  # no PCA: the diagonal blocks
+            d = np.arange(m.n_latent_)
+            var = np.einsum("tq,dqr,tr->td", H, C[d, :, d, :], H, optimize=True)
+        else:
+            S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
+            var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
         return np.sqrt(np.clip(var, 0.0, None))
 
     def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:

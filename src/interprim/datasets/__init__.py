@@ -22,10 +22,8 @@ from ._base import DataNotFoundError, Demonstrations, data_dir
 from .character_trajectories import load_character_trajectories
 from .files import load_demonstrations, save_demonstrations
 from .lasa import lasa_shapes, load_lasa
-from .mocap_bvh import load_bvh
-from .mocap_c3d import load_c3d
 from .nuisi import JOINT_GROUPS, NUISI_JOINTS, load_nuisi, nuisi_actions
-from .ros_bags import load_rosbag
+from .recordings import load_bvh, load_c3d, load_rosbag
 
 __all__ = [
     "Demonstrations",

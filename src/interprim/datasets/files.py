@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import DataFileError
 from ._base import DataNotFoundError, Demonstrations, select_columns, uniform_dt
+from ._checks import _check_frames, _check_times, _fill_nans
 
 __all__ = ["load_demonstrations", "save_demonstrations"]
 
@@ -48,61 +49,6 @@ def _natural_key(p: Path):
 
 
 # --------------------------------------------------------------------------- checks
-def _fill_nans(y, max_nan_gap, where, row_of):
-    """Interpolate interior NaN runs of at most ``max_nan_gap`` frames; reject any other NaN."""
-    bad = np.isnan(y)
-    if not bad.any():
-        return y
-    y = y.copy()
-    for d in range(y.shape[1]):
-        col = bad[:, d]
-        if not col.any():
-            continue
-        i = 0
-        T = col.shape[0]
-        while i < T:
-            if not col[i]:
-                i += 1
-                continue
-            j = i
-            while j < T and col[j]:
-                j += 1
-            run = j - i
-            if run > max_nan_gap or i == 0 or j == T:
-                why = (
-                    "missing value(s)"
-                    if max_nan_gap == 0
-                    else ("a run of missing values at the start or end" if (i == 0 or j == T) else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
-                )
-                edge = i == 0 or j == T  # interpolation cannot fill a run at the start or end
-                raise DataFileError(
-                    f"{where(d)}: {why} starting at {row_of(i)} ({run} frame(s)); fill or cut them"
-                    + ("" if edge else f", or interpolate interior gaps of up to {run} frames with max_nan_gap={run}")
-                )
-            y[i:j, d] = np.interp(np.arange(i, j), [i - 1, j], [y[i - 1, d], y[j, d]])
-            i = j
-    return y
-
-
-def _check_times(t, where, row_of):
-    if not np.all(np.isfinite(t)):
-        i = int(np.argmax(~np.isfinite(t)))
-        raise DataFileError(f"{where}: missing or non-finite time at {row_of(i)}")
-    d = np.diff(t)
-    if np.any(d <= 0):
-        i = int(np.argmax(d <= 0)) + 1
-        raise DataFileError(
-            f"{where}: time must be strictly increasing, but {row_of(i)} has time {float(t[i])!r} "
-            f"after {float(t[i - 1])!r}"
-        )
-
-
-def _check_frames(n, min_frames, where):
-    if n < min_frames:
-        raise DataFileError(f"{where}: only {n} frame(s), at least {min_frames} are needed")
-
-
-# --------------------------------------------------------------------------- CSV
 def _read_csv(path: Path, dt, max_nan_gap, min_frames):
     """Parse one CSV file into (demos, times, columns, labels, meta)."""
     try:
@@ -394,9 +340,9 @@ def load_demonstrations(
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
     The format follows the extension (see ``docs/data-formats.md``): ``.csv``, ``.npz``,
-    ``.c3d`` (:func:`~interprim.datasets.mocap_c3d.load_c3d`), ``.bvh``
-    (:func:`~interprim.datasets.mocap_bvh.load_bvh`), ``.bag``/``.db3``/``.mcap`` or a rosbag2
-    folder with ``metadata.yaml`` (:func:`~interprim.datasets.ros_bags.load_rosbag`); any other
+    ``.c3d`` (:func:`~interprim.datasets.recordings.load_c3d`), ``.bvh``
+    (:func:`~interprim.datasets.recordings.load_bvh`), ``.bag``/``.db3``/``.mcap`` or a rosbag2
+    folder with ``metadata.yaml`` (:func:`~interprim.datasets.recordings.load_rosbag`); any other
     folder is read file by file (every ``.csv``, ``.npz``, ``.c3d``, ``.bvh``, ``.bag``, ``.db3``
     and ``.mcap`` in it, natural order).  Every problem is reported as a
     :class:`~interprim.errors.DataFileError` naming the file and the position: the line (CSV,

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import DataFileError
 
-__all__ = ["load_bvh", "read_bvh"]
+__all__ = ["read_bvh"]
 
 _ROT = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -223,7 +223,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
 
     See :func:`load_bvh` for the parameters.
     """
-    from .files import _check_frames, _fill_nans
+    from ._checks import _check_frames, _fill_nans
     from .mocap_c3d import metres_per_unit
 
     path = Path(path)
@@ -326,44 +326,3 @@ def _is_number(v):
     except ValueError:
         return False
     return True
-
-
-def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites=False, max_nan_gap: int = 0,
-             min_frames: int = 5):
-    """Load a BVH skeleton recording (or a folder of them; one demonstration per file).
-
-    Parameters
-    ----------
-    path : str or Path
-        A ``.bvh`` file or a folder of ``.bvh`` files (natural order; same skeleton in all).
-    mode : {"positions", "angles"}
-        ``"positions"``: the world position of every joint by forward kinematics, columns
-        ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (in the file's length unit, or in metres
-        when ``length_unit`` is given).  ``"angles"``: every rotation channel, columns
-        ``<joint>_<channel>`` (e.g. ``RightArm_Zrotation``) in **radians**, unwrapped over time
-        so that a turn through +-180 degrees does not jump; the root's translation channels
-        are not included.
-    joints : sequence of str or str, optional
-        Joints to keep, in this order (default all, in the file's order).
-    length_unit : str, optional
-        The unit of the file's lengths (BVH does not say; ``"cm"`` is common, some
-        exporters use ``"m"`` or ``"in"``).  Given, positions are converted to
-        metres and ``Demonstrations.units`` is ``"m"``; otherwise they are kept in the file's
-        unit and the units are unknown (``None``).
-    end_sites : bool
-        With ``mode="positions"``, also the ``End Site`` points, columns ``<joint>_end_x``, ...
-    max_nan_gap : int
-        Longest interior run of missing values (``nan`` in the file), in frames, filled by
-        linear interpolation (default 0: none).
-    min_frames : int
-        Fewest frames a file may have (default 5).
-
-    Returns
-    -------
-    Demonstrations
-        Time stamps ``k * Frame Time`` seconds.
-    """
-    from .files import load_demonstrations
-
-    return load_demonstrations(path, bvh_mode=mode, joints=joints, length_unit=length_unit, end_sites=end_sites,
-                               max_nan_gap=max_nan_gap, min_frames=min_frames)

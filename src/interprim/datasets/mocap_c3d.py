@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import DataFileError, MissingExtraError
 
-__all__ = ["load_c3d", "read_c3d", "LENGTH_UNITS"]
+__all__ = ["read_c3d", "LENGTH_UNITS"]
 
 #: Metres per unit, for C3D ``POINT:UNITS`` and BVH ``length_unit`` values (lower case, stripped).
 LENGTH_UNITS = {
@@ -88,7 +88,7 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
 
     See :func:`load_c3d` for the parameters and what is read.
     """
-    from .files import _check_frames, _fill_nans  # the CSV/NPZ reader's rules for gaps and lengths
+    from ._checks import _check_frames, _fill_nans  # the CSV/NPZ reader's rules for gaps and lengths
 
     c3d = _import_c3d()
     path = Path(path)
@@ -180,46 +180,3 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
     t = np.arange(n_frames) / rate
     meta = {"units": ["m"] * len(columns)}
     return [y], [t], columns, [path.stem], meta
-
-
-def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5):
-    """Load the marker trajectories of a C3D motion-capture file (or a folder of them).
-
-    Each file is one demonstration.  Every marker becomes three columns ``<marker>_x``,
-    ``<marker>_y``, ``<marker>_z`` in the file's order (labels from ``POINT:LABELS``, then
-    ``LABELS2``, ...), **converted to metres** from the file's ``POINT:UNITS`` (``mm`` is the
-    usual unit; ``cm``, ``m``, ``in`` and ``ft`` are understood; a file without ``POINT:UNITS``
-    is taken as millimetres).  ``Demonstrations.units`` is ``"m"`` for every column.  Points
-    the file lists as model outputs (``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS``,
-    ``SCALARS``, ``REACTIONS``) are not markers and are left out.
-
-    Time stamps are ``k / POINT:RATE`` seconds for frame ``k`` counted from 0 at the file's
-    first frame.  A marker that is missing in a frame (residual < 0, or the coordinates
-    ``(0, 0, 0)``, which some exporters write for a lost marker) is a missing value: interior
-    gaps of up to ``max_nan_gap`` frames are filled by linear interpolation, any other gap is a
-    :class:`~interprim.errors.DataFileError` naming the file, the marker and the frame number
-    (as the capture software numbers it).
-
-    Parameters
-    ----------
-    path : str or Path
-        A ``.c3d`` file or a folder of them (natural order, one demonstration per file;
-        all files must have the same markers).
-    markers : sequence of str or str, optional
-        Marker labels to keep, in this order (default all markers).
-    length_unit : str, optional
-        Overrides the file's ``POINT:UNITS`` (for files that state a wrong unit).
-    max_nan_gap : int
-        Longest interior gap (frames) filled by interpolation (default 0: none).
-    min_frames : int
-        Fewest frames a file may have (default 5).
-
-    Returns
-    -------
-    Demonstrations
-    """
-    from .files import load_demonstrations
-
-    return load_demonstrations(
-        path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames
-    )

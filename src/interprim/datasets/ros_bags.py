@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import DataFileError, MissingExtraError
 
-__all__ = ["load_rosbag", "read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
+__all__ = ["read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
 
 ROS_SUFFIXES = (".bag", ".db3", ".mcap")
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -335,7 +335,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
 
     See the module docstring and :func:`load_rosbag` for the parameters.
     """
-    from .files import _check_frames, _fill_nans
+    from ._checks import _check_frames, _fill_nans
 
     path = Path(path)
     if topics is None:
@@ -419,45 +419,3 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
     if len(streams) == 2:
         meta["observed"] = cols[0]
     return demos, times, columns, labels, meta
-
-
-def load_rosbag(path, topics, *, joints=None, orientation=False, split_topic=None, split_gap=None,
-                resample_dt=None, max_nan_gap: int = 0, min_frames: int = 5):
-    """Load two-agent demonstrations from a ROS 1 or ROS 2 bag.
-
-    Parameters
-    ----------
-    path : str or Path
-        A ROS 1 ``.bag``, a ROS 2 ``.db3`` or ``.mcap`` file, or a rosbag2 folder (with
-        ``metadata.yaml``).
-    topics : sequence of str or str
-        ``(observed, controlled)``: two topics, or ``tf:FRAME`` / ``TOPIC:FRAME`` for a tf
-        frame (a comma-separated string also works).  One topic gives a single-agent set.
-        The observed agent's columns become ``observed_dofs``.
-    joints : sequence of str, optional
-        JointState joints to keep (default every joint seen).
-    orientation : bool
-        Also read the orientation quaternion of poses and tf frames (default False).
-    split_topic : str, optional
-        A topic whose messages mark the start of each demonstration.
-    split_gap : float, optional
-        Seconds: a pause longer than this in either stream starts a new demonstration.
-    resample_dt : float, optional
-        Interpolate both streams onto a uniform grid of this interval (seconds) instead of
-        onto the observed stream's stamps.
-    max_nan_gap : int
-        Longest interior run of missing values (frames) filled by interpolation.
-    min_frames : int
-        Fewest frames a demonstration may have.
-
-    Returns
-    -------
-    Demonstrations
-        Time stamps start at 0 in each demonstration; labels are ``<bag>@<start>s`` with the
-        start in seconds after the beginning of the bag.
-    """
-    from .files import load_demonstrations
-
-    return load_demonstrations(path, topics=topics, joints=joints, orientation=orientation, split_topic=split_topic,
-                               split_gap=split_gap, resample_dt=resample_dt, max_nan_gap=max_nan_gap,
-                               min_frames=min_frames)

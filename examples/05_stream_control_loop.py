@@ -21,14 +21,14 @@ rng = np.random.default_rng(0)
 arm = controlled_arm()
 q = arm.rest.copy()  # the robot's joints (radians)
 dt, ctrl = model.dt_, model.controlled_dofs_
-rollout = None
+rollout = p = None
 stream = model.stream(robot_state=q)
 caution, latency, n_ticks = 0.2, [], len(truth) + 30  # 0.3 s more: the partner holds its hand up
 next_tick = time.perf_counter()
 for k in range(n_ticks):
     frame = truth[min(k, len(truth) - 1), :2] + rng.normal(0, 0.002, 2)  # the sensor: 2 mm tracker noise
     tic = time.perf_counter()
-    if k == 0 or p.phase < 1.0:  # once the movement is over (phase 1), more frames of a still partner
+    if p is None or p.phase < 1.0:  # once the movement is over (phase 1), more frames of a still partner
         p = stream.update(frame)  # would stretch it: keep the last prediction
         if rollout is None:
             rollout = p.mean_rollout(101, ctrl)  # the mean trajectory on a fixed grid, built once

@@ -453,7 +453,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
 def draw_mujoco_highfive(result: MujocoResult, path, n_snapshots: int = 5):
     """Draw ``result`` to ``path`` (PNG, matplotlib with the Agg backend; no display or GL context needed).
 
-    Top row: the two arms at ``n_snapshots`` instants (the kinematics of :mod:`interprim.sim.arm`, the same
+    Top row: the two arms at ``n_snapshots`` instants from the start to the meeting, and at the end (the kinematics of :mod:`interprim.sim.arm`, the same
     chains as the MJCF model), with the partner's hand path so far and the robot's reference posture (dashed).
     Bottom: the distance between the hands over time, the threshold and the meeting time; the joint angles
     against the reference.
@@ -470,9 +470,9 @@ def draw_mujoco_highfive(result: MujocoResult, path, n_snapshots: int = 5):
     fig = plt.figure(figsize=(12, 6.2))
     gs = fig.add_gridspec(2, n_snapshots, height_ratios=[1.15, 1.0])
     end = r.t[-1]
-    moments = np.linspace(0.0, min(end, r.movement_duration + 0.2), n_snapshots)
-    if r.met:
-        moments[-1] = r.meet_time
+    last = r.meet_time if r.met else min(end, r.movement_duration)
+    moments = np.append(np.linspace(0.0, last, n_snapshots - 1), end)  # up to the meeting, and the end
+    labels = [""] * (n_snapshots - 2) + (["hands meet: "] if r.met else [""]) + ["end: "]
     for c, tm in enumerate(moments):
         ax = fig.add_subplot(gs[0, c])
         i = int(np.clip(np.searchsorted(r.t, tm), 0, len(r.t) - 1))
@@ -490,7 +490,7 @@ def draw_mujoco_highfive(result: MujocoResult, path, n_snapshots: int = 5):
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_title(f"t = {r.t[i]:.2f} s, d = {100 * r.distance[i]:.1f} cm", fontsize=8)
+        ax.set_title(f"{labels[c]}t = {r.t[i]:.2f} s, d = {100 * r.distance[i]:.1f} cm", fontsize=8)
     ax = fig.add_subplot(gs[1, : max(1, n_snapshots - 2)])
     ax.plot(r.t, 100 * r.distance, color="k", lw=1.2, label="distance between the hands")
     ax.axhline(100 * r.threshold, color="tab:green", ls="--", lw=1, label=f"meeting threshold {100 * r.threshold:g} cm")

@@ -126,8 +126,8 @@ def run(args) -> int:
 
     async def main():
         await server.start()
-        print(f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True)
-        stopped = await _serve_until_signal(server)
+        stopped = await _serve_until_signal(server, lambda: print(
+            f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True))
         print(f"interprim serve: stopped ({stopped})", flush=True)
 
     try:
@@ -141,10 +141,11 @@ def run(args) -> int:
     return 0
 
 
-async def _serve_until_signal(server) -> str:
+async def _serve_until_signal(server, ready) -> str:
     """Serve until SIGINT (Ctrl-C) or SIGTERM, then close every session and the socket inside the event loop
-    (a KeyboardInterrupt raised through the loop would leave it closed before the server is).  Returns the
-    signal's name."""
+    (a KeyboardInterrupt raised through the loop would leave it closed before the server is).  ``ready()`` is
+    called once the handlers are installed (it prints the address: a signal sent after that line is handled).
+    Returns the signal's name."""
     import asyncio
     import signal
 
@@ -157,6 +158,7 @@ async def _serve_until_signal(server) -> str:
             installed.append(sig)
         except (NotImplementedError, RuntimeError, ValueError):  # Windows, or not the main thread
             pass
+    ready()
     serving = asyncio.ensure_future(server.serve_forever())
     try:
         await asyncio.wait({serving, got}, return_when=asyncio.FIRST_COMPLETED)

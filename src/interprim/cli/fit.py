@@ -79,9 +79,10 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument(
         "--phase-method",
-        choices=("dtw", "likelihood"),
+        choices=("dtw", "likelihood", "learned", "auto"),
         default=None,
-        help="phase estimation: open-end DTW (paper Eq. 5-9) or likelihood (default: the model's)",
+        help="phase estimation: open-end DTW (paper Eq. 5-9), likelihood (default), learned (regressed on the "
+        "demonstrations' own prefixes: recommended for recordings of people) or auto (experimental)",
     )
     p.add_argument(
         "--input-noise",

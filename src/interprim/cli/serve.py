@@ -77,7 +77,6 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    import asyncio
     import logging
 
     from ..errors import InterprimError, ModelFileError
@@ -138,11 +137,9 @@ def run(args) -> int:
 
     async def main():
         await server.start()
-        print(f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True)
-        try:
-            await server.serve_forever()
-        finally:
-            await server.stop()
+        stopped = await _serve_until_signal(server, lambda: print(
+            f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True))
+        print(f"interprim serve: stopped ({stopped})", flush=True)
 
     try:
         new_event_loop(config.loop).close()  # --loop uvloop without uvloop: a clean error before fitting anything
@@ -195,6 +192,40 @@ def _attach_replays(models, values) -> None:
             e.meta["replay"] = load_replay(e, path)
         except (OSError, ValueError) as exc:  # DataFileError is a ValueError
             raise InterprimError(f"--replay {name}={path}: {exc}") from None
+
+async def _serve_until_signal(server, ready) -> str:
+    """Serve until SIGINT (Ctrl-C) or SIGTERM, then close every session and the socket inside the event loop
+    (a KeyboardInterrupt raised through the loop would leave it closed before the server is).  ``ready()`` is
+    called once the handlers are installed (it prints the address: a signal sent after that line is handled).
+    Returns the signal's name."""
+    import asyncio
+    import signal
+
+    loop = asyncio.get_running_loop()
+    got = asyncio.get_running_loop().create_future()
+    installed = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, lambda s=sig: got.done() or got.set_result(s.name))
+            installed.append(sig)
+        except (NotImplementedError, RuntimeError, ValueError):  # Windows, or not the main thread
+            pass
+    ready()
+    serving = asyncio.ensure_future(server.serve_forever())
+    try:
+        await asyncio.wait({serving, got}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)
+        serving.cancel()
+        try:
+            await serving
+        except (asyncio.CancelledError, Exception):
+            pass
+        await server.stop()
+    if serving.done() and not serving.cancelled() and serving.exception() is not None:
+        raise serving.exception()
+    return got.result() if got.done() else "server closed"
 
 
 def _has_sim() -> bool:

@@ -42,6 +42,8 @@ __all__ = [
     "highfive_split",
     "in_test_region",
     "COLUMNS",
+    "RECORDING_COLUMNS",
+    "highfive_recordings",
 ]
 
 #: Goal (high-five point) box, metres: ``((x_min, x_max), (y_min, y_max))``.
@@ -51,6 +53,8 @@ GRID = (5, 4)
 TEST_CELLS = ((1, 2), (2, 1), (3, 2))
 #: Column names of a demonstration.
 COLUMNS = ["obs_shoulder", "obs_elbow", "ctrl_shoulder", "ctrl_elbow", "ctrl_wrist"]
+#: Column names of :func:`highfive_recordings`: the partner's hand (metres), the robot's joints (radians).
+RECORDING_COLUMNS = ["human_x", "human_y", "robot_shoulder", "robot_elbow", "robot_wrist"]
 
 # Attractor offsets from the midpoint (rest hand, goal), in the arm's own
 # "forward" frame: x towards the partner, y up.  Metres.
@@ -313,3 +317,39 @@ def highfive_split(n_train: int, n_test: int, seed: int = 0, **kwargs):
     train = generate_highfive(n_train, seed=seed, region="train", **kwargs)
     test = generate_highfive(n_test, seed=seed + 1_000_003, region="test", **kwargs)
     return train, test
+
+
+def highfive_recordings(n: int = 40, seed: int = 0, noise: float = 0.002, region: str = "train", **kwargs):
+    """The simulated high five as a set of recordings, the way a lab records one (for tutorials and examples).
+
+    The partner is tracked in task space, its hand ``(human_x, human_y)`` in metres in the robot's world
+    frame (x towards the partner, y up; the partner's shoulder at the origin, the robot's at x = 1.6 m) with
+    Gaussian tracker noise of standard deviation ``noise`` metres; the robot is recorded in joint space
+    (``robot_shoulder``, ``robot_elbow``, ``robot_wrist``, radians, noise-free, as its encoders give them).
+    100 Hz, time stamps from 0.
+
+    Parameters
+    ----------
+    n, seed, region, **kwargs
+        As for :func:`generate_highfive` (``region="train"``: goals outside the held-out cells).
+    noise : float
+        Tracker noise of the partner's hand, metres.
+
+    Returns
+    -------
+    interprim.datasets.Demonstrations
+        Columns :data:`RECORDING_COLUMNS`; ``observed_dofs = [0, 1]``.
+    """
+    from ..datasets import Demonstrations
+
+    data = generate_highfive(n, seed=seed, region=region, progress=False, **kwargs)
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(n + 1)[-1])
+    demos = []
+    for i in range(len(data)):
+        hand = data.observed_arm.hand(data.observed(i))
+        if noise > 0:
+            hand = hand + noise * rng.standard_normal(hand.shape)
+        demos.append(np.hstack([hand, data.controlled(i)]))
+    times = [np.arange(len(d)) * data.dt for d in demos]
+    return Demonstrations(demos=demos, times=times, columns=list(RECORDING_COLUMNS), dt=data.dt,
+                          observed_dofs=[0, 1], name="simulated high five", source=f"highfive_recordings(seed={seed})")

@@ -47,7 +47,7 @@ try:
             time.sleep(max(0.0, next_tick - time.perf_counter()))
             if reply["out_of_range"]:
                 print("out of range: wrong units or frame?")
-            if reply["phase"] >= 1.0:  # the movement is over: stop streaming
+            if reply["conditioned"] and reply["phase"] >= 1.0:  # over (phase is null for the first frames)
                 break
     final = np.array(reply["mean"])[-1]  # predicted final posture of the robot (the controlled columns)
     print(f"{len(rtt)} frames: phase {reply['phase']:.2f}, final posture {np.round(final, 2)} rad "

@@ -31,9 +31,19 @@ def _key(rec):
     return rec["dataset"], rec["task"], rec["method"], rec["demo"], rec["fraction"]
 
 
-def _canonical(results):
-    """Fold records in a fixed order, as JSON text (NaN and floats exactly as written)."""
-    return [json.dumps(r, sort_keys=True) for r in sorted(results["folds"], key=_key)]
+def _assert_close(x, y, where, rtol=1e-9):
+    if isinstance(x, dict):
+        assert isinstance(y, dict) and sorted(x) == sorted(y), where
+        for k in x:
+            _assert_close(x[k], y[k], (where, k), rtol)
+    elif isinstance(x, (list, tuple)):
+        assert isinstance(y, (list, tuple)) and len(x) == len(y), where
+        for i, (u, v) in enumerate(zip(x, y)):
+            _assert_close(u, v, (where, i), rtol)
+    elif isinstance(x, float) and isinstance(y, float):
+        assert (math.isnan(x) and math.isnan(y)) or abs(x - y) <= rtol * max(abs(x), abs(y), 1e-300), (where, x, y)
+    else:
+        assert x == y, (where, x, y)
 
 
 @pytest.mark.slow
@@ -61,9 +71,15 @@ def test_evaluate_on_a_dask_cluster_equals_the_serial_run(tmp_path):
     assert len(tasks) >= n_folds
     assert {t["worker"] for t in tasks} <= workers
 
-    # same records, to the last bit
+    # same records: keys, strings and NaNs exactly, numbers to 1e-9 relative (the issue's bound between
+    # computation paths).  Not to the bit: the worker processes run numpy with one BLAS thread, the serial run
+    # with the machine's, which can change the order of a sum by a rounding; the phase, the vertex of a parabola
+    # through scores 0.2 % apart (phase.likelihood._finish), moves a few 1e-13 with it
     assert len(on_cluster["folds"]) == len(serial["folds"]) > 0
-    assert _canonical(on_cluster) == _canonical(serial)
+    a = sorted(on_cluster["folds"], key=_key)
+    b = sorted(serial["folds"], key=_key)
+    for ra, rb in zip(a, b):
+        _assert_close(ra, rb, _key(rb))
     assert on_cluster["config"] == serial["config"]
     # and they are real numbers: the IP's errors are finite and differ from the prior mean's
     ip = [r["rmse_ctrl"] for r in serial["folds"] if r["method"] == "ip-position"]

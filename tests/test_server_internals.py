@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import logging
 import socket
-import time
 
 import numpy as np
 import pytest
@@ -99,7 +98,7 @@ def _add(lane, s, *seqs):
 
 
 def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
-    """An async lane (threads / worker processes): one batch in flight; a session's turn takes all its pending
+    """An async lane (threads / worker processes), one batch in flight: a session's turn takes all its pending
     frames; frames that arrive during its turn put it back at the end of the round (no session starves)."""
     import asyncio
 
@@ -115,7 +114,7 @@ def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
             await gate.wait()
             return ["reply"], []
 
-        lane = _Lane(run, lambda s, op, batch, result: delivered.append((s.id, result)))
+        lane = _Lane(run, lambda s, op, batch, result: delivered.append((s.id, result)), depth=1)
         a, b, c = _sessions(3)
         _add(lane, a, 1)
         await asyncio.sleep(0)  # the lane task starts a's first batch and waits at the gate
@@ -133,6 +132,40 @@ def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
     # a's frames 2-4 wait for one turn of b and c, then go in one batch (one reply covers them)
     assert served == [(1, [1]), (2, [1]), (3, [1, 2, 3, 4]), (1, [2, 3, 4])]
     assert [sid for sid, _ in delivered] == [1, 2, 3, 1]
+
+
+def test_lane_keeps_depth_batches_of_different_sessions_in_flight():
+    """depth=2: a worker has the next batch waiting while it computes one; never two batches of one session."""
+    import asyncio
+
+    from interprim.server.lanes import _Lane
+
+    running, most, order = set(), [0], []
+
+    async def go():
+        async def run(s, op, batch):
+            assert s.id not in running  # one batch per session at a time: its stream is updated in order
+            running.add(s.id)
+            most[0] = max(most[0], len(running))
+            order.append((s.id, [q for _, q, _ in batch]))
+            await asyncio.sleep(0)
+            await asyncio.sleep(0)
+            running.discard(s.id)
+            return ["reply"], []
+
+        lane = _Lane(run, lambda *args: None, depth=2)
+        a, b, c = _sessions(3)
+        for k in range(1, 6):
+            for s in (a, b, c):
+                _add(lane, s, k)
+            await asyncio.sleep(0)
+        while a.queued or b.queued or c.queued:
+            await asyncio.sleep(0)
+
+    asyncio.run(go())
+    assert most[0] == 2
+    for sid in (1, 2, 3):  # each session's frames computed once each, in order
+        assert [q for i, qs in order if i == sid for q in qs] == [1, 2, 3, 4, 5]
 
 
 def test_inline_lane_serves_one_session_per_loop_iteration():

@@ -85,16 +85,18 @@ class _Lane:
 
     ``sync=True`` (inline compute): ``run`` is a plain callable, and one session is served per
     iteration of the event loop, so that between two batches the loop reads the sockets and frames that
-    arrived meanwhile join their sessions' batches.  Else ``run`` is a coroutine function and a task
-    serves the queue, one batch at a time.
+    arrived meanwhile join their sessions' batches.  Else ``run`` is a coroutine function, and up to
+    ``depth`` batches (of different sessions) are in flight at once, so that a worker process has the
+    next batch in its pipe when it finishes one instead of waiting for the event loop's round trip.
     """
 
-    def __init__(self, run, deliver, sync: bool = False):
+    def __init__(self, run, deliver, sync: bool = False, depth: int = 2):
         self.run = run
         self.deliver = deliver
         self.sync = sync
+        self.depth = max(1, int(depth))
         self.queue: deque = deque()
-        self.task = None
+        self.inflight = 0
         self._scheduled = False
 
     def push(self, s: _Session) -> None:
@@ -105,8 +107,8 @@ class _Lane:
             if not self._scheduled:
                 self._scheduled = True
                 asyncio.get_running_loop().call_soon(self._step)
-        elif self.task is None or self.task.done():
-            self.task = asyncio.get_running_loop().create_task(self._drain())
+        else:
+            self._pump()
 
     def _take(self):
         """The next session's batch: ``(session, open model, frames)``, or ``None`` for a session that has
@@ -139,22 +141,33 @@ class _Lane:
                 result = self.run(s, op, batch)
             except Exception as exc:  # run() reports model failures itself; this is a bug
                 result = exc
-            self.deliver(s, op, batch, result)
-            self._done(s)
+            try:
+                self.deliver(s, op, batch, result)
+            finally:
+                self._done(s)
             break
         if self.queue:
             self._scheduled = True
             asyncio.get_running_loop().call_soon(self._step)
 
-    async def _drain(self) -> None:
-        while self.queue:
+    def _pump(self) -> None:
+        """Async lane: start batches while fewer than ``depth`` are in flight."""
+        while self.queue and self.inflight < self.depth:
             job = self._take()
             if job is None:
                 continue
-            s, op, batch = job
-            try:
-                result = await self.run(s, op, batch)
-            except Exception as exc:  # a dead worker process, a bug
-                result = exc
+            self.inflight += 1
+            asyncio.get_running_loop().create_task(self._serve(*job))
+
+    async def _serve(self, s: _Session, op, batch) -> None:
+        try:
+            result = await self.run(s, op, batch)
+        except Exception as exc:  # a dead worker process, a bug
+            result = exc
+        finally:
+            self.inflight -= 1
+        try:
             self.deliver(s, op, batch, result)
+        finally:
             self._done(s)
+            self._pump()

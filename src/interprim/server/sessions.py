@@ -66,6 +66,10 @@ class SessionSide:
                     break
                 if self._stopping:
                     continue  # shutting down: not read any more (the close reason says which frames were answered)
+                if self._frame_at_once(s, data):  # the usual message: a valid frame of an open session
+                    if s.queued and len(s.pending) >= c.max_pending:
+                        await self._far_behind(s)
+                    continue
                 s.busy = True
                 try:
                     queued = await self._on_message(s, data)
@@ -173,6 +177,45 @@ class SessionSide:
             self._fatal(s, P.CLOSE_POLICY, f"too many protocol errors ({s.consecutive_errors} in a row)")
         else:
             self._send(s, P.dumps(msg))
+
+    def _frame_at_once(self, s: _Session, data) -> bool:
+        """A valid frame of a session with an open model, within the rate limit: put it in the session's pending
+        frames without a coroutine (the common case, per frame).  ``False`` (nothing done) for anything else,
+        which :meth:`_on_message` then handles, errors included."""
+        op = s.open
+        if op is None or not s.ready:
+            return False
+        n = op.entries[0].n_observed
+        try:
+            if isinstance(data, str):
+                msg = P.parse_text(data)
+                if msg["type"] != "frame":
+                    return False
+                frame, t = P.check_frame(msg, n)
+            elif isinstance(data, bytes):
+                frame, t = P.decode_binary_frame(data, n), None
+            else:
+                return False
+        except P.ProtocolError:
+            return False
+        if not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
+            return False
+        s.seq += 1
+        s.pending.append((frame, s.seq, t))
+        if not s.queued:
+            self._lanes[s.id % len(self._lanes)].push(s)
+        return True
+
+    async def _far_behind(self, s: _Session) -> None:
+        """``max_pending`` frames waiting: stop reading the session until its turn (the server cannot even feed its
+        frames to its streams as fast as they come), so that TCP flow control slows the client down."""
+        limit = self.config.max_pending
+        s.busy = True
+        try:
+            await self._until(s, lambda: len(s.pending) < limit or not s.queued)
+        finally:
+            s.busy = False
+            s.wake()
 
     async def _on_message(self, s: _Session, data) -> bool:
         """Handle one message; ``True`` when it was a frame put in the session's pending frames."""
@@ -311,10 +354,7 @@ class SessionSide:
         if not s.queued:
             self._lanes[s.id % len(self._lanes)].push(s)
         elif len(s.pending) >= self.config.max_pending:
-            # Far behind (the server cannot even feed this session's frames to its streams as fast as they
-            # come): stop reading until its turn, so that TCP flow control slows the client down.
-            limit = self.config.max_pending
-            await self._until(s, lambda: len(s.pending) < limit or not s.queued)
+            await self._until(s, lambda: len(s.pending) < self.config.max_pending or not s.queued)
 
     def _deliver(self, s: _Session, op: _Open, batch: list, result) -> None:
         """Send the replies of a computed batch (called by the lanes): ``result`` is ``(texts, failures)`` from

@@ -17,7 +17,6 @@ asks them to at its shutdown, or when their pipe closes because the server is go
 
 from __future__ import annotations
 
-import asyncio
 import itertools
 import json
 import logging

@@ -102,7 +102,7 @@ def _stream_until_closed(url, sig, served, n_before_signal=30):
     def sender():
         k = 0
         try:
-            while not done.wait(0.002):  # ~500 frames/s, faster than the replies come back when it is busy
+            while not done.wait(0.003):  # < 333 frames/s: under the rate limit (500/s), fast enough to be mid-stream
                 k += 1
                 ws.send(frame_msg([0.01 * (k % 100), -0.01 * (k % 100)]))
         except (ConnectionClosed, OSError):

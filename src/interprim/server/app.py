@@ -38,7 +38,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from . import protocol as P
-from . import sessions
 from .compute import compute_batch, warm_up
 from .http_api import HttpSide
 from .lanes import _Lane, _Session
@@ -184,9 +183,6 @@ class InterprimServer(HttpSide, SessionSide):
     # ------------------------------------------------------------------ lifecycle
     async def start(self):
         from websockets.asyncio.server import ServerConnection, serve
-        from websockets.protocol import State
-
-        sessions._OPEN = State.OPEN
 
         class LoggedConnection(ServerConnection):
             """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them)."""

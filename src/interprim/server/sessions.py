@@ -23,7 +23,6 @@ SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001
 log = logging.getLogger("interprim.server")
 
 _CLOSE = object()
-_OPEN = object()  # websockets.protocol.State.OPEN, set by InterprimServer.start (imported lazily)
 
 
 class SessionSide:

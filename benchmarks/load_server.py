@@ -3,8 +3,12 @@
 The server runs in its own process (``python -m interprim.cli serve`` equivalent, started here with a
 model fitted on the simulated high-five); the clients run in another process (asyncio, one
 connection per session, each sending a frame every 10 ms on its own schedule and timing
-frame-sent -> prediction-received).  Reports, per N: median and p99 latency, frames dropped (sent
-without a prediction back, or answered with an error), and the server's CPU use (from /proc).
+frame-sent -> the reply that covers it received: a reply answers frames ``first_seq .. seq``, more than
+one when the server coalesced a session's frames under overload).  Reports, per N: median and p99
+latency, frames coalesced (answered by a later frame's reply), frames lost (never answered, or answered
+twice / out of order: checked seq by seq), error replies, the server's CPU use (from /proc) and the
+machine's load: the 1-min load average and the CPU used by other processes during the run (the
+machine is shared).
 
     python benchmarks/load_server.py                   # N = 1, 10, 20, 30, 50, 100; 5 s each; writes SERVER_RESULTS.md
     python benchmarks/load_server.py --sessions 50 --seconds 10 --modes procs:2 --phase-method dtw
@@ -147,14 +151,57 @@ async def _reader(ws, st, loop, n_total):
         t = time.perf_counter()
         # Replies start with {"type":"...","seq":N,...}: read the head only, so that the client's own
         # CPU (JSON decoding of trajectories) does not dominate the measurement.
-        head = raw[:48]
+        head = raw[:96]
         if head.startswith('{"type":"prediction","seq":'):
-            seq = int(head[27:].split(",", 1)[0])
-            st["lat"].append(t - st["sent_at"].pop(seq))
-            st["recv"].append(t)
-            st["got"] += 1
+            _covered(st, t, *_head_numbers(head[27:].encode()))
         elif head.startswith('{"type":"error"'):
-            st["errors"] += 1
+            _error(st, json.loads(raw))
+
+
+def _head_numbers(b: bytes):
+    """``seq, covers`` from the text after ``"seq":`` of a prediction (``N,"covers":C,...``; an older server
+    without ``covers``: one frame per reply)."""
+    parts = b.split(b",", 2)
+    seq = int(parts[0])
+    covers = int(parts[1][9:]) if len(parts) > 1 and parts[1].startswith(b'"covers":') else 1
+    return seq, covers
+
+
+def _covered(st, t, seq, covers):
+    """A prediction answering frames ``seq - covers + 1 .. seq`` arrived at ``t``: the latency of each of them,
+    and a check that they follow the frames answered before (none skipped, none answered twice)."""
+    first = seq - covers + 1
+    if first != st["next"]:
+        st["bad"] += 1  # a gap or an overlap: counted as lost below
+    sent_at = st["sent_at"]
+    for q in range(first, seq + 1):
+        t_sent = sent_at.pop(q, None)
+        if t_sent is None:
+            st["bad"] += 1
+            continue
+        st["lat"].append(t - t_sent)
+        st["recv"].append(t)
+    st["got"] += covers
+    st["coalesced"] += covers - 1
+    st["replies"] += 1
+    st["next"] = seq + 1
+
+
+def _error(st, msg):
+    seq = msg.get("seq")
+    if seq is not None:
+        covers = msg.get("covers", 1)
+        for q in range(seq - covers + 1, seq + 1):
+            st["sent_at"].pop(q, None)
+        st["next"] = seq + 1
+        st["errors"] += covers
+    else:
+        st["errors"] += 1
+
+
+def _new_state():
+    return {"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0, "coalesced": 0, "replies": 0, "next": 1,
+            "bad": 0}
 
 
 def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0, client="raw", loop="auto"):
@@ -170,7 +217,7 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
     async def main():
         loop_ = asyncio.get_running_loop()
         n_total = int(seconds * rate_hz)
-        states = [{"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0} for _ in range(n)]
+        states = [_new_state() for _ in range(n)]
         # the first `heavy` sessions ask for 500 points with the std band: much more work per frame
         opts = [(500 if i < heavy else points, True if i < heavy else std) for i in range(n)]
         if client == "raw":
@@ -216,7 +263,9 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
                     await r
                 if k + 1 < n_total:
                     heapq.heappush(heap, (t0 + (k + 1) * period + (i / n) * period, i, k + 1))
-        done, pending = await asyncio.wait(readers, timeout=5.0)
+        # every frame is answered eventually (the server does not drop frames; when it is behind, TCP flow control
+        # holds them back): wait long enough that "lost" counts frames never answered, not late ones
+        done, pending = await asyncio.wait(readers, timeout=60.0)
         for t in pending:
             t.cancel()
         if client == "raw":
@@ -224,6 +273,7 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
         else:
             await asyncio.gather(*[ws.close() for ws in conns], return_exceptions=True)
         return [{"lat": st["lat"], "recv": st["recv"], "sent": n_total, "errors": st["errors"],
+                 "coalesced": st["coalesced"], "replies": st["replies"], "bad": st["bad"],
                  "missing": n_total - st["got"] - st["errors"]} for st in states]
 
     import resource
@@ -324,12 +374,9 @@ class _RawSession(asyncio.Protocol):
             op = b0 & 0x0F
             if op == 1 or op == 2:
                 if buf.startswith(b'{"type":"prediction","seq":', start):
-                    seq = int(buf[start + 27:start + 48].split(b",", 1)[0])
-                    st["lat"].append(t - st["sent_at"].pop(seq))
-                    st["recv"].append(t)
-                    st["got"] += 1
+                    _covered(st, t, *_head_numbers(bytes(buf[start + 27:start + 96])))
                 elif buf.startswith(b'{"type":"error"', start):
-                    st["errors"] += 1
+                    _error(st, json.loads(bytes(buf[start:pos])))
                 else:
                     self.control.put_nowait(bytes(buf[start:pos]))
                 if st["got"] + st["errors"] >= self.n_total and not self.done.done():
@@ -363,16 +410,20 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, c
                    args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy, client, loop))
     p.start()
     assert q.get(timeout=120) == "start"
+    load_before = os.getloadavg()[0]
     time.sleep(0.5)  # the scheduler starts 0.2 s after "start"
-    cpu0, t0 = _cpu_seconds(server_pid), time.monotonic()
+    cpu0, t0, busy0 = _cpu_seconds(server_pid), time.monotonic(), _machine_busy()
+    client0 = _cpu_seconds(p.pid)
     time.sleep(max(0.5, seconds - 1.0))  # server CPU over (most of) the streaming window only
-    cpu1, t1 = _cpu_seconds(server_pid), time.monotonic()
-    res, client_cpu = q.get(timeout=seconds + 120)
+    cpu1, t1, busy1 = _cpu_seconds(server_pid), time.monotonic(), _machine_busy()
+    client1 = _cpu_seconds(p.pid)
+    res, client_cpu = q.get(timeout=seconds + 180)
     p.join(30)
-    heavy_res, res = res[:heavy], res[heavy:]  # latency statistics over the normal sessions only
+    res = res[heavy:]  # latency statistics over the normal sessions only
     lat = sorted(x for r in res for x in r["lat"])
     sent = sum(r["sent"] for r in res)
-    dropped = sum(r["errors"] + r["missing"] for r in res)
+    errors = sum(r["errors"] for r in res)
+    lost = sum(r["missing"] + r["bad"] for r in res)
 
     def pct(v):
         return lat[min(len(lat) - 1, int(round(v / 100 * (len(lat) - 1))))] * 1e3 if lat else float("nan")
@@ -383,14 +434,29 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, c
         "median_ms": statistics.median(lat) * 1e3 if lat else float("nan"),
         "p99_ms": pct(99),
         "max_ms": lat[-1] * 1e3 if lat else float("nan"),
-        "dropped": dropped,
+        "replies": sum(r["replies"] for r in res),
+        "coalesced": sum(r["coalesced"] for r in res),
+        "lost": lost,
+        "errors": errors,
+        "dropped": lost + errors,
         "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
         # the client's whole run (connect, stream, wait for the last replies) over the streaming time
         "client_cpu_pct": 100.0 * client_cpu / seconds,
+        # CPU used on the machine by everything but this benchmark's server and client, during the window
+        "others_cpu_pct": 100.0 * max(0.0, (busy1 - busy0) - (cpu1 - cpu0) - (client1 - client0)) / (t1 - t0),
+        "loadavg_before": load_before,
         "loadavg": os.getloadavg()[0],
         # CPU time the server spent per answered frame: independent of other load on the machine
         "cpu_ms_per_frame": 1e3 * (cpu1 - cpu0) / max(1, sum(t0 <= x <= t1 for r in res for x in r["recv"])),
     }
+
+
+def _machine_busy() -> float:
+    """CPU seconds spent by the whole machine (all cores, all processes) since boot, from /proc/stat."""
+    with open("/proc/stat") as f:
+        fields = [int(v) for v in f.readline().split()[1:]]
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
 
 
 def main(argv=None):
@@ -410,6 +476,7 @@ def main(argv=None):
                     help="this many of the N sessions ask for 500 points + std band (noisy neighbours); "
                          "latencies are then reported for the other sessions")
     ap.add_argument("--append", action="store_true", help="append rows to the existing table")
+    ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     ap.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
                     help="event loop of the server and of the client (auto: uvloop if installed)")
     ap.add_argument("--client", default="raw", choices=["raw", "websockets"],
@@ -453,9 +520,11 @@ def main(argv=None):
                 rows.append(r)
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
-                    f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, dropped {r['dropped']}, "
-                    f"server CPU {r['server_cpu_pct']:.0f} % ({r['cpu_ms_per_frame']:.3f} ms/frame), client CPU {r['client_cpu_pct']:.0f} %, "
-                    f"load {r['loadavg']:.1f}",
+                    f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, {r['replies']} replies, "
+                    f"coalesced {r['coalesced']}, lost {r['lost']}, errors {r['errors']}, "
+                    f"server CPU {r['server_cpu_pct']:.0f} % ({r['cpu_ms_per_frame']:.3f} ms/frame), "
+                    f"client CPU {r['client_cpu_pct']:.0f} %, others' CPU {r['others_cpu_pct']:.0f} %, "
+                    f"load {r['loadavg_before']:.1f} -> {r['loadavg']:.1f}",
                     flush=True,
                 )
         finally:
@@ -463,6 +532,8 @@ def main(argv=None):
             srv.join(20)
             if srv.is_alive():
                 srv.terminate()
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
     if not args.no_write:
         write_results(Path(args.out), rows, args, append=args.append)
     return rows
@@ -481,6 +552,13 @@ def _loop_name(kind: str) -> str:
         ev.close()
 
 
+def table_row(r) -> str:
+    return (f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | {r['max_ms']:.1f} | "
+            f"{r['replies']} | {r['coalesced']} | {r['lost']} | {r['errors']} | {r['server_cpu_pct']:.0f} | "
+            f"{r['cpu_ms_per_frame']:.3f} | {r['client_cpu_pct']:.0f} | {r['others_cpu_pct']:.0f} | "
+            f"{r['loadavg_before']:.1f} -> {r['loadavg']:.1f} |")
+
+
 def write_results(path: Path, rows, args, append=False):
     import numpy as np
     import websockets
@@ -493,21 +571,21 @@ def write_results(path: Path, rows, args, append=False):
         f"carries the controlled agent's mean trajectory at {args.points} points"
         f"{' and its std band' if args.std else ''}. Model: simulated high-five (2 observed + 3 controlled "
         "joints, 15 basis functions, 30 demonstrations). Server and clients in separate processes. "
-        "Latency = frame sent -> prediction received (client clock). Dropped = frames answered with an error "
-        "or not answered. Server CPU = server process CPU time / wall time (100 % = one core).",
+        "Latency = frame sent -> the reply that covers it received (client clock). Coalesced = frames answered "
+        "by a later frame's reply (`covers` > 1). Lost = frames never answered (or not in seq order); errors = "
+        "frames answered with an error. Server CPU = server process CPU time / wall time (100 % = one core); "
+        "others = CPU used by the rest of the (shared) machine meanwhile; load = 1-min load average before -> "
+        "after the row.",
         "",
         f"Machine: {os.cpu_count()} CPUs, {platform.platform()}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, websockets {websockets.__version__}.",
         "",
-        "| server compute | loop | client | N sessions | frames | median (ms) | p99 (ms) | max (ms) | dropped | server CPU % | server CPU ms/frame | client CPU % | machine load (1 min) |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| server compute | N sessions | frames | median (ms) | p99 (ms) | max (ms) | replies | frames coalesced | "
+        "frames lost | errors | server CPU % | server CPU ms/frame | client CPU % | others' CPU % | load (1 min) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
-        lines.append(
-            f"| {r['mode']} | {r['loop']} | {r['client']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | "
-            f"{r['p99_ms']:.2f} | {r['max_ms']:.1f} | {r['dropped']} | {r['server_cpu_pct']:.0f} | {r['cpu_ms_per_frame']:.3f} | "
-            f"{r['client_cpu_pct']:.0f} | {r['loadavg']:.1f} |"
-        )
+        lines.append(table_row(r))
     lines.append("")
     if append and path.exists():
         old = path.read_text().rstrip("\n").split("\n")

@@ -4,7 +4,7 @@
 
 Starts `interprim serve MODEL --port 0` (a free loopback port) as a subprocess, reads the address it prints,
 connects `interprim.server.Client`, streams a held-out movement frame by frame, then stops the server with
-SIGINT (what Ctrl-C sends) and checks it exited cleanly.  Needs the [serve] extra.
+SIGTERM (what a service manager sends; Ctrl-C gives status 130) and checks it exited cleanly.  Needs the [serve] extra.
 """
 import signal
 import subprocess
@@ -54,7 +54,7 @@ try:
           f"(true {np.round(partner[-1, 2:], 2)}), server compute {reply['compute_ms']:.2f} ms, "
           f"round trip median {1e3 * np.median(rtt):.2f} ms, p99 {1e3 * np.percentile(rtt, 99):.2f} ms")
 finally:
-    server.send_signal(signal.SIGINT)  # Ctrl-C: sessions and socket are closed inside the event loop
+    server.send_signal(signal.SIGTERM)  # sessions answered and closed, workers joined: exit status 0
     rest, _ = server.communicate(timeout=30)
 print(rest.strip())
 print(f"server stopped cleanly (exit status {server.returncode})" if server.returncode == 0

@@ -105,6 +105,22 @@ def frame_msg(f, **kw):
     return json.dumps({"type": "frame", "frame": [float(v) for v in f], **kw})
 
 
+def covered(reply) -> list:
+    """The frame seqs a reply answers: ``first_seq .. seq`` (a prediction or error may cover several frames)."""
+    seq = reply["seq"]
+    return list(range(reply.get("first_seq", seq), seq + 1))
+
+
+def replies_until(ws, last_seq, timeout=10):
+    """Read replies until the one that answers frame ``last_seq``; returns them all (parsed)."""
+    got = []
+    while True:
+        r = json.loads(ws.recv(timeout=timeout))
+        got.append(r)
+        if r.get("seq") == last_seq:
+            return got
+
+
 def wait_until(pred, timeout=20.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import logging
 import socket
-import time
 
 import numpy as np
 import pytest
@@ -16,7 +15,7 @@ pytest.importorskip("websockets")
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.client import Client, ServerError  # noqa: E402
 
-from _server_support import models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
+from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
 
 
 def test_worker_processes_give_the_same_predictions(models, test_demo):
@@ -62,13 +61,15 @@ def test_async_client_pipelines_frames(server, models, test_demo):
             await c.open("pair", points=8)
             for f in test_demo[:20, :2]:  # pipelined: send all, then read all
                 await c.send_frame(f, binary=True)
-            replies = [await c.recv() for _ in range(20)]
+            replies = []
+            while not replies or replies[-1]["seq"] < 20:  # a reply may cover several frames (coalesced)
+                replies.append(await asyncio.wait_for(c.recv(), 30))
             await c.send_frame([1.0, 2.0, 3.0])
-            err = await c.recv_raw()
+            err = await asyncio.wait_for(c.recv_raw(), 30)
             return replies, err
 
     replies, err = asyncio.run(go())
-    assert [r["seq"] for r in replies] == list(range(1, 21))
+    assert [q for r in replies for q in covered(r)] == list(range(1, 21))
     direct = models["pair"].model.stream()
     for f in test_demo[:20, :2]:
         d = direct.update(f)
@@ -76,40 +77,127 @@ def test_async_client_pipelines_frames(server, models, test_demo):
     assert err["type"] == "error" and err["code"] == "bad_frame" and err["seq"] == 21
 
 
-def test_fair_queueing_serves_the_cheaper_session_first():
-    """The scheduler of a compute lane: among waiting frames, the session that used less compute goes first."""
+def _sessions(n):
     import asyncio
 
-    from interprim.server.lanes import _Lane, _Session
+    from interprim.server.lanes import _Session
 
-    order = []
+    out = []
+    for i in range(n):
+        s = _Session(i + 1, None, "?", asyncio.Queue(), None)
+        s.open = object()  # stands for an opened model
+        out.append(s)
+    return out
 
-    async def run(job):
-        name, cost = job
-        order.append(name)
-        time.sleep(cost)  # compute time charged to the session
-        return name
+
+def _add(lane, s, *seqs):
+    """What a session's handler does with a frame: into the pending list; the session into the lane's queue."""
+    for q in seqs:
+        s.pending.append((None, q, None))
+    if not s.queued:
+        lane.push(s)
+
+
+def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
+    """An async lane (threads / worker processes), one batch in flight: a session's turn takes all its pending
+    frames; frames that arrive during its turn put it back at the end of the round (no session starves)."""
+    import asyncio
+
+    from interprim.server.lanes import _Lane
+
+    served, delivered = [], []
 
     async def go():
-        lane = _Lane(run)
-        heavy = _Session(1, None, "a", asyncio.Queue(), None)
-        light = _Session(2, None, "b", asyncio.Queue(), None)
-        # the heavy session queues first; while its first frame runs, both queue one more frame
-        f1 = lane.submit(heavy, ("heavy-1", 0.05))
-        await asyncio.sleep(0)
-        f2 = lane.submit(heavy, ("heavy-2", 0.05))
-        f3 = lane.submit(light, ("light-1", 0.0))
-        assert await f1 == "heavy-1" and await f2 == "heavy-2" and await f3 == "light-1"
-        assert heavy.vtime > light.vtime
-        # the light session, having used less compute, overtakes frames the heavy one queued earlier
-        f4 = lane.submit(heavy, ("heavy-3", 0.0))
-        f5 = lane.submit(light, ("light-2", 0.0))
-        await asyncio.gather(f4, f5)
+        gate = asyncio.Event()
+
+        async def run(s, op, batch):
+            served.append((s.id, [q for _, q, _ in batch]))
+            await gate.wait()
+            return ["reply"], []
+
+        lane = _Lane(run, lambda s, op, batch, result: delivered.append((s.id, result)), depth=1)
+        a, b, c = _sessions(3)
+        _add(lane, a, 1)
+        await asyncio.sleep(0)  # the lane task starts a's first batch and waits at the gate
+        assert served == [(1, [1])] and a.queued and not a.pending
+        _add(lane, a, 2, 3)  # a sends on during its turn ...
+        _add(lane, b, 1)
+        _add(lane, c, 1, 2, 3, 4)
+        _add(lane, a, 4)
+        assert [s.id for s in lane.queue] == [2, 3] and len(a.pending) == 3  # ... it is not queued twice
+        gate.set()
+        while a.queued or b.queued or c.queued:
+            await asyncio.sleep(0)
 
     asyncio.run(go())
-    assert order[0] == "heavy-1"
-    assert order.index("light-1") < order.index("heavy-2")
-    assert order.index("light-2") < order.index("heavy-3")
+    # a's frames 2-4 wait for one turn of b and c, then go in one batch (one reply covers them)
+    assert served == [(1, [1]), (2, [1]), (3, [1, 2, 3, 4]), (1, [2, 3, 4])]
+    assert [sid for sid, _ in delivered] == [1, 2, 3, 1]
+
+
+def test_lane_keeps_depth_batches_of_different_sessions_in_flight():
+    """depth=2: a worker has the next batch waiting while it computes one; never two batches of one session."""
+    import asyncio
+
+    from interprim.server.lanes import _Lane
+
+    running, most, order = set(), [0], []
+
+    async def go():
+        async def run(s, op, batch):
+            assert s.id not in running  # one batch per session at a time: its stream is updated in order
+            running.add(s.id)
+            most[0] = max(most[0], len(running))
+            order.append((s.id, [q for _, q, _ in batch]))
+            await asyncio.sleep(0)
+            await asyncio.sleep(0)
+            running.discard(s.id)
+            return ["reply"], []
+
+        lane = _Lane(run, lambda *args: None, depth=2)
+        a, b, c = _sessions(3)
+        for k in range(1, 6):
+            for s in (a, b, c):
+                _add(lane, s, k)
+            await asyncio.sleep(0)
+        while a.queued or b.queued or c.queued:
+            await asyncio.sleep(0)
+
+    asyncio.run(go())
+    assert most[0] == 2
+    for sid in (1, 2, 3):  # each session's frames computed once each, in order
+        assert [q for i, qs in order if i == sid for q in qs] == [1, 2, 3, 4, 5]
+
+
+def test_inline_lane_serves_one_session_per_loop_iteration():
+    """The inline lane computes on the event loop: one session's batch per iteration, so that the handlers read
+    the frames that arrived meanwhile (they join their session's batch) before the next session is served."""
+    import asyncio
+
+    from interprim.server.lanes import _Lane
+
+    served = []
+
+    async def go():
+        lane = _Lane(lambda s, op, batch: served.append((s.id, [q for _, q, _ in batch])) or (["r"], []),
+                     lambda *args: None, sync=True)
+        a, b = _sessions(2)
+        _add(lane, a, 1)
+        _add(lane, b, 1)
+        await asyncio.sleep(0)  # one iteration: a is served, b waits for the next one
+        assert served == [(1, [1])] and b.queued and not a.queued
+        _add(lane, b, 2)  # arrives before b's turn: same batch
+        _add(lane, a, 2)
+        while a.queued or b.queued:
+            await asyncio.sleep(0)
+        ended = _sessions(1)[0]
+        _add(lane, ended, 1)
+        ended.ended = True  # a session that disconnected before its turn: its frames are not computed
+        await asyncio.sleep(0)
+        assert not ended.queued
+
+    asyncio.run(go())
+    assert served == [(1, [1]), (2, [1, 2]), (1, [2])]
 
 
 def test_garbage_connections_are_logged(server, caplog):
@@ -223,36 +311,6 @@ def test_event_loop_choice(models, test_demo, kind):
             assert type(ev).__module__.startswith("uvloop")
     finally:
         ev.close()
-
-
-def test_inline_lane_serves_at_once_only_sessions_not_ahead():
-    """The inline lane's shortcut (compute in the session's own task) is taken only while no frame is
-    waiting and the session has not used more compute than the others; else the frame is queued."""
-    import asyncio
-
-    from interprim.server.lanes import _Lane, _Session
-
-    def run(job):
-        name, cost = job
-        time.sleep(cost)
-        return name
-
-    async def go():
-        lane = _Lane(run, sync=True)
-        heavy = _Session(1, None, "a", asyncio.Queue(), None)
-        light = _Session(2, None, "b", asyncio.Queue(), None)
-        assert lane.run_now(heavy, ("heavy-1", 0.02)) == "heavy-1"
-        assert lane.run_now(heavy, ("heavy-2", 0.0)) is None  # 20 ms ahead: must queue
-        f2 = lane.submit(heavy, ("heavy-2", 0.0))
-        assert lane.run_now(light, ("light-1", 0.0)) is None  # a frame is waiting: queue behind it (fair order)
-        f3 = lane.submit(light, ("light-1", 0.0))
-        order = []
-        for f in asyncio.as_completed([f2, f3]):
-            order.append(await f)
-        assert order == ["light-1", "heavy-2"]  # the lighter session first
-        assert lane.run_now(light, ("light-2", 0.0)) == "light-2"
-
-    asyncio.run(go())
 
 
 @pytest.mark.parametrize("loop", ["asyncio", "uvloop"])

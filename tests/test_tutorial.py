@@ -7,7 +7,7 @@ right before a block changes that:
 * ``<!-- tutorial: skip REASON -->`` - not run (REASON is required and shown in the test's output);
 * ``<!-- tutorial: fails -->`` - must exit with a non-zero status and a one-line error, no traceback;
 * ``<!-- tutorial: background -->`` - started in the background (a server); it must print a line before the
-  next block runs, and is stopped with SIGINT (Ctrl-C) after the last block, exiting with status 0.
+  next block runs, and is stopped with SIGINT (Ctrl-C) after the last block, exiting with status 130 (128 + SIGINT).
 
 The tutorial's server port 8765 is replaced by a free port, so that the test does not depend on it being free.
 """
@@ -107,7 +107,7 @@ def test_every_block_runs(tmp_path, capsys):
                 os.killpg(proc.pid, signal.SIGKILL)
                 out, err = proc.communicate()
                 pytest.fail(f"line {line}: background block did not stop on SIGINT")
-            assert proc.returncode == 0, f"line {line}: background block exited {proc.returncode}: {err}"
+            assert proc.returncode == 130, f"line {line}: background block exited {proc.returncode}: {err}"  # 128 + SIGINT
             assert "Traceback" not in err, err
     assert ran >= 10
     with capsys.disabled():

@@ -25,7 +25,11 @@ examples:
   interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
 
 Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in
-their hello message and the page reads it from ?token=... in its URL."""
+their hello message and the page reads it from ?token=... in its URL.
+
+Ctrl-C (SIGINT) or SIGTERM stops the server cleanly: the frames received so far are answered, every
+session is closed with code 1001 "server shutting down (SIG...)", worker threads and processes are
+joined; exit status 130 after SIGINT, 0 after SIGTERM. A second signal exits at once."""
 
 
 def add_parser(subparsers) -> None:
@@ -67,6 +71,9 @@ def add_parser(subparsers) -> None:
                         "(default). Uses several cores: see benchmarks/SERVER_RESULTS.md")
     p.add_argument("--send-queue", type=int, default=256,
                    help="replies pending for one client before it is closed as not reading (default 256)")
+    p.add_argument("--max-pending", type=int, default=64,
+                   help="frames of one session waiting for their turn (answered together by one reply) before "
+                        "the server stops reading that session until its turn (default 64)")
     p.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
                    help="extra browser Origin allowed to open WebSockets (default: same host only)")
     p.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
@@ -76,8 +83,32 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+class _Terminated(BaseException):
+    """SIGTERM before the event loop runs (while models load or demo models are fitted)."""
+
+
+def _on_early_sigterm(signum, frame):
+    raise _Terminated()
+
+
 def run(args) -> int:
+    import signal
+
+    previous = signal.signal(signal.SIGTERM, _on_early_sigterm) if hasattr(signal, "SIGTERM") else None
+    try:
+        return _run(args)
+    except _Terminated:
+        print("interprim serve: terminated (SIGTERM) before serving", flush=True)
+        return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args) -> int:
+    import asyncio
     import logging
+    import signal
 
     from ..errors import InterprimError, ModelFileError
 
@@ -107,6 +138,7 @@ def run(args) -> int:
         workers=args.workers,
         processes=args.processes,
         send_queue=args.send_queue,
+        max_pending=args.max_pending,
         allowed_origins=tuple(args.allow_origin),
         loop=args.loop,
     )
@@ -134,22 +166,50 @@ def run(args) -> int:
         except Exception:  # the page then draws the arms with default lengths
             pass
     server = InterprimServer(models, config, extra_info=extra)
+    stop_signals = [getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n)]
 
-    async def main():
-        await server.start()
-        stopped = await _serve_until_signal(server, lambda: print(
-            f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True))
-        print(f"interprim serve: stopped ({stopped})", flush=True)
+    async def main() -> int:
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        got: list = []
+
+        def on_signal(sig):
+            if got:  # a second signal: the user does not want to wait
+                log.warning("%s again: exiting at once", sig.name)
+                os._exit(130 if sig == signal.SIGINT else 0)
+            got.append(sig)
+            stop.set()
+
+        handled = []
+        for sig in stop_signals:
+            try:
+                loop.add_signal_handler(sig, on_signal, sig)
+                handled.append(sig)
+            except (NotImplementedError, RuntimeError):  # not on this platform: Ctrl-C raises KeyboardInterrupt
+                pass
+        try:
+            await server.start()
+            if not got:
+                print(f"interprim serve: open {server.url}  (WebSocket {server.ws_url}; Ctrl-C to stop)", flush=True)
+            await stop.wait()
+        finally:
+            why = got[0].name if got else "error"
+            log.info("%s: shutting down", why)
+            await server.shutdown(f"server shutting down ({why})")
+            for sig in handled:
+                loop.remove_signal_handler(sig)
+        log.info("stopped (%d sessions served, %d predictions, %d frames coalesced)", server.stats["sessions"],
+                 server.stats["predictions"], server.stats["coalesced"])
+        return 130 if got[0] == signal.SIGINT else 0  # 128 + SIGINT, the shell's code for Ctrl-C
 
     try:
         new_event_loop(config.loop).close()  # --loop uvloop without uvloop: a clean error before fitting anything
     except ImportError as exc:
         raise InterprimError(str(exc)) from None
     try:
-        run_loop(main(), config.loop)
+        return run_loop(main(), config.loop)
     except OSError as exc:
         raise InterprimError(f"cannot listen on {args.host}:{args.port}: {exc}") from None
-    return 0
 
 
 def _pairs(values, flag):
@@ -192,40 +252,6 @@ def _attach_replays(models, values) -> None:
             e.meta["replay"] = load_replay(e, path)
         except (OSError, ValueError) as exc:  # DataFileError is a ValueError
             raise InterprimError(f"--replay {name}={path}: {exc}") from None
-
-async def _serve_until_signal(server, ready) -> str:
-    """Serve until SIGINT (Ctrl-C) or SIGTERM, then close every session and the socket inside the event loop
-    (a KeyboardInterrupt raised through the loop would leave it closed before the server is).  ``ready()`` is
-    called once the handlers are installed (it prints the address: a signal sent after that line is handled).
-    Returns the signal's name."""
-    import asyncio
-    import signal
-
-    loop = asyncio.get_running_loop()
-    got = asyncio.get_running_loop().create_future()
-    installed = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        try:
-            loop.add_signal_handler(sig, lambda s=sig: got.done() or got.set_result(s.name))
-            installed.append(sig)
-        except (NotImplementedError, RuntimeError, ValueError):  # Windows, or not the main thread
-            pass
-    ready()
-    serving = asyncio.ensure_future(server.serve_forever())
-    try:
-        await asyncio.wait({serving, got}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for sig in installed:
-            loop.remove_signal_handler(sig)
-        serving.cancel()
-        try:
-            await serving
-        except (asyncio.CancelledError, Exception):
-            pass
-        await server.stop()
-    if serving.done() and not serving.cancelled() and serving.exception() is not None:
-        raise serving.exception()
-    return got.result() if got.done() else "server closed"
 
 
 def _has_sim() -> bool:

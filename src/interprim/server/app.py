@@ -2,17 +2,23 @@
 
 One WebSocket connection is one *session*.  Inside it the client says ``hello``,
 ``open``\\s a model (or ``auto`` recognition among several), streams frames and
-receives one ``prediction`` (or ``error``) per frame, in order.  Each session
-owns its own ``model.stream()``; nothing is shared between sessions except the
-read-only fitted models.
+receives ``prediction`` (or ``error``) replies in ``seq`` order; each reply
+``covers`` one frame, or, when the server is behind, all the frames the session
+sent since its previous reply (every frame still enters the session's stream).
+Each session owns its own ``model.stream()``; nothing is shared between sessions
+except the read-only fitted models.
 
 Concurrency: the asyncio event loop does all the I/O; the CPU-bound
-``stream.update`` + trajectory + JSON encoding of a frame runs either inline on
-the loop (``workers=0``) or in a thread pool (``workers=N``).  Per-session
-ordering holds in both modes because a session awaits frame ``k`` before it
-reads frame ``k+1``.  Replies go through a bounded per-session queue drained by
-a writer task, so a client that never reads is detected (queue full) and closed
-with code 1008 instead of growing the server's memory.
+``stream.update`` + trajectory + JSON encoding runs inline on the loop
+(``workers=0``), in a thread pool (``workers=N``) or in worker processes
+(``processes=N``), in round-robin turns over the sessions with pending frames
+(:mod:`interprim.server.lanes`).  Replies go through a bounded per-session queue
+drained by a writer task, so a client that never reads is detected (queue full)
+and closed with code 1008 instead of growing the server's memory.
+
+:meth:`InterprimServer.shutdown` (``interprim serve`` on SIGINT/SIGTERM) stops
+accepting connections, answers the frames every session has sent, closes each
+session with 1001 and joins the worker threads/processes.
 
 Here: the configuration, the server's life cycle and its compute lanes.  The
 server's two faces are :class:`~interprim.server.http_api.HttpSide` (page, static
@@ -32,12 +38,11 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from . import protocol as P
-from . import sessions
-from .compute import compute_prediction, warm_up
+from .compute import compute_batch, warm_up
 from .http_api import HttpSide
 from .lanes import _Lane, _Session
 from .models import ModelEntry
-from .sessions import SessionSide
+from .sessions import SHUTDOWN_REASON, SessionSide
 
 log = logging.getLogger("interprim.server")
 
@@ -58,6 +63,7 @@ class ServerConfig:
     workers: int = 0  # 0 = compute inline on the event loop; N = thread pool of N
     processes: int = 0  # N > 0: sessions pinned to N worker processes (see workers.py); overrides workers
     send_queue: int = 256  # replies pending for one client before it counts as "not reading"
+    max_pending: int = 64  # frames of one session waiting for their turn before the server stops reading it
     write_limit: int = 256 * 1024  # bytes buffered in the socket writer before send() waits
     max_points: int = 500
     default_points: int = 50
@@ -81,7 +87,8 @@ class ServerConfig:
                 f"refusing to listen on {self.host!r} without a token: anyone who can reach it could use the "
                 "server. Pass --token (or set INTERPRIM_TOKEN), or keep the default --host 127.0.0.1"
             )
-        for name in ("max_sessions", "max_message_bytes", "send_queue", "max_points", "rate_burst", "max_errors"):
+        for name in ("max_sessions", "max_message_bytes", "send_queue", "max_points", "rate_burst", "max_errors",
+                     "max_pending"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if not self.max_rate_hz > 0:
@@ -126,6 +133,7 @@ def run(main, loop: str = "auto"):
     finally:
         try:
             ev.run_until_complete(ev.shutdown_asyncgens())
+            ev.run_until_complete(ev.shutdown_default_executor())  # joins the threads of run_in_executor(None, ...)
         finally:
             asyncio.set_event_loop(None)
             ev.close()
@@ -168,7 +176,8 @@ class InterprimServer(HttpSide, SessionSide):
         self.extra_info = dict(extra_info or {})
         self._ids = itertools.count(1)
         self.sessions: dict[int, _Session] = {}
-        self.stats = {"sessions": 0, "predictions": 0, "errors": 0, "rejected": 0}
+        self.stats = {"sessions": 0, "predictions": 0, "coalesced": 0, "errors": 0, "rejected": 0}
+        self._stopping = False
         c = self.config
         self._pool = ThreadPoolExecutor(c.workers, thread_name_prefix="ip-worker") if c.workers and not c.processes else None
         self._procs = None
@@ -185,9 +194,6 @@ class InterprimServer(HttpSide, SessionSide):
         client) or, with ``processes``, starts the worker processes.
         """
         from websockets.asyncio.server import ServerConnection, serve
-        from websockets.protocol import State
-
-        sessions._OPEN = State.OPEN
 
         class LoggedConnection(ServerConnection):
             """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them)."""
@@ -248,28 +254,29 @@ class InterprimServer(HttpSide, SessionSide):
         return self
 
     def _make_lanes(self) -> list:
+        deliver = self._deliver
         if self._procs is not None:
             procs = self._procs
 
-            async def run_proc(job):
-                s, op, frame, seq, t = job
-                return await procs.call(s.id, "frame", frame=frame.tolist(), seq=seq, t=t)
+            async def run_proc(s, op, batch):
+                head, body = await procs.request(s.id, "frames", frames=[f.tolist() for f, _, _ in batch],
+                                                 seqs=[q for _, q, _ in batch], ts=[t for _, _, t in batch])
+                texts = body.decode().split("\n") if body else []
+                return texts, [tuple(f) for f in head.get("failures", ())]
 
-            return [_Lane(run_proc) for _ in range(procs.n)]  # session i runs on worker i % n
+            return [_Lane(run_proc, deliver) for _ in range(procs.n)]  # session i runs on worker i % n
         if self._pool is not None:
             pool = self._pool
 
-            async def run_thread(job):
-                _, op, frame, seq, t = job
-                return await asyncio.get_running_loop().run_in_executor(pool, compute_prediction, op, frame, seq, t)
+            async def run_thread(s, op, batch):
+                return await asyncio.get_running_loop().run_in_executor(pool, compute_batch, op, batch)
 
-            return [_Lane(run_thread) for _ in range(self.config.workers)]
+            return [_Lane(run_thread, deliver) for _ in range(self.config.workers)]
 
-        def run_inline(job):
-            _, op, frame, seq, t = job
-            return compute_prediction(op, frame, seq, t)
+        def run_inline(s, op, batch):
+            return compute_batch(op, batch)
 
-        return [_Lane(run_inline, sync=True)]
+        return [_Lane(run_inline, deliver, sync=True)]
 
     async def serve_forever(self):
         """:meth:`start` if needed, then serve until the task is cancelled or :meth:`stop` is called."""
@@ -277,17 +284,49 @@ class InterprimServer(HttpSide, SessionSide):
             await self.start()
         await self._server.serve_forever()
 
-    async def stop(self):
-        """Close every connection and the listening socket, and shut down the worker threads or processes."""
-        if self._server is not None:
-            self._server.close(close_connections=True)
-            await self._server.wait_closed()
-            self._server = None
+    async def shutdown(self, reason: str = SHUTDOWN_REASON) -> None:
+        """Stop the server cleanly: stop accepting connections; let every session's frames received so far be
+        answered, then close each session with 1001 (going away) and ``reason``; join the worker threads or
+        processes.  Bounded: sessions still open ``close_timeout + 5`` s later are aborted.  Idempotent."""
+        c = self.config
+        self._stopping = True
+        srv, self._server = self._server, None
+        if srv is not None:
+            srv.close(close_connections=False)  # stop listening; wait_closed() waits for the handlers
+            live = list(self.sessions.values())
+            if live:
+                log.info("shutting down: closing %d session(s) with 1001 once their frames are answered", len(live))
+            loop = asyncio.get_running_loop()
+            tasks = [loop.create_task(self._going_away(s, P.CLOSE_GOING_AWAY, reason)) for s in live]
+            limit = c.close_timeout + 5.0
+            if tasks:
+                _, late = await asyncio.wait(tasks, timeout=limit)
+                for t in late:
+                    t.cancel()
+            try:
+                await asyncio.wait_for(srv.wait_closed(), limit)
+            except (TimeoutError, asyncio.TimeoutError):
+                log.warning("shutting down: %d session(s) still open after %.0f s; aborting them",
+                            len(self.sessions), limit)
+                for s in list(self.sessions.values()):
+                    transport = getattr(s.ws, "transport", None)
+                    if transport is not None:
+                        transport.abort()
+                try:
+                    await asyncio.wait_for(srv.wait_closed(), limit)
+                except (TimeoutError, asyncio.TimeoutError):
+                    log.error("shutting down: connection handlers did not return; giving up on them")
         if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool.shutdown(wait=True)  # idle by now: the sessions are gone
+            self._pool = None
         if self._procs is not None:
-            self._procs.stop()
+            self._procs.stop()  # asks each worker to stop and joins it
             self._procs = None
+            log.info("worker processes stopped")
+
+    async def stop(self):
+        """:meth:`shutdown` with the default reason."""
+        await self.shutdown()
 
     @property
     def url(self) -> str:
@@ -337,8 +376,11 @@ class ServerThread:
             try:
                 loop.run_forever()
             finally:
-                loop.run_until_complete(self.server.stop())
-                loop.close()
+                try:
+                    loop.run_until_complete(self.server.stop())
+                    loop.run_until_complete(loop.shutdown_default_executor())
+                finally:
+                    loop.close()
 
         self._thread = threading.Thread(target=run, name="interprim-server", daemon=True)
         self._thread.start()

@@ -158,7 +158,9 @@ class Client:
 class AsyncClient:
     """asyncio client; ``await AsyncClient.connect(url)``.
 
-    ``frame()`` waits for the reply; ``send_frame()`` + ``recv()`` pipeline.
+    ``frame()`` waits for the reply; ``send_frame()`` + ``recv()`` pipeline (a server that is behind may then
+    answer several pipelined frames with one reply: its ``first_seq .. seq``, ``covers`` frames; see the
+    protocol's "Overload and coalesced replies").
     """
 
     def __init__(self, ws, welcome):

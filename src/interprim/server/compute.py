@@ -156,13 +156,17 @@ class _MeanRollout:
         return np.asarray(pred.trajectory(self.n))[:, self.sel]
 
 
-def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
+def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound).
 
-    The reply is built as text directly (same keys, order and number formats as ``P.dumps`` of the
-    message would give): encoding a dict with :mod:`json` costs more than the rest of the reply.
+    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq`` (the earlier ones were fed to the
+    streams by :func:`observe`; see :func:`compute_batch`); ``t0``: start of their computation
+    (``compute_ms`` counts from there).  The reply is built as text directly (same keys, order and number
+    formats as ``P.dumps`` of the message would give): encoding a dict with :mod:`json` costs more than
+    the rest of the reply.
     """
-    t0 = time.perf_counter()
+    if t0 is None:
+        t0 = time.perf_counter()
     update_kw = op.update_kw
     if len(op.streams) == 1:
         preds = [op.streams[0].update(frame, **update_kw)]
@@ -187,8 +191,9 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
     n_frames = getattr(pred, "n_observed", None)
     if n_frames is not None:
         nums += '"frames":%d,' % n_frames
-    parts = ['{"type":"prediction","seq":%d' % seq, model_part, nums, cols_part]
-    # "type" and "seq" first: clients may read them without a full parse
+    parts = ['{"type":"prediction","seq":%d,"covers":%d,"first_seq":%d' % (seq, covers, seq - covers + 1),
+             model_part, nums, cols_part]
+    # "type", "seq", "covers", "first_seq" first: clients may read them without a full parse
     if probs is not None:
         parts.append(',"probabilities":' + P.dumps({e.name: round(p, 6) for e, p in zip(op.entries, probs)}))
     if t is not None:
@@ -207,3 +212,49 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t) -> str:
         ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null")))
     parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
     return "".join(parts)
+
+
+def observe(op: _Open, frame: np.ndarray) -> None:
+    """Feed ``frame`` to every stream of ``op`` without encoding a reply (a frame that a later reply covers).
+
+    Mean-only (``need_cov=False``) whatever the session asked: the covariance of a frame whose reply is
+    not sent is never used, and the reply's own frame (:func:`compute_prediction`) is updated with the
+    session's options, from the same stream state as without coalescing.
+    """
+    kw = {"need_cov": False} if op.update_kw else op.update_kw
+    for st in op.streams:
+        st.update(frame, **kw)
+    op.frames += 1
+
+
+def compute_batch(op: _Open, batch) -> tuple[list, list]:
+    """Feed a session's pending frames ``batch`` (a list of ``(frame, seq, t)``, seqs consecutive) to its
+    streams in order and encode **one** reply for the newest: a ``prediction`` with ``covers = len(batch)``.
+
+    Every frame enters the streams (phase estimation and conditioning see all of them), so the reply is
+    the one the last frame would get had each frame been answered (same stream state, same update
+    options for the last frame).  A frame on which the model fails ends the batch early: an ``internal``
+    error with that frame's ``seq`` that also covers the frames before it since the last reply; the
+    frames after it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
+    ``(seq, traceback text)`` per failure (for the server's log).
+    """
+    import traceback
+
+    texts, failures = [], []
+    t0 = time.perf_counter()
+    first = 0
+    last = len(batch) - 1
+    for i, (frame, seq, t) in enumerate(batch):
+        try:
+            if i < last:
+                observe(op, frame)
+                continue
+            texts.append(compute_prediction(op, frame, seq, t, covers=i - first + 1, t0=t0))
+        except Exception as exc:
+            covers = i - first + 1
+            failures.append((seq, traceback.format_exc()))
+            texts.append(P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq,
+                                         **({"covers": covers, "first_seq": seq - covers + 1} if covers > 1 else {}))))
+            first = i + 1
+            t0 = time.perf_counter()
+    return texts, failures

@@ -1,16 +1,20 @@
-"""Sessions and where their frames are computed: per-session rate limits and fair-queued compute lanes.
+"""Sessions and where their frames are computed: per-session rate limits and round-robin compute lanes.
 
 A :class:`_Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
-are computed (the event loop, a thread or a worker process), shared by several sessions with
-start-time fair queueing on compute time; :class:`_Bucket` limits a session's message rate.
+are computed (the event loop, a thread or a worker process), shared by several sessions in
+round-robin order; :class:`_Bucket` limits a session's message rate.
+
+Frames are *coalesced* under overload: a session's handler puts every frame it receives into the
+session's ``pending`` list and goes on reading; when the session's turn comes, its lane feeds all
+its pending frames to the session's streams (every frame enters the state) and encodes one reply,
+for the newest, that says how many frames it covers (:func:`interprim.server.compute.compute_batch`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import heapq
-import itertools
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 from .compute import _Open
@@ -47,103 +51,123 @@ class _Session:
     errors: int = 0
     consecutive_errors: int = 0
     predictions: int = 0
+    coalesced: int = 0  # frames answered by a later frame's reply (sum of covers - 1)
     closing: bool = False
     writer: asyncio.Task | None = None
     close_reason: str = ""
     error_counts: dict = field(default_factory=dict)
-    vtime: float = 0.0  # compute time used (fair queueing)
     unsent: int = 0  # items put in ``out`` that the writer has not finished sending
+    pending: list = field(default_factory=list)  # (frame, seq, t) received, not yet fed to the streams
+    queued: bool = False  # in its lane's round-robin queue or being computed (then ``pending`` may grow)
+    busy: bool = False  # the handler is inside a message (a control message may await a worker)
+    ended: bool = False  # the connection's handler has finished
+    waiters: list = field(default_factory=list)  # futures woken when the above change (see SessionSide._until)
+
+    def wake(self) -> None:
+        """Wake the coroutines waiting for a change of ``pending``/``queued``/``busy``/``ended``."""
+        if self.waiters:
+            ws, self.waiters = self.waiters, []
+            for fut in ws:
+                if not fut.done():
+                    fut.set_result(None)
 
 
 class _Lane:
     """One place where predictions are computed (the event loop, a thread, or a worker process),
-    shared by several sessions with fair queueing on compute time (start-time fair queueing).
+    shared by several sessions in **round-robin** order.
 
-    Each session has at most one frame waiting (its handler awaits the reply before it reads the
-    next frame).  Among the waiting frames, the one of the session that has used the least compute
-    time goes first.  A session that asks for expensive predictions (many candidates, std band,
-    many points) or sends too fast therefore slows itself down, not the other sessions of the lane.
+    A session with pending frames is in the lane's queue at most once.  When its turn comes the lane
+    takes *all* its pending frames (one batch), computes them with ``run(session, op, batch)`` and hands
+    the result to ``deliver(session, op, batch, result)``; frames that arrived meanwhile put the session
+    back at the end of the queue.  So every session with pending work gets one turn per round (none
+    starves, whatever its rate or cost), and a session that is behind gets one reply for all the frames
+    it sent during the round instead of one late reply per frame.
+
+    ``sync=True`` (inline compute): ``run`` is a plain callable, and one session is served per
+    iteration of the event loop, so that between two batches the loop reads the sockets and frames that
+    arrived meanwhile join their sessions' batches.  Else ``run`` is a coroutine function, and up to
+    ``depth`` batches (of different sessions) are in flight at once, so that a worker process has the
+    next batch in its pipe when it finishes one instead of waiting for the event loop's round trip.
     """
 
-    def __init__(self, run, sync: bool = False):
-        self.run = run  # async callable(job) -> reply text; with sync=True a plain callable (inline compute)
+    def __init__(self, run, deliver, sync: bool = False, depth: int = 2):
+        self.run = run
+        self.deliver = deliver
         self.sync = sync
-        self.heap: list = []
-        self.vclock = 0.0
-        self.task = None
+        self.depth = max(1, int(depth))
+        self.queue: deque = deque()
+        self.inflight = 0
         self._scheduled = False
-        self._tie = itertools.count()
 
-    SLACK = 0.002  # s of compute a session may be ahead of the lane's clock and still be served at once
-
-    def submit(self, s: "_Session", job) -> asyncio.Future:
-        loop = asyncio.get_running_loop()
-        fut = loop.create_future()
-        s.vtime = max(s.vtime, self.vclock)  # an idle session does not bank compute time
-        heapq.heappush(self.heap, (s.vtime, next(self._tie), s, job, fut))
+    def push(self, s: _Session) -> None:
+        """Queue ``s`` (which has pending frames and is not queued) for its turn."""
+        s.queued = True
+        self.queue.append(s)
         if self.sync:
             if not self._scheduled:
                 self._scheduled = True
-                loop.call_soon(self._step)
-        elif self.task is None or self.task.done():
-            self.task = loop.create_task(self._drain())
-        return fut
+                asyncio.get_running_loop().call_soon(self._step)
+        else:
+            self._pump()
 
-    def run_now(self, s: "_Session", job):
-        """Inline lane: compute ``job`` right away if no frame is waiting and ``s`` is at most
-        :attr:`SLACK` of compute ahead of the lane's clock (the start time of the last frame served);
-        else return ``None``: then :meth:`submit` it and wait for its turn.  Saves a future, a callback
-        and two task switches per frame while the lane keeps up (~0.04 ms of the ~0.17 ms per frame);
-        a session that uses more compute than the others (or frames waiting) goes through the heap
-        as before, so the fair order holds under load."""
-        s.vtime = max(s.vtime, self.vclock)
-        if self.heap or s.vtime > self.vclock + self.SLACK:
+    def _take(self):
+        """The next session's batch: ``(session, open model, frames)``, or ``None`` for a session that has
+        ended or has nothing to compute (then it leaves the queue)."""
+        s = self.queue.popleft()
+        batch, s.pending = s.pending, []
+        op = s.open
+        if s.ended or op is None or not batch:
+            s.queued = False
+            s.wake()
             return None
-        self.vclock = s.vtime  # its start time: the lane's clock, as when _step serves a frame
-        t0 = time.perf_counter()
-        try:
-            return self.run(job)
-        finally:
-            s.vtime += time.perf_counter() - t0
+        return s, op, batch
+
+    def _done(self, s: _Session) -> None:
+        if s.pending and not s.ended:
+            self.queue.append(s)  # frames arrived during its turn: back to the end of the round
+        else:
+            s.queued = False
+            s.wake()
 
     def _step(self) -> None:
-        """Inline lane: compute one waiting frame per event-loop iteration (a plain callback, cheaper
-        than a task).  Between two frames the loop reads the sockets, so frames that arrived meanwhile
-        join the heap before the next pick, as with :meth:`_drain`."""
+        """Inline lane: serve one session per event-loop iteration (a plain callback)."""
         self._scheduled = False
-        heap = self.heap
-        while heap:
-            vt, _, s, job, fut = heapq.heappop(heap)
-            self.vclock = vt
-            if fut.done():
+        while self.queue:
+            job = self._take()
+            if job is None:
                 continue
-            t0 = time.perf_counter()
+            s, op, batch = job
             try:
-                result = self.run(job)
-            except Exception as exc:
-                fut.set_exception(exc)
-            else:
-                fut.set_result(result)
-            s.vtime += time.perf_counter() - t0
+                result = self.run(s, op, batch)
+            except Exception as exc:  # run() reports model failures itself; this is a bug
+                result = exc
+            try:
+                self.deliver(s, op, batch, result)
+            finally:
+                self._done(s)
             break
-        if heap:
+        if self.queue:
             self._scheduled = True
             asyncio.get_running_loop().call_soon(self._step)
 
-    async def _drain(self) -> None:
-        while self.heap:
-            vt, _, s, job, fut = heapq.heappop(self.heap)
-            self.vclock = vt
-            if fut.done():
+    def _pump(self) -> None:
+        """Async lane: start batches while fewer than ``depth`` are in flight."""
+        while self.queue and self.inflight < self.depth:
+            job = self._take()
+            if job is None:
                 continue
-            t0 = time.perf_counter()
-            try:
-                result = await self.run(job)
-            except Exception as exc:
-                if not fut.done():
-                    fut.set_exception(exc)
-            else:
-                if not fut.done():
-                    fut.set_result(result)
-            s.vtime += time.perf_counter() - t0
-            await asyncio.sleep(0)  # let the other sessions read their next frames and queue them
+            self.inflight += 1
+            asyncio.get_running_loop().create_task(self._serve(*job))
+
+    async def _serve(self, s: _Session, op, batch) -> None:
+        try:
+            result = await self.run(s, op, batch)
+        except Exception as exc:  # a dead worker process, a bug
+            result = exc
+        finally:
+            self.inflight -= 1
+        try:
+            self.deliver(s, op, batch, result)
+        finally:
+            self._done(s)
+            self._pump()

@@ -2,6 +2,11 @@
 
 :class:`SessionSide` is a part of :class:`~interprim.server.app.InterprimServer` (which owns
 ``config``, ``models``, ``sessions``, the compute lanes and the statistics it updates).
+
+A session's handler reads its messages as they come.  A valid frame joins the session's pending
+frames and its lane computes them in round-robin turns (:mod:`interprim.server.lanes`: one reply per
+turn, which ``covers`` every frame of the turn).  Anything else (a control message, an error reply)
+first waits until the session's pending frames are answered, so replies keep the order of ``seq``.
 """
 
 from __future__ import annotations
@@ -13,10 +18,11 @@ from . import protocol as P
 from .compute import _Open, _accepts_need_cov
 from .lanes import _Bucket, _Session
 
+SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001) sent to every session at shutdown
+
 log = logging.getLogger("interprim.server")
 
 _CLOSE = object()
-_OPEN = object()  # websockets.protocol.State.OPEN, set by InterprimServer.start (imported lazily)
 
 
 class SessionSide:
@@ -29,6 +35,9 @@ class SessionSide:
             peer = "%s:%s" % tuple(ws.remote_address[:2])
         except Exception:
             peer = "?"
+        if self._stopping:  # accepted while shutting down
+            await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
+            return
         if len(self.sessions) >= c.max_sessions:
             self.stats["rejected"] += 1
             log.warning("session %d from %s refused: server full (%d sessions)", sid, peer, c.max_sessions)
@@ -54,10 +63,21 @@ class SessionSide:
                 except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
                     self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
                     break
-                await self._on_message(s, data)
-                if not s.out.empty():
-                    # Let the writer push the reply to the socket now: the queue then only fills up
-                    # when the socket's write buffer is full, i.e. when the client is not reading.
+                if self._stopping:
+                    continue  # shutting down: not read any more (the close reason says which frames were answered)
+                if self._frame_at_once(s, data):  # the usual message: a valid frame of an open session
+                    if s.queued and len(s.pending) >= c.max_pending:
+                        await self._far_behind(s)
+                    continue
+                s.busy = True
+                try:
+                    queued = await self._on_message(s, data)
+                finally:
+                    s.busy = False
+                    s.wake()
+                if not queued and s.unsent:
+                    # A reply of the handler's own (control, error): let the writer push it to the socket now,
+                    # so the queue only fills up when the socket's write buffer is full (a client not reading).
                     await asyncio.sleep(0)
         except ConnectionClosed as exc:
             rcvd, sent = exc.rcvd, exc.sent
@@ -73,6 +93,8 @@ class SessionSide:
             log.exception("session %d: internal error; closing the session", sid)
             self._fatal(s, P.CLOSE_INTERNAL, "internal server error (logged)")
         finally:
+            s.ended = True
+            s.wake()
             self.sessions.pop(sid, None)
             if self._procs is not None and s.open is not None:
                 s.open = None
@@ -88,7 +110,8 @@ class SessionSide:
             if s.writer is not None and not s.writer.done():
                 s.writer.cancel()
             extra = f", errors {s.error_counts}" if s.error_counts else ""
-            log.info("session %d: ended (%d frames, %d predictions%s)", sid, s.seq, s.predictions, extra)
+            log.info("session %d: ended (%d frames, %d predictions, %d frames coalesced%s)", sid, s.seq, s.predictions,
+                     s.coalesced, extra)
 
     async def _writer(self, s: _Session):
         from websockets.exceptions import ConnectionClosed
@@ -119,10 +142,10 @@ class SessionSide:
             s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
 
-    def _fatal(self, s: _Session, code: int, reason: str, message: dict | None = None) -> None:
+    def _fatal(self, s: _Session, code: int, reason: str, message: dict | None = None, level=logging.WARNING) -> None:
         if s.closing:
             return
-        log.warning("session %d: closing %d: %s", s.id, code, reason)
+        log.log(level, "session %d: closing %d: %s", s.id, code, reason)
         if message is not None:
             self._send(s, P.dumps(message))
         if s.closing:  # _send found the queue full
@@ -154,7 +177,47 @@ class SessionSide:
         else:
             self._send(s, P.dumps(msg))
 
-    async def _on_message(self, s: _Session, data) -> None:
+    def _frame_at_once(self, s: _Session, data) -> bool:
+        """A valid frame of a session with an open model, within the rate limit: put it in the session's pending
+        frames without a coroutine (the common case, per frame).  ``False`` (nothing done) for anything else,
+        which :meth:`_on_message` then handles, errors included."""
+        op = s.open
+        if op is None or not s.ready:
+            return False
+        n = op.entries[0].n_observed
+        try:
+            if isinstance(data, str):
+                msg = P.parse_text(data)
+                if msg["type"] != "frame":
+                    return False
+                frame, t = P.check_frame(msg, n)
+            elif isinstance(data, bytes):
+                frame, t = P.decode_binary_frame(data, n), None
+            else:
+                return False
+        except P.ProtocolError:
+            return False
+        if not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
+            return False
+        s.seq += 1
+        s.pending.append((frame, s.seq, t))
+        if not s.queued:
+            self._lanes[s.id % len(self._lanes)].push(s)
+        return True
+
+    async def _far_behind(self, s: _Session) -> None:
+        """``max_pending`` frames waiting: stop reading the session until its turn (the server cannot even feed its
+        frames to its streams as fast as they come), so that TCP flow control slows the client down."""
+        limit = self.config.max_pending
+        s.busy = True
+        try:
+            await self._until(s, lambda: len(s.pending) < limit or not s.queued)
+        finally:
+            s.busy = False
+            s.wake()
+
+    async def _on_message(self, s: _Session, data) -> bool:
+        """Handle one message; ``True`` when it was a frame put in the session's pending frames."""
         c = self.config
         is_frame = isinstance(data, (bytes, bytearray, memoryview))
         msg = None
@@ -169,8 +232,11 @@ class SessionSide:
                         s.seq += 1
                         seq = s.seq
                 if not s.bucket.take():
-                    return self._error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"), seq, t)
-                return self._error(s, exc, seq, t)
+                    await self._reply_error(s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s"),
+                                            seq, t)
+                else:
+                    await self._reply_error(s, exc, seq, t)
+                return False
             is_frame = msg["type"] == "frame"
         seq = t = None
         if is_frame:
@@ -178,16 +244,35 @@ class SessionSide:
             seq = s.seq
             t = P.frame_stamp(msg)
         if not s.bucket.take():
-            return self._error(
+            await self._reply_error(
                 s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"),
                 seq, t)
+            return False
         try:
-            if msg is None or msg["type"] == "frame":
+            if is_frame:
                 await self._on_frame(s, data, msg, seq)
-            else:
-                await self._on_control(s, msg)
+                return True
+            if s.queued:  # answer the frames received before this message first
+                await self._until(s, lambda: not s.queued)
+            await self._on_control(s, msg)
         except P.ProtocolError as exc:
-            self._error(s, exc, seq, t)
+            await self._reply_error(s, exc, seq, t)
+        return False
+
+    async def _reply_error(self, s: _Session, exc: P.ProtocolError, seq=None, t=None) -> None:
+        """:meth:`_error`, after the replies to the frames received before (replies stay in ``seq`` order)."""
+        if s.queued:
+            await self._until(s, lambda: not s.queued)
+        self._error(s, exc, seq, t)
+
+    async def _until(self, s: _Session, cond) -> None:
+        """Wait until ``cond()`` holds; it is checked whenever the session's lane or handler changes its state."""
+        loop = None
+        while not cond():
+            loop = loop or asyncio.get_running_loop()
+            fut = loop.create_future()
+            s.waiters.append(fut)
+            await fut
 
     async def _on_control(self, s: _Session, msg: dict) -> None:
         mtype = msg["type"]
@@ -269,32 +354,44 @@ class SessionSide:
             frame, t = P.decode_binary_frame(bytes(data), n), None
         else:
             frame, t = P.check_frame(msg, n)
-        try:
-            lane = self._lanes[s.id % len(self._lanes)]
-            job = (s, op, frame, seq, t)
-            text = lane.run_now(s, job) if lane.sync else None
-            if text is None:
-                text = await lane.submit(s, job)
-        except Exception as exc:
-            self.stats["errors"] += 1
-            log.exception("session %d: prediction failed at seq %d", s.id, seq)
-            self._send(s, P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq, t=t)))
-            return
-        if s.open is not op:  # closed/reopened while computing
-            return
-        s.consecutive_errors = 0
-        s.predictions += 1
-        self.stats["predictions"] += 1
-        ws = s.ws
-        if (not s.unsent and not s.closing and ws.state is _OPEN and getattr(ws, "paused", True) is False
-                and ws.transport.get_write_buffer_size() + len(text) + 16 <= self.config.write_limit):
-            # Fast path: nothing queued before this reply and room in the socket's write buffer, so
-            # ws.send() writes and returns without suspending (no flow-control wait).  Skips the
-            # queue + writer task; a client that does not read fills the buffer and then the queue.
-            await ws.send(text)
+        s.pending.append((frame, seq, t))
+        if not s.queued:
+            self._lanes[s.id % len(self._lanes)].push(s)
+        elif len(s.pending) >= self.config.max_pending:
+            await self._until(s, lambda: len(s.pending) < self.config.max_pending or not s.queued)
+
+    def _deliver(self, s: _Session, op: _Open, batch: list, result) -> None:
+        """Send the replies of a computed batch (called by the lanes): ``result`` is ``(texts, failures)`` from
+        :func:`~interprim.server.compute.compute_batch`, or the exception that stopped the computation."""
+        if isinstance(result, BaseException):
+            failures = [(batch[-1][1], f"{type(result).__name__}: {result}")]
+            n = len(batch)
+            extra = {"covers": n, "first_seq": batch[0][1]} if n > 1 else {}
+            texts = [P.dumps(P.error("internal", f"prediction failed: {type(result).__name__}: {result}",
+                                     seq=batch[-1][1], t=batch[-1][2], **extra))]
         else:
+            texts, failures = result
+        for seq, detail in failures:
+            self.stats["errors"] += 1
+            log.error("session %d: prediction failed at seq %d:\n%s", s.id, seq, detail.rstrip())
+        if s.ended or s.open is not op:  # gone, or closed while computing
+            return
+        n_pred = len(texts) - len(failures)
+        s.predictions += n_pred
+        s.coalesced += len(batch) - len(texts)
+        self.stats["predictions"] += n_pred
+        self.stats["coalesced"] += len(batch) - len(texts)
+        if n_pred:
+            s.consecutive_errors = 0
+        for text in texts:
             self._send(s, text)
 
+    async def _going_away(self, s: _Session, code: int, reason: str) -> None:
+        """Shutdown of one session: once the frames it sent are answered (and the handler is between two
+        messages), close it with ``code`` and a reason that names the last frame answered."""
+        await self._until(s, lambda: s.ended or not (s.busy or s.queued))
+        if not s.ended:
+            self._fatal(s, code, f"{reason}; frames up to seq {s.seq} answered", level=logging.INFO)
 
 def _opened(o: dict, entries: list, cols: list) -> dict:
     """The ``opened`` reply: what was opened and how to label it (names and units of the returned columns

@@ -7,29 +7,38 @@ only does the network I/O.  A slow session then only delays the sessions of its 
 
 Models reach the workers as safe ``.npz`` model files (``model.save`` / ``InteractionPrimitive.load``);
 requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
-pickle).  A reply is one JSON header line, then (for predictions) the finished JSON text for the
-client, so it is not encoded twice.
+pickle).  A reply is one JSON header line, then (for predictions) the finished JSON texts for the
+client, one per line, so they are not encoded twice.  A session's pending frames go to its worker in
+one ``frames`` request (:func:`interprim.server.compute.compute_batch`).
+
+Workers ignore SIGINT and SIGTERM (Ctrl-C reaches the whole process group): they stop when the server
+asks them to at its shutdown, or when their pipe closes because the server is gone.
 """
 
 from __future__ import annotations
 
-import asyncio
 import itertools
 import json
 import logging
 import multiprocessing as mp
 import os
+import signal
 import tempfile
 from pathlib import Path
 
 log = logging.getLogger("interprim.server")
 
 
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n))
+
+
 def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker process
+    for sig in _STOP_SIGNALS:  # the server stops its workers itself (see the module's docstring)
+        signal.signal(sig, signal.SIG_IGN)
     import numpy as np
 
     from ..primitive import InteractionPrimitive
-    from .compute import _Open, _accepts_need_cov, compute_prediction, warm_up
+    from .compute import _Open, _accepts_need_cov, compute_batch, warm_up
     from .models import entry_for
 
     entries = {n: entry_for(n, InteractionPrimitive.load(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}
@@ -46,9 +55,13 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
         body = b""
         head = {"rid": rid, "ok": True}
         try:
-            if op == "frame":
+            if op == "frames":
                 o = sessions[req["sid"]]
-                body = compute_prediction(o, np.asarray(req["frame"], dtype=np.float64), req["seq"], req.get("t")).encode()
+                batch = [(np.asarray(f, dtype=np.float64), q, t) for f, q, t in zip(req["frames"], req["seqs"], req["ts"])]
+                texts, failures = compute_batch(o, batch)
+                body = "\n".join(texts).encode()
+                if failures:
+                    head["failures"] = failures
             elif op == "open":
                 es = [entries[n] for n in req["candidates"]]
                 streams = [e.model.stream(robot_state=req.get("robot_state")) for e in es]
@@ -101,13 +114,21 @@ class ProcessPool:
                 paths[name] = str(p)
             kinds[name] = e.kind
         ctx = mp.get_context("spawn")
-        for i in range(self.n):
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker_main, args=(child, paths, kinds), name=f"interprim-worker-{i}",
-                               daemon=True)
-            proc.start()
-            child.close()
-            self.workers.append(_Worker(proc, parent))
+        # Block SIGINT/SIGTERM in this thread while spawning: the children inherit the mask, so a Ctrl-C during
+        # their start-up (before _worker_main ignores it) cannot print a KeyboardInterrupt traceback.
+        masked = hasattr(signal, "pthread_sigmask") and bool(_STOP_SIGNALS)
+        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS) if masked else None
+        try:
+            for i in range(self.n):
+                parent, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker_main, args=(child, paths, kinds), name=f"interprim-worker-{i}",
+                                   daemon=True)
+                proc.start()
+                child.close()
+                self.workers.append(_Worker(proc, parent))
+        finally:
+            if masked:
+                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
         for w in self.workers:
             if not w.conn.poll(120):
                 raise RuntimeError(f"worker process {w.proc.name} did not start")
@@ -124,20 +145,23 @@ class ProcessPool:
             os.set_blocking(w.conn.fileno(), True)
 
     def _on_readable(self, w: _Worker) -> None:
+        # One reply per call: the pipe is readable, so the read does not wait for the worker (it writes each reply
+        # whole), and the event loop calls again while more replies are in the pipe.  (Conn.poll() before each
+        # read would build a selector per call: it cost more than the rest of a reply.)
         try:
-            while w.conn.poll():
-                data = w.conn.recv_bytes()
-                head, _, body = data.partition(b"\n")
-                h = json.loads(head)
-                fut = w.pending.pop(h["rid"], None)
-                if fut is None or fut.done():
-                    continue
-                if h["ok"]:
-                    fut.set_result(body.decode())
-                else:
-                    fut.set_exception(RuntimeError(h["error"]))
+            data = w.conn.recv_bytes()
         except (EOFError, OSError):
             self._lost(w)
+            return
+        head, _, body = data.partition(b"\n")
+        h = json.loads(head)
+        fut = w.pending.pop(h["rid"], None)
+        if fut is None or fut.done():
+            return
+        if h["ok"]:
+            fut.set_result((h, body))
+        else:
+            fut.set_exception(RuntimeError(h["error"]))
 
     def _lost(self, w: _Worker) -> None:
         if w.dead:
@@ -157,6 +181,12 @@ class ProcessPool:
         return self.workers[sid % self.n]
 
     async def call(self, sid: int, op: str, **fields) -> str:
+        """Run ``op`` for session ``sid`` on its worker; returns the reply's body (text)."""
+        _, body = await self.request(sid, op, **fields)
+        return body.decode()
+
+    async def request(self, sid: int, op: str, **fields) -> tuple:
+        """Run ``op`` for session ``sid`` on its worker; returns the reply's ``(header dict, body bytes)``."""
         w = self.worker_of(sid)
         if w.dead:
             raise RuntimeError("worker process died")

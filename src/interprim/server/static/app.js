@@ -217,7 +217,7 @@ function hfDraw() {
 
 function hfApplyPrediction(p) {
   hf.pred = p;
-  state.hf.predictions += 1;
+  state.hf.predictions += p.covers || 1; // frames answered (a coalesced reply covers several)
   state.hf.phase = p.phase;
   state.hf.speed = p.speed;
   state.hf.duration = p.duration;
@@ -409,7 +409,7 @@ function hwDraw() {
 
 function hwApplyPrediction(p) {
   hw.pred = p;
-  state.hw.predictions += 1;
+  state.hw.predictions += p.covers || 1; // frames answered (a coalesced reply covers several)
   state.hw.model = p.model;
   state.hw.phase = p.phase;
   state.hw.probabilities = p.probabilities || null;

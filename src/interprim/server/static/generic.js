@@ -166,7 +166,7 @@ function onPrediction(p) {
   if (p.seq <= g.ignoreUpTo) return; // a reply to a frame of the previous interaction
   g.pred = p;
   const s = state.gen;
-  s.predictions += 1;
+  s.predictions += p.covers || 1; // frames answered (a coalesced reply covers several)
   s.phase = p.phase; s.conditioned = p.conditioned; s.outOfRange = p.out_of_range;
   s.inputDistance = p.input_distance; s.lastSeq = p.seq;
   g.canvas.dataset.predictions = String(s.predictions);

@@ -157,6 +157,7 @@ class ArmSim:
 
     @property
     def dt(self) -> float:
+        """The physics time step, seconds (the MJCF's ``timestep``)."""
         return float(self.model.opt.timestep)
 
     def set_robot(self, q, qd=None):
@@ -183,6 +184,7 @@ class ArmSim:
 
     @property
     def q(self) -> np.ndarray:
+        """The robot's joint angles now, radians (a copy)."""
         return self.data.qpos[self.robot_q].copy()
 
     def hands(self):

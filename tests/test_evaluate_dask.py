@@ -31,7 +31,7 @@ def _key(rec):
     return rec["dataset"], rec["task"], rec["method"], rec["demo"], rec["fraction"]
 
 
-def _assert_close(x, y, where, rtol=1e-9):
+def _assert_close(x, y, where, rtol=1e-6):
     if isinstance(x, dict):
         assert isinstance(y, dict) and sorted(x) == sorted(y), where
         for k in x:
@@ -71,10 +71,12 @@ def test_evaluate_on_a_dask_cluster_equals_the_serial_run(tmp_path):
     assert len(tasks) >= n_folds
     assert {t["worker"] for t in tasks} <= workers
 
-    # same records: keys, strings and NaNs exactly, numbers to 1e-9 relative (the bound between
-    # computation paths).  Not to the bit: the worker processes run numpy with one BLAS thread, the serial run
-    # with the machine's, which can change the order of a sum by a rounding; the phase, the vertex of a parabola
-    # through scores 0.2 % apart (phase.likelihood._finish), moves a few 1e-13 with it
+    # same records: keys, strings and NaNs exactly, numbers to 1e-6 relative.  Not to the bit: the same fold
+    # computed in another process can differ by a rounding (array alignment changes numpy's SIMD summation
+    # order), and the likelihood phase, the vertex of a parabola through scores 0.2 % apart
+    # (phase.likelihood._finish), moves by d_lp / (2 k h): for a flat posterior (curvature k ~ 10-100) and
+    # rounding d_lp ~ 1e-13 |lp|, ~1e-10-1e-9 of the movement, which the errors carry ~10x.  Measured: up to 6e-9
+    # (a fresh clone under stress-ng); any real difference between backends is orders of magnitude larger.
     assert len(on_cluster["folds"]) == len(serial["folds"]) > 0
     a = sorted(on_cluster["folds"], key=_key)
     b = sorted(serial["folds"], key=_key)

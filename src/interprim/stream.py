@@ -49,7 +49,6 @@ class Stream:
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation)
         self._n = 0
         self._tracker = None  # likelihood phase: interprim.phase.tracking._Tracker (created on first use)
-        self._s_prev = None
         self._max_dist = 0.0  # largest standardised distance of a frame since reset (out-of-range check)
         self._warned = False
 
@@ -62,7 +61,6 @@ class Stream:
         """Forget all frames (start a new interaction)."""
         self._dtw.reset()
         self._n = 0
-        self._s_prev = None
         self._max_dist = 0.0
         self._warned = False
         if self._tracker is not None:
@@ -133,8 +131,6 @@ class Stream:
 
                 self._tracker = tr = _Tracker(m)
         n_star, cost = estimate_phase(m, self._buf[: self._n], m._phase(), dtw=(n_star, cost), tracker=tr)
-        if tr is not None:
-            self._s_prev = n_star / (m.reference_.shape[0] - 1)
         z = self._buf[: self._n]
         return m._predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                                  workspace=self._ws)

@@ -498,42 +498,71 @@ class LowRankPrior:
         self.W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
 
 
-def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False):
-    """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation."""
-    L, zc = _compress(X.T @ X, X.T @ Y, tol=1e-10)
+def compress_observation(X, Y):
+    """``(L, z)`` of the compressed observation of :func:`lowrank_case` (``G = X^T X = L^T L``, ``z = L^-T X^T Y``):
+    depends on the design only, so it can be computed once and passed to every prior it is conditioned on."""
+    return _compress(X.T @ X, X.T @ Y, tol=1e-10)
+
+
+def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False, compressed=None):
+    """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation.
+
+    The observation ``Y = X theta_i + noise`` (one column per observed DoF ``i``, Eq. 16) is seen through
+    its compression ``z_i = L theta_i + noise`` (module notes).  Per observed DoF the block
+    ``L diag(d_i) L^T = V_i diag(e_i) V_i^T`` is eigendecomposed; in those bases
+    ``A = sigma^2 I + L Sigma_oo L^T = diag(e + sigma^2) + Ut Ut^T`` (``Ut`` stacks ``V_i^T L W_i^T``), so every
+    ``sigma^2`` candidate costs one ``n x n`` solve (Woodbury, ``n`` = rank of ``W``) and Eq. 18 follows:
+    ``mu + Sigma_{:,o} L^T A^-1 r`` with ``r = z - L mu_o``.
+
+    Parameters
+    ----------
+    pr : LowRankPrior
+    n_o, q : int
+        Observed DoFs (the first ``n_o q`` parameters) and parameters per DoF.
+    X, Y : ndarray, shape (M, q), (M, n_o)
+        Design and targets (ignored when ``compressed`` is given, except ``Y`` for the log-likelihood).
+    s2 : ndarray, shape (S2,)
+        Observation noise candidates.
+    need_mean, need_ll : bool
+        Compute the posterior means / the marginal log-likelihoods.
+    compressed : tuple, optional
+        :func:`compress_observation` of ``(X, Y)``, reused across priors.
+    """
+    L, zc = compress_observation(X, Y) if compressed is None else compressed
     k = L.shape[0]
     no_q = n_o * q
     mu_o = pr.mean[:no_q].reshape(n_o, q)
     d_o = pr.d[:no_q].reshape(n_o, q)
-    W_o = pr.W[:, :no_q].reshape(-1, n_o, q)  # (n, n_o, q)
-    # block i of B = L diag(d_i) L^T, eigendecomposed per observed DoF
-    B = np.einsum("kq,iq,jq->ikj", L, d_o, L)  # (n_o, k, k)
-    E, V = np.linalg.eigh(B)  # (n_o, k), (n_o, k, k)
+    Wt_o = pr.W[:, :no_q].T.reshape(n_o, q, -1)  # (n_o, q, n): W_i^T
+    # block i of L Sigma_oo L^T's diagonal part, L diag(d_i) L^T, eigendecomposed per observed DoF
+    E, V = np.linalg.eigh((L[None, :, :] * d_o[:, None, :]) @ L.T)  # (n_o, k), (n_o, k, k)
     E = np.clip(E, 0.0, None)
-    LW = np.einsum("kq,niq->ikn", L, W_o)  # (n_o, k, n)  = L W_i^T
-    Ut = np.einsum("ikj,ikn->ijn", V, LW).reshape(n_o * k, -1)  # V_i^T L W_i^T, stacked
+    Vt = V.transpose(0, 2, 1)
+    VL = Vt @ L  # (n_o, k, q): V_i^T L
+    Ut = (VL @ Wt_o).reshape(n_o * k, -1)  # V_i^T L W_i^T, stacked (n_o k, n)
     r = (zc - L @ mu_o.T).T  # (n_o, k)
-    rt = np.einsum("ikj,ik->ij", V, r).reshape(-1)  # (n_o k,)
+    rt = (Vt @ r[:, :, None]).reshape(-1)  # (n_o k,)
     e = E.reshape(-1)
     s2 = np.asarray(s2, dtype=np.float64)
+    ns = s2.shape[0]
     g = 1.0 / (e[None, :] + s2[:, None])  # (S2, n_o k)
     nW = Ut.shape[1]
-    C = np.einsum("ks,nk,kt->nst", Ut, g, Ut)
+    C = (Ut.T[None, :, :] * g[:, None, :]) @ Ut  # I + Ut^T diag(g) Ut (after the next line), (S2, n, n)
     C[:, np.arange(nW), np.arange(nW)] += 1.0
     gr = g * rt[None, :]
     sol = np.linalg.solve(C, (gr @ Ut)[:, :, None])[:, :, 0]  # (S2, n)
     at = gr - g * (sol @ Ut.T)  # A^-1 r in the eigenbases, (S2, n_o k)
     means = ll = None
     if need_mean:
-        alpha = np.einsum("ikj,sij->sik", V, at.reshape(-1, n_o, k))  # back to the compressed basis
-        v = np.einsum("kq,sik->siq", L, alpha).reshape(len(s2), no_q)  # Lb^T alpha
-        means = pr.mean[None, :] + (v @ pr.W[:, :no_q].T) @ pr.W
+        # v_i = L^T V_i at_i (back to the parameters); v @ W_o^T = at @ Ut
+        v = (VL.transpose(0, 2, 1) @ at.reshape(ns, n_o, k).transpose(1, 2, 0))  # (n_o, q, S2)
+        v = v.transpose(2, 0, 1).reshape(ns, no_q)
+        means = pr.mean[None, :] + (at @ Ut) @ pr.W
         means[:, :no_q] += v * pr.d[None, :no_q]
     if need_ll:
         resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
         resid_perp = max(resid_total - float(r.reshape(-1) @ r.reshape(-1)), 0.0)
         n_obs, dk = Y.size, n_o * k
         logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
-        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2
-                     + np.einsum("sk,k->s", at, rt))
+        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2 + at @ rt)
     return means, ll

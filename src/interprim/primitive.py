@@ -20,6 +20,7 @@ import numbers
 
 import numpy as np
 
+from ._blas import single_thread
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
@@ -370,16 +371,15 @@ class InteractionPrimitive:
                              f"covariance explicitly (e.g. sigma2=1e-3, covariance='ridge')")
         if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto")) and len(latent) >= 3:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
-
             select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
-        self.phase_model_, self.phase_method_ = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
+        with single_thread():  # small matrices: BLAS threads only oversubscribe a loaded machine
+            self.phase_model_, self.phase_method_ = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
             e2 = float(self.input_noise) ** 2
             if self.observation == "position":
                 self.sigma2_ += e2
             if self.phase_sigma2_ is not None:
                 self.phase_sigma2_ += e2
-
         # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
         n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
         if isinstance(self.reference, str):
@@ -397,8 +397,8 @@ class InteractionPrimitive:
         self.calibration_ = None
         if self.calibrate is True or (self.calibrate == "auto" and self.sigma2 == "cv"):
             from .calibration import fit_calibration  # predictive std scaled to held-out errors
-
-            self.calibration_ = fit_calibration(self, arrays)
+            with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
+                self.calibration_ = fit_calibration(self, arrays)
         return self
 
     def _setup(self):

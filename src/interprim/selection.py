@@ -50,7 +50,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._blas import single_thread
-from .gaussian import LowRankPrior, fit_prior, lowrank_case, shrink_cross, shrinkage_intensity
+from .gaussian import (LowRankPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
+                       shrinkage_intensity)
 from .phase.dtw import open_end_dtw
 from .phase.likelihood import observation_design
 from .preprocessing import time_normalise
@@ -165,7 +166,9 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
             designs = {kind: observation_design(model, zo, s_end, kind) for kind in kinds}
             y0 = np.concatenate([zo[0], model.start_position_[n_o:]])
             base = free @ np.vstack([y0, v0])  # (n_out, n_lat)
-            cases.append((j, designs, base))
+            # the compressed observation depends on the design only: computed once, used for every lambda
+            comp = {kind: compress_observation(*designs[kind]) for kind in kinds}
+            cases.append((j, designs, base, comp))
     scale = {kind: float(np.mean([np.mean(c[1][kind][1] ** 2) for c in cases])) for kind in kinds}
     s2_grid = {kind: max(scale[kind], 1e-300) * np.asarray(sigma2_factors, dtype=np.float64) for kind in kinds}
 
@@ -182,15 +185,17 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
             continue
         for a, lam in enumerate(lam_grid):
             prior = LowRankPrior(thetas[train], method, model.ridge, lam)
-            for j, designs, base in cases:
+            for j, designs, base, comp in cases:
                 if fold[j] != f:
                     continue
                 truth = truths[j]
                 if select_sigma2:
                     X, Y = designs[kind0]
-                    Th, lls = lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position")
-                    Th = Th.T.reshape(n_lat, q, -1)
-                    pred = base[None] + np.einsum("tq,dqs->std", H, Th)
+                    Th, lls = lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position",
+                                           compressed=comp[kind0])
+                    ns = Th.shape[0]
+                    # positions of every DoF for every sigma2 candidate, (S2, n_out, n_lat): one matrix product
+                    pred = base[None] + (Th.reshape(ns * n_lat, q) @ H.T).reshape(ns, n_lat, -1).transpose(0, 2, 1)
                     pm = base + H @ prior.mean.reshape(n_lat, q).T
                     # observed agent: as conditioned; controlled agent: the conditioned shift scaled by
                     # (1 - gamma), which is exactly the effect of scaling the cross-agent covariance
@@ -208,7 +213,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                 if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                     X, Y = designs["position"]
                     ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
-                                           need_ll=True)[1]
+                                           need_ll=True, compressed=comp["position"])[1]
                 if a == 0:
                     n_cases += 1
     err /= max(n_cases, 1)

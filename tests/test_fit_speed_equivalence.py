@@ -1,0 +1,133 @@
+"""The fast conditioning of the hyper-parameter selection (:func:`interprim.gaussian.lowrank_case`: matrix products,
+and a compressed observation reused across priors) against Eq. 17-18 as printed, with the ``N x N`` matrix
+``A = sigma^2 I + Omega Sigma Omega^T`` built and factorised (by Cholesky: the explicit inverse of
+:func:`~interprim.gaussian.condition_literal` is less accurate than what it would check).
+
+Error analysis (for the tolerances).  In whitened coordinates the posterior mean's shift is
+``delta = Sigma^{1/2} u`` with ``u = (K + sigma^2 I)^-1 Sigma^{1/2} Omega^T r``, ``K = Sigma^{1/2} Omega^T Omega Sigma^{1/2}``
+(push-through identity), a symmetric positive definite solve of condition number
+``kappa = 1 + lambda_max(K) / sigma^2`` (``lambda_max(K) = lambda_max(Omega Sigma Omega^T)``).  Backward-stable
+factorisations give ``u`` to a relative ``c N eps kappa`` (``N`` scalar observations, ``eps`` the machine epsilon,
+``c`` of order 1), hence ``|d delta| <= c N eps kappa sqrt(lambda_max(Sigma)) |u|``, plus ``eps`` times the mean
+itself for the final addition; this holds for either implementation, so twice that for their difference.  The
+log-likelihood ``-(N log 2 pi + log det A + r^T A^-1 r) / 2`` of a backward-stable evaluation is that of
+``A + dA`` with ``|dA| <= c N eps |A|``: ``log det A`` moves by ``tr(A^-1 dA) <= c N eps |A| tr(A^-1)`` and
+``r^T A^-1 r`` by ``x^T dA x <= c N eps |A| |x|^2`` (``x = A^-1 r``); the fast form also splits the residual
+``|r|^2`` into its parts in and out of the range of the design through the eigenvectors of ``X^T X`` (each
+accurate to ``eps kappa(X^T X)``) and by subtracting two sums of at most ``N`` squares, which costs
+``eps (kappa(X^T X) + N) |r|^2 / sigma^2``.  The bounds used are these with ``c = 1``, doubled.  The smallest
+noise candidate makes ``kappa ~ 1e5`` (bounds 1e-9 to 2e-7 relative for the mean, 4e-11 to 4e-9 for the
+log-likelihood); at the largest (``kappa ~ 1``) they are a few ``eps``.  The differences seen are at most
+3e-12 relative, an eighth of the bounds (median a few thousandths of them).
+"""
+
+import numpy as np
+import pytest
+
+from interprim.gaussian import LowRankPrior, compress_observation, lowrank_case
+
+EPS = np.finfo(float).eps
+
+
+def _case(seed, n_o, n_c, q, M, S, method, lam):
+    rng = np.random.default_rng(seed)
+    P = (n_o + n_c) * q
+    th = rng.standard_normal((S, P)) @ rng.standard_normal((P, P)) / np.sqrt(P)
+    pr = LowRankPrior(th, method, 1e-3, lam)
+    X = rng.standard_normal((M, q))
+    Y = rng.standard_normal((M, n_o)) + X @ pr.mean[: n_o * q].reshape(n_o, q).T
+    return pr, X, Y
+
+
+def _reference(mean, cov, Omega, F, sigma2):
+    """Eq. 17-18 as printed, ``A = sigma^2 I + Omega Sigma Omega^T`` factorised by Cholesky (backward stable; the
+    explicit inverse of :func:`condition_literal` would add ``N eps kappa(A) |r|^2 / sigma^2`` to the quadratic term)."""
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+
+    A = sigma2 * np.eye(Omega.shape[0]) + Omega @ cov @ Omega.T
+    cf = cho_factor(A, lower=True)
+    r = F - Omega @ mean
+    post_mean = mean + cov @ Omega.T @ cho_solve(cf, r)
+    w = solve_triangular(cf[0], r, lower=True)
+    logdet = 2.0 * float(np.sum(np.log(np.diag(cf[0]))))
+    return post_mean, -0.5 * (F.size * np.log(2.0 * np.pi) + logdet + float(w @ w))
+
+
+def _dense(pr, n_o, q, X):
+    P = pr.mean.size
+    cov = pr.W.T @ pr.W + np.diag(pr.d)
+    M = X.shape[0]
+    Omega = np.zeros((M * n_o, P))  # Omega~ = [blockdiag(X, ..., X), 0] (Sec. III-D)
+    for i in range(n_o):
+        Omega[i * M:(i + 1) * M, i * q:(i + 1) * q] = X
+    return cov, Omega
+
+
+CASES = [  # (seed, n_o, n_c, q, M, S, method, lam)
+    (0, 3, 2, 6, 9, 12, "shrinkage", 0.3),
+    (1, 2, 1, 5, 20, 8, "shrinkage", 0.02),
+    (2, 3, 0, 6, 4, 10, "shrinkage", 0.6),  # M < q: rank-deficient design (the first frames of a movement)
+    (3, 2, 2, 4, 7, 30, "ridge", None),  # more demonstrations than observed parameters
+    (4, 4, 1, 7, 12, 6, "empirical", None),
+    (5, 1, 3, 8, 15, 9, "shrinkage", 0.95),
+]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_lowrank_case_equals_literal_eq18(case):
+    seed, n_o, n_c, q, M, S, method, lam = case
+    pr, X, Y = _case(seed, n_o, n_c, q, M, S, method, lam)
+    cov, Omega = _dense(pr, n_o, q, X)
+    F = Y.T.reshape(-1)  # [f_1; ...; f_N]
+    OSO = Omega @ cov @ Omega.T
+    top = float(np.linalg.eigvalsh(OSO)[-1])
+    s2 = top * np.array([1e-5, 1e-3, 1e-1, 10.0])  # kappa(A) from ~1e5 down to ~1
+    means, ll = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True)
+    assert means.shape == (s2.size, pr.mean.size) and ll.shape == (s2.size,)
+    N = F.size
+    lmax_S = float(np.linalg.eigvalsh(cov)[-1])
+    sv = np.linalg.svd(X, compute_uv=False)
+    kappa_G = float(sv[0] / sv[-1]) ** 2  # X^T X on the range of the design (the compressed observation)
+    for i, v in enumerate(s2):
+        ref_mean, ref_ll = _reference(pr.mean, cov, Omega, F, float(v))
+        kappa = 1.0 + top / v
+        delta = ref_mean - pr.mean
+        u_norm = np.sqrt(float(delta @ np.linalg.solve(cov, delta)))  # |Sigma^-1/2 delta|
+        tol_mean = 2.0 * EPS * (N * kappa * np.sqrt(lmax_S) * u_norm + np.abs(ref_mean).max())
+        err_mean = np.abs(means[i] - ref_mean).max()
+        assert err_mean <= tol_mean, (i, kappa, err_mean, tol_mean)
+        r = F - Omega @ pr.mean
+        A = v * np.eye(N) + OSO
+        Ainv = np.linalg.inv(A)
+        x = Ainv @ r
+        # first order in a backward error |dA| <= N eps |A|: log det moves by tr(A^-1 dA), r^T A^-1 r by x^T dA x
+        tol_ll = 2.0 * EPS * (N * np.linalg.norm(A, 2) * (np.trace(Ainv) + float(x @ x))
+                              + (kappa_G + N) * float(r @ r) / v + abs(ref_ll))
+        assert abs(ll[i] - ref_ll) <= tol_ll, (i, abs(ll[i] - ref_ll), tol_ll)
+    # the bounds are tests, not formalities: at the largest noise (kappa ~ 1) they are a few eps
+    assert tol_mean / np.abs(ref_mean).max() < 1e-12 and tol_ll / abs(ref_ll) < 1e-12 and kappa < 2.0
+
+
+@pytest.mark.parametrize("case", CASES[:3])
+def test_lowrank_case_paths_agree(case):
+    """The compressed observation passed in (as the selection reuses it for every shrinkage) and the mean-only /
+    likelihood-only requests give exactly what one full call gives."""
+    seed, n_o, n_c, q, M, S, method, lam = case
+    pr, X, Y = _case(seed, n_o, n_c, q, M, S, method, lam)
+    s2 = np.array([1e-3, 0.5, 40.0])
+    means, ll = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True)
+    comp = compress_observation(X, Y)
+    m2, l2 = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True, compressed=comp)
+    np.testing.assert_array_equal(m2, means)
+    np.testing.assert_array_equal(l2, ll)
+    m3, l3 = lowrank_case(pr, n_o, q, X, Y, s2)
+    assert l3 is None
+    np.testing.assert_array_equal(m3, means)
+    m4, l4 = lowrank_case(pr, n_o, q, X, Y, s2, need_mean=False, need_ll=True)
+    assert m4 is None
+    np.testing.assert_array_equal(l4, ll)
+    # one candidate at a time gives the same numbers as the whole grid (to rounding: batched products)
+    for i, v in enumerate(s2):
+        mi, li = lowrank_case(pr, n_o, q, X, Y, np.array([v]), need_ll=True)
+        np.testing.assert_allclose(mi[0], means[i], rtol=1e-12, atol=1e-12 * np.abs(means).max())
+        assert li[0] == pytest.approx(ll[i], rel=1e-12)

@@ -4,8 +4,8 @@ and a compressed observation reused across priors) against Eq. 17-18 as printed,
 :func:`~interprim.gaussian.condition_literal` is less accurate than what it would check).
 
 Error analysis (for the tolerances).  In whitened coordinates the posterior mean's shift is
-``delta = Sigma^{1/2} u`` with ``u = (K + sigma^2 I)^-1 Sigma^{1/2} Omega^T r``, ``K = Sigma^{1/2} Omega^T Omega Sigma^{1/2}``
-(push-through identity), a symmetric positive definite solve of condition number
+``delta = Sigma^{1/2} u`` with ``u = (K + sigma^2 I)^-1 Sigma^{1/2} Omega^T r``,
+``K = Sigma^{1/2} Omega^T Omega Sigma^{1/2}``, a symmetric positive definite solve of condition number
 ``kappa = 1 + lambda_max(K) / sigma^2`` (``lambda_max(K) = lambda_max(Omega Sigma Omega^T)``).  Backward-stable
 factorisations give ``u`` to a relative ``c N eps kappa`` (``N`` scalar observations, ``eps`` the machine epsilon,
 ``c`` of order 1), hence ``|d delta| <= c N eps kappa sqrt(lambda_max(Sigma)) |u|``, plus ``eps`` times the mean
@@ -41,7 +41,8 @@ def _case(seed, n_o, n_c, q, M, S, method, lam):
 
 def _reference(mean, cov, Omega, F, sigma2):
     """Eq. 17-18 as printed, ``A = sigma^2 I + Omega Sigma Omega^T`` factorised by Cholesky (backward stable; the
-    explicit inverse of :func:`condition_literal` would add ``N eps kappa(A) |r|^2 / sigma^2`` to the quadratic term)."""
+    explicit inverse of :func:`condition_literal` would add ``N eps kappa(A) |r|^2 / sigma^2`` to the quadratic
+    term)."""
     from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
     A = sigma2 * np.eye(Omega.shape[0]) + Omega @ cov @ Omega.T
@@ -131,3 +132,48 @@ def test_lowrank_case_paths_agree(case):
         mi, li = lowrank_case(pr, n_o, q, X, Y, np.array([v]), need_ll=True)
         np.testing.assert_allclose(mi[0], means[i], rtol=1e-12, atol=1e-12 * np.abs(means).max())
         assert li[0] == pytest.approx(ll[i], rel=1e-12)
+
+
+@pytest.mark.parametrize("n_o, n_lat", [(2, 5), (3, 3)])  # with and without a controlled agent
+def test_cv_scores_equal_direct_form(n_o, n_lat):
+    """The selection's held-out errors (several cases at once, the cross-agent factor expanded in (1 - gamma))
+    against the direct form per case and per gamma, evaluated in extended precision.
+
+    Every float64 operation of either form sums or multiplies terms bounded by the same expression with absolute
+    values, ``m = sum_d w_d mean_t (|base| + |H| |theta| + |truth|)^2 / D`` (``mean_t (rc + (1 - gamma) dc)^2`` and its
+    expansion alike), along chains of at most ``n_out + q + 10`` operations, so the error is below
+    ``(n_out + q + 10) eps m`` (the classical running bound); doubled for a reference that is only float64 where
+    ``longdouble`` is.
+    """
+    from interprim.selection import _score
+
+    rng = np.random.default_rng(7)
+    B, ns, n_out, q = 3, 4, 7, 4
+    gam = np.array([0.0, 0.25, 0.9, 1.0] if n_lat > n_o else [0.0])
+    w_d = rng.uniform(0.5, 2.0, n_lat)
+    H = rng.standard_normal((n_out, q))
+    mean = rng.standard_normal(n_lat * q)
+    Th = mean + 0.1 * rng.standard_normal((B, ns, n_lat * q))
+    base = rng.standard_normal((B, n_out, n_lat))
+    truth = base + H @ mean.reshape(n_lat, q).T + 0.05 * rng.standard_normal((B, n_out, n_lat))
+    pm_shift = H @ mean.reshape(n_lat, q).T
+    e_all, e_prior = _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam)
+    assert e_all.shape == (B, ns, gam.size) and e_prior.shape == (B,)
+    ld = np.longdouble
+    Hl, wl = H.astype(ld), w_d.astype(ld)
+    mag = np.abs(base)[:, None] + np.einsum("tq,bsdq->bstd", np.abs(H), np.abs(Th).reshape(B, ns, n_lat, q)) \
+        + np.abs(truth)[:, None]
+    m = np.sum(np.mean(mag ** 2, axis=2) * w_d, axis=2) / n_lat  # (B, S2)
+    tol = 2.0 * (n_out + q + 10) * EPS * m
+    for b in range(B):
+        pm = base[b].astype(ld) + Hl @ mean.reshape(n_lat, q).T.astype(ld)
+        ref_prior = np.mean((pm - truth[b]) ** 2 * wl)
+        assert abs(e_prior[b] - float(ref_prior)) <= 2.0 * (n_out + q + 10) * EPS * float(np.max(m[b]))
+        for s in range(ns):
+            pred = base[b].astype(ld) + Hl @ Th[b, s].reshape(n_lat, q).T.astype(ld)
+            e_o = np.sum(np.mean((pred[:, :n_o] - truth[b, :, :n_o]) ** 2, axis=0) * wl[:n_o])
+            for c, g in enumerate(gam):
+                mixed = pm[:, n_o:] + (1 - ld(g)) * (pred[:, n_o:] - pm[:, n_o:])
+                e_c = np.sum(np.mean((mixed - truth[b, :, n_o:]) ** 2, axis=0) * wl[n_o:])
+                ref = float((e_o + e_c) / n_lat)
+                assert abs(e_all[b, s, c] - ref) <= tol[b, s], (b, s, c, e_all[b, s, c] - ref, tol[b, s])

@@ -185,31 +185,22 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
             continue
         for a, lam in enumerate(lam_grid):
             prior = LowRankPrior(thetas[train], method, model.ridge, lam)
-            for j, designs, base, comp in cases:
-                if fold[j] != f:
-                    continue
-                truth = truths[j]
-                if select_sigma2:
-                    X, Y = designs[kind0]
-                    Th, lls = lowrank_case(prior, n_o, q, X, Y, s2_grid[kind0], need_ll=kind0 == "position",
-                                           compressed=comp[kind0])
-                    ns = Th.shape[0]
-                    # positions of every DoF for every sigma2 candidate, (S2, n_out, n_lat): one matrix product
-                    pred = base[None] + (Th.reshape(ns * n_lat, q) @ H.T).reshape(ns, n_lat, -1).transpose(0, 2, 1)
-                    pm = base + H @ prior.mean.reshape(n_lat, q).T
-                    # observed agent: as conditioned; controlled agent: the conditioned shift scaled by
-                    # (1 - gamma), which is exactly the effect of scaling the cross-agent covariance
-                    e_o = np.sum(np.mean((pred[:, :, :n_o] - truth[None, :, :n_o]) ** 2, axis=1) * w_d[:n_o], axis=1)
-                    dc = pred[:, :, n_o:] - pm[None, :, n_o:]
-                    rc = pm[None, :, n_o:] - truth[None, :, n_o:]
-                    e_c = np.sum(np.mean((rc[None] + (1.0 - gam)[:, None, None, None] * dc[None]) ** 2, axis=2)
-                                 * w_d[n_o:], axis=2).T  # (S2, G)
-                    e_all = (e_o[:, None] + e_c) / n_lat
-                    err[a] += e_all
-                    per_case.setdefault(a, []).append(e_all)
-                    err_prior[a] += float(np.mean(((pm - truth) ** 2) * w_d))
-                    if kind0 == "position":
-                        ll[a] += lls
+            held = [c for c in cases if fold[c[0]] == f]
+            if select_sigma2:
+                pm_shift = H @ prior.mean.reshape(n_lat, q).T  # prior mean's positions minus the start's
+                for c0 in range(0, len(held), _SCORE_CHUNK):  # several held-out cases scored at once
+                    chunk = held[c0:c0 + _SCORE_CHUNK]
+                    outs = [lowrank_case(prior, n_o, q, *designs[kind0], s2_grid[kind0], need_ll=kind0 == "position",
+                                         compressed=comp[kind0]) for _, designs, _, comp in chunk]
+                    e_all, e_prior = _score(np.stack([o[0] for o in outs]), np.stack([c[2] for c in chunk]),
+                                            np.stack([truths[c[0]] for c in chunk]), pm_shift, H, n_o, q, w_d, gam)
+                    for b in range(len(chunk)):
+                        err[a] += e_all[b]
+                        per_case.setdefault(a, []).append(e_all[b])
+                        err_prior[a] += e_prior[b]
+                        if kind0 == "position":
+                            ll[a] += outs[b][1]
+            for j, designs, base, comp in held:
                 if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                     X, Y = designs["position"]
                     ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
@@ -275,6 +266,37 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         sel["cv_errors"] = err[:, :, c].tolist()
     model.selection_ = sel
     return sel
+
+
+_SCORE_CHUNK = 4  # held-out cases scored together (their (cases, sigma2, frames, DoF) arrays stay in cache)
+
+
+def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
+    """CV errors of held-out cases: ``(B, S2, G)`` per (sigma2, gamma) and ``(B,)`` of the prior mean.
+
+    ``Th`` (B, S2, P) posterior means, ``base`` (B, n_out, D) positions from the start state alone, ``truth``
+    (B, n_out, D) the time-normalised demonstrations, ``pm_shift`` (n_out, D) the prior mean's part.  Mean squared
+    error over the grid, each DoF weighted by ``w_d``, averaged over the DoFs.
+    """
+    B, ns, P = Th.shape
+    n_lat = P // q
+    # positions of every DoF for every sigma2 candidate, (B, S2, n_out, D): one matrix product
+    pred = base[:, None] + (Th.reshape(B * ns * n_lat, q) @ H.T).reshape(B, ns, n_lat, -1).transpose(0, 1, 3, 2)
+    pm = base + pm_shift[None]
+    # observed agent: as conditioned; controlled agent: the conditioned shift scaled by (1 - gamma), which is
+    # exactly the effect of scaling the cross-agent covariance
+    e_o = np.sum(np.mean((pred[..., :n_o] - truth[:, None, :, :n_o]) ** 2, axis=2) * w_d[:n_o], axis=2)  # (B, S2)
+    dc = pred[..., n_o:] - pm[:, None, :, n_o:]  # (B, S2, n_out, n_c)
+    rc = pm[:, :, n_o:] - truth[:, :, n_o:]  # (B, n_out, n_c)
+    # mean_t (rc + (1 - gamma) dc)^2 = mean rc^2 + 2 (1 - gamma) mean rc dc + (1 - gamma)^2 mean dc^2, per DoF
+    wc = w_d[n_o:]
+    R = np.mean(rc * rc, axis=1) @ wc  # (B,)
+    X = np.mean(rc[:, None] * dc, axis=2) @ wc  # (B, S2)
+    D = np.mean(dc * dc, axis=2) @ wc  # (B, S2)
+    a = 1.0 - gam
+    e_c = R[:, None, None] + (2.0 * a)[None, None, :] * X[:, :, None] + (a * a)[None, None, :] * D[:, :, None]
+    e_prior = np.mean(((pm - truth) ** 2) * w_d, axis=(1, 2))
+    return (e_o[:, :, None] + e_c) / n_lat, e_prior
 
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):

@@ -432,7 +432,8 @@ class LowRankConditioner:
         T = self.sq[:, :, None] * G[None, :, :] * self.sq[:, None, :]
         T[:, np.arange(q), np.arange(q)] += sigma2
         TinvUh = np.linalg.solve(T, self.Uh)  # (D_o, q, r)
-        K = self.K0 - sigma2 * np.einsum("iqr,iqs->rs", self.Uh, TinvUh)
+        r = self.r
+        K = self.K0 - sigma2 * (self.Uh.reshape(-1, r).T @ TinvUh.reshape(-1, r))  # sum_i Uh_i^T T_i^-1 Uh_i
         return T, TinvUh, 0.5 * (K + K.T)
 
     def mean_numpy(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
@@ -457,20 +458,21 @@ class LowRankConditioner:
 
     def cov(self, G, sigma2: float) -> np.ndarray:
         """Posterior covariance of Eq. 18 (``P x P``), as a sum of positive semi-definite terms."""
+        from scipy.linalg import solve_triangular  # lazy: keeps `import interprim` light
+
         G = np.asarray(G, dtype=np.float64)
         T, TinvUh, K = self._factors(G, sigma2)
-        P, q = self.P, self.q
+        P = self.P
         Tinv = np.linalg.inv(T)
         blocks = sigma2 * self.sq[:, :, None] * Tinv * self.sq[:, None, :]  # (D_o, q, q)
         Wt = np.empty((P, self.r))
         Wt[self.obs_flat] = (-sigma2 * self.sq[:, :, None] * TinvUh).reshape(-1, self.r)
         Wt[self.other] = -self.Uc
         Lk = np.linalg.cholesky(K)
-        V = np.linalg.solve(Lk, Wt.T)  # (r, P)
+        V = solve_triangular(Lk, Wt.T, lower=True, check_finite=False)  # (r, P)
         out = V.T @ V
-        for i in range(self.D_o):
-            idx = self.obs_index[i]
-            out[np.ix_(idx, idx)] += blocks[i]
+        oi = self.obs_index
+        out[oi[:, :, None], oi[:, None, :]] += blocks  # the D_o diagonal blocks (disjoint index sets)
         out[self.other, self.other] += self.d_other
         return out
 

@@ -214,3 +214,50 @@ def test_lowrank_conditioner_cov_equals_dense(seed, n_o, n_c, q, M, S, gamma):
         got = cond.cov(X.T @ X, float(s2))
         tol = 2.0 * (M * n_o + P) * EPS * (1.0 + top / s2) * lmax
         assert np.abs(got - ref).max() <= tol, (s2, np.abs(got - ref).max(), tol)
+
+
+def test_learned_phase_loo_regressions_equal_explicit_refits():
+    """The learned phase's closed-form leave-one-out predictions (batched matrix products) against refitting
+    without each demonstration, at every time.
+
+    Ridge: both sides solve with ``Zc^T Zc + alpha I`` (or its SVD), condition ``kappa = 1 + sigma_max^2 / alpha``,
+    so they agree to ``c (n + p) eps kappa`` times the spread of the targets (``c = 1``, doubled); the centring
+    with and without the left-out row is exact arithmetic on the same numbers up to ``n eps``.  Kernel
+    (Nadaraya-Watson): the squared distances are formed as ``|z_i|^2 + |z_j|^2 - 2 z_i.z_j`` (fast) or
+    ``|z_i - z_j|^2`` (reference), which differ by ``4 p eps max|z|^2 / p``; a weight ``exp(-d / 2h^2)`` then moves
+    by that over ``2 h^2`` relative, and a weighted mean by twice that times the spread of the targets.
+    """
+    from interprim.phase._learned_features import _kernel_loo, _ridge_loo
+
+    rng = np.random.default_rng(3)
+    K, n, p = 4, 9, 3
+    Z = rng.standard_normal((K, n, p))
+    s = rng.uniform(0.0, 1.0, (K, n))
+    alphas = np.array([0.1, 3.0, 1e3])
+    got = _ridge_loo(Z, s, alphas)
+    spread = float(np.ptp(s))
+    for a, lam in enumerate(alphas):
+        for k in range(K):
+            for i in range(n):
+                keep = np.arange(n) != i
+                Zk, sk = Z[k, keep], s[k, keep]
+                zm, sm = Zk.mean(axis=0), sk.mean()
+                Zc = Zk - zm
+                beta = np.linalg.solve(Zc.T @ Zc + lam * np.eye(p), Zc.T @ (sk - sm))
+                ref = sm + (Z[k, i] - zm) @ beta
+                smax = np.linalg.svd(Zc, compute_uv=False)[0]
+                tol = 2.0 * (n + p) * EPS * (1.0 + smax ** 2 / lam) * (spread + abs(ref))
+                assert abs(got[a, k, i] - ref) <= tol, (a, k, i, got[a, k, i] - ref, tol)
+    bws = np.array([0.3, 1.0, 5.0])
+    got = _kernel_loo(Z, s, bws)
+    zmax2 = float(np.max(np.sum(Z * Z, axis=2)))
+    for b, h in enumerate(bws):
+        for k in range(K):
+            D2 = np.sum((Z[k][:, None, :] - Z[k][None, :, :]) ** 2, axis=2) / p
+            for i in range(n):
+                keep = np.arange(n) != i
+                d = D2[i, keep]
+                w = np.exp(-(d - d.min()) / (2.0 * h * h))
+                ref = float(w @ s[k, keep] / w.sum())
+                tol = 2.0 * (4.0 * EPS * zmax2 / (2.0 * h * h)) * spread + 4.0 * n * EPS
+                assert abs(got[b, k, i] - ref) <= tol, (b, k, i, got[b, k, i] - ref, tol)

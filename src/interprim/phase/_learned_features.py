@@ -60,11 +60,12 @@ def _ridge_loo(Z, s, alphas):
     sc = s - sm
     U, S, _ = np.linalg.svd(Zc, full_matrices=False)  # (K, n, r), (K, r)
     out = np.empty((len(alphas), K, n))
-    Ut_s = np.einsum("knr,kn->kr", U, sc)
+    Ut_s = (sc[:, None, :] @ U)[:, 0, :]  # U^T s per time, (K, r)
+    U2 = U * U
     for a, lam in enumerate(alphas):
         f = S * S / (S * S + lam)  # (K, r)
-        fit = sm + np.einsum("knr,kr->kn", U, f * Ut_s)
-        h = 1.0 / n + np.einsum("knr,kr->kn", U * U, f)
+        fit = sm + (U @ (f * Ut_s)[:, :, None])[:, :, 0]
+        h = 1.0 / n + (U2 @ f[:, :, None])[:, :, 0]  # leverages
         out[a] = s - (s - fit) / np.maximum(1.0 - h, 1e-9)
     return out
 
@@ -73,14 +74,14 @@ def _kernel_loo(Z, s, bandwidths):
     """Leave-one-out Nadaraya-Watson predictions at each time: ``(len(bandwidths), K, n)``."""
     K, n, p = Z.shape
     sq = np.sum(Z * Z, axis=2)
-    D2 = np.maximum(sq[:, :, None] + sq[:, None, :] - 2.0 * np.einsum("kip,kjp->kij", Z, Z), 0.0) / max(p, 1)
+    D2 = np.maximum(sq[:, :, None] + sq[:, None, :] - 2.0 * (Z @ Z.transpose(0, 2, 1)), 0.0) / max(p, 1)
     idx = np.arange(n)
     D2[:, idx, idx] = np.inf
     dmin = D2.min(axis=2, keepdims=True)
     out = np.empty((len(bandwidths), K, n))
     for b, h in enumerate(bandwidths):
         W = np.exp(-(D2 - dmin) / (2.0 * h * h))
-        out[b] = np.einsum("kij,kj->ki", W, s) / W.sum(axis=2)
+        out[b] = (W @ s[:, :, None])[:, :, 0] / W.sum(axis=2)
     return out
 
 

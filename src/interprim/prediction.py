@@ -142,17 +142,16 @@ class Prediction:
         M, off = m._latent_map()
         return lat @ M.T + off
 
-    def _calibration_scale(self):
-        """Per-column factors of the calibrated predictive std (:mod:`interprim.calibration`), or ``None``."""
+    def _calibration_scale(self, n: int):
+        """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``
+        (:mod:`interprim.calibration`: per column, at this prediction's phase and each point's look-ahead
+        ``u - phase``), or ``None``."""
         m = self._m
         cal = getattr(m, "calibration_", None)
         if cal is None:
             return None
-        c_o, c_c = cal.factors(self.normalised_time)
-        f = np.empty(m.n_dofs_)
-        f[m.observed_dofs_] = c_o
-        f[m.controlled_dofs_] = c_c
-        return f
+        return cal.column_factors(self.normalised_time, np.linspace(0.0, 1.0, int(n)), m.observed_dofs_,
+                                  m.controlled_dofs_)
 
     def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
@@ -163,7 +162,7 @@ class Prediction:
         happens; ``False``, or a model without calibration: the posterior std itself.
         """
         sd = self._posterior_std(n)
-        f = self._calibration_scale() if calibrated else None
+        f = self._calibration_scale(n) if calibrated else None
         return sd if f is None else sd * f
 
     def _posterior_std(self, n: int) -> np.ndarray:
@@ -190,7 +189,7 @@ class Prediction:
         lat = self._latent_traj(self._theta(th), s, y0, v0)
         M, off = m._latent_map()
         out = lat @ M.T + off
-        f = self._calibration_scale()
+        f = self._calibration_scale(n)
         if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
             mean = self.trajectory(int(n))
             out = mean + (out - mean) * f

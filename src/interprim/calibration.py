@@ -266,7 +266,7 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
     sums = np.zeros((S, fr.size, B, D, 3))
     phases = np.zeros((S, fr.size))
     hsum = np.zeros((B, 2))
-    n = 201
+    n = 101
     grid = np.linspace(0.0, 1.0, n)
     for f in range(k):
         held = set(range(fold_edges[f], fold_edges[f + 1]))

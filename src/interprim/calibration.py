@@ -38,6 +38,12 @@ Held-out cases count at the fraction nodes by the phase the fold model *estimate
 the factor is looked up with.  ``clip`` bounds every scale (a guard against a degenerate fold).  Because the
 held-out errors shrink as more is seen, the calibrated band shrinks with them, whether or not the posterior
 does.
+
+Measured (docs/evaluation.md, *Calibration per look-ahead and per column*): NuiSI v1, default model, 5-fold
+real-time protocol, next 0.25 s, 20-90 % seen: the 90 % band covers 0.89-0.90 of the human's coordinates (was
+0.70-0.77 with one scale per agent and fraction; 0.99 on handshake2) and 0.86-0.91 of the robot's (was
+0.87-1.00); RMS error / RMS std per 10 % seen within 0.7-1.3 in 81 of 84 cells (worst: the robot's last 10 % of
+rocket1, 1.47).  Synthetic set and simulated high five: 0.88-0.92 coverage (were 0.92-0.97, a band too wide).
 """
 
 from __future__ import annotations

@@ -156,10 +156,11 @@ class Prediction:
     def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
-        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled per agent by the model's
-        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations, at this
-        prediction's phase), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what
-        happens; ``False``, or a model without calibration: the posterior std itself.
+        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled by the model's
+        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations), per
+        column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
+        included), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what happens;
+        ``False``, or a model without calibration: the posterior std itself.
         """
         sd = self._posterior_std(n)
         f = self._calibration_scale(n) if calibrated else None
@@ -181,7 +182,7 @@ class Prediction:
 
     def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
         """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
-        model their spread about :meth:`trajectory` is scaled per agent as in :meth:`std`."""
+        model their spread about :meth:`trajectory` is scaled per point and column as in :meth:`std`."""
         m = self._m
         th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
         s = np.linspace(0.0, 1.0, int(n))

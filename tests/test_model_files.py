@@ -147,7 +147,7 @@ def test_metadata_holds_a_checksum_of_every_array(saved):
     with zipfile.ZipFile(saved["pca"]) as z:
         names = {n[:-4] for n in z.namelist()}
         meta = json.loads(np.load(io.BytesIO(z.read("metadata.npy"))).tobytes())
-    assert meta["format_version"] == ipio.FORMAT_VERSION == 2
+    assert meta["format_version"] == ipio.FORMAT_VERSION == 3
     assert set(meta["checksums"]) == names - {"metadata"}
     assert {"prior_diag", "prior_factor", "pca_observed_explained_variance_ratio"} <= names
     for entry in meta["checksums"].values():
@@ -307,10 +307,10 @@ def test_version_1_files_still_load(models, data, tmp_path, name):
     uncal.calibration_ = None
     for a, b in zip(prediction_outputs(loaded, partials_of(data)), prediction_outputs(uncal, partials_of(data))):
         np.testing.assert_allclose(a, b, rtol=1e-8, atol=1e-10)
-    # and saving it again writes version 2
-    loaded.save(tmp_path / "v2.npz")
-    with zipfile.ZipFile(tmp_path / "v2.npz") as z:
-        assert json.loads(np.load(io.BytesIO(z.read("metadata.npy"))).tobytes())["format_version"] == 2
+    # and saving it again writes the current version
+    loaded.save(tmp_path / "v3.npz")
+    with zipfile.ZipFile(tmp_path / "v3.npz") as z:
+        assert json.loads(np.load(io.BytesIO(z.read("metadata.npy"))).tobytes())["format_version"] == 3
 
 
 def test_unknown_version_is_refused(saved, tmp_path):
@@ -318,14 +318,14 @@ def test_unknown_version_is_refused(saved, tmp_path):
         if name != "metadata.npy":
             return raw
         meta = json.loads(np.load(io.BytesIO(raw)).tobytes())
-        meta["format_version"] = 3
+        meta["format_version"] = 4
         buf = io.BytesIO()
         np.save(buf, np.frombuffer(json.dumps(meta).encode(), np.uint8))
         return buf.getvalue()
 
-    _rewrite(saved["default"], tmp_path / "v3.npz", bump)
-    with pytest.raises(ip.ModelFileError, match="format_version 3 is not supported .*reads versions 1, 2"):
-        ip.InteractionPrimitive.load(tmp_path / "v3.npz")
+    _rewrite(saved["default"], tmp_path / "v4.npz", bump)
+    with pytest.raises(ip.ModelFileError, match="format_version 4 is not supported .*reads versions 1, 2, 3"):
+        ip.InteractionPrimitive.load(tmp_path / "v4.npz")
 
 
 # ----------------------------------------------------------------------------- not model files (item 3)

@@ -10,7 +10,12 @@ dtypes, so loading a model never unpickles or executes anything.
 
 Versions (``format_version``):
 
-* **2** (written now): ``metadata`` also holds
+* **3** (written now): version 2 with a look-ahead-aware calibration of the predictive std: the arrays
+  ``calibration_lookaheads (H,)`` and ``calibration_dof_scale (D,)``, and ``calibration_scale_{observed,
+  controlled}`` of shape ``(F, H)`` (:class:`~interprim.calibration.Calibration`).  An older interprim refuses
+  the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
+  calibration, ``(F,)`` scales, acts at every look-ahead as it did).
+* **2**: ``metadata`` also holds
   ``checksums``, ``{name: {"dtype", "shape", "sha256"}}`` for every other array
   (SHA-256 of the array's C-ordered bytes); ``selection`` (``selection_``,
   the hyper-parameter selection record of ``fit``, or ``null``); and the
@@ -59,8 +64,8 @@ from .gaussian import GaussianPrior
 from .preprocessing import PCA
 
 FORMAT = "interprim-model"
-FORMAT_VERSION = 2
-READ_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+READ_VERSIONS = (1, 2, 3)
 
 __all__ = ["save_model", "load_model", "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
@@ -121,7 +126,7 @@ def _arrays(model) -> dict:
 
 
 def save_model(model, path) -> None:
-    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 2)."""
+    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3)."""
     path = Path(path)
     meta = _metadata(model)
     arrays = _arrays(model)
@@ -256,7 +261,7 @@ def _read_archive(path: Path):
 
 
 def load_model(path, model_class):
-    """Read a model written by :func:`save_model` (format version 1 or 2; no pickle, every array checked) as a
+    """Read a model written by :func:`save_model` (format version 1, 2 or 3; no pickle, every array checked) as a
     ``model_class`` (:class:`~interprim.primitive.InteractionPrimitive`)."""
     path = Path(path)
     meta, data = _read_archive(path)
@@ -317,15 +322,14 @@ def load_model(path, model_class):
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration
 
-            model.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
-                                                          if k.startswith("calibration_")})
-            c = model.calibration_
-            _expect(c.fractions.ndim == 1 and c.scale_observed.shape == c.fractions.shape
-                    and c.scale_controlled.shape == c.fractions.shape and c.fractions.size >= 1
-                    and bool(np.all(np.isfinite(c.scale_observed)) and np.all(c.scale_observed > 0)
-                             and np.all(np.isfinite(c.scale_controlled)) and np.all(c.scale_controlled > 0))
-                    and bool(np.all(np.diff(c.fractions) > 0)), path,
-                    "arrays 'calibration_*' are not a calibration (increasing fractions, positive finite scales)")
+            try:
+                model.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
+                                                              if k.startswith("calibration_")})
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ModelFileError(f"{path}: arrays 'calibration_*' are not a calibration: "
+                                     f"{type(exc).__name__}: {exc}") from None
+            bad = model.calibration_.problem(len(model.observed_dofs_) + len(model.controlled_dofs_))
+            _expect(bad is None, path, f"arrays 'calibration_*' are not a calibration: {bad}")
         for agent in ("observed", "controlled"):
             pca = None
             if f"pca_{agent}_mean" in data:

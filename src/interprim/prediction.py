@@ -142,28 +142,28 @@ class Prediction:
         M, off = m._latent_map()
         return lat @ M.T + off
 
-    def _calibration_scale(self):
-        """Per-column factors of the calibrated predictive std (:mod:`interprim.calibration`), or ``None``."""
+    def _calibration_scale(self, n: int):
+        """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``
+        (:mod:`interprim.calibration`: per column, at this prediction's phase and each point's look-ahead
+        ``u - phase``), or ``None``."""
         m = self._m
         cal = getattr(m, "calibration_", None)
         if cal is None:
             return None
-        c_o, c_c = cal.factors(self.normalised_time)
-        f = np.empty(m.n_dofs_)
-        f[m.observed_dofs_] = c_o
-        f[m.controlled_dofs_] = c_c
-        return f
+        return cal.column_factors(self.normalised_time, np.linspace(0.0, 1.0, int(n)), m.observed_dofs_,
+                                  m.controlled_dofs_)
 
     def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
-        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled per agent by the model's
-        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations, at this
-        prediction's phase), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what
-        happens; ``False``, or a model without calibration: the posterior std itself.
+        ``calibrated=True`` (default): the posterior std (Eq. 18) scaled by the model's
+        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations), per
+        column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
+        included), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what happens;
+        ``False``, or a model without calibration: the posterior std itself.
         """
         sd = self._posterior_std(n)
-        f = self._calibration_scale() if calibrated else None
+        f = self._calibration_scale(n) if calibrated else None
         return sd if f is None else sd * f
 
     def _posterior_std(self, n: int) -> np.ndarray:
@@ -182,7 +182,7 @@ class Prediction:
 
     def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
         """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
-        model their spread about :meth:`trajectory` is scaled per agent as in :meth:`std`."""
+        model their spread about :meth:`trajectory` is scaled per point and column as in :meth:`std`."""
         m = self._m
         th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
         s = np.linspace(0.0, 1.0, int(n))
@@ -190,7 +190,7 @@ class Prediction:
         lat = self._latent_traj(self._theta(th), s, y0, v0)
         M, off = m._latent_map()
         out = lat @ M.T + off
-        f = self._calibration_scale()
+        f = self._calibration_scale(n)
         if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
             mean = self.trajectory(int(n))
             out = mean + (out - mean) * f

@@ -127,7 +127,7 @@ class InteractionPrimitive:
     calibrate : bool or "auto", default "auto"
         Calibrate the predictive uncertainty on held-out folds of the training demonstrations
         (:mod:`interprim.calibration`): :meth:`Prediction.std` and :meth:`Prediction.samples` are the
-        posterior's, scaled per agent and per fraction seen so that their 90 % band covers about 90 % of
+        posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
     """

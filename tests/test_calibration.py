@@ -1,0 +1,212 @@
+"""Calibrated predictive std (interprim.calibration): look-ahead-aware factors, held-out coverage on data with
+known noise, shrinkage, model files with and without the look-ahead arrays."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+import interprim as ip
+from interprim import io as ipio
+from interprim.calibration import Calibration, _shrink
+from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
+from interprim.synthetic import two_agent_demos
+
+NOISE = 0.05  # i.i.d. per frame and column: larger than the model's own errors on this data
+N_TRAIN = 30
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    train = two_agent_demos(N_TRAIN, seed=0, noise=NOISE)
+    test = two_agent_demos(16, seed=1, noise=NOISE)
+    model = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10).fit(train, dt=0.01)
+    return model, train, test
+
+
+def _hand_made(lookaheads=(-0.2, 0.0, 0.05, 0.5)):
+    fr = np.array([0.2, 0.8])
+    h = np.asarray(lookaheads, dtype=float)
+    c_o = np.array([[1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 8.0]])
+    c_c = 10 * c_o
+    col = np.empty((2, 4, 5))
+    col[:] = [1.0, 2.0, 1.0, 0.5, 2.0]
+    col[:, :, 1] = [1.0, 2.0, 3.0, 4.0]  # column 1 relative to its agent: varies with the look-ahead
+    return Calibration(fr, c_o, c_c, 4, lookaheads=h, column_scale=col)
+
+
+def test_factors_interpolate_in_phase_and_lookahead_and_hold_at_the_ends():
+    cal = _hand_made()
+    # at a measured fraction and node: the stored scale
+    assert cal.factors(0.2, 0.05) == (3.0, 30.0)
+    # half-way between fractions and between two look-ahead nodes: the bilinear mean of the four corners
+    c_o, c_c = cal.factors(0.5, 0.025)
+    assert c_o == pytest.approx((2 + 3 + 6 + 7) / 4) and c_c == pytest.approx(10 * c_o)
+    # beyond the last node / before the first / outside the fractions: held
+    assert cal.factors(0.8, 0.9)[0] == 8.0 and cal.factors(0.2, -0.7)[0] == 1.0 and cal.factors(0.05, 0.5)[0] == 4.0
+    # per column: the agent's factor times the column's own
+    u = np.array([0.0, 0.2, 0.25, 1.0])
+    f = cal.column_factors(0.2, u, [0, 1], [2, 3, 4])
+    co, cc = cal.factors(0.2, u - 0.2)
+    r1 = np.interp(u - 0.2, cal.lookaheads, [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(f, np.column_stack([co, r1 * co, cc, 0.5 * cc, 2 * cc]))
+    # the look-ahead matters: the observed past, now, the near and the far future differ
+    assert len(set(np.round(f[:, 0], 12))) == 4
+
+
+def test_one_dimensional_scales_act_at_every_lookahead():
+    cal = Calibration(np.array([0.1, 0.9]), np.array([1.0, 3.0]), np.array([2.0, 4.0]), 2)
+    assert cal.problem(5) is None
+    assert cal.factors(0.5) == (2.0, 3.0)
+    f = cal.column_factors(0.5, np.linspace(0, 1, 7), [0, 1], [2, 3, 4])
+    np.testing.assert_array_equal(f, np.tile([2.0, 2.0, 3.0, 3.0, 3.0], (7, 1)))
+
+
+def test_shrinkage_keeps_real_deviations_and_removes_noise():
+    rng = np.random.default_rng(0)
+    n = 400
+    var = np.full(n, 0.01)
+    noise = rng.normal(0.0, 0.1, n)  # sampling noise with exactly the stated variance
+    # no true deviation: everything is noise, the estimates collapse onto the parent
+    np.testing.assert_allclose(_shrink(noise, var, 0.0), 0.0, atol=0.03)
+    # true deviations of spread 1 (100x the noise variance): kept with weight 1 / (1 + 0.01) up to the moment
+    # estimate of tau^2 (relative error ~ sqrt(2 / n) = 7 %)
+    true = rng.normal(0.0, 1.0, n)
+    out = _shrink(true + noise, var, 0.0)
+    w = np.polyfit(true + noise, out, 1)[0]
+    assert 1 / (1 + 0.01 / (1 - 3 * math.sqrt(2 / n))) <= w <= 1
+    # NaN estimates (nothing measured) stay NaN; infinite variance (one demonstration) goes to the parent
+    out = _shrink(np.array([np.nan, 2.0, 1.0, -1.0]), np.array([0.1, np.inf, 0.1, 0.1]), 0.5)
+    assert np.isnan(out[0]) and out[1] == 0.5
+
+
+def test_prediction_std_applies_each_points_lookahead_factor(noisy):
+    model, _, test = noisy
+    m = ip.InteractionPrimitive.__new__(ip.InteractionPrimitive)
+    m.__dict__.update(model.__dict__)
+    m.calibration_ = _hand_made()
+    p = m.predict(test[0][:90, :2])
+    n = 51
+    u = np.linspace(0, 1, n)
+    want = m.calibration_.column_factors(p.normalised_time, u, [0, 1], [2, 3, 4])
+    np.testing.assert_allclose(p.std(n), p.std(n, calibrated=False) * want, rtol=1e-12)
+    # samples spread about the mean as std says (trajectories are affine in theta)
+    smp = p.samples(4000, n, random_state=0)
+    ratio = smp.std(axis=0)[1:] / p.std(n)[1:]  # the first point is the fixed start
+    ok = np.isfinite(ratio) & (p.std(n)[1:] > 1e-9)
+    assert np.all(np.abs(ratio[ok] - 1) < 5 / math.sqrt(2 * 4000))  # sd of a sample std: 1/sqrt(2n) relative
+
+
+def test_fitted_scales_depend_on_the_lookahead(noisy):
+    model, _, _ = noisy
+    cal = model.calibration_
+    assert cal is not None and cal.problem(5) is None
+    assert cal.lookaheads.size >= 6 and np.any(cal.lookaheads < 0) and np.any(cal.lookaheads > 0)
+    assert cal.scale_observed.shape == (cal.fractions.size, cal.lookaheads.size)
+    assert cal.column_scale.shape == cal.scale_observed.shape + (5,)
+    # the observed agent's own near future (pinned by the frames just seen) and its far future are not
+    # predicted equally well relative to the posterior std: the scales differ along the look-ahead
+    fut = cal.lookaheads > 0
+    row = cal.scale_observed[2, fut]
+    assert row.max() / row.min() > 1.2
+
+
+def test_held_out_coverage_of_the_calibrated_band_on_noisy_data(noisy):
+    """New demonstrations of the synthetic set with i.i.d. noise: the real-time protocol's 90 % band (next 0.25 s,
+    20-90 % seen) covers close to 90 % of both agents' coordinates, RMS error / RMS std close to 1.
+
+    The interval: a scale estimated from ``S`` held-out demonstrations has a relative error of at most about
+    ``1 / sqrt(2 S)`` (Gaussian errors, at least one independent error per demonstration); at 3 such errors
+    the band is ``exp(+-3 / sqrt(2 S))`` too wide or narrow, which moves a Gaussian's coverage to
+    ``2 Phi(1.645 exp(+-delta)) - 1``; plus 3 standard errors of the mean coverage over the test demonstrations."""
+    model, train, test = noisy
+    cfg = RealTimeConfig(stride=4)
+    cov = {"obs": [], "ctrl": []}
+    z = {"obs": [], "ctrl": []}
+    for d in test:
+        recs = [r for r in realtime_fold(model, train, d, [0, 1], 0.01, cfg, fitted=True) if r["method"] == "method"]
+        for a in cov:
+            cov[a].append(np.mean([r[f"cov_{a}"] for r in recs]))
+            z[a].append(np.sqrt(np.mean([r[f"z_{a}"] ** 2 for r in recs])))
+    delta = 3 / math.sqrt(2 * N_TRAIN)
+    lo_cov, hi_cov = 2 * norm.cdf(1.645 * math.exp(-delta)) - 1, 2 * norm.cdf(1.645 * math.exp(delta)) - 1
+    for a in cov:
+        c = np.array(cov[a])
+        se = c.std(ddof=1) / math.sqrt(c.size)
+        assert lo_cov - 3 * se <= c.mean() <= hi_cov + 3 * se, (a, c.mean(), se)
+        r = np.array(z[a])
+        se_r = r.std(ddof=1) / math.sqrt(r.size)
+        assert math.exp(-delta) - 3 * se_r <= r.mean() <= math.exp(delta) + 3 * se_r, (a, r.mean(), se_r)
+
+
+def _arrays_of(path):
+    meta, arrays = ipio._read_archive(path)
+    return meta, dict(arrays)
+
+
+def _write_arrays(path, meta, arrays):
+    meta = dict(meta)
+    meta["checksums"] = {k: ipio._checksum(v) for k, v in arrays.items()}
+    ipio._write(path, meta, arrays)
+
+
+def test_model_file_round_trip_keeps_the_calibration(noisy, tmp_path):
+    model, _, test = noisy
+    model.save(tmp_path / "m.npz")
+    loaded = ip.InteractionPrimitive.load(tmp_path / "m.npz")
+    a, b = model.calibration_.to_arrays(), loaded.calibration_.to_arrays()
+    assert a.keys() == b.keys() and {"lookaheads", "column_scale"} <= set(a)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    z = test[1][:70, :2]
+    np.testing.assert_array_equal(model.predict(z).std(33), loaded.predict(z).std(33))
+
+
+def test_version_2_file_with_one_dimensional_calibration_loads(noisy, tmp_path):
+    """A file written before look-ahead-aware calibration (version 2: ``(F,)`` scales, no look-aheads, no
+    per-column factors) loads, and its scales act at every look-ahead as they did."""
+    model, _, test = noisy
+    model.save(tmp_path / "m.npz")
+    meta, arrays = _arrays_of(tmp_path / "m.npz")
+    meta["format_version"] = 2
+    del arrays["calibration_lookaheads"], arrays["calibration_column_scale"]
+    arrays["calibration_fractions"] = np.array([0.1, 0.3, 0.5, 0.7, 0.9])
+    arrays["calibration_scale_observed"] = np.array([0.5, 0.6, 0.7, 0.8, 0.9])
+    arrays["calibration_scale_controlled"] = np.array([1.5, 1.6, 1.7, 1.8, 1.9])
+    _write_arrays(tmp_path / "v2.npz", meta, arrays)
+    old = ip.InteractionPrimitive.load(tmp_path / "v2.npz")
+    assert old.calibration_.lookaheads is None and old.calibration_.column_scale is None
+    p = old.predict(test[2][:100, :2])
+    c_o = np.interp(p.normalised_time, old.calibration_.fractions, arrays["calibration_scale_observed"])
+    c_c = np.interp(p.normalised_time, old.calibration_.fractions, arrays["calibration_scale_controlled"])
+    np.testing.assert_allclose(p.std(20), p.std(20, calibrated=False) * [c_o, c_o, c_c, c_c, c_c], rtol=1e-12)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda a: a.pop("calibration_lookaheads"), r"scale_observed has shape \(9, \d+\), expected \(9,\)"),
+    (lambda a: a.update(calibration_column_scale=np.ones(3)), r"column_scale has shape \(3,\), expected \(9, \d+, 5\)"),
+    (lambda a: a.update(calibration_lookaheads=a["calibration_lookaheads"][::-1].copy()),
+     "lookaheads are not increasing"),
+    (lambda a: a.pop("calibration_fractions"), "KeyError: 'fractions'"),
+])
+def test_inconsistent_calibration_arrays_are_refused_clearly(noisy, tmp_path, edit, message):
+    model, _, _ = noisy
+    model.save(tmp_path / "m.npz")
+    meta, arrays = _arrays_of(tmp_path / "m.npz")
+    edit(arrays)
+    _write_arrays(tmp_path / "bad.npz", meta, arrays)
+    with pytest.raises(ip.ModelFileError, match=r"bad\.npz: arrays 'calibration_\*' are not a calibration: " + message):
+        ip.InteractionPrimitive.load(tmp_path / "bad.npz")
+
+
+def test_version_3_file_is_refused_by_a_reader_of_versions_1_and_2_with_a_clear_message(noisy, tmp_path, monkeypatch):
+    """What an older interprim says about a file with the look-ahead arrays (it reads versions 1 and 2)."""
+    model, _, _ = noisy
+    model.save(tmp_path / "m.npz")
+    assert _arrays_of(tmp_path / "m.npz")[0]["format_version"] == 3
+    monkeypatch.setattr(ipio, "READ_VERSIONS", (1, 2))
+    with pytest.raises(ip.ModelFileError, match="format_version 3 is not supported by this interprim"):
+        ip.InteractionPrimitive.load(tmp_path / "m.npz")

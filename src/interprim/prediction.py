@@ -174,7 +174,7 @@ class Prediction:
         M, _ = m._latent_map()
         if M.shape[0] == M.shape[1] and np.array_equal(M, np.eye(M.shape[0])):  # no PCA: the diagonal blocks
             d = np.arange(m.n_latent_)
-            var = np.einsum("tq,dqr,tr->td", H, C[d, :, d, :], H, optimize=True)
+            var = np.sum(np.matmul(H[None], C[d, :, d, :]) * H[None], axis=2).T  # diag(H C_dd H^T) per DoF
         else:
             S_t = np.einsum("tq,dqer,tr->tde", H, C, H, optimize=True)  # latent covariance per time
             var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)

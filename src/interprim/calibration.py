@@ -285,7 +285,9 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
                 pred = m.predict(d[:M, obs])
                 s = phases[j, i] = float(pred.normalised_time)
                 h = (np.arange(T) - (M - 1)) * dt / float(pred.duration)
-                keep = (s + h >= 0.0) & (h > allEdges[0]) & (h <= allEdges[-1])  # the past the grid can show
+                # the past the grid can show; the first frame sits at s + h = 0 up to rounding (the phase is its elapsed
+                # time over the duration), so a tolerance keeps it in or out whatever path computed s
+                keep = (s + h >= -1e-9) & (h > allEdges[0]) & (h <= allEdges[-1])
                 fut = np.arange(T)[keep]
                 h = h[keep]
                 u = np.clip(s + h, 0.0, 1.0)

@@ -147,3 +147,26 @@ def test_bad_inputs_name_the_problem():
         m.predict(demos[0][:10, OBS], 1.5)
     with pytest.raises(ValueError, match="phase_std"):
         m.predict(demos[0][:10, OBS], 0.3, phase_std=-1.0)
+
+
+def test_learned_interaction_std_adds_the_timing_uncertainty():
+    """``LearnedInteraction``'s std = the coupling's std (+) |dy/du| u std(s)/s, the first-order effect of a
+    relative phase error on a point placed in real time; without phase uncertainty it is the coupling's std."""
+    from interprim.learned import _Prediction
+    from interprim.phase.learned import PhaseEstimate
+
+    u = np.linspace(0.0, 1.0, 11)
+    mean = np.stack([2.0 * u, np.sin(np.pi * u), np.ones_like(u)], axis=1)  # slopes 2, pi cos(pi u), 0
+    sd = np.full_like(mean, 0.1)
+    cp = CouplingPrediction(u, mean, sd, 0.5, 0.05, [0], [1, 2], "ridge", 0.0)
+    p = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.05, 1.0))
+    got = p.std(11)
+    e = 0.05 / 0.5
+    slope = np.gradient(mean, u, axis=0)  # the mean's derivative on the grid (exact for the linear column)
+    assert np.allclose(got, np.sqrt(0.01 + (slope * (u * e)[:, None]) ** 2), rtol=1e-12)
+    assert np.allclose(got[:, 0], np.sqrt(0.01 + (2.0 * u * e) ** 2), rtol=1e-12)  # the linear column exactly
+    assert np.allclose(got[:, 2], 0.1)  # a constant column gets no timing term
+    assert np.all(got >= sd - 1e-15)
+    assert np.allclose(p.std(11, timing=False), sd)
+    still = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.0, 1.0))  # a phase known exactly
+    assert np.allclose(still.std(11), sd)

@@ -47,9 +47,22 @@ class _Prediction:
         """Mean of all DoFs on the normalised-time grid ``linspace(0, 1, n)``, shape ``(n, D)``."""
         return self._cp.trajectory(n)
 
-    def std(self, n: int = 100) -> np.ndarray:
-        """Calibrated predictive standard deviation of :meth:`trajectory`, shape ``(n, D)``."""
-        return self._cp.std(n)
+    def std(self, n: int = 100, timing: bool = True) -> np.ndarray:
+        """Predictive standard deviation of :meth:`trajectory`, shape ``(n, D)``.
+
+        The coupling's calibrated std (:class:`~interprim.coupling.CouplingPrediction`, errors measured in
+        normalised time, where timing errors do not show) combined with the timing uncertainty
+        (``timing=True``): a point at normalised time ``u`` is placed in real time by the phase ``s`` and the
+        duration ``D = elapsed / s``; a relative error ``e = std(s) / s`` of the phase moves it by ``u e`` to
+        first order, and the position there by ``|dy/du| u e``, added in quadrature (``e`` capped at 1).
+        """
+        sd = self._cp.std(n)
+        if not timing or self.phase <= 0.0 or self.phase_std <= 0.0:
+            return sd
+        u = np.linspace(0.0, 1.0, int(n))
+        slope = np.gradient(self._cp.trajectory(n), u, axis=0)
+        e = min(self.phase_std / self.phase, 1.0)
+        return np.sqrt(sd * sd + (slope * (u * e)[:, None]) ** 2)
 
     def response(self, n: int = 100):
         return self._cp.response(n)

@@ -11,7 +11,7 @@ dtypes, so loading a model never unpickles or executes anything.
 Versions (``format_version``):
 
 * **3** (written now): version 2 with a look-ahead-aware calibration of the predictive std: the arrays
-  ``calibration_lookaheads (H,)`` and ``calibration_dof_scale (D,)``, and ``calibration_scale_{observed,
+  ``calibration_lookaheads (H,)`` and ``calibration_column_scale (F, H, D)``, and ``calibration_scale_{observed,
   controlled}`` of shape ``(F, H)`` (:class:`~interprim.calibration.Calibration`).  An older interprim refuses
   the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
   calibration, ``(F,)`` scales, acts at every look-ahead as it did).

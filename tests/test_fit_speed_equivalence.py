@@ -157,8 +157,9 @@ def test_cv_scores_equal_direct_form(n_o, n_lat):
     base = rng.standard_normal((B, n_out, n_lat))
     truth = base + H @ mean.reshape(n_lat, q).T + 0.05 * rng.standard_normal((B, n_out, n_lat))
     pm_shift = H @ mean.reshape(n_lat, q).T
-    e_all, e_prior = _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam)
-    assert e_all.shape == (B, ns, gam.size) and e_prior.shape == (B,)
+    e_o, e_c, p_o, p_c = _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam)
+    assert e_o.shape == (B, ns) and e_c.shape == (B, ns, gam.size) and p_o.shape == p_c.shape == (B,)
+    e_all, e_prior = (e_o[:, :, None] + e_c) / n_lat, (p_o + p_c) / n_lat  # both agents' sums, per DoF
     ld = np.longdouble
     Hl, wl = H.astype(ld), w_d.astype(ld)
     mag = np.abs(base)[:, None] + np.einsum("tq,bsdq->bstd", np.abs(H), np.abs(Th).reshape(B, ns, n_lat, q)) \

@@ -74,6 +74,8 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
     po = 2 * m._q
     if m.selection_["cross_shrinkage"] == 1.0:
         assert np.all(m.prior_.cov[:po, po:] == 0.0)
+        # the robot keeps its mean whatever the noise: the observed agent's completion chose sigma2 and the shrinkage
+        assert m.selection_["cv_error_observed"] == np.min(m.selection_["cv_errors_observed"])
     factor = getattr(m.prior_, "factor", None)
     if factor is not None:  # the diagonal + low-rank form stays exact
         rec = factor @ factor.T
@@ -114,3 +116,48 @@ def test_bad_sigma2_string_rejected(small):
     train = small
     with pytest.raises((ValueError, TypeError), match="sigma2"):
         ip.InteractionPrimitive(observed_dofs=[0, 1], sigma2="loo").fit(train, dt=0.01)
+
+
+def test_cv_scores_the_controlled_agent_then_the_observed_within_its_noise(small):
+    """The criterion is the controlled agent's held-out error; among the candidates within one standard error of
+    its best (at the chosen gamma) the observed agent's completion decides."""
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12).fit(small, dt=0.01)
+    sel = m.selection_
+    assert sel["cv_target"] == "controlled agent"
+    errs, errs_o = np.asarray(sel["cv_errors"]), np.asarray(sel["cv_errors_observed"])  # (lambda, sigma2)
+    within = np.asarray(sel["cv_within_se"])
+    a = sel["shrinkage_grid"].index(m.prior_.shrinkage)
+    b = int(np.argmin(np.abs(np.asarray(sel["sigma2_grid"]) - m.sigma2_)))
+    assert within[a, b] and sel["cv_error"] == errs[a, b] and sel["cv_error_observed"] == errs_o[a, b]
+    assert errs_o[a, b] == errs_o[within].min()
+    assert within[np.unravel_index(np.argmin(errs), errs.shape)]  # the controlled agent's best is always in
+    assert not within.all()  # a real choice: some candidates are worse for the robot beyond its noise
+    assert sel["cv_error"] < 0.5 * sel["cv_error_prior"]  # correlated agents: conditioning helps the robot a lot
+
+
+def test_best_candidate_is_the_observed_agents_best_within_the_controlled_agents_noise():
+    from interprim.selection import _best_at
+
+    within = np.array([[True, True], [True, False]])
+    err_o = np.array([[5.0, 3.0], [1.0, 0.0]])  # (1, 1) has the best observed error but is out for the robot
+    assert tuple(int(i) for i in _best_at(within, err_o)) == (1, 0)
+    within[1, 0] = False
+    assert tuple(int(i) for i in _best_at(within, err_o)) == (0, 1)
+
+
+def test_selection_criteria_per_agent():
+    """``_criteria`` averages each agent's summed errors over its own DoFs; without a controlled agent the
+    criterion is the observed agent's error."""
+    from interprim.selection import _criteria
+
+    rng = np.random.default_rng(1)
+    n_lam, S2, G, n_cases = 2, 3, 4, 5
+    per_case = {i: [(rng.random(S2), rng.random((S2, G)), rng.random(), rng.random()) for _ in range(n_cases)]
+                for i in range(n_lam)}
+    E, Eo, p_c, p_o = _criteria(per_case, n_lam, n_o=3, n_lat=5)
+    assert E.shape == (n_cases, n_lam, S2, G) and Eo.shape == (n_cases, n_lam, S2)
+    assert E[2, 1, 0, 3] == per_case[1][2][1][0, 3] / 2 and Eo[4, 0, 2] == per_case[0][4][0][2] / 3
+    assert p_c == pytest.approx(np.mean([c[3] for c in per_case[0]]) / 2)
+    assert p_o == pytest.approx(np.mean([c[2] for c in per_case[0]]) / 3)
+    E1, Eo1, p1, po1 = _criteria(per_case, n_lam, n_o=5, n_lat=5)
+    assert E1.shape == (n_cases, n_lam, S2, 1) and np.array_equal(E1[..., 0], Eo1) and p1 == po1

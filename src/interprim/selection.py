@@ -17,9 +17,14 @@ model by K-fold cross-validation on the training demonstrations:
    candidate ``sigma^2`` and predict the whole movement of *all* DoFs (both
    agents) by integrating the DMPs from the start;
 3. score each ``(lambda, sigma^2, gamma)`` by the mean squared error of those
-   predictions, each DoF divided by its variance over the demonstrations, and
+   predictions *of the controlled agent* (the robot's response is what conditioning
+   is for; the observed agent's completion, with most of the DoFs, used to decide
+   ``sigma^2`` and the shrinkage when both were scored together), each DoF divided
+   by its variance over the demonstrations, and
    keep the most conservative ``gamma`` (the largest) within one standard
-   error of the best, with the best ``(lambda, sigma^2)`` for it (Hastie et al.'s
+   error of the best, with the best ``(lambda, sigma^2)`` for it (candidates tied on
+   the controlled agent, as all are with ``gamma = 1``, by the observed agent's
+   error; without a controlled agent, by the observed agent's error alone) (Hastie et al.'s
    one-standard-error rule: a few dozen demonstrations make the CV noisy), the standard
    error being that of the paired per-case differences from the best candidate.  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
    covariance (observed x controlled) towards zero: the controlled agent's
@@ -174,11 +179,9 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
 
     kind0 = kinds[0]
     gam = np.asarray(cross_grid if n_lat > n_o else (0.0,), dtype=np.float64)
-    err = np.zeros((len(lam_grid), len(sigma2_factors), gam.size))
     ll = np.zeros((len(lam_grid), len(sigma2_factors)))
-    err_prior = np.zeros(len(lam_grid))
     n_cases = 0
-    per_case = {}  # lambda index -> one (S2, G) error array per held-out case (for the paired rule)
+    per_case = {}  # lambda index -> per held-out case: the observed and controlled agents' errors, and the prior's
     for f in range(K):
         train = fold != f
         if train.sum() < 2:
@@ -192,12 +195,10 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                     chunk = held[c0:c0 + _SCORE_CHUNK]
                     outs = [lowrank_case(prior, n_o, q, *designs[kind0], s2_grid[kind0], need_ll=kind0 == "position",
                                          compressed=comp[kind0]) for _, designs, _, comp in chunk]
-                    e_all, e_prior = _score(np.stack([o[0] for o in outs]), np.stack([c[2] for c in chunk]),
-                                            np.stack([truths[c[0]] for c in chunk]), pm_shift, H, n_o, q, w_d, gam)
+                    e_o, e_c, p_o, p_c = _score(np.stack([o[0] for o in outs]), np.stack([c[2] for c in chunk]),
+                                                np.stack([truths[c[0]] for c in chunk]), pm_shift, H, n_o, q, w_d, gam)
                     for b in range(len(chunk)):
-                        err[a] += e_all[b]
-                        per_case.setdefault(a, []).append(e_all[b])
-                        err_prior[a] += e_prior[b]
+                        per_case.setdefault(a, []).append((e_o[b], e_c[b], p_o[b], p_c[b]))
                         if kind0 == "position":
                             ll[a] += outs[b][1]
             for j, designs, base, comp in held:
@@ -207,21 +208,22 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                                            need_ll=True, compressed=comp["position"])[1]
                 if a == 0:
                     n_cases += 1
-    err /= max(n_cases, 1)
-    err_prior /= max(n_cases, 1)
-
     if select_sigma2:
+        E, Eo, crit_prior, crit_prior_o = _criteria(per_case, len(lam_grid), n_o, n_lat)
+        err, err_o = E.mean(axis=0), Eo.mean(axis=0)  # (lam, s2, gamma), (lam, s2)
         a, b, c = np.unravel_index(int(np.argmin(err)), err.shape)
         # one-standard-error rule on paired differences: the most conservative cross-agent shrinkage whose
         # CV error exceeds the best by less than one standard error of the per-case differences (every
         # candidate is scored on the same held-out cases, so the cases' own spread cancels; the unpaired
         # standard error counted it and kept gamma = 1, the prior mean, on NuiSI, where the coupling helps)
-        E = np.stack([np.stack(per_case[i]) for i in range(len(lam_grid))], axis=1)  # (cases, lam, s2, gamma)
         Dif = E - E[:, a, b, c][:, None, None, None]
         se_d = Dif.std(axis=0, ddof=1) / np.sqrt(max(Dif.shape[0], 1)) if Dif.shape[0] > 1 else np.inf
-        ok = np.argwhere(Dif.mean(axis=0) <= se_d)
-        c = int(max(t[2] for t in ok))
-        a, b = np.unravel_index(int(np.argmin(err[:, :, c])), err.shape[:2])
+        ok = Dif.mean(axis=0) <= se_d  # (lam, s2, gamma); the best is always in
+        c = int(np.flatnonzero(ok.any(axis=(0, 1))).max())
+        # among the candidates within one standard error of the best for the controlled agent, at that gamma: the
+        # best completion of the observed agent (the robot first, the human within the robot's noise)
+        within = ok[:, :, c]
+        a, b = _best_at(within, err_o)
         lam = lam_grid[a]
         gamma = float(gam[c])
         model.sigma2_ = float(s2_grid[kind0][b])
@@ -261,9 +263,14 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     if select_sigma2:
         sel["cross_shrinkage"] = gamma
         sel["cross_shrinkage_grid"] = gam.tolist()
+        sel["cv_target"] = "controlled agent" if n_lat > n_o else "observed agent"
         sel["cv_error"] = float(err[a, b, c])
-        sel["cv_error_prior"] = float(err_prior[a])
+        sel["cv_error_prior"] = float(crit_prior)
+        sel["cv_error_observed"] = float(err_o[a, b])
+        sel["cv_error_observed_prior"] = float(crit_prior_o)
         sel["cv_errors"] = err[:, :, c].tolist()
+        sel["cv_errors_observed"] = err_o.tolist()
+        sel["cv_within_se"] = within.tolist()
     model.selection_ = sel
     return sel
 
@@ -271,12 +278,38 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
 _SCORE_CHUNK = 4  # held-out cases scored together (their (cases, sigma2, frames, DoF) arrays stay in cache)
 
 
+def _criteria(per_case, n_lam, n_o, n_lat):
+    """Per-case selection criteria from the cases' errors: ``(E (cases, lam, s2, gamma), Eo (cases, lam, s2),
+    prior's criterion, prior's observed error)``, each a mean over the DoFs of its agent.
+
+    The criterion is the *controlled* agent's error when there is one: the robot's response is what the
+    conditioning is for, and scoring both agents together let the observed agent's completion (most of the DoFs)
+    decide ``sigma^2`` and the shrinkage.  Without a controlled agent it is the observed agent's error.
+    """
+    cases = [list(zip(*per_case[i])) for i in range(n_lam)]  # per lambda: (e_o, e_c, p_o, p_c) over cases
+    Eo = np.stack([np.stack(c[0]) for c in cases], axis=1) / n_o  # (cases, lam, s2)
+    p_o = float(np.mean(cases[0][2])) / n_o
+    if n_lat > n_o:
+        E = np.stack([np.stack(c[1]) for c in cases], axis=1) / (n_lat - n_o)
+        return E, Eo, float(np.mean(cases[0][3])) / (n_lat - n_o), p_o
+    return Eo[..., None], Eo, p_o, p_o
+
+
+def _best_at(within, err_o):
+    """``(lambda, sigma^2)`` indices, among the candidates ``within`` (lam, s2; bool) one standard error of the best
+    for the controlled agent, with the smallest observed-agent error ``err_o`` (with ``gamma = 1`` the controlled
+    agent keeps its prior mean whatever the noise: then the observed agent alone decides)."""
+    return np.unravel_index(int(np.argmin(np.where(within, err_o, np.inf))), err_o.shape)
+
+
 def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
-    """CV errors of held-out cases: ``(B, S2, G)`` per (sigma2, gamma) and ``(B,)`` of the prior mean.
+    """CV errors of held-out cases, per agent: ``e_o`` (B, S2) of the observed agent per sigma2, ``e_c``
+    (B, S2, G) of the controlled agent per (sigma2, gamma), and ``(B,)`` of the prior mean's, observed and
+    controlled.
 
     ``Th`` (B, S2, P) posterior means, ``base`` (B, n_out, D) positions from the start state alone, ``truth``
     (B, n_out, D) the time-normalised demonstrations, ``pm_shift`` (n_out, D) the prior mean's part.  Mean squared
-    error over the grid, each DoF weighted by ``w_d``, averaged over the DoFs.
+    error over the grid, each DoF weighted by ``w_d``, summed over the agent's DoFs.
     """
     B, ns, P = Th.shape
     n_lat = P // q
@@ -295,8 +328,8 @@ def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
     D = np.mean(dc * dc, axis=2) @ wc  # (B, S2)
     a = 1.0 - gam
     e_c = R[:, None, None] + (2.0 * a)[None, None, :] * X[:, :, None] + (a * a)[None, None, :] * D[:, :, None]
-    e_prior = np.mean(((pm - truth) ** 2) * w_d, axis=(1, 2))
-    return (e_o[:, :, None] + e_c) / n_lat, e_prior
+    ep = np.mean((pm - truth) ** 2, axis=1) * w_d  # (B, D)
+    return e_o, e_c, ep[:, :n_o].sum(axis=1), ep[:, n_o:].sum(axis=1)
 
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):

@@ -340,3 +340,20 @@ def test_two_demonstrations_need_explicit_noise():
         ip.InteractionPrimitive(observed_dofs=[0, 1]).fit(d, dt=0.01)
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], sigma2=1e-3, covariance="ridge").fit(d, dt=0.01)
     assert 0.0 < m.predict(d[0][:50, :2]).normalised_time <= 1.0
+
+
+@pytest.mark.parametrize("phase", [0.40013, 0.6, 0.77771])  # s * n_steps rounding down, exact, rounding up
+def test_continuations_start_exactly_at_the_current_state(fitted, synthetic, phase):
+    """The completion starts at the last observed frame and the response at the robot's state whatever the phase:
+    output times are counted from the snapped start (no interpolation towards the next grid point at ``s0``)."""
+    _, test = synthetic
+    d = test[1]
+    rs = np.array([0.2, 0.1, -0.3])
+    pred = fitted.predict(d[:40, :2], phase=phase)
+    s, yc = pred.completion(25)
+    assert s[0] == pytest.approx(phase)
+    np.testing.assert_allclose(yc[0], d[39, :2], atol=1e-12)
+    t, y = pred.response(25, state=rs)
+    np.testing.assert_allclose(y[0], rs, atol=1e-12)
+    t_ref, y_ref = pred._response_reference(25, state=rs)  # the compiled kernel counts times the same way
+    np.testing.assert_allclose(y, y_ref, rtol=1e-9, atol=1e-12)

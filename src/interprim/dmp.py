@@ -243,13 +243,16 @@ class LinearRollout:
         H : ndarray, shape (n, n_basis + 1)
             Map from ``theta = [w, g]``.
 
-        ``y(s_out) = free @ z0 + H @ theta``.  ``s0`` is snapped to the grid;
-        outputs are interpolated linearly between grid points, and outputs
-        before ``s0`` are clipped to ``s0``.  ``derivative=1`` gives ``y'`` (normalised time).
+        ``y(s_out) = free @ z0 + H @ theta``.  ``s0`` is snapped to the grid
+        point ``k0`` and the output times are counted from it (``s0`` itself is
+        ``k0``, so ``y(s0)`` is the start state exactly; the times are shifted by
+        less than half a grid step); outputs are interpolated linearly between grid
+        points, and outputs before ``s0`` are clipped to ``s0``.  ``derivative=1``
+        gives ``y'`` (normalised time).
         """
         k0 = int(self.index(s0))
         # linear interpolation between the two grid points around each output time
-        u = np.clip(np.asarray(s_out, dtype=np.float64) * self.n_steps, k0, self.n_steps)
+        u = np.clip(k0 + (np.asarray(s_out, dtype=np.float64) - float(s0)) * self.n_steps, k0, self.n_steps)
         kf = np.minimum(np.floor(u).astype(np.intp), self.n_steps - 1)
         kf = np.maximum(kf, k0)
         a = (u - kf)[:, None]

@@ -68,7 +68,7 @@ def response_positions(Z, powers, s0, n, th, z0, at_s0, out, duration, t_out):
         if n == 1:
             s = s0
         t_out[t] = (s - s0) * duration
-        u = min(max(s * Kn, float(k0)), float(Kn))
+        u = min(max(k0 + (s - s0) * Kn, float(k0)), float(Kn))  # times counted from s0 = grid point k0
         kf = min(int(np.floor(u)), Kn - 1)
         kf = max(kf, k0)
         a = u - kf

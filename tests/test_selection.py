@@ -75,7 +75,8 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
     if m.selection_["cross_shrinkage"] == 1.0:
         assert np.all(m.prior_.cov[:po, po:] == 0.0)
         # the robot keeps its mean whatever the noise: the observed agent's completion chose sigma2 and the shrinkage
-        assert m.selection_["cv_error_observed"] == np.min(m.selection_["cv_errors_observed"])
+        eo = np.asarray(m.selection_["cv_errors_observed"])
+        assert m.selection_["cv_error_observed"] == eo[np.asarray(m.selection_["cv_observed_within_se"])].min()
     factor = getattr(m.prior_, "factor", None)
     if factor is not None:  # the diagonal + low-rank form stays exact
         rec = factor @ factor.T
@@ -118,31 +119,49 @@ def test_bad_sigma2_string_rejected(small):
         ip.InteractionPrimitive(observed_dofs=[0, 1], sigma2="loo").fit(train, dt=0.01)
 
 
-def test_cv_scores_the_controlled_agent_then_the_observed_within_its_noise(small):
-    """The criterion is the controlled agent's held-out error; among the candidates within one standard error of
-    its best (at the chosen gamma) the observed agent's completion decides."""
+def test_cv_keeps_the_observed_agent_within_its_noise_then_scores_the_controlled_agent(small):
+    """(lambda, sigma2) are first limited to those within one standard error of the observed agent's best held-out
+    completion; among them the controlled agent's held-out error decides (and gamma by the one-SE rule)."""
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12).fit(small, dt=0.01)
     sel = m.selection_
     assert sel["cv_target"] == "controlled agent"
     errs, errs_o = np.asarray(sel["cv_errors"]), np.asarray(sel["cv_errors_observed"])  # (lambda, sigma2)
-    within = np.asarray(sel["cv_within_se"])
+    human_ok, within = np.asarray(sel["cv_observed_within_se"]), np.asarray(sel["cv_within_se"])
     a = sel["shrinkage_grid"].index(m.prior_.shrinkage)
     b = int(np.argmin(np.abs(np.asarray(sel["sigma2_grid"]) - m.sigma2_)))
-    assert within[a, b] and sel["cv_error"] == errs[a, b] and sel["cv_error_observed"] == errs_o[a, b]
-    assert errs_o[a, b] == errs_o[within].min()
-    assert within[np.unravel_index(np.argmin(errs), errs.shape)]  # the controlled agent's best is always in
-    assert not within.all()  # a real choice: some candidates are worse for the robot beyond its noise
+    assert human_ok[np.unravel_index(np.argmin(errs_o), errs_o.shape)]  # the observed agent's best is always in
+    assert not human_ok.all()  # a real restriction: far too small or large noises spoil the completion
+    assert within[a, b] and human_ok[a, b] and not np.any(within & ~human_ok)
+    assert sel["cv_error"] == errs[a, b] == pytest.approx(errs[within].min(), rel=1e-12)
+    assert sel["cv_error_observed"] == errs_o[a, b]
     assert sel["cv_error"] < 0.5 * sel["cv_error_prior"]  # correlated agents: conditioning helps the robot a lot
+    assert sel["cv_error_observed"] < 0.5 * sel["cv_error_observed_prior"]
 
 
-def test_best_candidate_is_the_observed_agents_best_within_the_controlled_agents_noise():
+def test_within_one_standard_error_of_paired_differences():
+    from interprim.selection import _within_one_se
+
+    rng = np.random.default_rng(2)
+    base = rng.uniform(1.0, 2.0, 40)  # the cases' own spread, shared by every candidate
+    E = np.stack([base, base + 0.01 + 0.001 * rng.standard_normal(40), base + rng.normal(0.005, 0.2, 40),
+                  np.full(40, np.inf)], axis=1)
+    ok = _within_one_se(E)
+    # candidate 1 is worse by 0.01 with a paired SE of ~1.6e-4: out; candidate 2 is as close on average but its
+    # differences spread 0.2 (SE ~0.03): in; the excluded (inf) candidate stays out; the best is in
+    assert ok.tolist() == [True, False, True, False]
+    assert _within_one_se(E[:1]).tolist() == [True, True, True, False]  # one case: no standard error, all finite in
+
+
+def test_best_candidate_ties_broken_by_the_observed_agent():
     from interprim.selection import _best_at
 
-    within = np.array([[True, True], [True, False]])
-    err_o = np.array([[5.0, 3.0], [1.0, 0.0]])  # (1, 1) has the best observed error but is out for the robot
-    assert tuple(int(i) for i in _best_at(within, err_o)) == (1, 0)
-    within[1, 0] = False
-    assert tuple(int(i) for i in _best_at(within, err_o)) == (0, 1)
+    err_c = np.array([[1.0, 1.0], [1.0, 2.0]])
+    err_o = np.array([[5.0, 3.0], [1.0, 0.0]])  # (1, 1) has the best observed error but not the best controlled
+    assert tuple(int(i) for i in _best_at(err_c, err_o)) == (1, 0)
+    err_c[1, 0] += 1e-6  # no longer tied: the controlled agent decides alone
+    assert tuple(int(i) for i in _best_at(err_c, err_o)) == (0, 1)
+    err_c[0, 1] = np.inf  # excluded candidates never win
+    assert tuple(int(i) for i in _best_at(err_c, err_o)) == (0, 0)
 
 
 def test_selection_criteria_per_agent():

@@ -210,20 +210,16 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                     n_cases += 1
     if select_sigma2:
         E, Eo, crit_prior, crit_prior_o = _criteria(per_case, len(lam_grid), n_o, n_lat)
-        err, err_o = E.mean(axis=0), Eo.mean(axis=0)  # (lam, s2, gamma), (lam, s2)
-        a, b, c = np.unravel_index(int(np.argmin(err)), err.shape)
-        # one-standard-error rule on paired differences: the most conservative cross-agent shrinkage whose
-        # CV error exceeds the best by less than one standard error of the per-case differences (every
-        # candidate is scored on the same held-out cases, so the cases' own spread cancels; the unpaired
-        # standard error counted it and kept gamma = 1, the prior mean, on NuiSI, where the coupling helps)
-        Dif = E - E[:, a, b, c][:, None, None, None]
-        se_d = Dif.std(axis=0, ddof=1) / np.sqrt(max(Dif.shape[0], 1)) if Dif.shape[0] > 1 else np.inf
-        ok = Dif.mean(axis=0) <= se_d  # (lam, s2, gamma); the best is always in
+        err_all, err_o = E.mean(axis=0), Eo.mean(axis=0)  # (lam, s2, gamma), (lam, s2)
+        # 1. the observed agent's completion: the (lambda, sigma2) within one standard error of its best
+        # 2. among those, the controlled agent's: its best, then the most conservative cross-agent damping gamma
+        #    within one standard error of that (Hastie et al.'s rule), then its best (lambda, sigma2) at that gamma
+        human_ok = _within_one_se(Eo)  # (lam, s2)
+        E = np.where(human_ok[None, :, :, None], E, np.inf)
+        ok = _within_one_se(E)  # (lam, s2, gamma)
         c = int(np.flatnonzero(ok.any(axis=(0, 1))).max())
-        # among the candidates within one standard error of the best for the controlled agent, at that gamma: the
-        # best completion of the observed agent (the robot first, the human within the robot's noise)
-        within = ok[:, :, c]
-        a, b = _best_at(within, err_o)
+        err = np.where(ok, err_all, np.inf)
+        a, b = _best_at(err[:, :, c], err_o)
         lam = lam_grid[a]
         gamma = float(gam[c])
         model.sigma2_ = float(s2_grid[kind0][b])
@@ -264,13 +260,14 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         sel["cross_shrinkage"] = gamma
         sel["cross_shrinkage_grid"] = gam.tolist()
         sel["cv_target"] = "controlled agent" if n_lat > n_o else "observed agent"
-        sel["cv_error"] = float(err[a, b, c])
+        sel["cv_error"] = float(err_all[a, b, c])
         sel["cv_error_prior"] = float(crit_prior)
         sel["cv_error_observed"] = float(err_o[a, b])
         sel["cv_error_observed_prior"] = float(crit_prior_o)
-        sel["cv_errors"] = err[:, :, c].tolist()
+        sel["cv_errors"] = err_all[:, :, c].tolist()
         sel["cv_errors_observed"] = err_o.tolist()
-        sel["cv_within_se"] = within.tolist()
+        sel["cv_observed_within_se"] = human_ok.tolist()
+        sel["cv_within_se"] = ok[:, :, c].tolist()
     model.selection_ = sel
     return sel
 
@@ -295,11 +292,28 @@ def _criteria(per_case, n_lam, n_o, n_lat):
     return Eo[..., None], Eo, p_o, p_o
 
 
-def _best_at(within, err_o):
-    """``(lambda, sigma^2)`` indices, among the candidates ``within`` (lam, s2; bool) one standard error of the best
-    for the controlled agent, with the smallest observed-agent error ``err_o`` (with ``gamma = 1`` the controlled
-    agent keeps its prior mean whatever the noise: then the observed agent alone decides)."""
-    return np.unravel_index(int(np.argmin(np.where(within, err_o, np.inf))), err_o.shape)
+def _within_one_se(E):
+    """Candidates whose mean CV error exceeds the best's by at most one standard error of the paired per-case
+    differences (every candidate is scored on the same held-out cases, so the cases' own spread cancels; the
+    unpaired standard error counted it and kept gamma = 1, the prior mean, on NuiSI, where the coupling helps).
+    ``E`` (cases, ...) per-case errors, ``inf`` for excluded candidates; returns a bool array ``E.shape[1:]``."""
+    flat = E.reshape(E.shape[0], -1)
+    best = int(np.argmin(flat.mean(axis=0)))
+    with np.errstate(invalid="ignore"):  # excluded candidates: inf - finite
+        Dif = flat - flat[:, best][:, None]
+        se = Dif.std(axis=0, ddof=1) / np.sqrt(Dif.shape[0]) if Dif.shape[0] > 1 else np.full(Dif.shape[1], np.inf)
+        ok = Dif.mean(axis=0) <= se
+    ok[best] = True
+    return ok.reshape(E.shape[1:])
+
+
+def _best_at(err_c, err_o):
+    """``(lambda, sigma^2)`` indices with the smallest controlled-agent error ``err_c`` (lam, s2; ``inf`` excluded);
+    among candidates tied on it (to rounding; with ``gamma = 1`` the controlled agent keeps its prior mean whatever
+    the noise, so all are tied) the one with the smallest observed-agent error ``err_o``."""
+    m = float(err_c.min())
+    tied = err_c <= m + 1e-12 * max(abs(m), 1e-300)
+    return np.unravel_index(int(np.argmin(np.where(tied, err_o, np.inf))), err_c.shape)
 
 
 def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):

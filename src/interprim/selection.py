@@ -302,7 +302,7 @@ def _within_one_se(E):
     with np.errstate(invalid="ignore"):  # excluded candidates: inf - finite
         Dif = flat - flat[:, best][:, None]
         se = Dif.std(axis=0, ddof=1) / np.sqrt(Dif.shape[0]) if Dif.shape[0] > 1 else np.full(Dif.shape[1], np.inf)
-        ok = Dif.mean(axis=0) <= se
+        ok = (Dif.mean(axis=0) <= se) & np.isfinite(flat.mean(axis=0))
     ok[best] = True
     return ok.reshape(E.shape[1:])
 

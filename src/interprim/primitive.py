@@ -60,8 +60,8 @@ class InteractionPrimitive:
     sigma2 : "cv", "auto" or float, default "cv"
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
-        K-fold cross-validation of held-out predictions of the controlled agent (ties: the observed one)
-        on the training demonstrations (:func:`interprim.selection.select_hyperparameters`);
+        K-fold cross-validation (the observed agent's completion within its noise, then the controlled
+        agent's response) on the training demonstrations (:func:`interprim.selection.select_hyperparameters`);
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).

@@ -16,15 +16,16 @@ model by K-fold cross-validation on the training demonstrations:
    true phase for the accurate likelihood phase), condition (Eq. 16-18) with every
    candidate ``sigma^2`` and predict the whole movement of *all* DoFs (both
    agents) by integrating the DMPs from the start;
-3. score each ``(lambda, sigma^2, gamma)`` by the mean squared error of those
-   predictions *of the controlled agent* (the robot's response is what conditioning
-   is for; the observed agent's completion, with most of the DoFs, used to decide
-   ``sigma^2`` and the shrinkage when both were scored together), each DoF divided
-   by its variance over the demonstrations, and
-   keep the most conservative ``gamma`` (the largest) within one standard
-   error of the best, with the best ``(lambda, sigma^2)`` for it (candidates tied on
-   the controlled agent, as all are with ``gamma = 1``, by the observed agent's
-   error; without a controlled agent, by the observed agent's error alone) (Hastie et al.'s
+3. score every candidate by the mean squared error of those predictions, per
+   agent, each DoF divided by its variance over the demonstrations; keep the
+   ``(lambda, sigma^2)`` whose observed-agent error is within one standard error
+   of its best (the human's completion never pays for the robot's beyond its
+   noise); among those, score the *controlled* agent (the robot's response is
+   what conditioning is for: one score of all DoFs let the observed agent, with
+   most of the DoFs, choose ``sigma^2`` and the shrinkage) and keep the most
+   conservative ``gamma`` (the largest) within one standard error of its best,
+   with its best ``(lambda, sigma^2)`` at that ``gamma`` (ties, as with
+   ``gamma = 1``, broken by the observed agent's error) (Hastie et al.'s
    one-standard-error rule: a few dozen demonstrations make the CV noisy), the standard
    error being that of the paired per-case differences from the best candidate.  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
    covariance (observed x controlled) towards zero: the controlled agent's

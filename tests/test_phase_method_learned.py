@@ -39,6 +39,37 @@ def test_stream_equals_batch_with_the_learned_phase(fitted):
             np.testing.assert_allclose(q.trajectory(40), p.trajectory(40), rtol=1e-9, atol=1e-12)
 
 
+def test_partner_holding_still_after_the_end_leaves_the_prediction_unchanged(fitted):
+    """Past the end of the movement the learned phase stays at 1: the prediction is conditioned on the frames up to
+    where it first reached 1, so still frames do not move the robot's goal, in a stream as in batch."""
+    from interprim.phase import movement_prefix
+
+    m, test = fitted
+    d = test[2]
+    T = len(d)
+    ext = np.vstack([d[:, :2], np.repeat(d[-1:, :2], 25, axis=0)])  # the partner holds still for 25 frames
+    s = m.stream()
+    preds = []
+    for k in range(1, len(ext) + 1):
+        q = s.update(ext[k - 1])
+        if k >= T - 5:
+            p = m.predict(ext[:k])
+            assert q.n_observed == p.n_observed, k
+            np.testing.assert_allclose(q.trajectory(40), p.trajectory(40), rtol=1e-9, atol=1e-12)
+            preds.append(p)
+    ended = [p for p in preds if p.phase >= 1.0]
+    assert len(ended) >= 20  # the phase reaches 1 at most a few frames after the true end
+    M1 = ended[0].n_observed
+    assert all(p.n_observed == M1 for p in ended)
+    est = m.phase_model_.estimate
+    assert est(ext[:M1]).phase >= 1.0 > est(ext[:M1 - 1]).phase  # the first prefix whose phase is 1
+    goals = np.array([p.trajectory(50)[-1] for p in ended])
+    assert np.ptp(goals, axis=0).max() == 0.0  # no wobble: the same prediction for every still frame
+    # other phase methods, and a phase below 1, keep every frame
+    z = ext[: T - 10]
+    assert movement_prefix(m, z, 0.5 * (m.reference_.shape[0] - 1)) is z
+
+
 def test_learned_phase_survives_save_and_load(fitted, tmp_path):
     m, test = fitted
     m.save(tmp_path / "m.npz")

@@ -28,7 +28,7 @@ from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
-from .phase import estimate_phase, fit_phase_model
+from .phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
 from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
 from .stream import Stream
@@ -533,7 +533,7 @@ class InteractionPrimitive:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
             return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
         n_star, cost = estimate_phase(self, z, self._phase())
-        return self._predict_latent(z, n_star, cost, robot_state)
+        return self._predict_latent(movement_prefix(self, z, n_star), n_star, cost, robot_state)
 
     def _phase(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""

@@ -13,7 +13,7 @@ import numpy as np
 from ._compiled import loader
 from ._validation import as_frame
 from .input_range import mark
-from .phase import IncrementalDTW, estimate_phase
+from .phase import IncrementalDTW, estimate_phase, movement_prefix
 from .prediction import Prediction
 
 __all__ = ["Stream"]
@@ -131,6 +131,6 @@ class Stream:
 
                 self._tracker = tr = _Tracker(m)
         n_star, cost = estimate_phase(m, self._buf[: self._n], m._phase(), dtw=(n_star, cost), tracker=tr)
-        z = self._buf[: self._n]
+        z = movement_prefix(m, self._buf[: self._n], n_star)  # learned phase past the end: where it ended
         return m._predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                                  workspace=self._ws)

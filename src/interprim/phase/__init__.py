@@ -18,7 +18,7 @@ import numpy as np
 
 from .dtw import DTWResult, IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
 
-__all__ = ["estimate_phase", "fit_phase_model", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
+__all__ = ["estimate_phase", "movement_prefix", "fit_phase_model", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
            "phase_from_index"]
 
 
@@ -98,3 +98,30 @@ def fit_phase_model(model, observed_latent, dt: float):
     sel["learned_phase_error"] = float(lp.cv_error_)  # both figures of the choice, for the user
     sel["clock_phase_error"] = float(lp.cv_error_clock_)
     return (lp, "learned") if float(lp.cv_error_) < float(lik) else (None, "likelihood")
+
+
+def movement_prefix(model, z, n_star):
+    """The frames of ``z`` to condition on: all of them, or, when the learned phase says the movement has ended
+    (phase 1 at the last frame), the shortest prefix at which it first said so.
+
+    Past its end the learned phase stays at 1 and its duration grows with the elapsed time; conditioning on every
+    frame would squeeze a partner who holds still onto ``[0, 1]`` and move the robot's goal with each still frame
+    (NuiSI highfive1: up to 3.5 cm over 30 frames).  A pure function of ``z`` (binary search over prefix lengths
+    for the first whose estimate is 1; ``O(M log M)``), so :meth:`~interprim.stream.Stream.update` and
+    :meth:`~interprim.primitive.InteractionPrimitive.predict` agree.  Other phase methods: ``z`` unchanged.
+    """
+    if model._phase() != "learned" or n_star < model.reference_.shape[0] - 1 or z.shape[0] < 3:
+        return z
+    est = model.phase_model_.estimate
+    lo, hi = max(2, int(model.min_observed)), z.shape[0]  # the phase of z[:hi] is 1
+    if lo >= hi:
+        return z
+    if est(z[:lo]).phase >= 1.0:
+        return z[:lo]
+    while hi - lo > 1:  # invariant: phase(z[:lo]) < 1 <= phase(z[:hi])
+        mid = (lo + hi) // 2
+        if est(z[:mid]).phase >= 1.0:
+            hi = mid
+        else:
+            lo = mid
+    return z[:hi]

@@ -40,7 +40,8 @@ class Prediction:
     n_star, dtw_cost : int, float
         Matched reference frame (0-based) and ``D(n*, M)``.
     n_observed : int
-        Number of observed frames used.
+        Number of observed frames used (with the learned phase past the end of the movement, those up to where
+        its phase first reached 1: :func:`interprim.phase.movement_prefix`).
     log_likelihood : float
         ``log p(observation | model)`` at the estimated phase (0 when
         nothing was conditioned on); compare across models for recognition.

@@ -181,7 +181,6 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     kind0 = kinds[0]
     gam = np.asarray(cross_grid if n_lat > n_o else (0.0,), dtype=np.float64)
     ll = np.zeros((len(lam_grid), len(sigma2_factors)))
-    n_cases = 0
     per_case = {}  # lambda index -> per held-out case: the observed and controlled agents' errors, and the prior's
     for f in range(K):
         train = fold != f
@@ -202,13 +201,11 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                         per_case.setdefault(a, []).append((e_o[b], e_c[b], p_o[b], p_c[b]))
                         if kind0 == "position":
                             ll[a] += outs[b][1]
-            for j, designs, base, comp in held:
-                if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
+            if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
+                for j, designs, base, comp in held:
                     X, Y = designs["position"]
                     ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
                                            need_ll=True, compressed=comp["position"])[1]
-                if a == 0:
-                    n_cases += 1
     if select_sigma2:
         E, Eo, crit_prior, crit_prior_o = _criteria(per_case, len(lam_grid), n_o, n_lat)
         err_all, err_o = E.mean(axis=0), Eo.mean(axis=0)  # (lam, s2, gamma), (lam, s2)
@@ -280,9 +277,8 @@ def _criteria(per_case, n_lam, n_o, n_lat):
     """Per-case selection criteria from the cases' errors: ``(E (cases, lam, s2, gamma), Eo (cases, lam, s2),
     prior's criterion, prior's observed error)``, each a mean over the DoFs of its agent.
 
-    The criterion is the *controlled* agent's error when there is one: the robot's response is what the
-    conditioning is for, and scoring both agents together let the observed agent's completion (most of the DoFs)
-    decide ``sigma^2`` and the shrinkage.  Without a controlled agent it is the observed agent's error.
+    ``E`` is the *controlled* agent's error when there is one (the observed agent's otherwise); ``Eo`` limits the
+    candidates first (see the module docstring, step 3).
     """
     cases = [list(zip(*per_case[i])) for i in range(n_lam)]  # per lambda: (e_o, e_c, p_o, p_c) over cases
     Eo = np.stack([np.stack(c[0]) for c in cases], axis=1) / n_o  # (cases, lam, s2)

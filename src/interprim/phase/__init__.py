@@ -18,8 +18,8 @@ import numpy as np
 
 from .dtw import DTWResult, IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
 
-__all__ = ["estimate_phase", "movement_prefix", "fit_phase_model", "DTWResult", "IncrementalDTW", "accumulated_cost", "open_end_dtw",
-           "phase_from_index"]
+__all__ = ["estimate_phase", "movement_prefix", "fit_phase_model", "DTWResult", "IncrementalDTW", "accumulated_cost",
+           "open_end_dtw", "phase_from_index"]
 
 
 def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):

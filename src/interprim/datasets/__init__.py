@@ -18,7 +18,7 @@ The default data folder is ``$INTERPRIM_DATA`` or ``../shared/data`` beside the 
 (:func:`data_dir`).
 """
 
-from ._base import DataNotFoundError, Demonstrations, data_dir
+from ._base import DataNotFoundError, Demonstrations, RawStream, data_dir
 from .character_trajectories import load_character_trajectories
 from .files import load_demonstrations, save_demonstrations
 from .lasa import lasa_shapes, load_lasa
@@ -27,6 +27,7 @@ from .recordings import load_bvh, load_c3d, load_rosbag
 
 __all__ = [
     "Demonstrations",
+    "RawStream",
     "DataNotFoundError",
     "data_dir",
     "load_nuisi",

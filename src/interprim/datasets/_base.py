@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import DataFileError
 
-__all__ = ["Demonstrations", "DataNotFoundError", "data_dir", "resolve_data_path"]
+__all__ = ["Demonstrations", "RawStream", "DataNotFoundError", "data_dir", "resolve_data_path"]
 
 #: Environment variable naming the folder that holds the shared data sets
 #: (``nuisi_v1/``, ``character_trajectories/``).
@@ -20,6 +20,31 @@ DATA_ENV = "INTERPRIM_DATA"
 
 class DataNotFoundError(DataFileError, FileNotFoundError):
     """A data set file or folder does not exist (both a :class:`DataFileError` and a ``FileNotFoundError``)."""
+
+
+@dataclass(frozen=True)
+class RawStream:
+    """Samples of some columns as they were recorded, before interpolation onto a uniform grid.
+
+    Parameters
+    ----------
+    times : ndarray, shape (M,)
+        Strictly increasing time stamps in seconds, on the clock of the demonstration's ``times``.
+    columns : tuple of int
+        The demonstration's columns these samples hold.
+    values : ndarray, shape (M, len(columns))
+        The recorded values.
+    """
+
+    times: np.ndarray
+    columns: tuple
+    values: np.ndarray
+
+    def select(self, idx) -> "RawStream":
+        """The same samples re-indexed for the column selection ``idx`` (columns not selected are dropped)."""
+        pos = {c: k for k, c in enumerate(idx)}
+        keep = [j for j, c in enumerate(self.columns) if c in pos]
+        return RawStream(self.times, tuple(pos[self.columns[j]] for j in keep), self.values[:, keep])
 
 
 @dataclass
@@ -55,6 +80,13 @@ class Demonstrations(Sequence):
         markers converted from the file's unit, ``"rad"`` for joint angles, ``""`` for
         unitless quaternion components); ``None`` for a column (or for the whole set)
         whose unit is not known.
+    raw : list of (list of RawStream) or None
+        What was recorded, before any interpolation onto ``times``: per demonstration, the raw
+        sample streams (:class:`RawStream`, time stamps on the clock of ``times``) that the
+        interpolated columns were made from.  ``None`` when the demonstrations are the recorded
+        samples themselves.  An evaluation builds a causal prefix from them
+        (:func:`interprim.evaluation.protocol.causal_prefix`): interpolating over the whole
+        recording lets a frame near the end of a prefix depend on a raw sample after it.
     """
 
     demos: list
@@ -66,12 +98,15 @@ class Demonstrations(Sequence):
     source: str = ""
     labels: list = field(default_factory=list)
     units: list | None = None
+    raw: list | None = None
 
     def __post_init__(self):
         if not self.labels:
             self.labels = [f"{i:03d}" for i in range(len(self.demos))]
         if self.units is not None and len(self.units) != len(self.columns):
             raise ValueError(f"units has {len(self.units)} entries for {len(self.columns)} columns")
+        if self.raw is not None and len(self.raw) != len(self.demos):
+            raise ValueError(f"raw has {len(self.raw)} entries for {len(self.demos)} demonstrations")
 
     # -- sequence protocol -------------------------------------------------
     def __len__(self) -> int:
@@ -132,6 +167,7 @@ class Demonstrations(Sequence):
             source=self.source,
             labels=list(self.labels),
             units=None if self.units is None else [self.units[i] for i in idx],
+            raw=None if self.raw is None else [[r.select(idx) for r in streams] for streams in self.raw],
         )
 
 

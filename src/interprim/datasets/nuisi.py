@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import DataFileError
-from ._base import Demonstrations, resolve_data_path
+from ._base import Demonstrations, RawStream, resolve_data_path
 
 __all__ = ["load_nuisi", "nuisi_actions", "NUISI_JOINTS", "JOINT_GROUPS", "NUISI_DEFAULT_PATH"]
 
@@ -163,7 +163,9 @@ def load_nuisi(
         ``demos``: one ``(T_i, D)`` array per demonstration, columns
         ``agent1_<joint>_<x|y|z>`` for the observed joints then ``agent2_<joint>_<x|y|z>``;
         ``times``: grid times in seconds from the start of the overlap; ``dt``;
-        ``observed_dofs``: the agent-1 column indices; ``labels``: demo numbers.
+        ``observed_dofs``: the agent-1 column indices; ``labels``: demo numbers; ``raw``: each agent's
+        recorded samples (:class:`~interprim.datasets.RawStream`, on the grid's clock), from which an
+        evaluation builds causal prefixes.
 
     Raises
     ------
@@ -197,7 +199,7 @@ def load_nuisi(
             if missing:
                 raise ValueError(f"{action} has no demonstration(s) {missing}; it has {numbers[0]}..{numbers[-1]}")
             numbers = wanted
-        out, times = [], []
+        out, times, raw = [], [], []
         for nn in numbers:
             key = f"{action}/{nn}"
             try:
@@ -220,10 +222,14 @@ def load_nuisi(
             n = int(np.floor((end - origin) / dt + 1e-9)) + 1
             grid = np.arange(n) * dt
             cols = [_interp(t1 - origin, a1[:, i1, :], grid).reshape(n, -1)]
+            streams = [RawStream(t1 - origin, tuple(range(3 * len(i1))), a1[:, i1, :].reshape(len(t1), -1))]
             if i2:
                 cols.append(_interp(t2 - origin, a2[:, i2, :], grid).reshape(n, -1))
+                streams.append(RawStream(t2 - origin, tuple(range(3 * len(i1), 3 * (len(i1) + len(i2)))),
+                                         a2[:, i2, :].reshape(len(t2), -1)))
             out.append(np.ascontiguousarray(np.concatenate(cols, axis=1)))
             times.append(grid)
+            raw.append(streams)
     columns = [f"agent1_{j}_{c}" for j in j1 for c in "xyz"] + [f"agent2_{j}_{c}" for j in j2 for c in "xyz"]
     return Demonstrations(
         demos=out,
@@ -234,4 +240,5 @@ def load_nuisi(
         name=action,
         source=str(p),
         labels=list(numbers),
+        raw=raw,
     )

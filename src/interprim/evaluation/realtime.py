@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..preprocessing import time_normalise
+from .protocol import Prefixes, observed_frames
 from .sweep import _point_rms
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
@@ -102,7 +103,8 @@ def _timing(pred, k, dt, mean_dur_s):
 
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                  name: str = "method", fitted: bool = False, frames=None, trace: bool = False) -> list:
+                  name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
+                  prefix=None) -> list:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
@@ -114,6 +116,10 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     numbers were computed from to every record (for figures; not JSON-serialisable): ``"t_ahead"`` (seconds
     after frame ``k``, ``(H,)``), ``"truth"`` (the held-out frames there, ``(H, D)``), ``"mean"`` and ``"std"``
     (the prediction placed in time there, ``(H, D)``; ``std`` None without one).
+
+    ``prefix``: ``prefix(k)`` returns the observed columns of the first ``k`` frames as a robot had them at
+    frame ``k`` (:class:`~interprim.evaluation.protocol.Prefixes`; causal prefixes of interpolated recordings);
+    default ``test[:k, observed_dofs]``, which is causal only when ``test`` holds the recorded samples.
     """
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
@@ -140,7 +146,7 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
         truth = test[idx]
         phase_true = (k - 1) / (T - 1)
         elapsed = (k - 1) * dt
-        pred = estimator.predict(test[:k, obs])
+        pred = estimator.predict(test[:k, obs] if prefix is None else prefix(k))
         s, dur = _timing(pred, k, dt, mean_dur_s)
         Y = pred.trajectory(cfg.n_grid)
         S = pred.std(cfg.n_grid)
@@ -173,10 +179,11 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
 
 
 def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
-                        point_dim: int = 1, name: str = "method") -> list:
+                        point_dim: int = 1, name: str = "method", prefix=None) -> list:
     """The paper's Fig. 7 protocol for one held-out demonstration and a fitted ``estimator``: observe the first
     ``p`` of the observed agent, predict the whole movement, RMSE of each agent on a normalised-time grid
-    (timing errors hidden by construction: compare with :func:`realtime_fold`)."""
+    (timing errors hidden by construction: compare with :func:`realtime_fold`).  ``prefix`` as in
+    :func:`realtime_fold`."""
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
     ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
@@ -184,8 +191,8 @@ def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8
     T = test.shape[0]
     out = []
     for p in fractions:
-        M = int(min(T, max(3, round(p * T))))
-        err = estimator.predict(test[:M, obs]).trajectory(n) - truth
+        M = observed_frames(T, p)
+        err = estimator.predict(test[:M, obs] if prefix is None else prefix(M)).trajectory(n) - truth
         rec = {"method": name, "fraction": float(p), "wm_obs": _point_rms(err[:, obs], point_dim)}
         if ctrl:
             rec["wm_ctrl"] = _point_rms(err[:, ctrl], point_dim)
@@ -211,8 +218,12 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     fits every method on the other demonstrations; clock and oracle rows are added once (from the first
     method's pass).  ``whole_movement``: fractions at which :func:`whole_movement_fold` records (with
     ``"protocol": "whole"``) are added too.  Returns records with ``"demo"`` added.
+
+    ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (NuiSI, resampled
+    recordings): every prediction then sees a causal prefix (:class:`~interprim.evaluation.protocol.Prefixes`).
     """
-    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    prefixes = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
+    demos = prefixes.demos
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
@@ -230,14 +241,16 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
         for first, (name, factory) in enumerate(make_estimators.items()):
             est = factory().fit(train, dt=dt)
             for j in held:
-                for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True):
+                pre = (lambda k, j=j: prefixes(j, k))
+                for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
+                                       prefix=pre):
                     if r["method"] in ("clock", "oracle-duration") and first:
                         continue
                     r["demo"] = int(j)
                     recs.append(r)
                 if whole_movement:
                     for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
-                                                 point_dim=cfg.point_dim, name=name):
+                                                 point_dim=cfg.point_dim, name=name, prefix=pre):
                         r["demo"] = int(j)
                         r["protocol"] = "whole"
                         recs.append(r)

@@ -105,6 +105,13 @@ class Task:
     dt: float
     point_dim: int = 1
     columns: list = field(default_factory=list)
+    prefixes: object = None  # Prefixes: causal observed prefixes (None: the first frames of the arrays)
+
+    def prefix(self, j: int, k: int):
+        """The first ``k`` observed frames of demonstration ``j`` as a robot had them (causal)."""
+        if self.prefixes is None:
+            return self.demos[j][:k, self.observed_dofs]
+        return self.prefixes(j, k)
 
 
 @lru_cache(maxsize=64)
@@ -112,8 +119,11 @@ def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     if dataset == "nuisi":
         from ..datasets import load_nuisi
 
+        from .protocol import Prefixes
+
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)
-        return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns))
+        return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns),
+                    Prefixes(d, d.observed_dofs))
     if dataset == "synthetic":
         from ..synthetic import two_agent_demos
 
@@ -208,11 +218,11 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
         for (name, variant), p in ((v, p) for v in variants for p in cfg.fractions):
             M = observed_frames(T, p)
             if variant == "oracle":
-                pred = est.predict(test[:M, obs], phase=max((M - 1) / (T - 1), 1e-3))
+                pred = est.predict(t.prefix(j, M), phase=max((M - 1) / (T - 1), 1e-3))
             else:
                 if variant is not None:
                     est.phase_method = variant
-                pred = est.predict(test[:M, obs])
+                pred = est.predict(t.prefix(j, M))
             Y = pred.trajectory(n)
             S = pred.std(n)
             err = Y - truth
@@ -264,13 +274,12 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
     with single_thread():
         models = {nm: _recognition_model(dataset, nm, cfg, j if nm == task else -1) for nm in names}
         rec = Recogniser(models, noise=cfg.recognition_noise)
-        test = _task(dataset, task, cfg).demos[j]
-        obs = _task(dataset, task, cfg).observed_dofs
-        T = test.shape[0]
+        tk = _task(dataset, task, cfg)
+        T = tk.demos[j].shape[0]
         out = []
         for p in cfg.recognition_fractions:
             M = observed_frames(T, p)
-            r = rec.recognise(test[:M, obs])
+            r = rec.recognise(tk.prefix(j, M))
             out.append({"dataset": dataset, "task": task, "demo": int(j), "fraction": float(p),
                         "predicted": r.label, "correct": bool(r.label == task),
                         "probabilities": {k: float(v) for k, v in r.probabilities.items()}})

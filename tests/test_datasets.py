@@ -227,6 +227,13 @@ def test_csv_demo_column_column_selection_and_resample(tmp_path):
     assert r.demos[0].shape == (11, 2) and r.demos[1].shape == (17, 2)
     np.testing.assert_allclose(r.demos[0][1], [0.5, 1.0])  # halfway between frames 0 and 1
     np.testing.assert_allclose(r.demos[1][:, 0], -r.times[1] / 0.2, atol=1e-12)
+    # the recorded samples are kept: a causal prefix ending between two samples holds the earlier one
+    from interprim.evaluation.protocol import Prefixes
+
+    P = Prefixes(r, [0])
+    assert P.causal
+    np.testing.assert_allclose(P(0, 2)[:, 0], [0.0, 0.0])  # frame 1 (t = 0.05) precedes the sample at 0.1
+    np.testing.assert_allclose(r.demos[0][:2, 0], [0.0, 0.5])  # the uncut interpolation looks ahead
 
 
 def test_csv_without_time_needs_dt(tmp_path):

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataFileError
-from ._base import DataNotFoundError, Demonstrations, select_columns, uniform_dt
+from ._base import DataNotFoundError, Demonstrations, RawStream, select_columns, uniform_dt
 from ._checks import _check_frames, _check_times, _fill_nans
 
 __all__ = ["load_demonstrations", "save_demonstrations"]
@@ -473,6 +473,9 @@ def load_demonstrations(
         ds = ds.select(columns)
     if resample_dt is not None and not all_bags:
         new_d, new_t = [], []
+        # the recorded samples, so that an evaluation can build causal prefixes (evaluation.protocol)
+        ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]
+                  for y, t in zip(ds.demos, ds.times)]
         for y, t in zip(ds.demos, ds.times):
             n = int(np.floor((t[-1] - t[0]) / resample_dt + 1e-9)) + 1
             t_new = t[0] + np.arange(n) * resample_dt

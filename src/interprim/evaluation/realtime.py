@@ -104,7 +104,7 @@ def _timing(pred, k, dt, mean_dur_s):
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                   name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
-                  prefix=None) -> list:
+                  prefix=None, oracle=None) -> list:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
@@ -120,6 +120,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     ``prefix``: ``prefix(k)`` returns the observed columns of the first ``k`` frames as a robot had them at
     frame ``k`` (:class:`~interprim.evaluation.protocol.Prefixes`; causal prefixes of interpolated recordings);
     default ``test[:k, observed_dofs]``, which is causal only when ``test`` holds the recorded samples.
+    ``oracle``: ``(T, D)``, the best possible prediction of ``test`` (synthetic data,
+    :class:`~interprim.synthetic.SyntheticTask`); adds ``"oracle"`` records, the floor.
     """
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
@@ -156,6 +158,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
             "clock": (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean), None),
             "oracle-duration": (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None),
         }
+        if oracle is not None:
+            rows["oracle"] = (phase_true, np.asarray(oracle, dtype=np.float64)[idx], None)
         for method, (sm, Yh, Sh) in rows.items():
             err = Yh - truth
             rec = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true, "phase": float(sm),
@@ -179,11 +183,11 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
 
 
 def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
-                        point_dim: int = 1, name: str = "method", prefix=None) -> list:
+                        point_dim: int = 1, name: str = "method", prefix=None, oracle=None) -> list:
     """The paper's Fig. 7 protocol for one held-out demonstration and a fitted ``estimator``: observe the first
     ``p`` of the observed agent, predict the whole movement, RMSE of each agent on a normalised-time grid
     (timing errors hidden by construction: compare with :func:`realtime_fold`).  ``prefix`` as in
-    :func:`realtime_fold`."""
+    :func:`realtime_fold`; with ``oracle`` (``(T, D)``), ``"oracle"`` records are added too."""
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
     ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
@@ -192,11 +196,15 @@ def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8
     out = []
     for p in fractions:
         M = observed_frames(T, p)
-        err = estimator.predict(test[:M, obs] if prefix is None else prefix(M)).trajectory(n) - truth
-        rec = {"method": name, "fraction": float(p), "wm_obs": _point_rms(err[:, obs], point_dim)}
-        if ctrl:
-            rec["wm_ctrl"] = _point_rms(err[:, ctrl], point_dim)
-        out.append(rec)
+        rows = [(name, estimator.predict(test[:M, obs] if prefix is None else prefix(M)).trajectory(n))]
+        if oracle is not None:
+            rows.append(("oracle", time_normalise(np.asarray(oracle, dtype=np.float64), n)))
+        for method, Y in rows:
+            err = Y - truth
+            rec = {"method": method, "fraction": float(p), "wm_obs": _point_rms(err[:, obs], point_dim)}
+            if ctrl:
+                rec["wm_ctrl"] = _point_rms(err[:, ctrl], point_dim)
+            out.append(rec)
     return out
 
 
@@ -211,7 +219,8 @@ def folds(n: int, k: int | None = None):
 
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                   k: int | None = None, progress: bool = False, whole_movement=None) -> list:
+                   k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
+                   test=None) -> list:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -221,13 +230,28 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
 
     ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (NuiSI, resampled
     recordings): every prediction then sees a causal prefix (:class:`~interprim.evaluation.protocol.Prefixes`).
+    ``oracles``: one ``(T_i, D)`` best possible prediction per demonstration (synthetic data); adds the floor.
+
+    ``test``: evaluate on a fixed hold-out instead of cross-validating: ``demos`` are then the training
+    demonstrations (every method is fitted once on all of them) and ``test`` the held-out ones (a
+    :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
     """
-    prefixes = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
-    demos = prefixes.demos
+    if test is not None:
+        train = [np.asarray(d, dtype=np.float64) for d in demos]
+        prefixes = test if isinstance(test, Prefixes) else Prefixes(test, observed_dofs)
+        demos = train + prefixes.demos
+        n_train = len(train)
+        prefixes = _Offset(prefixes, n_train)
+        sets = [list(range(n_train, len(demos)))]
+        oracles = None if oracles is None else [None] * n_train + list(oracles)
+    else:
+        prefixes = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
+        demos = prefixes.demos
+        sets = None
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
-    sets = folds(len(demos), k)
+    sets = sets or folds(len(demos), k)
     it = sets
     if progress:
         try:
@@ -242,19 +266,31 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
             est = factory().fit(train, dt=dt)
             for j in held:
                 pre = (lambda k, j=j: prefixes(j, k))
+                orc = None if oracles is None else oracles[j]
                 for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
-                                       prefix=pre):
-                    if r["method"] in ("clock", "oracle-duration") and first:
+                                       prefix=pre, oracle=orc if not first else None):
+                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
                         continue
                     r["demo"] = int(j)
                     recs.append(r)
                 if whole_movement:
                     for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
-                                                 point_dim=cfg.point_dim, name=name, prefix=pre):
+                                                 point_dim=cfg.point_dim, name=name, prefix=pre,
+                                                 oracle=orc if not first else None):
                         r["demo"] = int(j)
                         r["protocol"] = "whole"
                         recs.append(r)
     return recs
+
+
+class _Offset:
+    """Prefixes of a hold-out numbered after the training demonstrations."""
+
+    def __init__(self, prefixes, n_train):
+        self.prefixes, self.n_train = prefixes, n_train
+
+    def __call__(self, j, k):
+        return self.prefixes(j - self.n_train, k)
 
 
 def summarise_realtime(records) -> dict:
@@ -291,6 +327,12 @@ def summarise_realtime(records) -> dict:
                 w[key] = float(np.mean(vals))
                 if prior and any(key in r for r in prior):
                     w[f"{key}_vs_prior"] = w[key] / float(np.mean([r[key] for r in prior if key in r]))
+    floor = out.get("oracle")
+    if floor:  # synthetic data: the gap to the best possible prediction
+        for m in out:
+            for key in ("rt_ctrl", "rt_obs", "wm_ctrl", "wm_obs"):
+                if floor.get(key, 0) > 0 and key in out[m]:
+                    out[m][f"{key}_vs_floor"] = out[m][key] / floor[key]
     return out
 
 

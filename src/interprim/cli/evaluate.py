@@ -121,9 +121,10 @@ def run_user_data(args) -> int:
         raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
     cfg = RealTimeConfig(horizon=float(args.horizon))
     try:
-        recs, summary, sentence = evaluate_demonstrations(list(ds.demos), obs, float(ds.dt), k=args.folds, cfg=cfg,
+        recs, summary, sentence = evaluate_demonstrations(ds, obs, float(ds.dt), k=args.folds, cfg=cfg,
                                                           smoothing_window=args.smoothing_window,
-                                                          n_basis=args.n_basis, progress=True)
+                                                          n_basis=args.n_basis, progress=True, data=args.data,
+                                                          observed=args.observed)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold

@@ -40,11 +40,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..preprocessing import time_normalise
+from .nested import nested_choice_records, standard_error_ratio
 from .protocol import Prefixes, observed_frames
 from .sweep import _point_rms
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
-           "default_methods", "verdict", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
+           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
 
 Z90 = 1.6448536269514722  # two-sided 90 % band of a normal distribution
 
@@ -401,15 +402,120 @@ def markdown_table(summary) -> str:
     return "\n".join(lines)
 
 
+def choose_method(make_estimators, demos, observed_dofs, dt: float, cfg=None, k: int = 3,
+                  metric: str = "rt_ctrl") -> tuple:
+    """The method with the smallest cross-validated error on ``demos`` (training demonstrations only).
+
+    Parameters
+    ----------
+    make_estimators : dict
+        ``{name: factory}`` of the candidate methods (see :func:`~interprim.evaluation.realtime.realtime_sweep`).
+    demos : sequence of ndarray, Demonstrations or Prefixes
+        The training demonstrations (causal prefixes when their raw samples are known).
+    observed_dofs, dt, cfg
+        As in :func:`~interprim.evaluation.realtime.realtime_sweep` (``cfg`` default: every 3rd frame).
+    k : int
+        Inner folds.
+    metric : str
+        ``"rt_ctrl"`` (real time, the controlled agent) or ``"wm_ctrl"`` (whole movement at 60 %).
+
+    Returns
+    -------
+    (str, dict)
+        The chosen name and ``{name: mean inner error}`` (``inf`` for a method that cannot be fitted on an
+        inner training fold, e.g. with too few demonstrations).
+    """
+    cfg = cfg or RealTimeConfig(stride=3)
+    whole = (0.6,) if metric.startswith("wm") else None
+    scores = {}
+    for name, factory in make_estimators.items():
+        try:
+            recs = realtime_sweep({name: factory}, demos, observed_dofs, dt, cfg, k=k, whole_movement=whole)
+        except ValueError:  # e.g. too few demonstrations in an inner training fold for this method
+            scores[name] = float("inf")
+            continue
+        scores[name] = float(summarise_realtime(recs).get(name, {}).get(metric, np.inf))
+    if not np.isfinite(min(scores.values())):
+        return next(iter(make_estimators)), scores
+    return min(scores, key=lambda m: (scores[m], list(make_estimators).index(m))), scores
+
+
+BASELINES = ("nn", "prior", "clock")
+
+#: How each method of :func:`default_methods` is fitted outside the evaluation.
+FIT_COMMANDS = {
+    "ip": "interprim fit {data} --observed {observed} -o model.npz",
+    "ip-paper": "interprim fit {data} --observed {observed} --observation forcing --sigma2 auto "
+                "--phase-method dtw -o model.npz",
+    "learned": "python: interprim.LearnedInteraction(observed_dofs).fit(demos, dt)",
+    "nn": "no model to fit: replay the nearest demonstration (interprim.evaluation.baselines.NearestNeighbour)",
+    "prior": "no model to fit: replay the mean demonstration at the mean duration",
+}
+
+
+def nested_verdict(summary, records, method: str = "chosen", threshold: float = 0.03, data: str = "DEMOS",
+                   observed: str = "COLS") -> str:
+    """The verdict of an evaluation whose choice was made inside the training folds (nested).
+
+    Says which method the inner cross-validation chose (per outer fold), how the chosen model compares with the
+    clock and with the mean stretched to the true duration (a floor no online method has), names the best method
+    among all rows and says plainly when a baseline beats the chosen model by more than one standard error, and
+    gives the command that fits the chosen method.
+    """
+    m = summary.get(method)
+    if m is None or "rt_ctrl_vs_clock" not in m:
+        return verdict(summary, next((x for x in ("ip", "learned") if x in summary), "ip"), threshold)
+    picks = {}
+    for r in records:
+        if r["method"] == method and r.get("protocol") != "whole":
+            picks.setdefault(r["chosen"], set()).add(r["demo"])
+    order = sorted(picks, key=lambda c: -len(picks[c]))
+    n_demo = sum(len(v) for v in picks.values())
+    chosen = ", ".join(f"{c} ({len(picks[c])} of {n_demo} held-out demonstrations)" for c in order)
+    r = m["rt_ctrl_vs_clock"]
+    parts = [f"chosen inside the training folds: {chosen}."]
+    ro = m.get("rt_ctrl_vs_oracle", float("nan"))
+    parts.append(f"Real time: {r:.2f}x the clock's error and {ro:.2f}x the mean stretched to the true duration "
+                 f"(a floor that needs the future).")
+    online = [x for x in summary if x not in ("oracle-duration", "oracle", method) and "rt_ctrl" in summary[x]]
+    best = min(online, key=lambda x: summary[x]["rt_ctrl"]) if online else None
+    if best is not None:
+        rb, se = standard_error_ratio(records, best if best != "clock" else "clock", method)
+        if best in BASELINES and np.isfinite(rb) and rb < 1 - (se if np.isfinite(se) else 0):
+            parts.append(f"A baseline beats it: {best} has {rb:.2f}x (± {se:.2f}) the chosen model's real-time "
+                         f"error; use {best} on this data.")
+        else:
+            parts.append(f"Best single method: {best} ({summary[best]['rt_ctrl_vs_clock']:.2f}x the clock).")
+    if r <= 1 - threshold:
+        parts.append(f"Conditioning on the human helps: {100 * (1 - r):.0f} % less real-time error than the clock.")
+    elif r < 1 + threshold:
+        parts.append("It does not help on this data: no better than the mean at the mean speed.")
+    else:
+        parts.append(f"It hurts on this data: {100 * (r - 1):.0f} % worse than the mean at the mean speed.")
+    w = m.get("wm_ctrl_vs_prior")
+    if w is not None and np.isfinite(w):
+        parts.append(f"Whole movement: {w:.2f}x the mean demonstration's error.")
+    if order:
+        parts.append("To fit it: " + FIT_COMMANDS.get(order[0], order[0]).format(data=data, observed=observed))
+    return " ".join(parts)
+
+
 def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
                             cfg: RealTimeConfig = RealTimeConfig(), smoothing_window=None, n_basis: int = 20,
-                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False):
+                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False,
+                            nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS"):
     """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
 
     Returns ``(records, summary, verdict_sentence)``; see :func:`realtime_sweep`, :func:`summarise_realtime`
-    and :func:`verdict`.  ``methods``: names among ``ip``, ``ip-paper``, ``nn``, ``prior`` (default all).
+    and :func:`nested_verdict`.  ``methods``: names among ``ip``, ``learned``, ``ip-paper``, ``nn``, ``prior``
+    (default all).  ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (causal
+    prefixes).
+
+    With ``nested`` (default), the method a verdict names is chosen for each outer fold by an ``inner_k``-fold
+    cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
+    and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
     """
-    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    prefixes = Prefixes(demos, observed_dofs)
     make = default_methods(observed_dofs, smoothing_window=smoothing_window, n_basis=n_basis)
     if methods is not None:
         unknown = [m for m in methods if m not in make]
@@ -418,11 +524,28 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
         make = {m: make[m] for m in methods}
     if whole_movement and "prior" not in make:
         make["prior"] = default_methods(observed_dofs)["prior"]
-    recs = realtime_sweep(make, demos, observed_dofs, dt, cfg, k=k, progress=progress,
+    recs = realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
                           whole_movement=whole_movement)
+    if nested:
+        choices = {}
+        for held in folds(len(prefixes), k):
+            train = [i for i in range(len(prefixes)) if i not in set(held)]
+            kk = min(int(inner_k), len(train))
+            if kk >= 2 and len(train) >= 3:
+                best, _ = choose_method(make, prefixes.subset(train), observed_dofs, dt,
+                                        RealTimeConfig(horizon=cfg.horizon, start=cfg.start, stop=cfg.stop,
+                                                       stride=max(cfg.stride, 3), n_grid=cfg.n_grid,
+                                                       point_dim=cfg.point_dim), k=kk)
+            else:
+                best = next(iter(make))
+            for j in held:
+                choices[j] = best
+        recs = recs + nested_choice_records(recs, choices)
     summary = summarise_realtime(recs)
+    if nested:
+        return recs, summary, nested_verdict(summary, recs, data=data, observed=observed)
     cands = [m for m in ("ip", "learned") if m in summary] or [next(iter(make))]
-    best = min(cands, key=lambda m: summary[m].get("rt_ctrl", np.inf))  # the better of the two, named
+    best = min(cands, key=lambda m: summary[m].get("rt_ctrl", np.inf))
     return recs, summary, f"{best}: " + verdict(summary, best)
 
 

@@ -116,7 +116,11 @@ def test_evaluate_command_on_a_users_file(tmp_path, capsys):
     assert "verdict: " in printed and "| clock |" in printed and "| ip |" in printed
     res = json.loads((out / "realtime.json").read_text())
     assert res["summary"]["ip"]["rt_ctrl_vs_clock"] < 0.8  # synthetic data: the human helps
-    assert res["verdict"].split(": ", 1)[1].startswith("conditioning on the human improves")  # "ip: ..."
+    v = res["verdict"]
+    assert v.startswith("chosen inside the training folds: ")  # nested: no choice on a test fold
+    assert "Conditioning on the human helps" in v and "To fit it: " in v
+    assert "chosen" in res["summary"] and res["summary"]["chosen"]["rt_ctrl_vs_clock"] < 0.8
+    assert "| chosen |" in printed
     assert (out / "report.md").read_text().count("|") > 20
     # no observed columns named and none in the file: a one-line error naming the flag
     assert main(["evaluate", "--data", str(path), "--out", str(out)]) != 0

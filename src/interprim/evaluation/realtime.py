@@ -340,8 +340,10 @@ def summarise_realtime(records) -> dict:
 def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, phase_method: str | None = None):
     """Factories of the methods compared by default: the library's defaults (``ip``), learned timing + coupling
     (``learned``: :class:`~interprim.learned.LearnedInteraction`), the paper exactly (``ip-paper``: forcing
-    observation, DTW phase, ``sigma2="auto"``), nearest neighbour and the prior mean."""
+    observation, DTW phase, ``sigma2="auto"``), the kernel-weighted demonstrations (``kernel``:
+    :class:`~interprim.evaluation.kernel.KernelDemonstrations`), nearest neighbour and the prior mean."""
     from .baselines import NearestNeighbour, PriorMean
+    from .kernel import KernelDemonstrations
     from ..primitive import InteractionPrimitive
 
     obs = [int(i) for i in observed_dofs]
@@ -353,6 +355,7 @@ def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, pha
         "ip": lambda: InteractionPrimitive(**common, **extra),
         "learned": lambda: LearnedInteraction(obs),
         "ip-paper": lambda: InteractionPrimitive(**common, observation="forcing", sigma2="auto", phase_method="dtw"),
+        "kernel": lambda: KernelDemonstrations(obs),
         "nn": lambda: NearestNeighbour(obs),
         "prior": lambda: PriorMean(obs),
     }
@@ -448,6 +451,7 @@ FIT_COMMANDS = {
     "ip-paper": "interprim fit {data} --observed {observed} --observation forcing --sigma2 auto "
                 "--phase-method dtw -o model.npz",
     "learned": "python: interprim.LearnedInteraction(observed_dofs).fit(demos, dt)",
+    "kernel": "python: interprim.evaluation.kernel.KernelDemonstrations(observed_dofs).fit(demos, dt)",
     "nn": "no model to fit: replay the nearest demonstration (interprim.evaluation.baselines.NearestNeighbour)",
     "prior": "no model to fit: replay the mean demonstration at the mean duration",
 }

@@ -1,0 +1,177 @@
+"""The final numbers: every method fitted on the development recordings, measured once on the untouched hold-out.
+
+The hold-out was fixed before any new model was developed (:data:`interprim.evaluation.nested.HOLDOUT`): the
+last third of each NuiSI interaction's recordings (highest demo numbers), and the synthetic benchmark drawn
+with seed 1 (:func:`interprim.synthetic.benchmark_tasks`; development uses seed 0).  Every choice is made on
+the development recordings: each estimator's own hyper-parameters in its ``fit``, and the ``chosen`` method
+by a 3-fold cross-validation on them (:func:`interprim.evaluation.realtime.choose_method`).  Predictions see
+causal prefixes (:mod:`interprim.evaluation.protocol`); ``--lookahead`` adds the same figures with the
+uncut interpolation (the old, flattering protocol) for NuiSI, to show what causality changes.
+
+Run::
+
+    python -m interprim.experiments.holdout --out holdout-results [--tasks nuisi,synthetic] [--lookahead]
+
+Writes ``holdout.json`` (every record and summary) and ``holdout.md`` (the tables) to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
+from ..evaluation.protocol import Prefixes
+from ..evaluation.realtime import (RealTimeConfig, choose_method, default_methods, realtime_fold,
+                                   summarise_realtime, whole_movement_fold)
+
+__all__ = ["holdout_tasks", "run_task", "main"]
+
+NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
+METHODS = ("ip", "learned", "ip-paper", "nn", "prior")
+
+
+def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):
+    """``[(name, dev, hold, observed_dofs, dt, point_dim, oracles or None)]`` for the hold-out evaluation.
+
+    NuiSI: agent 1's right arm observed (shoulder, elbow, hand: 9 columns), agent 2's right hand predicted,
+    20 Hz; ``dev``/``hold`` are :class:`~interprim.datasets.Demonstrations` (raw samples kept: causal prefixes).
+    """
+    out = []
+    if "nuisi" in which:
+        from ..datasets import load_nuisi
+
+        for a in NUISI_ACTIONS:
+            d = load_nuisi(data_path, action=a, observed="right_arm", controlled="right_hand", dt=0.05)
+            dev_i, hold_i = split_holdout(len(d))
+            out.append((a, _subset(d, dev_i), _subset(d, hold_i), list(d.observed_dofs), float(d.dt), 3, None))
+    if "synthetic" in which:
+        from ..synthetic import benchmark_tasks
+
+        dev = benchmark_tasks(30, seed=HOLDOUT["synthetic_dev_seed"])
+        hold = benchmark_tasks(15, seed=HOLDOUT["synthetic_holdout_seed"])
+        for name in dev:
+            out.append((f"synthetic/{name}", dev[name].demos, hold[name].demos, dev[name].observed_dofs,
+                        dev[name].dt, 1, hold[name].oracles))
+    return out
+
+
+def _subset(ds, idx):
+    from ..datasets import Demonstrations
+
+    return Demonstrations([ds.demos[i] for i in idx], [ds.times[i] for i in idx], list(ds.columns), ds.dt,
+                          list(ds.observed_dofs), ds.name, ds.source, [ds.labels[i] for i in idx],
+                          ds.units, None if ds.raw is None else [ds.raw[i] for i in idx])
+
+
+def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS, lookahead=False,
+             fractions=(0.6,), log=print):
+    """Fit every method on ``dev``, choose one by inner CV on ``dev``, measure all on ``hold``.
+
+    Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
+    """
+    cfg = RealTimeConfig(point_dim=point_dim)
+    make = {m: f for m, f in default_methods(obs).items() if m in methods}
+    t0 = time.perf_counter()
+    chosen, inner = choose_method(make, Prefixes(dev, obs), obs, dt,
+                                  RealTimeConfig(point_dim=point_dim, stride=3), k=3)
+    log(f"  {name}: chose {chosen} on the development recordings "
+        f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}) in {time.perf_counter() - t0:.0f} s")
+    train = [np.asarray(x, dtype=np.float64) for x in dev]
+    prefixes = {"causal": Prefixes(hold, obs)}
+    if lookahead and prefixes["causal"].causal:
+        prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
+    records = {p: [] for p in prefixes}
+    for first, (m, factory) in enumerate(make.items()):
+        t1 = time.perf_counter()
+        est = factory().fit(train, dt=dt)
+        for j, test in enumerate(prefixes["causal"].demos):
+            orc = None if oracles is None or first else oracles[j]
+            for p, P in prefixes.items():
+                pre = (lambda k, j=j, P=P: P(j, k))
+                recs = realtime_fold(est, train, test, obs, dt, cfg, name=m, fitted=True, prefix=pre, oracle=orc)
+                recs += [dict(r, protocol="whole") for r in
+                         whole_movement_fold(est, test, obs, fractions, point_dim=point_dim, name=m, prefix=pre,
+                                             oracle=orc)]
+                for r in recs:
+                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
+                        continue
+                    r["demo"] = j
+                    records[p].append(r)
+        log(f"    {m}: fitted and measured in {time.perf_counter() - t1:.0f} s")
+    for p in records:
+        records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
+    return {"records": records, "summary": {p: summarise_realtime(records[p]) for p in records},
+            "chosen": chosen, "inner": inner,
+            "se": {p: {b: standard_error_ratio(records[p], "chosen", b) for b in ("nn", "clock", "oracle-duration")}
+                   | {"wm_prior": standard_error_ratio(records[p], "chosen", "prior", key="wm_ctrl"),
+                      "wm_nn": standard_error_ratio(records[p], "chosen", "nn", key="wm_ctrl")}
+                   for p in records}}
+
+
+COLUMNS = (("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle", "÷ mean at true duration"),
+           ("rt_ctrl_vs_floor", "÷ oracle (floor)"), ("rt_obs_vs_clock", "human real time ÷ clock"),
+           ("phase_err_vs_clock", "phase ÷ clock"), ("wm_ctrl_vs_prior", "robot whole movement (60 %) ÷ mean"),
+           ("wm_ctrl_vs_floor", "whole ÷ oracle"), ("cov_ctrl", "90 % band, robot"), ("cov_obs", "90 % band, human"))
+
+
+def tables(results, protocol="causal") -> str:
+    """Markdown: one table per metric, tasks as columns, methods as rows, and the geometric mean over tasks."""
+    names = [n for n in results if protocol in results[n]["summary"]]
+    methods = ["chosen", *METHODS, "clock", "oracle-duration", "oracle"]
+    lines = []
+    for key, title in COLUMNS:
+        rows = []
+        for m in methods:
+            vals = [results[n]["summary"][protocol].get(m, {}).get(key, np.nan) for n in names]
+            if not np.any(np.isfinite(vals)):
+                continue
+            ok = [v for v in vals if np.isfinite(v) and v > 0]
+            geo = float(np.exp(np.mean(np.log(ok)))) if ok and not key.startswith("cov") else (
+                float(np.mean(ok)) if ok else np.nan)
+            cells = ["—" if not np.isfinite(v) else f"{v:.2f}" for v in vals] + [f"{geo:.2f}"]
+            rows.append(f"| {m} | " + " | ".join(cells) + " |")
+        if rows:
+            agg = "mean" if key.startswith("cov") else "geo-mean"
+            lines += [f"**{title}** ({protocol} prefixes)", "",
+                      "| method | " + " | ".join(names) + f" | {agg} |", "|---" * (len(names) + 2) + "|", *rows, ""]
+    chosen = ", ".join(f"{n}: {results[n]['chosen']}" for n in names)
+    lines.append(f"Chosen on the development recordings: {chosen}.")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m interprim.experiments.holdout", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default="holdout-results", help="output folder (outside the repository)")
+    ap.add_argument("--tasks", default="nuisi,synthetic", help="nuisi, synthetic or both")
+    ap.add_argument("--only", default=None, help="comma-separated task names to run (default all)")
+    ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
+    ap.add_argument("--lookahead", action="store_true", help="also measure with the uncut interpolation (NuiSI)")
+    args = ap.parse_args(argv)
+    from .._blas import single_thread
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {}
+    only = None if args.only is None else set(args.only.split(","))
+    with single_thread():
+        for (name, dev, hold, obs, dt, pdim, orc) in holdout_tasks(tuple(args.tasks.split(",")), args.data):
+            if only is not None and name not in only:
+                continue
+            print(f"{name}: {len(dev)} development, {len(hold)} hold-out recordings", flush=True)
+            results[name] = run_task(name, dev, hold, obs, dt, pdim, orc, lookahead=args.lookahead,
+                                     log=lambda s: print(s, flush=True))
+            (out / "holdout.json").write_text(json.dumps(results, default=float))
+    md = tables(results) + ("\n\n" + tables(results, "lookahead") if args.lookahead else "")
+    (out / "holdout.md").write_text(md + "\n")
+    print(md)
+    print(f"wrote {out / 'holdout.json'} and {out / 'holdout.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -32,7 +32,7 @@ from ..evaluation.realtime import (RealTimeConfig, choose_method, default_method
 __all__ = ["holdout_tasks", "run_task", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
-METHODS = ("ip", "learned", "ip-paper", "nn", "prior")
+METHODS = ("ip", "learned", "ip-paper", "kernel", "nn", "prior")
 
 
 def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):

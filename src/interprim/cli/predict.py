@@ -98,8 +98,10 @@ def cmd_predict(args) -> int:
         )
     frames = part.demos[0][:, idx]
     t = part.times[0]
-    try:
-        if frames.shape[0] > 1 and (part.dt is None or abs(part.dt - model.dt_) > 1e-9 * model.dt_):
+    from interprim.datasets._base import sampling
+
+    try:  # frames on the model's grid up to rounding (the rule of every command) are taken as they are
+        if frames.shape[0] > 1 and not sampling([t], dt=model.dt_).uniform:
             pred = model.predict(frames, times=t - t[0])
         else:
             pred = model.predict(frames)

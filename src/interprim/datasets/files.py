@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataFileError
-from ._base import DataNotFoundError, Demonstrations, select_columns, uniform_dt
+from ._base import DataNotFoundError, Demonstrations, sampling, select_columns, uniform_dt
 from ._checks import _check_frames, _check_times, _fill_nans
 
 __all__ = ["load_demonstrations", "save_demonstrations"]
@@ -471,7 +471,9 @@ def load_demonstrations(
     )  # fmt: skip
     if columns is not None:
         ds = ds.select(columns)
-    if resample_dt is not None and not all_bags:
+    if resample_dt is not None and not all_bags and sampling(ds.times, dt=resample_dt).uniform:
+        ds.dt = float(resample_dt)  # already on that grid up to rounding (the rule of every command): kept as read
+    elif resample_dt is not None and not all_bags:
         new_d, new_t = [], []
         for y, t in zip(ds.demos, ds.times):
             n = int(np.floor((t[-1] - t[0]) / resample_dt + 1e-9)) + 1

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError, MissingExtraError
+from ..errors import DataFileError, DataFileWarning, MissingExtraError
 
 __all__ = ["read_c3d", "LENGTH_UNITS"]
 
@@ -135,12 +135,17 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
             raise DataFileError(
                 f"{path}, frame {first + k}: unreadable point data at byte {fh.tell()} of {size} ({exc})"
             ) from None
+        truncated = None
         if k < n_frames:
-            raise DataFileError(
-                f"{path}: truncated file: the header announces frames {first}-{first + n_frames - 1} ({n_frames}) "
-                f"but the data ends at byte {fh.tell()} of {size}, in frame {first + k} ({k} complete frames)"
-            )
+            what = (f"{path}: truncated file: the header announces frames {first}-{first + n_frames - 1} ({n_frames}) "
+                    f"but the data ends at byte {fh.tell()} of {size}, in frame {first + k} ({k} complete frames)")
+            if k == 0:
+                raise DataFileError(what)
+            truncated = f"{what}; keeping frames {first}-{first + k - 1}, {n_frames - k} announced frames are missing"
+            n_frames = k
     del caught  # the package's warnings (no analog data, ...) are replaced by the checks above
+    if truncated:
+        warnings.warn(truncated, DataFileWarning, stacklevel=2)
     xyz, missing = np.stack(frames), np.stack(lost)
     unit = length_unit if length_unit is not None else (file_unit or "mm")
     scale = metres_per_unit(unit, str(path), "length_unit" if length_unit is not None else "POINT:UNITS")

@@ -275,35 +275,18 @@ def _finish_stream(path, s, joints):
 
 
 def _segments(streams_t, markers, split_gap):
-    """Time intervals [a, b] (ns) of the demonstrations."""
+    """Time intervals [a, b] (ns) of the demonstrations: :func:`._split.spans` with the streams' pauses."""
+    from ._split import spans
+
     lo = min(int(t[0]) for t in streams_t)
     hi = max(int(t[-1]) for t in streams_t)
-    if markers:
-        bounds = list(markers) + [max(hi, markers[-1]) + 1]
-        segs = [(int(a), int(b) - 1) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-    else:
-        segs = [(lo, hi)]
+    cuts = []
     if split_gap is not None:
         gap_ns = split_gap * 1e9
-        cuts = []
         for t in streams_t:
             d = np.diff(t)
-            for i in np.nonzero(d > gap_ns)[0]:
-                cuts.append((int(t[i]), int(t[i + 1])))
-        cuts.sort()
-        out = []
-        for a, b in segs:
-            cur = a
-            for c0, c1 in cuts:
-                if c1 <= cur or c0 >= b:
-                    continue
-                if c0 >= cur:
-                    out.append((cur, c0))
-                cur = max(cur, c1)
-            if cur <= b:
-                out.append((cur, b))
-        segs = out
-    return segs
+            cuts.extend((int(t[i]), int(t[i + 1])) for i in np.nonzero(d > gap_ns)[0])
+    return spans(lo, hi, starts=markers, cuts=cuts)
 
 
 #: A target time inside a pause of a source stream longer than this many of its median intervals

@@ -101,8 +101,9 @@ def _pauses(y, rate, gap):
     speed = np.full(T, np.nan)
     if T > w:
         d = np.abs(y[w:] - y[:-w]).max(axis=1) * rate / w  # NaN where a frame of the pair is missing
-        speed[: T - w] = d
-        speed[T - w:] = d[-1]
+        h = w // 2  # centred on the window
+        speed[h:h + T - w] = d
+        speed[:h], speed[h + T - w:] = d[0], d[-1]
     ok = np.isfinite(speed)
     ref = np.percentile(speed[ok], 95) if ok.any() else 0.0
     quiet = missing | (ok & (speed <= PAUSE_SPEED * ref))

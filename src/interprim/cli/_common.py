@@ -38,7 +38,9 @@ def add_recording_args(p, what="DEMOS") -> None:
     g = p.add_argument_group(RECORDING_HELP)
     g.add_argument("--topics", metavar="OBS,CTRL",
                    help=f"ROS bag {what}: the observed and the controlled agent's topic (JointState, PoseStamped, "
-                        "PointStamped, TransformStamped) or tf frame (tf:FRAME), comma-separated; required for bags. "
+                        "PointStamped, TransformStamped, Odometry, PoseWithCovarianceStamped), tf frame (tf:FRAME; "
+                        "tf2_msgs/TFMessage or ROS 1 tf/tfMessage) or numeric fields of any message "
+                        "(/turtle1/pose:x,y), comma-separated; required for bags. "
                         "The controlled stream is interpolated onto the observed stream's time stamps "
                         "(with --resample DT: both onto a uniform grid)")
     g.add_argument("--split-topic", metavar="TOPIC",

@@ -22,6 +22,8 @@ examples:
   interprim serve --demo                      # fit the demo models, open http://127.0.0.1:8765/
   interprim serve highfive.npz letters/a.npz  # model names are the file stems
   interprim serve mine.npz --replay mine=demos.csv --units mine=rad,rad,m,m,m
+  interprim serve mine.npz --replay mine=takes/ --length-unit cm        # BVH takes in centimetres
+  interprim serve mine.npz --replay mine=rec.bag --topics /human/wrist,/robot/joint_states
   interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
 
 Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in
@@ -80,6 +82,11 @@ def add_parser(subparsers) -> None:
                    help="event loop: auto (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument("--max-nan-gap", type=int, default=0,
+                   help="--replay: fill interior gaps of up to this many missing frames (as 'interprim fit')")
+    from ._common import add_recording_args
+
+    add_recording_args(p, what="--replay")  # the same recording options as 'interprim fit', for every --replay
     p.set_defaults(func=run)
 
 
@@ -148,7 +155,9 @@ def _run(args) -> int:
         raise InterprimError(f"bad option: {exc}") from None  # printed as a clean CLI error
     models = load_models(args.models)  # fails here, before listening, on a corrupt file
     _attach_units(models, args.units)
-    _attach_replays(models, args.replay)
+    from ._common import recording_options
+
+    _attach_replays(models, args.replay, dict(recording_options(args), max_nan_gap=args.max_nan_gap))
     extra = {}
     if args.demo:
         from ..server.demo import demo_models
@@ -233,6 +242,10 @@ def _entry(models, name, flag, text):
 def _attach_units(models, values) -> None:
     from ..errors import InterprimError
 
+    for text in values:
+        if "=" not in text and text.strip().lower() in ("mm", "cm", "m", "in", "ft"):
+            raise InterprimError(f"--units {text}: --units gives MODEL=U1,U2,... (the columns' units shown by the "
+                                 f"page); for the length unit of --replay recordings use --length-unit {text}")
     for name, value in _pairs(values, "--units"):
         e = _entry(models, name, "--units", f"{name}={value}")
         units = [u.strip() or None for u in value.split(",")]
@@ -242,14 +255,15 @@ def _attach_units(models, values) -> None:
         e.meta["units"] = units
 
 
-def _attach_replays(models, values) -> None:
+def _attach_replays(models, values, options=None) -> None:
+    """Load each ``--replay MODEL=DEMOS`` with the recording ``options`` (``load_demonstrations`` keywords)."""
     from ..errors import InterprimError
     from ..server.models import load_replay
 
     for name, path in _pairs(values, "--replay"):
         e = _entry(models, name, "--replay", f"{name}={path}")
         try:
-            e.meta["replay"] = load_replay(e, path)
+            e.meta["replay"] = load_replay(e, path, **(options or {}))
         except (OSError, ValueError) as exc:  # DataFileError is a ValueError
             raise InterprimError(f"--replay {name}={path}: {exc}") from None
 

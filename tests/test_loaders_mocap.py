@@ -45,6 +45,13 @@ def write_c3d(path, xyz, labels, *, rate=100.0, units="mm", first_frame=1, lost=
     return path
 
 
+def _data_start(path):
+    """The byte at which the file's frames start."""
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 'no analog data'
+        return (c3d.Reader(fh).header.data_block - 1) * 512
+
+
 def handover(T=40, seed=0):
     """A small two-person reach (millimetres): A's and B's right hands meet in the middle."""
     rng = np.random.default_rng(seed)
@@ -147,7 +154,7 @@ def test_c3d_folder_is_many_demonstrations_in_natural_order(tmp_path):
 
 def test_c3d_damaged_files_name_file_and_position(tmp_path):
     good = write_c3d(tmp_path / "good.c3d", handover(40), LABELS).read_bytes()
-    data_start = (c3d.Reader(open(tmp_path / "good.c3d", "rb")).header.data_block - 1) * 512
+    data_start = _data_start(tmp_path / "good.c3d")
     (tmp_path / "cut.c3d").write_bytes(good[: data_start + 20])  # inside the first frame: nothing to keep
     with pytest.raises(DataFileError, match=r"cut\.c3d: truncated file: the header announces frames 1-40 \(40\) but "
                                             r"the data ends at byte \d+ of \d+, in frame 1 \(0 complete frames\)"):
@@ -172,7 +179,7 @@ def test_c3d_header_announcing_more_frames_than_held_keeps_the_complete_ones(tmp
     xyz = handover(40)
     write_c3d(tmp_path / "good.c3d", xyz, LABELS, first_frame=1)
     good = (tmp_path / "good.c3d").read_bytes()
-    data_start = (c3d.Reader(open(tmp_path / "good.c3d", "rb")).header.data_block - 1) * 512
+    data_start = _data_start(tmp_path / "good.c3d")
     frame_bytes = (len(good) - data_start) // 40
     (tmp_path / "optotrak.c3d").write_bytes(good[: data_start + 29 * frame_bytes + extra])
     with pytest.warns(DataFileWarning, match=r"optotrak\.c3d: truncated file: the header announces frames 1-40 "
@@ -429,7 +436,7 @@ def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
     code, _, err = _cli(["fit", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o", tmp_path / "m.npz"],
                         capsys)
     assert code == 1 and "--observed and --controlled both name A:RHand_x" in err
-    data_start = (c3d.Reader(open(path, "rb")).header.data_block - 1) * 512
+    data_start = _data_start(path)
     (tmp_path / "cut.c3d").write_bytes(path.read_bytes()[: data_start + 10])
     code, _, err = _cli(["fit", tmp_path / "cut.c3d", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
     assert code == 1 and err.count("\n") == 1 and "cut.c3d: truncated file" in err and "frame" in err

@@ -147,7 +147,9 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
             n_frames = k
     del caught  # the package's warnings (no analog data, ...) are replaced by the checks above
     if truncated:
-        warnings.warn(truncated, DataFileWarning, stacklevel=2)
+        from ._checks import _warn
+
+        _warn(truncated, DataFileWarning)
     xyz, missing = np.stack(frames), np.stack(lost)
     unit = length_unit if length_unit is not None else (file_unit or "mm")
     scale = metres_per_unit(unit, str(path), "length_unit" if length_unit is not None else "POINT:UNITS")

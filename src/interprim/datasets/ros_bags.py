@@ -54,6 +54,7 @@ ends a demonstration.  Both may be combined.  Each demonstration's time stamps s
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -89,6 +90,24 @@ def _import_rosbags():
         raise MissingExtraError(f"{_HINT} ({exc})") from None
 
 
+def _closure(fielddefs, typ, out):
+    """``typ`` and every type its fields use, from ``fielddefs`` (a typestore's), as a dict to register."""
+    if typ in out or typ not in fielddefs:
+        return out
+    out[typ] = fielddefs[typ]
+
+    def walk(node):
+        if isinstance(node, str):
+            if "/" in node:
+                _closure(fielddefs, node, out)
+        elif isinstance(node, (tuple, list)):
+            for x in node:
+                walk(x)
+
+    walk(fielddefs[typ][1])
+    return out
+
+
 class _Bag:
     """A ROS 1 bag or rosbag2 recording opened with the types of its own definitions.
 
@@ -112,8 +131,9 @@ class _Bag:
         self.typestore = get_typestore(Stores.EMPTY)
         none = MessageDefinitionFormat.NONE
         defined = [c for c in self.connections if c.msgdef.format != none]
+        latest = get_typestore(Stores.LATEST)
         if not defined:  # an older rosbag2 without definitions: the latest ROS 2 types
-            self.typestore.register(get_typestore(Stores.LATEST).fielddefs)
+            self.typestore.register(latest.fielddefs)
         for c in defined:
             if c.msgtype in self.typestore.fielddefs or c.msgtype in self.unparsed:
                 continue
@@ -134,6 +154,13 @@ class _Bag:
             except Exception as exc:  # noqa: BLE001 - the parsers raise several kinds
                 text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
                 self.unparsed[c.msgtype] = f"{type(exc).__name__}: {' '.join(str(text).split())[:200]}"
+
+        for c in self.connections:  # a connection without a definition in a bag that has others: the latest types
+            if c.msgdef.format == none and c.msgtype not in self.typestore.fielddefs:
+                try:
+                    self.typestore.register(_closure(latest.fielddefs, c.msgtype, {}))
+                except Exception as exc:  # noqa: BLE001 - conflicts with the bag's own definitions
+                    self.unparsed[c.msgtype] = f"no definition in the bag, and the known one conflicts ({exc})"
 
     @property
     def start_time(self):
@@ -196,23 +223,19 @@ def _parse_topics(topics):
     return out
 
 
-_FIELD = None
+_FIELD = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")  # one step of a field path: name, name[2], name[0][1]
+_INDEX = re.compile(r"\[(\d+)\]")
 
 
 def _field_value(msg, path):
     """The value at ``path`` (``a.b``, ``c[2]``) of a decoded message."""
-    import re
-
-    global _FIELD
-    if _FIELD is None:
-        _FIELD = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")
     v = msg
     for part in path.split("."):
         m = _FIELD.match(part)
         if not m:
             raise KeyError(f"{path!r} is not a field path (name.name[index])")
         v = getattr(v, m.group(1))
-        for idx in re.findall(r"\[(\d+)\]", m.group(2)):
+        for idx in _INDEX.findall(m.group(2)):
             v = v[int(idx)]
     return v
 
@@ -402,14 +425,14 @@ def _read_streams(path, streams, split_topic, orientation):
 
 def _check_path(typestore, msgtype, path):
     """Raise ``KeyError`` (with a message) unless ``path`` names a field of ``msgtype``."""
-    import re
-
     typ = msgtype
     for part in path.split("."):
-        m = re.match(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$", part)
+        m = _FIELD.match(part)
         if not m:
             raise KeyError(f"{path!r} is not a field path (name.name[index])")
-        fields = dict(typestore.fielddefs[typ][1]) if typ in typestore.fielddefs else {}
+        if typ not in typestore.fielddefs:
+            raise KeyError(f"the type {typ} is neither defined in the bag nor a known ROS 2 type")
+        fields = dict(typestore.fielddefs[typ][1])
         if m.group(1) not in fields:
             raise KeyError(f"{typ} has no field {m.group(1)!r} (in {path!r})")
         desc = fields[m.group(1)]

@@ -4,6 +4,8 @@ The takes are written here (C3D with the ``c3d`` package, BVH as text); every pi
 frames that were written for it.
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
@@ -17,7 +19,8 @@ import c3d
 
 def add_events(path, events, rate):
     """Rewrite the C3D file ``path`` with an EVENT group: ``events`` is a list of (label, time in s)."""
-    with open(path, "rb") as fh:
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 'no analog data'
         r = c3d.Reader(fh)
         frames = [p.copy() for _, p, _ in r.read_frames(copy=True)]
         labels = [s.strip() for s in r.get("POINT:LABELS").string_array]
@@ -36,8 +39,6 @@ def add_events(path, events, rate):
     g.add_str("LABELS", "", s, size, n)
     s, size = c3d.Writer.pack_labels(["Right"] * n)
     g.add_str("CONTEXTS", "", s, size, n)
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with open(path, "wb") as fh:

@@ -243,7 +243,7 @@ def _attach_units(models, values) -> None:
     from ..errors import InterprimError
 
     for text in values:
-        if "=" not in text and text.strip().lower() in ("mm", "cm", "m", "in", "ft"):
+        if "=" not in text and text.strip().lower() in ("mm", "cm", "m", "in", "ft") and text.strip() not in models:
             raise InterprimError(f"--units {text}: --units gives MODEL=U1,U2,... (the columns' units shown by the "
                                  f"page); for the length unit of --replay recordings use --length-unit {text}")
     for name, value in _pairs(values, "--units"):

@@ -40,8 +40,9 @@ class Demonstrations(Sequence):
         Name of each of the ``D`` columns.
     dt : float or None
         The common sampling interval in seconds when every demonstration is
-        uniformly sampled with the same interval, else ``None`` (then use
-        ``times``).
+        uniformly sampled with the same interval (up to 1 % jitter and the
+        rounding of the written stamps: :func:`sampling`), else ``None`` (then
+        use ``times``).
     observed_dofs : list of int or None
         Indices of the columns that belong to the observed agent, when the
         source says so (NuiSI, or an ``observed`` entry in a file).

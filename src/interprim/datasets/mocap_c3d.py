@@ -214,7 +214,7 @@ def _event_rows(path, events, which, rate, first, n_frames):
     """Row indices of the events named by ``which`` (True/'*' = all; labels, or 'Context:Label').
 
     An event at time ``s`` is at frame ``round(s * rate) + 1`` in the capture's numbering (frame 1 at
-    time 0, as Vicon writes events); events outside the file's frames are left out.
+    time 0, as the C3D specification defines EVENT:TIMES); events outside the file's frames are left out.
     """
     if which is True or which in ("*", "all"):
         names = None

@@ -45,6 +45,15 @@ def test_rounded_30hz_stamps_are_uniform(decimals):
     assert sampling(t, dt=1 / 30).uniform and not sampling(t, dt=1 / 29).uniform
 
 
+def test_coarse_rounding_does_not_hide_a_dropped_frame():
+    assert sampling([np.arange(20) / 10]).uniform  # 10 Hz written with one decimal: exact
+    dropped = np.delete(np.round(np.arange(20) / 10, 1), 7)
+    s = sampling([dropped])
+    assert not s.uniform and s.rounding == 0.0 and "off a uniform grid" in s.describe()
+    dropped = np.delete(np.round(np.arange(40) / 30, 2), 20)  # 30 Hz with 2 decimals (rounding 15 % of dt)
+    assert sampling([np.round(np.arange(40) / 30, 2)]).uniform and not sampling([dropped]).uniform
+
+
 def test_irregular_stamps_say_by_how_much():
     t = np.arange(40) / 30
     t[17] += 0.004  # 12 % of the interval

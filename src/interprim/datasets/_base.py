@@ -222,6 +222,9 @@ def resolve_data_path(path, default_relative: str, what: str) -> Path:
 #: Time stamps count as uniformly sampled when each lies within this fraction of the interval of one
 #: uniform grid, plus the rounding of the decimals they are written with (see :func:`sampling`).
 UNIFORM_TOLERANCE = 0.01
+#: The rounding of the written decimals is accepted only up to this fraction of the interval (coarser
+#: rounding, e.g. 10 Hz stamps written with one decimal, must not hide a dropped frame).
+ROUNDING_CAP = 0.25
 
 
 @dataclass
@@ -243,7 +246,8 @@ class Sampling:
         The largest distance accepted: ``UNIFORM_TOLERANCE * interval`` plus ``rounding``.
     rounding : float
         Half a unit of the last decimal the stamps are written with (``0.0005`` for
-        ``0.033, 0.067, ...``); 0 when they are not written with 9 decimals or fewer.
+        ``0.033, 0.067, ...``); 0 when they are not written with 9 decimals or fewer, or when
+        that is more than :data:`ROUNDING_CAP` (a quarter) of the interval.
     demo, frame : int
         Where the largest deviation is (demonstration index, frame index).
     intervals : list of float
@@ -303,8 +307,8 @@ def sampling(times, dt=None, tol: float = UNIFORM_TOLERANCE) -> Sampling:
     given, or fitted by least squares to all demonstrations together; ``t0_i`` chosen per
     demonstration to centre its deviations).  They count as uniform when no stamp is further from
     its grid than ``tol * dt`` plus the rounding of the decimals they are written with (half a unit
-    of the last decimal: stamps of a 30 Hz recording written as ``0.033, 0.067, 0.1, ...`` are
-    uniform at ``dt = 1/30``).
+    of the last decimal, counted when at most a quarter of ``dt``: stamps of a 30 Hz recording written
+    as ``0.033, 0.067, 0.1, ...`` are uniform at ``dt = 1/30``).
 
     Parameters
     ----------
@@ -333,6 +337,8 @@ def sampling(times, dt=None, tol: float = UNIFORM_TOLERANCE) -> Sampling:
         num, den = num + a, den + b
     step = float(dt) if dt is not None else num / den
     rounding = _rounding(ts)
+    if rounding > ROUNDING_CAP * abs(step):  # so coarse that it could hide a dropped frame: not counted
+        rounding = 0.0
     allowed = tol * abs(step) + rounding
     worst, shown, where = -1.0, 0.0, (0, 0)
     for i, t in enumerate(ts):

@@ -13,12 +13,15 @@ def _serve_replays(argv):
     """Parse ``interprim serve`` arguments and attach the replays as the command does (without listening)."""
     from interprim.cli import build_parser
     from interprim.cli._common import recording_options
-    from interprim.cli.serve import _attach_replays
+    from interprim.cli.serve import _attach_replays, _attach_units, _split_units
     from interprim.server.models import load_models
 
     args = build_parser().parse_args(["serve", *map(str, argv)])
     models = load_models(args.models)
-    _attach_replays(models, args.replay, dict(recording_options(args), max_nan_gap=args.max_nan_gap))
+    labels, length_unit = _split_units(args.units, args.length_unit)
+    _attach_units(models, labels)
+    _attach_replays(models, args.replay, dict(recording_options(args), max_nan_gap=args.max_nan_gap,
+                                              length_unit=length_unit))
     return models
 
 
@@ -36,18 +39,23 @@ def test_serve_replays_a_bvh_folder_in_centimetres(tmp_path, capsys):
                          "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     truth = load_demonstrations(folder, joints="A_Hand,B_Hand", length_unit="cm")  # metres
-    models = _serve_replays([model, "--replay", f"m={folder}", "--joints", "A_Hand,B_Hand", "--length-unit", "cm"])
-    replay = models["m"].meta["replay"]
-    assert len(replay["interactions"]) == 5
-    for it, d in zip(replay["interactions"], truth.demos):
-        np.testing.assert_allclose(it["observed"], d[:, :3], atol=1e-6)  # the file's own frames, in metres
-        np.testing.assert_allclose(it["controlled_truth"], d[:, 3:], atol=1e-6)
+    for flags in (["--units", "cm"], ["--length-unit", "cm"]):
+        models = _serve_replays([model, "--replay", f"m={folder}", "--joints", "A_Hand,B_Hand", *flags])
+        replay = models["m"].meta["replay"]
+        assert len(replay["interactions"]) == 5
+        for it, d in zip(replay["interactions"], truth.demos):
+            np.testing.assert_allclose(it["observed"], d[:, :3], atol=1e-6)  # the file's own frames, in metres
+            np.testing.assert_allclose(it["controlled_truth"], d[:, 3:], atol=1e-6)
+    # --units MODEL=... still labels the columns, beside a bare length unit
+    models = _serve_replays([model, "--replay", f"m={folder}", "--joints", "A_Hand,B_Hand", "--units", "cm",
+                             "--units", "m=m,m,m,m,m,m"])
+    assert models["m"].units == ["m"] * 6
     # without the unit the same folder is read in centimetres: 100 times too large for the model
     models = _serve_replays([model, "--replay", f"m={folder}", "--joints", "A_Hand,B_Hand"])
     far = models["m"].meta["replay"]["interactions"][0]["observed"]
     np.testing.assert_allclose(far, truth.demos[0][:, :3] * 100, atol=1e-4)
-    code, _, err = _cli(["serve", model, "--replay", f"m={folder}", "--units", "cm"], capsys)
-    assert code == 1 and "for the length unit of --replay recordings use --length-unit cm" in err
+    code, _, err = _cli(["serve", model, "--replay", f"m={folder}", "--units", "cm", "--length-unit", "mm"], capsys)
+    assert code == 1 and "two length units for the --replay recordings: cm, mm" in err
 
 
 def test_serve_replays_a_bag_with_its_topics(tmp_path, capsys):

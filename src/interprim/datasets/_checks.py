@@ -62,7 +62,7 @@ def _warn(message, category):
     import sys
     import warnings
 
-    level, f = 1, sys._getframe(1)
+    level, f = 2, sys._getframe(1)  # stacklevel 1 is this function, 2 its caller
     while f is not None and str(f.f_globals.get("__name__", "")).split(".")[0] == "interprim":
         f, level = f.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)

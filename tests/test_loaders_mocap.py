@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
-from interprim.errors import DataFileError, MissingExtraError
+from interprim.errors import DataFileError, DataFileWarning, MissingExtraError
 
 import c3d  # the [mocap] extra, part of the test extra
 
@@ -43,6 +43,13 @@ def write_c3d(path, xyz, labels, *, rate=100.0, units="mm", first_frame=1, lost=
         with open(path, "wb") as fh:
             w.write(fh)
     return path
+
+
+def _data_start(path):
+    """The byte at which the file's frames start."""
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 'no analog data'
+        return (c3d.Reader(fh).header.data_block - 1) * 512
 
 
 def handover(T=40, seed=0):
@@ -147,9 +154,10 @@ def test_c3d_folder_is_many_demonstrations_in_natural_order(tmp_path):
 
 def test_c3d_damaged_files_name_file_and_position(tmp_path):
     good = write_c3d(tmp_path / "good.c3d", handover(40), LABELS).read_bytes()
-    (tmp_path / "cut.c3d").write_bytes(good[: len(good) - 700])  # inside the data section
+    data_start = _data_start(tmp_path / "good.c3d")
+    (tmp_path / "cut.c3d").write_bytes(good[: data_start + 20])  # inside the first frame: nothing to keep
     with pytest.raises(DataFileError, match=r"cut\.c3d: truncated file: the header announces frames 1-40 \(40\) but "
-                                            r"the data ends at byte \d+ of \d+, in frame \d+"):
+                                            r"the data ends at byte \d+ of \d+, in frame 1 \(0 complete frames\)"):
         load_c3d(tmp_path / "cut.c3d")
     (tmp_path / "head.c3d").write_bytes(good[:300])
     with pytest.raises(DataFileError, match=r"head\.c3d: not a readable C3D file \(header or parameter section, byte"):
@@ -160,6 +168,27 @@ def test_c3d_damaged_files_name_file_and_position(tmp_path):
     (tmp_path / "empty.c3d").write_bytes(b"")
     with pytest.raises(DataFileError, match=r"empty\.c3d: empty file"):
         load_c3d(tmp_path / "empty.c3d")
+
+
+@pytest.mark.parametrize("extra", [0, 7])  # cut at a frame's end, or inside the next frame
+def test_c3d_header_announcing_more_frames_than_held_keeps_the_complete_ones(tmp_path, extra):
+    """Like ezc3d's Optotrak.c3d (header: frames 1-1149, data: 29 complete frames): the complete frames are
+    read, with a warning saying how many announced frames are missing."""
+    from interprim.errors import DataFileWarning
+
+    xyz = handover(40)
+    write_c3d(tmp_path / "good.c3d", xyz, LABELS, first_frame=1)
+    good = (tmp_path / "good.c3d").read_bytes()
+    data_start = _data_start(tmp_path / "good.c3d")
+    frame_bytes = (len(good) - data_start) // 40
+    (tmp_path / "optotrak.c3d").write_bytes(good[: data_start + 29 * frame_bytes + extra])
+    with pytest.warns(DataFileWarning, match=r"optotrak\.c3d: truncated file: the header announces frames 1-40 "
+                                             r"\(40\) .*\(29 complete frames\); keeping frames 1-29, 11 announced "
+                                             r"frames are missing"):
+        ds = load_c3d(tmp_path / "optotrak.c3d")
+    assert ds.demos[0].shape == (29, 12)
+    np.testing.assert_allclose(ds.demos[0], f32(xyz[:29]).reshape(29, 12) * 1e-3)
+    np.testing.assert_allclose(ds.times[0], np.arange(29) / 100.0)
 
 
 def test_c3d_random_damage_never_escapes_as_another_error(tmp_path):
@@ -176,7 +205,9 @@ def test_c3d_random_damage_never_escapes_as_another_error(tmp_path):
         p = tmp_path / f"d{k}.c3d"
         p.write_bytes(bytes(b))
         try:
-            ds = load_c3d(p, max_nan_gap=20)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DataFileWarning)  # a truncated copy keeps its complete frames
+                ds = load_c3d(p, max_nan_gap=20)
             assert np.all(np.isfinite(ds.demos[0]))
             outcomes.add("read")
         except DataFileError as exc:
@@ -407,11 +438,12 @@ def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
     code, _, err = _cli(["fit", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o", tmp_path / "m.npz"],
                         capsys)
     assert code == 1 and "--observed and --controlled both name A:RHand_x" in err
-    (tmp_path / "cut.c3d").write_bytes(path.read_bytes()[:-600])
+    data_start = _data_start(path)
+    (tmp_path / "cut.c3d").write_bytes(path.read_bytes()[: data_start + 10])
     code, _, err = _cli(["fit", tmp_path / "cut.c3d", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
     assert code == 1 and err.count("\n") == 1 and "cut.c3d: truncated file" in err and "frame" in err
-    code, _, err = _cli(["fit", path, "--split-gap", "2", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
-    assert code == 1 and "the option --split-gap= applies to ROS bag files, not to this .c3d file" in err
+    code, _, err = _cli(["fit", path, "--split-topic", "/x", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
+    assert code == 1 and "the option --split-topic= applies to ROS bag files, not to this .c3d file" in err
 
 
 SKELETON = """HIERARCHY

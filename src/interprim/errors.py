@@ -30,6 +30,11 @@ class MissingExtraError(InterprimError, ImportError):
     (``pip install 'interprim[mocap]'``)."""
 
 
+class DataFileWarning(UserWarning):
+    """A demonstration file was read with a repair it needed (e.g. a truncated C3D file, of which the complete
+    frames are kept); the message names the file and what was lost."""
+
+
 class OutOfRangeWarning(UserWarning):
     """An observation lies far outside what the model was trained on (wrong units, a wrong column order, another
     frame of reference, a tracking failure): the prediction extrapolates and is not to be trusted.  The

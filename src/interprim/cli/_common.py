@@ -38,13 +38,26 @@ def add_recording_args(p, what="DEMOS") -> None:
     g = p.add_argument_group(RECORDING_HELP)
     g.add_argument("--topics", metavar="OBS,CTRL",
                    help=f"ROS bag {what}: the observed and the controlled agent's topic (JointState, PoseStamped, "
-                        "PointStamped, TransformStamped) or tf frame (tf:FRAME), comma-separated; required for bags. "
+                        "PointStamped, TransformStamped, Odometry, PoseWithCovarianceStamped), tf frame (tf:FRAME; "
+                        "tf2_msgs/TFMessage or ROS 1 tf/tfMessage) or numeric fields of any message "
+                        "(/turtle1/pose:x,y), comma-separated; required for bags. "
                         "The controlled stream is interpolated onto the observed stream's time stamps "
                         "(with --resample DT: both onto a uniform grid)")
     g.add_argument("--split-topic", metavar="TOPIC",
                    help="ROS bag: a topic whose messages (e.g. std_msgs/Empty) mark the start of each demonstration")
     g.add_argument("--split-gap", type=float, metavar="SECONDS",
-                   help="ROS bag: a pause longer than SECONDS in either stream starts a new demonstration")
+                   help="a pause longer than SECONDS starts a new demonstration: ROS bag, no message in either "
+                        "stream; C3D/BVH, every column slower than 5%% of the take's 95th-percentile speed, or a "
+                        "marker missing")
+    g.add_argument("--split-events", nargs="?", const="*", default=None, metavar="LABELS",
+                   help="C3D: each of the file's events (or only those labelled LABELS, comma-separated) starts a "
+                        "demonstration lasting until the next")
+    g.add_argument("--split-frames", metavar="A-B,C-D",
+                   help="C3D/BVH: the demonstrations as frame ranges (inclusive; C3D frames as the capture numbers "
+                        "them, BVH frames from 0)")
+    g.add_argument("--trim", action="store_true",
+                   help="C3D/BVH: drop the leading and trailing frames in which a marker is missing (0,0,0) or a "
+                        "channel is nan")
     g.add_argument("--orientation", action="store_true",
                    help="ROS bag: also read the orientation quaternion of poses and tf frames (_qx, _qy, _qz, _qw)")
     g.add_argument("--joints", metavar="J1,J2",
@@ -63,9 +76,13 @@ def recording_options(args) -> dict:
     """The keyword arguments of ``load_demonstrations`` given by :func:`add_recording_args` flags."""
     _positive(args.split_gap, "--split-gap")
     return dict(
-        topics=_split_cols([args.topics]) if args.topics else None,
+        topics=args.topics or None,  # parsed by the bag reader ('/a/pose:x,y,/b/pose:x,y' has field lists)
         split_topic=args.split_topic,
         split_gap=args.split_gap,
+        trim=bool(args.trim),
+        split_events=(True if args.split_events == "*" else _split_cols([args.split_events]))
+        if args.split_events is not None else None,
+        split_frames=args.split_frames,
         orientation=bool(args.orientation),
         joints=_split_cols([args.joints]) if args.joints else None,
         markers=_split_cols([args.markers]) if args.markers else None,

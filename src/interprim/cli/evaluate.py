@@ -112,9 +112,11 @@ def run_user_data(args) -> int:
     ds = load_demonstrations(args.data, dt=args.dt, resample_dt=args.resample, max_nan_gap=args.max_nan_gap,
                              **recording_options(args))
     ds, obs = agent_columns(ds, _split_cols([args.observed]), _split_cols([args.controlled]), args.data)
-    if ds.dt is None:
-        raise InterprimError(f"--data {args.data}: the demonstrations are not uniformly sampled at one interval; "
-                             "resample them with --resample DT")
+    if ds.dt is None:  # the rule of every command: uniform within 1 % of the interval plus the stamps' rounding
+        from ..datasets._base import sampling
+
+        raise InterprimError(f"--data {args.data}: {sampling(ds.times).describe(ds.labels)}; resample them with "
+                             "--resample DT")
     if len(ds.demos) < 4:
         raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstrations; the evaluation needs at least 4")
     if args.folds is not None and args.folds < 2:

@@ -51,6 +51,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--n-points", type=int, default=100, help="points of the normalised-time grid (default 100)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the samples (default 0)")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) of PARTIAL if it has no time column")
+    p.add_argument("--observe-fraction", type=float, default=None, metavar="F",
+                   help="observe only the first F (0 < F <= 1) of PARTIAL's frames, e.g. 0.6 for the first 60 %% of a "
+                        "whole recording")
     add_recording_args(p, what="PARTIAL")
     p.set_defaults(func=cmd_predict)
 
@@ -78,6 +81,8 @@ def cmd_predict(args) -> int:
     if args.n_points < 2:
         raise CommandError(f"--n-points must be >= 2, got {args.n_points}")
     _positive(args.dt, "--dt")
+    if args.observe_fraction is not None and not 0 < args.observe_fraction <= 1:
+        raise CommandError(f"--observe-fraction must be in (0, 1], got {args.observe_fraction!r}")
     if not Path(args.model).exists():
         raise FileNotFoundError(f"model file not found: {args.model}")
     model = ip.InteractionPrimitive.load(args.model)
@@ -98,8 +103,13 @@ def cmd_predict(args) -> int:
         )
     frames = part.demos[0][:, idx]
     t = part.times[0]
-    try:
-        if frames.shape[0] > 1 and (part.dt is None or abs(part.dt - model.dt_) > 1e-9 * model.dt_):
+    if args.observe_fraction is not None:  # the first F of the recording: ceil(F * T) frames, at least one
+        n_obs = max(1, int(np.ceil(args.observe_fraction * frames.shape[0] - 1e-9)))
+        frames, t = frames[:n_obs], t[:n_obs]
+    from interprim.datasets._base import sampling
+
+    try:  # frames on the model's grid up to rounding (the rule of every command) are taken as they are
+        if frames.shape[0] > 1 and not sampling([t], dt=model.dt_).uniform:
             pred = model.predict(frames, times=t - t[0])
         else:
             pred = model.predict(frames)

@@ -22,6 +22,8 @@ examples:
   interprim serve --demo                      # fit the demo models, open http://127.0.0.1:8765/
   interprim serve highfive.npz letters/a.npz  # model names are the file stems
   interprim serve mine.npz --replay mine=demos.csv --units mine=rad,rad,m,m,m
+  interprim serve mine.npz --replay mine=takes/ --units cm   # BVH takes in centimetres (= --length-unit cm)
+  interprim serve mine.npz --replay mine=rec.bag --topics /human/wrist,/robot/joint_states
   interprim serve m.npz --host 0.0.0.0 --token "$(openssl rand -hex 16)"
 
 Listening on anything but loopback requires --token (or INTERPRIM_TOKEN); clients send it in
@@ -48,7 +50,8 @@ def add_parser(subparsers) -> None:
                         "or folder as 'interprim fit' reads, e.g. the training CSV (repeatable)")
     p.add_argument("--units", action="append", default=[], metavar="MODEL=U1,U2,...",
                    help="units of MODEL's data columns, in column order (e.g. rad,rad,m; empty = unknown), sent to "
-                        "clients to label values (repeatable)")
+                        "clients to label values (repeatable); a bare length unit (--units cm) is the length unit of "
+                        "the --replay recordings, as --length-unit")
     p.add_argument("--demo", action="store_true",
                    help="also fit demo models at start-up: 'highfive' (interprim.sim) and letters c/s/u")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
@@ -80,6 +83,11 @@ def add_parser(subparsers) -> None:
                    help="event loop: auto (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument("--max-nan-gap", type=int, default=0,
+                   help="--replay: fill interior gaps of up to this many missing frames (as 'interprim fit')")
+    from ._common import add_recording_args
+
+    add_recording_args(p, what="--replay")  # the same recording options as 'interprim fit', for every --replay
     p.set_defaults(func=run)
 
 
@@ -147,8 +155,12 @@ def _run(args) -> int:
     except ValueError as exc:
         raise InterprimError(f"bad option: {exc}") from None  # printed as a clean CLI error
     models = load_models(args.models)  # fails here, before listening, on a corrupt file
-    _attach_units(models, args.units)
-    _attach_replays(models, args.replay)
+    labels, length_unit = _split_units(args.units, args.length_unit)
+    _attach_units(models, labels)
+    from ._common import recording_options
+
+    options = dict(recording_options(args), max_nan_gap=args.max_nan_gap, length_unit=length_unit)
+    _attach_replays(models, args.replay, options)
     extra = {}
     if args.demo:
         from ..server.demo import demo_models
@@ -230,6 +242,24 @@ def _entry(models, name, flag, text):
     return models[name]
 
 
+LENGTH_UNITS = ("mm", "cm", "m", "in", "ft")
+
+
+def _split_units(values, length_unit):
+    """``--units`` values as (MODEL=U1,... entries, the recordings' length unit): a bare ``--units cm`` is the
+    length unit of the ``--replay`` recordings, as ``--length-unit cm``."""
+    from ..errors import InterprimError
+
+    labels, bare = [], []
+    for text in values:
+        (bare if "=" not in text and text.strip() in LENGTH_UNITS else labels).append(text)
+    units = {u.strip() for u in bare} | ({length_unit} if length_unit else set())
+    if len(units) > 1:
+        raise InterprimError(f"--units/--length-unit: two length units for the --replay recordings: "
+                             f"{', '.join(sorted(units))}")
+    return labels, (units.pop() if units else None)
+
+
 def _attach_units(models, values) -> None:
     from ..errors import InterprimError
 
@@ -242,14 +272,15 @@ def _attach_units(models, values) -> None:
         e.meta["units"] = units
 
 
-def _attach_replays(models, values) -> None:
+def _attach_replays(models, values, options=None) -> None:
+    """Load each ``--replay MODEL=DEMOS`` with the recording ``options`` (``load_demonstrations`` keywords)."""
     from ..errors import InterprimError
     from ..server.models import load_replay
 
     for name, path in _pairs(values, "--replay"):
         e = _entry(models, name, "--replay", f"{name}={path}")
         try:
-            e.meta["replay"] = load_replay(e, path)
+            e.meta["replay"] = load_replay(e, path, **(options or {}))
         except (OSError, ValueError) as exc:  # DataFileError is a ValueError
             raise InterprimError(f"--replay {name}={path}: {exc}") from None
 

@@ -11,7 +11,8 @@ import numpy as np
 
 from ..errors import DataFileError
 
-__all__ = ["Demonstrations", "RawStream", "DataNotFoundError", "data_dir", "resolve_data_path"]
+__all__ = ["Demonstrations", "RawStream", "DataNotFoundError", "data_dir", "resolve_data_path", "sampling", "Sampling",
+           "UNIFORM_TOLERANCE"]
 
 #: Environment variable naming the folder that holds the shared data sets
 #: (``nuisi_v1/``, ``character_trajectories/``).
@@ -64,8 +65,9 @@ class Demonstrations(Sequence):
         Name of each of the ``D`` columns.
     dt : float or None
         The common sampling interval in seconds when every demonstration is
-        uniformly sampled with the same interval, else ``None`` (then use
-        ``times``).
+        uniformly sampled with the same interval (up to 1 % jitter and the
+        rounding of the written stamps: :func:`sampling`), else ``None`` (then
+        use ``times``).
     observed_dofs : list of int or None
         Indices of the columns that belong to the observed agent, when the
         source says so (NuiSI, or an ``observed`` entry in a file).
@@ -253,20 +255,140 @@ def resolve_data_path(path, default_relative: str, what: str) -> Path:
     return p
 
 
-def uniform_dt(times, rtol: float = 1e-6):
-    """The common sampling interval of a list of time-stamp arrays, or ``None`` if not uniform."""
-    dts = []
-    for t in times:
-        if len(t) < 2:
-            return None
-        d = np.diff(t)
-        med = float(np.median(d))
-        if med <= 0 or np.max(np.abs(d - med)) > rtol * med + 1e-12:
-            return None
-        dts.append(med)
-    if not dts:
-        return None
-    ref = dts[0]
-    if any(abs(x - ref) > 1e-6 * ref for x in dts):
-        return None
-    return float(np.mean(dts))
+#: Time stamps count as uniformly sampled when each lies within this fraction of the interval of one
+#: uniform grid, plus the rounding of the decimals they are written with (see :func:`sampling`).
+UNIFORM_TOLERANCE = 0.01
+#: The rounding of the written decimals is accepted only up to this fraction of the interval (coarser
+#: rounding, e.g. 10 Hz stamps written with one decimal, must not hide a dropped frame).
+ROUNDING_CAP = 0.25
+
+
+@dataclass
+class Sampling:
+    """How far a set of time stamps is from uniform sampling (the result of :func:`sampling`).
+
+    Attributes
+    ----------
+    dt : float or None
+        The common sampling interval (s) when the stamps are uniform by the rule of
+        :func:`sampling`, else ``None``.
+    interval : float
+        The interval of the uniform grid the stamps were compared with (the given one, or the
+        least-squares fit of all demonstrations together); ``nan`` when it cannot be told.
+    deviation : float
+        The largest distance (s) of a stamp from that grid (for stamps that are not uniform: from
+        the grid through most of them, at ``demo``, ``frame``).
+    tolerance : float
+        The largest distance accepted: ``UNIFORM_TOLERANCE * interval`` plus ``rounding``.
+    rounding : float
+        Half a unit of the last decimal the stamps are written with (``0.0005`` for
+        ``0.033, 0.067, ...``); 0 when they are not written with 9 decimals or fewer, or when
+        that is more than :data:`ROUNDING_CAP` (a quarter) of the interval.
+    demo, frame : int
+        Where the largest deviation is (demonstration index, frame index).
+    intervals : list of float
+        Each demonstration's own interval (least squares), to tell different rates apart.
+    """
+
+    dt: float | None
+    interval: float
+    deviation: float
+    tolerance: float
+    rounding: float
+    demo: int = 0
+    frame: int = 0
+    intervals: list = field(default_factory=list)
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the stamps are uniform within the tolerance."""
+        return self.dt is not None
+
+    def describe(self, labels=None) -> str:
+        """One sentence saying how the stamps deviate from uniform sampling (empty when they do not)."""
+        if self.uniform:
+            return ""
+        if not np.isfinite(self.interval):
+            return "a demonstration has fewer than 2 time stamps, so its sampling interval cannot be told"
+        name = (lambda i: repr(labels[i])) if labels is not None and len(labels) == len(self.intervals) else str
+        iv = self.intervals
+        if len(iv) > 1 and min(iv) > 0 and (max(iv) - min(iv)) > UNIFORM_TOLERANCE * min(iv):
+            lo, hi = int(np.argmin(iv)), int(np.argmax(iv))
+            return (
+                f"the demonstrations have different sampling intervals (demonstration {name(lo)}: "
+                f"{iv[lo]:.6g} s, demonstration {name(hi)}: {iv[hi]:.6g} s)"
+            )
+        return (
+            f"the time stamps are not uniform: demonstration {name(self.demo)}, frame {self.frame} is "
+            f"{self.deviation * 1e3:.3g} ms ({100 * self.deviation / self.interval:.3g} % of the interval) off a "
+            f"uniform grid of {self.interval:.6g} s; accepted are {100 * UNIFORM_TOLERANCE:g} % of the interval"
+            + (f" plus the rounding of the written decimals ({self.rounding * 1e3:.3g} ms)" if self.rounding else "")
+        )
+
+
+def _rounding(times) -> float:
+    """Half a unit of the last decimal (up to 9) that every stamp is written with, or 0."""
+    for k in range(10):
+        scale = 10.0**k
+        if all(np.all(np.abs(t * scale - np.round(t * scale)) <= 1e-6 * np.maximum(1.0, np.abs(t * scale) * 1e-9))
+               for t in times):
+            return 0.5 / scale
+    return 0.0
+
+
+def sampling(times, dt=None, tol: float = UNIFORM_TOLERANCE) -> Sampling:
+    """Whether time stamps are uniformly sampled at one interval: the rule every reader and command uses.
+
+    The stamps of every demonstration are compared with a uniform grid ``t0_i + k * dt`` (``dt``
+    given, or fitted by least squares to all demonstrations together; ``t0_i`` chosen per
+    demonstration to centre its deviations).  They count as uniform when no stamp is further from
+    its grid than ``tol * dt`` plus the rounding of the decimals they are written with (half a unit
+    of the last decimal, counted when at most a quarter of ``dt``: stamps of a 30 Hz recording written
+    as ``0.033, 0.067, 0.1, ...`` are uniform at ``dt = 1/30``).
+
+    Parameters
+    ----------
+    times : list of ndarray, shape (T_i,)
+        Time stamps (s) of each demonstration, strictly increasing.
+    dt : float, optional
+        The interval to compare with (e.g. a model's); default the least-squares interval.
+    tol : float
+        Accepted jitter as a fraction of the interval (default :data:`UNIFORM_TOLERANCE`, 1 %).
+
+    Returns
+    -------
+    Sampling
+        ``dt`` is the interval when uniform (the given one, or the fitted one), else ``None``;
+        :meth:`Sampling.describe` says by how much the stamps deviate.
+    """
+    ts = [np.asarray(t, dtype=np.float64) for t in times]
+    nan = float("nan")
+    if not ts or any(len(t) < 2 for t in ts):
+        return Sampling(None, nan, nan, nan, 0.0, intervals=[])
+    intervals, num, den = [], 0.0, 0.0
+    for t in ts:
+        k = np.arange(len(t)) - (len(t) - 1) / 2.0
+        a, b = float(k @ (t - t.mean())), float(k @ k)
+        intervals.append(a / b)
+        num, den = num + a, den + b
+    step = float(dt) if dt is not None else num / den
+    rounding = _rounding(ts)
+    if rounding > ROUNDING_CAP * abs(step):  # so coarse that it could hide a dropped frame: not counted
+        rounding = 0.0
+    allowed = tol * abs(step) + rounding
+    worst, shown, where = -1.0, 0.0, (0, 0)
+    for i, t in enumerate(ts):
+        r = t - np.arange(len(t)) * step
+        half_range = float(r.max() - r.min()) / 2.0  # the distance to the best grid (offset at mid-range)
+        if half_range > worst:
+            off = r - np.median(r)  # where it deviates: the stamp furthest from the grid through most stamps
+            j = int(np.argmax(np.abs(off)))
+            worst, shown, where = half_range, float(abs(off[j])), (i, j)
+    ok = step > 0 and worst <= allowed * (1 + 1e-9) + 1e-12
+    return Sampling(step if ok else None, step, worst if ok else shown, allowed, rounding, where[0], where[1],
+                    intervals)
+
+
+def uniform_dt(times, rtol: float = UNIFORM_TOLERANCE):
+    """The common sampling interval of a list of time-stamp arrays, or ``None`` if not uniform (:func:`sampling`)."""
+    return sampling(times, tol=rtol).dt

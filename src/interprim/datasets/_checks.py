@@ -57,6 +57,17 @@ def _check_times(t, where, row_of):
         )
 
 
+def _warn(message, category):
+    """``warnings.warn`` attributed to the first caller outside interprim (the user's line, not a reader's)."""
+    import sys
+    import warnings
+
+    level, f = 2, sys._getframe(1)  # stacklevel 1 is this function, 2 its caller
+    while f is not None and str(f.f_globals.get("__name__", "")).split(".")[0] == "interprim":
+        f, level = f.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
+
+
 def _check_frames(n, min_frames, where):
     if n < min_frames:
         raise DataFileError(f"{where}: only {n} frame(s), at least {min_frames} are needed")

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataFileError
-from ._base import DataNotFoundError, Demonstrations, RawStream, select_columns, uniform_dt
+from ._base import DataNotFoundError, Demonstrations, RawStream, sampling, select_columns, uniform_dt
 from ._checks import _check_frames, _check_times, _fill_nans
 
 __all__ = ["load_demonstrations", "save_demonstrations"]
@@ -275,10 +275,16 @@ RECORDING_SUFFIXES = (".c3d", ".bvh", ".bag", ".db3", ".mcap")
 _FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
 # Which format reads which option (the options not listed for a format must be left at None).
 _OPTIONS = {
-    ".c3d": ("markers", "length_unit"),
-    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites"),
+    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap"),
+    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap"),
     "ros": ("topics", "joints", "orientation", "split_topic", "split_gap"),
 }
+
+
+def _take_split(opts) -> dict:
+    """The splitting options of a motion-capture take (:func:`._split.cut_take`)."""
+    return dict(trim=bool(opts["trim"]), events=opts["split_events"], ranges=opts["split_frames"],
+                gap=opts["split_gap"])
 
 
 def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
@@ -300,13 +306,13 @@ def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
         from .mocap_c3d import read_c3d
 
         return read_c3d(p, markers=opts["markers"], length_unit=opts["length_unit"], max_nan_gap=max_nan_gap,
-                        min_frames=min_frames)
+                        min_frames=min_frames, split=_take_split(opts))
     if kind == ".bvh":
         from .mocap_bvh import read_bvh
 
         return read_bvh(p, mode=opts["bvh_mode"] or "positions", joints=opts["joints"],
                         length_unit=opts["length_unit"], end_sites=bool(opts["end_sites"]),
-                        max_nan_gap=max_nan_gap, min_frames=min_frames)
+                        max_nan_gap=max_nan_gap, min_frames=min_frames, split=_take_split(opts))
     if kind == "ros":
         from .ros_bags import read_rosbag
 
@@ -336,6 +342,9 @@ def load_demonstrations(
     orientation: bool = False,
     split_topic: str | None = None,
     split_gap: float | None = None,
+    trim: bool = False,
+    split_events=None,
+    split_frames=None,
 ) -> Demonstrations:
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
@@ -390,7 +399,19 @@ def load_demonstrations(
     split_topic : str, optional
         ROS bags: a topic whose messages mark the start of each demonstration.
     split_gap : float, optional
-        ROS bags: a pause longer than this many seconds starts a new demonstration.
+        A pause longer than this many seconds starts a new demonstration: in a ROS bag, no
+        message in either stream; in a C3D or BVH take, a run of frames in which every column
+        moves slower than 5 % of the take's 95th-percentile speed, or in which a value is missing
+        (:func:`interprim.datasets._split.split_take`).
+    trim : bool
+        C3D, BVH: drop the leading and trailing frames (of each demonstration) in which a
+        marker or channel is missing (written as 0,0,0, with a negative residual, or ``nan``).
+    split_events : True or str or sequence of str, optional
+        C3D: each of the file's events (``True``: every event; else the event labels, or
+        ``Context:Label``) starts a demonstration lasting until the next one.
+    split_frames : str or sequence of (int, int), optional
+        C3D, BVH: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive; C3D
+        frames numbered as the capture software numbers them, BVH frames from 0).
 
     Returns
     -------
@@ -423,8 +444,11 @@ def load_demonstrations(
         raise ValueError(f"resample_dt must be a positive number of seconds, got {resample_dt!r}")
     if bvh_mode is not None and bvh_mode not in ("positions", "angles"):
         raise ValueError(f"bvh_mode must be 'positions' or 'angles', got {bvh_mode!r}")
+    if split_gap is not None and not (np.isfinite(split_gap) and split_gap > 0):
+        raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
     opts = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
-                topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap)
+                topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
+                split_events=split_events or None, split_frames=split_frames)
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
@@ -471,7 +495,9 @@ def load_demonstrations(
     )  # fmt: skip
     if columns is not None:
         ds = ds.select(columns)
-    if resample_dt is not None and not all_bags:
+    if resample_dt is not None and not all_bags and sampling(ds.times, dt=resample_dt).uniform:
+        ds.dt = float(resample_dt)  # already on that grid up to rounding (the rule of every command): kept as read
+    elif resample_dt is not None and not all_bags:
         new_d, new_t = [], []
         # the recorded samples, so that an evaluation can build causal prefixes (evaluation.protocol)
         ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]

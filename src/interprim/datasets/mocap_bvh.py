@@ -218,12 +218,15 @@ def _fk(joints, values, scale):
     return pos, ends
 
 
-def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites=False, max_nan_gap=0, min_frames=5):
+def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites=False, max_nan_gap=0, min_frames=5,
+             split=None):
     """Read one BVH file; returns ``(demos, times, columns, labels, meta)`` as the other readers do.
 
-    See :func:`load_bvh` for the parameters.
+    See :func:`load_bvh` for the parameters; ``split`` holds ``trim``, ``ranges`` and ``gap``
+    (:func:`._split.cut_take`).
     """
-    from ._checks import _check_frames, _fill_nans
+    from ._checks import _check_frames
+    from ._split import cut_take
     from .mocap_c3d import metres_per_unit
 
     path = Path(path)
@@ -315,9 +318,11 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
                 blocks.append(ends[j.name])
         y = np.hstack(blocks)
         units = [unit] * len(cols)
-    y = _fill_nans(y, max_nan_gap, lambda d: f"{path}, column {cols[d]!r}", lambda r: f"line {lineno[r]} (frame {r})")
     t = np.arange(n_frames) * frame_time
-    return [y], [t], cols, [path.stem], {"units": units}
+    demos, times, names = cut_take(path, y, t, np.arange(n_frames), dict(split or {}), max_nan_gap=max_nan_gap,
+                                   min_frames=min_frames, where_col=lambda d: f"{path}, column {cols[d]!r}",
+                                   row_of=lambda r: f"line {lineno[r]} (frame {r})")
+    return demos, times, cols, names, {"units": units}
 
 
 def _is_number(v):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError, MissingExtraError
+from ..errors import DataFileError, DataFileWarning, MissingExtraError
 
 __all__ = ["read_c3d", "LENGTH_UNITS"]
 
@@ -83,12 +83,13 @@ def _labels(reader, n_points):
     return [lab or f"point{i + 1}" for i, lab in enumerate(labels)]
 
 
-def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=5):
+def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=5, split=None):
     """Read one C3D file; returns ``(demos, times, columns, labels, meta)`` as the other readers do.
 
-    See :func:`load_c3d` for the parameters and what is read.
+    See :func:`load_c3d` for the parameters and what is read; ``split`` holds ``trim``, ``events``
+    (True or event labels), ``ranges`` and ``gap`` (:func:`._split.cut_take`).
     """
-    from ._checks import _check_frames, _fill_nans  # the CSV/NPZ reader's rules for gaps and lengths
+    from ._split import cut_take  # the rules of every reader for splitting, gaps and lengths
 
     c3d = _import_c3d()
     path = Path(path)
@@ -110,6 +111,7 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
             for grp in _NON_MARKER_GROUPS:
                 skip.update(s for s in _strings(reader, f"POINT:{grp}") if s)
             data_start = (int(reader.header.data_block) - 1) * 512
+            events = _events(reader)
         except Exception as exc:  # noqa: BLE001 - the c3d package raises many kinds on damaged headers
             raise DataFileError(
                 f"{path}: not a readable C3D file (header or parameter section, byte {fh.tell()} of {size}: {exc})"
@@ -135,12 +137,19 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
             raise DataFileError(
                 f"{path}, frame {first + k}: unreadable point data at byte {fh.tell()} of {size} ({exc})"
             ) from None
+        truncated = None
         if k < n_frames:
-            raise DataFileError(
-                f"{path}: truncated file: the header announces frames {first}-{first + n_frames - 1} ({n_frames}) "
-                f"but the data ends at byte {fh.tell()} of {size}, in frame {first + k} ({k} complete frames)"
-            )
+            what = (f"{path}: truncated file: the header announces frames {first}-{first + n_frames - 1} ({n_frames}) "
+                    f"but the data ends at byte {fh.tell()} of {size}, in frame {first + k} ({k} complete frames)")
+            if k == 0:
+                raise DataFileError(what)
+            truncated = f"{what}; keeping frames {first}-{first + k - 1}, {n_frames - k} announced frames are missing"
+            n_frames = k
     del caught  # the package's warnings (no analog data, ...) are replaced by the checks above
+    if truncated:
+        from ._checks import _warn
+
+        _warn(truncated, DataFileWarning)
     xyz, missing = np.stack(frames), np.stack(lost)
     unit = length_unit if length_unit is not None else (file_unit or "mm")
     scale = metres_per_unit(unit, str(path), "length_unit" if length_unit is not None else "POINT:UNITS")
@@ -170,13 +179,58 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
     y[missing[:, keep]] = np.nan
     y = y.reshape(n_frames, 3 * len(keep))
     columns = [f"{labels[i]}_{a}" for i in keep for a in _AXES]
-    where = f"{path}"
-    _check_frames(n_frames, min_frames, where)
 
     def where_col(d):
         return f"{path}, marker {labels[keep[d // 3]]!r} (column {columns[d]!r})"
 
-    y = _fill_nans(y, max_nan_gap, where_col, lambda i: f"frame {first + i}")
+    split = dict(split or {})
+    if split.get("events") is not None:
+        split["events"] = _event_rows(path, events, split["events"], rate, first, n_frames)
     t = np.arange(n_frames) / rate
+    demos, times, names = cut_take(path, y, t, first + np.arange(n_frames), split, max_nan_gap=max_nan_gap,
+                                   min_frames=min_frames, where_col=where_col, row_of=lambda i: f"frame {first + i}")
     meta = {"units": ["m"] * len(columns)}
-    return [y], [t], columns, [path.stem], meta
+    return demos, times, columns, names, meta
+
+
+def _events(reader):
+    """The file's events as ``(context, label, time in s)`` from ``EVENT:CONTEXTS/LABELS/TIMES``."""
+    p = reader.get("EVENT:TIMES")
+    if p is None:
+        return []
+    try:
+        times = np.asarray(p.float_array, dtype=np.float64).reshape(-1, 2)  # (minutes, seconds) per event
+    except Exception:  # noqa: BLE001 - a malformed parameter is reported as 'no events'
+        return []
+    labels = _strings(reader, "EVENT:LABELS")
+    contexts = _strings(reader, "EVENT:CONTEXTS")
+    used = reader.get("EVENT:USED")
+    n = len(times) if used is None else min(len(times), max(int(used.int16_value), 0))
+    return [(contexts[i] if i < len(contexts) else "", labels[i] if i < len(labels) else "",
+             60.0 * times[i, 0] + times[i, 1]) for i in range(n)]
+
+
+def _event_rows(path, events, which, rate, first, n_frames):
+    """Row indices of the events named by ``which`` (True/'*' = all; labels, or 'Context:Label').
+
+    An event at time ``s`` is at frame ``round(s * rate) + 1`` in the capture's numbering (frame 1 at
+    time 0, as the C3D specification defines EVENT:TIMES); events outside the file's frames are left out.
+    """
+    if which is True or which in ("*", "all"):
+        names = None
+    else:
+        names = [w.strip() for w in (which.split(",") if isinstance(which, str) else which) if str(w).strip()]
+    chosen = []
+    for ctx, lab, s in events:
+        if names is not None and lab not in names and f"{ctx}:{lab}" not in names:
+            continue
+        row = int(round(s * rate)) + 1 - first
+        if 0 <= row < n_frames:
+            chosen.append(row)
+    if not chosen:
+        shown = ", ".join(f"{c + ':' if c else ''}{lab} at {s:.3f} s" for c, lab, s in events[:20]) or "none"
+        raise DataFileError(
+            f"{path}: no event {'' if names is None else ','.join(names) + ' '}inside frames "
+            f"{first}-{first + n_frames - 1} to split at (split_events); the file's events: {shown}"
+        )
+    return sorted(set(chosen))

@@ -11,7 +11,8 @@ from .files import load_demonstrations
 __all__ = ["load_c3d", "load_bvh", "load_rosbag"]
 
 
-def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5):
+def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5, trim=False,
+             split_events=None, split_frames=None, split_gap=None):
     """Load the marker trajectories of a C3D motion-capture file (or a folder of them).
 
     Each file is one demonstration.  Every marker becomes three columns ``<marker>_x``,
@@ -41,20 +42,35 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
     max_nan_gap : int
         Longest interior gap (frames) filled by interpolation (default 0: none).
     min_frames : int
-        Fewest frames a file may have (default 5).
+        Fewest frames a demonstration may have (default 5).
+    trim : bool
+        Drop the leading and trailing frames in which a selected marker is missing (e.g. a marker
+        written as 0,0,0 until it is first seen); with splitting, in each demonstration.
+    split_events : True or str or sequence of str, optional
+        Split the take at the file's events (``EVENT:LABELS``, ``EVENT:TIMES``): each event starts a
+        demonstration lasting until the next (``True``: every event; else the labels to use, or
+        ``Context:Label``).  An event at ``s`` seconds is frame ``round(s * POINT:RATE) + 1`` of the
+        capture (frame 1 at time 0).
+    split_frames : str or sequence of (int, int), optional
+        The demonstrations as frame ranges ``"FIRST-LAST,..."`` (inclusive, the file's frame numbers).
+    split_gap : float, optional
+        Seconds: a pause longer than this starts a new demonstration (every marker slower than 5 % of
+        the take's 95th-percentile speed, or a marker missing).
 
     Returns
     -------
     Demonstrations
+        Split takes have one demonstration per piece, labelled ``<file>@<start>s``, time from 0.
     """
 
     return load_demonstrations(
-        path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames
+        path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames, trim=trim,
+        split_events=split_events, split_frames=split_frames, split_gap=split_gap,
     )
 
 
 def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites=False, max_nan_gap: int = 0,
-             min_frames: int = 5):
+             min_frames: int = 5, trim=False, split_frames=None, split_gap=None):
     """Load a BVH skeleton recording (or a folder of them; one demonstration per file).
 
     Parameters
@@ -81,16 +97,24 @@ def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
         Longest interior run of missing values (``nan`` in the file), in frames, filled by
         linear interpolation (default 0: none).
     min_frames : int
-        Fewest frames a file may have (default 5).
+        Fewest frames a demonstration may have (default 5).
+    trim : bool
+        Drop the leading and trailing frames with a missing (``nan``) channel.
+    split_frames : str or sequence of (int, int), optional
+        The demonstrations as frame ranges ``"FIRST-LAST,..."`` (inclusive, frames from 0).
+    split_gap : float, optional
+        Seconds: a pause longer than this (every column slower than 5 % of the take's
+        95th-percentile speed, or a missing value) starts a new demonstration.
 
     Returns
     -------
     Demonstrations
-        Time stamps ``k * Frame Time`` seconds.
+        Time stamps ``k * Frame Time`` seconds (from 0 in each piece of a split take).
     """
 
     return load_demonstrations(path, bvh_mode=mode, joints=joints, length_unit=length_unit, end_sites=end_sites,
-                               max_nan_gap=max_nan_gap, min_frames=min_frames)
+                               max_nan_gap=max_nan_gap, min_frames=min_frames, trim=trim, split_frames=split_frames,
+                               split_gap=split_gap)
 
 
 def load_rosbag(path, topics, *, joints=None, orientation=False, split_topic=None, split_gap=None,

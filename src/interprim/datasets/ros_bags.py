@@ -19,6 +19,19 @@ Each *agent* is one stream, named by a topic or a tf frame:
     ``orientation=True`` the rotation) of the child frame ``FRAME`` relative to its parent,
     columns ``FRAME_x``, ... .  The parent must be the same in every message.
 
+``tf/msg/tfMessage`` (ROS 1's old name of the same message) is read like ``TFMessage``.
+``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseWithCovarianceStamped``
+    The pose (``pose.pose``), columns as for ``PoseStamped``.
+Any other message, by field paths: ``TOPIC:FIELD,FIELD,...``
+    Numeric fields read by path from any message the bag's own type definitions describe
+    (``/turtle1/pose:x,y``; ``pose.position.x``; ``data[2]``), columns ``<prefix>_<field>``,
+    units unknown.  With a comma-separated ``topics`` string, a name without ``/`` or ``:`` after
+    a field list is one more field (write further topics with their leading ``/``).
+
+Message types come from the bag's own definitions (a ROS 1 bag always has them, rosbag2 has them
+since Iron), else from ``rosbags``' latest ROS 2 types.  A topic whose definition cannot be parsed
+is skipped unless it is needed; then the error names the topic, its type and what failed.
+
 Time stamps are the messages' ``header.stamp`` (the bag's receive time for a stream whose
 header stamps are all zero).  A stream is sorted by stamp; a message with the same stamp as
 the one before it is skipped.
@@ -41,6 +54,7 @@ ends a demonstration.  Both may be combined.  Each demonstration's time stamps s
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -55,7 +69,10 @@ POSE = "geometry_msgs/msg/PoseStamped"
 POINT = "geometry_msgs/msg/PointStamped"
 TRANSFORM = "geometry_msgs/msg/TransformStamped"
 TF = "tf2_msgs/msg/TFMessage"
-SUPPORTED = (JOINT_STATE, POSE, POINT, TRANSFORM, TF)
+TF_TYPES = (TF, "tf/msg/tfMessage")  # ROS 1's old tf name, the same layout
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
+SUPPORTED = (JOINT_STATE, POSE, POINT, TRANSFORM, ODOMETRY, POSE_COV) + TF_TYPES
 _HINT = "reading ROS bags needs the optional extra: pip install 'interprim[ros]' (the rosbags package)"
 
 
@@ -66,11 +83,106 @@ def is_rosbag2_folder(p: Path) -> bool:
 
 def _import_rosbags():
     try:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
+        import rosbags.rosbag1  # noqa: F401
+        import rosbags.rosbag2  # noqa: F401
+        import rosbags.typesys  # noqa: F401
     except ImportError as exc:
         raise MissingExtraError(f"{_HINT} ({exc})") from None
-    return AnyReader, get_typestore(Stores.LATEST)
+
+
+def _closure(fielddefs, typ, out):
+    """``typ`` and every type its fields use, from ``fielddefs`` (a typestore's), as a dict to register."""
+    if typ in out or typ not in fielddefs:
+        return out
+    out[typ] = fielddefs[typ]
+
+    def walk(node):
+        if isinstance(node, str):
+            if "/" in node:
+                _closure(fielddefs, node, out)
+        elif isinstance(node, (tuple, list)):
+            for x in node:
+                walk(x)
+
+    walk(fielddefs[typ][1])
+    return out
+
+
+class _Bag:
+    """A ROS 1 bag or rosbag2 recording opened with the types of its own definitions.
+
+    Unlike ``rosbags.highlevel.AnyReader``, a connection whose definition cannot be parsed (e.g. a service
+    event type) does not make the whole bag unreadable: its type is listed in ``unparsed`` with the
+    reason, and only a topic that is read needs it.
+    """
+
+    def __init__(self, path):
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.rosbag1 import Reader as Reader1
+        from rosbags.rosbag2 import Reader as Reader2
+        from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+        self.path = Path(path)
+        self.is2 = self.path.suffix.lower() != ".bag"
+        self.reader = (Reader2 if self.is2 else Reader1)(self.path)
+        self.reader.open()
+        self.connections = list(self.reader.connections)
+        self.unparsed = {}
+        self.typestore = get_typestore(Stores.EMPTY)
+        none = MessageDefinitionFormat.NONE
+        defined = [c for c in self.connections if c.msgdef.format != none]
+        latest = get_typestore(Stores.LATEST)
+        if not defined:  # an older rosbag2 without definitions: the latest ROS 2 types
+            self.typestore.register(latest.fielddefs)
+        for c in defined:
+            if c.msgtype in self.typestore.fielddefs or c.msgtype in self.unparsed:
+                continue
+            try:
+                if c.msgdef.format == MessageDefinitionFormat.MSG:
+                    types = get_types_from_msg(c.msgdef.data, c.msgtype)
+                else:
+                    sep = "=" * 80 + "\n"
+                    types = {}
+                    if c.msgdef.data.startswith(f"{sep}IDL: "):
+                        for part in c.msgdef.data.split(sep)[1:]:
+                            types.update(get_types_from_idl(part.split("\n", 1)[1]))
+                    else:
+                        types.update(get_types_from_idl(c.msgdef.data))
+                if c.msgtype not in types:
+                    raise KeyError(f"it defines {', '.join(sorted(types)) or 'nothing'}, not {c.msgtype}")
+                self.typestore.register(types)
+            except Exception as exc:  # noqa: BLE001 - the parsers raise several kinds
+                text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+                self.unparsed[c.msgtype] = f"{type(exc).__name__}: {' '.join(str(text).split())[:200]}"
+
+        for c in self.connections:  # a connection without a definition in a bag that has others: the latest types
+            if c.msgdef.format == none and c.msgtype not in self.typestore.fielddefs:
+                try:
+                    self.typestore.register(_closure(latest.fielddefs, c.msgtype, {}))
+                except Exception as exc:  # noqa: BLE001 - conflicts with the bag's own definitions
+                    self.unparsed[c.msgtype] = f"no definition in the bag, and the known one conflicts ({exc})"
+
+    @property
+    def start_time(self):
+        return int(self.reader.start_time)
+
+    @property
+    def topics(self):
+        out = {}
+        for c in self.connections:
+            out.setdefault(c.topic, c.msgtype)
+        return out
+
+    def messages(self, connections):
+        return self.reader.messages(connections=connections)
+
+    def deserialize(self, raw, msgtype):
+        if self.is2:
+            return self.typestore.deserialize_cdr(raw, msgtype)
+        return self.typestore.deserialize_ros1(raw, msgtype)
+
+    def close(self):
+        self.reader.close()
 
 
 class _Stream:
@@ -83,7 +195,8 @@ class _Stream:
             s = "/tf:" + s[3:]
         topic, _, frame = s.partition(":")
         self.topic = topic if topic.startswith("/") else "/" + topic
-        self.frame = frame.strip().lstrip("/") or None
+        self.frame = frame.strip().lstrip("/") or None  # a tf frame, or the field paths of another message
+        self.fields = None
         self.msgtype = None
         self.stamps, self.bag_times, self.rows = [], [], []
         self.names = []  # JointState: joint names in order of appearance
@@ -92,6 +205,58 @@ class _Stream:
     @property
     def label(self):
         return f"{self.topic}:{self.frame}" if self.frame else self.topic
+
+
+def _parse_topics(topics):
+    """The stream specs in ``topics`` (a list, or a comma-separated string in which a name without ``/`` or
+    ``:`` that follows a ``TOPIC:FIELD`` spec is one more field: ``/a/pose:x,y,/b/pose:x,y``)."""
+    if not isinstance(topics, str):
+        return [str(x).strip() for x in topics if str(x).strip()]
+    out = []
+    for tok in (x.strip() for x in topics.split(",")):
+        if not tok:
+            continue
+        if out and ":" in out[-1] and not out[-1].startswith("tf:") and "/" not in tok and ":" not in tok:
+            out[-1] += "," + tok
+        else:
+            out.append(tok)
+    return out
+
+
+_FIELD = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")  # one step of a field path: name, name[2], name[0][1]
+_INDEX = re.compile(r"\[(\d+)\]")
+
+
+def _field_value(msg, path):
+    """The value at ``path`` (``a.b``, ``c[2]``) of a decoded message."""
+    v = msg
+    for part in path.split("."):
+        m = _FIELD.match(part)
+        if not m:
+            raise KeyError(f"{path!r} is not a field path (name.name[index])")
+        v = getattr(v, m.group(1))
+        for idx in _INDEX.findall(m.group(2)):
+            v = v[int(idx)]
+    return v
+
+
+def _numeric_fields(typestore, msgtype, prefix="", depth=0):
+    """Field paths of the numeric scalar fields of ``msgtype`` (for messages)."""
+    out = []
+    try:
+        fields = typestore.fielddefs[msgtype][1]
+    except Exception:  # noqa: BLE001
+        return out
+    for name, desc in fields:
+        kind = getattr(desc, "name", None) or desc[0]
+        kname = getattr(kind, "name", str(kind))
+        if kname == "BASE":
+            base = desc[1][0] if isinstance(desc[1], tuple) else desc[1]
+            if base not in ("string", "bool"):
+                out.append(prefix + name)
+        elif kname == "NAME" and depth < 3:
+            out += _numeric_fields(typestore, desc[1], prefix + name + ".", depth + 1)
+    return out
 
 
 def _stamp_ns(msg):
@@ -112,6 +277,15 @@ def _quat(q):
 def _take(stream, msg, orientation, where):
     """The values of one message for ``stream`` (a dict for JointState, a list otherwise), or None."""
     t = stream.msgtype
+    if stream.fields is not None:
+        vals = []
+        for f in stream.fields:
+            v = _field_value(msg, f)
+            arr = np.asarray(v, dtype=np.float64).ravel()
+            if arr.size != 1:
+                raise DataFileError(f"{where}: field {f!r} holds {arr.size} values; name one, e.g. {f}[0]")
+            vals.append(float(arr[0]))
+        return vals, _stamp_ns(msg)
     if t == JOINT_STATE:
         names, pos = list(msg.name), np.asarray(msg.position, dtype=np.float64)
         if len(pos) != len(names):
@@ -128,6 +302,9 @@ def _take(stream, msg, orientation, where):
     if t == TRANSFORM:
         tr = msg.transform
         return _xyz(tr.translation) + (_quat(tr.rotation) if orientation else []), _stamp_ns(msg)
+    if t in (ODOMETRY, POSE_COV):
+        p = msg.pose.pose
+        return _xyz(p.position) + (_quat(p.orientation) if orientation else []), _stamp_ns(msg)
     # TFMessage: the transform whose child is stream.frame, if this message has it
     for tr in msg.transforms:
         if str(tr.child_frame_id).lstrip("/") != stream.frame:
@@ -146,18 +323,26 @@ def _take(stream, msg, orientation, where):
 
 def _read_streams(path, streams, split_topic, orientation):
     """Read every needed message in one pass; returns (bag start ns, marker times ns)."""
-    AnyReader, typestore = _import_rosbags()
+    _import_rosbags()
     markers = []
     try:
-        reader = AnyReader([path], default_typestore=typestore)
-        reader.open()
+        reader = _Bag(path)
     except DataFileError:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on damaged files
         raise DataFileError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {exc})") from None
     try:
-        topics = {name: info.msgtype for name, info in reader.topics.items()}
+        topics = reader.topics
         shown = ", ".join(f"{k} ({v})" for k, v in sorted(topics.items())) or "none"
+
+        def understood(topic, what):
+            why = reader.unparsed.get(topics[topic])
+            if why is not None:
+                raise DataFileError(
+                    f"{path}: topic {topic!r} ({what}) has messages of type {topics[topic]}, whose definition in the "
+                    f"bag could not be parsed ({why}); the bag itself is readable, and topics not needed are skipped"
+                )
+
         for s in streams:
             if s.topic not in topics:
                 raise DataFileError(
@@ -165,24 +350,39 @@ def _read_streams(path, streams, split_topic, orientation):
                     f"the bag has: {shown}"
                 )
             s.msgtype = topics[s.topic]
-            if s.msgtype not in SUPPORTED:
+            understood(s.topic, f"{s.role} agent")
+            if s.msgtype in TF_TYPES:
+                if s.frame is None:
+                    raise DataFileError(
+                        f"{path}: {s.spec!r} ({s.role} agent): topic {s.topic!r} holds tf transforms; name the child "
+                        f"frame as {s.topic}:FRAME or tf:FRAME"
+                    )
+            elif s.frame is not None:  # field paths of any message type
+                s.fields = [f.strip() for f in s.frame.split(",") if f.strip()]
+                s.frame = None
+                for f in s.fields:
+                    try:
+                        _check_path(reader.typestore, s.msgtype, f)
+                    except KeyError as exc:
+                        fields = _numeric_fields(reader.typestore, s.msgtype)
+                        raise DataFileError(
+                            f"{path}: {s.spec!r} ({s.role} agent): {exc.args[0]}; the numeric fields of "
+                            f"{s.msgtype} are: {', '.join(fields) or 'none'}"
+                        ) from None
+            elif s.msgtype not in SUPPORTED:
+                fields = _numeric_fields(reader.typestore, s.msgtype)
                 raise DataFileError(
                     f"{path}: topic {s.topic!r} ({s.role} agent) has messages of type {s.msgtype}; "
-                    f"expected one of {', '.join(SUPPORTED)}"
+                    f"expected one of {', '.join(SUPPORTED)}, or name numeric fields to read as "
+                    f"{s.topic}:FIELD,FIELD" + (f" (its numeric fields: {', '.join(fields[:12])})" if fields else "")
                 )
-            if (s.msgtype == TF) != (s.frame is not None):
-                why = (
-                    f"topic {s.topic!r} holds tf transforms; name the child frame as {s.topic}:FRAME or tf:FRAME"
-                    if s.frame is None
-                    else f"a frame ':{s.frame}' is only meaningful on a tf2_msgs/msg/TFMessage topic"
-                )
-                raise DataFileError(f"{path}: {s.spec!r} ({s.role} agent): {why}")
         if split_topic is not None:
             split_topic = split_topic if split_topic.startswith("/") else "/" + split_topic
             if split_topic not in topics:
                 raise DataFileError(
                     f"{path}: no topic {split_topic!r} (split_topic={split_topic}); the bag has: {shown}"
                 )
+            understood(split_topic, "split_topic")
         wanted = {s.topic for s in streams} | ({split_topic} if split_topic else set())
         conns = [c for c in reader.connections if c.topic in wanted]
         start = int(reader.start_time)
@@ -192,7 +392,7 @@ def _read_streams(path, streams, split_topic, orientation):
             counts[con.topic] = k + 1
             where = f"{path}, topic {con.topic}, message {k} (bag time {(bag_t - start) * 1e-9:.3f} s)"
             try:
-                msg = reader.deserialize(raw, con.msgtype)
+                msg = reader.deserialize(raw, topics[con.topic])
             except Exception as exc:  # noqa: BLE001
                 raise DataFileError(f"{where}: cannot decode the message ({exc})") from None
             if con.topic == split_topic:
@@ -223,10 +423,28 @@ def _read_streams(path, streams, split_topic, orientation):
     return start, sorted(markers)
 
 
+def _check_path(typestore, msgtype, path):
+    """Raise ``KeyError`` (with a message) unless ``path`` names a field of ``msgtype``."""
+    typ = msgtype
+    for part in path.split("."):
+        m = _FIELD.match(part)
+        if not m:
+            raise KeyError(f"{path!r} is not a field path (name.name[index])")
+        if typ not in typestore.fielddefs:
+            raise KeyError(f"the type {typ} is neither defined in the bag nor a known ROS 2 type")
+        fields = dict(typestore.fielddefs[typ][1])
+        if m.group(1) not in fields:
+            raise KeyError(f"{typ} has no field {m.group(1)!r} (in {path!r})")
+        desc = fields[m.group(1)]
+        while getattr(desc[0], "name", "") in ("ARRAY", "SEQUENCE"):
+            desc = desc[1][0]
+        typ = desc[1] if getattr(desc[0], "name", "") == "NAME" else None
+
+
 def _finish_stream(path, s, joints):
     """Turn the samples of ``s`` into (times ns, values (n, d), column names, units)."""
     if not s.rows:
-        if s.msgtype == TF:
+        if s.msgtype in TF_TYPES:
             raise DataFileError(f"{path}: topic {s.topic!r} has no transform with child frame {s.frame!r}")
         raise DataFileError(f"{path}: topic {s.topic!r} ({s.role} agent) holds no messages")
     stamps = np.array(s.stamps, dtype=object)
@@ -255,6 +473,10 @@ def _finish_stream(path, s, joints):
                 raise DataFileError(f"{path}: topic {s.topic!r}: none of the joints {list(joints)} is on it")
         y = np.array([[r.get(n, np.nan) for n in names] for r in s.rows], dtype=np.float64).reshape(len(s.rows), -1)
         cols, units = names, [None] * len(names)
+    elif s.fields is not None:
+        y = np.array(s.rows, dtype=np.float64).reshape(len(s.rows), len(s.fields))
+        cols = [f"{s.topic.lstrip('/')}_{f}" for f in s.fields]
+        units = [None] * len(cols)
     else:
         y = np.array(s.rows, dtype=np.float64)
         prefix = s.frame if s.frame else s.topic.lstrip("/")
@@ -265,7 +487,7 @@ def _finish_stream(path, s, joints):
     t, y = t[order], y[order]
     keep = np.concatenate([[True], np.diff(t) > 0])  # same stamp as the message before: skipped
     t, y = t[keep], y[keep]
-    if s.msgtype != JOINT_STATE and y.shape[1] == 7:
+    if s.msgtype != JOINT_STATE and s.fields is None and y.shape[1] == 7:
         q = y[:, 3:7]
         for i in range(1, len(q)):  # one hemisphere, so interpolation takes the short way
             if np.dot(q[i], q[i - 1]) < 0:
@@ -275,35 +497,18 @@ def _finish_stream(path, s, joints):
 
 
 def _segments(streams_t, markers, split_gap):
-    """Time intervals [a, b] (ns) of the demonstrations."""
+    """Time intervals [a, b] (ns) of the demonstrations: :func:`._split.spans` with the streams' pauses."""
+    from ._split import spans
+
     lo = min(int(t[0]) for t in streams_t)
     hi = max(int(t[-1]) for t in streams_t)
-    if markers:
-        bounds = list(markers) + [max(hi, markers[-1]) + 1]
-        segs = [(int(a), int(b) - 1) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-    else:
-        segs = [(lo, hi)]
+    cuts = []
     if split_gap is not None:
         gap_ns = split_gap * 1e9
-        cuts = []
         for t in streams_t:
             d = np.diff(t)
-            for i in np.nonzero(d > gap_ns)[0]:
-                cuts.append((int(t[i]), int(t[i + 1])))
-        cuts.sort()
-        out = []
-        for a, b in segs:
-            cur = a
-            for c0, c1 in cuts:
-                if c1 <= cur or c0 >= b:
-                    continue
-                if c0 >= cur:
-                    out.append((cur, c0))
-                cur = max(cur, c1)
-            if cur <= b:
-                out.append((cur, b))
-        segs = out
-    return segs
+            cuts.extend((int(t[i]), int(t[i + 1])) for i in np.nonzero(d > gap_ns)[0])
+    return spans(lo, hi, starts=markers, cuts=cuts)
 
 
 #: A target time inside a pause of a source stream longer than this many of its median intervals
@@ -340,9 +545,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
     path = Path(path)
     if topics is None:
         raise DataFileError(f"{path}: a ROS bag needs topics=OBSERVED,CONTROLLED: the two agents' topics (or tf:FRAME)")
-    if isinstance(topics, str):
-        topics = [x.strip() for x in topics.split(",") if x.strip()]
-    topics = list(topics)
+    topics = _parse_topics(topics)
     if not 1 <= len(topics) <= 2:
         raise DataFileError(f"{path}: topics must name one or two streams (observed, controlled), got {topics!r}")
     if isinstance(joints, str):

@@ -202,11 +202,13 @@ def replay_json(model, demos, *, names=None, units=None, source: str = "", max_i
             "observed_dofs": obs, "controlled_dofs": ctrl, "source": source, "interactions": out}
 
 
-def load_replay(entry: ModelEntry, path) -> dict:
+def load_replay(entry: ModelEntry, path, **options) -> dict:
     """Read demonstrations for ``entry`` from a data file (as ``interprim fit`` reads them) into :func:`replay_json`.
 
     Columns are matched by name when the model knows its column names, else by position; frames are
-    resampled to the model's ``dt``.
+    resampled to the model's ``dt`` (unless already on it up to rounding).  ``options`` are the recording
+    keywords of :func:`interprim.datasets.load_demonstrations` (``length_unit``, ``topics``, ``joints``,
+    ``markers``, splitting, ``max_nan_gap``), as ``interprim fit`` takes them.
 
     Raises
     ------
@@ -220,7 +222,7 @@ def load_replay(entry: ModelEntry, path) -> dict:
     model = entry.model
     named = getattr(model, "columns_", None)
     dt = float(model.dt_)
-    ds = load_demonstrations(path, columns=list(named) if named else None, dt=dt, resample_dt=dt)
+    ds = load_demonstrations(path, columns=list(named) if named else None, dt=dt, resample_dt=dt, **options)
     if ds.n_dofs != entry.n_dofs:
         raise ValueError(f"{path} has {ds.n_dofs} columns; model {entry.name!r} has {entry.n_dofs}")
     return replay_json(model, ds.demos, names=entry.names, units=entry.units,

@@ -1,0 +1,199 @@
+"""Trimming and splitting one long motion-capture take (C3D, BVH) into demonstrations, and the shared rule.
+
+The takes are written here (C3D with the ``c3d`` package, BVH as text); every piece read back is compared with the
+frames that were written for it.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
+
+from interprim.datasets import load_bvh, load_c3d, load_demonstrations
+from interprim.datasets._split import spans
+from interprim.errors import DataFileError
+
+import c3d
+
+
+def add_events(path, events, rate):
+    """Rewrite the C3D file ``path`` with an EVENT group: ``events`` is a list of (label, time in s)."""
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 'no analog data'
+        r = c3d.Reader(fh)
+        frames = [p.copy() for _, p, _ in r.read_frames(copy=True)]
+        labels = [s.strip() for s in r.get("POINT:LABELS").string_array]
+        first = int(r.first_frame)
+    w = c3d.Writer(point_rate=rate, point_units="mm")
+    for p in frames:
+        w.add_frames([(p.astype(np.float32), np.zeros((0, 0)))])
+    w.set_point_labels(labels)
+    w.set_start_frame(first)
+    g = w.add_group(9, "EVENT", "events")
+    n = len(events)
+    g.add("USED", "", 2, "<h", n)
+    times = np.array([[t // 60, t % 60] for _, t in events], np.float32)  # (minutes, seconds), dims [2, n]
+    g.add_param("TIMES", desc="", bytes_per_element=4, bytes=times.tobytes(), dimensions=[2, n])
+    s, size = c3d.Writer.pack_labels([lab for lab, _ in events])
+    g.add_str("LABELS", "", s, size, n)
+    s, size = c3d.Writer.pack_labels(["Right"] * n)
+    g.add_str("CONTEXTS", "", s, size, n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with open(path, "wb") as fh:
+            w.write(fh)
+    return path
+
+
+def long_take(reps=3, still=50, seed=0):
+    """``reps`` handovers there and back (80 frames each, 100 Hz), each after ``still`` frames at rest (with 0.05 mm
+    of marker noise), and a rest at the end; returns (xyz, the first frame of each handover)."""
+    parts, starts, k = [], [], 0
+    rng = np.random.default_rng(seed)
+    for r in range(reps):
+        move = handover(40, seed=r)
+        parts += [move[:1] + rng.normal(0, 0.05, (still, 4, 3)), move, move[::-1]]
+        starts.append(k + still)
+        k += still + 80
+    parts.append(move[:1] + rng.normal(0, 0.05, (still, 4, 3)))
+    return np.concatenate(parts), starts
+
+
+# ----------------------------------------------------------------------------- the rule
+def test_spans_is_one_rule_for_markers_ranges_and_pauses():
+    assert spans(0, 99) == [(0, 99)]
+    assert spans(0, 99, starts=[10, 40]) == [(10, 39), (40, 99)]  # before the first marker: not used
+    assert spans(0, 99, cuts=[(29, 50)]) == [(0, 29), (50, 99)]
+    assert spans(0, 99, starts=[10, 40], cuts=[(20, 30)]) == [(10, 20), (30, 39), (40, 99)]
+    assert spans(0, 99, ranges=[(5, 9), (90, 120)]) == [(5, 9), (90, 99)]
+    assert spans(0, 99, cuts=[(-1, 20), (80, 100)]) == [(20, 80)]  # pauses at the ends
+
+
+# ----------------------------------------------------------------------------- trimming
+def test_c3d_trim_leading_zero_marker_like_my_looped_motion(tmp_path):
+    """py-c3d's my-looped-motion.c3d writes a marker as 0,0,0 for its first 25 frames: refused, or trimmed."""
+    xyz = handover(60)
+    zeroed = np.zeros((60, 4), bool)
+    zeroed[:25, 2] = True
+    zeroed[57:, 1] = True  # and lost again for the last 3 frames
+    path = write_c3d(tmp_path / "looped.c3d", xyz, LABELS, first_frame=1, zeroed=zeroed)
+    with pytest.raises(DataFileError, match=r"looped\.c3d, marker 'B:RHand' .*missing value\(s\) starting at frame 1 "
+                                            r"\(25 frame\(s\)\)"):
+        load_c3d(path, markers="B:RHand")
+    ds = load_c3d(path, trim=True)
+    assert ds.labels == ["looped"] and ds.demos[0].shape == (32, 12)
+    np.testing.assert_allclose(ds.demos[0], f32(xyz[25:57]).reshape(32, 12) * 1e-3)
+    np.testing.assert_allclose(ds.times[0], np.arange(32) / 100.0)
+    assert load_c3d(path, trim=True, markers="A:RHand").demos[0].shape == (60, 3)  # that marker is never lost
+
+
+def test_bvh_trim_nan_frames(tmp_path):
+    from test_loaders_mocap import _rows
+
+    rows = _rows(20)
+    rows[:3, 15] = np.nan
+    path = write_bvh(tmp_path / "t.bvh", rows)
+    ds = load_bvh(path, mode="angles", trim=True)
+    assert ds.demos[0].shape[0] == 17
+    np.testing.assert_allclose(ds.times[0], np.arange(17) * 0.02)
+
+
+# ----------------------------------------------------------------------------- splitting
+def test_c3d_split_by_the_files_events(tmp_path):
+    xyz, starts = long_take()
+    path = write_c3d(tmp_path / "long.c3d", xyz, LABELS, first_frame=1)
+    # an event at s seconds is capture frame round(s * rate) + 1, i.e. row round(s * rate) here
+    add_events(path, [("Start", s / 100.0) for s in starts] + [("Foot Strike", 0.07)], rate=100.0)
+    ds = load_c3d(path, split_events="Start")
+    assert len(ds) == 3
+    bounds = starts[1:] + [len(xyz)]
+    for d, t, a, b in zip(ds.demos, ds.times, starts, bounds):
+        np.testing.assert_allclose(d, f32(xyz[a:b]).reshape(b - a, 12) * 1e-3)
+        assert t[0] == 0.0 and len(t) == b - a
+    assert ds.labels == [f"long@{s / 100:.3f}s" for s in starts]
+    assert len(load_c3d(path, split_events=True)) == 4  # every event, 'Foot Strike' too
+    assert len(load_c3d(path, split_events="Right:Start")) == 3
+    with pytest.raises(DataFileError, match=r"long\.c3d: no event Heel inside frames 1-\d+ to split at "
+                                            r"\(split_events\); the file's events: Right:Start at 0\.500 s"):
+        load_c3d(path, split_events="Heel")
+
+
+def test_c3d_and_bvh_split_by_frame_ranges(tmp_path):
+    xyz = handover(60)
+    path = write_c3d(tmp_path / "r.c3d", xyz, LABELS, first_frame=101)
+    ds = load_demonstrations(path, split_frames="111-120,131-150")  # the file's frame numbers
+    assert [d.shape[0] for d in ds.demos] == [10, 20]
+    np.testing.assert_allclose(ds.demos[1], f32(xyz[30:50]).reshape(20, 12) * 1e-3)
+    with pytest.raises(DataFileError, match=r"split_frames 90-120 is not inside the recording's frames 101-160"):
+        load_c3d(path, split_frames="90-120")
+    with pytest.raises(DataFileError, match=r"split_frames 'x' is not a frame range FIRST-LAST"):
+        load_c3d(path, split_frames="x")
+    from test_loaders_mocap import _rows
+
+    rows = _rows(30)
+    bvh = write_bvh(tmp_path / "r.bvh", rows)
+    whole = load_bvh(bvh, mode="angles")
+    ds = load_bvh(bvh, mode="angles", split_frames="0-9,20-29")
+    np.testing.assert_allclose(ds.demos[1], whole.demos[0][20:30])
+    with pytest.raises(DataFileError, match=r"r\.bvh, frames 0-2 \(a larger split_gap, fewer events or longer "
+                                            r"split_frames\?\): only 3 frame\(s\), at least 5"):
+        load_bvh(bvh, split_frames="0-2,10-20")
+
+
+def test_c3d_split_by_pauses(tmp_path):
+    xyz, starts = long_take(still=60)
+    path = write_c3d(tmp_path / "p.c3d", xyz, LABELS)
+    ds = load_c3d(path, split_gap=0.3)  # 0.6 s at rest between the movements
+    assert len(ds) == 3
+    for d, lab, s in zip(ds.demos, ds.labels, starts):
+        # each piece is its movement, give or take the few frames at either end that are nearly still
+        start = round(float(lab.split("@")[1][:-1]) * 100)
+        assert abs(start - s) <= 6 and 68 <= d.shape[0] <= 92
+        np.testing.assert_allclose(d[s + 40 - start], f32(xyz[s + 40]).ravel() * 1e-3)
+    assert len(load_c3d(path, split_gap=1.0)) == 1  # no pause is that long
+
+
+def test_bvh_split_by_pauses(tmp_path):
+    from test_loaders_mocap import N_CH
+
+    rows = np.zeros((200, N_CH))
+    rows[40:80, 3] = np.linspace(0, 90, 40)  # the root turns, rests, turns back, rests
+    rows[80:120, 3] = 90.0
+    rows[120:160, 3] = np.linspace(90, 0, 40)
+    path = write_bvh(tmp_path / "p.bvh", rows, frame_time=0.01)
+    ds = load_bvh(path, split_gap=0.2)
+    assert len(ds) == 2
+    for d, lab, start in zip(ds.demos, ds.labels, (40, 120)):
+        assert abs(float(lab.split("@")[1][:-1]) - start / 100) <= 0.06 and 36 <= d.shape[0] <= 52
+
+
+def test_split_options_belong_to_their_formats(tmp_path):
+    from test_loaders_mocap import _rows
+
+    bvh = write_bvh(tmp_path / "x.bvh", _rows(10))
+    with pytest.raises(DataFileError, match=r"the option split_events= applies to \.c3d files, not to this \.bvh"):
+        load_demonstrations(bvh, split_events=True)
+    with pytest.raises(ValueError, match="split_gap must be a positive number of seconds"):
+        load_demonstrations(bvh, split_gap=-1)
+
+
+# ----------------------------------------------------------------------------- command line
+def test_cli_fit_on_one_take_split_by_events_and_predict_a_fraction(tmp_path, capsys):
+    xyz, starts = long_take(reps=4)
+    path = write_c3d(tmp_path / "long.c3d", xyz, LABELS)
+    add_events(path, [("Start", s / 100.0) for s in starts], rate=100.0)
+    model = tmp_path / "m.npz"
+    code, out, err = _cli(["fit", path, "--split-events", "--observed", "A:*", "--n-basis", "5", "-o", model], capsys)
+    assert code == 0, err
+    assert "fitted 4 demonstrations" in out
+    one = write_c3d(tmp_path / "one.c3d", handover(40, seed=1), LABELS)
+    code, out, err = _cli(["predict", model, one, "--observe-fraction", "0.6", "-o", tmp_path / "p.csv"], capsys)
+    assert code == 0, err
+    assert "24 frames observed" in out  # ceil(0.6 * 40)
+    code, out, err = _cli(["predict", model, one, "--observe-fraction", "0", "-o", tmp_path / "p.csv"], capsys)
+    assert code == 1 and "--observe-fraction must be in (0, 1], got 0.0" in err
+    code, out, err = _cli(["fit", path, "--trim", "--split-frames", "51-90,141-180,231-270", "--observed", "A:*",
+                           "--n-basis", "5", "-o", model], capsys)
+    assert code == 0, err
+    assert "fitted 3 demonstrations" in out

@@ -666,7 +666,7 @@ def main(argv=None):
         bench_cold_start(args.quick, tmp)
         from benchmarks.threads_cold import bench_first_run, bench_threads
         bench_first_run(args.quick, tmp, row, rel, ROOT)
-        bench_threads(args.quick, fitted_model, make_demos, timed, row, rel)
+        bench_threads(args.quick, fitted_model, make_demos, row, rel)
         bench_memory(tmp)
     scal = {"dof": [], "basis": [], "length": []} if args.no_scaling else scaling(args.quick)
     elapsed = time.perf_counter() - t_start

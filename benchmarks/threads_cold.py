@@ -30,7 +30,7 @@ def _busy(n):
     return [subprocess.Popen([sys.executable, "-c", BUSY_CODE, str(BUSY_SECONDS)]) for _ in range(n)]
 
 
-def bench_threads(quick, fitted_model, make_demos, timed, row, rel):
+def bench_threads(quick, fitted_model, make_demos, row, rel):
     """Default BLAS threads vs one thread (the caller's threadpool_limits(1)) for the public calls, under load."""
     from threadpoolctl import threadpool_limits
 
@@ -38,7 +38,7 @@ def bench_threads(quick, fitted_model, make_demos, timed, row, rel):
 
     print("BLAS threads: default vs one, with 2 busy-loop processes running")
     model, test = fitted_model(Do=9, Dc=9, n_basis=25, S=30, T=500)
-    demos = make_demos(12, 9, 9, 300, seed=3)
+    demos = make_demos(12, 9, 9, 200, seed=3)
     partial = test[:250, :9]
     default = os.cpu_count() or 2
     n_rep = 5 if quick else 15
@@ -56,7 +56,7 @@ def bench_threads(quick, fitted_model, make_demos, timed, row, rel):
         "predict (250 frames)": lambda: model.predict(partial),
         "std(50) (covariance included)": lambda: model.predict(partial).std(50),
         "samples(20, 50) (covariance included)": lambda: model.predict(partial).samples(20, 50, random_state=0),
-        "fit (12 demos x 300 frames, defaults)": lambda: ip.InteractionPrimitive(observed_dofs=list(range(9)),
+        "fit (12 demos x 200 frames, defaults)": lambda: ip.InteractionPrimitive(observed_dofs=list(range(9)),
                                                                                  n_basis=25).fit(demos, dt=0.01),
     }
     procs = _busy(2)
@@ -65,15 +65,16 @@ def bench_threads(quick, fitted_model, make_demos, timed, row, rel):
         for name, fn in ops.items():
             res = {"default": [], "one": []}
             outs = {}
-            n = 2 if name.startswith("fit") and quick else (4 if name.startswith("fit") else n_rep)
+            n = (1 if quick else 3) if name.startswith("fit") else n_rep
             for _ in range(n):  # interleaved: a drift of the load hits both settings alike
                 for key, lim in (("default", default), ("one", 1)):
                     with threadpool_limits(lim, user_api="blas"):
-                        res[key].append(timed(fn, n=1, warm=0)[0])
-                        if key not in outs:
-                            o = fn()
-                            outs[key] = o if isinstance(o, np.ndarray) else (
-                                o.prior_.mean if hasattr(o, "prior_") else o.std(50))
+                        t0 = time.perf_counter()
+                        o = fn()
+                        res[key].append(time.perf_counter() - t0)
+                    if key not in outs:
+                        outs[key] = o if isinstance(o, np.ndarray) else (
+                            o.prior_.mean if hasattr(o, "prior_") else o.std(50))
             err = rel(outs["default"], outs["one"])
             _row(row, name, res, err)
         res = {"default": [], "one": []}

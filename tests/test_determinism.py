@@ -62,6 +62,7 @@ def _rel(a, b):
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
 
 
+@pytest.mark.slow  # three fresh interpreters, each fitting and predicting
 def test_result_does_not_depend_on_when_the_kernels_loaded(runs):
     """With numba's cache filled, the first call after import (which waits for the kernels to load) and a call
     after an explicit warm-up give the same bits: there is no window in which numpy serves while they load.
@@ -71,6 +72,7 @@ def test_result_does_not_depend_on_when_the_kernels_loaded(runs):
     assert a == b
 
 
+@pytest.mark.slow
 def test_numpy_and_compiled_paths_agree(runs):
     """``INTERPRIM_JIT=0`` (numpy throughout) against the compiled kernels: fit, phase, posterior, response,
     samples and the stream agree to rounding.

@@ -564,7 +564,9 @@ def machine_info():
             "versions": vers, "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
 
 
-def table_md(rows):
+def table_md(rows, all_sections=False):
+    """Markdown table of ``rows`` (without the rows of a section of their own unless ``all_sections``)."""
+    rows = [r for r in rows if all_sections or "section" not in r]
     lines = ["| operation | size | ours median | ours p99 | peer | peer median | peer / ours | agree | note |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -592,6 +594,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
           "(T D)^2 matrix A) differ pairwise by 2e-9 to 1e-8 on these problems: the posterior precision is "
           "ill-conditioned (prior variances of the forcing weights ~1e4, sigma^2 ~1e-3, near-null directions of "
           "X^T X early in the movement), so ~1e-8 is the floor of double precision here, not an approximation.", ""]
+    from benchmarks.threads_cold import section_md
+    md += section_md(ROWS, table_md)
     for online in (r for r in ROWS if r["op"].startswith("online step, ") and "cpu_median" in r):
         md += [f"{online['op']}: cpu time (this thread only, excludes waiting for the CPU) median "
                f"{fmt_t(online['cpu_median'])}, p99 {fmt_t(online['cpu_p99'])}.", ""]
@@ -672,7 +676,7 @@ def main(argv=None):
     elapsed = time.perf_counter() - t_start
     load_end = os.getloadavg() if hasattr(os, "getloadavg") else None
     write_results(args.out, info, scal, args.quick, load_end, elapsed)
-    print("\n" + table_md(ROWS))
+    print("\n" + table_md(ROWS, True))
     print(f"\nwrote {args.out} ({elapsed:.0f} s)")
     if args.json:
         Path(args.json).write_text(json.dumps({"rows": [{k: v for k, v in r.items() if k != "per_frame_wall"}

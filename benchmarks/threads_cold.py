@@ -93,11 +93,12 @@ def bench_threads(quick, fitted_model, make_demos, row, rel):
 def _row(row, name, res, err, per_call=False):
     d, o = np.asarray(res["default"]), np.asarray(res["one"])
     ratio = max(np.median(d), np.median(o)) / min(np.median(d), np.median(o))
-    row(f"BLAS threads under load: {name}", "9+9 DoF, 25 basis; 2 busy-loop processes", d,
+    r = row(f"BLAS threads under load: {name}", "9+9 DoF, 25 basis; 2 busy-loop processes", d,
         "same call inside threadpool_limits(1)", o,
         f"{'yes' if err == 0.0 else 'NO'} ({err:.1e})",
         note=f"ours = BLAS left at its default ({os.cpu_count()} threads); {ratio:.2f}x apart (target <= 1.5x)"
              + ("; per frame, frames 10-59" if per_call else ""))
+    r["section"] = "threads"
 
 
 FIRST_RUN = r"""
@@ -156,12 +157,38 @@ def bench_first_run(quick, tmp, row, rel, root):
     w_med = float(np.median([w["wall"] for w in warm]))
     c_med = float(np.median([c["wall"] for c in cold]))
     size = "import + fit 12 demos + predict + 60 frames"
-    row("first run: empty numba cache (fresh install)", size, np.array([c["wall"] for c in cold]),
+    r1 = row("first run: empty numba cache (fresh install)", size, np.array([c["wall"] for c in cold]),
         "warm cache", np.array([w["wall"] for w in warm]), f"{'yes' if err <= 1e-6 else 'NO'} ({err:.1e})",
         note=f"{c_med / w_med:.1f}x the warm run (target <= 4x); numpy while a background process compiles; "
              f"agree = cold vs warm outputs (trajectory, std, response, phases; tolerance 1e-6), warm runs "
              f"among themselves {err_w:.1e}")
-    row("first run: empty cache, INTERPRIM_JIT=1 (waits for the compiler; before)", size,
+    r2 = row("first run: empty cache, INTERPRIM_JIT=1 (waits for the compiler; before)", size,
         np.array([s["wall"] for s in strict]), "warm cache", np.array([w["wall"] for w in warm]),
         note=f"{float(np.median([s['wall'] for s in strict])) / w_med:.1f}x the warm run")
+    r1["section"] = r2["section"] = "first"
     return {"cold": cold, "warm": warm, "strict": strict}
+
+
+def section_md(rows, table_md, load=None):
+    """The RESULTS.md section of these rows (``rows``: every row of the run; those of this module are picked)."""
+    th = [r for r in rows if r.get("section") == "threads"]
+    fr = [r for r in rows if r.get("section") == "first"]
+    if not th and not fr:
+        return []
+    md = ["## BLAS threads under load, and the first run after an install", ""]
+    if load is not None:
+        md += [f"Load average when these rows ran: {tuple(round(x, 2) for x in load)}.", ""]
+    if th:
+        md += ["Each public call with BLAS left at its default (one thread per core; *ours*) and inside the "
+               "caller's `threadpool_limits(1)` (*peer*), interleaved, while two busy-loop processes (one per "
+               "core, started by the benchmark, each ending by itself after at most "
+               f"{BUSY_SECONDS} s) compete for the CPU.  The library runs its linear algebra with one thread "
+               "either way (`interprim._blas`), so the two must agree in time (target: within 1.5x) and in "
+               "value (*agree*: largest relative difference of the outputs).", "", table_md(th, True), ""]
+    if fr:
+        md += ["`import interprim` + `fit` (12 demonstrations, defaults) + `predict` + 60 streamed frames in a fresh "
+               "process: with an empty numba cache (`NUMBA_CACHE_DIR` a new temporary directory, as after an "
+               "install), and again with the cache that run left (*peer*: warm).  With an empty cache the process "
+               "computes with the numpy equivalents while a background process compiles the kernels; "
+               "`INTERPRIM_JIT=1` waits for the compiler instead (the behaviour before).", "", table_md(fr, True), ""]
+    return md

@@ -185,7 +185,7 @@ def _start(target):
 
 def _decide() -> bool:
     """First call needing a kernel: choose the path (see the module docstring)."""
-    global _READY, _PENDING
+    global _READY, _PENDING, _ERROR
     if _numpy_only():
         _READY = False
         return False
@@ -195,7 +195,6 @@ def _decide() -> bool:
         try:
             warm = cache_is_warm()
         except BaseException as exc:  # numba not importable: numpy for the whole process
-            global _ERROR
             _ERROR = exc
             _READY = False
             return False

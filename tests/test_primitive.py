@@ -278,6 +278,7 @@ def test_bad_inputs(synthetic):
     assert st.n_frames == 1
 
 
+@pytest.mark.slow  # fits and scores several models on noisy input (~20 s under load)
 def test_input_noise_makes_clean_models_robust_to_noisy_input():
     """Models learned from clean (simulated) demonstrations choose a tiny sigma2 by CV; noisy online input then
     moves the predicted high-five point far.  ``input_noise`` adds the sensor's variance and fixes that."""

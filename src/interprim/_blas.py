@@ -19,8 +19,8 @@ code may use ``with single_thread():``.  Both share one process-wide limiter:
   counter increment.  The count is process-wide (BLAS pools are), so other
   threads' BLAS calls also run on one thread while a library call is running.
 
-The thread count never changes a result here: the kernels are single-threaded
-reductions in a fixed order either way (tested: ``tests/test_blas.py``).
+Results therefore do not depend on the caller's BLAS setting: the library's
+calls always run on one thread (tested bit for bit: ``tests/test_blas.py``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import functools
 import sys
 import threading
 
-__all__ = ["single_thread", "one_blas_thread", "blas_threads"]
+__all__ = ["single_thread", "one_blas_thread"]
 
 _LOCK = threading.Lock()
 _STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1}
@@ -111,10 +111,3 @@ def on_outer_entry(fn) -> None:
     """Call ``fn()`` at the start of every outermost library call (``None``: nothing); see
     :mod:`interprim._compiled.loader`: the kernels a call uses are chosen before it starts, never inside it."""
     _HOOK[0] = fn
-
-
-def blas_threads() -> list[int]:
-    """Current thread count of every BLAS/OpenMP pool loaded in this process (for tests and benchmarks)."""
-    from threadpoolctl import threadpool_info
-
-    return [int(i["num_threads"]) for i in threadpool_info()]

@@ -450,7 +450,8 @@ def bench_cold_start(quick, tmp):
     np.save(Path(tmp) / "partial.npy", test[:250, :7])
     code = ("import time; t0 = time.perf_counter(); import numpy as np; import interprim as ip; "
             f"m = ip.InteractionPrimitive.load(r'{path}'); p = m.predict(np.load(r'{Path(tmp) / 'partial.npy'}')); "
-            "p.response(100); print(time.perf_counter() - t0)")
+            "p.response(100); print(time.perf_counter() - t0, flush=True); "
+            "from interprim._compiled import loader; loader.warmup()")  # a background compilation ends in the run
     env = dict(os.environ)
     env.pop("INTERPRIM_JIT", None)
     res = {}
@@ -460,9 +461,9 @@ def bench_cold_start(quick, tmp):
             e = dict(env)
             if extra is None:
                 e["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp)
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-c", code], env=e, check=True, capture_output=True, cwd=str(ROOT))
-            walls.append(time.perf_counter() - t0)
+            out = subprocess.run([sys.executable, "-c", code], env=e, check=True, capture_output=True, text=True,
+                                 cwd=str(ROOT))
+            walls.append(float(out.stdout.split()[0]))  # import to response, as timed inside the process
         res[label] = walls
         row(f"cold start: import + load + predict ({label})", "fresh process, 250 frames", np.array(walls))
     return res
@@ -564,7 +565,9 @@ def machine_info():
             "versions": vers, "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
 
 
-def table_md(rows):
+def table_md(rows, all_sections=False):
+    """Markdown table of ``rows`` (without the rows of a section of their own unless ``all_sections``)."""
+    rows = [r for r in rows if all_sections or "section" not in r]
     lines = ["| operation | size | ours median | ours p99 | peer | peer median | peer / ours | agree | note |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -592,6 +595,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
           "(T D)^2 matrix A) differ pairwise by 2e-9 to 1e-8 on these problems: the posterior precision is "
           "ill-conditioned (prior variances of the forcing weights ~1e4, sigma^2 ~1e-3, near-null directions of "
           "X^T X early in the movement), so ~1e-8 is the floor of double precision here, not an approximation.", ""]
+    from benchmarks.threads_cold import section_md
+    md += section_md(ROWS, table_md)
     for online in (r for r in ROWS if r["op"].startswith("online step, ") and "cpu_median" in r):
         md += [f"{online['op']}: cpu time (this thread only, excludes waiting for the CPU) median "
                f"{fmt_t(online['cpu_median'])}, p99 {fmt_t(online['cpu_p99'])}.", ""]
@@ -664,12 +669,15 @@ def main(argv=None):
         bench_fit(args.quick)
         bench_promp(model, test, args.quick)
         bench_cold_start(args.quick, tmp)
+        from benchmarks.threads_cold import bench_first_run, bench_threads
+        bench_first_run(args.quick, tmp, row, rel, ROOT)
+        bench_threads(args.quick, fitted_model, make_demos, row, rel)
         bench_memory(tmp)
     scal = {"dof": [], "basis": [], "length": []} if args.no_scaling else scaling(args.quick)
     elapsed = time.perf_counter() - t_start
     load_end = os.getloadavg() if hasattr(os, "getloadavg") else None
     write_results(args.out, info, scal, args.quick, load_end, elapsed)
-    print("\n" + table_md(ROWS))
+    print("\n" + table_md(ROWS, True))
     print(f"\nwrote {args.out} ({elapsed:.0f} s)")
     if args.json:
         Path(args.json).write_text(json.dumps({"rows": [{k: v for k, v in r.items() if k != "per_frame_wall"}

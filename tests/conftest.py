@@ -8,6 +8,17 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 SHARED = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "shared"))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _compiled_kernels():
+    """Load (on a fresh clone: compile) the compiled kernels before the first test, as every run after an
+    install has them: results then never depend on how far a background compilation has got, and numba's cache
+    is filled for the tests that start fresh interpreters.  The first run after an install, on numpy while the
+    kernels compile, is tested in tests/test_cold_start.py."""
+    from interprim._compiled import loader
+
+    loader.warmup()
+
+
 @pytest.fixture(scope="session")
 def synthetic():
     from interprim.synthetic import two_agent_demos

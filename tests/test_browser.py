@@ -23,10 +23,10 @@ import pytest
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.skipif(
     CHROMIUM is None or DRIVER is None,
     reason="needs Chromium and its driver: apt-get install -y chromium chromium-driver",
-)
+), pytest.mark.slow]  # a browser driving the live page
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 

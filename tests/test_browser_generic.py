@@ -20,6 +20,7 @@ pytestmark = [
     pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
                        reason="needs Chromium and its driver: apt-get install -y chromium chromium-driver"),
     pytest.mark.filterwarnings("ignore:the observed frames are"),  # the server's warning about the x1000 input
+    pytest.mark.slow,  # a browser driving the live page
 ]
 
 NAMES = ["hand_x", "hand_y", "arm_a", "arm_b", "arm_c"]

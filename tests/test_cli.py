@@ -169,6 +169,7 @@ def test_predict_errors(files, tmp_path, capsys):
                                                status=2)
 
 
+@pytest.mark.slow  # the console script in subprocesses
 def test_console_script_round_trip(files, tmp_path):
     """The installed ``interprim`` entry point fits a model and reports errors in one line."""
     exe = Path(sys.executable).with_name("interprim")

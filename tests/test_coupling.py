@@ -64,6 +64,7 @@ def test_no_information_falls_back_to_the_mean():
     np.testing.assert_allclose(p.trajectory(50), m.y_mean_, atol=1e-12)
 
 
+@pytest.mark.slow  # coverage over many held-out draws
 def test_calibration_on_gaussian_data_covers_about_90_percent():
     train = linear_demos(40, 4, noise=0.3)
     test = linear_demos(150, 5, noise=0.3)

@@ -73,6 +73,7 @@ def quick_run(tmp_path_factory):
     return code, out
 
 
+@pytest.mark.slow  # the whole demo pipeline (data by optimal control, figures, animation)
 def test_demo_quick_writes_all_files(quick_run):
     code, out = quick_run
     assert code == 0
@@ -86,6 +87,7 @@ def test_demo_quick_writes_all_files(quick_run):
         assert key in report
 
 
+@pytest.mark.slow
 def test_demo_quick_results_are_sane(quick_run):
     _, out = quick_run
     r = json.loads((out / "results.json").read_text())

@@ -62,14 +62,17 @@ def _rel(a, b):
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
 
 
+@pytest.mark.slow  # three fresh interpreters, each fitting and predicting
 def test_result_does_not_depend_on_when_the_kernels_loaded(runs):
-    """The first call after import (which waits for the kernels) and a call after an explicit warm-up give
-    the same bits: there is no window in which numpy serves while numba compiles."""
+    """With numba's cache filled, the first call after import (which waits for the kernels to load) and a call
+    after an explicit warm-up give the same bits: there is no window in which numpy serves while they load.
+    (An empty cache, the first run after an install: ``tests/test_cold_start.py``.)"""
     a, b = runs["auto"], runs["auto_warm"]
     assert a["compiled"] and b["compiled"]
     assert a == b
 
 
+@pytest.mark.slow
 def test_numpy_and_compiled_paths_agree(runs):
     """``INTERPRIM_JIT=0`` (numpy throughout) against the compiled kernels: fit, phase, posterior, response,
     samples and the stream agree to rounding.

@@ -35,6 +35,7 @@ def test_examples_exist():
     assert set(EXPECTED) <= names, f"missing examples: {sorted(set(EXPECTED) - names)}"
 
 
+@pytest.mark.slow  # one subprocess per example, some run for a minute
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
 def test_example_runs(script, tmp_path):
     tmp = tmp_path / "tmp"

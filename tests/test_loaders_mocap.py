@@ -399,6 +399,7 @@ def _cli(argv, capsys):
     return code, out, err
 
 
+@pytest.mark.slow  # fits and predicts on every take through the CLI
 def test_cli_fit_and_predict_on_c3d_takes(tmp_path, capsys):
     import interprim as ip
 

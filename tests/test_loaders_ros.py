@@ -357,6 +357,7 @@ def test_without_the_extra_names_it(monkeypatch, tmp_path):
 
 
 # ----------------------------------------------------------------------------- command line
+@pytest.mark.slow  # fits through the CLI
 def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
     import interprim as ip
     from interprim.cli import main

@@ -198,6 +198,7 @@ def test_removed_or_added_array_is_refused(saved, tmp_path):
         ip.InteractionPrimitive.load(extra)
 
 
+@pytest.mark.slow  # hundreds of corrupted files
 def test_fuzz_byte_flips_truncations_insertions(models, saved, data, tmp_path):
     """500 random corruptions of a model file: each raises ModelFileError naming the file, or loads identically."""
     model, good = models["default"], saved["default"]

@@ -104,6 +104,7 @@ def result(model):
     return run_mujoco_highfive(model, seed=0)
 
 
+@pytest.mark.slow  # the physics-simulated interaction (module fixture)
 def test_hands_meet_within_the_movement(result):
     """A held-out partner (goal in the held-out cells), the robot driven online by model.stream(): the hands
     meet before the partner's movement ends and stay together, with a margin of 2x on the distance."""
@@ -125,6 +126,7 @@ def test_hands_meet_within_the_movement(result):
     assert r.phase[-1] > 0.95 and np.all(r.latency > 0)
 
 
+@pytest.mark.slow
 def test_run_is_deterministic(model, result):
     again = run_mujoco_highfive(model, seed=0)
     np.testing.assert_array_equal(again.q_robot, result.q_robot)
@@ -146,6 +148,7 @@ def test_bad_inputs(model):
         run_mujoco_highfive(model, physics_dt=0.003)
 
 
+@pytest.mark.slow
 def test_figure_is_written(result, tmp_path):
     path = draw_mujoco_highfive(result, tmp_path / "highfive_mujoco.png")
     assert path.is_file() and path.stat().st_size > 10_000

@@ -98,6 +98,7 @@ def test_auto_chooses_the_phase_with_the_smaller_held_out_error(tmp_path):
     assert ip.InteractionPrimitive.load(tmp_path / "a.npz").phase_method_ == "likelihood"
 
 
+@pytest.mark.slow  # fits on recordings-like data with both phases
 def test_auto_is_the_default_and_picks_the_learned_phase_on_recordings_of_people():
     """The default phase_method "auto" picks the learned phase on a NuiSI interaction (held-out phase error
     0.026 vs 0.034 for the likelihood phase on highfive1; 0.78x vs 0.99x the clock in real time over 5 folds),

@@ -53,6 +53,7 @@ def test_controlled_error_falls_with_more_observed(fitted, fitted_paper, synthet
         assert _ctrl_mse(model, test, 0.6, oracle=False) < prior_only
 
 
+@pytest.mark.slow  # fits and scores two models
 def test_likelihood_phase_beats_dtw_when_goals_vary(synthetic):
     """The demos differ in goal: DTW on positions confuses "further along" with "aiming further" (the core
     issue's warning); the likelihood phase does not, and the controlled agent's error falls accordingly."""
@@ -150,6 +151,7 @@ def test_fit_with_times_resamples_irregular_demos(synthetic):
     assert 0.008 < m.dt_ < 0.012 and m.mean_duration_ > 1.0
 
 
+@pytest.mark.slow  # fits PCA models with CV
 def test_pca_model(synthetic):
     train, test = synthetic
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, pca_components=(1, 2)).fit(train, dt=0.01)
@@ -278,6 +280,7 @@ def test_bad_inputs(synthetic):
     assert st.n_frames == 1
 
 
+@pytest.mark.slow  # fits and scores several models on noisy input (~20 s under load)
 def test_input_noise_makes_clean_models_robust_to_noisy_input():
     """Models learned from clean (simulated) demonstrations choose a tiny sigma2 by CV; noisy online input then
     moves the predicted high-five point far.  ``input_noise`` adds the sensor's variance and fixes that."""

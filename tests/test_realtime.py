@@ -100,6 +100,7 @@ def test_verdict_says_plainly_whether_the_human_helps():
     assert "| clock |" in markdown_table(good) and "| ip |" in markdown_table(good)
 
 
+@pytest.mark.slow  # the evaluate command end to end
 def test_evaluate_command_on_a_users_file(tmp_path, capsys):
     """``interprim evaluate --data FILE``: every protocol on the user's own recordings, a verdict, files."""
     import json
@@ -127,6 +128,7 @@ def test_evaluate_command_on_a_users_file(tmp_path, capsys):
     assert "--observed is required" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # fits and evaluates several methods
 def test_learned_interaction_places_its_prediction_in_time_and_beats_the_clock_on_synthetic_data():
     """LearnedInteraction (learned phase -> phase-robust coupling): the realtime interface, a phase that is a
     pure function of the prefix (a stream of predictions equals the batch ones), and a real gain."""

@@ -38,6 +38,7 @@ def test_cv_reports_its_choice_and_beats_the_prior_in_cv(small, observation, pha
     assert sel["cv_error"] < 0.5 * sel["cv_error_prior"]  # correlated agents: conditioning helps a lot
 
 
+@pytest.mark.slow  # a full CV
 def test_cv_scores_the_dtw_phase_errors(small):
     """With the paper's DTW phase the held-out cases are conditioned at the DTW estimate, not the true phase:
     on demos that differ in goal, DTW's phase errors make forcing-value conditioning useless here, and the

@@ -372,6 +372,7 @@ def test_too_many_errors_in_a_row(strict):
     assert all(json.loads(g)["code"] == "bad_json" for g in got)
 
 
+@pytest.mark.slow  # waits for the send buffer to fill and time out
 def test_client_that_never_reads_is_closed(models, test_demo, caplog):
     cfg = ServerConfig(port=0, send_queue=8, write_limit=4096, max_rate_hz=100000, rate_burst=100000, max_points=500)
     srv = InterprimServer({"pair": models["pair"]}, cfg)

@@ -84,6 +84,7 @@ messages = st.lists(st.one_of(client_like, json_values, st.binary(max_size=40), 
 
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                  HealthCheck.too_slow])
+@pytest.mark.slow  # hundreds of generated message sequences
 @given(msgs=messages)
 def test_protocol_fuzz(fuzz_server, validator, msgs):
     ws = connect(fuzz_server.ws_url)

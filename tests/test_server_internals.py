@@ -18,6 +18,7 @@ from interprim.server.client import Client, ServerError  # noqa: E402
 from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
 
 
+@pytest.mark.slow  # starts worker processes
 def test_worker_processes_give_the_same_predictions(models, test_demo):
     srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},
                           ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
@@ -313,6 +314,7 @@ def test_event_loop_choice(models, test_demo, kind):
         ev.close()
 
 
+@pytest.mark.slow  # starts worker processes
 @pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
 def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
     """Worker-process replies of several hundred kB (many points + band) arrive whole under either

@@ -283,6 +283,7 @@ def test_a_session_far_behind_is_no_longer_read(models, test_demo, gate):
     assert replies[1]["covers"] == 4  # frames 2-5 in one reply
 
 
+@pytest.mark.slow  # starts worker processes
 def test_worker_processes_coalesce_too(models, test_demo):
     """--processes: a session's pending frames go to its worker in one request; same guarantees."""
     srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},

@@ -126,6 +126,7 @@ def _stream_until_closed(url, sig, served, n_before_signal=30):
     return replies, code, reason
 
 
+@pytest.mark.slow  # starts `interprim serve` in a subprocess per case
 @pytest.mark.parametrize("mode,sig", [
     ("inline", signal.SIGINT), ("inline", signal.SIGTERM),
     ("processes", signal.SIGINT), ("processes", signal.SIGTERM),

@@ -116,6 +116,7 @@ def realtime_case():
     return models, train, test, obs
 
 
+@pytest.mark.slow  # renders a GIF
 def test_realtime_figure_writes_gif_and_png_with_the_protocol_numbers(realtime_case, tmp_path):
     from interprim.evaluation.realtime import RealTimeConfig, realtime_fold, summarise_realtime
     from interprim.evaluation.realtime_plots import realtime_interaction_figure
@@ -201,6 +202,7 @@ def _nuisi():
 needs_nuisi = pytest.mark.skipif(_nuisi() is None, reason="NuiSI data (../shared/data or $INTERPRIM_DATA) not found")
 
 
+@pytest.mark.slow  # fits on NuiSI, renders a GIF
 @needs_nuisi
 def test_nuisi_realtime_figure_holds_the_recording_out(tmp_path):
     from interprim.evaluation.realtime_plots import nuisi_realtime_figure
@@ -231,6 +233,7 @@ def test_demo_nuisi_flag_is_checked_before_the_run(capsys, tmp_path):
     assert not any(tmp_path.iterdir())  # nothing ran
 
 
+@pytest.mark.slow  # the demo's NuiSI section end to end (about a minute)
 @needs_nuisi
 def test_demo_nuisi_section(monkeypatch, tmp_path, capsys):
     """What ``interprim demo --nuisi`` adds: the figure files, nuisi_realtime.json and a report section whose numbers

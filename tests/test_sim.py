@@ -109,6 +109,7 @@ def test_trajectory_basis_boundary_conditions():
     np.testing.assert_allclose((A0p - A0m) / (2 * h), A1, atol=1e-6)
 
 
+@pytest.mark.slow  # SLSQP per arm
 @pytest.mark.parametrize("arm", ARMS, ids=lambda a: a.name)
 def test_optimiser_reaches_goal_and_starts_at_rest(arm):
     rng = np.random.default_rng(4)
@@ -233,6 +234,7 @@ def test_generator_prefix_is_stable():
         np.testing.assert_array_equal(x, y)
 
 
+@pytest.mark.slow  # optimal control of many interactions
 def test_split_holds_out_goal_region():
     train, test = highfive_split(30, 8, seed=3, progress=False)
     assert not in_test_region(train.goals).any()

@@ -55,6 +55,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow  # runs every block of the tutorial in subprocesses
 def test_every_block_runs(tmp_path, capsys):
     port = str(_free_port())
     work = tmp_path / "work"

@@ -1,18 +1,113 @@
-"""One BLAS thread for hot paths made of many tiny factorisations.
+"""One BLAS thread for the library's numeric calls (many tiny factorisations).
 
 numpy and scipy wheels each bundle an OpenBLAS thread pool; on a small,
-loaded machine their threads oversubscribe the cores (a 1.5 ms operation
-measured 8 ms), and tiny matrices gain nothing from threads anyway.
+loaded machine their threads oversubscribe the cores (``Prediction.std(50)``
+of a 9 + 9 DoF model: 7.8 ms with the default two threads, 1.3 ms with one;
+127 ms against 2.8 ms with other work on the machine), and the library's
+matrices (a few hundred rows at most) gain nothing from threads anyway.
+
+Every public numeric entry point (``fit``, ``predict``, ``Stream.update``, the
+``Prediction`` accessors, ...) is wrapped by :func:`one_blas_thread`, and inner
+code may use ``with single_thread():``.  Both share one process-wide limiter:
+
+* the BLAS libraries are inspected once (``threadpoolctl.ThreadpoolController``
+  reads every loaded shared library, ~5 ms per call, so ``threadpool_limits(1)``
+  per call would cost more than the online step itself) and again only when new
+  modules have been imported since (a BLAS loaded later, e.g. by ``scipy.linalg``);
+* the outermost entry sets each pool to one thread and the last exit restores
+  the previous counts; nested entries (a ``predict`` inside ``fit``) cost a
+  counter increment.  The count is process-wide (BLAS pools are), so other
+  threads' BLAS calls also run on one thread while a library call is running.
+
+Results therefore do not depend on the caller's BLAS setting: the library's
+calls always run on one thread (tested bit for bit: ``tests/test_blas.py``).
 """
 
 from __future__ import annotations
 
-from threadpoolctl import threadpool_limits
+import functools
+import sys
+import threading
 
-__all__ = ["single_thread"]
+__all__ = ["single_thread", "one_blas_thread"]
+
+_LOCK = threading.Lock()
+_STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1}
+_HOOK = [None]  # called at the entry of an outermost call (interprim._compiled.loader switches paths there)
 
 
-def single_thread():
-    """Context limiting the BLAS thread pools to one thread (many tiny factorisations: threads only add
-    overhead, up to 100x on a loaded 2-core machine; SLSQP of the simulated arms up to 20x)."""
-    return threadpool_limits(1)
+def _controllers():
+    """The BLAS/OpenMP pools of the loaded libraries, inspected again only after new imports."""
+    key = len(sys.modules)
+    if _STATE["ctrl"] is None or key != _STATE["key"]:
+        from threadpoolctl import ThreadpoolController
+
+        _STATE["ctrl"] = ThreadpoolController().lib_controllers
+        _STATE["key"] = key
+    return _STATE["ctrl"]
+
+
+class _OneThread:
+    """Re-entrant, process-wide 'one thread per pool' context (see the module docstring)."""
+
+    __slots__ = ()
+
+    def __enter__(self):
+        with _LOCK:
+            if _STATE["depth"] == 0:
+                hook = _HOOK[0]
+                if hook is not None:
+                    hook()
+                saved = []
+                for lc in _controllers():
+                    n = lc.get_num_threads()
+                    if n is not None and n != 1:
+                        lc.set_num_threads(1)
+                        saved.append((lc, n))
+                _STATE["saved"] = saved
+            _STATE["depth"] += 1
+        return self
+
+    def __exit__(self, *exc):
+        with _LOCK:
+            _STATE["depth"] -= 1
+            if _STATE["depth"] == 0:
+                for lc, n in _STATE["saved"]:
+                    lc.set_num_threads(n)
+                _STATE["saved"] = None
+        return False
+
+
+_ONE = _OneThread()
+
+
+def single_thread() -> _OneThread:
+    """Context limiting the BLAS (and OpenMP) thread pools to one thread, restoring them on exit.
+
+    Re-entrant and cheap (the libraries are inspected once, see the module docstring); many tiny
+    factorisations gain nothing from threads, which only add overhead: up to 100x on a loaded 2-core
+    machine (SLSQP of the simulated arms up to 20x).
+    """
+    return _ONE
+
+
+def one_blas_thread(fn):
+    """Decorator: run ``fn`` inside :func:`single_thread` (the library's public numeric entry points)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with _ONE:
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def depth() -> int:
+    """Number of library calls running (nested ones counted) in this process."""
+    return _STATE["depth"]
+
+
+def on_outer_entry(fn) -> None:
+    """Call ``fn()`` at the start of every outermost library call (``None``: nothing); see
+    :mod:`interprim._compiled.loader`: the kernels a call uses are chosen before it starts, never inside it."""
+    _HOOK[0] = fn

@@ -68,6 +68,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from ._validation import as_2d_finite
 from .errors import NotFittedError
 
@@ -161,6 +162,7 @@ class CouplingPrediction:
         """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)``."""
         return self._interp(self.mean, n)
 
+    @one_blas_thread
     def std(self, n: int = 100) -> np.ndarray:
         """Predictive standard deviation of all DoFs, shape ``(n, D)``."""
         return self._interp(self._std, n)
@@ -303,6 +305,7 @@ class CouplingModel:
         return obs, ["mean"] + [m for m in methods if m != "mean"], fr
 
     # ------------------------------------------------------------------ fit
+    @one_blas_thread
     def fit(self, demos, dt=None):
         """Learn the coupling and choose method, hyper-parameter and calibration by grouped CV.
 
@@ -611,6 +614,7 @@ class CouplingModel:
             self.scale_[name] = max(q / zc, 1e-6)
 
     # ------------------------------------------------------------------ predict
+    @one_blas_thread
     def predict(self, partial, phase, phase_std=None) -> CouplingPrediction:
         """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
 

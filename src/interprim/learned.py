@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from .coupling import CouplingModel
 from .phase.learned import LearnedPhase
 
@@ -47,6 +48,7 @@ class _Prediction:
         """Mean of all DoFs on the normalised-time grid ``linspace(0, 1, n)``, shape ``(n, D)``."""
         return self._cp.trajectory(n)
 
+    @one_blas_thread
     def std(self, n: int = 100, timing: bool = True) -> np.ndarray:
         """Predictive standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
@@ -89,6 +91,7 @@ class LearnedInteraction:
         self.phase_kwargs = phase_kwargs
         self.coupling_kwargs = coupling_kwargs
 
+    @one_blas_thread
     def fit(self, demos, dt: float | None = None):
         """Fit the timing model on the observed columns, then the coupling with the timing model's own error."""
         if hasattr(demos, "demos") and hasattr(demos, "times"):
@@ -112,6 +115,7 @@ class LearnedInteraction:
         self.dt_ = float(dt)
         return self
 
+    @one_blas_thread
     def predict(self, partial) -> _Prediction:
         """Phase of the prefix (learned), then the whole movement of both agents given it (coupling)."""
         est = self.phase_.estimate(partial)

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from ._compiled import loader
 from .gaussian import Posterior, sample
 
@@ -96,6 +97,7 @@ class Prediction:
         return self._post.mean
 
     @property
+    @one_blas_thread
     def posterior_cov(self) -> np.ndarray:
         """Covariance of ``p(theta | tau_o)`` (Eq. 18) in the layout of :attr:`posterior_mean`; computed on first
         access after a mean-only (streaming) update."""
@@ -130,6 +132,7 @@ class Prediction:
         return flat.reshape(*flat.shape[:-1], m.n_latent_, m._q)
 
     # -- trajectories
+    @one_blas_thread
     def trajectory(self, n: int = 100) -> np.ndarray:
         """Posterior mean of all DoFs over the whole movement, shape ``(n, D)``.
 
@@ -154,6 +157,7 @@ class Prediction:
         return cal.column_factors(self.normalised_time, np.linspace(0.0, 1.0, int(n)), m.observed_dofs_,
                                   m.controlled_dofs_)
 
+    @one_blas_thread
     def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray:
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
@@ -181,6 +185,7 @@ class Prediction:
             var = np.einsum("cd,tde,ce->tc", M, S_t, M, optimize=True)
         return np.sqrt(np.clip(var, 0.0, None))
 
+    @one_blas_thread
     def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
         """Trajectories drawn from the posterior over ``theta``, shape ``(n_samples, n, D)``; with a calibrated
         model their spread about :meth:`trajectory` is scaled per point and column as in :meth:`std`."""
@@ -197,6 +202,7 @@ class Prediction:
             out = mean + (out - mean) * f
         return out
 
+    @one_blas_thread
     def response(self, n: int = 100, state=None):
         """The controlled agent's mean movement from the current phase to the end.
 
@@ -260,6 +266,7 @@ class Prediction:
         y = lat @ M[ctrl, n_o:].T + off[ctrl]
         return (s - s0) * self.duration, y
 
+    @one_blas_thread
     def completion(self, n: int = 100):
         """Pattern completion (paper Fig. 3): continue the observed agent from its last observed frame.
 

@@ -20,7 +20,7 @@ import numbers
 
 import numpy as np
 
-from ._blas import single_thread
+from ._blas import one_blas_thread, single_thread
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
@@ -219,6 +219,7 @@ class InteractionPrimitive:
         return obs, ctrl, kk
 
     # ------------------------------------------------------------------ fitting
+    @one_blas_thread
     def fit(self, demos, dt: float | None = None, times=None, columns=None):
         """Learn the Interaction Primitive from demonstrations of both agents.
 
@@ -482,6 +483,7 @@ class InteractionPrimitive:
             raise NotFittedError(f"this InteractionPrimitive is not fitted yet; call fit(demos) before {what}")
 
     # ------------------------------------------------------------------ prediction
+    @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> "Prediction":
         """Predict the interaction from a partial observation of the observed agent.

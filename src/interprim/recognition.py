@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._blas import one_blas_thread
+
 __all__ = ["Recogniser", "Recognition"]
 
 
@@ -108,6 +110,7 @@ class Recogniser:
                 raise ValueError(f"noise must be positive, got {noise!r}")
             self.noise = {k: float(noise) for k in self.models}
 
+    @one_blas_thread
     def recognise(self, partial, respond: bool = False) -> Recognition:
         """Posterior probability of each interaction given the observed prefix ``partial`` (M, n_observed)."""
         from ._validation import as_2d_finite

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from ._compiled import loader
 from ._validation import as_frame
 from .input_range import mark
@@ -41,9 +42,9 @@ class Stream:
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
-        # streaming needs the compiled per-frame step: load the kernels now (see interprim._compiled.loader)
+        # the compiled per-frame step when the kernels are in use (see interprim._compiled.loader)
         self._ws = None
-        if loader.warmup():
+        if loader.ready():
             from ._compiled.observation import StatsWorkspace
 
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation)
@@ -74,6 +75,7 @@ class Stream:
         """``(y0, v0, [y0; v0])``: the stacked start state is reused by every :meth:`Prediction.response`."""
         return (rs[0], rs[1], np.vstack([rs[0], rs[1]]))
 
+    @one_blas_thread
     def update(self, frame, need_cov: bool = False) -> Prediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns a :class:`Prediction`.
 

@@ -1,34 +1,59 @@
 """The one loader of the compiled kernels (:mod:`interprim._compiled`).
 
 Every compiled kernel has a plain numpy equivalent that gives the same
-numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``).
-``ready()`` says which one runs, and the answer never changes within a process
-(one input, one answer: no result may depend on when a compilation finished):
+numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``;
+a whole fit + predict + stream agrees to ~2e-8 relative, the conditioning
+floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
+which one runs:
 
 * ``INTERPRIM_JIT=0``: numpy only;
-* ``INTERPRIM_JIT=1`` or default (``auto``): the compiled kernels, compiled or
-  loaded from numba's on-disk cache on first use, in the calling thread (a
-  fresh install without a cache waits for the compilation once).  If numba is
-  missing or fails to compile, numpy serves for the rest of the process.
+* ``INTERPRIM_JIT=1``: the compiled kernels from the first call on, compiled or
+  loaded from numba's on-disk cache in the calling thread (a fresh install
+  waits for the compilation once, ~15 s on 2 cores); one path for the whole
+  process;
+* default (``auto``): if numba's cache holds every kernel (checked from its
+  index files, without compiling), the kernels are loaded on the first call that
+  needs one (~0.3-1 s), as with ``1``.  If it does not (a fresh install, an
+  upgraded numba), the kernels are compiled by a separate background process
+  (``python -m interprim._compiled.loader``, which fills the cache for every later
+  process too), the calling process computes with the numpy equivalents
+  meanwhile, and switches to the compiled kernels once they are loaded -- only
+  between two public calls (:func:`interprim._blas.one_blas_thread` marks them),
+  never inside one, so each ``fit``, ``predict``, ``Stream.update``, ``std``...
+  runs on one path.  A first run after an install then costs about what a warm
+  one does instead of waiting for the compiler.  If numba is missing or fails
+  to compile, numpy serves for the rest of the process.
 
 ``import interprim`` stays cheap: numba is imported on the first call that
 needs a kernel (``fit``, ``predict``, ``stream``), not at import.  An
-application that wants the first prediction to be fast calls :func:`warmup`
-(or :func:`prefetch`, which starts loading in a background thread while the
-caller does something else; the first kernel call then waits for it).
+application that wants the compiled kernels before its first call calls
+:func:`warmup` (waits) or :func:`prefetch` (starts loading, or the background
+compilation, and returns at once).
 """
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 
 import numpy as np
 
-_READY: bool | None = None
+_READY: bool | None = None  # None: undecided, or numpy while the kernels are being compiled (_PENDING)
 _LOCK = threading.Lock()
 _THREAD: threading.Thread | None = None
 _ERROR: BaseException | None = None
+_PENDING = False  # auto mode, cold cache: numpy now, the compiled kernels once _LOADED
+_LOADED = threading.Event()  # the kernels are loaded in this process (set by _load on success or failure)
+
+#: the kernels called from Python (``module``, ``name``): loaded by :func:`_compile_all` and
+#: :func:`_load_phase_kernels`; the cache is warm when numba's index has an entry for each
+ENTRY_KERNELS = (("dtw", "_open_end_strips"), ("dtw", "_incremental_step"), ("dtw", "_accumulate"),
+                 ("dtw", "_backtrack"), ("observation", "forcing_values_into"), ("observation", "design_stats"),
+                 ("observation", "position_stats"), ("observation", "forcing_targets_batch"),
+                 ("conditioning", "lowrank_condition_mean"), ("rollout", "response_positions"),
+                 ("phase_likelihood", "phase_loglik_batch"), ("phase_likelihood", "track_step"))
 
 
 def _mode() -> str:
@@ -80,57 +105,185 @@ def _load():
     try:
         _compile_all()
         _load_phase_kernels()  # the likelihood phase's kernels: one loader, one decision for all kernels
-        _READY = True
+        ok = True
     except BaseException as exc:  # numba missing or broken: numpy for the whole process
         _ERROR = exc
-        _READY = False
+        ok = False
+    if _PENDING and ok:
+        _LOADED.set()  # switched to at the next boundary between public calls (_switch)
+        _arm_switch()
+    else:
+        _READY = ok
+        _LOADED.set()
 
 
 def _numpy_only() -> bool:
     return _mode() in ("0", "false", "no", "off")
 
 
-def ready() -> bool:
-    """True when the compiled kernels are to be used (see the module docstring).
+def _strict() -> bool:
+    return _mode() in ("1", "true", "yes", "on")
 
-    The first call decides for the whole process: with ``INTERPRIM_JIT`` other than ``0`` it waits for the
-    kernels (loading them in the calling thread, or joining a :func:`prefetch` in progress), so a result
-    never depends on how far a background compilation has got.
+
+def cache_is_warm() -> bool:
+    """Whether numba's on-disk cache holds a current entry for every kernel of :data:`ENTRY_KERNELS`.
+
+    Reads the cache index files (numba checks their source stamps), compiles nothing.  If numba's cache
+    layout cannot be read, answers True (the kernels are then loaded, or compiled, in the calling thread).
     """
-    if _READY is not None:
-        return _READY
+    try:
+        import importlib
+
+        for mod, name in ENTRY_KERNELS:
+            disp = getattr(importlib.import_module(f"{__package__}.{mod}"), name)
+            if not disp._cache._cache_file._load_index():
+                return False
+        return True
+    except ImportError:
+        raise
+    except Exception:  # noqa: BLE001 -- another numba version's internals: fall back to loading in the caller
+        return True
+
+
+def _child_command() -> list[str]:
+    """The command of the background compilation: this package, found where the parent found it."""
+    pkg_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    code = (f"import sys; sys.path.insert(0, {pkg_root!r}); "
+            "from interprim._compiled.loader import _compile_main; sys.exit(_compile_main())")
+    return [sys.executable, "-c", code]
+
+
+def _background():
+    """Cold cache: compile in a child process (no GIL shared with the caller), then load from the cache here."""
+    try:
+        child = subprocess.Popen(_child_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, start_new_session=True)
+        child.wait()  # the child completes even if this process exits first (the next run is warm)
+    except OSError:
+        pass  # no child process possible: compile here instead (below)
+    _load()
+
+
+def _compile_main() -> int:
+    """Entry point of the background compilation: compile every kernel into numba's cache."""
+    try:
+        _compile_all()
+        _load_phase_kernels()
+    except BaseException:  # noqa: BLE001 -- the parent finds out when it loads
+        return 1
+    return 0
+
+
+def _start(target):
+    global _THREAD
+    with _LOCK:
+        if _THREAD is None:
+            _THREAD = threading.Thread(target=target, name="interprim-jit-warmup", daemon=True)
+            _THREAD.start()
+        return _THREAD
+
+
+def _decide() -> bool:
+    """First call needing a kernel: choose the path (see the module docstring)."""
+    global _READY, _PENDING, _ERROR
+    if _numpy_only():
+        _READY = False
+        return False
+    if _PENDING:
+        return _switch()
+    if not _strict():
+        try:
+            warm = cache_is_warm()
+        except BaseException as exc:  # numba not importable: numpy for the whole process
+            _ERROR = exc
+            _READY = False
+            return False
+        if not warm:
+            with _LOCK:
+                if _THREAD is None:
+                    _PENDING = True
+            if _PENDING:
+                _start(_background)
+                return _switch()
     return warmup()
 
 
-def prefetch() -> None:
-    """Start loading the compiled kernels in a background thread and return at once.
+def _switch() -> bool:
+    """While pending: take the compiled kernels if they are loaded and no public call is running."""
+    global _READY
+    if _LOADED.is_set() and _outside_calls():
+        _READY = _ERROR is None
+        _disarm_switch()
+    return bool(_READY)
 
-    Nothing runs on numpy meanwhile: the first call that needs a kernel waits for this load (so results are
-    the same as without the prefetch).  A no-op with ``INTERPRIM_JIT=0`` or once loaded.
+
+def _outside_calls() -> bool:
+    from .. import _blas
+
+    return _blas.depth() == 0
+
+
+def _arm_switch():
+    from .. import _blas
+
+    _blas.on_outer_entry(_switch)
+
+
+def _disarm_switch():
+    from .. import _blas
+
+    _blas.on_outer_entry(None)
+
+
+def ready() -> bool:
+    """True when the compiled kernels are to be used now (see the module docstring).
+
+    The first call decides: with a warm numba cache (or ``INTERPRIM_JIT=1``) it waits for the kernels
+    (loading them in the calling thread, or joining a :func:`prefetch` in progress); with a cold cache it
+    answers False (numpy) until a background compilation has finished, and True from the next public call on.
+    The answer never changes inside a public call.
     """
-    global _THREAD
+    if _READY is not None:
+        return _READY
+    return _decide()
+
+
+def prefetch() -> None:
+    """Start loading the compiled kernels (or, with a cold cache, their background compilation) and return.
+
+    With a warm cache nothing runs on numpy meanwhile: the first call that needs a kernel waits for this load.
+    A no-op with ``INTERPRIM_JIT=0`` or once loaded.
+    """
     if _READY is not None or _numpy_only():
         return
-    with _LOCK:
-        if _THREAD is None:
-            _THREAD = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
-            _THREAD.start()
+    if not _strict() and not _PENDING:
+        try:
+            warm = cache_is_warm()
+        except BaseException:  # noqa: BLE001 -- decided (numpy) on the first call
+            return
+        if not warm:
+            _decide()
+            return
+    _start(_load)
 
 
 def warmup() -> bool:
-    """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use."""
-    global _READY, _THREAD
+    """Load (or compile) the compiled kernels now and wait for them; returns whether they are in use.
+
+    Call it outside any library call (it switches a process running on numpy during a background
+    compilation to the compiled kernels once they are loaded).
+    """
+    global _READY
     if _READY is not None:
         return _READY
     if _numpy_only():
         _READY = False
         return False
-    with _LOCK:
-        t = _THREAD
-        if t is None:
-            _THREAD = t = threading.Thread(target=_load, name="interprim-jit-warmup", daemon=True)
-            t.start()
+    t = _start(_load)
     t.join()
+    if _PENDING:
+        _LOADED.wait()
+        return _switch()
     return bool(_READY)
 
 
@@ -155,3 +308,7 @@ def phase_kernel(block: bool = False):
     """The compiled batch kernel of the likelihood phase, or ``None`` on the numpy path (:func:`ready` decides,
     once per process; ``block`` is kept for callers and has no effect: the first use always waits)."""
     return _PHASE_KERNELS[0] if ready() else None
+
+
+if __name__ == "__main__":  # the background compilation (see _child_command)
+    sys.exit(_compile_main())

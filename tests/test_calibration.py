@@ -136,6 +136,7 @@ def _passes(check):
     return all(COVERAGE_OK[0] <= c <= COVERAGE_OK[1] and RATIO_OK[0] <= r <= RATIO_OK[1] for c, r in check.values())
 
 
+@pytest.mark.slow
 def test_calibrated_band_holds_on_new_demonstrations_and_the_check_bites(noisy):
     """New demonstrations of the synthetic set with i.i.d. noise: the real-time protocol's 90 % band (next 0.25 s,
     20-90 % seen) covers 85-94 % of both agents' coordinates with RMS error / RMS std within 0.88-1.14; and the

@@ -12,6 +12,7 @@ configuration, nearest neighbour, the mean) is wrapped; the spy identifies every
 """
 
 import numpy as np
+import pytest
 
 from interprim.datasets import Demonstrations, RawStream
 from interprim.evaluation import realtime
@@ -74,6 +75,7 @@ class _World:
             assert ids <= self.allowed, "the nested choice saw a demonstration of its outer test fold"
 
 
+@pytest.mark.slow
 def test_no_prediction_sees_its_held_out_recording(monkeypatch):
     ds = _data()
     world = _World(ds)

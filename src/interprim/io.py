@@ -89,7 +89,7 @@ def _metadata(model) -> dict:
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "params": model.get_params(),
+        "params": model.json_params(),
         "observed_dofs": list(model.observed_dofs_),
         "controlled_dofs": list(model.controlled_dofs_),
         "n_dofs": int(model.n_dofs_),

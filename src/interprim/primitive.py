@@ -21,6 +21,7 @@ import numbers
 import numpy as np
 
 from ._blas import single_thread
+from ._params import Params
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
@@ -36,10 +37,11 @@ from .stream import Stream
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
+COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
 PHASE_METHODS = ("dtw", "likelihood", "learned", "auto")
 
 
-class InteractionPrimitive:
+class InteractionPrimitive(Params):
     """An Interaction Primitive (Ben Amor et al., ICRA 2014).
 
     Parameters
@@ -52,11 +54,11 @@ class InteractionPrimitive:
     n_basis : int, default 20
         Basis functions per DoF (Eq. 2); ``theta`` has ``n_basis + 1`` entries per DoF.
     alpha_y : float, default 25.0
-        Spring constant of Eq. 1.
+        (Advanced.) Spring constant of Eq. 1.
     beta_y : float, optional
-        Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
+        (Advanced.) Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
     alpha_x : float, default 3.0
-        Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
+        (Advanced.) Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
     sigma2 : "cv", "auto" or float, default "cv"
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
@@ -73,7 +75,7 @@ class InteractionPrimitive:
     covariance : {"shrinkage", "ridge", "empirical"}, default "shrinkage"
         Regularisation of Eq. 10's covariance (see :func:`interprim.gaussian.fit_prior`).
     ridge : float, default 1e-6
-        Relative diagonal loading of the covariance.
+        (Advanced.) Relative diagonal loading of the covariance.
     observation : {"position", "forcing"}, default "position"
         ``"forcing"`` conditions on forcing values of the observation (Eq. 15,
         the paper's method, kept exactly); ``"position"`` (the default) conditions on the observed
@@ -88,13 +90,13 @@ class InteractionPrimitive:
         Project each agent onto this many principal components before
         learning (paper Sec. IV); an int applies to both agents.
     reference : "mean" or int, default "mean"
-        Reference movement for DTW: the mean of the time-normalised
+        (Advanced.) Reference movement for DTW: the mean of the time-normalised
         demonstrations of the observed agent, or the demonstration with this index
         (the paper's choice).
     min_observed : int, default 3
-        Fewer observed frames than this give the prior (no conditioning).
+        (Advanced.) Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
-        Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
+        (Advanced.) Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
     phase_method : {"auto", "likelihood", "learned", "dtw"}, default "auto"
         How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
 
@@ -130,6 +132,51 @@ class InteractionPrimitive:
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
+
+    Advanced parameters (rarely changed; the defaults are the paper's or were measured to suit every data
+    set we have): ``alpha_y``, ``beta_y``, ``alpha_x``, ``ridge``, ``min_observed``, ``n_steps`` and
+    ``reference``.
+
+    Attributes
+    ----------
+    observed_dofs_, controlled_dofs_ : list of int
+        Data columns of the observed and the controlled agent.
+    n_dofs_ : int
+        Columns of the demonstrations.
+    columns_ : list of str or None
+        Their names, when given to :meth:`fit`.
+    dt_ : float
+        Sampling interval of the (resampled) demonstrations, seconds.
+    n_demos_ : int
+        Number of demonstrations.
+    durations_ : ndarray, shape (n_demos_,)
+        Duration of each demonstration in seconds; ``mean_duration_`` is their mean.
+    beta_y_ : float
+        Damper constant of Eq. 1 in use.
+    pca_observed_, pca_controlled_ : PCA or None
+        Per-agent projections (Sec. IV); ``n_observed_latent_`` and ``n_latent_`` count the latent DoFs.
+    basis_ : Basis
+        The basis functions of Eq. 2; ``rollout_`` integrates Eq. 1 linearly in ``theta``.
+    thetas_ : ndarray, shape (n_demos_, n_latent_ * (n_basis + 1))
+        DMP parameters ``[w_1, g_1, ..., w_N, g_N]`` of each demonstration (Eq. 3-4), observed DoFs first.
+    prior_ : GaussianPrior
+        ``p(theta)`` of Eq. 10.
+    sigma2_ : float
+        Observation noise of Eq. 16 in use; ``phase_sigma2_`` the position noise of the likelihood phase
+        (``None`` when not chosen).
+    selection_ : dict or None
+        What the cross-validation chose and measured (:mod:`interprim.selection`).
+    phase_method_ : str
+        The phase method ``fit`` chose (``phase_method="auto"``) or was given; ``phase_model_`` is the
+        fitted :class:`~interprim.phase.learned.LearnedPhase` or ``None``.
+    reference_ : ndarray, shape (N, n_observed_latent_)
+        DTW reference of the observed agent (Sec. III-B).
+    start_position_, start_velocity_ : ndarray, shape (n_latent_,)
+        Mean start state of the demonstrations (latent DoFs; velocity per unit normalised time).
+    input_mean_, input_std_, input_limit_ : ndarray, ndarray, float
+        Range of the observed agent's training frames (:mod:`interprim.input_range`).
+    calibration_ : Calibration or None
+        Scales of the predictive std (:mod:`interprim.calibration`).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
@@ -156,8 +203,8 @@ class InteractionPrimitive:
         self.calibrate = calibrate
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict:
-        """Hyper-parameters as a JSON-friendly dict (scikit-learn convention)."""
+    def json_params(self) -> dict:
+        """:meth:`get_params` with JSON types (lists, floats, ints), as stored in a model file."""
         obs = self.observed_dofs
         pca = self.pca_components
         return {
@@ -176,7 +223,8 @@ class InteractionPrimitive:
             "calibrate": self.calibrate if isinstance(self.calibrate, str) else bool(self.calibrate),
         }
 
-    def _check_params(self, n_dofs: int):
+    def _check_params(self, n_dofs: int, n_demos: int):
+        """Validate every parameter (cheap; ``fit`` calls it before any expensive work)."""
         obs = self.observed_dofs
         if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
             raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
@@ -207,6 +255,24 @@ class InteractionPrimitive:
             raise ValueError(f"smoothing_window must be None or an odd integer >= 3, got {self.smoothing_window!r}")
         if not isinstance(self.min_observed, numbers.Integral) or self.min_observed < 3:
             raise ValueError(f"min_observed must be an integer >= 3, got {self.min_observed!r}")
+        if self.covariance not in COVARIANCE_METHODS:
+            raise ValueError(f"covariance must be one of {COVARIANCE_METHODS}, got {self.covariance!r}")
+        if isinstance(self.ridge, bool) or not isinstance(self.ridge, numbers.Real) or not (
+                np.isfinite(self.ridge) and self.ridge >= 0):
+            raise ValueError(f"ridge must be a finite number >= 0, got {self.ridge!r}")
+        if isinstance(self.n_steps, bool) or not isinstance(self.n_steps, numbers.Integral) or self.n_steps < 1:
+            raise ValueError(f"n_steps must be a positive integer, got {self.n_steps!r}")
+        if not (self.calibrate is True or self.calibrate is False or isinstance(self.calibrate, np.bool_)
+                or (isinstance(self.calibrate, str) and self.calibrate == "auto")):
+            raise ValueError(f"calibrate must be True, False or 'auto', got {self.calibrate!r}")
+        ref = self.reference
+        if isinstance(ref, str):
+            if ref != "mean":
+                raise ValueError(f"reference must be 'mean' or a demo index, got {ref!r}")
+        elif isinstance(ref, bool) or not isinstance(ref, numbers.Integral):
+            raise ValueError(f"reference must be 'mean' or a demo index, got {ref!r}")
+        elif not 0 <= int(ref) < n_demos:
+            raise ValueError(f"reference={int(ref)} is not a demo index (0..{n_demos - 1})")
         ctrl = [i for i in range(n_dofs) if i not in set(obs)]
         pca = self.pca_components
         if pca is not None:
@@ -267,7 +333,8 @@ class InteractionPrimitive:
             columns = [str(c) for c in columns]
             if len(columns) != D:
                 raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
-        obs, ctrl, kk = self._check_params(D)
+        obs, ctrl, kk = self._check_params(D, len(arrays))
+        self._derived = {}  # a new fit: nothing derived from an earlier one survives (see cached)
         min_frames = max(5, self.smoothing_window or 0)
         if times is not None:
             if dt is not None:
@@ -440,10 +507,34 @@ class InteractionPrimitive:
     def _observed_to_latent(self, o):
         return self.pca_observed_.transform(o) if self.pca_observed_ is not None else o
 
+    def cached(self, name: str, key: tuple, build):
+        """A value derived from the fitted state, computed once by ``build()`` and kept while the objects in
+        ``key`` stay the same (compared by identity).
+
+        The store is replaced by every :meth:`fit` (and is empty in a loaded or copied model), so a refit never
+        sees a value derived from the previous fit.  Modules that need derived arrays of the model (the phase
+        likelihood's factored prior, for example) keep them here instead of setting attributes on it.
+        """
+        store = self.__dict__.setdefault("_derived", {})
+        hit = store.get(name)
+        if hit is not None and len(hit[0]) == len(key) and all(a is b for a, b in zip(hit[0], key)):
+            return hit[1]
+        value = build()
+        store[name] = (tuple(key), value)
+        return value
+
+    def __copy__(self):
+        """A shallow copy with its own (empty) store of derived values (see :meth:`cached`)."""
+        new = type(self).__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._derived = {}
+        return new
+
     def _latent_map(self):
         """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
-        if getattr(self, "_map_cache", None) is not None:
-            return self._map_cache
+        return self.cached("latent_map", (self.pca_observed_, self.pca_controlled_), self._build_latent_map)
+
+    def _build_latent_map(self):
         D = self.n_dofs_
         M = np.zeros((D, self.n_latent_))
         off = np.zeros(D)
@@ -459,23 +550,20 @@ class InteractionPrimitive:
             off[ctrl] = self.pca_controlled_.mean_
         elif ctrl:
             M[ctrl, range(n_o, self.n_latent_)] = 1.0
-        self._map_cache = (M, off)
-        return self._map_cache
+        return M, off
 
     def _controlled_map(self):
         """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
-        cache = self.__dict__.get("_ctrl_map_cache")
-        if cache is not None and cache[0] is self.pca_controlled_:
-            return cache[1]
+        return self.cached("controlled_map", (self.pca_observed_, self.pca_controlled_), self._build_controlled_map)
+
+    def _build_controlled_map(self):
         M, off = self._latent_map()
         n_o = self.n_observed_latent_
         ctrl = self.controlled_dofs_
         Mc = np.ascontiguousarray(M[ctrl, n_o:].T)
         offc = off[ctrl].copy()
-        res = (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
-                               and not np.any(offc)) else (Mc, offc)
-        self._ctrl_map_cache = (self.pca_controlled_, res)
-        return res
+        return (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
+                                and not np.any(offc)) else (Mc, offc)
 
     def _check_fitted(self, what: str):
         if not hasattr(self, "prior_"):
@@ -643,13 +731,8 @@ class InteractionPrimitive:
 
     def _conditioner(self):
         """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.gaussian.LowRankConditioner`)."""
-        cache = self.__dict__.get("_conditioner_cache")
-        if cache is not None and cache[0] is self.prior_ and cache[1] is self.obs_index_:
-            return cache[2]
-        cond = LowRankConditioner.from_prior(self.prior_, self.obs_index_, getattr(self, "thetas_", None),
-                                             float(self.ridge))
-        self._conditioner_cache = (self.prior_, self.obs_index_, cond)
-        return cond
+        return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: LowRankConditioner.from_prior(
+            self.prior_, self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 
     def _condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
@@ -694,7 +777,7 @@ class InteractionPrimitive:
         import inspect
 
         defaults = {k: v.default for k, v in inspect.signature(type(self).__init__).parameters.items()}
-        p = self.get_params()
+        p = self.json_params()
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         return f"InteractionPrimitive({shown})"

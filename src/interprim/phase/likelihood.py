@@ -121,15 +121,13 @@ def phase_noise(model) -> float:
 def _marginal(model):
     """Mean and covariance of the observed agent's block of the prior (cached per prior object)."""
     prior = model.prior_
-    cache = getattr(model, "_phase_marginal", None)
-    if cache is not None and cache[0] is prior:
-        return cache[1], cache[2], cache[3]
-    n = model.n_observed_latent_ * model._q
-    mean_o = np.ascontiguousarray(prior.mean[:n])
-    cov_o = np.ascontiguousarray(prior.cov[:n, :n])
-    idx = np.arange(n).reshape(model.n_observed_latent_, model._q)
-    model._phase_marginal = (prior, mean_o, cov_o, idx)
-    return mean_o, cov_o, idx
+
+    def build():
+        n = model.n_observed_latent_ * model._q
+        idx = np.arange(n).reshape(model.n_observed_latent_, model._q)
+        return np.ascontiguousarray(prior.mean[:n]), np.ascontiguousarray(prior.cov[:n, :n]), idx
+
+    return model.cached("phase_marginal", (prior,), build)
 
 
 def _factored(model):
@@ -139,9 +137,10 @@ def _factored(model):
     once); ``None`` otherwise (then the dense path is used).
     """
     prior = model.prior_
-    cache = getattr(model, "_phase_factored", None)
-    if cache is not None and cache[0] is prior:
-        return cache[1]
+    return model.cached("phase_factored", (prior,), lambda: _build_factored(model, prior))
+
+
+def _build_factored(model, prior):
     pr = None
     th = getattr(model, "thetas_", None)
     if th is not None:
@@ -154,7 +153,6 @@ def _factored(model):
         if np.allclose(approx, dense, rtol=1e-8, atol=1e-10 * float(np.abs(dense).max())) and np.allclose(
                 cand.mean, prior.mean[:n]):
             pr = cand
-    model._phase_factored = (prior, pr)
     return pr
 
 
@@ -245,14 +243,11 @@ class _FastState:
 
 def _fast_state(model):
     """The :class:`_FastState` of ``model`` (``None`` when the prior is not diagonal plus low rank)."""
-    prior = model.prior_
-    cache = getattr(model, "_phase_fast", None)
-    if cache is not None and cache[0] is prior and cache[1] is model.rollout_:
-        return cache[2]
-    pr = _factored(model)
-    fs = None if pr is None else _FastState(model, pr)
-    model._phase_fast = (prior, model.rollout_, fs)
-    return fs
+    def build():
+        pr = _factored(model)
+        return None if pr is None else _FastState(model, pr)
+
+    return model.cached("phase_fast", (model.prior_, model.rollout_), build)
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
@@ -393,12 +388,13 @@ class _scorer:
 def _speed_prior_params(model, M):
     """``(log elapsed time, mean, sd)`` of :func:`_log_speed_prior` (the log-duration statistics cached per model)."""
     dur = model.durations_
-    cache = getattr(model, "_phase_speed_prior", None)
-    if cache is None or cache[0] is not dur:
+
+    def build():
         d = np.log(np.asarray(dur, dtype=np.float64))
-        cache = (dur, float(d.mean()), max(float(d.std()), 0.1))
-        model._phase_speed_prior = cache
-    return float(np.log(max(M - 1, 1) * model.dt_)), cache[1], cache[2]
+        return float(d.mean()), max(float(d.std()), 0.1)
+
+    mu, sd = model.cached("phase_speed_prior", (dur,), build)
+    return float(np.log(max(M - 1, 1) * model.dt_)), mu, sd
 
 
 def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):

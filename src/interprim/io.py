@@ -67,7 +67,8 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["save_model", "load_model", "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
+__all__ = ["save_model", "load_model", "save_estimator", "load_estimator", "FORMAT", "FORMAT_VERSION",
+           "READ_VERSIONS"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
 _NPY_MAGIC = b"\x93NUMPY"
@@ -156,6 +157,43 @@ def save_model(model, path) -> None:
     meta["selection"] = getattr(model, "selection_", None)
     meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
     _write(path, meta, arrays)
+
+
+def save_estimator(model, path) -> None:
+    """Write a fitted model other than the Interaction Primitive (any :class:`~interprim.contract.Predictor`).
+
+    The same container as :func:`save_model` (format version 3: checksummed ``.npy`` members and a JSON
+    ``metadata``), with ``metadata["model"]`` the class name, ``metadata["model_version"]`` its
+    ``STATE_VERSION``, ``params`` its constructor arguments and ``state`` the JSON part of its
+    :meth:`~interprim.contract.Predictor.to_state`.
+    """
+    path = Path(path)
+    arrays, state = model.to_state()
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "model": type(model).__name__,
+            "model_version": int(model.STATE_VERSION), "params": model.json_params(), "state": state,
+            "checksums": {k: _checksum(v) for k, v in arrays.items()}}
+    _write(path, meta, arrays)
+
+
+def load_estimator(path, model_class):
+    """Read a model written by :func:`save_estimator` as a ``model_class`` (no pickle, every array checked)."""
+    path = Path(path)
+    meta, data = _read_archive(path)
+    name = model_class.__name__
+    kind = meta.get("model", "InteractionPrimitive")
+    _expect(kind == name, path, f"holds a {kind} model, not a {name}")
+    version = meta.get("model_version")
+    _expect(type(version) is int and 1 <= version <= model_class.STATE_VERSION, path,
+            f"{name} model_version {version!r} is not supported by this interprim (reads 1..{model_class.STATE_VERSION})")
+    try:
+        model = model_class(**meta["params"])
+        model.load_state(data, meta["state"])
+    except ModelFileError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ModelFileError(f"{path}: corrupt {name} model file ({type(exc).__name__}: {exc})") from None
+    return model
 
 
 def _write(path: Path, meta: dict, arrays: dict) -> None:
@@ -265,6 +303,8 @@ def load_model(path, model_class):
     ``model_class`` (:class:`~interprim.primitive.InteractionPrimitive`)."""
     path = Path(path)
     meta, data = _read_archive(path)
+    kind = meta.get("model", "InteractionPrimitive")
+    _expect(kind == "InteractionPrimitive", path, f"holds a {kind} model, not an InteractionPrimitive")
     try:
         model = model_class(**meta["params"])
         model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]

@@ -17,12 +17,13 @@ import math
 import numpy as np
 
 from ._compiled import loader
+from .contract import BasePrediction
 from .gaussian import Posterior, sample
 
 __all__ = ["Prediction", "MeanRollout"]
 
 
-class Prediction:
+class Prediction(BasePrediction):
     """The model's belief about the whole interaction after a partial observation.
 
     Attributes

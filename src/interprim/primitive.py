@@ -21,7 +21,7 @@ import numbers
 import numpy as np
 
 from ._blas import single_thread
-from ._params import Params
+from .contract import Predictor
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
@@ -41,7 +41,7 @@ COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
 PHASE_METHODS = ("dtw", "likelihood", "learned", "auto")
 
 
-class InteractionPrimitive(Params):
+class InteractionPrimitive(Predictor):
     """An Interaction Primitive (Ben Amor et al., ICRA 2014).
 
     Parameters
@@ -526,8 +526,7 @@ class InteractionPrimitive(Params):
     def __copy__(self):
         """A shallow copy with its own (empty) store of derived values (see :meth:`cached`)."""
         new = type(self).__new__(type(self))
-        new.__dict__.update(self.__dict__)
-        new._derived = {}
+        new.__dict__.update(self.__dict__, _derived={})
         return new
 
     def _latent_map(self):
@@ -564,6 +563,8 @@ class InteractionPrimitive(Params):
         offc = off[ctrl].copy()
         return (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
                                 and not np.any(offc)) else (Mc, offc)
+
+    _FITTED = "prior_"
 
     def _check_fitted(self, what: str):
         if not hasattr(self, "prior_"):

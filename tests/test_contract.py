@@ -28,7 +28,12 @@ def _promp():
     return InteractionProMP(OBS, n_weights=6, n_phases=8)
 
 
-MODELS = {"ip": _ip, "learned": _learned, "prior-mean": lambda: PriorMean(OBS, n=60),
+def _ip_phase(method):
+    return lambda: ip.InteractionPrimitive(OBS, n_basis=8, sigma2=1e-3, phase_method=method, calibrate=False)
+
+
+MODELS = {"ip": _ip, "ip-likelihood": _ip_phase("likelihood"), "ip-learned": _ip_phase("learned"),
+          "learned": _learned, "prior-mean": lambda: PriorMean(OBS, n=60),
           "nearest-neighbour": lambda: NearestNeighbour(OBS, n=60), "promp": _promp}
 
 

@@ -97,3 +97,16 @@ def test_every_parameter_is_checked_before_the_cross_validation(monkeypatch, nam
     model = ip.InteractionPrimitive([0, 1], n_basis=8, **{name: value})  # sigma2="cv": selection would run
     with pytest.raises(ValueError, match=match):
         model.fit(two_agent_demos(8, seed=4), dt=0.01)
+
+
+@pytest.mark.parametrize("name, new, old", [("sigma2", "residual", "auto"), ("phase_method", "cv", "auto")])
+def test_auto_has_a_name_that_says_what_it_does(name, new, old):
+    """sigma2="residual" (the paper's fit residual) and phase_method="cv" (the phase method with the smaller
+    held-out error) are the same models as their old name "auto"."""
+    demos = two_agent_demos(8, seed=4)
+    kw = dict(n_basis=8, calibrate=False, sigma2=1e-3)
+    a = ip.InteractionPrimitive([0, 1], **{**kw, name: new}).fit(demos, dt=0.01)
+    b = ip.InteractionPrimitive([0, 1], **{**kw, name: old}).fit(demos, dt=0.01)
+    assert a.sigma2_ == b.sigma2_ and a.phase_method_used() == b.phase_method_used()
+    part = demos[0][:70, :2]
+    np.testing.assert_array_equal(a.predict(part).trajectory(20), b.predict(part).trajectory(20))

@@ -56,6 +56,7 @@ import struct
 import zipfile
 import zlib
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -144,7 +145,7 @@ def save_model(model, path) -> None:
         arrays["input_mean"] = np.asarray(model.input_mean_)
         arrays["input_std"] = np.asarray(model.input_std_)
         meta["input_limit"] = float(model.input_limit_)
-    meta["phase_method_used"] = model._phase()
+    meta["phase_method_used"] = model.phase_method_used()
     pm = getattr(model, "phase_model_", None)  # the learned phase (phase_method="learned")
     if pm is not None:
         pm_arrays, meta["phase_model"] = pm.to_state()
@@ -185,7 +186,8 @@ def load_estimator(path, model_class):
     _expect(kind == name, path, f"holds a {kind} model, not a {name}")
     version = meta.get("model_version")
     _expect(type(version) is int and 1 <= version <= model_class.STATE_VERSION, path,
-            f"{name} model_version {version!r} is not supported by this interprim (reads 1..{model_class.STATE_VERSION})")
+            f"{name} model_version {version!r} is not supported by this interprim "
+            f"(reads 1..{model_class.STATE_VERSION})")
     try:
         model = model_class(**meta["params"])
         model.load_state(data, meta["state"])
@@ -307,68 +309,70 @@ def load_model(path, model_class):
     _expect(kind == "InteractionPrimitive", path, f"holds a {kind} model, not an InteractionPrimitive")
     try:
         model = model_class(**meta["params"])
-        model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
-        model.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
-        model.n_dofs_ = int(meta["n_dofs"])
-        model.n_observed_latent_ = int(meta["n_observed_latent"])
-        model.n_latent_ = int(meta["n_latent"])
-        model.beta_y_ = float(meta["beta_y"])
-        model.dt_ = float(meta["dt"])
-        model.mean_duration_ = float(meta["mean_duration"])
-        model.sigma2_ = float(meta["sigma2"])
+        st = SimpleNamespace()  # the fitted attributes, handed to the model at the end (load_fitted)
+        st.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
+        st.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
+        st.n_dofs_ = int(meta["n_dofs"])
+        st.n_observed_latent_ = int(meta["n_observed_latent"])
+        st.n_latent_ = int(meta["n_latent"])
+        st.beta_y_ = float(meta["beta_y"])
+        st.dt_ = float(meta["dt"])
+        st.mean_duration_ = float(meta["mean_duration"])
+        st.sigma2_ = float(meta["sigma2"])
         ps2 = meta.get("phase_sigma2")  # noise of the likelihood phase estimator (absent in older files)
-        model.phase_sigma2_ = None if ps2 is None else float(ps2)
-        model.n_demos_ = int(meta["n_demos"])
+        st.phase_sigma2_ = None if ps2 is None else float(ps2)
+        st.n_demos_ = int(meta["n_demos"])
         cols = meta.get("columns")  # column names (absent in older files; the CLI's legacy 'columns' array)
         if cols is None and "columns" in data:
             cols = [str(c) for c in data["columns"]]
-        _expect(cols is None or (isinstance(cols, list) and len(cols) == model.n_dofs_), path,
-                f"columns {cols!r} do not name the model's {model.n_dofs_} columns")
-        model.columns_ = None if cols is None else [str(c) for c in cols]
+        _expect(cols is None or (isinstance(cols, list) and len(cols) == st.n_dofs_), path,
+                f"columns {cols!r} do not name the model's {st.n_dofs_} columns")
+        st.columns_ = None if cols is None else [str(c) for c in cols]
         sel = meta.get("selection")  # hyper-parameter selection record (version 2; absent when fit made none)
         _expect(sel is None or isinstance(sel, dict), path, "corrupt metadata: 'selection' is not a record")
         if sel is not None:
-            model.selection_ = sel
-        model.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
-                                     float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
-        model.thetas_ = data["thetas"]
-        model.reference_ = data["reference"]
-        model.start_position_ = data["start_position"]
-        model.start_velocity_ = data["start_velocity"]
-        model.durations_ = data["durations"]
-        model.input_mean_ = model.input_std_ = model.input_limit_ = None  # absent in older files: no check
+            st.selection_ = sel
+        st.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
+                                  float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
+        st.thetas_ = data["thetas"]
+        st.reference_ = data["reference"]
+        st.start_position_ = data["start_position"]
+        st.start_velocity_ = data["start_velocity"]
+        st.durations_ = data["durations"]
+        st.input_mean_ = st.input_std_ = st.input_limit_ = None  # absent in older files: no check
         if "input_mean" in data:
-            model.input_mean_, model.input_std_ = data["input_mean"], data["input_std"]
-            model.input_limit_ = float(meta["input_limit"])
-            n_o = len(model.observed_dofs_)
-            _expect(model.input_mean_.shape == (n_o,) and model.input_std_.shape == (n_o,)
-                    and bool(np.all(model.input_std_ > 0)) and model.input_limit_ > 0, path,
+            st.input_mean_, st.input_std_ = data["input_mean"], data["input_std"]
+            st.input_limit_ = float(meta["input_limit"])
+            n_o = len(st.observed_dofs_)
+            _expect(st.input_mean_.shape == (n_o,) and st.input_std_.shape == (n_o,)
+                    and bool(np.all(st.input_std_ > 0)) and st.input_limit_ > 0, path,
                     f"arrays 'input_mean'/'input_std' are not ({n_o},) statistics with a positive spread")
-        model.phase_model_ = None
+        st.phase_model_ = None
         if meta.get("phase_model") is not None:
             from .phase.learned import LearnedPhase
 
-            model.phase_model_ = LearnedPhase.from_state(
+            st.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
                 meta["phase_model"])
         used = meta.get("phase_method_used")  # absent in files older than phase_method="auto": as set there
-        model.phase_method_ = str(used if used is not None else
-                                  (model.phase_method if model.phase_method != "auto" else "likelihood"))
-        _expect(model.phase_method_ in ("dtw", "likelihood", "learned"), path,
-                f"unknown phase method {model.phase_method_!r} in the metadata")
-        _expect(model._phase() != "learned" or model.phase_model_ is not None, path,
+        st.phase_method_ = str(used if used is not None else
+                               (model.phase_method if model.phase_method not in ("cv", "auto") else "likelihood"))
+        _expect(st.phase_method_ in ("dtw", "likelihood", "learned"), path,
+                f"unknown phase method {st.phase_method_!r} in the metadata")
+        used = st.phase_method_ if model.phase_method in ("cv", "auto") else model.phase_method
+        _expect(used != "learned" or st.phase_model_ is not None, path,
                 "the phase method is 'learned' but the file holds no phase model")
-        model.calibration_ = None
+        st.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration
 
             try:
-                model.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
-                                                              if k.startswith("calibration_")})
+                st.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
+                                                           if k.startswith("calibration_")})
             except (KeyError, TypeError, ValueError) as exc:
                 raise ModelFileError(f"{path}: arrays 'calibration_*' are not a calibration: "
                                      f"{type(exc).__name__}: {exc}") from None
-            bad = model.calibration_.problem(len(model.observed_dofs_) + len(model.controlled_dofs_))
+            bad = st.calibration_.problem(len(st.observed_dofs_) + len(st.controlled_dofs_))
             _expect(bad is None, path, f"arrays 'calibration_*' are not a calibration: {bad}")
         for agent in ("observed", "controlled"):
             pca = None
@@ -381,17 +385,17 @@ def load_model(path, model_class):
                 evr = data.get(f"pca_{agent}_explained_variance_ratio")
                 if evr is not None:
                     pca.explained_variance_ratio_ = evr
-            setattr(model, f"pca_{agent}_", pca)
+            setattr(st, f"pca_{agent}_", pca)
     except ModelFileError:
         raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
 
     q = model.n_basis + 1
-    P = model.n_latent_ * q
+    P = st.n_latent_ * q
     checks = {
-        "prior_mean": (P,), "prior_cov": (P, P), "thetas": (model.n_demos_, P),
-        "start_position": (model.n_latent_,), "start_velocity": (model.n_latent_,), "durations": (model.n_demos_,),
+        "prior_mean": (P,), "prior_cov": (P, P), "thetas": (st.n_demos_, P),
+        "start_position": (st.n_latent_,), "start_velocity": (st.n_latent_,), "durations": (st.n_demos_,),
     }
     if "prior_diag" in data or "prior_factor" in data:
         _expect("prior_diag" in data and "prior_factor" in data, path,
@@ -406,13 +410,13 @@ def load_model(path, model_class):
         arr = data[key]
         _expect(np.issubdtype(arr.dtype, np.floating) and bool(np.all(np.isfinite(arr))), path,
                 f"array '{key}' is not finite floating point")
-    ref = model.reference_
-    _expect(ref.ndim == 2 and ref.shape[1] == model.n_observed_latent_ and ref.shape[0] >= 2, path,
-            f"array 'reference' has shape {ref.shape}, expected (N>=2, {model.n_observed_latent_})")
-    _expect(sorted(model.observed_dofs_ + model.controlled_dofs_) == list(range(model.n_dofs_)), path,
+    ref = st.reference_
+    _expect(ref.ndim == 2 and ref.shape[1] == st.n_observed_latent_ and ref.shape[0] >= 2, path,
+            f"array 'reference' has shape {ref.shape}, expected (N>=2, {st.n_observed_latent_})")
+    _expect(sorted(st.observed_dofs_ + st.controlled_dofs_) == list(range(st.n_dofs_)), path,
             "observed_dofs and controlled_dofs do not partition the columns")
     try:
-        model._setup()
+        model.load_fitted(vars(st))
     except (TypeError, ValueError, OverflowError) as exc:
         raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
     return model

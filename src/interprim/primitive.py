@@ -38,7 +38,8 @@ __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
 COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
-PHASE_METHODS = ("dtw", "likelihood", "learned", "auto")
+PHASE_METHODS = ("dtw", "likelihood", "learned", "cv", "auto")  # "auto": the old name of "cv"
+SIGMA2_RULES = ("cv", "residual", "auto")  # "auto": the old name of "residual"
 
 
 class InteractionPrimitive(Predictor):
@@ -59,7 +60,7 @@ class InteractionPrimitive(Predictor):
         (Advanced.) Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
     alpha_x : float, default 3.0
         (Advanced.) Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
-    sigma2 : "cv", "auto" or float, default "cv"
+    sigma2 : "cv", "residual" or float, default "cv"
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
         K-fold cross-validation (the observed agent's completion within its noise, then the controlled
@@ -67,7 +68,7 @@ class InteractionPrimitive(Predictor):
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).
-        ``"auto"`` (the paper's setting) uses the mean
+        ``"residual"`` (the paper's setting; ``"auto"`` is its old name, still accepted) uses the mean
         squared residual of the observation model on the training
         demonstrations' own fits (observed DoFs), which sets the noise on the
         scale of the chosen observation; on noisy or recorded data it is
@@ -82,7 +83,7 @@ class InteractionPrimitive(Predictor):
         positions themselves, which are linear in ``theta`` given the start
         state (integrated Eq. 1), and needs no second derivatives: better or
         equal on every recorded or noisy data set we measured (``docs/observation-models.md``).
-        The paper's method exactly is ``observation="forcing", sigma2="auto", phase_method="dtw"``.
+        The paper's method exactly is ``observation="forcing", sigma2="residual", phase_method="dtw"``.
     smoothing_window : int or None, default None
         Savitzky-Golay window (frames) used for the derivatives of Eq. 3 and
         Eq. 15; ``None`` uses central differences (noise-free data).
@@ -97,7 +98,7 @@ class InteractionPrimitive(Predictor):
         (Advanced.) Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         (Advanced.) Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
-    phase_method : {"auto", "likelihood", "learned", "dtw"}, default "auto"
+    phase_method : {"auto", "cv", "likelihood", "learned", "dtw"}, default "auto"
         How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
 
         * ``"likelihood"``: the maximum of the marginal likelihood of the observed positions under the learned
@@ -109,7 +110,8 @@ class InteractionPrimitive(Predictor):
           prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
           recordings of people (NuiSI: 0.71x its error), where the likelihood phase is not; worse on clean
           simulated data.
-        * ``"auto"`` (default): whichever of the two has the smaller held-out phase error on the training
+        * ``"cv"``, or ``"auto"`` (the default, the same choice under its old name): whichever of the two has
+          the smaller held-out phase error on the training
           demonstrations (``phase_method_``; both figures in ``selection_``: ``phase_error_refined`` and
           ``learned_phase_error``).  It picks the likelihood on the built-in simulated and synthetic data and
           the learned phase on all six NuiSI interactions.
@@ -246,7 +248,7 @@ class InteractionPrimitive(Predictor):
             raise ValueError(f"observation must be one of {OBSERVATION_MODELS}, got {self.observation!r}")
         if self.input_noise is not None:
             check_positive(self.input_noise, "input_noise")
-        if not (isinstance(self.sigma2, str) and self.sigma2 in ("auto", "cv")):
+        if not (isinstance(self.sigma2, str) and self.sigma2 in SIGMA2_RULES):
             check_positive(self.sigma2, "sigma2")
         if self.phase_method not in PHASE_METHODS:
             raise ValueError(f"phase_method must be one of {PHASE_METHODS}, got {self.phase_method!r}")
@@ -335,6 +337,7 @@ class InteractionPrimitive(Predictor):
                 raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
         obs, ctrl, kk = self._check_params(D, len(arrays))
         self._derived = {}  # a new fit: nothing derived from an earlier one survives (see cached)
+        self.__dict__.pop("selection_", None)  # set again below when this fit selects anything
         min_frames = max(5, self.smoothing_window or 0)
         if times is not None:
             if dt is not None:
@@ -368,7 +371,7 @@ class InteractionPrimitive(Predictor):
                 self.pca_controlled_ = PCA(kk[1]).fit(np.vstack([a[:, ctrl] for a in arrays]))
         self.n_observed_latent_ = self._n_obs_latent()
         n_o = self.n_observed_latent_
-        self._setup()
+        self.setup_derived()
         # Demonstrations of equal length are processed together as one (n, T, D') array
         # (one derivative call, one least-squares solve); latent[j] is a view into it.
         S = len(arrays)
@@ -436,11 +439,16 @@ class InteractionPrimitive(Predictor):
             raise ValueError(f"choosing the noise and shrinkage by cross-validation (sigma2='cv', the default) needs "
                              f"at least 3 demonstrations, got {len(latent)}: record more, or give sigma2 and "
                              f"covariance explicitly (e.g. sigma2=1e-3, covariance='ridge')")
-        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto")) and len(latent) >= 3:
+        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "cv", "auto")) and len(latent) >= 3:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
-            select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
+            chosen = select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
+            if chosen.sigma2 is not None:
+                self.sigma2_, self.prior_ = chosen.sigma2, chosen.prior
+            self.phase_sigma2_, self.selection_ = chosen.phase_sigma2, chosen.record
         with single_thread():  # small matrices: BLAS threads only oversubscribe a loaded machine
-            self.phase_model_, self.phase_method_ = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
+            self.phase_model_, self.phase_method_, figures = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
+        if figures:  # both phase errors of the "auto" choice, for the user
+            self.selection_.update(figures)
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
             e2 = float(self.input_noise) ** 2
             if self.observation == "position":
@@ -468,13 +476,14 @@ class InteractionPrimitive(Predictor):
                 self.calibration_ = fit_calibration(self, arrays)
         return self
 
-    def _setup(self):
+    def setup_derived(self):
         """Derived, non-learned state (basis, rollout map, index tables)."""
         self.basis_ = Basis(int(self.n_basis), float(self.alpha_x))
         self.rollout_ = cached_rollout(int(self.n_basis), float(self.alpha_x), float(self.alpha_y), self.beta_y_,
                                        int(self.n_steps))
         q = self.n_basis + 1
         self._q = q
+        self.params_per_dof_ = q  # n_basis + 1 entries of theta per DoF (Eq. 2)
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
 
     def _n_obs_latent(self):
@@ -504,7 +513,8 @@ class InteractionPrimitive(Predictor):
             return out
         return np.stack([self._to_latent(a) for a in arrays])
 
-    def _observed_to_latent(self, o):
+    def observed_to_latent(self, o):
+        """Frames ``(t, len(observed_dofs))`` of the observed agent in the model's latent DoFs (PCA, Sec. IV)."""
         return self.pca_observed_.transform(o) if self.pca_observed_ is not None else o
 
     def cached(self, name: str, key: tuple, build):
@@ -523,13 +533,35 @@ class InteractionPrimitive(Predictor):
         store[name] = (tuple(key), value)
         return value
 
+    def load_fitted(self, fitted: dict) -> "InteractionPrimitive":
+        """Set the fitted attributes ``fitted`` (names ending in ``_``, as :mod:`interprim.io` reads them from a
+        model file) and build the derived state (:meth:`setup_derived`); returns ``self``."""
+        bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
+        if bad:
+            raise ValueError(f"load_fitted: {bad} are not fitted attribute names")
+        self.__dict__.update(fitted, _derived={})
+        self.setup_derived()
+        return self
+
+    def with_fitted(self, **fitted) -> "InteractionPrimitive":
+        """A copy of this fitted model with some fitted attributes (names ending in ``_``) replaced, e.g. the
+        prior re-estimated on a subset of the demonstrations (:func:`interprim.calibration.fold_model`).  The
+        copy shares the other fitted arrays and has its own store of derived values; ``self`` is unchanged."""
+        self._check_fitted("with_fitted")
+        bad = [k for k in fitted if not k.endswith("_") or k.startswith("_") or not hasattr(self, k)]
+        if bad:
+            raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
+        new = self.__copy__()
+        new.__dict__.update(fitted)
+        return new
+
     def __copy__(self):
         """A shallow copy with its own (empty) store of derived values (see :meth:`cached`)."""
         new = type(self).__new__(type(self))
         new.__dict__.update(self.__dict__, _derived={})
         return new
 
-    def _latent_map(self):
+    def latent_map(self):
         """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
         return self.cached("latent_map", (self.pca_observed_, self.pca_controlled_), self._build_latent_map)
 
@@ -551,12 +583,12 @@ class InteractionPrimitive(Predictor):
             M[ctrl, range(n_o, self.n_latent_)] = 1.0
         return M, off
 
-    def _controlled_map(self):
+    def controlled_map(self):
         """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
         return self.cached("controlled_map", (self.pca_observed_, self.pca_controlled_), self._build_controlled_map)
 
     def _build_controlled_map(self):
-        M, off = self._latent_map()
+        M, off = self.latent_map()
         n_o = self.n_observed_latent_
         ctrl = self.controlled_dofs_
         Mc = np.ascontiguousarray(M[ctrl, n_o:].T)
@@ -615,20 +647,24 @@ class InteractionPrimitive(Predictor):
         return input_distance(self, frames)
 
     def _predict_observed(self, o, robot_state, phase):
-        z = self._observed_to_latent(o)
+        z = self.observed_to_latent(o)
         if phase is not None:
             ph = float(phase)
             if not 0.0 < ph <= 1.0:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
-            return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
-        n_star, cost = estimate_phase(self, z, self._phase())
-        return self._predict_latent(movement_prefix(self, z, n_star), n_star, cost, robot_state)
+            return self.predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
+        n_star, cost = estimate_phase(self, z, self.phase_method_used())
+        return self.predict_latent(movement_prefix(self, z, n_star), n_star, cost, robot_state)
 
-    def _phase(self) -> str:
+    def phase_method_used(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""
-        return getattr(self, "phase_method_", "likelihood") if self.phase_method == "auto" else self.phase_method
+        if self.phase_method in ("cv", "auto"):
+            return getattr(self, "phase_method_", "likelihood")
+        return self.phase_method
 
-    def _robot_start(self, robot_state):
+    def robot_start(self, robot_state):
+        """Start ``(y0, v0)`` of the controlled agent's latent DoFs (velocity per unit normalised time) from
+        ``robot_state`` (see :meth:`predict`); the demonstrations' mean start when ``None``."""
         n_o = self.n_observed_latent_
         y0 = self.start_position_[n_o:].copy()
         v0 = self.start_velocity_[n_o:].copy()
@@ -681,20 +717,23 @@ class InteractionPrimitive(Predictor):
             Y = z - free @ np.vstack([y0, v0])
         return X, Y, y0
 
-    def _predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
+    def predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
                         workspace=None) -> "Prediction":
+        """The :class:`Prediction` for latent observed frames ``z (M, n_observed_latent_)`` at the reference frame
+        ``n_star`` (Eq. 9: fraction seen ``n_star / (N - 1)``): Eq. 13-18 when at least ``min_observed`` frames
+        were seen, else the prior.  The one path of :meth:`predict` and :meth:`Stream.update`."""
         M = z.shape[0]
         s_end, duration = self._phase_info(n_star, M)
         prior = self.prior_
         stats = None
         if M >= self.min_observed and s_end > 0:
             stats, y0 = self._stats(z, s_end, workspace)
-            post = self._condition(stats, need_cov)
+            post = self.condition(stats, need_cov)
         else:
             y0 = z[0]
             post = Posterior(prior.mean, prior.cov, 0.0)
         if robot_start is None:
-            robot_start = self._robot_start(robot_state)
+            robot_start = self.robot_start(robot_state)
         return Prediction(self, post, stats, s_end, duration, n_star, cost, M, y0, robot_start, z[-1])
 
     def _stats(self, z, s_end, workspace=None):
@@ -735,7 +774,7 @@ class InteractionPrimitive(Predictor):
         return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: LowRankConditioner.from_prior(
             self.prior_, self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 
-    def _condition(self, stats, need_cov: bool) -> Posterior:
+    def condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
 
         Uses the exact low-rank form of :class:`~interprim.gaussian.LowRankConditioner`
@@ -782,3 +821,13 @@ class InteractionPrimitive(Predictor):
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         return f"InteractionPrimitive({shown})"
+
+    # the names these methods had while they were private (kept for code written against them)
+    _latent_map = latent_map
+    _controlled_map = controlled_map
+    _robot_start = robot_start
+    _condition = condition
+    _predict_latent = predict_latent
+    _phase = phase_method_used
+    _observed_to_latent = observed_to_latent
+    _setup = setup_derived

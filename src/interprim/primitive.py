@@ -45,6 +45,9 @@ SIGMA2_RULES = ("cv", "residual", "auto")  # "auto": the old name of "residual"
 class InteractionPrimitive(Predictor):
     """An Interaction Primitive (Ben Amor et al., ICRA 2014).
 
+    The parameters marked "(Advanced.)" are rarely changed: their defaults are the paper's or were measured
+    to suit every data set we have.
+
     Parameters
     ----------
     observed_dofs : sequence of int
@@ -134,10 +137,6 @@ class InteractionPrimitive(Predictor):
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
-
-    Advanced parameters (rarely changed; the defaults are the paper's or were measured to suit every data
-    set we have): ``alpha_y``, ``beta_y``, ``alpha_x``, ``ridge``, ``min_observed``, ``n_steps`` and
-    ``reference``.
 
     Attributes
     ----------

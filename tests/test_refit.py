@@ -110,3 +110,19 @@ def test_auto_has_a_name_that_says_what_it_does(name, new, old):
     assert a.sigma2_ == b.sigma2_ and a.phase_method_used() == b.phase_method_used()
     part = demos[0][:70, :2]
     np.testing.assert_array_equal(a.predict(part).trajectory(20), b.predict(part).trajectory(20))
+
+
+def test_to_state_from_state_round_trip():
+    """The model file's content without the file: ``from_state(*to_state())`` is the same model."""
+    demos = two_agent_demos(8, seed=4)
+    m = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, pca_components=(2, 2), phase_method="likelihood",
+                                calibrate=False).fit(demos, dt=0.01)
+    arrays, meta = m.to_state()
+    twin = ip.InteractionPrimitive.from_state(arrays, meta)
+    part = demos[1][:60, :2]
+    a, b = m.predict(part), twin.predict(part)
+    np.testing.assert_array_equal(a.trajectory(30), b.trajectory(30))
+    np.testing.assert_array_equal(a.std(30), b.std(30))
+    bad = dict(arrays, thetas=arrays["thetas"][:, :-1])
+    with pytest.raises(ip.ModelFileError, match="<state>: array 'thetas' has shape"):
+        ip.InteractionPrimitive.from_state(bad, meta)

@@ -68,8 +68,8 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["save_model", "load_model", "save_estimator", "load_estimator", "FORMAT", "FORMAT_VERSION",
-           "READ_VERSIONS"]
+__all__ = ["save_model", "load_model", "model_state", "model_from_state", "save_estimator", "load_estimator",
+           "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
 _NPY_MAGIC = b"\x93NUMPY"
@@ -128,8 +128,17 @@ def _arrays(model) -> dict:
 
 
 def save_model(model, path) -> None:
-    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3)."""
+    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3): its
+    :meth:`~interprim.primitive.InteractionPrimitive.to_state`, each array checksummed."""
     path = Path(path)
+    arrays, meta = model.to_state()
+    meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
+    _write(path, meta, arrays)
+
+
+def model_state(model):
+    """``(arrays, meta)`` of a fitted Interaction Primitive as a model file holds them (without checksums;
+    :meth:`~interprim.primitive.InteractionPrimitive.to_state`)."""
     meta = _metadata(model)
     arrays = _arrays(model)
     for name in ("diag", "factor"):  # the prior's diagonal + low-rank form (exact reload of the fast path)
@@ -156,8 +165,7 @@ def save_model(model, path) -> None:
         for k, v in cal.to_arrays().items():
             arrays[f"calibration_{k}"] = np.asarray(v)
     meta["selection"] = getattr(model, "selection_", None)
-    meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
-    _write(path, meta, arrays)
+    return arrays, meta
 
 
 def save_estimator(model, path) -> None:
@@ -307,6 +315,13 @@ def load_model(path, model_class):
     meta, data = _read_archive(path)
     kind = meta.get("model", "InteractionPrimitive")
     _expect(kind == "InteractionPrimitive", path, f"holds a {kind} model, not an InteractionPrimitive")
+    return model_class.from_state(data, meta, source=path)
+
+
+def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
+    """The model of ``(data, meta)`` (a model file's arrays and metadata, format versions 1-3), every array
+    checked; problems raise :class:`~interprim.errors.ModelFileError` naming ``path``
+    (:meth:`~interprim.primitive.InteractionPrimitive.from_state`)."""
     try:
         model = model_class(**meta["params"])
         st = SimpleNamespace()  # the fitted attributes, handed to the model at the end (load_fitted)

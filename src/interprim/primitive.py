@@ -805,6 +805,22 @@ class InteractionPrimitive(Predictor):
 
         save_model(self, path)
 
+    def to_state(self):
+        """``(arrays, meta)``: the fitted model as its model file holds it (numeric arrays and JSON metadata;
+        :mod:`interprim.io`); :meth:`from_state` restores it."""
+        self._check_fitted("to_state")
+        from .io import model_state
+
+        return model_state(self)
+
+    @classmethod
+    def from_state(cls, arrays: dict, meta: dict, source="<state>") -> "InteractionPrimitive":
+        """The model of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's); raises
+        :class:`~interprim.ModelFileError` naming ``source`` when they are inconsistent."""
+        from .io import model_from_state
+
+        return model_from_state(arrays, meta, cls, source)
+
     @classmethod
     def load(cls, path) -> "InteractionPrimitive":
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""

@@ -524,10 +524,16 @@ class InteractionPrimitive(Predictor):
         sees a value derived from the previous fit.  Modules that need derived arrays of the model (the phase
         likelihood's factored prior, for example) keep them here instead of setting attributes on it.
         """
-        store = self.__dict__.setdefault("_derived", {})
+        store = self.__dict__.get("_derived")
+        if store is None:
+            store = self._derived = {}
         hit = store.get(name)
-        if hit is not None and len(hit[0]) == len(key) and all(a is b for a, b in zip(hit[0], key)):
-            return hit[1]
+        if hit is not None and len(hit[0]) == len(key):
+            for a, b in zip(hit[0], key):  # per frame of a stream: a plain loop, no generator
+                if a is not b:
+                    break
+            else:
+                return hit[1]
         value = build()
         store[name] = (tuple(key), value)
         return value

@@ -456,15 +456,10 @@ class InteractionPrimitive(Predictor):
                 self.phase_sigma2_ += e2
         # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
         n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
-        if isinstance(self.reference, str):
-            if self.reference != "mean":
-                raise ValueError(f"reference must be 'mean' or a demo index, got {self.reference!r}")
+        if isinstance(self.reference, str):  # "mean" (checked with the other parameters, before any work)
             self.reference_ = np.mean([time_normalise(z[:, :n_o], n_ref) for z in latent], axis=0)
         else:
-            r = int(self.reference)
-            if not 0 <= r < len(latent):
-                raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
-            self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
+            self.reference_ = time_normalise(latent[int(self.reference)][:, :n_o], n_ref)
         # what the observed agent's frames look like in training (the out-of-range check, interprim.input_range)
         self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
             np.concatenate([a[:, obs] for a in arrays], axis=0))

@@ -94,10 +94,11 @@ def test_phase_error_model_is_used_and_prediction_shapes():
     p = m.predict(demos[0][:15, OBS], 0.4)
     assert isinstance(p, CouplingPrediction)
     assert p.trajectory(30).shape == (30, 4) and p.std(30).shape == (30, 4) and np.all(p.std(30) > 0)
-    mean, std = p.response(30)
-    assert mean.shape == (30, 2) and std.shape == (30, 2)
-    t, cm, cs = p.completion(10)
-    assert t[0] == pytest.approx(0.4) and cm.shape == (10, 2)
+    t, y = p.response(30)  # the contract of interprim.contract: (t, y) like the Interaction Primitive's
+    assert t.shape == (30,) and t[0] == 0.0 and y.shape == (30, 2)
+    np.testing.assert_allclose(y[-1], p.trajectory(30)[-1, m.controlled_dofs_])
+    s, cm = p.completion(10)
+    assert s[0] == pytest.approx(0.4) and cm.shape == (10, 2) and p.completion_std(10).shape == (10, 2)
     lo, hi = p.band(30)
     assert np.all(lo <= hi)
     # equal-length demos: the clock is exact, so its phase error model is zero

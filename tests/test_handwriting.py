@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from _dtw_reference import brute_force_dtw
 
 from interprim.cli import main
 from interprim.datasets import data_dir
@@ -22,42 +23,15 @@ def _has_data():
 needs_data = pytest.mark.skipif(not _has_data(), reason="shared data folder (../shared/data) not found")
 
 
-def _dtw_full_matrix(u, v):
-    """Literal Eq. 5-8: D over (query frame, reference frame), n* = argmin of the last row."""
-    c = ((u[:, None, :] - v[None, :, :]) ** 2).sum(-1)
-    D = np.full((len(u) + 1, len(v) + 1), np.inf)
-    D[0, 0] = 0.0
-    for i in range(1, len(u) + 1):
-        for j in range(1, len(v) + 1):
-            D[i, j] = c[i - 1, j - 1] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
-    j = int(np.argmin(D[-1, 1:]))
-    return D[-1, j + 1], j
-
-
-def _dtw_py(query, ref):
-    """Readable reference of :func:`open_end_dtw` (full accumulated-cost matrix)."""
-    t, n = query.shape[0], ref.shape[0]
-    c = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)  # (t, n)
-    D = np.empty((t, n))
-    D[0] = np.cumsum(c[0])
-    for i in range(1, t):
-        D[i, 0] = D[i - 1, 0] + c[i, 0]
-        for j in range(1, n):
-            D[i, j] = c[i, j] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
-    j = int(np.argmin(D[-1]))
-    return float(D[-1, j]), j
-
-
 def test_open_end_dtw_matches_the_literal_recursion():
     rng = np.random.default_rng(1)
     for _ in range(20):
         q = rng.normal(size=(int(rng.integers(1, 9)), 2))
         r = rng.normal(size=(int(rng.integers(2, 12)), 2))
         cost, j = open_end_dtw(q, r)
-        c2, j2 = _dtw_full_matrix(q, r)
-        c3, j3 = _dtw_py(q, r)
-        assert cost == pytest.approx(c2) == pytest.approx(c3)
-        assert j == j2 == j3
+        D, j2 = brute_force_dtw(r, q)  # (reference, query)
+        assert cost == pytest.approx(D[j2, -1])
+        assert j == j2
 
 
 def test_open_end_dtw_finds_the_prefix_of_a_slower_copy():

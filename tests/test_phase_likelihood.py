@@ -7,7 +7,6 @@ import interprim as ip
 from interprim.phase.dtw import open_end_dtw
 from interprim._compiled import loader
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
-from interprim.phase.tracking import track_phase
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +68,6 @@ def test_stream_tracks_phase_with_local_search(synthetic, lik_model):
         pred = st.update(d[k, :2], need_cov=False)
     s_true = (int(0.7 * T) - 1) / (T - 1)
     assert abs(pred.normalised_time - s_true) < 0.08
-    assert abs(track_phase(lik_model, d[: int(0.7 * T), :2], None, 0) - s_true) < 0.1
 
 
 def test_phase_method_validated_and_saved(tmp_path, synthetic, lik_model):
@@ -126,7 +124,7 @@ def _both_paths(model, z, s, s2):
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
-    assert loader.phase_kernel(block=True) is not None
+    assert loader.phase_kernel() is not None
     comp = fs.loglik(z, s, s2)
     return num, comp
 
@@ -202,23 +200,6 @@ def test_dense_fallback_when_prior_is_not_low_rank():
     assert 0.0 < est.s_end <= 1.0
 
 
-def _reference_track(model, z, s_prev, m_prev, n_candidates=7, spread=0.15):
-    """``track_phase`` as it was: one reference evaluation per candidate."""
-    M = z.shape[0]
-    if M < 2:
-        return PL._S_MIN
-    s2 = PL.phase_noise(model)
-    if s_prev is None or m_prev < 2:
-        lo = max(PL._S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
-        cand = np.exp(np.linspace(np.log(lo), 0.0, 20))
-    else:
-        s_pred = min(1.0, s_prev * (M - 1) / (m_prev - 1))
-        cand = np.unique(np.clip(s_pred * np.exp(np.linspace(-spread, spread, n_candidates)), PL._S_MIN, 1.0))
-    sc = [PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL._log_speed_prior(model, M, s))
-          for s in cand]
-    return float(cand[int(np.argmax(sc))])
-
-
 def _paused(frames, pre=20, post=40):
     """Frames held still before and after the movement (the tracker's phase clips at _S_MIN and at 1)."""
     return np.concatenate([np.repeat(frames[:1], pre, 0), frames, np.repeat(frames[-1:], post, 0)])
@@ -237,7 +218,7 @@ def test_stream_lattice_scores_equal_reference(observation, monkeypatch):
     """Every lattice window the stream scores (slots extended frame by frame, clipped candidates, re-centred
     windows) equals the per-candidate reference evaluation of the log posterior."""
     model = _small_model(observation, None, "shrinkage")
-    assert loader.phase_kernel(block=True) is not None
+    assert loader.phase_kernel() is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     seen = []
     real = PT._finish
@@ -265,7 +246,7 @@ def test_stream_phase_and_prediction_equal_batch(observation, paused):
     maximum of the same log posterior refined to ``_XATOL`` = 1e-5 (measured: phase within 1e-4); the
     trajectory moves about 10x the phase difference."""
     model = _small_model(observation, None, "shrinkage")
-    assert loader.phase_kernel(block=True) is not None
+    assert loader.phase_kernel() is not None
     frames = _demos(1, seed=11)[0][:, model.observed_dofs_]
     if paused:  # held still before and after: phases clipped at s_min and at 1
         frames = _paused(frames)
@@ -360,7 +341,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
     leaving the candidate window), equal a recomputation from all frames."""
     model = ip.InteractionPrimitive(observed_dofs=[0, 1, 2, 3], n_basis=8, sigma2=1e-2, phase_method="likelihood",
                                     **kw).fit(_demos(12), dt=0.01)
-    assert loader.phase_kernel(block=True) is not None
+    assert loader.phase_kernel() is not None
     frames = _paused(_demos(1, seed=11)[0], 10, 20)[:, model.observed_dofs_]
     st = model.stream()
     worst, n_checked = np.zeros(4), 0
@@ -379,7 +360,7 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
 
 def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     model = _small_model("position", 2, "shrinkage")
-    assert loader.phase_kernel(block=True) is not None
+    assert loader.phase_kernel() is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     st = model.stream()
     got = np.array([st.update(f).normalised_time for f in frames])
@@ -387,8 +368,8 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     again = np.array([st.update(f).normalised_time for f in frames[:50]])
     np.testing.assert_array_equal(again, got[:50])
     with monkeypatch.context() as mp:  # no compiled kernel: the same candidates scored by numpy
-        mp.setattr(PL, "_kernel", lambda block=False: None)
-        mp.setattr(PT, "_kernel", lambda block=False: None)
+        mp.setattr(PL, "_kernel", lambda: None)
+        mp.setattr(PT, "_kernel", lambda: None)
         st.reset()
         num = np.array([st.update(f).normalised_time for f in frames])
     # the refinement's parabola vertex divides score differences by (curvature x lattice spacing): the two
@@ -399,8 +380,8 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     for k, f in enumerate(frames):
         if k < 40:
             with monkeypatch.context() as mp:
-                mp.setattr(PL, "_kernel", lambda block=False: None)
-                mp.setattr(PT, "_kernel", lambda block=False: None)
+                mp.setattr(PL, "_kernel", lambda: None)
+                mp.setattr(PT, "_kernel", lambda: None)
                 p = st2.update(f)
         else:
             p = st2.update(f)

@@ -183,7 +183,7 @@ def test_save_load_roundtrip_exact(tmp_path, synthetic, observation):
     path = tmp_path / "model.npz"
     m.save(path)
     m2 = ip.InteractionPrimitive.load(path)
-    assert m2.get_params() == m.get_params()
+    assert m2.json_params() == m.json_params()
     for a in ("thetas_", "reference_", "start_position_", "start_velocity_"):
         np.testing.assert_array_equal(getattr(m2, a), getattr(m, a))
     np.testing.assert_array_equal(m2.prior_.cov, m.prior_.cov)

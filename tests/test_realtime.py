@@ -141,8 +141,12 @@ def test_learned_interaction_places_its_prediction_in_time_and_beats_the_clock_o
     p = est.predict(d[:60, :2])
     assert 0 < p.normalised_time <= 1 and p.duration > 0 and p.phase_std >= 0
     assert p.trajectory(50).shape == (50, 5) and np.all(p.std(50) >= 0)
-    q = est.predict(d[:60, :2].copy())
+    st = est.stream()  # frame by frame: the stream's prediction after 60 frames is the batch one
+    for frame in d[:60, :2]:
+        q = st.update(frame)
     np.testing.assert_array_equal(p.trajectory(50), q.trajectory(50))
+    np.testing.assert_array_equal(p.std(50), q.std(50))
+    assert q.normalised_time == p.normalised_time and q.n_observed == 60
     s = summarise_realtime(realtime_sweep({"learned": lambda: ip.LearnedInteraction([0, 1])}, demos, [0, 1], 0.01,
                                           RealTimeConfig(stride=8), k=4))
     assert s["learned"]["rt_ctrl_vs_clock"] < 0.6 and s["learned"]["phase_err_vs_clock"] < 0.8

@@ -20,6 +20,8 @@ import urllib.request
 import numpy as np
 import pytest
 
+from interprim.contract import BasePrediction
+
 pytest.importorskip("websockets")
 
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
@@ -292,15 +294,12 @@ def test_internal_error_in_model_is_contained(test_demo):
         def stream(self, robot_state=None):
             return self
 
-        def update(self, frame):
+        def update(self, frame, need_cov=False):
             if frame[0] > 100:
                 raise RuntimeError("kaboom")
-            if frame[0] > 50:
-                return type("Pred", (), {"phase": float("nan"), "x": 1, "speed": 1, "duration": 1,
-                                         "log_likelihood": 0, "goal": np.zeros(3),
-                                         "trajectory": lambda self, n: np.zeros((n, 3))})()
-            return type("Pred", (), {"phase": 0.5, "x": 1, "speed": 1, "duration": 1, "log_likelihood": 0,
-                                     "goal": np.zeros(3), "trajectory": lambda self, n: np.zeros((n, 3))})()
+            fields = {"phase": float("nan") if frame[0] > 50 else 0.5, "x": 1, "speed": 1, "duration": 1,
+                      "log_likelihood": 0, "goal": np.zeros(3), "trajectory": lambda self, n: np.zeros((n, 3))}
+            return type("Pred", (BasePrediction,), fields)()
 
     srv = InterprimServer({"boom": entry_for("boom", Boom())}, ServerConfig(port=0))
     with ServerThread(srv) as st, Client(st.ws_url) as c:

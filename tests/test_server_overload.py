@@ -16,6 +16,8 @@ import threading
 import numpy as np
 import pytest
 
+from interprim.contract import BasePrediction
+
 pytest.importorskip("websockets")
 
 from interprim.server import compute  # noqa: E402
@@ -81,11 +83,12 @@ class _Boom:
     def stream(self, robot_state=None):
         return self
 
-    def update(self, frame):
+    def update(self, frame, need_cov=False):
         if frame[0] > 100:
             raise RuntimeError("kaboom")
-        return type("Pred", (), {"phase": 0.5, "x": 1, "speed": 1, "duration": 1, "log_likelihood": 0,
-                                 "goal": np.zeros(3), "trajectory": lambda self, n: np.zeros((n, 3))})()
+        fields = {"phase": 0.5, "x": 1, "speed": 1, "duration": 1, "log_likelihood": 0, "goal": np.zeros(3),
+                  "trajectory": lambda self, n: np.zeros((n, 3))}
+        return type("Pred", (BasePrediction,), fields)()
 
     def reset(self):
         pass

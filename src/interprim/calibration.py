@@ -217,27 +217,22 @@ def fold_model(model, keep, observed=None):
     (``phase_model_``) is refitted on the kept demonstrations' observed columns ``observed`` (one array per
     demonstration, the model's latent space) when given: it is fitted on the very prefixes it is asked about,
     and kept as is it would make the held-out timing, and so the calibrated band, optimistic."""
-    import copy
-
     from .gaussian import fit_prior, shrink_cross
 
     keep = np.asarray(keep, dtype=np.intp)
-    m = copy.copy(model)  # the model's caches are keyed by the identity of prior_ / durations_, replaced below
-    m.thetas_ = model.thetas_[keep]
-    m.durations_ = model.durations_[keep]
-    m.mean_duration_ = float(m.durations_.mean())
-    m.n_demos_ = int(keep.size)
+    thetas = model.thetas_[keep]
+    durations = model.durations_[keep]
     lam = float(model.prior_.shrinkage) if model.covariance == "shrinkage" else None
-    m.prior_ = fit_prior(m.thetas_, model.covariance, model.ridge, shrinkage=lam)
+    prior = fit_prior(thetas, model.covariance, model.ridge, shrinkage=lam)
     gamma = float((getattr(model, "selection_", None) or {}).get("cross_shrinkage", 0.0) or 0.0)
-    shrink_cross(m.prior_, gamma, model.n_observed_latent_ * model._q)
-    m.calibration_ = None
-    if observed is not None and getattr(model, "phase_model_", None) is not None:
+    shrink_cross(prior, gamma, model.n_observed_latent_ * model.params_per_dof_)
+    phase_model = getattr(model, "phase_model_", None)
+    if observed is not None and phase_model is not None:
         from .phase.learned import LearnedPhase
 
-        m.phase_model_ = LearnedPhase(**model.phase_model_.get_params()).fit([observed[i] for i in keep],
-                                                                             dt=model.dt_)
-    return m
+        phase_model = LearnedPhase(**phase_model.get_params()).fit([observed[i] for i in keep], dt=model.dt_)
+    return model.with_fitted(thetas_=thetas, durations_=durations, mean_duration_=float(durations.mean()),
+                             n_demos_=int(keep.size), prior_=prior, calibration_=None, phase_model_=phase_model)
 
 
 LOOKAHEAD_EDGES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.4, 1.0)
@@ -259,7 +254,7 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
     observed = None
     if getattr(model, "phase_model_", None) is not None:  # refitted per fold (fold_model)
         n_o = model.n_observed_latent_
-        observed = [np.asarray(model._observed_to_latent(d[:, obs]))[:, :n_o] for d in demos]
+        observed = [np.asarray(model.observed_to_latent(d[:, obs]))[:, :n_o] for d in demos]
     D = demos[0].shape[1]
     spread = np.std(np.concatenate(demos, axis=0), axis=0)
     spread = np.where(spread > 0, spread, 1.0)

@@ -70,6 +70,7 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from ._validation import as_2d_finite
+from .contract import GridPrediction
 from .errors import NotFittedError
 
 __all__ = ["CouplingModel", "CouplingPrediction", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
@@ -125,64 +126,8 @@ def _smooth_time(v, w):
     return (c[..., hi, :] - c[..., lo, :]) / (hi - lo)[:, None]
 
 
-class CouplingPrediction:
-    """A prediction of the whole movement of both agents on normalised time ``0 .. 1``.
-
-    Parameters
-    ----------
-    times : ndarray, shape (K,)
-        Normalised times of ``mean`` and ``std``.
-    mean, std : ndarray, shape (K, D)
-        Predictive mean and standard deviation, columns in the demonstrations' order.
-    phase, phase_std : float
-        The phase estimate (fraction of the movement seen) the prediction was made with.
-    observed_dofs, controlled_dofs : list of int
-    method : str
-        The coupling that made it (``"mean"`` when the model fell back to the prior mean).
-    leverage : float
-        ``h`` of the module docstring (parameter variance / residual variance).
-    """
-
-    def __init__(self, times, mean, std, phase, phase_std, observed_dofs, controlled_dofs, method, leverage):
-        self.times = np.asarray(times, dtype=np.float64)
-        self.mean = np.asarray(mean, dtype=np.float64)
-        self._std = np.asarray(std, dtype=np.float64)
-        self.phase = float(phase)
-        self.phase_std = float(phase_std)
-        self.observed_dofs = list(observed_dofs)
-        self.controlled_dofs = list(controlled_dofs)
-        self.method = method
-        self.leverage = float(leverage)
-
-    def _interp(self, Y, n):
-        s = np.linspace(0.0, 1.0, int(n))
-        return np.stack([np.interp(s, self.times, Y[:, d]) for d in range(Y.shape[1])], axis=1)
-
-    def trajectory(self, n: int = 100) -> np.ndarray:
-        """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)``."""
-        return self._interp(self.mean, n)
-
-    @one_blas_thread
-    def std(self, n: int = 100) -> np.ndarray:
-        """Predictive standard deviation of all DoFs, shape ``(n, D)``."""
-        return self._interp(self._std, n)
-
-    def response(self, n: int = 100):
-        """The controlled agent's (robot's) mean and std, each ``(n, len(controlled_dofs))``."""
-        return self.trajectory(n)[:, self.controlled_dofs], self.std(n)[:, self.controlled_dofs]
-
-    def completion(self, n: int = 100):
-        """The observed agent's remaining movement: normalised times ``> phase`` and mean, std there."""
-        t = np.linspace(self.phase, 1.0, int(n))
-        m = np.stack([np.interp(t, self.times, self.mean[:, d]) for d in self.observed_dofs], axis=1)
-        s = np.stack([np.interp(t, self.times, self._std[:, d]) for d in self.observed_dofs], axis=1)
-        return t, m, s
-
-    def band(self, n: int = 100, coverage: float = 0.9):
-        """Lower and upper edge of the pointwise ``coverage`` band, each ``(n, D)``."""
-        z = _normal_quantile(0.5 + coverage / 2.0)
-        m, s = self.trajectory(n), self.std(n)
-        return m - z * s, m + z * s
+#: the prediction of :meth:`CouplingModel.predict` (:class:`interprim.contract.GridPrediction`; the old name is kept)
+CouplingPrediction = GridPrediction
 
 
 class CouplingModel:
@@ -637,7 +582,7 @@ class CouplingModel:
         if not hasattr(self, "method_"):
             raise NotFittedError("this CouplingModel is not fitted yet: call fit(demos) before predict")
         Do = len(self.observed_dofs_)
-        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=2)
+        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=1)  # one frame: a prefix that has not moved
         if isinstance(phase, (bool, np.bool_)) or not isinstance(phase, numbers.Real) or not math.isfinite(phase) \
                 or not 0.0 < float(phase) <= 1.0:
             raise ValueError(f"phase must be a number in (0, 1] (the fraction of the movement seen), got {phase!r}")
@@ -669,5 +614,58 @@ class CouplingModel:
         c[self.observed_dofs_] = self.scale_["observed"]
         c[self.controlled_dofs_] = self.scale_["controlled"]
         std = c[None, :] * np.sqrt(var * (1.0 + h))
-        return CouplingPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
-                                  self.controlled_dofs_, self.method_, h)
+        return GridPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
+                              self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
+                              n_observed=v.shape[0], conditioned=not self.fallback_to_mean_)
+
+    # ------------------------------------------------------------------ persistence
+    _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")
+    _SCALARS = ("observed_dofs_", "controlled_dofs_", "n_dofs_", "methods_", "n_demos_", "clock_rel_std_",
+                "mean_duration_", "method_", "param_", "fallback_to_mean_", "selection_", "scale_")
+
+    def to_state(self):
+        """``(arrays, meta)``: the fitted state, numeric arrays apart and the rest JSON-friendly (for the model
+        files of :mod:`interprim.io`; no pickle); :meth:`from_state` restores it.  A callable ``phase_std`` is
+        not stored: the owner passes it again to :meth:`from_state`."""
+        if not hasattr(self, "method_"):
+            raise NotFittedError("this CouplingModel is not fitted yet: call fit(demos) before to_state")
+        arrays = {k: getattr(self, k) for k in self._ARRAYS}
+        arrays["obs_frames"] = np.concatenate(self.obs_frames_)
+        arrays["obs_lengths"] = np.array([len(f) for f in self.obs_frames_])
+        params = {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
+        if callable(params.get("phase_std")):
+            params["phase_std"] = None
+        meta = {"params": _plain(params), "fitted": _plain({k: getattr(self, k) for k in self._SCALARS})}
+        return arrays, meta
+
+    @classmethod
+    def from_state(cls, arrays, meta, phase_std=None) -> "CouplingModel":
+        """The model saved by :meth:`to_state` (``phase_std``: the callable it was fitted with, if any)."""
+        params = dict(meta["params"])
+        if phase_std is not None:
+            params["phase_std"] = phase_std
+        obj = cls(**params)
+        for k in cls._ARRAYS:
+            setattr(obj, k, np.asarray(arrays[k]))
+        fitted = meta["fitted"]
+        for k in cls._SCALARS:
+            setattr(obj, k, fitted[k])
+        obj.methods_ = list(obj.methods_)
+        if isinstance(obj.param_, list):  # a blend: (ridge, bandwidth, weight)
+            obj.param_ = tuple(obj.param_)
+        ends = np.cumsum(arrays["obs_lengths"])
+        obj.obs_frames_ = [np.ascontiguousarray(f) for f in np.split(np.asarray(arrays["obs_frames"]), ends[:-1])]
+        return obj
+
+
+def _plain(v):
+    """``v`` with tuples, numpy scalars and arrays made JSON types (lists, floats, ints)."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v

@@ -206,7 +206,7 @@ class LinearRollout:
         self.n_steps = int(n_steps)
         K = self.n_steps
         Ad, Bd, powers = _discretisation(self.alpha_y, self.beta_y, K)
-        self._powers = powers  # (K+1, 2, 2)
+        self.powers = self._powers = powers  # (K+1, 2, 2): powers of the one-step transition
         mid = (np.arange(K) + 0.5) / K
         U = basis.phi_tilde(mid, self.alpha_y, self.beta_y)  # (K, q)
         q = U.shape[1]
@@ -222,7 +222,7 @@ class LinearRollout:
             dst[:, 0] += P[0, 0] * src[:, 0] + P[0, 1] * src[:, 1]
             dst[:, 1] += P[1, 0] * src[:, 0] + P[1, 1] * src[:, 1]
             shift *= 2
-        self._Z = Z
+        self.Z = self._Z = Z  # (K+1, 2, q): the forced response's rows on the grid
 
     @property
     def n_params(self) -> int:

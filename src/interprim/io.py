@@ -56,6 +56,7 @@ import struct
 import zipfile
 import zlib
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -67,7 +68,8 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["save_model", "load_model", "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
+__all__ = ["save_model", "load_model", "model_state", "model_from_state", "save_estimator", "load_estimator",
+           "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
 _NPY_MAGIC = b"\x93NUMPY"
@@ -89,7 +91,7 @@ def _metadata(model) -> dict:
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "params": model.get_params(),
+        "params": model.json_params(),
         "observed_dofs": list(model.observed_dofs_),
         "controlled_dofs": list(model.controlled_dofs_),
         "n_dofs": int(model.n_dofs_),
@@ -126,8 +128,17 @@ def _arrays(model) -> dict:
 
 
 def save_model(model, path) -> None:
-    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3)."""
+    """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3): its
+    :meth:`~interprim.primitive.InteractionPrimitive.to_state`, each array checksummed."""
     path = Path(path)
+    arrays, meta = model.to_state()
+    meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
+    _write(path, meta, arrays)
+
+
+def model_state(model):
+    """``(arrays, meta)`` of a fitted Interaction Primitive as a model file holds them (without checksums;
+    :meth:`~interprim.primitive.InteractionPrimitive.to_state`)."""
     meta = _metadata(model)
     arrays = _arrays(model)
     for name in ("diag", "factor"):  # the prior's diagonal + low-rank form (exact reload of the fast path)
@@ -143,7 +154,7 @@ def save_model(model, path) -> None:
         arrays["input_mean"] = np.asarray(model.input_mean_)
         arrays["input_std"] = np.asarray(model.input_std_)
         meta["input_limit"] = float(model.input_limit_)
-    meta["phase_method_used"] = model._phase()
+    meta["phase_method_used"] = model.phase_method_used()
     pm = getattr(model, "phase_model_", None)  # the learned phase (phase_method="learned")
     if pm is not None:
         pm_arrays, meta["phase_model"] = pm.to_state()
@@ -154,8 +165,45 @@ def save_model(model, path) -> None:
         for k, v in cal.to_arrays().items():
             arrays[f"calibration_{k}"] = np.asarray(v)
     meta["selection"] = getattr(model, "selection_", None)
-    meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
+    return arrays, meta
+
+
+def save_estimator(model, path) -> None:
+    """Write a fitted model other than the Interaction Primitive (any :class:`~interprim.contract.Predictor`).
+
+    The same container as :func:`save_model` (format version 3: checksummed ``.npy`` members and a JSON
+    ``metadata``), with ``metadata["model"]`` the class name, ``metadata["model_version"]`` its
+    ``STATE_VERSION``, ``params`` its constructor arguments and ``state`` the JSON part of its
+    :meth:`~interprim.contract.Predictor.to_state`.
+    """
+    path = Path(path)
+    arrays, state = model.to_state()
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "model": type(model).__name__,
+            "model_version": int(model.STATE_VERSION), "params": model.json_params(), "state": state,
+            "checksums": {k: _checksum(v) for k, v in arrays.items()}}
     _write(path, meta, arrays)
+
+
+def load_estimator(path, model_class):
+    """Read a model written by :func:`save_estimator` as a ``model_class`` (no pickle, every array checked)."""
+    path = Path(path)
+    meta, data = _read_archive(path)
+    name = model_class.__name__
+    kind = meta.get("model", "InteractionPrimitive")
+    _expect(kind == name, path, f"holds a {kind} model, not a {name}")
+    version = meta.get("model_version")
+    _expect(type(version) is int and 1 <= version <= model_class.STATE_VERSION, path,
+            f"{name} model_version {version!r} is not supported by this interprim "
+            f"(reads 1..{model_class.STATE_VERSION})")
+    try:
+        model = model_class(**meta["params"])
+        model.load_state(data, meta["state"])
+    except ModelFileError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ModelFileError(f"{path}: corrupt {name} model file ({type(exc).__name__}: {exc})") from None
+    return model
 
 
 def _write(path: Path, meta: dict, arrays: dict) -> None:
@@ -265,70 +313,81 @@ def load_model(path, model_class):
     ``model_class`` (:class:`~interprim.primitive.InteractionPrimitive`)."""
     path = Path(path)
     meta, data = _read_archive(path)
+    kind = meta.get("model", "InteractionPrimitive")
+    _expect(kind == "InteractionPrimitive", path, f"holds a {kind} model, not an InteractionPrimitive")
+    return model_class.from_state(data, meta, source=path)
+
+
+def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
+    """The model of ``(data, meta)`` (a model file's arrays and metadata, format versions 1-3), every array
+    checked; problems raise :class:`~interprim.errors.ModelFileError` naming ``path``
+    (:meth:`~interprim.primitive.InteractionPrimitive.from_state`)."""
     try:
         model = model_class(**meta["params"])
-        model.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
-        model.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
-        model.n_dofs_ = int(meta["n_dofs"])
-        model.n_observed_latent_ = int(meta["n_observed_latent"])
-        model.n_latent_ = int(meta["n_latent"])
-        model.beta_y_ = float(meta["beta_y"])
-        model.dt_ = float(meta["dt"])
-        model.mean_duration_ = float(meta["mean_duration"])
-        model.sigma2_ = float(meta["sigma2"])
+        st = SimpleNamespace()  # the fitted attributes, handed to the model at the end (load_fitted)
+        st.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
+        st.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
+        st.n_dofs_ = int(meta["n_dofs"])
+        st.n_observed_latent_ = int(meta["n_observed_latent"])
+        st.n_latent_ = int(meta["n_latent"])
+        st.beta_y_ = float(meta["beta_y"])
+        st.dt_ = float(meta["dt"])
+        st.mean_duration_ = float(meta["mean_duration"])
+        st.sigma2_ = float(meta["sigma2"])
         ps2 = meta.get("phase_sigma2")  # noise of the likelihood phase estimator (absent in older files)
-        model.phase_sigma2_ = None if ps2 is None else float(ps2)
-        model.n_demos_ = int(meta["n_demos"])
+        st.phase_sigma2_ = None if ps2 is None else float(ps2)
+        st.n_demos_ = int(meta["n_demos"])
         cols = meta.get("columns")  # column names (absent in older files; the CLI's legacy 'columns' array)
         if cols is None and "columns" in data:
             cols = [str(c) for c in data["columns"]]
-        _expect(cols is None or (isinstance(cols, list) and len(cols) == model.n_dofs_), path,
-                f"columns {cols!r} do not name the model's {model.n_dofs_} columns")
-        model.columns_ = None if cols is None else [str(c) for c in cols]
+        _expect(cols is None or (isinstance(cols, list) and len(cols) == st.n_dofs_), path,
+                f"columns {cols!r} do not name the model's {st.n_dofs_} columns")
+        st.columns_ = None if cols is None else [str(c) for c in cols]
         sel = meta.get("selection")  # hyper-parameter selection record (version 2; absent when fit made none)
         _expect(sel is None or isinstance(sel, dict), path, "corrupt metadata: 'selection' is not a record")
         if sel is not None:
-            model.selection_ = sel
-        model.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
-                                     float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
-        model.thetas_ = data["thetas"]
-        model.reference_ = data["reference"]
-        model.start_position_ = data["start_position"]
-        model.start_velocity_ = data["start_velocity"]
-        model.durations_ = data["durations"]
-        model.input_mean_ = model.input_std_ = model.input_limit_ = None  # absent in older files: no check
+            st.selection_ = sel
+        st.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
+                                  float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
+        st.thetas_ = data["thetas"]
+        st.reference_ = data["reference"]
+        st.start_position_ = data["start_position"]
+        st.start_velocity_ = data["start_velocity"]
+        st.durations_ = data["durations"]
+        st.input_mean_ = st.input_std_ = st.input_limit_ = None  # absent in older files: no check
         if "input_mean" in data:
-            model.input_mean_, model.input_std_ = data["input_mean"], data["input_std"]
-            model.input_limit_ = float(meta["input_limit"])
-            n_o = len(model.observed_dofs_)
-            _expect(model.input_mean_.shape == (n_o,) and model.input_std_.shape == (n_o,)
-                    and bool(np.all(model.input_std_ > 0)) and model.input_limit_ > 0, path,
+            st.input_mean_, st.input_std_ = data["input_mean"], data["input_std"]
+            st.input_limit_ = float(meta["input_limit"])
+            n_o = len(st.observed_dofs_)
+            _expect(st.input_mean_.shape == (n_o,) and st.input_std_.shape == (n_o,)
+                    and bool(np.all(st.input_std_ > 0)) and st.input_limit_ > 0, path,
                     f"arrays 'input_mean'/'input_std' are not ({n_o},) statistics with a positive spread")
-        model.phase_model_ = None
+        st.phase_model_ = None
         if meta.get("phase_model") is not None:
             from .phase.learned import LearnedPhase
 
-            model.phase_model_ = LearnedPhase.from_state(
+            st.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
                 meta["phase_model"])
         used = meta.get("phase_method_used")  # absent in files older than phase_method="auto": as set there
-        model.phase_method_ = str(used if used is not None else
-                                  (model.phase_method if model.phase_method != "auto" else "likelihood"))
-        _expect(model.phase_method_ in ("dtw", "likelihood", "learned"), path,
-                f"unknown phase method {model.phase_method_!r} in the metadata")
-        _expect(model._phase() != "learned" or model.phase_model_ is not None, path,
+        st.phase_method_ = str(used if used is not None else
+                               (model.phase_method if model.phase_method not in ("cv", "auto") else "likelihood"))
+        _expect(st.phase_method_ in ("dtw", "likelihood", "learned"), path,
+                f"unknown phase method {st.phase_method_!r} in the metadata")
+        used = st.phase_method_ if model.phase_method in ("cv", "auto") else model.phase_method
+        _expect(used != "learned" or st.phase_model_ is not None, path,
                 "the phase method is 'learned' but the file holds no phase model")
-        model.calibration_ = None
+        st.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
             from .calibration import Calibration
 
             try:
-                model.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
-                                                              if k.startswith("calibration_")})
+                st.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
+                                                           if k.startswith("calibration_")})
             except (KeyError, TypeError, ValueError) as exc:
                 raise ModelFileError(f"{path}: arrays 'calibration_*' are not a calibration: "
                                      f"{type(exc).__name__}: {exc}") from None
-            bad = model.calibration_.problem(len(model.observed_dofs_) + len(model.controlled_dofs_))
+            bad = st.calibration_.problem(len(st.observed_dofs_) + len(st.controlled_dofs_))
             _expect(bad is None, path, f"arrays 'calibration_*' are not a calibration: {bad}")
         for agent in ("observed", "controlled"):
             pca = None
@@ -341,17 +400,17 @@ def load_model(path, model_class):
                 evr = data.get(f"pca_{agent}_explained_variance_ratio")
                 if evr is not None:
                     pca.explained_variance_ratio_ = evr
-            setattr(model, f"pca_{agent}_", pca)
+            setattr(st, f"pca_{agent}_", pca)
     except ModelFileError:
         raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
 
     q = model.n_basis + 1
-    P = model.n_latent_ * q
+    P = st.n_latent_ * q
     checks = {
-        "prior_mean": (P,), "prior_cov": (P, P), "thetas": (model.n_demos_, P),
-        "start_position": (model.n_latent_,), "start_velocity": (model.n_latent_,), "durations": (model.n_demos_,),
+        "prior_mean": (P,), "prior_cov": (P, P), "thetas": (st.n_demos_, P),
+        "start_position": (st.n_latent_,), "start_velocity": (st.n_latent_,), "durations": (st.n_demos_,),
     }
     if "prior_diag" in data or "prior_factor" in data:
         _expect("prior_diag" in data and "prior_factor" in data, path,
@@ -366,13 +425,13 @@ def load_model(path, model_class):
         arr = data[key]
         _expect(np.issubdtype(arr.dtype, np.floating) and bool(np.all(np.isfinite(arr))), path,
                 f"array '{key}' is not finite floating point")
-    ref = model.reference_
-    _expect(ref.ndim == 2 and ref.shape[1] == model.n_observed_latent_ and ref.shape[0] >= 2, path,
-            f"array 'reference' has shape {ref.shape}, expected (N>=2, {model.n_observed_latent_})")
-    _expect(sorted(model.observed_dofs_ + model.controlled_dofs_) == list(range(model.n_dofs_)), path,
+    ref = st.reference_
+    _expect(ref.ndim == 2 and ref.shape[1] == st.n_observed_latent_ and ref.shape[0] >= 2, path,
+            f"array 'reference' has shape {ref.shape}, expected (N>=2, {st.n_observed_latent_})")
+    _expect(sorted(st.observed_dofs_ + st.controlled_dofs_) == list(range(st.n_dofs_)), path,
             "observed_dofs and controlled_dofs do not partition the columns")
     try:
-        model._setup()
+        model.load_fitted(vars(st))
     except (TypeError, ValueError, OverflowError) as exc:
         raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
     return model

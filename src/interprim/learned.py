@@ -12,9 +12,10 @@ clock, a response better than the mean):
    beats it; calibrated predictive std.
 
 The phase error the coupling is trained with is the learned phase's cross-validated error at each elapsed
-time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The prediction has the small
-interface every method of :mod:`interprim.evaluation.realtime` and :mod:`interprim.evaluation.baselines` shares: ``trajectory(n)``,
-``std(n)`` on normalised time, and ``normalised_time``, ``duration``, ``phase`` for placing it in seconds.
+time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The model follows the prediction
+contract of :mod:`interprim.contract` (``fit``, ``predict``, ``stream``, ``save``/``load``, ``get_params``/
+``set_params``); its prediction is a :class:`~interprim.contract.GridPrediction` whose ``std`` includes the
+timing uncertainty.
 
 It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP, no rollout from a
 robot state and no streaming state here (each :meth:`predict` is a pure function of the prefix, so a stream
@@ -26,55 +27,26 @@ from __future__ import annotations
 import numpy as np
 
 from ._blas import one_blas_thread
+from ._validation import as_2d_finite
+from .contract import GridPrediction, Predictor
 from .coupling import CouplingModel
 from .phase.learned import LearnedPhase
 
 __all__ = ["LearnedInteraction"]
 
 
-class _Prediction:
-    """A :class:`~interprim.coupling.CouplingPrediction` with the timing that placed it."""
-
-    def __init__(self, cp, est):
-        self._cp = cp
-        self.phase_estimate = est
-        self.normalised_time = float(est.phase)
-        self.phase = float(est.phase)
-        self.duration = float(est.duration)
-        self.speed = float(est.speed)
-        self.phase_std = float(est.std)
-
-    def trajectory(self, n: int = 100) -> np.ndarray:
-        """Mean of all DoFs on the normalised-time grid ``linspace(0, 1, n)``, shape ``(n, D)``."""
-        return self._cp.trajectory(n)
-
-    @one_blas_thread
-    def std(self, n: int = 100, timing: bool = True) -> np.ndarray:
-        """Predictive standard deviation of :meth:`trajectory`, shape ``(n, D)``.
-
-        The coupling's calibrated std (:class:`~interprim.coupling.CouplingPrediction`, errors measured in
-        normalised time, where timing errors do not show) combined with the timing uncertainty
-        (``timing=True``): a point at normalised time ``u`` is placed in real time by the phase ``s`` and the
-        duration ``D = elapsed / s``; a relative error ``e = std(s) / s`` of the phase moves it by ``u e`` to
-        first order, and the position there by ``|dy/du| u e``, added in quadrature (``e`` capped at 1).
-        """
-        sd = self._cp.std(n)
-        if not timing or self.phase <= 0.0 or self.phase_std <= 0.0:
-            return sd
-        u = np.linspace(0.0, 1.0, int(n))
-        slope = np.gradient(self._cp.trajectory(n), u, axis=0)
-        e = min(self.phase_std / self.phase, 1.0)
-        return np.sqrt(sd * sd + (slope * (u * e)[:, None]) ** 2)
-
-    def response(self, n: int = 100):
-        return self._cp.response(n)
-
-    def __repr__(self):
-        return (f"LearnedInteraction prediction(phase={self.phase:.3f}, duration={self.duration:.3f} s, "
-                f"coupling={self._cp.method})")
+def _Prediction(cp: GridPrediction, est) -> GridPrediction:
+    """``cp`` (the coupling's prediction) placed in time by the phase estimate ``est``, with the timing
+    uncertainty added to its std (:meth:`~interprim.contract.GridPrediction.std`)."""
+    out = GridPrediction(cp.times, cp.mean, cp.std_values, est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
+                         cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
+                         conditioned=cp.conditioned)
+    out.speed = float(est.speed)
+    out.phase_estimate = est
+    return out
 
 
-class LearnedInteraction:
+class LearnedInteraction(Predictor):
     """Learned timing + learned coupling (see the module docstring).
 
     Parameters
@@ -84,7 +56,19 @@ class LearnedInteraction:
     phase_kwargs, coupling_kwargs : dict, optional
         Extra arguments of :class:`~interprim.phase.learned.LearnedPhase` and
         :class:`~interprim.coupling.CouplingModel`.
+
+    Attributes
+    ----------
+    phase_ : LearnedPhase
+        The timing model, fitted on the observed columns.
+    coupling_ : CouplingModel
+        The coupling, trained with ``phase_``'s cross-validated error.
+    observed_dofs_ : list of int
+    dt_ : float
+        Sampling interval of the demonstrations (s).
     """
+
+    _FITTED = "coupling_"
 
     def __init__(self, observed_dofs, phase_kwargs=None, coupling_kwargs=None):
         self.observed_dofs = observed_dofs
@@ -100,25 +84,53 @@ class LearnedInteraction:
         demos = [np.asarray(d, dtype=np.float64) for d in demos]
         if dt is None:
             raise ValueError("dt (the demonstrations' sampling interval in seconds) is required")
+        for name in ("phase_kwargs", "coupling_kwargs"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, dict):
+                raise TypeError(f"{name} must be a dict or None, got {type(v).__name__}")
         obs = [int(i) for i in self.observed_dofs]
-        self.phase_ = LearnedPhase(**(self.phase_kwargs or {})).fit([d[:, obs] for d in demos], dt=dt)
-        grid_t = np.arange(len(self.phase_.std_grid_)) * float(self.phase_.dt_)
-        std_grid = np.asarray(self.phase_.std_grid_, dtype=np.float64)
-        mean_dur = float(self.phase_.mean_duration_)
+        phase = LearnedPhase(**(self.phase_kwargs or {})).fit([d[:, obs] for d in demos], dt=dt)
+        coupling = CouplingModel(obs, **self._coupling_kwargs(phase)).fit(demos, dt=dt)
+        self.phase_, self.coupling_, self.dt_, self.observed_dofs_ = phase, coupling, float(dt), obs
+        return self
+
+    def _coupling_kwargs(self, phase: LearnedPhase) -> dict:
+        grid_t = np.arange(len(phase.std_grid_)) * float(phase.dt_)
+        std_grid = np.asarray(phase.std_grid_, dtype=np.float64)
+        mean_dur = float(phase.mean_duration_)
 
         def phase_err(s, _t=grid_t, _g=std_grid, _d=mean_dur):  # CV error of the phase at normalised time s
             return np.interp(np.asarray(s, dtype=np.float64) * _d, _t, _g)
 
         kw = dict(phase_std=phase_err)
         kw.update(self.coupling_kwargs or {})
-        self.coupling_ = CouplingModel(obs, **kw).fit(demos, dt=dt)
-        self.dt_ = float(dt)
-        return self
+        return kw
 
     @one_blas_thread
-    def predict(self, partial) -> _Prediction:
+    def predict(self, partial) -> GridPrediction:
         """Phase of the prefix (learned), then the whole movement of both agents given it (coupling)."""
+        self._check_fitted("predict")
+        partial = as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
         est = self.phase_.estimate(partial)
         s = float(np.clip(est.phase, 1e-3, 1.0))
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
+
+    def to_state(self):
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        self._check_fitted("to_state")
+        pa, pm = self.phase_.to_state()
+        ca, cm = self.coupling_.to_state()
+        arrays = {**{f"phase_{k}": v for k, v in pa.items()}, **{f"coupling_{k}": v for k, v in ca.items()}}
+        return arrays, {"phase": pm, "coupling": cm, "dt_": self.dt_, "observed_dofs_": self.observed_dofs_}
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        self.phase_ = LearnedPhase.from_state({k[6:]: v for k, v in arrays.items() if k.startswith("phase_")},
+                                              meta["phase"])
+        ca = {k[9:]: v for k, v in arrays.items() if k.startswith("coupling_")}
+        phase_std = self._coupling_kwargs(self.phase_)["phase_std"]
+        self.coupling_ = CouplingModel.from_state(ca, meta["coupling"], phase_std=phase_std if callable(phase_std)
+                                                  else None)
+        self.dt_ = float(meta["dt_"])
+        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]

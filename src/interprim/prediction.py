@@ -18,12 +18,13 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from ._compiled import loader
+from .contract import BasePrediction
 from .gaussian import Posterior, sample
 
 __all__ = ["Prediction", "MeanRollout"]
 
 
-class Prediction:
+class Prediction(BasePrediction):
     """The model's belief about the whole interaction after a partial observation.
 
     Attributes
@@ -102,19 +103,21 @@ class Prediction:
         """Covariance of ``p(theta | tau_o)`` (Eq. 18) in the layout of :attr:`posterior_mean`; computed on first
         access after a mean-only (streaming) update."""
         if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
-            self._post = self._m._condition(self._stats, need_cov=True)
+            self._post = self._m.condition(self._stats, need_cov=True)
         return self._post.cov
 
     @property
     def goal(self) -> np.ndarray:
         """Posterior mean goal attractor ``g`` of every DoF, in data columns, shape ``(D,)``."""
         m = self._m
-        q = m._q
+        q = m.params_per_dof_
         g_lat = self._post.mean.reshape(m.n_latent_, q)[:, -1]
-        M, off = m._latent_map()
+        M, off = m.latent_map()
         return M @ g_lat + off
 
-    def _start_states(self):
+    def start_states(self):
+        """Start position and velocity ``(y0, v0)`` of every latent DoF (observed agent first) from which the
+        prediction's movement is integrated (Eq. 1)."""
         m = self._m
         n_o = m.n_observed_latent_
         y0 = np.concatenate([self._y0_obs, self._robot_start[0]])
@@ -126,10 +129,11 @@ class Prediction:
         free, H = self._m.rollout_.design(s0, s_out)
         return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
 
-    def _theta(self, flat=None):
+    def theta(self, flat=None):
+        """Posterior mean DMP parameters (or the flat vectors ``flat``) as ``(..., n_latent, n_basis + 1)``."""
         m = self._m
         flat = self._post.mean if flat is None else flat
-        return flat.reshape(*flat.shape[:-1], m.n_latent_, m._q)
+        return flat.reshape(*flat.shape[:-1], m.n_latent_, m.params_per_dof_)
 
     # -- trajectories
     @one_blas_thread
@@ -141,9 +145,9 @@ class Prediction:
         """
         m = self._m
         s = np.linspace(0.0, 1.0, int(n))
-        y0, v0 = self._start_states()
-        lat = self._latent_traj(self._theta(), s, y0, v0)
-        M, off = m._latent_map()
+        y0, v0 = self.start_states()
+        lat = self._latent_traj(self.theta(), s, y0, v0)
+        M, off = m.latent_map()
         return lat @ M.T + off
 
     def _calibration_scale(self, n: int):
@@ -175,8 +179,8 @@ class Prediction:
         m = self._m
         s = np.linspace(0.0, 1.0, int(n))
         _, H = m.rollout_.design(0.0, s)
-        C = self.posterior_cov.reshape(m.n_latent_, m._q, m.n_latent_, m._q)
-        M, _ = m._latent_map()
+        C = self.posterior_cov.reshape(m.n_latent_, m.params_per_dof_, m.n_latent_, m.params_per_dof_)
+        M, _ = m.latent_map()
         if M.shape[0] == M.shape[1] and np.array_equal(M, np.eye(M.shape[0])):  # no PCA: the diagonal blocks
             d = np.arange(m.n_latent_)
             var = np.sum(np.matmul(H[None], C[d, :, d, :]) * H[None], axis=2).T  # diag(H C_dd H^T) per DoF
@@ -192,9 +196,9 @@ class Prediction:
         m = self._m
         th = sample(self._post.mean, self.posterior_cov, int(n_samples), random_state)
         s = np.linspace(0.0, 1.0, int(n))
-        y0, v0 = self._start_states()
-        lat = self._latent_traj(self._theta(th), s, y0, v0)
-        M, off = m._latent_map()
+        y0, v0 = self.start_states()
+        lat = self._latent_traj(self.theta(th), s, y0, v0)
+        M, off = m.latent_map()
         out = lat @ M.T + off
         f = self._calibration_scale(n)
         if f is not None:  # spread about the mean scaled like std(): trajectories are affine in theta
@@ -228,19 +232,19 @@ class Prediction:
         n = int(n)
         n_o = m.n_observed_latent_
         s0 = self.normalised_time
-        th = self._post.mean.reshape(m.n_latent_, m._q)[n_o:]
+        th = self._post.mean.reshape(m.n_latent_, m.params_per_dof_)[n_o:]
         if state is None:
             rs = self._robot_start
             z0 = rs[2] if len(rs) > 2 else np.vstack(rs[:2])
             at_s0 = False
         else:
-            y0, v0 = m._robot_start(state)
+            y0, v0 = m.robot_start(state)
             z0 = np.vstack([y0, v0 / m.mean_duration_ * self.duration])
             at_s0 = True
         ro = m.rollout_
         t = np.empty(n)
-        lat = kern(ro._Z, ro._powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])), self.duration, t)
-        Mc, offc = m._controlled_map()
+        lat = kern(ro.Z, ro.powers, s0, n, th, z0, at_s0, np.empty((n, th.shape[0])), self.duration, t)
+        Mc, offc = m.controlled_map()
         return t, (lat if Mc is None else lat @ Mc + offc)
 
     def _response_reference(self, n: int = 100, state=None):
@@ -249,7 +253,7 @@ class Prediction:
         n_o = m.n_observed_latent_
         s0 = self.normalised_time
         s = np.linspace(s0, 1.0, int(n))
-        th = self._theta()[n_o:]
+        th = self.theta()[n_o:]
         if state is None:
             rs = self._robot_start
             free, H = m.rollout_.design(0.0, np.array([s0]))
@@ -258,10 +262,10 @@ class Prediction:
             y0 = (free @ z0 + H @ th.T)[0]
             v0 = (freed @ z0 + Hd @ th.T)[0]
         else:
-            y0, v0 = m._robot_start(state)
+            y0, v0 = m.robot_start(state)
             v0 = v0 / m.mean_duration_ * self.duration
         lat = self._latent_traj(th, s, y0, v0, s0=s0)
-        M, off = m._latent_map()
+        M, off = m.latent_map()
         ctrl = m.controlled_dofs_
         y = lat @ M[ctrl, n_o:].T + off[ctrl]
         return (s - s0) * self.duration, y
@@ -277,13 +281,13 @@ class Prediction:
         n_o = m.n_observed_latent_
         s0 = self.normalised_time
         s = np.linspace(s0, 1.0, int(n))
-        th = self._theta()[:n_o]
+        th = self.theta()[:n_o]
         # velocity at the current phase from the posterior mean movement
         freed, Hd = m.rollout_.design(0.0, np.array([s0]), derivative=1)
         z0 = np.vstack([self._y0_obs, m.start_velocity_[:n_o]])
         v0 = (freed @ z0 + Hd @ th.T)[0]
         lat = self._latent_traj(th, s, self._last_obs, v0, s0=s0)
-        M, off = m._latent_map()
+        M, off = m.latent_map()
         obs = m.observed_dofs_
         return s, lat @ M[obs, :n_o].T + off[obs]
 
@@ -331,13 +335,13 @@ class MeanRollout:
     def __init__(self, model, n: int, columns=None):
         sel = slice(None) if columns is None else columns
         free, H = model.rollout_.design(0.0, np.linspace(0.0, 1.0, int(n)))
-        M, off = model._latent_map()
+        M, off = model.latent_map()
         self.free, self.H = np.ascontiguousarray(free), np.ascontiguousarray(H)
         self.MT, self.off = np.ascontiguousarray(M[sel].T), np.ascontiguousarray(off[sel])
 
     def __call__(self, pred: Prediction) -> np.ndarray:
         """The posterior mean of ``pred`` on the grid, shape ``(n, len(columns))``."""
-        y0, v0 = pred._start_states()
-        th = pred._theta()
+        y0, v0 = pred.start_states()
+        th = pred.theta()
         lat = self.free @ np.vstack((y0, v0)) + self.H @ th.T
         return lat @ self.MT + self.off

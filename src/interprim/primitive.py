@@ -21,6 +21,7 @@ import numbers
 import numpy as np
 
 from ._blas import one_blas_thread, single_thread
+from .contract import Predictor
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
@@ -36,11 +37,16 @@ from .stream import Stream
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
-PHASE_METHODS = ("dtw", "likelihood", "learned", "auto")
+COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
+PHASE_METHODS = ("dtw", "likelihood", "learned", "cv", "auto")  # "auto": the old name of "cv"
+SIGMA2_RULES = ("cv", "residual", "auto")  # "auto": the old name of "residual"
 
 
-class InteractionPrimitive:
+class InteractionPrimitive(Predictor):
     """An Interaction Primitive (Ben Amor et al., ICRA 2014).
+
+    The parameters marked "(Advanced.)" are rarely changed: their defaults are the paper's or were measured
+    to suit every data set we have.
 
     Parameters
     ----------
@@ -52,12 +58,12 @@ class InteractionPrimitive:
     n_basis : int, default 20
         Basis functions per DoF (Eq. 2); ``theta`` has ``n_basis + 1`` entries per DoF.
     alpha_y : float, default 25.0
-        Spring constant of Eq. 1.
+        (Advanced.) Spring constant of Eq. 1.
     beta_y : float, optional
-        Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
+        (Advanced.) Damper constant of Eq. 1; default ``alpha_y / 4`` (critically damped).
     alpha_x : float, default 3.0
-        Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
-    sigma2 : "cv", "auto" or float, default "cv"
+        (Advanced.) Canonical system decay; ``x`` falls from 1 to ``exp(-alpha_x)`` over the movement.
+    sigma2 : "cv", "residual" or float, default "cv"
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
         K-fold cross-validation (the observed agent's completion within its noise, then the controlled
@@ -65,7 +71,7 @@ class InteractionPrimitive:
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).
-        ``"auto"`` (the paper's setting) uses the mean
+        ``"residual"`` (the paper's setting; ``"auto"`` is its old name, still accepted) uses the mean
         squared residual of the observation model on the training
         demonstrations' own fits (observed DoFs), which sets the noise on the
         scale of the chosen observation; on noisy or recorded data it is
@@ -73,14 +79,14 @@ class InteractionPrimitive:
     covariance : {"shrinkage", "ridge", "empirical"}, default "shrinkage"
         Regularisation of Eq. 10's covariance (see :func:`interprim.gaussian.fit_prior`).
     ridge : float, default 1e-6
-        Relative diagonal loading of the covariance.
+        (Advanced.) Relative diagonal loading of the covariance.
     observation : {"position", "forcing"}, default "position"
         ``"forcing"`` conditions on forcing values of the observation (Eq. 15,
         the paper's method, kept exactly); ``"position"`` (the default) conditions on the observed
         positions themselves, which are linear in ``theta`` given the start
         state (integrated Eq. 1), and needs no second derivatives: better or
         equal on every recorded or noisy data set we measured (``docs/observation-models.md``).
-        The paper's method exactly is ``observation="forcing", sigma2="auto", phase_method="dtw"``.
+        The paper's method exactly is ``observation="forcing", sigma2="residual", phase_method="dtw"``.
     smoothing_window : int or None, default None
         Savitzky-Golay window (frames) used for the derivatives of Eq. 3 and
         Eq. 15; ``None`` uses central differences (noise-free data).
@@ -88,14 +94,14 @@ class InteractionPrimitive:
         Project each agent onto this many principal components before
         learning (paper Sec. IV); an int applies to both agents.
     reference : "mean" or int, default "mean"
-        Reference movement for DTW: the mean of the time-normalised
+        (Advanced.) Reference movement for DTW: the mean of the time-normalised
         demonstrations of the observed agent, or the demonstration with this index
         (the paper's choice).
     min_observed : int, default 3
-        Fewer observed frames than this give the prior (no conditioning).
+        (Advanced.) Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
-        Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
-    phase_method : {"auto", "likelihood", "learned", "dtw"}, default "auto"
+        (Advanced.) Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
+    phase_method : {"auto", "cv", "likelihood", "learned", "dtw"}, default "auto"
         How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
 
         * ``"likelihood"``: the maximum of the marginal likelihood of the observed positions under the learned
@@ -107,7 +113,8 @@ class InteractionPrimitive:
           prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
           recordings of people (NuiSI: 0.71x its error), where the likelihood phase is not; worse on clean
           simulated data.
-        * ``"auto"`` (default): whichever of the two has the smaller held-out phase error on the training
+        * ``"cv"``, or ``"auto"`` (the default, the same choice under its old name): whichever of the two has
+          the smaller held-out phase error on the training
           demonstrations (``phase_method_``; both figures in ``selection_``: ``phase_error_refined`` and
           ``learned_phase_error``).  It picks the likelihood on the built-in simulated and synthetic data and
           the learned phase on all six NuiSI interactions.
@@ -130,6 +137,47 @@ class InteractionPrimitive:
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
+
+    Attributes
+    ----------
+    observed_dofs_, controlled_dofs_ : list of int
+        Data columns of the observed and the controlled agent.
+    n_dofs_ : int
+        Columns of the demonstrations.
+    columns_ : list of str or None
+        Their names, when given to :meth:`fit`.
+    dt_ : float
+        Sampling interval of the (resampled) demonstrations, seconds.
+    n_demos_ : int
+        Number of demonstrations.
+    durations_ : ndarray, shape (n_demos_,)
+        Duration of each demonstration in seconds; ``mean_duration_`` is their mean.
+    beta_y_ : float
+        Damper constant of Eq. 1 in use.
+    pca_observed_, pca_controlled_ : PCA or None
+        Per-agent projections (Sec. IV); ``n_observed_latent_`` and ``n_latent_`` count the latent DoFs.
+    basis_ : Basis
+        The basis functions of Eq. 2; ``rollout_`` integrates Eq. 1 linearly in ``theta``.
+    thetas_ : ndarray, shape (n_demos_, n_latent_ * (n_basis + 1))
+        DMP parameters ``[w_1, g_1, ..., w_N, g_N]`` of each demonstration (Eq. 3-4), observed DoFs first.
+    prior_ : GaussianPrior
+        ``p(theta)`` of Eq. 10.
+    sigma2_ : float
+        Observation noise of Eq. 16 in use; ``phase_sigma2_`` the position noise of the likelihood phase
+        (``None`` when not chosen).
+    selection_ : dict or None
+        What the cross-validation chose and measured (:mod:`interprim.selection`).
+    phase_method_ : str
+        The phase method ``fit`` chose (``phase_method="auto"``) or was given; ``phase_model_`` is the
+        fitted :class:`~interprim.phase.learned.LearnedPhase` or ``None``.
+    reference_ : ndarray, shape (N, n_observed_latent_)
+        DTW reference of the observed agent (Sec. III-B).
+    start_position_, start_velocity_ : ndarray, shape (n_latent_,)
+        Mean start state of the demonstrations (latent DoFs; velocity per unit normalised time).
+    input_mean_, input_std_, input_limit_ : ndarray, ndarray, float
+        Range of the observed agent's training frames (:mod:`interprim.input_range`).
+    calibration_ : Calibration or None
+        Scales of the predictive std (:mod:`interprim.calibration`).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
@@ -156,8 +204,8 @@ class InteractionPrimitive:
         self.calibrate = calibrate
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict:
-        """Hyper-parameters as a JSON-friendly dict (scikit-learn convention)."""
+    def json_params(self) -> dict:
+        """:meth:`get_params` with JSON types (lists, floats, ints), as stored in a model file."""
         obs = self.observed_dofs
         pca = self.pca_components
         return {
@@ -176,7 +224,8 @@ class InteractionPrimitive:
             "calibrate": self.calibrate if isinstance(self.calibrate, str) else bool(self.calibrate),
         }
 
-    def _check_params(self, n_dofs: int):
+    def _check_params(self, n_dofs: int, n_demos: int):
+        """Validate every parameter (cheap; ``fit`` calls it before any expensive work)."""
         obs = self.observed_dofs
         if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
             raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
@@ -198,7 +247,7 @@ class InteractionPrimitive:
             raise ValueError(f"observation must be one of {OBSERVATION_MODELS}, got {self.observation!r}")
         if self.input_noise is not None:
             check_positive(self.input_noise, "input_noise")
-        if not (isinstance(self.sigma2, str) and self.sigma2 in ("auto", "cv")):
+        if not (isinstance(self.sigma2, str) and self.sigma2 in SIGMA2_RULES):
             check_positive(self.sigma2, "sigma2")
         if self.phase_method not in PHASE_METHODS:
             raise ValueError(f"phase_method must be one of {PHASE_METHODS}, got {self.phase_method!r}")
@@ -207,6 +256,24 @@ class InteractionPrimitive:
             raise ValueError(f"smoothing_window must be None or an odd integer >= 3, got {self.smoothing_window!r}")
         if not isinstance(self.min_observed, numbers.Integral) or self.min_observed < 3:
             raise ValueError(f"min_observed must be an integer >= 3, got {self.min_observed!r}")
+        if self.covariance not in COVARIANCE_METHODS:
+            raise ValueError(f"covariance must be one of {COVARIANCE_METHODS}, got {self.covariance!r}")
+        if isinstance(self.ridge, bool) or not isinstance(self.ridge, numbers.Real) or not (
+                np.isfinite(self.ridge) and self.ridge >= 0):
+            raise ValueError(f"ridge must be a finite number >= 0, got {self.ridge!r}")
+        if isinstance(self.n_steps, bool) or not isinstance(self.n_steps, numbers.Integral) or self.n_steps < 1:
+            raise ValueError(f"n_steps must be a positive integer, got {self.n_steps!r}")
+        if not (self.calibrate is True or self.calibrate is False or isinstance(self.calibrate, np.bool_)
+                or (isinstance(self.calibrate, str) and self.calibrate == "auto")):
+            raise ValueError(f"calibrate must be True, False or 'auto', got {self.calibrate!r}")
+        ref = self.reference
+        if isinstance(ref, str):
+            if ref != "mean":
+                raise ValueError(f"reference must be 'mean' or a demo index, got {ref!r}")
+        elif isinstance(ref, bool) or not isinstance(ref, numbers.Integral):
+            raise ValueError(f"reference must be 'mean' or a demo index, got {ref!r}")
+        elif not 0 <= int(ref) < n_demos:
+            raise ValueError(f"reference={int(ref)} is not a demo index (0..{n_demos - 1})")
         ctrl = [i for i in range(n_dofs) if i not in set(obs)]
         pca = self.pca_components
         if pca is not None:
@@ -268,7 +335,9 @@ class InteractionPrimitive:
             columns = [str(c) for c in columns]
             if len(columns) != D:
                 raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
-        obs, ctrl, kk = self._check_params(D)
+        obs, ctrl, kk = self._check_params(D, len(arrays))
+        self._derived = {}  # a new fit: nothing derived from an earlier one survives (see cached)
+        self.__dict__.pop("selection_", None)  # set again below when this fit selects anything
         min_frames = max(5, self.smoothing_window or 0)
         if times is not None:
             if dt is not None:
@@ -302,7 +371,7 @@ class InteractionPrimitive:
                 self.pca_controlled_ = PCA(kk[1]).fit(np.vstack([a[:, ctrl] for a in arrays]))
         self.n_observed_latent_ = self._n_obs_latent()
         n_o = self.n_observed_latent_
-        self._setup()
+        self.setup_derived()
         # Demonstrations of equal length are processed together as one (n, T, D') array
         # (one derivative call, one least-squares solve); latent[j] is a view into it.
         S = len(arrays)
@@ -370,11 +439,16 @@ class InteractionPrimitive:
             raise ValueError(f"choosing the noise and shrinkage by cross-validation (sigma2='cv', the default) needs "
                              f"at least 3 demonstrations, got {len(latent)}: record more, or give sigma2 and "
                              f"covariance explicitly (e.g. sigma2=1e-3, covariance='ridge')")
-        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "auto")) and len(latent) >= 3:
+        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "cv", "auto")) and len(latent) >= 3:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
-            select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
+            chosen = select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
+            if chosen.sigma2 is not None:
+                self.sigma2_, self.prior_ = chosen.sigma2, chosen.prior
+            self.phase_sigma2_, self.selection_ = chosen.phase_sigma2, chosen.record
         with single_thread():  # small matrices: BLAS threads only oversubscribe a loaded machine
-            self.phase_model_, self.phase_method_ = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
+            self.phase_model_, self.phase_method_, figures = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
+        if figures:  # both phase errors of the "auto" choice, for the user
+            self.selection_.update(figures)
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
             e2 = float(self.input_noise) ** 2
             if self.observation == "position":
@@ -383,15 +457,10 @@ class InteractionPrimitive:
                 self.phase_sigma2_ += e2
         # DTW reference of the observed agent (Sec. III-B) at the training sampling rate
         n_ref = max(int(round(self.mean_duration_ / dt)) + 1, 2)
-        if isinstance(self.reference, str):
-            if self.reference != "mean":
-                raise ValueError(f"reference must be 'mean' or a demo index, got {self.reference!r}")
+        if isinstance(self.reference, str):  # "mean" (checked with the other parameters, before any work)
             self.reference_ = np.mean([time_normalise(z[:, :n_o], n_ref) for z in latent], axis=0)
         else:
-            r = int(self.reference)
-            if not 0 <= r < len(latent):
-                raise ValueError(f"reference={r} is not a demo index (0..{len(latent) - 1})")
-            self.reference_ = time_normalise(latent[r][:, :n_o], n_ref)
+            self.reference_ = time_normalise(latent[int(self.reference)][:, :n_o], n_ref)
         # what the observed agent's frames look like in training (the out-of-range check, interprim.input_range)
         self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
             np.concatenate([a[:, obs] for a in arrays], axis=0))
@@ -402,13 +471,14 @@ class InteractionPrimitive:
                 self.calibration_ = fit_calibration(self, arrays)
         return self
 
-    def _setup(self):
+    def setup_derived(self):
         """Derived, non-learned state (basis, rollout map, index tables)."""
         self.basis_ = Basis(int(self.n_basis), float(self.alpha_x))
         self.rollout_ = cached_rollout(int(self.n_basis), float(self.alpha_x), float(self.alpha_y), self.beta_y_,
                                        int(self.n_steps))
         q = self.n_basis + 1
         self._q = q
+        self.params_per_dof_ = q  # n_basis + 1 entries of theta per DoF (Eq. 2)
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
 
     def _n_obs_latent(self):
@@ -438,13 +508,65 @@ class InteractionPrimitive:
             return out
         return np.stack([self._to_latent(a) for a in arrays])
 
-    def _observed_to_latent(self, o):
+    def observed_to_latent(self, o):
+        """Frames ``(t, len(observed_dofs))`` of the observed agent in the model's latent DoFs (PCA, Sec. IV)."""
         return self.pca_observed_.transform(o) if self.pca_observed_ is not None else o
 
-    def _latent_map(self):
+    def cached(self, name: str, key: tuple, build):
+        """A value derived from the fitted state, computed once by ``build()`` and kept while the objects in
+        ``key`` stay the same (compared by identity).
+
+        The store is replaced by every :meth:`fit` (and is empty in a loaded or copied model), so a refit never
+        sees a value derived from the previous fit.  Modules that need derived arrays of the model (the phase
+        likelihood's factored prior, for example) keep them here instead of setting attributes on it.
+        """
+        store = self.__dict__.get("_derived")
+        if store is None:
+            store = self._derived = {}
+        hit = store.get(name)
+        if hit is not None and len(hit[0]) == len(key):
+            for a, b in zip(hit[0], key):  # per frame of a stream: a plain loop, no generator
+                if a is not b:
+                    break
+            else:
+                return hit[1]
+        value = build()
+        store[name] = (tuple(key), value)
+        return value
+
+    def load_fitted(self, fitted: dict) -> "InteractionPrimitive":
+        """Set the fitted attributes ``fitted`` (names ending in ``_``, as :mod:`interprim.io` reads them from a
+        model file) and build the derived state (:meth:`setup_derived`); returns ``self``."""
+        bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
+        if bad:
+            raise ValueError(f"load_fitted: {bad} are not fitted attribute names")
+        self.__dict__.update(fitted, _derived={})
+        self.setup_derived()
+        return self
+
+    def with_fitted(self, **fitted) -> "InteractionPrimitive":
+        """A copy of this fitted model with some fitted attributes (names ending in ``_``) replaced, e.g. the
+        prior re-estimated on a subset of the demonstrations (:func:`interprim.calibration.fold_model`).  The
+        copy shares the other fitted arrays and has its own store of derived values; ``self`` is unchanged."""
+        self._check_fitted("with_fitted")
+        bad = [k for k in fitted if not k.endswith("_") or k.startswith("_") or not hasattr(self, k)]
+        if bad:
+            raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
+        new = self.__copy__()
+        new.__dict__.update(fitted)
+        return new
+
+    def __copy__(self):
+        """A shallow copy with its own (empty) store of derived values (see :meth:`cached`)."""
+        new = type(self).__new__(type(self))
+        new.__dict__.update(self.__dict__, _derived={})
+        return new
+
+    def latent_map(self):
         """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
-        if getattr(self, "_map_cache", None) is not None:
-            return self._map_cache
+        return self.cached("latent_map", (self.pca_observed_, self.pca_controlled_), self._build_latent_map)
+
+    def _build_latent_map(self):
         D = self.n_dofs_
         M = np.zeros((D, self.n_latent_))
         off = np.zeros(D)
@@ -460,23 +582,22 @@ class InteractionPrimitive:
             off[ctrl] = self.pca_controlled_.mean_
         elif ctrl:
             M[ctrl, range(n_o, self.n_latent_)] = 1.0
-        self._map_cache = (M, off)
-        return self._map_cache
+        return M, off
 
-    def _controlled_map(self):
+    def controlled_map(self):
         """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
-        cache = self.__dict__.get("_ctrl_map_cache")
-        if cache is not None and cache[0] is self.pca_controlled_:
-            return cache[1]
-        M, off = self._latent_map()
+        return self.cached("controlled_map", (self.pca_observed_, self.pca_controlled_), self._build_controlled_map)
+
+    def _build_controlled_map(self):
+        M, off = self.latent_map()
         n_o = self.n_observed_latent_
         ctrl = self.controlled_dofs_
         Mc = np.ascontiguousarray(M[ctrl, n_o:].T)
         offc = off[ctrl].copy()
-        res = (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
-                               and not np.any(offc)) else (Mc, offc)
-        self._ctrl_map_cache = (self.pca_controlled_, res)
-        return res
+        return (None, None) if (self.pca_controlled_ is None and np.array_equal(Mc, np.eye(Mc.shape[0]))
+                                and not np.any(offc)) else (Mc, offc)
+
+    _FITTED = "prior_"
 
     def _check_fitted(self, what: str):
         if not hasattr(self, "prior_"):
@@ -528,20 +649,24 @@ class InteractionPrimitive:
         return input_distance(self, frames)
 
     def _predict_observed(self, o, robot_state, phase):
-        z = self._observed_to_latent(o)
+        z = self.observed_to_latent(o)
         if phase is not None:
             ph = float(phase)
             if not 0.0 < ph <= 1.0:
                 raise ValueError(f"phase must be in (0, 1], got {phase!r}")
-            return self._predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
-        n_star, cost = estimate_phase(self, z, self._phase())
-        return self._predict_latent(movement_prefix(self, z, n_star), n_star, cost, robot_state)
+            return self.predict_latent(z, ph * (self.reference_.shape[0] - 1), float("nan"), robot_state)
+        n_star, cost = estimate_phase(self, z, self.phase_method_used())
+        return self.predict_latent(movement_prefix(self, z, n_star), n_star, cost, robot_state)
 
-    def _phase(self) -> str:
+    def phase_method_used(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""
-        return getattr(self, "phase_method_", "likelihood") if self.phase_method == "auto" else self.phase_method
+        if self.phase_method in ("cv", "auto"):
+            return getattr(self, "phase_method_", "likelihood")
+        return self.phase_method
 
-    def _robot_start(self, robot_state):
+    def robot_start(self, robot_state):
+        """Start ``(y0, v0)`` of the controlled agent's latent DoFs (velocity per unit normalised time) from
+        ``robot_state`` (see :meth:`predict`); the demonstrations' mean start when ``None``."""
         n_o = self.n_observed_latent_
         y0 = self.start_position_[n_o:].copy()
         v0 = self.start_velocity_[n_o:].copy()
@@ -594,20 +719,23 @@ class InteractionPrimitive:
             Y = z - free @ np.vstack([y0, v0])
         return X, Y, y0
 
-    def _predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
+    def predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None,
                         workspace=None) -> "Prediction":
+        """The :class:`Prediction` for latent observed frames ``z (M, n_observed_latent_)`` at the reference frame
+        ``n_star`` (Eq. 9: fraction seen ``n_star / (N - 1)``): Eq. 13-18 when at least ``min_observed`` frames
+        were seen, else the prior.  The one path of :meth:`predict` and :meth:`Stream.update`."""
         M = z.shape[0]
         s_end, duration = self._phase_info(n_star, M)
         prior = self.prior_
         stats = None
         if M >= self.min_observed and s_end > 0:
             stats, y0 = self._stats(z, s_end, workspace)
-            post = self._condition(stats, need_cov)
+            post = self.condition(stats, need_cov)
         else:
             y0 = z[0]
             post = Posterior(prior.mean, prior.cov, 0.0)
         if robot_start is None:
-            robot_start = self._robot_start(robot_state)
+            robot_start = self.robot_start(robot_state)
         return Prediction(self, post, stats, s_end, duration, n_star, cost, M, y0, robot_start, z[-1])
 
     def _stats(self, z, s_end, workspace=None):
@@ -645,15 +773,10 @@ class InteractionPrimitive:
 
     def _conditioner(self):
         """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.gaussian.LowRankConditioner`)."""
-        cache = self.__dict__.get("_conditioner_cache")
-        if cache is not None and cache[0] is self.prior_ and cache[1] is self.obs_index_:
-            return cache[2]
-        cond = LowRankConditioner.from_prior(self.prior_, self.obs_index_, getattr(self, "thetas_", None),
-                                             float(self.ridge))
-        self._conditioner_cache = (self.prior_, self.obs_index_, cond)
-        return cond
+        return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: LowRankConditioner.from_prior(
+            self.prior_, self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 
-    def _condition(self, stats, need_cov: bool) -> Posterior:
+    def condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
 
         Uses the exact low-rank form of :class:`~interprim.gaussian.LowRankConditioner`
@@ -685,6 +808,22 @@ class InteractionPrimitive:
 
         save_model(self, path)
 
+    def to_state(self):
+        """``(arrays, meta)``: the fitted model as its model file holds it (numeric arrays and JSON metadata;
+        :mod:`interprim.io`); :meth:`from_state` restores it."""
+        self._check_fitted("to_state")
+        from .io import model_state
+
+        return model_state(self)
+
+    @classmethod
+    def from_state(cls, arrays: dict, meta: dict, source="<state>") -> "InteractionPrimitive":
+        """The model of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's); raises
+        :class:`~interprim.ModelFileError` naming ``source`` when they are inconsistent."""
+        from .io import model_from_state
+
+        return model_from_state(arrays, meta, cls, source)
+
     @classmethod
     def load(cls, path) -> "InteractionPrimitive":
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
@@ -696,7 +835,17 @@ class InteractionPrimitive:
         import inspect
 
         defaults = {k: v.default for k, v in inspect.signature(type(self).__init__).parameters.items()}
-        p = self.get_params()
+        p = self.json_params()
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         return f"InteractionPrimitive({shown})"
+
+    # the names these methods had while they were private (kept for code written against them)
+    _latent_map = latent_map
+    _controlled_map = controlled_map
+    _robot_start = robot_start
+    _condition = condition
+    _predict_latent = predict_latent
+    _phase = phase_method_used
+    _observed_to_latent = observed_to_latent
+    _setup = setup_derived

@@ -120,7 +120,7 @@ class Recogniser:
         scores, phases = {}, {}
         for k, m in self.models.items():
             o = as_2d_finite(partial, "partial", n_cols=len(m.observed_dofs_), min_rows=2)
-            z = m._observed_to_latent(o)
+            z = m.observed_to_latent(o)
             N1 = m.reference_.shape[0] - 1
             s0 = open_end_dtw(m.reference_, z, return_path=False).n_star / N1
             est = estimate_phase(m, z, s_init=s0, sigma2=self.noise[k])

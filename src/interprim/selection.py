@@ -53,6 +53,8 @@ The choice is reported in ``model.selection_``.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ._blas import single_thread
@@ -62,12 +64,25 @@ from .phase.dtw import open_end_dtw
 from .phase.likelihood import observation_design
 from .preprocessing import time_normalise
 
-__all__ = ["select_hyperparameters", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
+__all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
 
 DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
 DEFAULT_SHRINKAGE_GRID = (0.0, 0.02, 0.1, 0.3, 0.6, 0.95)
 #: ``sigma^2`` candidates relative to the mean square of the observation targets
 DEFAULT_SIGMA2_FACTORS = tuple(10.0 ** np.arange(-6.0, 6.01, 0.5))
+
+
+class Selection(NamedTuple):
+    """The choices of :func:`select_hyperparameters` (``fit`` assigns them to the model)."""
+
+    #: observation noise of Eq. 16 chosen by cross-validation (``None``: not selected)
+    sigma2: float | None
+    #: the prior (Eq. 10) at the chosen shrinkage and cross-agent damping (``None``: not selected)
+    prior: object
+    #: position noise of the likelihood phase
+    phase_sigma2: float
+    #: what was chosen and measured (the model's ``selection_``)
+    record: dict
 
 
 def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
@@ -77,9 +92,9 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
 
     Called by :meth:`InteractionPrimitive.fit` (``sigma2="cv"``, or
     ``phase_method="likelihood"`` for the phase noise alone) after the DMP
-    parameters ``model.thetas_`` are known; it sets ``model.prior_``,
-    ``model.sigma2_`` (when ``select_sigma2``), ``model.phase_sigma2_`` and
-    ``model.selection_``.
+    parameters ``model.thetas_`` are known; it returns its choices (a :class:`Selection`) and ``fit`` assigns
+    them to ``prior_``, ``sigma2_`` (when ``select_sigma2``), ``phase_sigma2_`` and ``selection_``; the model
+    itself is not changed.
 
     Parameters
     ----------
@@ -108,12 +123,13 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
 
     Returns
     -------
-    dict
-        The same as ``model.selection_``: ``sigma2``, ``shrinkage``,
+    Selection
+        ``sigma2`` and ``prior`` (``None`` unless ``select_sigma2``), ``phase_sigma2`` and ``record``, the dict
+        ``fit`` keeps as ``selection_``: ``sigma2``, ``shrinkage``,
         ``phase_sigma2``, ``cv_error`` (normalised MSE of the choice),
         ``cv_error_prior`` (of the prior mean), ``cv_error_auto``-free grids and scores.
     """
-    with single_thread():
+    with single_thread():  # the model is only read: fit assigns the choices
         return _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, select_sigma2, n_out,
                        phase_cases)
 
@@ -135,7 +151,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     thetas = model.thetas_
     S, P = thetas.shape
     n_o = model.n_observed_latent_
-    q = model._q
+    q = model.params_per_dof_
     n_lat = model.n_latent_
     K = int(min(max(n_folds, 2), S))
     fold = np.arange(S) % K
@@ -220,12 +236,12 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         a, b = _best_at(err[:, :, c], err_o)
         lam = lam_grid[a]
         gamma = float(gam[c])
-        model.sigma2_ = float(s2_grid[kind0][b])
-        prior = shrink_cross(fit_prior(thetas, method, model.ridge, shrinkage=lam), gamma, n_o * q)
-        model.prior_ = prior
+        chosen_sigma2 = float(s2_grid[kind0][b])
+        chosen_prior = shrink_cross(fit_prior(thetas, method, model.ridge, shrinkage=lam), gamma, n_o * q)
     else:
         a = 0
         lam = None
+        chosen_sigma2, chosen_prior = None, None
     res = _phase_noise_by_accuracy(model, latent, fold, K, lam if select_sigma2 else None,
                                    s2_grid["position"], fractions, max_cases=phase_cases)
     phase_err, phase_err_refined = None, None
@@ -234,18 +250,18 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         # the noise under which the likelihood phase estimate is most accurate on held-out demos
         # (the held-out marginal likelihood at the true phase favours too small a noise for this)
         bp = int(np.argmin(phase_err + 1e-9 * np.arange(len(phase_err))[::-1]))
-        if model.phase_method == "auto":
+        if model.phase_method in ("cv", "auto"):
             phase_err_refined = _refined_phase_error(model, kept, float(s2_grid["position"][bp]), bp)
     else:
         bp = int(np.argmax(ll[a]))
-    model.phase_sigma2_ = float(s2_grid["position"][bp])
+    phase_sigma2 = float(s2_grid["position"][bp])
     sel = {
         "method": f"{K}-fold cross-validation" if select_sigma2 else "held-out marginal likelihood",
         "n_folds": K,
         "fractions": [float(p) for p in fractions],
-        "sigma2": float(model.sigma2_),
-        "shrinkage": float(model.prior_.shrinkage),
-        "phase_sigma2": model.phase_sigma2_,
+        "sigma2": float(model.sigma2_ if chosen_sigma2 is None else chosen_sigma2),
+        "shrinkage": float((model.prior_ if chosen_prior is None else chosen_prior).shrinkage),
+        "phase_sigma2": phase_sigma2,
         "observation": kind0,
         "sigma2_grid": [float(x) for x in s2_grid[kind0]],
         "shrinkage_grid": [None if x is None else float(x) for x in lam_grid],
@@ -266,8 +282,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         sel["cv_errors_observed"] = err_o.tolist()
         sel["cv_observed_within_se"] = human_ok.tolist()
         sel["cv_within_se"] = ok[:, :, c].tolist()
-    model.selection_ = sel
-    return sel
+    return Selection(chosen_sigma2, chosen_prior, phase_sigma2, sel)
 
 
 _SCORE_CHUNK = 4  # held-out cases scored together (their (cases, sigma2, frames, DoF) arrays stay in cache)
@@ -349,7 +364,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
 
     if max_cases <= 0:
         return None
-    n_o, q = model.n_observed_latent_, model._q
+    n_o, q = model.n_observed_latent_, model.params_per_dof_
     S = len(latent)
     all_cases = [(j, p) for p in fractions for j in range(S)]
     pick = np.unique(np.linspace(0, len(all_cases) - 1, min(max_cases, len(all_cases))).round().astype(int))
@@ -387,7 +402,7 @@ def _refined_phase_error(model, kept, s2, b) -> float:
     learned phase's cross-validated error (the grid maximum alone is off by up to half a grid step, ~8 %)."""
     from .phase.likelihood import _brent_min, _log_speed_prior
 
-    n_o, q = model.n_observed_latent_, model._q
+    n_o, q = model.n_observed_latent_, model.params_per_dof_
     s2a = np.array([s2])
     errs = []
     for prior, zo, M, s_true, grid, curves in kept:

@@ -27,7 +27,7 @@ class Stream:
     and conditions on all frames seen so far at their new phases (Eq. 15-18).
     The frame buffer is preallocated and grows by doubling.
 
-    With the likelihood phase (the default) the phase is tracked on a lattice of speeds whose
+    With the likelihood phase (what ``phase_method="auto"`` picks on most data) the phase is tracked on a lattice of speeds whose
     scores are extended frame by frame (:class:`interprim.phase.tracking._Tracker`) and then taken
     to the maximum of the log posterior by the batch search's own last step, so that the stream's
     phase, and hence its prediction, is :meth:`~interprim.primitive.InteractionPrimitive.predict`'s
@@ -38,7 +38,7 @@ class Stream:
     def __init__(self, model, robot_state=None):
         self.model = model
         self.robot_state = robot_state
-        self._robot_start = self._with_z0(model._robot_start(robot_state))
+        self._robot_start = self._with_z0(model.robot_start(robot_state))
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
@@ -47,7 +47,7 @@ class Stream:
         if loader.ready():
             from ._compiled.observation import StatsWorkspace
 
-            self._ws = StatsWorkspace(cap, model.n_observed_latent_, model._q, model.observation)
+            self._ws = StatsWorkspace(cap, model.n_observed_latent_, model.params_per_dof_, model.observation)
         self._n = 0
         self._tracker = None  # likelihood phase: interprim.phase.tracking._Tracker (created on first use)
         self._max_dist = 0.0  # largest standardised distance of a frame since reset (out-of-range check)
@@ -68,7 +68,7 @@ class Stream:
             self._tracker.reset()
         if robot_state is not None:
             self.robot_state = robot_state
-            self._robot_start = self._with_z0(self.model._robot_start(robot_state))
+            self._robot_start = self._with_z0(self.model.robot_start(robot_state))
 
     @staticmethod
     def _with_z0(rs):
@@ -104,7 +104,7 @@ class Stream:
         with ``need_cov=True``.  Work per frame: one DTW column ``O(N D_o)``,
         the observation statistics ``O(M q (q + D_o))`` for the ``M`` frames
         seen (every frame moves to a new phase), and a conditioning step
-        independent of ``M``; with the likelihood phase (default) the lattice
+        independent of ``M``; with the likelihood phase the lattice
         window's scores ``O(D_o (q^2 + q r) + r^3)`` per candidate and about
         three evaluations of the log posterior ``O(M q (q + D_o))`` each (see
         :class:`Stream`).  No buffer grows with ``M`` except the frame buffer
@@ -126,13 +126,14 @@ class Stream:
         self._buf[self._n] = f
         self._n += 1
         tr = None
-        if m._phase() == "likelihood":  # local search around the previous estimate, on a lattice of speeds
+        if m.phase_method_used() == "likelihood":  # local search around the previous estimate on a speed lattice
             tr = self._tracker
             if tr is None or tr.model is not m:
                 from .phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
-        n_star, cost = estimate_phase(m, self._buf[: self._n], m._phase(), dtw=(n_star, cost), tracker=tr)
+        n_star, cost = estimate_phase(m, self._buf[: self._n], m.phase_method_used(), dtw=(n_star, cost),
+                                      tracker=tr)
         z = movement_prefix(m, self._buf[: self._n], n_star)  # learned phase past the end: where it ended
-        return m._predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
+        return m.predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                                  workspace=self._ws)

@@ -210,3 +210,13 @@ def _backtrack(Dm, n_end):
         path[k, 0] = n
         path[k, 1] = m
     return path[: k + 1][::-1].copy()
+
+
+def warm_up(u, v) -> None:
+    """Compile (or load from the cache) every kernel of this module with tiny inputs ``u (N, D)``, ``v (M, D)``
+    of the real types (called by :func:`interprim._compiled.loader.warmup`)."""
+    uT = np.ascontiguousarray(u.T)
+    N = u.shape[0]
+    _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
+    _incremental_step(uT, v[0], np.zeros(N), np.empty(N), np.empty(N), True)
+    _backtrack(_accumulate(u, v), 2)

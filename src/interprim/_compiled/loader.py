@@ -70,11 +70,7 @@ def _compile_all():
     rng = np.random.default_rng(0)
     u = rng.normal(size=(6, 2))
     v = rng.normal(size=(7, 2))
-    uT = np.ascontiguousarray(u.T)
-    dk._open_end_strips(uT, v, np.empty(6), np.empty(6), np.empty((4, 6)))
-    dk._incremental_step(uT, v[0], np.zeros(6), np.empty(6), np.empty(6), True)
-    Dm = dk._accumulate(u, v)
-    dk._backtrack(Dm, 2)
+    dk.warm_up(u, v)
     q, Do, r, M = 4, 2, 3, 6
     z = np.cumsum(rng.normal(size=(M, Do)), axis=0)
     yd = np.empty((M, Do))
@@ -304,9 +300,9 @@ def _load_phase_kernels():
     _PHASE_KERNELS.extend([phase_loglik_batch, track_step])
 
 
-def phase_kernel(block: bool = False):
+def phase_kernel():
     """The compiled batch kernel of the likelihood phase, or ``None`` on the numpy path (:func:`ready` decides,
-    once per process; ``block`` is kept for callers and has no effect: the first use always waits)."""
+    once per process; the first use waits for the kernels)."""
     return _PHASE_KERNELS[0] if ready() else None
 
 

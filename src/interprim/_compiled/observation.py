@@ -426,6 +426,6 @@ class StatsWorkspace:
         Reference: ``InteractionPrimitive._observation`` (``LinearRollout.design(0, s)``).
         ``G`` and ``B`` are this workspace's buffers (overwritten by the next call).
         """
-        yy = position_stats(z, M, float(s_end), y0, v0, rollout._Z, rollout._powers, self.G, self.B,
+        yy = position_stats(z, M, float(s_end), y0, v0, rollout.Z, rollout.powers, self.G, self.B,
                             self.HT, self.YTb)
         return self.G, self.B, float(yy)

@@ -81,8 +81,9 @@ def add_parser(subparsers) -> None:
         "--phase-method",
         choices=("dtw", "likelihood", "learned", "auto"),
         default=None,
-        help="phase estimation: open-end DTW (paper Eq. 5-9), likelihood (default), learned (regressed on the "
-        "demonstrations' own prefixes: recommended for recordings of people) or auto (experimental)",
+        help="phase estimation: open-end DTW (paper Eq. 5-9), likelihood, learned (regressed on the "
+        "demonstrations' own prefixes: recommended for recordings of people) or auto (the model's default: "
+        "likelihood or learned, whichever has the smaller held-out phase error)",
     )
     p.add_argument(
         "--input-noise",

@@ -1,6 +1,7 @@
 """Peer methods evaluated on the same splits as Interaction Primitives.
 
-Every method has the same small interface, used by :mod:`interprim.evaluation.sweep`::
+Every method follows the prediction contract of :mod:`interprim.contract` (``fit``, ``predict``, ``stream``,
+``save``/``load``, ``get_params``/``set_params``), used by :mod:`interprim.evaluation.sweep`::
 
     est = Method(observed_dofs, ...).fit(demos, dt=...)
     out = est.predict(partial)          # partial: (M, len(observed_dofs)) frames from the start
@@ -25,45 +26,63 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validation import as_2d_finite, check_positive
+from ..contract import GridPrediction, Predictor
 from ..preprocessing import time_normalise
 
 __all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction"]
 
 
-class BaselinePrediction:
-    """A prediction of the whole movement of all DoFs on normalised time (0..1).
+#: the prediction type of every method here (:class:`interprim.contract.GridPrediction`; the old name is kept)
+BaselinePrediction = GridPrediction
 
-    Parameters
-    ----------
-    times : ndarray, shape (K,)
-        Normalised times of ``mean`` (and ``std``).
-    mean : ndarray, shape (K, D)
-    std : ndarray, shape (K, D) or None
-    phase : float
-        Estimated fraction of the movement already seen (NaN when not estimated).
-    log_likelihood : float
-    """
 
-    def __init__(self, times, mean, std=None, phase=float("nan"), log_likelihood=float("nan")):
-        self._t = np.asarray(times, dtype=np.float64)
-        self._mean = np.asarray(mean, dtype=np.float64)
-        self._std = None if std is None else np.asarray(std, dtype=np.float64)
-        self.phase = float(phase)
-        self.log_likelihood = float(log_likelihood)
+class _Baseline(Predictor):
+    """What the three methods share: the column layout, the sampling interval and the prediction's timing."""
 
-    def _interp(self, Y, n):
-        s = np.linspace(0.0, 1.0, int(n))
-        return np.stack([np.interp(s, self._t, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+    def _fit_common(self, demos, dt):
+        if hasattr(demos, "demos") and not isinstance(demos, (list, tuple, np.ndarray)):
+            dt = getattr(demos, "dt", None) if dt is None else dt
+            demos = list(demos.demos)
+        arrays = _check_demos(demos)
+        D = arrays[0].shape[1]
+        obs = self.observed_dofs
+        if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
+            raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
+        obs = [int(i) for i in obs]
+        bad = [i for i in obs if not 0 <= i < D]
+        if bad or len(set(obs)) != len(obs):
+            raise ValueError(f"observed_dofs {list(self.observed_dofs)} must be distinct columns of the "
+                             f"{D}-column demonstrations")
+        self.dt_ = 0.01 if dt is None else check_positive(dt, "dt")
+        self.mean_duration_ = float(np.mean([(a.shape[0] - 1) * self.dt_ for a in arrays]))
+        self.n_dofs_ = D
+        self.observed_dofs_ = obs
+        return arrays
 
-    def trajectory(self, n: int = 100) -> np.ndarray:
-        """Predicted mean of every DoF at ``n`` evenly spaced normalised times in [0, 1], shape ``(n, D)``
-        (linear interpolation of ``mean``)."""
-        return self._interp(self._mean, n)
+    def _partial(self, partial):
+        self._check_fitted("predict")
+        return as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
 
-    def std(self, n: int = 100):
-        """Pointwise predictive standard deviation on the same grid as :meth:`trajectory`, shape ``(n, D)``;
-        ``None`` when the method gives no uncertainty."""
-        return None if self._std is None else self._interp(self._std, n)
+    def _prediction(self, times, mean, std, M, phase=float("nan"), log_likelihood=float("nan"), method=None,
+                    conditioned=True):
+        """A :class:`~interprim.contract.GridPrediction` with the duration ``elapsed / phase`` (the mean
+        duration when the phase is unknown or 0)."""
+        elapsed = (M - 1) * self.dt_
+        duration = elapsed / phase if (np.isfinite(phase) and phase > 0 and M > 1) else self.mean_duration_
+        return GridPrediction(times, mean, std, phase=phase, observed_dofs=self.observed_dofs_, method=method,
+                              log_likelihood=log_likelihood, duration=duration, mean_duration=self.mean_duration_,
+                              n_observed=M, conditioned=conditioned)
+
+    def _common_state(self) -> dict:
+        return {"observed_dofs_": self.observed_dofs_, "dt_": self.dt_, "mean_duration_": self.mean_duration_,
+                "n_dofs_": self.n_dofs_}
+
+    def _set_common(self, meta):
+        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+        self.dt_ = float(meta["dt_"])
+        self.mean_duration_ = float(meta["mean_duration_"])
+        self.n_dofs_ = int(meta["n_dofs_"])
 
 
 def _check_demos(demos):
@@ -77,7 +96,7 @@ def _check_demos(demos):
     return arrays
 
 
-class PriorMean:
+class PriorMean(_Baseline):
     """Replay the mean demonstration (time-normalised), with the demonstrations' spread as ``std``.
 
     Parameters
@@ -99,25 +118,39 @@ class PriorMean:
         demos : list of ndarray, shape (T_j, D)
             At least 2 finite demonstrations with the same columns.
         dt : float, optional
-            Ignored (the interface of the other methods).
+            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
 
         Returns
         -------
         PriorMean
             ``self``, with ``mean_`` and ``std_`` (sample std, ``ddof=1``) of shape ``(n, D)``.
         """
-        arrays = _check_demos(demos)
+        arrays = self._fit_common(demos, dt)
         Y = np.stack([time_normalise(a, self.n) for a in arrays])
         self.mean_ = Y.mean(axis=0)
         self.std_ = Y.std(axis=0, ddof=1)
         return self
 
-    def predict(self, partial) -> BaselinePrediction:
-        """The mean demonstration whatever ``partial`` holds (no conditioning, phase NaN)."""
-        return BaselinePrediction(np.linspace(0.0, 1.0, self.n), self.mean_, self.std_)
+    def predict(self, partial) -> GridPrediction:
+        """The mean demonstration whatever ``partial`` holds (no conditioning, phase NaN; ``partial`` may be
+        ``None``)."""
+        self._check_fitted("predict")
+        M = 0 if partial is None else self._partial(partial).shape[0]
+        return self._prediction(np.linspace(0.0, 1.0, self.n), self.mean_, self.std_, M,
+                                method="mean", conditioned=False)
+
+    def to_state(self):
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        self._check_fitted("to_state")
+        return {"mean": self.mean_, "std": self.std_}, self._common_state()
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        self._set_common(meta)
+        self.mean_, self.std_ = arrays["mean"], arrays["std"]
 
 
-class NearestNeighbour:
+class NearestNeighbour(_Baseline):
     """The training demonstration nearest to the observed prefix under open-end DTW.
 
     The cost of demonstration ``j`` is ``D(n*, M) / (n* + M)`` of the open-end
@@ -139,20 +172,34 @@ class NearestNeighbour:
         demos : list of ndarray, shape (T_j, D)
             At least 2 finite demonstrations with the same columns.
         dt : float, optional
-            Ignored (the interface of the other methods).
+            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
 
         Returns
         -------
         NearestNeighbour
             ``self``.
         """
-        arrays = _check_demos(demos)
-        obs = [int(i) for i in self.observed_dofs]
+        arrays = self._fit_common(demos, dt)
+        obs = self.observed_dofs_
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
         self.demos_ = [time_normalise(a, self.n) for a in arrays]
         return self
 
-    def predict(self, partial) -> BaselinePrediction:
+    def to_state(self):
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        self._check_fitted("to_state")
+        arrays = {"observed": np.concatenate(self.observed_), "lengths": np.array([len(u) for u in self.observed_]),
+                  "demos": np.stack(self.demos_)}
+        return arrays, self._common_state()
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        self._set_common(meta)
+        ends = np.cumsum(arrays["lengths"])
+        self.observed_ = [np.ascontiguousarray(u) for u in np.split(arrays["observed"], ends[:-1])]
+        self.demos_ = list(arrays["demos"])
+
+    def predict(self, partial) -> GridPrediction:
         """The nearest demonstration to ``partial`` (``(M, len(observed_dofs))`` frames from the start).
 
         Sets ``neighbour_`` to its index; the prediction's phase is its matched fraction ``(n*+1)/N_j``
@@ -160,7 +207,7 @@ class NearestNeighbour:
         """
         from ..phase.dtw import open_end_dtw
 
-        v = np.asarray(partial, dtype=np.float64)
+        v = self._partial(partial)
         best, best_c, frac = 0, np.inf, float("nan")
         for j, u in enumerate(self.observed_):
             r = open_end_dtw(u, v, return_path=False)
@@ -168,10 +215,11 @@ class NearestNeighbour:
             if c < best_c:
                 best, best_c, frac = j, c, r.fraction
         self.neighbour_ = best
-        return BaselinePrediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, phase=frac)
+        return self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, v.shape[0], phase=frac,
+                                method=f"demonstration {best}")
 
 
-class InteractionProMP:
+class InteractionProMP(_Baseline):
     """Interaction ProMP (Maeda et al. 2017) from ``movement_primitives`` and ``gmr``.
 
     Parameters
@@ -211,7 +259,7 @@ class InteractionProMP:
         demos : list of ndarray, shape (T_j, D)
             At least 2 finite demonstrations with the same columns; each is put on normalised time [0, 1].
         dt : float, optional
-            Ignored (the interface of the other methods).
+            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
 
         Returns
         -------
@@ -225,9 +273,9 @@ class InteractionProMP:
         """
         from movement_primitives.promp import ProMP
 
-        arrays = _check_demos(demos)
+        arrays = self._fit_common(demos, dt)
         D = arrays[0].shape[1]
-        obs = [int(i) for i in self.observed_dofs]
+        obs = self.observed_dofs_
         ctrl = [i for i in range(D) if i not in set(obs)]
         self.order_ = obs + ctrl  # observed DoFs first in the stacked weights
         self.n_dofs_ = D
@@ -251,6 +299,24 @@ class InteractionProMP:
         self.n_obs_ = len(obs)
         return self
 
+    def to_state(self):
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`); the
+        ProMP basis is rebuilt from the parameters on load."""
+        self._check_fitted("to_state")
+        meta = self._common_state()
+        meta.update(order_=[int(i) for i in self.order_], sigma2_=float(self.sigma2_), n_obs_=int(self.n_obs_))
+        return {"weights": self.weights_, "mean": self.mean_, "cov": self.cov_}, meta
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        from movement_primitives.promp import ProMP
+
+        self._set_common(meta)
+        self.order_ = [int(i) for i in meta["order_"]]
+        self.sigma2_, self.n_obs_ = float(meta["sigma2_"]), int(meta["n_obs_"])
+        self.weights_, self.mean_, self.cov_ = arrays["weights"], arrays["mean"], arrays["cov"]
+        self.promp_ = ProMP(n_dims=self.n_dofs_, n_weights_per_dim=int(self.n_weights))
+
     def _stats(self, partial, s):
         M = partial.shape[0]
         Psi = self._basis(np.linspace(0.0, s, M)).T  # (M, K)
@@ -266,11 +332,11 @@ class InteractionProMP:
         return condition(self.mean_[: self.n_obs_ * K], self.cov_[: self.n_obs_ * K, : self.n_obs_ * K], idx,
                          G, B, self.sigma2_, yy=yy, n_obs=n, need_cov=False).log_likelihood
 
-    def predict(self, partial, phase: float | None = None) -> BaselinePrediction:
+    def predict(self, partial, phase: float | None = None) -> GridPrediction:
         """Condition on the observed prefix (phase by maximum likelihood unless given)."""
         from gmr import MVN
 
-        v = np.asarray(partial, dtype=np.float64)
+        v = self._partial(partial)
         M = v.shape[0]
         K = int(self.n_weights)
         if phase is None:
@@ -307,4 +373,4 @@ class InteractionProMP:
         inv = np.argsort(self.order_)
         mean_traj = Y.T[:, inv]
         std = np.sqrt(np.clip(var, 0.0, None)).T[:, inv]
-        return BaselinePrediction(t, mean_traj, std, phase=s, log_likelihood=best_ll)
+        return self._prediction(t, mean_traj, std, M, phase=s, log_likelihood=best_ll, method="promp")

@@ -21,14 +21,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .baselines import BaselinePrediction, _check_demos
+from ..contract import GridPrediction
+from .baselines import _Baseline
 
 __all__ = ["KernelDemonstrations"]
 
 BANDWIDTHS = (0.03, 0.1, 0.3, 1.0, 3.0, 1e6)
 
 
-class KernelDemonstrations:
+class KernelDemonstrations(_Baseline):
     """Kernel-weighted, DTW-aligned training demonstrations continued at their own timing.
 
     Parameters
@@ -49,7 +50,11 @@ class KernelDemonstrations:
         The bandwidth used.
     cv_errors_ : dict
         ``{h: mean held-out error}`` of the cross-validation (empty when ``bandwidth`` is given).
+    weights_ : dict
+        ``{training demonstration: weight}`` of the last prediction.
     """
+
+    _FITTED = "demos_"
 
     def __init__(self, observed_dofs, bandwidth="cv", horizon: float = 0.25, n: int = 201):
         self.observed_dofs = observed_dofs
@@ -77,12 +82,9 @@ class KernelDemonstrations:
             raise ValueError(f"bandwidth must be a positive number or 'cv', got {self.bandwidth!r}")
         if not (isinstance(self.horizon, (int, float)) and self.horizon > 0):
             raise ValueError(f"horizon must be a positive number of seconds, got {self.horizon!r}")
-        arrays = _check_demos(demos)
-        self.dt_ = 0.01 if dt is None else float(dt)
-        obs = [int(i) for i in self.observed_dofs]
+        arrays = self._fit_common(demos, dt)
+        obs = self.observed_dofs_
         D = arrays[0].shape[1]
-        if not obs or any(not 0 <= i < D for i in obs):
-            raise ValueError(f"observed_dofs {self.observed_dofs!r} must name columns of the {D}-column demos")
         self.obs_ = obs
         self.ctrl_ = [i for i in range(D) if i not in set(obs)] or obs
         self.demos_ = arrays
@@ -157,29 +159,42 @@ class KernelDemonstrations:
         return min(self.cv_errors_, key=self.cv_errors_.get)
 
     # -- prediction ------------------------------------------------------------------------------
-    def predict(self, partial) -> BaselinePrediction:
+    def to_state(self):
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        self._check_fitted("to_state")
+        arrays = {"demos": np.concatenate(self.demos_), "lengths": np.array([len(a) for a in self.demos_])}
+        meta = self._common_state()
+        meta.update(bandwidth_=self.bandwidth_, cost_scale_=self.cost_scale_,
+                    cv_errors_=[[float(h), float(e)] for h, e in self.cv_errors_.items()])
+        return arrays, meta
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        self._set_common(meta)
+        ends = np.cumsum(arrays["lengths"])
+        self.demos_ = [np.ascontiguousarray(a) for a in np.split(arrays["demos"], ends[:-1])]
+        self.obs_ = list(self.observed_dofs_)
+        self.ctrl_ = [i for i in range(self.n_dofs_) if i not in set(self.obs_)] or self.obs_
+        self.observed_ = [np.ascontiguousarray(a[:, self.obs_]) for a in self.demos_]
+        self.bandwidth_ = float(meta["bandwidth_"])
+        self.cost_scale_ = float(meta["cost_scale_"])
+        self.cv_errors_ = {float(h): float(e) for h, e in meta["cv_errors_"]}
+
+    def predict(self, partial) -> GridPrediction:
         """Predict the whole movement of both agents from the observed prefix ``partial`` (``(M, n_obs)``).
 
         The prediction's ``phase`` is the fraction of the movement seen and ``duration`` the predicted total
         duration in seconds; ``trajectory(n)`` and ``std(n)`` are the weighted mean and spread of the aligned
-        demonstrations on normalised time.
+        demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
         """
-        if not hasattr(self, "demos_"):
-            from ..errors import NotFittedError
-
-            raise NotFittedError("this KernelDemonstrations is not fitted yet; call fit(demos, dt) first")
-        v = np.asarray(partial, dtype=np.float64)
-        if v.ndim != 2 or v.shape[1] != len(self.obs_):
-            raise ValueError(f"partial must have shape (M, {len(self.obs_)}), got {v.shape}")
-        if v.shape[0] < 1 or not np.all(np.isfinite(v)):
-            raise ValueError("partial must hold at least one frame of finite values")
+        v = self._partial(partial)
         idx, n_star, cost = self._align(v)
         w = self._weights(cost, self.bandwidth_)
         elapsed = (v.shape[0] - 1) * self.dt_
         rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
         R = float(w @ rem) * self.dt_
         dur = max(elapsed + R, self.dt_)
-        s = elapsed / dur if dur > 0 else 1.0
+        s = elapsed / dur
         u = np.linspace(0.0, 1.0, int(self.n))
         Y = np.zeros((len(idx), u.size, self.demos_[0].shape[1]))
         for i, (j, n) in enumerate(zip(idx, n_star)):
@@ -191,7 +206,6 @@ class KernelDemonstrations:
             Y[i] = np.stack([np.interp(f, np.arange(T), a[:, c]) for c in range(a.shape[1])], axis=1)
         mean = np.einsum("j,jkd->kd", w, Y)
         std = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
-        pred = BaselinePrediction(u, mean, std, phase=s)
-        pred.duration = dur
-        pred.weights = dict(zip(idx, w))
-        return pred
+        self.weights_ = dict(zip(idx, w))
+        return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
+                              duration=dur, mean_duration=self.mean_duration_, n_observed=v.shape[0])

@@ -118,10 +118,16 @@ class Prefixes:
 
     def subset(self, indices) -> "Prefixes":
         """The prefixes of the demonstrations ``indices`` only (renumbered from 0)."""
-        new = object.__new__(Prefixes)
-        new.demos = [self.demos[i] for i in indices]
-        new.observed_dofs = list(self.observed_dofs)
-        new.causal = self.causal
-        new._raw = [self._raw[i] for i in indices] if self.causal else None
-        new._times = [self._times[i] for i in indices] if self.causal else None
-        return new
+        idx = list(indices)
+        if not self.causal:
+            return Prefixes([self.demos[i] for i in idx], self.observed_dofs)
+        return Prefixes(_Recorded([self.demos[i] for i in idx], [self._times[i] for i in idx],
+                                  [self._raw[i] for i in idx]), self.observed_dofs)
+
+
+class _Recorded(list):
+    """Demonstrations with their grid times and raw samples (what :class:`Prefixes` reads)."""
+
+    def __init__(self, demos, times, raw):
+        super().__init__(demos)
+        self.times, self.raw = times, raw

@@ -91,14 +91,11 @@ def _interp_rows(u, grid, Y):
 def _timing(pred, k, dt, mean_dur_s):
     """``(phase s at frame k, duration in s)`` of a prediction, by the rules of the module docstring."""
     elapsed = (k - 1) * dt
-    s = getattr(pred, "normalised_time", None)
-    if s is None:
-        s = getattr(pred, "phase", float("nan"))
-    s = float(s)
-    dur = getattr(pred, "duration", None)
+    s = float(pred.normalised_time)  # every prediction has it (interprim.contract.BasePrediction)
+    dur = float(pred.duration)
     if not math.isfinite(s):  # no timing at all: the clock
         return min(elapsed / mean_dur_s, 1.0), mean_dur_s
-    if dur is None or not math.isfinite(float(dur)) or float(dur) <= 0:
+    if not math.isfinite(dur) or dur <= 0:
         dur = elapsed / s if s > 0 else mean_dur_s
     return s, float(dur)
 

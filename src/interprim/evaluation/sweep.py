@@ -228,9 +228,9 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
             err = Y - truth
             rec = {
                 "dataset": dataset, "task": t.name, "method": name, "demo": int(j), "fraction": float(p),
-                "n_observed": M, "phase_true": (M - 1) / (T - 1), "phase": float(getattr(pred, "phase", np.nan)),
+                "n_observed": M, "phase_true": (M - 1) / (T - 1), "phase": float(pred.phase),
                 "rmse_obs": _point_rms(err[:, obs], t.point_dim),
-                "log_likelihood": float(getattr(pred, "log_likelihood", np.nan)),
+                "log_likelihood": float(pred.log_likelihood),
             }
             if ctrl:
                 ec = err[:, ctrl]

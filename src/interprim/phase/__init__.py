@@ -75,29 +75,29 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
 
 
 def fit_phase_model(model, observed_latent, dt: float):
-    """``(phase_model, method used)`` for ``model.phase_method`` at the end of ``fit``.
+    """``(phase_model, method used, figures)`` for ``model.phase_method`` at the end of ``fit``.
 
     ``"learned"`` and ``"auto"`` fit a :class:`~interprim.phase.learned.LearnedPhase` on the observed (latent)
     columns of the demonstrations; ``"auto"`` keeps it only if its leave-one-demonstration-out phase error
     (``cv_error_``) is below the held-out error of the likelihood phase measured by the hyper-parameter selection
     at its chosen noise, each estimate refined like ``predict``'s (``selection_["phase_error_refined"]``): each on
-    held-out training demonstrations, mean absolute error in fractions of the movement.
+    held-out training demonstrations, mean absolute error in fractions of the movement.  ``figures`` holds both
+    errors of that choice (``learned_phase_error``, ``clock_phase_error``; empty otherwise): ``fit`` adds them to
+    ``selection_``.
     """
     method = model.phase_method
-    if method not in ("learned", "auto"):
-        return None, method
+    if method not in ("learned", "cv", "auto"):
+        return None, method, {}
     from .learned import LearnedPhase
 
     if method == "learned":
-        return LearnedPhase().fit(observed_latent, dt=dt), "learned"
-    sel = getattr(model, "selection_", None)
-    lik = (sel or {}).get("phase_error_refined")
+        return LearnedPhase().fit(observed_latent, dt=dt), "learned", {}
+    lik = (getattr(model, "selection_", None) or {}).get("phase_error_refined")
     if lik is None or len(observed_latent) < 3:  # no held-out measure to compare with: the likelihood phase
-        return None, "likelihood"
+        return None, "likelihood", {}
     lp = LearnedPhase().fit(observed_latent, dt=dt)
-    sel["learned_phase_error"] = float(lp.cv_error_)  # both figures of the choice, for the user
-    sel["clock_phase_error"] = float(lp.cv_error_clock_)
-    return (lp, "learned") if float(lp.cv_error_) < float(lik) else (None, "likelihood")
+    figures = {"learned_phase_error": float(lp.cv_error_), "clock_phase_error": float(lp.cv_error_clock_)}
+    return (lp, "learned", figures) if float(lp.cv_error_) < float(lik) else (None, "likelihood", figures)
 
 
 def movement_prefix(model, z, n_star):
@@ -110,7 +110,7 @@ def movement_prefix(model, z, n_star):
     for the first whose estimate is 1; ``O(M log M)``), so :meth:`~interprim.stream.Stream.update` and
     :meth:`~interprim.primitive.InteractionPrimitive.predict` agree.  Other phase methods: ``z`` unchanged.
     """
-    if model._phase() != "learned" or n_star < model.reference_.shape[0] - 1 or z.shape[0] < 3:
+    if model.phase_method_used() != "learned" or n_star < model.reference_.shape[0] - 1 or z.shape[0] < 3:
         return z
     est = model.phase_model_.estimate
     lo, hi = max(2, int(model.min_observed)), z.shape[0]  # the phase of z[:hi] is 1

@@ -66,12 +66,12 @@ way the demonstrations were cut.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from .._validation import as_2d_finite, as_frame, check_positive, check_times
 from ._learned_features import _group_dims, _jsonable, _kernel_loo, _prefix_features, _ridge_loo
+from .estimate import PhaseEstimate
 
 __all__ = ["LearnedPhase", "PhaseEstimate", "PhaseTracker", "FEATURE_GROUPS", "DEFAULT_FEATURES"]
 
@@ -81,37 +81,8 @@ FEATURE_GROUPS = ("position", "displacement", "velocity", "path", "peak_speed", 
 #: the sensor's noise and sampling rate; on NuiSI they made the estimate worse: 0.72x the clock with them,
 #: 0.68x without).
 DEFAULT_FEATURES = ("position", "displacement", "velocity", "history")
-_GROUP_SIZE = {"position": "D", "displacement": "D", "velocity": "D", "path": 1, "peak_speed": 1, "history": "DH"}
 _MODELS = ("kernel", "ridge")
 _TARGETS = ("phase", "log_duration")
-
-
-@dataclass(frozen=True)
-class PhaseEstimate:
-    """A phase estimate of a partial observation.
-
-    Attributes
-    ----------
-    phase : float
-        Normalised time of the last observed frame (fraction of the movement
-        seen), in [0, 1].
-    duration : float
-        Estimated duration of the whole movement in seconds.
-    speed : float
-        ``mean_duration / duration``: the partner's speed relative to the
-        demonstrations' mean (1 = as fast).
-    std : float
-        Uncertainty of ``phase`` (root mean square leave-one-demonstration-out
-        error of the chosen model at this elapsed time).
-    elapsed : float
-        Elapsed time of the last observed frame since the first, in seconds.
-    """
-
-    phase: float
-    duration: float
-    speed: float
-    std: float
-    elapsed: float
 
 
 class LearnedPhase:
@@ -518,8 +489,13 @@ class LearnedPhase:
             return min(k * self.dt_ / math.exp(v), 1.0)
         return min(max(v, 0.0), 1.0)
 
-    def _finish(self, t: float, f) -> PhaseEstimate:
-        """Estimate at elapsed time ``t`` from the features ``f`` of the prefix."""
+    @property
+    def window_(self) -> int:
+        """Frames of the windowed velocity feature (``velocity_window / dt``, at least 1)."""
+        return self._w
+
+    def estimate_at(self, t: float, f) -> PhaseEstimate:
+        """Estimate at elapsed time ``t`` (s) from the features ``f`` of the prefix (``None``: the clock's)."""
         K = self.n_grid_
         k = int(round(t / self.dt_))
         if k <= 0:
@@ -538,6 +514,8 @@ class LearnedPhase:
             duration = t if t > 0 else self.mean_duration_
         std = float(self.std_grid_[min(k, K - 1)])
         return PhaseEstimate(float(s), float(duration), float(self.mean_duration_ / duration), std, float(t))
+
+    _finish = estimate_at
 
     def estimate(self, partial, dt: float | None = None, times=None) -> PhaseEstimate:
         """Phase of a partial observation of the observed agent.
@@ -595,7 +573,7 @@ class LearnedPhase:
             setattr(obj, k, tuple(v) if k in ("features", "features_", "cv_range") and isinstance(v, list) else v)
         for k, v in arrays.items():
             setattr(obj, k, np.asarray(v))
-        obj._check_fitted()
+        cls._check_fitted(obj)
         return obj
 
     def tracker(self) -> "PhaseTracker":
@@ -625,7 +603,7 @@ class PhaseTracker:
     def __init__(self, model: LearnedPhase):
         self.model = model
         self._inv_scale = 1.0 / model.scale_
-        self._buf = np.zeros((model._w + 1, model.n_dofs_))
+        self._buf = np.zeros((model.window_ + 1, model.n_dofs_))
         self._hist = np.zeros((64, model.n_dofs_)) if "history" in model.features_ else None
         self._q = np.arange(1, model.history + 1) / (model.history + 1)
         self._shape = (model.n_dofs_,)
@@ -650,7 +628,7 @@ class PhaseTracker:
                 raise ValueError("frame contains NaN or inf")
         else:
             y = as_frame(frame, "frame", m.n_dofs_) * self._inv_scale
-        w = m._w
+        w = m.window_
         k = self.n_frames
         buf = self._buf
         if k == 0:
@@ -667,7 +645,7 @@ class PhaseTracker:
             self._hist[k] = y
         self.n_frames = k + 1
         if k == 0 or m.method_ == "clock":
-            return m._finish(k * m.dt_, None)
+            return m.estimate_at(k * m.dt_, None)
         back = max(k - w, 0)
         vel = (y - buf[back % (w + 1)]) / ((k - back) * m.dt_)
         sp = math.sqrt(float(vel @ vel))
@@ -691,4 +669,4 @@ class PhaseTracker:
                 f = (x - lo)[:, None]
                 h = self._hist
                 out[sl] = ((1.0 - f) * h[lo] + f * h[np.minimum(lo + 1, k)] - self._first).ravel()
-        return m._finish(k * m.dt_, out)
+        return m.estimate_at(k * m.dt_, out)

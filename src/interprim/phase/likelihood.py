@@ -27,9 +27,8 @@ data (forcing values of Eq. 15 change with ``s`` through their derivatives).
 demonstrations' durations.
 
 The search evaluates a grid of candidates (plus the DTW estimate, when given),
-then refines the best one by a bounded scalar search.  :func:`interprim.phase.tracking.track_phase` is
-the cheap online variant (a few candidates around the previous estimate,
-extrapolated at constant speed).
+then refines the best one by a bounded scalar search.  Streams track the same maximum frame by frame
+(:class:`interprim.phase.tracking._Tracker`).
 
 All candidates of a search are evaluated in one batched computation
 (:func:`phase_log_likelihoods`): since the design of every observed DoF is the
@@ -42,8 +41,6 @@ evaluation it is tested against.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .._blas import single_thread
@@ -51,34 +48,12 @@ from .._compiled.loader import phase_kernel as _kernel
 from ..dmp import forcing_values
 from ..gaussian import _LOG2PI, LowRankPrior, condition, lowrank_case
 from ..preprocessing import derivatives
+from .estimate import PhaseEstimate
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
            "phase_noise"]
 
 _S_MIN = 0.02
-
-
-@dataclass(frozen=True)
-class PhaseEstimate:
-    """Result of :func:`estimate_phase`.
-
-    Attributes
-    ----------
-    s_end : float
-        Normalised time (in (0, 1]) of the last observed frame.
-    log_likelihood : float
-        ``log p(observation | s_end)`` (positions, observed block of the prior).
-    log_posterior : float
-        ``log_likelihood + log p(s_end)`` (equal when there is no speed prior).
-    grid, curve : ndarray
-        The candidates evaluated and their log posteriors (for plots and diagnostics).
-    """
-
-    s_end: float
-    log_likelihood: float
-    log_posterior: float
-    grid: np.ndarray
-    curve: np.ndarray
 
 
 def observation_design(model, z, s_end: float, kind: str = "position"):
@@ -121,15 +96,13 @@ def phase_noise(model) -> float:
 def _marginal(model):
     """Mean and covariance of the observed agent's block of the prior (cached per prior object)."""
     prior = model.prior_
-    cache = getattr(model, "_phase_marginal", None)
-    if cache is not None and cache[0] is prior:
-        return cache[1], cache[2], cache[3]
-    n = model.n_observed_latent_ * model._q
-    mean_o = np.ascontiguousarray(prior.mean[:n])
-    cov_o = np.ascontiguousarray(prior.cov[:n, :n])
-    idx = np.arange(n).reshape(model.n_observed_latent_, model._q)
-    model._phase_marginal = (prior, mean_o, cov_o, idx)
-    return mean_o, cov_o, idx
+
+    def build():
+        n = model.n_observed_latent_ * model.params_per_dof_
+        idx = np.arange(n).reshape(model.n_observed_latent_, model.params_per_dof_)
+        return np.ascontiguousarray(prior.mean[:n]), np.ascontiguousarray(prior.cov[:n, :n]), idx
+
+    return model.cached("phase_marginal", (prior,), build)
 
 
 def _factored(model):
@@ -139,13 +112,14 @@ def _factored(model):
     once); ``None`` otherwise (then the dense path is used).
     """
     prior = model.prior_
-    cache = getattr(model, "_phase_factored", None)
-    if cache is not None and cache[0] is prior:
-        return cache[1]
+    return model.cached("phase_factored", (prior,), lambda: _build_factored(model, prior))
+
+
+def _build_factored(model, prior):
     pr = None
     th = getattr(model, "thetas_", None)
     if th is not None:
-        n = model.n_observed_latent_ * model._q
+        n = model.n_observed_latent_ * model.params_per_dof_
         cand = LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
         cand.mean, cand.d, cand.W = cand.mean[:n], cand.d[:n], cand.W[:, :n]
         dense = prior.cov[:n, :n]
@@ -154,7 +128,6 @@ def _factored(model):
         if np.allclose(approx, dense, rtol=1e-8, atol=1e-10 * float(np.abs(dense).max())) and np.allclose(
                 cand.mean, prior.mean[:n]):
             pr = cand
-    model._phase_factored = (prior, pr)
     return pr
 
 
@@ -190,8 +163,8 @@ def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)
     if pr is not None:  # O(D_o k^3 + D_o k S^2) instead of O((D_o k)^3)
-        return float(lowrank_case(pr, model.n_observed_latent_, model._q, X, Y, np.array([s2]), need_mean=False,
-                                   need_ll=True)[1][0])
+        return float(lowrank_case(pr, model.n_observed_latent_, model.params_per_dof_, X, Y, np.array([s2]),
+                                  need_mean=False, need_ll=True)[1][0])
     mean_o, cov_o, idx = _marginal(model)
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
                      need_cov=False)
@@ -205,12 +178,12 @@ class _FastState:
     """Everything of the batched evaluation that depends only on the model (cached per prior object)."""
 
     def __init__(self, model, pr):
-        n_o, q = model.n_observed_latent_, model._q
+        n_o, q = model.n_observed_latent_, model.params_per_dof_
         no_q = n_o * q
         ro = model.rollout_
         self.n_o, self.q = n_o, q
-        self.Zh = np.ascontiguousarray(ro._Z[:, 0, :])  # (K+1, q): H rows on the grid (s0 = 0)
-        self.Pf = np.ascontiguousarray(ro._powers[:, 0, :])  # (K+1, 2): free response rows on the grid
+        self.Zh = np.ascontiguousarray(ro.Z[:, 0, :])  # (K+1, q): H rows on the grid (s0 = 0)
+        self.Pf = np.ascontiguousarray(ro.powers[:, 0, :])  # (K+1, 2): free response rows on the grid
         mu_o = np.asarray(pr.mean[:no_q], dtype=np.float64).reshape(n_o, q)
         self.Hmu = np.ascontiguousarray(self.Zh @ mu_o.T)  # (K+1, n_o)
         self.v0 = np.asarray(model.start_velocity_[:n_o], dtype=np.float64)
@@ -231,11 +204,11 @@ class _FastState:
             self._rg_key = key
         return self._rg
 
-    def loglik(self, z, s_values, s2, block: bool = False):
+    def loglik(self, z, s_values, s2):
         z = np.ascontiguousarray(z, dtype=np.float64)
         M = z.shape[0]
         Rg = self.mean_path(z[0])
-        kern = _kernel(block)
+        kern = _kernel()
         if kern is not None:
             return kern(self.Zh, Rg, z, M, np.ascontiguousarray(s_values, dtype=np.float64), self.sq, self.Uh,
                         self.K0, float(s2), np.empty(s_values.shape[0]))
@@ -245,14 +218,11 @@ class _FastState:
 
 def _fast_state(model):
     """The :class:`_FastState` of ``model`` (``None`` when the prior is not diagonal plus low rank)."""
-    prior = model.prior_
-    cache = getattr(model, "_phase_fast", None)
-    if cache is not None and cache[0] is prior and cache[1] is model.rollout_:
-        return cache[2]
-    pr = _factored(model)
-    fs = None if pr is None else _FastState(model, pr)
-    model._phase_fast = (prior, model.rollout_, fs)
-    return fs
+    def build():
+        pr = _factored(model)
+        return None if pr is None else _FastState(model, pr)
+
+    return model.cached("phase_fast", (model.prior_, model.rollout_), build)
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
@@ -336,7 +306,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     lo, hi = _bounds(model, M, bounds)
     if M < 2:
         s = float(np.clip(s_init if s_init is not None else lo, lo, hi))
-        return PhaseEstimate(s, 0.0, 0.0, np.array([s]), np.array([0.0]))
+        return PhaseEstimate(s, log_likelihood=0.0, log_posterior=0.0, grid=np.array([s]), curve=np.array([0.0]))
     grid = np.exp(np.linspace(np.log(lo), np.log(hi), int(n_grid)))
     if s_init is not None and np.isfinite(s_init):
         grid = np.unique(np.append(grid, np.clip(float(s_init), lo, hi)))
@@ -393,12 +363,13 @@ class _scorer:
 def _speed_prior_params(model, M):
     """``(log elapsed time, mean, sd)`` of :func:`_log_speed_prior` (the log-duration statistics cached per model)."""
     dur = model.durations_
-    cache = getattr(model, "_phase_speed_prior", None)
-    if cache is None or cache[0] is not dur:
+
+    def build():
         d = np.log(np.asarray(dur, dtype=np.float64))
-        cache = (dur, float(d.mean()), max(float(d.std()), 0.1))
-        model._phase_speed_prior = cache
-    return float(np.log(max(M - 1, 1) * model.dt_)), cache[1], cache[2]
+        return float(d.mean()), max(float(d.std()), 0.1)
+
+    mu, sd = model.cached("phase_speed_prior", (dur,), build)
+    return float(np.log(max(M - 1, 1) * model.dt_)), mu, sd
 
 
 def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
@@ -437,7 +408,7 @@ def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
         s = _finish(scores, ss, lps, k, lo, hi)
         lp1, ll1 = scores(np.array([s]))
         best_s, best_lp, best_ll = s, float(lp1[0]), float(ll1[0])
-    return PhaseEstimate(best_s, float(best_ll), float(best_lp), grid, curve)
+    return PhaseEstimate(best_s, log_likelihood=float(best_ll), log_posterior=float(best_lp), grid=grid, curve=curve)
 
 
 _GOLD = 0.5 * (3.0 - 5.0 ** 0.5)

@@ -1,11 +1,10 @@
 """Online phase tracking for streams: the likelihood phase by local search (beyond the paper's DTW).
 
-:func:`track_phase` re-scores a few candidates around the constant-speed
-extrapolation of the previous estimate; :class:`_Tracker` (used by
-:class:`~interprim.stream.Stream`) scores them on a fixed lattice of speeds, so
-the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
-lattice point's statistics by the new frame instead of recomputing them.
-Both score with :mod:`interprim.phase.likelihood`.
+:class:`_Tracker` (used by :class:`~interprim.stream.Stream`) scores candidates around the previous
+estimate on a fixed lattice of speeds, so the compiled step
+(:func:`interprim._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
+frame instead of recomputing them; it scores with :mod:`interprim.phase.likelihood` and ends where the batch
+search ends.
 """
 
 from __future__ import annotations
@@ -17,47 +16,7 @@ from .._compiled.loader import _PHASE_KERNELS as _KERNEL
 from .._compiled.loader import phase_kernel as _kernel
 from .likelihood import _S_MIN, _bounds, _finish, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
 
-__all__ = ["track_phase"]
-
-
-_FACTORS: dict = {}
-
-
-def _spread_factors(n: int, spread: float) -> np.ndarray:
-    """``exp(linspace(-spread, spread, n))`` (cached: it is the same for every frame of a stream)."""
-    f = _FACTORS.get((n, spread))
-    if f is None:
-        f = np.exp(np.linspace(-spread, spread, n))
-        f.flags.writeable = False
-        _FACTORS[(n, spread)] = f
-    return f
-
-
-def track_phase(model, z, s_prev: float | None, m_prev: int, n_candidates: int = 7, spread: float = 0.15,
-                speed_prior: bool = True) -> float:
-    """Cheap online phase update for :class:`~interprim.primitive.Stream`.
-
-    Extrapolates the previous estimate ``s_prev`` (made with ``m_prev``
-    frames) at constant speed to the current ``M`` frames and evaluates
-    ``n_candidates`` values within a factor ``exp(+-spread)`` of it; the first
-    estimate (``s_prev is None``) uses a coarse full grid.
-    """
-    M = z.shape[0]
-    if M < 2:
-        return _S_MIN
-    if s_prev is None or m_prev < 2:
-        return estimate_phase(model, z, n_grid=20, refine=False, speed_prior=speed_prior).s_end
-    s_pred = min(1.0, s_prev * (M - 1) / (m_prev - 1))
-    cand = s_pred * _spread_factors(int(n_candidates), float(spread))
-    if cand[0] < _S_MIN or cand[-1] > 1.0:  # clipped: duplicates at the bounds
-        cand = np.unique(np.clip(cand, _S_MIN, 1.0))
-    scores = _scorer(model, z, phase_noise(model), speed_prior)
-    if scores.dense:
-        with single_thread():
-            sc = scores(cand)[0]
-    else:
-        sc = scores(cand)[0]
-    return float(cand[int(np.argmax(sc))])
+__all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
 
 
 # ---------------------------------------------------------------------------------------------------------------

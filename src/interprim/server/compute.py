@@ -40,23 +40,13 @@ def warm_up(entries) -> None:
     for e in entries:
         try:
             st = e.model.stream()
-            has_kw = _accepts_need_cov(st)
             ramp = np.linspace(0.0, 0.1, 20)[:, None] * np.ones(e.n_observed)
             for k, f in enumerate(ramp):
-                p = st.update(f, **({"need_cov": k % 2 == 1} if has_kw else {}))
+                p = st.update(f, need_cov=k % 2 == 1)
             p.trajectory(5)
             p.std(5)
         except Exception:  # a model that cannot predict from zeros will say so to its first client
             log.debug("warm-up of %s failed", e.name, exc_info=True)
-
-
-def _accepts_need_cov(stream) -> bool:
-    import inspect
-
-    try:
-        return "need_cov" in inspect.signature(stream.update).parameters
-    except (TypeError, ValueError):
-        return False
 
 
 _FMT_CACHE: dict = {}
@@ -181,16 +171,14 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
         best = int(np.argmax(probs))
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
-    if getattr(pred, "conditioned", True):
+    if pred.conditioned:  # every prediction has the attributes of interprim.contract.BasePrediction
         vals = (float(pred.phase), float(pred.x), float(pred.speed), float(pred.duration), float(pred.log_likelihood))
         if not all(map(math.isfinite, vals)):  # nan / inf: never put them on the wire
             raise FloatingPointError(_NONFINITE)
         nums = _HEAD_FMT % vals + '"conditioned":true,'
     else:  # the prior (too few frames): no phase, speed or likelihood to report
         nums = _UNCONDITIONED
-    n_frames = getattr(pred, "n_observed", None)
-    if n_frames is not None:
-        nums += '"frames":%d,' % n_frames
+    nums += '"frames":%d,' % pred.n_observed
     parts = ['{"type":"prediction","seq":%d,"covers":%d,"first_seq":%d' % (seq, covers, seq - covers + 1),
              model_part, nums, cols_part]
     # "type", "seq", "covers", "first_seq" first: clients may read them without a full parse
@@ -206,9 +194,9 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
         parts += [',"std":', _json_array(np.asarray(pred.std(op.points))[:, sel])]
     # input far outside the training demonstrations (wrong units, columns, frame of reference): the flag and
     # the largest standardised distance seen since the session's last reset (null for an old model file)
-    dist = float(getattr(pred, "input_distance", float("nan")))
+    dist = float(pred.input_distance)
     parts.append(',"out_of_range":%s,"input_distance":%s' % (
-        "true" if getattr(pred, "out_of_range", False) else "false",
+        "true" if pred.out_of_range else "false",
         ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null")))
     parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
     return "".join(parts)

@@ -72,7 +72,7 @@ class ModelEntry:
     def start(self) -> list | None:
         """Mean start position of the demonstrations in every data column, or ``None`` if unknown."""
         try:
-            M, off = self.model._latent_map()
+            M, off = self.model.latent_map()
             return [float(v) for v in M @ np.asarray(self.model.start_position_, dtype=np.float64) + off]
         except Exception:  # a stand-in model without these attributes
             return None

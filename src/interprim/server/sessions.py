@@ -15,7 +15,7 @@ import asyncio
 import logging
 
 from . import protocol as P
-from .compute import _Open, _accepts_need_cov
+from .compute import _Open
 from .lanes import _Bucket, _Session
 
 SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001) sent to every session at shutdown
@@ -310,7 +310,7 @@ class SessionSide:
                 except RuntimeError as exc:
                     raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
             s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
-            if streams and _accepts_need_cov(streams[0]):  # mean-only updates are much cheaper without a band
+            if streams:  # mean-only updates are much cheaper without a band (every stream takes need_cov)
                 s.open.update_kw = {"need_cov": o["std"]}
             s.consecutive_errors = 0
             log.info("session %d: opened %s%s", s.id, o["model"],

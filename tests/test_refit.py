@@ -1,0 +1,128 @@
+"""A refit starts from nothing: no value derived from an earlier fit survives it (issue 20's refit bug)."""
+
+import copy
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim.synthetic import two_agent_demos
+
+CONFIGS = {
+    "dtw": dict(sigma2=1e-3, covariance="ridge", phase_method="dtw", calibrate=False),
+    "likelihood-pca": dict(sigma2=1e-3, phase_method="likelihood", pca_components=(2, 2), calibrate=False),
+}
+
+
+def _use(model, partial):
+    pred = model.predict(partial)
+    pred.std(30)
+    pred.response(20)
+    pred.samples(3, 30, random_state=0)
+    pred.completion(10)
+    return pred
+
+
+@pytest.mark.parametrize("config", sorted(CONFIGS))
+def test_refit_on_fewer_columns_equals_a_fresh_fit(config):
+    demos = two_agent_demos(12, seed=3)  # 5 columns: 2 observed, 3 controlled
+    fewer = [d[:, :4] for d in demos]
+    kw = dict(observed_dofs=[0, 1], n_basis=8, **CONFIGS[config])
+    model = ip.InteractionPrimitive(**kw).fit(demos, dt=0.01)
+    first = _use(model, demos[0][:60, :2])
+    assert first.trajectory(30).shape == (30, 5)
+    model.fit(fewer, dt=0.01)  # the same instance, one controlled column fewer
+    fresh = ip.InteractionPrimitive(**kw).fit(fewer, dt=0.01)
+    got, want = _use(model, fewer[1][:70, :2]), _use(fresh, fewer[1][:70, :2])
+    assert got.trajectory(30).shape == (30, 4)
+    np.testing.assert_array_equal(got.trajectory(30), want.trajectory(30))
+    np.testing.assert_array_equal(got.std(30), want.std(30))
+    for a, b in zip(got.response(20), want.response(20)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(got.samples(3, 30, random_state=0), want.samples(3, 30, random_state=0))
+    assert got.phase == want.phase
+
+
+def test_derived_values_are_not_attributes_and_copies_do_not_share_them():
+    demos = two_agent_demos(8, seed=4)
+    model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, phase_method="likelihood",
+                                    calibrate=False).fit(demos, dt=0.01)
+    before = set(vars(model))
+    _use(model, demos[0][:50, :2])
+    assert set(vars(model)) == before  # predicting adds no attribute to the estimator
+    twin = copy.copy(model)
+    assert twin.cached("x", (), lambda: 1) == 1 and model.cached("x", (), lambda: 2) == 2
+
+
+# ----------------------------------------------------------------------------- scikit-learn conventions
+def test_get_params_set_params_and_clone():
+    sklearn_base = pytest.importorskip("sklearn.base")
+    demos = two_agent_demos(8, seed=4)
+    model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, pca_components=(2, 2), phase_method="dtw",
+                                    calibrate=False)
+    params = model.get_params(deep=True)
+    assert params == model.get_params(deep=False) and params["pca_components"] == (2, 2)
+    assert set(params) == set(ip.InteractionPrimitive([0]).get_params())
+    assert model.set_params(n_basis=9, ridge=1e-5) is model and model.n_basis == 9 and model.ridge == 1e-5
+    with pytest.raises(ValueError, match="no parameter 'n_basiss'"):
+        model.set_params(n_basiss=3)
+    model.fit(demos, dt=0.01)
+    twin = sklearn_base.clone(model)
+    assert type(twin) is ip.InteractionPrimitive and twin.get_params() == model.get_params()
+    assert not hasattr(twin, "prior_")  # a clone is unfitted
+    with pytest.raises(ip.NotFittedError):
+        twin.predict(demos[0][:20, :2])
+    twin.fit(demos, dt=0.01)
+    part = demos[1][:60, :2]
+    np.testing.assert_array_equal(twin.predict(part).trajectory(20), model.predict(part).trajectory(20))
+
+
+@pytest.mark.parametrize("name, value, match", [
+    ("calibrate", "yes", "calibrate must be True, False or 'auto'"),
+    ("n_steps", 0, "n_steps must be a positive integer"),
+    ("n_steps", 2.5, "n_steps must be a positive integer"),
+    ("ridge", -1.0, "ridge must be a finite number >= 0"),
+    ("ridge", "big", "ridge must be a finite number >= 0"),
+    ("covariance", "full", "covariance must be one of"),
+    ("reference", 99, r"reference=99 is not a demo index \(0..7\)"),
+    ("reference", "median", "reference must be 'mean' or a demo index"),
+])
+def test_every_parameter_is_checked_before_the_cross_validation(monkeypatch, name, value, match):
+    import interprim.selection
+
+    def expensive(*args, **kwargs):  # pragma: no cover - reaching it is the failure
+        raise AssertionError("the cross-validation ran before the parameters were checked")
+
+    monkeypatch.setattr(interprim.selection, "select_hyperparameters", expensive)
+    model = ip.InteractionPrimitive([0, 1], n_basis=8, **{name: value})  # sigma2="cv": selection would run
+    with pytest.raises(ValueError, match=match):
+        model.fit(two_agent_demos(8, seed=4), dt=0.01)
+
+
+@pytest.mark.parametrize("name, new, old", [("sigma2", "residual", "auto"), ("phase_method", "cv", "auto")])
+def test_auto_has_a_name_that_says_what_it_does(name, new, old):
+    """sigma2="residual" (the paper's fit residual) and phase_method="cv" (the phase method with the smaller
+    held-out error) are the same models as their old name "auto"."""
+    demos = two_agent_demos(8, seed=4)
+    kw = dict(n_basis=8, calibrate=False, sigma2=1e-3)
+    a = ip.InteractionPrimitive([0, 1], **{**kw, name: new}).fit(demos, dt=0.01)
+    b = ip.InteractionPrimitive([0, 1], **{**kw, name: old}).fit(demos, dt=0.01)
+    assert a.sigma2_ == b.sigma2_ and a.phase_method_used() == b.phase_method_used()
+    part = demos[0][:70, :2]
+    np.testing.assert_array_equal(a.predict(part).trajectory(20), b.predict(part).trajectory(20))
+
+
+def test_to_state_from_state_round_trip():
+    """The model file's content without the file: ``from_state(*to_state())`` is the same model."""
+    demos = two_agent_demos(8, seed=4)
+    m = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, pca_components=(2, 2), phase_method="likelihood",
+                                calibrate=False).fit(demos, dt=0.01)
+    arrays, meta = m.to_state()
+    twin = ip.InteractionPrimitive.from_state(arrays, meta)
+    part = demos[1][:60, :2]
+    a, b = m.predict(part), twin.predict(part)
+    np.testing.assert_array_equal(a.trajectory(30), b.trajectory(30))
+    np.testing.assert_array_equal(a.std(30), b.std(30))
+    bad = dict(arrays, thetas=arrays["thetas"][:, :-1])
+    with pytest.raises(ip.ModelFileError, match="<state>: array 'thetas' has shape"):
+        ip.InteractionPrimitive.from_state(bad, meta)

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import importlib
 
-from .errors import DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning
+from .errors import (DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning,
+                     RepresentationWarning)
 
 __version__ = "0.1.0"
 
@@ -38,6 +39,7 @@ __all__ = [
     "NotFittedError",
     "ModelFileError",
     "OutOfRangeWarning",
+    "RepresentationWarning",
     "DataFileError",
     "__version__",
 ]

@@ -32,7 +32,7 @@ import numpy as np
 from .basis import Basis
 
 __all__ = ["forcing_targets", "forcing_values", "fit_weights", "fit_weights_stacked", "fit_weights_targets",
-           "LinearRollout", "cached_rollout"]
+           "LinearRollout", "cached_rollout", "representation_report"]
 
 
 def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
@@ -323,3 +323,56 @@ class LinearRollout:
 def cached_rollout(n_basis: int, alpha_x: float, alpha_y: float, beta_y: float, n_steps: int) -> LinearRollout:
     """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as read-only)."""
     return LinearRollout(Basis(int(n_basis), float(alpha_x)), float(alpha_y), float(beta_y), int(n_steps))
+
+
+def representation_report(latent, starts, theta, rollout, n: int = 101, groups=None) -> dict:
+    """How well the DMPs (Eq. 1-4) represent the demonstrations, relative to the spread between them.
+
+    For every demonstration, its own parameters ``theta[j]`` are rolled out (Eq. 1) from its start state and
+    compared with what was recorded; and the mean parameters are rolled out from the mean start and compared
+    with the demonstrations' mean, all on a normalised-time grid of ``n`` points.  Both errors are divided by
+    the spread between demonstrations (RMS distance of each from their mean): a ratio near 0 means the DMPs
+    keep what distinguishes the demonstrations, a ratio near or above 1 means they lose it (e.g. a periodic
+    movement with too few basis functions).
+
+    Parameters
+    ----------
+    latent : list of ndarray, shape (T_j, d)
+        The demonstrations in the space the DMPs model.
+    starts : list of (ndarray (d,), ndarray (d,))
+        Start position and velocity (normalised time) of each demonstration.
+    theta : ndarray, shape (S, d, n_basis + 1)
+        Each demonstration's DMP parameters.
+    rollout : LinearRollout
+        The rollout map.
+    groups : dict, optional
+        ``{name: slice or list of latent columns}`` to report separately (default: all as ``"all"``).
+
+    Returns
+    -------
+    dict
+        Per group: ``{"reconstruction": RMS reconstruction error / spread, "mean_offset": RMS distance of the
+        DMP mean from the data mean / spread, "spread": RMS spread}``.
+    """
+    from .preprocessing import time_normalise
+
+    s = np.linspace(0.0, 1.0, int(n))
+    free, H = rollout.design(0.0, s)
+    Y = np.stack([time_normalise(np.asarray(z, dtype=np.float64), n) for z in latent])  # (S, n, d)
+    rec = np.stack([free @ np.stack([y0, v0]) + H @ th.T for (y0, v0), th in zip(starts, theta)])
+    y0m = np.mean([st[0] for st in starts], axis=0)
+    v0m = np.mean([st[1] for st in starts], axis=0)
+    mean_roll = free @ np.stack([y0m, v0m]) + H @ np.mean(theta, axis=0).T
+    data_mean = Y.mean(axis=0)
+    out = {}
+    for name, cols in (groups or {"all": slice(None)}).items():
+        spread = float(np.sqrt(np.mean((Y[:, :, cols] - data_mean[None, :, cols]) ** 2)))
+        if spread <= 0:
+            out[name] = {"reconstruction": 0.0, "mean_offset": 0.0, "spread": 0.0}
+            continue
+        out[name] = {
+            "reconstruction": float(np.sqrt(np.mean((rec[:, :, cols] - Y[:, :, cols]) ** 2)) / spread),
+            "mean_offset": float(np.sqrt(np.mean((mean_roll[:, cols] - data_mean[:, cols]) ** 2)) / spread),
+            "spread": spread,
+        }
+    return out

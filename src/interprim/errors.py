@@ -40,3 +40,9 @@ class OutOfRangeWarning(UserWarning):
     frame of reference, a tracking failure): the prediction extrapolates and is not to be trusted.  The
     prediction carries ``input_distance`` and ``out_of_range``
     (:attr:`interprim.primitive.Prediction.out_of_range`)."""
+
+
+class RepresentationWarning(UserWarning):
+    """The DMPs cannot represent the demonstrations well enough (e.g. a periodic movement with too few basis
+    functions): their reconstruction or their mean is far from the recorded movements, relative to the spread
+    between demonstrations.  The numbers are in ``InteractionPrimitive.representation_``."""

@@ -24,7 +24,7 @@ from ._blas import one_blas_thread, single_thread
 from .contract import Predictor
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
-from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values
+from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
@@ -162,6 +162,12 @@ class InteractionPrimitive(Predictor):
         DMP parameters ``[w_1, g_1, ..., w_N, g_N]`` of each demonstration (Eq. 3-4), observed DoFs first.
     prior_ : GaussianPrior
         ``p(theta)`` of Eq. 10.
+    representation_ : dict
+        How well the DMPs represent the demonstrations, per agent (``"observed"``, ``"controlled"``):
+        ``reconstruction`` (each demonstration rolled out from its own parameters, Eq. 1) and ``mean_offset``
+        (the mean parameters' rollout against the demonstrations' mean), both as RMS error / the RMS spread
+        between demonstrations, and ``spread`` (:func:`interprim.dmp.representation_report`).  Above 0.5 ``fit``
+        warns (:class:`~interprim.RepresentationWarning`); also kept in ``selection_["representation"]``.
     sigma2_ : float
         Observation noise of Eq. 16 in use; ``phase_sigma2_`` the position noise of the likelihood phase
         (``None`` when not chosen).
@@ -415,6 +421,10 @@ class InteractionPrimitive(Predictor):
         self.start_position_ = np.mean([z[0] for z in latent], axis=0)
         self.start_velocity_ = np.mean([d[1] for d in ders], axis=0)
         self.prior_ = fit_prior(self.thetas_, self.covariance, self.ridge)
+        self.representation_ = representation_report(
+            latent, ders, theta, self.rollout_,
+            groups={"observed": slice(0, n_o), "controlled": slice(n_o, None)} if ctrl else {"observed": slice(None)})
+        _warn_representation(self.representation_, int(self.n_basis))
 
         # observation noise (Eq. 16)
         if isinstance(self.sigma2, str):
@@ -449,6 +459,8 @@ class InteractionPrimitive(Predictor):
             self.phase_model_, self.phase_method_, figures = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
         if figures:  # both phase errors of the "auto" choice, for the user
             self.selection_.update(figures)
+        if hasattr(self, "selection_"):  # how well the DMPs represent the demonstrations (kept in the model file)
+            self.selection_["representation"] = self.representation_
         if self.input_noise is not None:  # sensor noise of the online input that the demonstrations lack
             e2 = float(self.input_noise) ** 2
             if self.observation == "position":
@@ -849,3 +861,26 @@ class InteractionPrimitive(Predictor):
     _phase = phase_method_used
     _observed_to_latent = observed_to_latent
     _setup = setup_derived
+
+
+#: Above this ratio (error / spread between demonstrations) the DMPs lose most of what distinguishes the
+#: demonstrations, and fit warns (:class:`~interprim.errors.RepresentationWarning`).
+REPRESENTATION_LIMIT = 0.5
+
+
+def _warn_representation(report: dict, n_basis: int):
+    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
+    import warnings
+
+    from .errors import RepresentationWarning
+
+    bad = {a: r for a, r in report.items() if max(r["reconstruction"], r["mean_offset"]) > REPRESENTATION_LIMIT}
+    if not bad:
+        return
+    what = "; ".join(f"{a} agent: reconstruction {r['reconstruction']:.2f}x and mean {r['mean_offset']:.2f}x the "
+                     f"spread between demonstrations" for a, r in bad.items())
+    warnings.warn(f"the DMPs with n_basis={n_basis} cannot represent these movements ({what}; above "
+                  f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
+                  f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
+                  f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
+                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=3)

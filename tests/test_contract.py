@@ -36,7 +36,8 @@ def _ip_phase(method):
 MODELS = {"ip": _ip, "ip-likelihood": _ip_phase("likelihood"), "ip-learned": _ip_phase("learned"),
           "learned": _learned, "prior-mean": lambda: PriorMean(OBS, n=60),
           "nearest-neighbour": lambda: NearestNeighbour(OBS, n=60), "promp": _promp,
-          "kernel": lambda: KernelDemonstrations(OBS, n=60)}
+          "kernel": lambda: KernelDemonstrations(OBS, n=60),
+          "auto": lambda: ip.AutoInteraction(OBS, candidates=("kernel", "prior"))}
 
 
 @pytest.fixture(scope="module")

@@ -23,6 +23,7 @@ _LAZY = {
     "Stream": "interprim.stream",
     "Recogniser": "interprim.recognition",
     "LearnedInteraction": "interprim.learned",
+    "AutoInteraction": "interprim.auto",
     "LearnedPhase": "interprim.phase.learned",
     "CouplingModel": "interprim.coupling",
 }
@@ -33,6 +34,7 @@ __all__ = [
     "Stream",
     "Recogniser",
     "LearnedInteraction",
+    "AutoInteraction",
     "LearnedPhase",
     "CouplingModel",
     "InterprimError",

@@ -69,10 +69,10 @@ def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
             ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6, sigma2=1e-3, phase_method="dtw",
                                     calibrate=False).fit(two_agent_demos(5, seed=1, frames=80), dt=0.01)
         elif entry == "predict":
-            spy_on(type(model), "_condition")
+            spy_on(type(model), "condition")
             model.predict(human[:40])
         elif entry == "update":
-            spy_on(type(model), "_predict_latent")
+            spy_on(type(model), "predict_latent")
             s = model.stream()
             for f in human[:5]:
                 s.update(f)
@@ -80,7 +80,7 @@ def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
             s = model.stream()
             for f in human[:30]:
                 p = s.update(f)  # mean only: the covariance is computed on first access
-            spy_on(type(model), "_condition")
+            spy_on(type(model), "condition")
             p.posterior_cov
         else:
             p = model.predict(human[:40])

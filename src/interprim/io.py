@@ -165,6 +165,7 @@ def model_state(model):
         for k, v in cal.to_arrays().items():
             arrays[f"calibration_{k}"] = np.asarray(v)
     meta["selection"] = getattr(model, "selection_", None)
+    meta["representation"] = getattr(model, "representation_", None)  # absent in files before 2026-11-26
     return arrays, meta
 
 
@@ -347,6 +348,10 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
         _expect(sel is None or isinstance(sel, dict), path, "corrupt metadata: 'selection' is not a record")
         if sel is not None:
             st.selection_ = sel
+        rep = meta.get("representation")  # how well the DMPs represent the demonstrations (newer files)
+        _expect(rep is None or isinstance(rep, dict), path, "corrupt metadata: 'representation' is not a record")
+        if rep is not None:
+            st.representation_ = rep
         st.prior_ = GaussianPrior(data["prior_mean"], data["prior_cov"], str(meta["covariance_method"]),
                                   float(meta["shrinkage"]), data.get("prior_diag"), data.get("prior_factor"))
         st.thetas_ = data["thetas"]

@@ -145,6 +145,7 @@ def tables(results, protocol="causal") -> str:
 
 
 def main(argv=None) -> int:
+    """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.holdout", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="holdout-results", help="output folder (outside the repository)")
     ap.add_argument("--tasks", default="nuisi,synthetic", help="nuisi, synthetic or both")

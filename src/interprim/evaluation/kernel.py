@@ -10,8 +10,8 @@ recordings may well prefer (waving, gait, few demonstrations): for an observed p
    real-time error of the controlled agent over ``horizon`` seconds) unless given;
 3. each demonstration continues from its own matched frame at its own timing: the remaining movement
    ``n*_j .. T_j - 1`` of all its columns, on a common normalised remainder, averaged with the weights; the
-   remaining duration is the weighted mean of the demonstrations' remaining durations.  The weighted spread
-   is the predictive standard deviation.
+   remaining duration is the weighted mean of the demonstrations' remaining durations.  The weighted spread,
+   scaled per agent to the leave-one-out errors over the horizon, is the predictive standard deviation.
 
 The gain over the mean demonstration comes from lining each demonstration up at its own matched moment; a
 small ``h`` gives the nearest demonstration, a large one the aligned mean.
@@ -52,6 +52,9 @@ class KernelDemonstrations(_Baseline):
         ``{h: mean held-out error}`` of the cross-validation (empty when ``bandwidth`` is given).
     weights_ : dict
         ``{training demonstration: weight}`` of the last prediction.
+    std_scale_, std_floor_ : ndarray, shape (D,)
+        Calibration of the weighted spread: ``std = sqrt((std_scale_ spread)^2 + std_floor_^2)``, per agent fitted
+        to the leave-one-out errors over ``horizon`` (``bandwidth="cv"``; the raw spread otherwise).
     """
 
     _FITTED = "demos_"
@@ -90,6 +93,8 @@ class KernelDemonstrations(_Baseline):
         self.demos_ = arrays
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
         self.cv_errors_ = {}
+        D = arrays[0].shape[1]
+        self.std_scale_, self.std_floor_ = np.ones(D), np.zeros(D)  # the raw spread unless calibrated by "cv"
         if self.bandwidth != "cv":
             self.cost_scale_ = self._cost_scale()
             self.bandwidth_ = float(self.bandwidth)
@@ -127,17 +132,43 @@ class KernelDemonstrations(_Baseline):
         w = np.exp(-z)
         return w / w.sum()
 
-    def _ahead(self, idx, n_star, w, t_ahead, cols):
-        """The weighted continuation ``t_ahead`` seconds after the matched frames, own timing, ``(H, len(cols))``."""
-        out = np.zeros((len(t_ahead), len(cols)))
+    def _ahead(self, idx, n_star, w, t_ahead, cols, spread=False):
+        """The weighted continuation ``t_ahead`` seconds after the matched frames, own timing, ``(H, len(cols))``
+        (and, with ``spread``, the weighted spread there)."""
         rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
         R = float(w @ rem) * self.dt_
-        for wi, j, n, r in zip(w, idx, n_star, rem):
+        Y = np.empty((len(idx), len(t_ahead), len(cols)))
+        for i, (j, n, r) in enumerate(zip(idx, n_star, rem)):
             f = n + (t_ahead / R * r if R > 0 else 0 * t_ahead)
-            f = np.minimum(f, len(self.demos_[j]) - 1)
             a = self.demos_[j]
-            out += wi * np.stack([np.interp(f, np.arange(len(a)), a[:, c]) for c in cols], axis=1)
-        return out
+            f = np.minimum(f, len(a) - 1)
+            Y[i] = np.stack([np.interp(f, np.arange(len(a)), a[:, c]) for c in cols], axis=1)
+        mean = np.einsum("j,jhc->hc", w, Y)
+        if not spread:
+            return mean
+        return mean, np.sqrt(np.maximum(np.einsum("j,jhc->hc", w, (Y - mean) ** 2), 0.0))
+
+    def _calibrate(self, cases, t_ahead):
+        """Calibration of the weighted spread per agent from the leave-one-out cases over the horizon:
+        ``std^2 = a spread^2 + b`` with ``a, b >= 0`` fitted (non-negative least squares) to the squared errors,
+        so that a prediction whose weights sit on one demonstration (no spread) keeps an honest width."""
+        from scipy.optimize import nnls
+
+        D = self.demos_[0].shape[1]
+        cols = list(range(D))
+        agents = [a for a in (self.obs_, [i for i in cols if i not in set(self.obs_)]) if a]
+        rows = {k: ([], []) for k in range(len(agents))}
+        for idx, ns, c, tr_all in cases:
+            m, sd = self._ahead(idx, ns, self._weights(c, self.bandwidth_), t_ahead, cols, spread=True)
+            for k, agent in enumerate(agents):
+                rows[k][0].append(float(np.mean((m[:, agent] - tr_all[:, agent]) ** 2)))
+                rows[k][1].append(float(np.mean(sd[:, agent] ** 2)))
+        scale, floor = np.ones(D), np.zeros(D)
+        for k, agent in enumerate(agents):
+            e2, s2 = np.array(rows[k][0]), np.array(rows[k][1])
+            (a, b), _ = nnls(np.stack([s2, np.ones_like(s2)], axis=1), e2)
+            scale[agent], floor[agent] = np.sqrt(a), np.sqrt(b)
+        self.std_scale_, self.std_floor_ = scale, floor
 
     def _choose_bandwidth(self):
         H = max(1, int(round(self.horizon / self.dt_)))
@@ -150,19 +181,22 @@ class KernelDemonstrations(_Baseline):
                 if k >= T:
                     continue
                 idx, n_star, cost = self._align(self.observed_[i][:k], exclude=i)
-                truth = a[np.minimum(np.arange(k, k + H), T - 1)][:, self.ctrl_]
+                truth = a[np.minimum(np.arange(k, k + H), T - 1)]
                 cases.append((idx, n_star, cost, truth))
         for h in BANDWIDTHS:
-            errs = [np.sqrt(np.mean((self._ahead(idx, ns, self._weights(c, h), t_ahead, self.ctrl_) - tr) ** 2))
-                    for idx, ns, c, tr in cases]
+            errs = [np.sqrt(np.mean((self._ahead(idx, ns, self._weights(c, h), t_ahead, self.ctrl_)
+                                     - tr[:, self.ctrl_]) ** 2)) for idx, ns, c, tr in cases]
             self.cv_errors_[h] = float(np.mean(errs))
-        return min(self.cv_errors_, key=self.cv_errors_.get)
+        self.bandwidth_ = min(self.cv_errors_, key=self.cv_errors_.get)
+        self._calibrate(cases, t_ahead)
+        return self.bandwidth_
 
     # -- prediction ------------------------------------------------------------------------------
     def to_state(self):
         """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
         self._check_fitted("to_state")
-        arrays = {"demos": np.concatenate(self.demos_), "lengths": np.array([len(a) for a in self.demos_])}
+        arrays = {"demos": np.concatenate(self.demos_), "lengths": np.array([len(a) for a in self.demos_]),
+                  "std_scale": self.std_scale_, "std_floor": self.std_floor_}
         meta = self._common_state()
         meta.update(bandwidth_=self.bandwidth_, cost_scale_=self.cost_scale_,
                     cv_errors_=[[float(h), float(e)] for h, e in self.cv_errors_.items()])
@@ -176,6 +210,8 @@ class KernelDemonstrations(_Baseline):
         self.obs_ = list(self.observed_dofs_)
         self.ctrl_ = [i for i in range(self.n_dofs_) if i not in set(self.obs_)] or self.obs_
         self.observed_ = [np.ascontiguousarray(a[:, self.obs_]) for a in self.demos_]
+        self.std_scale_ = np.asarray(arrays["std_scale"], dtype=np.float64)
+        self.std_floor_ = np.asarray(arrays["std_floor"], dtype=np.float64)
         self.bandwidth_ = float(meta["bandwidth_"])
         self.cost_scale_ = float(meta["cost_scale_"])
         self.cv_errors_ = {float(h): float(e) for h, e in meta["cv_errors_"]}
@@ -205,7 +241,8 @@ class KernelDemonstrations(_Baseline):
             f = np.clip(f, 0, T - 1)
             Y[i] = np.stack([np.interp(f, np.arange(T), a[:, c]) for c in range(a.shape[1])], axis=1)
         mean = np.einsum("j,jkd->kd", w, Y)
-        std = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
+        spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
+        std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
         self.weights_ = dict(zip(idx, w))
         return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
                               duration=dur, mean_duration=self.mean_duration_, n_observed=v.shape[0])

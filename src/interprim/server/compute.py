@@ -32,6 +32,7 @@ class _Open:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
+    extend: bool | None = None  # every stream has extend() (see _can_extend; None: not checked yet)
 
 
 
@@ -156,23 +157,29 @@ class _MeanRollout:
         return np.asarray(pred.trajectory(self.n))[:, self.sel]
 
 
-def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None) -> str:
+def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None,
+                       block: np.ndarray | None = None) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound).
 
-    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq`` (the earlier ones were fed to the
-    streams by :func:`observe`; see :func:`compute_batch`); ``t0``: start of their computation
-    (``compute_ms`` counts from there).  The reply is built as text directly (same keys, order and number
-    formats as ``P.dumps`` of the message would give): encoding a dict with :mod:`json` costs more than
-    the rest of the reply.
+    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq``: the earlier ones were fed to the
+    streams by :func:`observe`, or, with ``block`` (all ``covers`` frames, ``(covers, n_observed)``, the last
+    one ``frame``), they enter with it in one ``stream.extend(block)`` (see :func:`compute_batch`); ``t0``:
+    start of their computation (``compute_ms`` counts from there).  The reply is built as text directly
+    (same keys, order and number formats as ``P.dumps`` of the message would give): encoding a dict with
+    :mod:`json` costs more than the rest of the reply.
     """
     if t0 is None:
         t0 = time.perf_counter()
     update_kw = op.update_kw
-    if len(op.streams) == 1:
+    if block is not None:
+        preds = [st.extend(block, **update_kw) for st in op.streams]
+        op.frames += block.shape[0]
+    elif len(op.streams) == 1:
         preds = [op.streams[0].update(frame, **update_kw)]
+        op.frames += 1
     else:
         preds = [st.update(frame, **update_kw) for st in op.streams]
-    op.frames += 1
+        op.frames += 1
     probs = None
     best = 0
     if len(preds) > 1:
@@ -227,20 +234,44 @@ def observe(op: _Open, frame: np.ndarray) -> None:
     op.frames += 1
 
 
+def _can_extend(op: _Open) -> bool:
+    """Whether every stream of ``op`` has :meth:`~interprim.stream.Stream.extend` (stand-in models may not)."""
+    ok = op.extend
+    if ok is None:
+        ok = op.extend = all(callable(getattr(st, "extend", None)) for st in op.streams)
+    return ok
+
+
 def compute_batch(op: _Open, batch) -> tuple[list, list]:
     """Feed a session's pending frames ``batch`` (a list of ``(frame, seq, t)``, seqs consecutive) to its
     streams in order and encode **one** reply for the newest: a ``prediction`` with ``covers = len(batch)``.
 
     Every frame enters the streams (phase estimation and conditioning see all of them), so the reply is
     the one the last frame would get had each frame been answered (same stream state, same update
-    options for the last frame).  A frame on which the model fails ends the batch early: an ``internal``
-    error with that frame's ``seq`` that also covers the frames before it since the last reply; the
-    frames after it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
+    options for the last frame).  Streams with :meth:`~interprim.stream.Stream.extend` take the frames in
+    one call (the per-frame cost is then the DTW column and the phase tracker's lattice step only; the
+    phase, conditioning and prediction are computed once): if the model fails, one ``internal`` error
+    answers the whole batch (``covers`` all its frames).  Streams without ``extend`` get one ``update``
+    per frame, and a frame on which the model fails ends the batch early: an ``internal`` error with
+    that frame's ``seq`` that also covers the frames before it since the last reply; the frames after
+    it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
     ``(seq, traceback text)`` per failure (for the server's log).
     """
     import traceback
 
     texts, failures = [], []
+    if len(batch) > 1 and _can_extend(op):
+        t0 = time.perf_counter()
+        frame, seq, t = batch[-1]
+        n = len(batch)
+        try:
+            block = np.stack([f for f, _, _ in batch])
+            texts.append(compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block))
+        except Exception as exc:
+            failures.append((seq, traceback.format_exc()))
+            texts.append(P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq,
+                                         t=t, covers=n, first_seq=seq - n + 1)))
+        return texts, failures
     t0 = time.perf_counter()
     first = 0
     last = len(batch) - 1

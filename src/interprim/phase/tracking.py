@@ -120,7 +120,7 @@ class _Tracker:
         if self._buf is not None:
             self._buf[0][:] = _SLOT_FREE
 
-    def step(self, z, finish: bool = True) -> float | None:
+    def step(self, z) -> float:
         """Phase of the last of the frames ``z`` (the frames seen so far, a prefix of the next call's).
 
         The lattice step (:meth:`_lattice_step`) finds the best speed on the lattice around the previous one;
@@ -128,10 +128,6 @@ class _Tracker:
         by the same last step as :func:`~interprim.phase.likelihood.estimate_phase`, so that a stream's
         phase is the batch phase of the same frames (within ``1e-3`` of the movement, tested; measured
         ``~1e-6``), not a lattice point ``exp(dlog / 2)`` away.
-
-        ``finish=False``: only the lattice step, which is all the tracker keeps from a frame (``_finish``
-        changes no state), for a frame whose phase nobody asks for (:meth:`interprim.stream.Stream.extend`);
-        returns ``None`` then, unless the step was a batch search (first estimate, or re-anchoring).
         """
         M = z.shape[0]
         if M < 2:
@@ -148,8 +144,6 @@ class _Tracker:
             s = estimate_phase(self.model, z, speed_prior=self.speed_prior).s_end
             self.kc = int(round(np.log(s / (self.v0 * (M - 1))) / self.dlog))
             return s
-        if not finish:
-            return None
         return _finish(_scorer(self.model, z, phase_noise(self.model), self.speed_prior), ss, lps, i, *_bounds(self.model, M))
 
     def _lattice_step(self, z):

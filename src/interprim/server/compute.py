@@ -33,6 +33,66 @@ class _Open:
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
     extend: bool | None = None  # every stream has extend() (see _can_extend; None: not checked yet)
+    recognition: "_Recognition | None" = None  # with several candidates: which one (created on first use)
+
+    def reset(self, robot_state=None) -> None:
+        """A new interaction: reset every stream (with ``robot_state``) and forget the frames seen."""
+        for st in self.streams:
+            st.reset(robot_state=robot_state)
+        self.frames = 0
+        if self.recognition is not None:
+            self.recognition.reset()
+
+
+class _Recognition:
+    """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.recognition.Recogniser` on
+    the frames of the current interaction.
+
+    Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
+    all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
+    ``log_likelihood``, as before) the model with the smallest noise would win by its normalising constant alone.
+    Stand-in models that the Recogniser does not take (not fitted InteractionPrimitives) fall back to that
+    softmax.
+    """
+
+    def __init__(self, entries):
+        from ..recognition import Recogniser
+
+        self.names = [e.name for e in entries]
+        try:
+            self.rec = Recogniser({e.name: e.model for e in entries})
+        except (TypeError, ValueError, AttributeError):
+            self.rec = None
+        self.buf = np.empty((64, entries[0].n_observed))
+        self.n = 0
+
+    def reset(self) -> None:
+        self.n = 0
+
+    def add(self, frames: np.ndarray) -> None:
+        """Frames ``(k, n_observed)`` of the interaction, in order."""
+        k = frames.shape[0]
+        if self.n + k > self.buf.shape[0]:
+            cap = self.buf.shape[0]
+            while cap < self.n + k:
+                cap *= 2
+            buf = np.empty((cap, self.buf.shape[1]))
+            buf[: self.n] = self.buf[: self.n]
+            self.buf = buf
+        self.buf[self.n:self.n + k] = frames
+        self.n += k
+
+    def posterior(self, preds) -> tuple[list, int]:
+        """``(probabilities in candidate order, index of the most probable)``; uniform (and the first candidate)
+        while the predictions are not conditioned (too few frames)."""
+        if not all(getattr(p, "conditioned", True) for p in preds) or self.n < 2:
+            return [1.0 / len(preds)] * len(preds), 0
+        if self.rec is None:
+            probs = P.softmax([float(p.log_likelihood) for p in preds])
+            return probs, int(np.argmax(probs))
+        r = self.rec.recognise(self.buf[: self.n])
+        probs = [float(r.probabilities[n]) for n in self.names]
+        return probs, self.names.index(r.label)
 
 
 
@@ -183,9 +243,9 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
     probs = None
     best = 0
     if len(preds) > 1:
-        lls = [float(p.log_likelihood) for p in preds]
-        probs = P.softmax(lls)
-        best = int(np.argmax(probs))
+        rec = _recognition(op)
+        rec.add(block if block is not None else np.asarray(frame, dtype=np.float64)[None])
+        probs, best = rec.posterior(preds)
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
     if getattr(pred, "conditioned", True):
@@ -232,6 +292,15 @@ def observe(op: _Open, frame: np.ndarray) -> None:
     for st in op.streams:
         st.update(frame, **kw)
     op.frames += 1
+    if len(op.streams) > 1:
+        _recognition(op).add(np.asarray(frame, dtype=np.float64)[None])
+
+
+def _recognition(op: _Open) -> _Recognition:
+    rec = op.recognition
+    if rec is None:
+        rec = op.recognition = _Recognition(op.entries)
+    return rec
 
 
 def _can_extend(op: _Open) -> bool:

@@ -349,9 +349,7 @@ class SessionSide:
                     await self._procs.call(s.id, "reset", robot_state=rs)
                 except RuntimeError as exc:
                     raise P.ProtocolError("internal", f"reset failed: {exc}") from None
-            for st in s.open.streams:
-                st.reset(robot_state=rs)
-            s.open.frames = 0
+            s.open.reset(robot_state=rs)
             s.consecutive_errors = 0
             self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
         elif mtype == "close":

@@ -76,8 +76,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
                     o.update_kw = {"need_cov": req["std"]}
                 sessions[req["sid"]] = o
             elif op == "reset":
-                for st in sessions[req["sid"]].streams:
-                    st.reset(robot_state=req.get("robot_state"))
+                sessions[req["sid"]].reset(robot_state=req.get("robot_state"))
             elif op == "drop":
                 sessions.pop(req["sid"], None)
             elif op == "stop":

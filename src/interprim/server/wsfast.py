@@ -26,6 +26,8 @@ connection, and without them the library does everything, as before.
 
 from __future__ import annotations
 
+import logging
+
 try:
     from websockets.frames import apply_mask  # the library's C speedup when built, else its Python version
     from websockets.protocol import OPEN
@@ -33,6 +35,8 @@ except ImportError:  # pragma: no cover - websockets is a dependency of the serv
     apply_mask = OPEN = None
 
 _TEXT, _BINARY = 0x1, 0x2
+
+log = logging.getLogger("interprim.server")
 
 
 def supported(conn) -> bool:
@@ -135,9 +139,15 @@ class FastFrames:
                         msg = payload.decode()
                     except UnicodeDecodeError:  # the library closes the connection (1007)
                         msg = None
-                if msg is not None and hook(msg):
-                    pos = end
-                    continue
+                if msg is not None:
+                    try:
+                        taken = hook(msg)
+                    except Exception:  # a bug: the library's path (the handler reports and closes the session)
+                        log.exception("fast frame path failed; the message goes the library's way")
+                        taken = False
+                    if taken:
+                        pos = end
+                        continue
             super().data_received(bytes(buf[pos:end]))  # one whole frame: the library's parser stays aligned
             pos = end
             if proto.state is not OPEN:  # a close frame (or a protocol error): the library's from now on

@@ -74,7 +74,10 @@ class _StubModel:
             type(self)._pred = _StubPrediction(len(frame))
         return self._pred
 
-    def reset(self):
+    def extend(self, frames, need_cov=True):  # several frames at once (Stream.extend), as cheap
+        return self.update(frames[-1], need_cov)
+
+    def reset(self, robot_state=None):
         pass
 
 

@@ -122,6 +122,40 @@ def test_auto_recognises_the_letter(server, validator):
             assert np.array(p["mean"]).shape == (20, 2)
 
 
+def test_auto_probabilities_are_the_recognisers(server, models):
+    """Issue 20: "auto" recognises with interprim.recognition.Recogniser (the candidates' likelihoods of the observed
+    positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
+    own-noise log-likelihood; coalesced frames (one reply for several) count as well, and reset starts over."""
+    from interprim.recognition import Recogniser
+
+    names = ["letter_c", "letter_s", "letter_u"]
+    rec = Recogniser({n: models[n].model for n in names})
+    stroke = synthetic_letters("s", 1, seed=7)[0]
+    with Client(server.ws_url) as c:
+        c.open("auto", candidates=names, points=10, dofs="all")
+        for k in (12, 25, 40):
+            for f in stroke[:k]:
+                p = c.frame(f)
+            want = rec.recognise(stroke[:k])
+            for n in names:
+                assert p["probabilities"][n] == pytest.approx(want.probabilities[n], abs=2e-6), (k, n)
+            assert p["model"] == want.label
+            c.reset()
+    # pipelined (the server may answer several frames with one reply): the newest reply is the same
+    ws = connect(server.ws_url)
+    try:
+        hello(ws)
+        rpc(ws, {"type": "open", "model": "auto", "candidates": names, "points": 10})
+        for f in stroke[:40]:
+            ws.send(frame_msg(f))
+        got = replies_until(ws, 40, timeout=60)
+    finally:
+        ws.close()
+    assert [q for r in got for q in covered(r)] == list(range(1, 41))
+    for n in names:
+        assert got[-1]["probabilities"][n] == pytest.approx(want.probabilities[n], abs=2e-6)
+
+
 def test_auto_refuses_candidates_of_different_sizes(server, models):
     with Client(server.ws_url) as c:
         with pytest.raises(ServerError) as e:

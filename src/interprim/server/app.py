@@ -37,6 +37,8 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numpy as np
+
 from . import protocol as P
 from .compute import compute_batch, warm_up
 from .http_api import HttpSide
@@ -195,8 +197,11 @@ class InterprimServer(HttpSide, SessionSide):
         """
         from websockets.asyncio.server import ServerConnection, serve
 
-        class LoggedConnection(ServerConnection):
-            """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them)."""
+        from .wsfast import FastFrames
+
+        class LoggedConnection(FastFrames, ServerConnection):
+            """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them);
+            frames take the fast path of :mod:`interprim.server.wsfast`."""
 
             async def handshake(self, *args, **kwargs):
                 try:
@@ -259,9 +264,12 @@ class InterprimServer(HttpSide, SessionSide):
             procs = self._procs
 
             async def run_proc(s, op, batch):
-                head, body = await procs.request(s.id, "frames", frames=[f.tolist() for f, _, _ in batch],
-                                                 seqs=[q for _, q, _ in batch], ts=[t for _, _, t in batch])
-                texts = body.decode().split("\n") if body else []
+                block = np.stack([f for f, _, _ in batch]).astype("<f8", copy=False)
+                ts = [t for _, _, t in batch]
+                kw = {"ts": ts} if any(t is not None for t in ts) else {}
+                head, body = await procs.request(s.id, "frames", payload=block.tobytes(), n=block.shape[0],
+                                                 d=block.shape[1], seq=batch[0][1], **kw)
+                texts = body.split(b"\n") if body else []  # UTF-8 JSON texts, sent as they are
                 return texts, [tuple(f) for f in head.get("failures", ())]
 
             return [_Lane(run_proc, deliver) for _ in range(procs.n)]  # session i runs on worker i % n

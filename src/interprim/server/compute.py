@@ -32,6 +32,67 @@ class _Open:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
+    extend: bool | None = None  # every stream has extend() (see _can_extend; None: not checked yet)
+    recognition: "_Recognition | None" = None  # with several candidates: which one (created on first use)
+
+    def reset(self, robot_state=None) -> None:
+        """A new interaction: reset every stream (with ``robot_state``) and forget the frames seen."""
+        for st in self.streams:
+            st.reset(robot_state=robot_state)
+        self.frames = 0
+        if self.recognition is not None:
+            self.recognition.reset()
+
+
+class _Recognition:
+    """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.recognition.Recogniser` on
+    the frames of the current interaction.
+
+    Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
+    all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
+    ``log_likelihood``, as before) the model with the smallest noise would win by its normalising constant alone.
+    Stand-in models that the Recogniser does not take (not fitted InteractionPrimitives) fall back to that
+    softmax.
+    """
+
+    def __init__(self, entries):
+        from ..recognition import Recogniser
+
+        self.names = [e.name for e in entries]
+        try:
+            self.rec = Recogniser({e.name: e.model for e in entries})
+        except (TypeError, ValueError, AttributeError):
+            self.rec = None
+        self.buf = np.empty((64, entries[0].n_observed))
+        self.n = 0
+
+    def reset(self) -> None:
+        self.n = 0
+
+    def add(self, frames: np.ndarray) -> None:
+        """Frames ``(k, n_observed)`` of the interaction, in order."""
+        k = frames.shape[0]
+        if self.n + k > self.buf.shape[0]:
+            cap = self.buf.shape[0]
+            while cap < self.n + k:
+                cap *= 2
+            buf = np.empty((cap, self.buf.shape[1]))
+            buf[: self.n] = self.buf[: self.n]
+            self.buf = buf
+        self.buf[self.n:self.n + k] = frames
+        self.n += k
+
+    def posterior(self, preds) -> tuple[list, int]:
+        """``(probabilities in candidate order, index of the most probable)``; uniform (and the first candidate)
+        while the predictions are not conditioned (too few frames)."""
+        if not all(getattr(p, "conditioned", True) for p in preds) or self.n < 2:
+            return [1.0 / len(preds)] * len(preds), 0
+        if self.rec is None:
+            probs = P.softmax([float(p.log_likelihood) for p in preds])
+            return probs, int(np.argmax(probs))
+        r = self.rec.recognise(self.buf[: self.n])
+        probs = [float(r.probabilities[n]) for n in self.names]
+        return probs, self.names.index(r.label)
 
 
 
@@ -146,29 +207,35 @@ class _MeanRollout:
         return np.asarray(pred.trajectory(self.n))[:, self.sel]
 
 
-def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None) -> str:
+def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None,
+                       block: np.ndarray | None = None) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound).
 
-    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq`` (the earlier ones were fed to the
-    streams by :func:`observe`; see :func:`compute_batch`); ``t0``: start of their computation
-    (``compute_ms`` counts from there).  The reply is built as text directly (same keys, order and number
-    formats as ``P.dumps`` of the message would give): encoding a dict with :mod:`json` costs more than
-    the rest of the reply.
+    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq``: the earlier ones were fed to the
+    streams by :func:`observe`, or, with ``block`` (all ``covers`` frames, ``(covers, n_observed)``, the last
+    one ``frame``), they enter with it in one ``stream.extend(block)`` (see :func:`compute_batch`); ``t0``:
+    start of their computation (``compute_ms`` counts from there).  The reply is built as text directly
+    (same keys, order and number formats as ``P.dumps`` of the message would give): encoding a dict with
+    :mod:`json` costs more than the rest of the reply.
     """
     if t0 is None:
         t0 = time.perf_counter()
     update_kw = op.update_kw
-    if len(op.streams) == 1:
+    if block is not None:
+        preds = [st.extend(block, **update_kw) for st in op.streams]
+        op.frames += block.shape[0]
+    elif len(op.streams) == 1:
         preds = [op.streams[0].update(frame, **update_kw)]
+        op.frames += 1
     else:
         preds = [st.update(frame, **update_kw) for st in op.streams]
-    op.frames += 1
+        op.frames += 1
     probs = None
     best = 0
     if len(preds) > 1:
-        lls = [float(p.log_likelihood) for p in preds]
-        probs = P.softmax(lls)
-        best = int(np.argmax(probs))
+        rec = _recognition(op)
+        rec.add(block if block is not None else np.asarray(frame, dtype=np.float64)[None])
+        probs, best = rec.posterior(preds)
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
     if pred.conditioned:  # every prediction has the attributes of interprim.contract.BasePrediction
@@ -213,6 +280,23 @@ def observe(op: _Open, frame: np.ndarray) -> None:
     for st in op.streams:
         st.update(frame, **kw)
     op.frames += 1
+    if len(op.streams) > 1:
+        _recognition(op).add(np.asarray(frame, dtype=np.float64)[None])
+
+
+def _recognition(op: _Open) -> _Recognition:
+    rec = op.recognition
+    if rec is None:
+        rec = op.recognition = _Recognition(op.entries)
+    return rec
+
+
+def _can_extend(op: _Open) -> bool:
+    """Whether every stream of ``op`` has :meth:`~interprim.stream.Stream.extend` (stand-in models may not)."""
+    ok = op.extend
+    if ok is None:
+        ok = op.extend = all(callable(getattr(st, "extend", None)) for st in op.streams)
+    return ok
 
 
 def compute_batch(op: _Open, batch) -> tuple[list, list]:
@@ -221,14 +305,30 @@ def compute_batch(op: _Open, batch) -> tuple[list, list]:
 
     Every frame enters the streams (phase estimation and conditioning see all of them), so the reply is
     the one the last frame would get had each frame been answered (same stream state, same update
-    options for the last frame).  A frame on which the model fails ends the batch early: an ``internal``
-    error with that frame's ``seq`` that also covers the frames before it since the last reply; the
-    frames after it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
+    options for the last frame).  Streams with :meth:`~interprim.stream.Stream.extend` take the frames in
+    one call (the per-frame cost is then the DTW column and the phase tracker's lattice step only; the
+    phase, conditioning and prediction are computed once): if the model fails, one ``internal`` error
+    answers the whole batch (``covers`` all its frames).  Streams without ``extend`` get one ``update``
+    per frame, and a frame on which the model fails ends the batch early: an ``internal`` error with
+    that frame's ``seq`` that also covers the frames before it since the last reply; the frames after
+    it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
     ``(seq, traceback text)`` per failure (for the server's log).
     """
     import traceback
 
     texts, failures = [], []
+    if len(batch) > 1 and _can_extend(op):
+        t0 = time.perf_counter()
+        frame, seq, t = batch[-1]
+        n = len(batch)
+        try:
+            block = np.stack([f for f, _, _ in batch])
+            texts.append(compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block))
+        except Exception as exc:
+            failures.append((seq, traceback.format_exc()))
+            texts.append(P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq,
+                                         t=t, covers=n, first_seq=seq - n + 1)))
+        return texts, failures
     t0 = time.perf_counter()
     first = 0
     last = len(batch) - 1

@@ -62,6 +62,7 @@ class _Session:
     busy: bool = False  # the handler is inside a message (a control message may await a worker)
     ended: bool = False  # the connection's handler has finished
     waiters: list = field(default_factory=list)  # futures woken when the above change (see SessionSide._until)
+    direct: bool = False  # replies may be written to the socket at once (interprim.server.wsfast.write_now)
 
     def wake(self) -> None:
         """Wake the coroutines waiting for a change of ``pending``/``queued``/``busy``/``ended``."""

@@ -16,7 +16,9 @@ import logging
 
 from . import protocol as P
 from .compute import _Open
+from . import wsfast
 from .lanes import _Bucket, _Session
+from .wsfast import FastFrames
 
 SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001) sent to every session at shutdown
 
@@ -44,6 +46,9 @@ class SessionSide:
             await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {c.max_sessions} sessions; try again later")
             return
         s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
+        if isinstance(ws, FastFrames) and wsfast.supported(ws):
+            s.direct = True
+            ws.fast_frame = lambda data: self._fast_frame(s, data)
         self.sessions[sid] = s
         self.stats["sessions"] += 1
         s.writer = asyncio.get_running_loop().create_task(self._writer(s))
@@ -94,6 +99,8 @@ class SessionSide:
             self._fatal(s, P.CLOSE_INTERNAL, "internal server error (logged)")
         finally:
             s.ended = True
+            if isinstance(ws, FastFrames):
+                ws.fast_frame = None
             s.wake()
             self.sessions.pop(sid, None)
             if self._procs is not None and s.open is not None:
@@ -122,13 +129,18 @@ class SessionSide:
                 if isinstance(item, tuple) and item and item[0] is _CLOSE:
                     await s.ws.close(item[1], item[2])
                     return
-                await s.ws.send(item)
+                await s.ws.send(item, text=True)  # (bytes: UTF-8 JSON from a worker process)
                 s.unsent -= 1
         except ConnectionClosed:
             return
 
-    def _send(self, s: _Session, text: str) -> None:
+    def _send(self, s: _Session, text) -> None:
+        """Send a reply (``str``, or ``bytes`` of UTF-8 JSON): written at once when the session's writer has nothing
+        queued and the socket takes it (:func:`~interprim.server.wsfast.write_now`), else queued for the writer
+        (order kept: the writer sends what was queued before)."""
         if s.closing:
+            return
+        if s.direct and s.unsent == 0 and wsfast.write_now(s.ws, text):
             return
         try:
             s.out.put_nowait(text)
@@ -204,6 +216,15 @@ class SessionSide:
         if not s.queued:
             self._lanes[s.id % len(self._lanes)].push(s)
         return True
+
+    def _fast_frame(self, s: _Session, data) -> bool:
+        """A message straight from the connection's bytes (:class:`~interprim.server.wsfast.FastFrames`, offered
+        only while no earlier message waits for the handler): taken if it is a valid frame that
+        :meth:`_frame_at_once` takes and the handler is between two messages (not waiting for an earlier one's
+        turn) and the session is not near ``max_pending``; else ``False`` and the handler gets it, in order."""
+        if s.busy or s.closing or s.ended or self._stopping or len(s.pending) + 1 >= self.config.max_pending:
+            return False
+        return self._frame_at_once(s, data)
 
     async def _far_behind(self, s: _Session) -> None:
         """``max_pending`` frames waiting: stop reading the session until its turn (the server cannot even feed its
@@ -328,9 +349,7 @@ class SessionSide:
                     await self._procs.call(s.id, "reset", robot_state=rs)
                 except RuntimeError as exc:
                     raise P.ProtocolError("internal", f"reset failed: {exc}") from None
-            for st in s.open.streams:
-                st.reset(robot_state=rs)
-            s.open.frames = 0
+            s.open.reset(robot_state=rs)
             s.consecutive_errors = 0
             self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
         elif mtype == "close":

@@ -7,9 +7,11 @@ only does the network I/O.  A slow session then only delays the sessions of its 
 
 Models reach the workers as safe ``.npz`` model files (``model.save`` / ``InteractionPrimitive.load``);
 requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
-pickle).  A reply is one JSON header line, then (for predictions) the finished JSON texts for the
+pickle).  A request is one JSON header line, then (for frames) the frames as raw little-endian float64
+values; a reply is one JSON header line, then (for predictions) the finished JSON texts for the
 client, one per line, so they are not encoded twice.  A session's pending frames go to its worker in
-one ``frames`` request (:func:`interprim.server.compute.compute_batch`).
+one ``frames`` request (:func:`interprim.server.compute.compute_batch`): ``n`` frames of ``d`` values, the
+first one's ``seq`` (the others follow it) and their ``t`` (omitted when none has one).
 
 Workers ignore SIGINT and SIGTERM (Ctrl-C reaches the whole process group): they stop when the server
 asks them to at its shutdown, or when their pipe closes because the server is gone.
@@ -50,14 +52,18 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
             data = conn.recv_bytes()
         except (EOFError, OSError):
             return
-        req = json.loads(data)
+        head_line, _, payload = data.partition(b"\n")
+        req = json.loads(head_line)
         op, rid = req["op"], req["rid"]
         body = b""
         head = {"rid": rid, "ok": True}
         try:
             if op == "frames":
                 o = sessions[req["sid"]]
-                batch = [(np.asarray(f, dtype=np.float64), q, t) for f, q, t in zip(req["frames"], req["seqs"], req["ts"])]
+                n, seq0 = int(req["n"]), int(req["seq"])
+                block = np.frombuffer(payload, dtype="<f8").reshape(n, int(req["d"]))
+                ts = req.get("ts") or [None] * n
+                batch = [(block[i], seq0 + i, ts[i]) for i in range(n)]
                 texts, failures = compute_batch(o, batch)
                 body = "\n".join(texts).encode()
                 if failures:
@@ -70,8 +76,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
                     o.update_kw = {"need_cov": req["std"]}
                 sessions[req["sid"]] = o
             elif op == "reset":
-                for st in sessions[req["sid"]].streams:
-                    st.reset(robot_state=req.get("robot_state"))
+                sessions[req["sid"]].reset(robot_state=req.get("robot_state"))
             elif op == "drop":
                 sessions.pop(req["sid"], None)
             elif op == "stop":
@@ -185,8 +190,9 @@ class ProcessPool:
         _, body = await self.request(sid, op, **fields)
         return body.decode()
 
-    async def request(self, sid: int, op: str, **fields) -> tuple:
-        """Run ``op`` for session ``sid`` on its worker; returns the reply's ``(header dict, body bytes)``."""
+    async def request(self, sid: int, op: str, payload: bytes = b"", **fields) -> tuple:
+        """Run ``op`` for session ``sid`` on its worker (``payload``: raw bytes after the JSON header, the
+        frames of a ``frames`` request); returns the reply's ``(header dict, body bytes)``."""
         w = self.worker_of(sid)
         if w.dead:
             raise RuntimeError("worker process died")
@@ -194,7 +200,7 @@ class ProcessPool:
         fut = self._loop.create_future()
         w.pending[rid] = fut
         try:
-            w.conn.send_bytes(json.dumps({"op": op, "rid": rid, "sid": sid, **fields}).encode())
+            w.conn.send_bytes(json.dumps({"op": op, "rid": rid, "sid": sid, **fields}).encode() + b"\n" + payload)
         except (OSError, ValueError):
             w.pending.pop(rid, None)
             self._lost(w)

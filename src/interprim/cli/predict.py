@@ -62,12 +62,14 @@ def _model_columns(model):
 
 def cmd_predict(args) -> int:
     """``interprim predict``: condition a saved model on a partial observation and write the prediction."""
+    import warnings
     from pathlib import Path
 
     import numpy as np
 
     import interprim as ip
     from interprim.datasets import load_demonstrations
+    from interprim.errors import OutOfRangeWarning
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -99,10 +101,12 @@ def cmd_predict(args) -> int:
     frames = part.demos[0][:, idx]
     t = part.times[0]
     try:
-        if frames.shape[0] > 1 and (part.dt is None or abs(part.dt - model.dt_) > 1e-9 * model.dt_):
-            pred = model.predict(frames, times=t - t[0])
-        else:
-            pred = model.predict(frames)
+        with warnings.catch_warnings():  # said once, in the command's own WARNING line below
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            if frames.shape[0] > 1 and (part.dt is None or abs(part.dt - model.dt_) > 1e-9 * model.dt_):
+                pred = model.predict(frames, times=t - t[0])
+            else:
+                pred = model.predict(frames)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:

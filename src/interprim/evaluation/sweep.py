@@ -49,11 +49,13 @@ from ..preprocessing import time_normalise
 
 from .protocol import observed_frames
 
-__all__ = ["EvalConfig", "METHODS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
+__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
            "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
 
 FRACTIONS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 METHODS = ("ip-forcing", "ip-position", "ip-paper", "iprompt", "nn", "prior")
+#: optional modules a method needs (the ``bench`` extra), beyond the core
+METHOD_NEEDS = {"iprompt": ("movement_primitives", "gmr")}
 #: phase variants evaluated from the same fitted IP model (``ip-forcing`` -> ``ip-forcing-dtw``, ...)
 PHASE_VARIANTS = ("likelihood", "dtw", "oracle")
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")

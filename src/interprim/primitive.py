@@ -130,6 +130,20 @@ class InteractionPrimitive:
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
         least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
+
+    Attributes
+    ----------
+    selection_ : dict
+        What ``fit`` chose and why (:meth:`summary` prints the gist).  Choices: ``sigma2``, ``shrinkage``
+        (of Eq. 10's covariance), ``cross_shrinkage`` (the cross-agent damping gamma: 1 = the controlled agent's
+        prior mean), ``phase_sigma2``, ``observation``, ``method`` and ``n_folds`` (how), ``fractions`` (fractions
+        seen in the held-out cases).  Held-out errors at the choice (mean squared error of the whole movement, each
+        DoF divided by its variance): ``cv_error`` / ``cv_error_prior`` (``cv_target``, the controlled agent, and
+        its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="auto"``):
+        ``phase_error_refined`` (likelihood), ``learned_phase_error``, ``clock_phase_error``.  Candidates and
+        their scores: ``*_grid``, ``cv_errors``, ``cv_errors_observed``, ``cv_within_se``,
+        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood``.  Keys are left out where they do
+        not apply (e.g. ``sigma2="auto"`` has no ``cv_*``).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
@@ -697,4 +711,17 @@ class InteractionPrimitive:
         p = self.get_params()
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
-        return f"InteractionPrimitive({shown})"
+        if getattr(self, "prior_", None) is None:
+            return f"InteractionPrimitive({shown})"
+        from ._summary import one_line
+
+        return f"<InteractionPrimitive({shown}) {one_line(self)}>"
+
+    def summary(self, fit_seconds: float | None = None) -> str:
+        """What the fitted model chose, in a few lines: phase method, noise ``sigma2``, shrinkage, cross-agent
+        damping and the held-out error against the prior mean (from :attr:`selection_`), and whether the
+        uncertainty is calibrated.  ``fit_seconds``: a fit time to report (``interprim fit`` passes it)."""
+        self._check_fitted("summary")
+        from ._summary import summary
+
+        return summary(self, fit_seconds)

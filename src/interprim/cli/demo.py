@@ -74,7 +74,7 @@ def run(args) -> int:
     from .._optional import require
 
     # figures, progress bars and worker processes: the [experiments] extra, checked before the long part
-    require(("matplotlib", "tqdm", "joblib"), "interprim demo", extra="experiments")
+    require(("matplotlib", "tqdm", "joblib"), "the demo", extra="experiments")
     from ..experiments.highfive import HighFiveConfig, format_summary, run_highfive
 
     _check_positive(args.n_train, "--n-train")

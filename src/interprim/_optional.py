@@ -54,17 +54,18 @@ def install_hint(modules, extra: str | None = None) -> str:
     return f"pip install 'interprim[{extra}]'" if extra else f"pip install {' '.join(modules)}"
 
 
-def require(modules, what: str, extra: str | None = None) -> None:
+def require(modules, what: str, extra: str | None = None, otherwise: str = "") -> None:
     """Raise :class:`~interprim.errors.MissingExtraError` (one line) if any of ``modules`` is not installed.
 
-    ``what`` says what needs them (``"interprim demo"``); ``extra`` the extra to name (default: the first
-    missing module's own extra, :data:`EXTRA_OF`).
+    ``what`` says what needs them (``"the demo"``); ``extra`` the extra to name (default: the first missing
+    module's own extra, :data:`EXTRA_OF`); ``otherwise`` a way around it (``"pass --no-figures"``).
     """
     modules = [modules] if isinstance(modules, str) else list(modules)
     gone = missing(*modules)
     if gone:
         names = ", ".join(gone)
-        raise MissingExtraError(f"{what} needs {names} (not installed): {install_hint(gone, extra)}")
+        raise MissingExtraError(f"{what} needs {names} (not installed): {install_hint(gone, extra)}"
+                                + (f", or {otherwise}" if otherwise else ""))
 
 
 def extra_for_import_error(exc: ImportError, prefer: str | None = None) -> str | None:

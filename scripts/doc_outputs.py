@@ -6,6 +6,8 @@ output as printed: standard output, or standard error for a block marked ``<!-- 
     python scripts/doc_outputs.py             # run every block, report the outputs that drifted (exit 1 if any)
     python scripts/doc_outputs.py --update    # the same, and write the printed outputs into the guide
                                               # (timings keep the values shown: a quiet machine's)
+    python scripts/doc_outputs.py --readme-demo interprim-demo/results.json
+                                              # the README's simulated high-five numbers against a full demo run
 
 ``tests/test_tutorial.py`` runs the blocks with :class:`Runner` and checks every shown output with
 :func:`compare`: the text must match with the numbers taken out, and every number must equal the printed one
@@ -120,6 +122,68 @@ def merged(shown: str, printed: str) -> str:
     return "\n".join(out)
 
 
+# ----------------------------------------------------------------------------- README: the demo's numbers
+#: README table rows of the simulated high five -> (agent, method) in ``results.json``'s ``fig7``
+README_MSE_ROWS = {
+    "robot, IP as in the paper": ("controlled", "ip"),
+    "robot, IP library defaults": ("controlled", "ip_default"),
+    "robot, IP paper + likelihood phase": ("controlled", "ip_likelihood"),
+    "robot, prior mean": ("controlled", "prior"),
+    "robot, nearest neighbour (DTW)": ("controlled", "nn"),
+    "human (completion), IP as in the paper": ("observed", "ip"),
+    "human (completion), IP library defaults": ("observed", "ip_default"),
+}
+
+
+def readme_demo_numbers(results: dict) -> list:
+    """``(template, values)`` of the README's simulated high-five numbers, from ``interprim demo``'s
+    ``results.json`` (full run: 100 training and 30 test interactions).  ``{}`` in a template is a number."""
+    pc = list(results["percents"])
+    cols = [pc.index(p) for p in (20, 40, 60, 80, 100)]
+    out = []
+    for label, (agent, m) in README_MSE_ROWS.items():
+        mean = results["fig7"][agent][m]["mean"]
+        out.append((f"| {label} " + r"[^|]*" + "| {} | {} | {} | {} | {} |", [f"{mean[j]:.4f}" for j in cols]))
+    d8 = results["fig8"]["mean_distance_m"]
+    out.append(("mean distance to the true one: library defaults {} cm, paper + likelihood phase {} cm, the paper's "
+                "IP {} cm, prior mean {} cm, nearest neighbour {} cm",
+                [f"{100 * d8[m]:.1f}" for m in ("ip_default", "ip_likelihood", "ip", "prior", "nn")]))
+    s6 = results["fig6"]["goal_spread_m_mean_over_test"]
+    out.append(("Spread of the posterior samples' goal (Fig. 6): {} cm at 40 %, {} cm at 60 %",
+                [f"{100 * s6[0]:.1f}", f"{100 * s6[1]:.1f}"]))
+    a = results["animation"]
+    de, pa = a["default"], a["paper"]
+    out.append(("the library's defaults estimate phase {} and end with the robot's hand {} cm from the high-five "
+                "point; the paper's IP estimates phase {} and misses by {} cm",
+                [f"{de['phase']:.2f}", f"{100 * de['distance_m']:.1f}", f"{pa['phase']:.2f}",
+                 f"{100 * pa['distance_m']:.1f}"]))
+    out.append(("passes through that posture at {} % of its way", [f"{100 * pa['phase']:.0f}"]))
+    out.append(("conditioned at the true phase, the same model misses by {} cm",
+                [f"{100 * pa['distance_at_true_phase_m']:.1f}"]))
+    g = results["goal_distance_m"]
+    j = pc.index(100)
+    out.append(("with 100 % seen: {} cm (defaults) and {} cm (paper), medians {} and {} cm",
+                [f"{100 * g['ip_default']['mean'][j]:.1f}", f"{100 * g['ip']['mean'][j]:.1f}",
+                 f"{100 * g['ip_default']['median'][j]:.1f}", f"{100 * g['ip']['median'][j]:.1f}"]))
+    return out
+
+
+def check_readme_demo(readme: str, results: dict) -> list:
+    """The README's simulated high-five numbers that differ from ``results`` (empty: none)."""
+    text = " ".join(readme.replace("**", "").split())
+    problems = []
+    for template, values in readme_demo_numbers(results):
+        parts = [re.escape(re.sub(r"\s+", " ", p)).replace(re.escape("[^|]*"), "[^|]*") for p in template.split("{}")]
+        m = re.search(r"(-?\d+(?:\.\d+)?)".join(parts), text)
+        if m is None:
+            problems.append(f"not found in the README: {template.format(*values)}")
+            continue
+        bad = [f"{u} shown, {v} computed" for u, v in zip(m.groups(), values) if not _close(u, v)]
+        if bad:
+            problems.append(f"{'; '.join(bad)}: {m.group(0)}")
+    return problems
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -192,7 +256,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="Check (or --update) the outputs shown in a Markdown guide.")
     ap.add_argument("guide", nargs="?", default=str(TUTORIAL))
     ap.add_argument("--update", action="store_true", help="write the printed outputs into the guide")
+    ap.add_argument("--readme-demo", metavar="RESULTS_JSON",
+                    help="instead: check the README's simulated high-five numbers against the results.json of a "
+                         "full 'interprim demo' run")
     args = ap.parse_args(argv)
+    if args.readme_demo:
+        import json
+
+        problems = check_readme_demo((ROOT / "README.md").read_text(), json.loads(Path(args.readme_demo).read_text()))
+        print("\n".join(problems) or "the README's simulated high-five numbers are those of the run", file=sys.stderr)
+        return 1 if problems else 0
     path = Path(args.guide)
     text = path.read_text()
     bl = blocks(text)

@@ -64,3 +64,21 @@ def test_readme_commands_with_the_extras_the_readme_names(tmp_path):
     assert "note: skipping iprompt: it needs movement_primitives, gmr (pip install 'interprim[bench]')" in r.stderr
     assert "| synthetic | ip-position |" in r.stdout and "iprompt" not in r.stdout
     _ok(_run([py, "-m", "interprim.experiments.quickstart"], tmp_path))
+
+
+@pytest.mark.slow
+def test_readme_simulated_high_five_numbers_are_those_of_the_demo(tmp_path):
+    """The README's table, Fig. 6/8 sentences and animation caption: what a full ``interprim demo`` computes
+    (``python scripts/doc_outputs.py --readme-demo interprim-demo/results.json`` checks a run of your own)."""
+    import json
+
+    from interprim.cli import main
+
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from doc_outputs import check_readme_demo, readme_demo_numbers
+
+    assert main(["demo", "--out", str(tmp_path), "--quiet"]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert len(readme_demo_numbers(results)) == 13
+    problems = check_readme_demo((ROOT / "README.md").read_text(), results)
+    assert not problems, "\n".join(problems)

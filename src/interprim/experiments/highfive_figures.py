@@ -295,7 +295,7 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
     obs_hand = oa.hand(d[:, :2])
     goal = test.goals[idx]
 
-    fig = Figure(figsize=(4.3 * len(panels), 4.9), dpi=100)  # every text >= 8.5 pt = 11.8 px at 100 dpi
+    fig = Figure(figsize=(3.95 * len(panels), 4.6), dpi=100)  # every text >= 8.5 pt = 11.8 px at 100 dpi
     canvas = FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(panels), squeeze=False)
     art = {}
@@ -337,7 +337,7 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
                 c = ps["cloud"][i] if ps["cloud"] is not None else np.empty((0, 2))
                 line.set_data(c[:, 0], c[:, 1])
             note = "human stopped: robot completes its response" if st["hold"] else ""
-            txt.set_text(f"seen {100 * k / T:.0f} %, estimated phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
+            txt.set_text(f"seen {100 * k / T:.0f} %: phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
                          f"robot hand–goal distance {100 * ps['dist']:.1f} cm\n{note}")
 
     # the static part (axes, titles, legend) is rendered once; each frame redraws only what moves

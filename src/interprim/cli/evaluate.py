@@ -129,8 +129,8 @@ def run_user_data(args) -> int:
     from ..errors import InterprimError
     import sys
 
-    from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, evaluate_demonstrations,
-                                       markdown_table, save_report)
+    from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, default_methods,
+                                       evaluate_demonstrations, markdown_table, save_report)
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
@@ -151,9 +151,10 @@ def run_user_data(args) -> int:
     methods = None
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-        bad = [m for m in methods if m not in USER_METHODS.split(",")]
-        if bad or not methods:
-            raise InterprimError(f"--methods {args.methods}: with --data FILE the methods are some of {USER_METHODS}")
+        known = list(default_methods(obs))
+        if not methods or any(m not in known for m in methods):
+            raise InterprimError(f"--methods {args.methods}: with --data FILE the methods are some of "
+                                 f"{','.join(known)}")
     cfg = RealTimeConfig(horizon=float(args.horizon))
     notes = []
 

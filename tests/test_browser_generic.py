@@ -68,9 +68,18 @@ def gen(drv):
 def test_generic_view_replay_labels_band_phase_and_out_of_range(user_server, driver):  # noqa: F811
     from selenium.webdriver.support.ui import Select
 
+    # record whether "no high-five model loaded" is ever visible, from before the page's own scripts run
+    driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": """
+        window.__hfErrorShown = false;
+        new MutationObserver(() => {
+          const e = document.getElementById('hf-error'), v = document.getElementById('view-highfive');
+          if (e && v && e.textContent && !v.hidden) window.__hfErrorShown = true;
+        }).observe(document, {subtree: true, childList: true, characterData: true, attributes: true});"""})
     driver.get(user_server.url)
     wait_for(driver, "return window.ipState && window.ipState.ready")
-    # only user models: the page starts on the generic view (no "no high-five model loaded" dead end)
+    # only user models: the page starts on the generic view (no "no high-five model loaded" dead end, not even
+    # for a moment before it switches)
+    assert driver.execute_script("return window.__hfErrorShown") is False
     assert driver.execute_script("return document.getElementById('view-generic').hidden") is False
     assert driver.execute_script("return document.getElementById('view-highfive').hidden") is True
     driver.find_element("id", "tab-generic").click()
@@ -113,6 +122,12 @@ def test_generic_view_replay_labels_band_phase_and_out_of_range(user_server, dri
     assert r["oorText"] == "true" and r["canvasOor"] == "true"
     assert r["state"]["inputDistance"] > 100
     wait_for(driver, "return window.ipState.gen.drawn.series.every(s => s.mean)")
+    # the phase label and the out-of-range banner do not overlap
+    wait_for(driver, "const d = window.ipState.gen.drawn; return d.banner && d.phaseLabel")
+    b, lab = driver.execute_script("const d = window.ipState.gen.drawn; return [d.banner, d.phaseLabel]")
+    apart = (lab["x"] >= b["x"] + b["w"] or b["x"] >= lab["x"] + lab["w"] or lab["y"] >= b["y"] + b["h"]
+             or b["y"] >= lab["y"] + lab["h"])
+    assert apart, (b, lab)
     driver.save_screenshot(str(_artifacts() / "browser_generic_x1000.png"))
     logs = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
     assert not logs, logs

@@ -77,6 +77,53 @@ def test_highfive_animation_numbers_are_those_of_predict_on_the_whole_observatio
         assert states[2][key]["cloud"].shape[0] == 2
 
 
+def test_highfive_animation_text_is_legible_at_display_size(highfive_case, tmp_path, monkeypatch):
+    """Every text of the GIF (titles, ticks, legend, the numbers) is at least 11 px high at its own size."""
+    import interprim.experiments.highfive_figures as hff
+
+    models, test, cfg = highfive_case
+    seen = {}
+
+    def capture(fig, canvas, dynamic, states, draw, path, fps):
+        draw(states[-1])
+        canvas.draw()  # tick labels get their text when drawn
+        seen["fig"] = fig
+
+    monkeypatch.setattr(hff, "_write_gif", capture)
+    hff.animate(models, test, 0, cfg, tmp_path / "hf.gif")
+    fig = seen["fig"]
+    texts = [t for t in fig.findobj(lambda a: hasattr(a, "get_fontsize") and hasattr(a, "get_text"))
+             if t.get_text().strip() and t.get_visible()]
+    assert len(texts) > 20  # titles, tick labels, legend entries, the numbers of each panel
+    small = sorted({(t.get_fontsize() * fig.dpi / 72, t.get_text()[:30]) for t in texts})[:3]
+    assert small[0][0] >= 11, small
+
+
+def test_fig6_names_its_model_and_fig8_shows_every_row_of_its_table(highfive_case, tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from interprim.experiments.highfive_common import METHOD_LABELS
+    from interprim.experiments.highfive_figures import plot_fig6, plot_fig8
+
+    models, test, cfg = highfive_case
+    figs = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: figs.append(fig))
+    plot_fig6(models["paper"], test, 0, cfg, tmp_path / "f6.png")
+    assert "drawn by the paper's IP (forcing values, DTW phase" in figs[-1]._suptitle.get_text()
+    n = len(test.goals)
+    rng = np.random.default_rng(0)
+    methods = ("ip", "ip_likelihood", "ip_default", "nn", "prior")
+    ev = {"pred_goals": {m: rng.uniform(0.3, 0.9, (n, 1, 2)) for m in methods},
+          "goal_err": {m: np.full((n, 1), 0.01 * (i + 1)) for i, m in enumerate(methods)}}
+    plot_fig8(ev, test, type("C", (), {"percents": (60,)})(), tmp_path / "f8.png", percent=60)
+    labels = [t.get_text() for t in figs[-1].axes[0].get_legend().get_texts()]
+    for i, m in enumerate(methods):
+        assert any(lab.endswith(f"{METHOD_LABELS[m]}: {i + 1:.1f} cm") for lab in labels), (m, labels)
+
+
 def test_highfive_animation_needs_a_known_panel(highfive_case, tmp_path):
     from interprim.experiments.highfive_figures import animate
 

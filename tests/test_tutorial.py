@@ -9,107 +9,78 @@ right before a block changes that:
 * ``<!-- tutorial: background -->`` - started in the background (a server); it must print a line before the
   next block runs, and is stopped with SIGINT (Ctrl-C) after the last block, exiting with status 130 (128 + SIGINT).
 
+A ```text block right after a block shows its output: it must be what the block prints (numbers within rounding,
+timings excepted; ``scripts/doc_outputs.py``, which also rewrites them with ``--update``).
+
 The tutorial's server port 8765 is replaced by a free port, so that the test does not depend on it being free.
 """
 
 from __future__ import annotations
 
-import os
-import re
-import signal
-import subprocess
 import sys
 from pathlib import Path
-
-import socket
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-TUTORIAL = ROOT / "docs" / "tutorial.md"
-FENCE = re.compile(r"(?:<!-- tutorial: (?P<mark>\w+)(?P<why>[^>]*)-->\s*\n)?```(?P<lang>\w*)\n(?P<body>.*?)\n```",
-                   re.S)
-
-
-def blocks(text: str):
-    """``(line, lang, mark, reason, body)`` of every fenced block."""
-    out = []
-    for m in FENCE.finditer(text):
-        line = text.count("\n", 0, m.start("lang")) + 1
-        out.append((line, m["lang"], m["mark"], (m["why"] or "").strip(), m["body"]))
-    return out
+sys.path.insert(0, str(ROOT / "scripts"))
+from doc_outputs import TUTORIAL, Runner, blocks, compare, printed, shown_output  # noqa: E402
 
 
 def test_markers_are_known_and_skips_explained():
-    for line, lang, mark, why, _ in blocks(TUTORIAL.read_text()):
-        assert mark in (None, "skip", "fails", "background"), f"line {line}: unknown marker {mark!r}"
-        if mark == "skip":
-            assert why, f"line {line}: a skipped block needs a reason"
-        if mark:
-            assert lang in ("bash", "python"), f"line {line}: marker on a ```{lang} block"
+    for b in blocks(TUTORIAL.read_text()):
+        assert b.mark in (None, "skip", "fails", "background"), f"line {b.line}: unknown marker {b.mark!r}"
+        if b.mark == "skip":
+            assert b.why, f"line {b.line}: a skipped block needs a reason"
+        if b.mark:
+            assert b.lang in ("bash", "python"), f"line {b.line}: marker on a ```{b.lang} block"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def test_compare_catches_drift_and_ignores_timings():
+    assert compare("held-out error 0.0598 (prior 0.1284)", "held-out error 0.0598 (prior 0.1285)") == []
+    assert compare("held-out error 0.0598", "held-out error 0.0889")  # the drift of issue 21
+    assert compare("0,0.0,0.1194", "0,0.0,0.1183")
+    assert compare("fitted 20 demonstrations", "fitted 20 demonstration")  # the text, too
+    assert compare("a\nb", "a")  # and the number of lines
+    assert compare("latency median 0.39 ms, p99 5.22 ms; fit in 4.5 s; error 0.123 rad",
+                   "latency median 0.52 ms, p99 9.10 ms; fit in 8.1 s; error 0.123 rad") == []
+    assert compare("simulated 1.91 s in 0.3 s", "simulated 1.95 s in 0.9 s")  # a duration is not a timing
 
 
 @pytest.mark.slow  # runs every block of the tutorial in subprocesses
-def test_every_block_runs(tmp_path, capsys):
-    port = str(_free_port())
-    work = tmp_path / "work"
-    work.mkdir()
-    (work / "examples").symlink_to(ROOT / "examples")
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    bindir = str(Path(sys.executable).parent)
-    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp), PYTHONUNBUFFERED="1",
-               PATH=bindir + os.pathsep + os.environ.get("PATH", ""))
-    background, ran, skipped = [], 0, []
-    try:
-        for i, (line, lang, mark, why, body) in enumerate(blocks(TUTORIAL.read_text())):
-            if lang not in ("bash", "python"):
+def test_every_block_runs_and_prints_what_the_guide_shows(tmp_path, capsys):
+    text = TUTORIAL.read_text()
+    bl = blocks(text)
+    ran, skipped, drift = 0, [], []
+    with Runner(tmp_path) as runner:
+        for i, b in enumerate(bl):
+            if b.lang not in ("bash", "python"):
                 continue
-            if mark == "skip":
-                skipped.append(f"line {line}: {why}")
+            if b.mark == "skip":
+                skipped.append(f"line {b.line}: {b.why}")
                 continue
-            body = body.replace("8765", port)
-            if lang == "python":
-                script = tmp_path / f"block_{i:02d}.py"
-                script.write_text(body + "\n")
-                cmd = [sys.executable, str(script)]
-            else:
-                cmd = ["bash", "-e", "-c", body]
-            if mark == "background":
-                proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True, start_new_session=True)
-                first = proc.stdout.readline()  # waits for the server's address line (state, not a sleep)
-                assert first.strip(), f"line {line}: background block printed nothing: {proc.stderr.read()}"
-                background.append((line, proc))
-                ran += 1
-                continue
-            r = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True, timeout=900)
+            r = runner.run(b)
             ran += 1
-            where = f"docs/tutorial.md line {line} ({lang})\nstdout:\n{r.stdout}\nstderr:\n{r.stderr}"
-            if mark == "fails":
+            if b.mark == "background":
+                assert r.strip(), f"line {b.line}: background block printed nothing"
+                continue
+            where = f"docs/tutorial.md line {b.line} ({b.lang})\nstdout:\n{r.stdout}\nstderr:\n{r.stderr}"
+            if b.mark == "fails":
                 assert r.returncode != 0, f"expected a failure: {where}"
                 assert "Traceback" not in r.stderr and "error:" in r.stderr, where
             else:
                 assert r.returncode == 0, where
                 assert "Traceback" not in r.stderr, where
-    finally:
-        for line, proc in background:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGINT)  # bash and the server it started: what Ctrl-C does
-            try:
-                out, err = proc.communicate(timeout=60)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                out, err = proc.communicate()
-                pytest.fail(f"line {line}: background block did not stop on SIGINT")
-            assert proc.returncode == 130, f"line {line}: background block exited {proc.returncode}: {err}"  # 128 + SIGINT
-            assert "Traceback" not in err, err
+            out = shown_output(text, bl, i)
+            if out is not None:
+                problems = compare(out.body, printed(b, r))
+                if problems:
+                    drift.append(f"docs/tutorial.md line {out.line}:\n" + "\n".join(problems))
+    for line, code, err in runner.stopped:
+        assert code == 130, f"line {line}: background block exited {code}: {err}"  # 128 + SIGINT
+        assert "Traceback" not in err, err
     assert ran >= 10
+    assert not drift, ("the outputs shown drifted from what the code prints; regenerate them with "
+                       "'python scripts/doc_outputs.py --update' and review the diff:\n" + "\n".join(drift))
     with capsys.disabled():
         print(f"\ntutorial: {ran} blocks run; not run: {skipped}")

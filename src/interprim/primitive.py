@@ -171,8 +171,18 @@ class InteractionPrimitive(Predictor):
     sigma2_ : float
         Observation noise of Eq. 16 in use; ``phase_sigma2_`` the position noise of the likelihood phase
         (``None`` when not chosen).
-    selection_ : dict or None
-        What the cross-validation chose and measured (:mod:`interprim.selection`).
+    selection_ : dict
+        What ``fit`` chose and why (:meth:`summary` prints the gist).  Choices: ``sigma2``, ``shrinkage``
+        (of Eq. 10's covariance), ``cross_shrinkage`` (the cross-agent damping gamma: 1 = the controlled agent's
+        prior mean), ``phase_sigma2``, ``observation``, ``method`` and ``n_folds`` (how), ``fractions`` (fractions
+        seen in the held-out cases).  Held-out errors at the choice (mean squared error of the whole movement, each
+        DoF divided by its variance): ``cv_error`` / ``cv_error_prior`` (``cv_target``, the controlled agent, and
+        its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="auto"``):
+        ``phase_error_refined`` (likelihood), ``learned_phase_error``, ``clock_phase_error``.  Candidates and
+        their scores: ``*_grid``, ``cv_errors``, ``cv_errors_observed``, ``cv_within_se``,
+        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood``; ``representation`` (as
+        ``representation_``).  Keys are left out where they do
+        not apply (e.g. ``sigma2="auto"`` has no ``cv_*``).
     phase_method_ : str
         The phase method ``fit`` chose (``phase_method="auto"``) or was given; ``phase_model_`` is the
         fitted :class:`~interprim.phase.learned.LearnedPhase` or ``None``.
@@ -850,7 +860,20 @@ class InteractionPrimitive(Predictor):
         p = self.json_params()
         shown = ", ".join(f"{k}={v!r}" for k, v in p.items()
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
-        return f"InteractionPrimitive({shown})"
+        if getattr(self, "prior_", None) is None:
+            return f"InteractionPrimitive({shown})"
+        from ._summary import one_line
+
+        return f"<InteractionPrimitive({shown}) {one_line(self)}>"
+
+    def summary(self, fit_seconds: float | None = None) -> str:
+        """What the fitted model chose, in a few lines: phase method, noise ``sigma2``, shrinkage, cross-agent
+        damping and the held-out error against the prior mean (from :attr:`selection_`), and whether the
+        uncertainty is calibrated.  ``fit_seconds``: a fit time to report (``interprim fit`` passes it)."""
+        self._check_fitted("summary")
+        from ._summary import summary
+
+        return summary(self, fit_seconds)
 
     # the names these methods had while they were private (kept for code written against them)
     _latent_map = latent_map

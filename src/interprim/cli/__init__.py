@@ -24,6 +24,9 @@ COMMAND_MODULES = [
     "interprim.cli.evaluate",
 ]
 
+# The extra named when a command misses an optional module that this extra installs (README: *Install*).
+COMMAND_EXTRA = {"demo": "experiments", "evaluate": "experiments", "handwriting": "experiments", "serve": "serve"}
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -73,6 +76,14 @@ def main(argv=None) -> int:
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         print(f"interprim {args.command}: error: {_flag_names(parser, args.command, exc)}", file=sys.stderr)
         return 2 if isinstance(exc, ModelFileError) else 1  # a corrupt or non-model file given as MODEL
+    except ImportError as exc:  # an optional extra that is not installed: one line naming the pip install
+        from .._optional import extra_for_import_error
+
+        msg = extra_for_import_error(exc, prefer=COMMAND_EXTRA.get(args.command))
+        if msg is None:
+            raise
+        print(f"interprim {args.command}: error: {msg}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

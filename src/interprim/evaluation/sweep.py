@@ -49,11 +49,13 @@ from ..preprocessing import time_normalise
 
 from .protocol import observed_frames
 
-__all__ = ["EvalConfig", "METHODS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
+__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
            "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
 
 FRACTIONS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 METHODS = ("ip-forcing", "ip-position", "ip-paper", "iprompt", "nn", "prior")
+#: optional modules a method needs (the ``bench`` extra), beyond the core
+METHOD_NEEDS = {"iprompt": ("movement_primitives", "gmr")}
 #: phase variants evaluated from the same fitted IP model (``ip-forcing`` -> ``ip-forcing-dtw``, ...)
 PHASE_VARIANTS = ("likelihood", "dtw", "oracle")
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
@@ -338,16 +340,15 @@ def run_sweep(datasets=("nuisi",), methods=METHODS, cfg: EvalConfig = EvalConfig
     from joblib import Parallel, delayed, parallel_config
 
     jobs = _jobs(datasets, methods, cfg, recognition, max_demos)
-    client = None
+    client = cluster = None
     if backend == "dask":
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:  # pragma: no cover
             raise ImportError("backend='dask' needs the optional extra: pip install 'interprim[dask]'") from exc
-        client = Client(scheduler) if scheduler else Client(LocalCluster(n_workers=max(1, n_jobs if n_jobs > 0
-                                                                                           else 2),
-                                                                         threads_per_worker=1,
-                                                                         processes=True))
+        cluster = None if scheduler else LocalCluster(n_workers=max(1, n_jobs if n_jobs > 0 else 2),
+                                                      threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(scheduler or cluster)
     folds, recog = [], []
     try:
         with parallel_config(backend=backend, n_jobs=n_jobs, inner_max_num_threads=1 if backend == "loky" else None):
@@ -361,6 +362,8 @@ def run_sweep(datasets=("nuisi",), methods=METHODS, cfg: EvalConfig = EvalConfig
     finally:
         if client is not None:
             client.close()
+            if cluster is not None:  # the cluster started here: its worker processes end with the sweep
+                cluster.close()
     return {"folds": folds, "recognition": recog, "config": asdict(cfg)}
 
 

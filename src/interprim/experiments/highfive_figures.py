@@ -68,8 +68,10 @@ def plot_setup(train, test, path):
     plt.close(fig)
 
 
-def plot_fig6(model, test, idx, cfg, path, percents=(40, 60)):
-    """Fig. 6: posterior samples of the controlled agent's task-space trajectory; returns goal spreads (m)."""
+def plot_fig6(model, test, idx, cfg, path, percents=(40, 60), model_label=None):
+    """Fig. 6: posterior samples of the controlled agent's task-space trajectory; returns goal spreads (m).
+
+    ``model_label`` names the model that drew the samples in the figure's title (default: the paper's IP)."""
     import matplotlib.pyplot as plt
 
     oa, ca = test.observed_arm, test.controlled_arm
@@ -97,6 +99,8 @@ def plot_fig6(model, test, idx, cfg, path, percents=(40, 60)):
         ax.plot(*test.goals[idx], "o", mfc="none", mec="k", ms=10, mew=1.5, label="true goal")
         _setup_axes(ax, f"{p} % observed: goal spread {100 * spread:.1f} cm ({cfg.n_samples} samples)")
         ax.legend(loc="lower center", fontsize=7)
+    label = model_label or "paper's IP (forcing values, DTW phase, σ² on a validation set)"
+    fig.suptitle(f"Fig. 6: posterior samples of the robot's hand path drawn by the {label}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -155,12 +159,15 @@ def plot_fig8(ev, test, cfg, path, percent=60):
     dist = ev["goal_err"]["ip"][:, j]
     ax.plot(*pg.T, "o", mfc="none", mec="tab:red", ms=8, mew=1.5,
             label=f"predicted, {METHOD_LABELS['ip']}: {100 * np.mean(dist):.1f} cm")
-    for name, mk, col in (("ip_likelihood", "x", "tab:orange"), ("ip_default", "+", "tab:green")):
+    for name, mk, col in (("ip_likelihood", "x", "tab:orange"), ("ip_default", "+", "tab:green"),
+                          ("nn", "^", "tab:purple"), ("prior", "s", "0.35")):
         pgm = ev["pred_goals"].get(name)
         if pgm is not None and not np.all(np.isnan(pgm)):
             dl = ev["goal_err"][name][:, j]
-            ax.plot(*pgm[:, j].T, mk, color=col, ms=7, mew=1.5,
-                    label=f"predicted, {METHOD_LABELS[name]}: {100 * np.mean(dl):.1f} cm")
+            style = dict(mfc="none", mec=col) if mk in "^s" else dict(color=col)
+            ax.plot(*pgm[:, j].T, mk, ms=7, mew=1.5, **style,
+                    label=f"{'' if name == 'prior' else 'predicted, '}{METHOD_LABELS[name]}: "
+                          f"{100 * np.mean(dl):.1f} cm")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -288,7 +295,7 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
     obs_hand = oa.hand(d[:, :2])
     goal = test.goals[idx]
 
-    fig = Figure(figsize=(4.3 * len(panels), 4.7), dpi=72)
+    fig = Figure(figsize=(3.95 * len(panels), 4.6), dpi=100)  # every text >= 8.5 pt = 11.8 px at 100 dpi
     canvas = FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(panels), squeeze=False)
     art = {}
@@ -303,7 +310,7 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
         ctrl_line = _draw_arm(ax, ca, ca.rest, color=col)
         (path_line,) = ax.plot([], [], "--", color=col, lw=1.2)
         (end_pt,) = ax.plot([], [], "x", color=col, ms=9, mew=2)
-        txt = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=7.5)
+        txt = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=8.5)
         art[key] = (cloud, trace, obs_line, ctrl_line, path_line, end_pt, txt)
     handles = [Line2D([], [], ls="", marker="o", mfc="none", mec="k", ms=9, mew=1.5, label="true high-five point"),
                Line2D([], [], color="tab:blue", lw=3, marker="o", ms=5, label="human (replayed; its hand's path)")]
@@ -311,8 +318,8 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
                 for _, name, _, col in panels]
     handles += [Line2D([], [], color="0.3", ls="--", lw=1.2, label="predicted hand path to come (x: its end)"),
                 Line2D([], [], color="0.3", lw=0.6, alpha=0.4, label=f"{n_samples} posterior samples of it")]
-    fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=7, frameon=False)
-    fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.235, wspace=0.18)
+    fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8.5, frameon=False)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.25, wspace=0.18)
 
     def draw(st):
         k = st["k"]
@@ -330,7 +337,7 @@ def animate(models, test, idx, cfg, path, fps=15, n_samples=8):
                 c = ps["cloud"][i] if ps["cloud"] is not None else np.empty((0, 2))
                 line.set_data(c[:, 0], c[:, 1])
             note = "human stopped: robot completes its response" if st["hold"] else ""
-            txt.set_text(f"seen {100 * k / T:.0f} %, estimated phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
+            txt.set_text(f"seen {100 * k / T:.0f} %: phase {ps['phase']:.2f} (true {(k - 1) / (T - 1):.2f})\n"
                          f"robot hand–goal distance {100 * ps['dist']:.1f} cm\n{note}")
 
     # the static part (axes, titles, legend) is rendered once; each frame redraws only what moves

@@ -298,12 +298,20 @@ function canvasPoint(canvas, ev) {
   return [((ev.clientX - r.left) * canvas.width) / r.width, ((ev.clientY - r.top) * canvas.height) / r.height];
 }
 
+// the demo's model, or a saved copy of it (a file named highfive*.npz with its 2 + 3 joints)
+function highfiveModel(info) {
+  return info.models.find((m) => m.world === "highfive") ||
+    info.models.find((m) => m.name.startsWith("highfive") && m.controlled_dofs.length === 3 && m.observed_dofs.length === 2);
+}
+
+const handwritingModels = (info) =>
+  info.models.filter((m) => m.world === "handwriting" || (m.kind === "single" && m.n_dofs === 2));
+
 async function hfInit(info) {
   hf.world = info.highfive_world || DEFAULT_WORLD;
   // the demo's model, or a saved copy of it (a file named highfive*.npz with its 2 + 3 joints); any other model
   // is shown by the generic view (generic.js)
-  hf.model = info.models.find((m) => m.world === "highfive") ||
-    info.models.find((m) => m.name.startsWith("highfive") && m.controlled_dofs.length === 3 && m.observed_dofs.length === 2);
+  hf.model = highfiveModel(info);
   hfSetupView();
   hf.restHuman = hf.world.observed_arm.rest.slice();
   hf.restRobot = hf.world.controlled_arm.rest.slice();
@@ -461,7 +469,7 @@ function hwStop() {
 }
 
 async function hwInit(info) {
-  hw.models = info.models.filter((m) => m.world === "handwriting" || (m.kind === "single" && m.n_dofs === 2));
+  hw.models = handwritingModels(info);
   requestAnimationFrame(hwDraw);
   if (!hw.models.length) { $("hw-error").textContent = "no handwriting model loaded (start with --demo); your models are on the Any model tab"; return; }
   hw.extent = hw.models[0].extent || hw.extent;
@@ -512,10 +520,12 @@ $("tab-generic").onclick = () => showTab("generic");
     const info = await fetchJSON("/api/info");
     if (!info) throw new Error("cannot read /api/info (wrong token?)");
     state.info = info;
+    // only the user's own models: the generic view, chosen before anything is drawn (the high-five view's
+    // "no high-five model loaded" must not flash first)
+    if (!highfiveModel(info) && !handwritingModels(info).length) showTab("generic");
     await hfInit(info);
     await hwInit(info);
     await genInit(info, state);
-    if (!hf.model && !hw.models.length) showTab("generic"); // only the user's own models: the generic view
     state.ready = true;
     document.body.dataset.ready = "1";
     setStatus(`connected · ${info.server} · protocol v${info.protocol} · models: ${info.models.map((m) => m.name).join(", ")}`);

@@ -146,15 +146,23 @@ function draw() {
     const px = X(ax.grid(p.phase));
     ctx.save(); ctx.strokeStyle = "#555"; ctx.setLineDash([3, 3]); ctx.beginPath();
     ctx.moveTo(px, MARGIN.top); ctx.lineTo(px, bottom); ctx.stroke(); ctx.restore();
-    ctx.fillStyle = "#555"; ctx.font = "12px sans-serif"; ctx.fillText(`phase ${fmt(p.phase, 2)}`, px + 4, MARGIN.top + 12);
+    // the label at the foot of the line: the top of the plot holds the out-of-range banner
+    const text = `phase ${fmt(p.phase, 2)}`;
+    ctx.fillStyle = "#555"; ctx.font = "12px sans-serif"; ctx.fillText(text, px + 4, bottom - 6);
     drawn.phaseLine = true;
+    drawn.phaseLabel = { x: px + 4, y: bottom - 18, w: ctx.measureText(text).width, h: 14 }; // canvas pixels
   }
   ctx.fillStyle = "#444"; ctx.font = "12px sans-serif";
   for (let i = 0; i <= 4; i++) { const t = (i / 4) * ax.max; ctx.fillText(fmt(t, 2), X(t) - 10, bottom + 14); }
   ctx.fillText(ax.label, x0 + (x1 - x0) / 2 - 120, bottom + 30);
   if (p && p.out_of_range) {
-    ctx.fillStyle = "#b00"; ctx.font = "bold 14px sans-serif";
-    ctx.fillText(`input out of range (${fmt(p.input_distance, 0)} σ): the prediction extrapolates`, x0 + 10, MARGIN.top + 16);
+    const banner = `input out of range (${fmt(p.input_distance, 0)} σ): the prediction extrapolates`;
+    ctx.font = "bold 14px sans-serif";
+    ctx.fillStyle = "rgba(255,255,255,0.85)"; // legible over the curves
+    ctx.fillRect(x0 + 4, MARGIN.top + 2, ctx.measureText(banner).width + 12, 20);
+    ctx.fillStyle = "#b00";
+    ctx.fillText(banner, x0 + 10, MARGIN.top + 16);
+    drawn.banner = { x: x0 + 4, y: MARGIN.top + 2, w: ctx.measureText(banner).width + 12, h: 20 };
   }
   state.gen.drawn = drawn;
   c.dataset.series = JSON.stringify(drawn.series.map((s) => s.label));

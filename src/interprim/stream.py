@@ -192,7 +192,7 @@ class Stream:
             buf = np.empty((cap, self._buf.shape[1]))
             buf[: self._n] = self._buf[: self._n]
             self._buf = buf
-        method = m._phase()
+        method = m.phase_method_used()
         tr = None
         if method == "likelihood":
             tr = self._tracker
@@ -210,7 +210,7 @@ class Stream:
         z_all = buf[: self._n]
         n_star, cost = estimate_phase(m, z_all, method, dtw=(n_star, cost), tracker=tr)
         z = movement_prefix(m, z_all, n_star)
-        p = m._predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
+        p = m.predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                               workspace=self._ws)
         mean = getattr(m, "input_mean_", None)
         if mean is not None:

@@ -85,10 +85,15 @@ class Stream:
         ``out_of_range`` says whether it passed the model's limit (a warning is issued the first time).
         """
         p = self._update(frame, need_cov)
+        return self._check_range(p, frame)
+
+    def _check_range(self, p, frames):
+        """Mark ``p`` with the largest input distance of the frames seen so far (:mod:`interprim.input_range`),
+        warning once when it leaves the training range."""
         m = self.model
         mean = getattr(m, "input_mean_", None)
         if mean is not None:
-            d = float(np.max(np.abs(np.asarray(frame, dtype=np.float64) - mean) / m.input_std_))
+            d = float(np.max(np.abs(np.asarray(frames, dtype=np.float64) - mean) / m.input_std_))
             self._max_dist = max(self._max_dist, d)
             p.input_distance = self._max_dist
             p.out_of_range = self._max_dist > m.input_limit_
@@ -212,13 +217,4 @@ class Stream:
         z = movement_prefix(m, z_all, n_star)
         p = m.predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                               workspace=self._ws)
-        mean = getattr(m, "input_mean_", None)
-        if mean is not None:
-            d = float(np.max(np.abs(raw - mean) / m.input_std_))
-            self._max_dist = max(self._max_dist, d)
-            p.input_distance = self._max_dist
-            p.out_of_range = self._max_dist > m.input_limit_
-            if p.out_of_range and not self._warned:
-                self._warned = True
-                mark(m, p, self._max_dist)
-        return p
+        return self._check_range(p, raw)

@@ -333,3 +333,16 @@ def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
             assert pb["type"] == "prediction" and len(pb["mean"]) == 5000 and len(pb["std"]) == 5000
             np.testing.assert_allclose(ps["mean"], e.trajectory(10)[:, 2:], atol=2e-6)
         assert not st.server._procs.workers[0].dead
+
+
+def test_replay_lists_every_interaction_loaded():
+    """The page's replay list is not cut at 20 (74 NuiSI interactions were loaded and 20 shown)."""
+    import interprim as ip
+    from interprim.server.models import replay_json
+    from interprim.synthetic import two_agent_demos
+
+    demos = two_agent_demos(30, seed=2, frames=40)
+    model = ip.InteractionPrimitive([0, 1], n_basis=6, sigma2=1e-3, phase_method="dtw", calibrate=False).fit(
+        demos[:10], dt=0.01)
+    assert len(replay_json(model, demos)["interactions"]) == 30
+    assert len(replay_json(model, demos, max_interactions=5)["interactions"]) == 5

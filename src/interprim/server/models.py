@@ -159,7 +159,7 @@ def load_models(paths) -> dict[str, ModelEntry]:
     return out
 
 
-def replay_json(model, demos, *, names=None, units=None, source: str = "", max_interactions: int = 20) -> dict:
+def replay_json(model, demos, *, names=None, units=None, source: str = "", max_interactions: int | None = None) -> dict:
     """The JSON of ``GET /api/replay/MODEL``: demonstrations to stream to the model (the page's *Replay*).
 
     Parameters
@@ -171,8 +171,8 @@ def replay_json(model, demos, *, names=None, units=None, source: str = "", max_i
         Column names / units (default: the model's names, units unknown).
     source : str
         Where they come from (shown by the page), e.g. ``"training demonstrations (demos.csv)"``.
-    max_interactions : int
-        At most this many are kept (the first ones).
+    max_interactions : int, optional
+        At most this many are kept (the first ones); default all (the page lists every one).
 
     Returns
     -------
@@ -190,7 +190,8 @@ def replay_json(model, demos, *, names=None, units=None, source: str = "", max_i
     if names is None:
         names = getattr(model, "columns_", None) or [f"dof_{i}" for i in range(D)]
     out = []
-    for i, d in enumerate(list(demos)[: int(max_interactions)]):
+    demos = list(demos) if max_interactions is None else list(demos)[: int(max_interactions)]
+    for i, d in enumerate(demos):
         d = np.asarray(d, dtype=np.float64)
         if d.ndim != 2 or d.shape[1] != D or d.shape[0] < 2 or not np.all(np.isfinite(d)):
             raise ValueError(f"replay interaction {i}: expected a finite (T >= 2, {D}) array, got shape {d.shape}")

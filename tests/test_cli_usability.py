@@ -117,7 +117,8 @@ def test_evaluate_three_demonstrations_leaves_out_what_cannot_train(recordings, 
     cap = capsys.readouterr()
     assert "note: ip left out: it cannot be fitted on the 2 demonstrations of a training fold" in cap.err
     summary = json.loads((out / "realtime.json").read_text())["summary"]
-    assert set(summary) == {"nn", "prior", "clock", "oracle-duration"}  # --methods honoured; prior for the ratios
+    # --methods honoured; prior for the ratios; "chosen": the nested choice among them (inside each training fold)
+    assert set(summary) == {"nn", "prior", "clock", "oracle-duration", "chosen"}
     assert "Note: ip left out" in (out / "report.md").read_text()
 
 
@@ -127,7 +128,7 @@ def test_evaluate_methods_are_honoured_with_a_file(recordings, tmp_path, capsys)
                  "--n-basis", "6"]) == 0
     cap = capsys.readouterr()
     summary = json.loads((out / "realtime.json").read_text())["summary"]
-    assert set(summary) == {"nn", "prior", "clock", "oracle-duration"}
+    assert set(summary) == {"nn", "prior", "clock", "oracle-duration", "chosen"}
     assert "left out" not in cap.err
 
 
@@ -135,7 +136,7 @@ def test_evaluate_states_the_minimum_and_bad_methods_in_one_line(recordings, tmp
     assert main(["evaluate", "--data", str(recordings[2]), "--out", str(tmp_path)]) == 1
     _one_line_error(capsys.readouterr().err, "2 demonstration(s); the evaluation needs at least 3")
     assert main(["evaluate", "--data", str(recordings[3]), "--methods", "ip-forcing", "--out", str(tmp_path)]) == 1
-    _one_line_error(capsys.readouterr().err, "--methods ip-forcing", "ip,learned,ip-paper,nn,prior")
+    _one_line_error(capsys.readouterr().err, "--methods ip-forcing", "ip,learned,ip-paper,kernel,nn,prior")
 
 
 def test_evaluate_demonstrations_minimum_is_the_documented_constant():

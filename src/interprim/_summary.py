@@ -37,6 +37,8 @@ SELECTION_KEYS = {
     "cross_shrinkage_grid": "the gamma candidates", "phase_sigma2_grid": "the phase noise candidates",
     "phase_log_likelihood": "held-out marginal log-likelihood per phase noise candidate",
     "phase_error": "held-out phase error per phase noise candidate",
+    "representation": "how well the DMPs represent the demonstrations, per agent: reconstruction and mean offset "
+                      "relative to the spread between demonstrations (also model.representation_)",
     "cv_errors": "held-out error of the controlled agent per (shrinkage, sigma2) at the chosen gamma",
     "cv_errors_observed": "held-out error of the observed agent per (shrinkage, sigma2)",
     "cv_within_se": "per (shrinkage, sigma2): within one standard error of the controlled agent's best",

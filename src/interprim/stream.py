@@ -151,15 +151,12 @@ class Stream:
         The answer is the one ``k`` calls of :meth:`update` give for their last frame, and so the one
         :meth:`~interprim.primitive.InteractionPrimitive.predict` gives for all the frames seen: exactly
         (the same numbers) with the DTW and learned phases, which are functions of the frames; with the
-        likelihood phase (the default) the phase is the same maximum of the log posterior, reached by the
-        same last step from the lattice point the tracker finds at the last frame instead of from the one
-        it walked to frame by frame (``tests/test_stream_extend.py``: within 1e-7 of :meth:`update`'s and
-        of ``predict``'s phase, trajectories within 1e-6 relative).  It costs less: for each of the ``k``
-        frames only what the stream keeps from a frame is done, namely the DTW column (Eq. 5-8,
-        ``O(N D_o)``) and the frame's place in the buffer; the phase (one tracker step, whose compiled
-        step brings each lattice candidate's statistics up to date over the new frames), the observation
-        statistics at that phase, the conditioning (Eq. 15-18) and the :class:`Prediction` are computed
-        once, for the last frame.  For a server or controller that received several frames while busy
+        likelihood phase the tracker walks its lattice frame by frame as :meth:`update` does, so that its
+        state does not depend on how frames were grouped.  It costs less: for each of the ``k`` frames only
+        what the stream keeps from a frame is done, namely the DTW column (Eq. 5-8, ``O(N D_o)``), the
+        tracker's step (likelihood phase) and the frame's place in the buffer; the observation statistics
+        at the phase, the conditioning (Eq. 15-18) and the :class:`Prediction` are computed once, for the
+        last frame.  For a server or controller that received several frames while busy
         (:mod:`interprim.server` uses it for its coalesced replies).
 
         Parameters
@@ -212,6 +209,10 @@ class Stream:
             n_star, cost = dtw.update(f, check=False)
             buf[self._n] = f
             self._n += 1
+            if tr is not None and i < k - 1:
+                # the likelihood tracker walks its lattice frame by frame, as update does: its state (and so the
+                # phase) then does not depend on how the frames were grouped (a server's coalescing under load)
+                estimate_phase(m, buf[: self._n], method, dtw=(n_star, cost), tracker=tr)
         z_all = buf[: self._n]
         n_star, cost = estimate_phase(m, z_all, method, dtw=(n_star, cost), tracker=tr)
         z = movement_prefix(m, z_all, n_star)

@@ -32,7 +32,7 @@ import numpy as np
 from .basis import Basis
 
 __all__ = ["forcing_targets", "forcing_values", "fit_weights", "fit_weights_stacked", "fit_weights_targets",
-           "LinearRollout", "cached_rollout", "representation_report"]
+           "LinearRollout", "cached_rollout", "representation_report", "warn_representation"]
 
 
 def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
@@ -376,3 +376,26 @@ def representation_report(latent, starts, theta, rollout, n: int = 101, groups=N
             "spread": spread,
         }
     return out
+
+
+#: Above this ratio (error / spread between demonstrations) the DMPs lose most of what distinguishes the
+#: demonstrations, and fit warns (:class:`~interprim.errors.RepresentationWarning`).
+REPRESENTATION_LIMIT = 0.5
+
+
+def warn_representation(report: dict, n_basis: int):
+    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
+    import warnings
+
+    from .errors import RepresentationWarning
+
+    bad = {a: r for a, r in report.items() if max(r["reconstruction"], r["mean_offset"]) > REPRESENTATION_LIMIT}
+    if not bad:
+        return
+    what = "; ".join(f"{a} agent: reconstruction {r['reconstruction']:.2f}x and mean {r['mean_offset']:.2f}x the "
+                     f"spread between demonstrations" for a, r in bad.items())
+    warnings.warn(f"the DMPs with n_basis={n_basis} cannot represent these movements ({what}; above "
+                  f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
+                  f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
+                  f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
+                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=4)

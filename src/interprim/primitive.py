@@ -24,7 +24,7 @@ from ._blas import one_blas_thread, single_thread
 from .contract import Predictor
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
-from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
+from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report, warn_representation
 from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
 from ._compiled import loader
@@ -434,7 +434,7 @@ class InteractionPrimitive(Predictor):
         self.representation_ = representation_report(
             latent, ders, theta, self.rollout_,
             groups={"observed": slice(0, n_o), "controlled": slice(n_o, None)} if ctrl else {"observed": slice(None)})
-        _warn_representation(self.representation_, int(self.n_basis))
+        warn_representation(self.representation_, int(self.n_basis))
 
         # observation noise (Eq. 16)
         if isinstance(self.sigma2, str):
@@ -884,26 +884,3 @@ class InteractionPrimitive(Predictor):
     _phase = phase_method_used
     _observed_to_latent = observed_to_latent
     _setup = setup_derived
-
-
-#: Above this ratio (error / spread between demonstrations) the DMPs lose most of what distinguishes the
-#: demonstrations, and fit warns (:class:`~interprim.errors.RepresentationWarning`).
-REPRESENTATION_LIMIT = 0.5
-
-
-def _warn_representation(report: dict, n_basis: int):
-    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
-    import warnings
-
-    from .errors import RepresentationWarning
-
-    bad = {a: r for a, r in report.items() if max(r["reconstruction"], r["mean_offset"]) > REPRESENTATION_LIMIT}
-    if not bad:
-        return
-    what = "; ".join(f"{a} agent: reconstruction {r['reconstruction']:.2f}x and mean {r['mean_offset']:.2f}x the "
-                     f"spread between demonstrations" for a, r in bad.items())
-    warnings.warn(f"the DMPs with n_basis={n_basis} cannot represent these movements ({what}; above "
-                  f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
-                  f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
-                  f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
-                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=3)

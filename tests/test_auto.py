@@ -17,6 +17,12 @@ def task():
 @pytest.fixture(scope="module")
 def auto(task):
     dev, _ = task
+    return ip.AutoInteraction([0, 1], candidates=("kernel", "nn", "prior"), combine="best").fit(dev.demos, dt=dev.dt)
+
+
+@pytest.fixture(scope="module")
+def blend(task):
+    dev, _ = task
     return ip.AutoInteraction([0, 1], candidates=("kernel", "nn", "prior")).fit(dev.demos, dt=dev.dt)
 
 
@@ -57,3 +63,79 @@ def test_bad_arguments_are_named(task):
         ip.AutoInteraction([0, 1]).fit(dev.demos[:2], dt=dev.dt)
     with pytest.raises(ip.NotFittedError):
         ip.AutoInteraction([0, 1]).predict(np.zeros((3, 2)))
+
+
+def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_family(blend, task):
+    dev, _ = task
+    s = blend.selection_
+    w = blend.weights_
+    assert s["combine"] == "blend" and set(w) <= {"kernel", "nn", "prior"}
+    assert sum(w.values()) == pytest.approx(1.0) and all(0 < x <= 1 for x in w.values())
+    # the blend's in-sample CV error is at most the best family's (a vertex of the simplex is a candidate) ...
+    assert s["blend_cv_error"] <= s["cv_errors"][blend.chosen_] + 1e-12
+    assert s["blend_vs_best"] <= 1.0 + 1e-12
+    # ... and no other point of the simplex does better (the optimiser found the minimum of a convex loss)
+    from interprim.auto import CrossValidation
+    from interprim.evaluation.realtime import RealTimeConfig
+
+    cv = CrossValidation(blend.factories(), dev.demos, [0, 1], dev.dt, RealTimeConfig(stride=3), k=3)
+    wv = np.array([w.get(m, 0.0) for m in cv.names])
+    assert cv.blend_error(wv) == pytest.approx(s["blend_cv_error"], rel=1e-9)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        other = rng.dirichlet(np.ones(len(cv.names)))
+        assert cv.blend_error(other) >= cv.blend_error(wv) - 1e-9
+    for m, e in s["cv_errors"].items():
+        assert cv.errors[m] == pytest.approx(e)
+    # the variance model matches the mean squared held-out error at every step ahead and column
+    W = wv[:, None, None, None]
+    mix = np.sum(W * cv.mean, axis=0)
+    spread = np.sum(W * (cv.mean - mix) ** 2, axis=0)
+    vm = cv.blend_scales(wv)
+    np.testing.assert_allclose((vm["a"] * spread + vm["b"]).mean(axis=0), ((mix - cv.truth) ** 2).mean(axis=0),
+                               rtol=1e-9, atol=1e-15)
+
+
+def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
+    """Ahead of now, the blend at the instant t seconds ahead is the weighted mean of every member's prediction at
+    that same instant (each member placed in time by its own phase and duration)."""
+    from interprim.contract import place_in_time
+
+    _, hold = task
+    x = hold.demos[1][:35, :2]
+    model = blend.model_
+    p = blend.predict(x)
+    preds = {m: est.predict(x) for m, est in model.members_.items()}
+    t = np.array([0.02, 0.1, 0.2])
+    s_b, D_b = place_in_time(p, len(x), hold.dt, model.mean_duration_)
+    got = np.stack([np.interp(s_b + t / D_b, p.times, p.mean[:, d]) for d in range(4)], axis=1)
+    want = 0
+    for m, pm in preds.items():
+        sm, Dm = place_in_time(pm, len(x), hold.dt, model.mean_duration_)
+        Y = pm.trajectory(401)
+        grid = np.linspace(0, 1, 401)
+        want = want + model.weights[m] * np.stack([np.interp(np.clip(sm + t / Dm, 0, 1), grid, Y[:, d])
+                                                   for d in range(4)], axis=1)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-3 * np.abs(want).max())
+
+
+def test_blend_streams_saves_and_calibrates(blend, task, tmp_path):
+    _, hold = task
+    x = hold.demos[0][:40, :2]
+    p = blend.predict(x)
+    st = blend.stream()
+    for f in x:
+        q = st.update(f)
+    np.testing.assert_array_equal(q.trajectory(50), p.trajectory(50))
+    np.testing.assert_array_equal(q.std(50), p.std(50))
+    assert st.n_frames == 40
+    blend.save(tmp_path / "blend.npz")
+    back = ip.load_any(tmp_path / "blend.npz")
+    assert type(back) is ip.AutoInteraction and back.weights_ == blend.weights_
+    np.testing.assert_array_equal(back.predict(x).trajectory(50), p.trajectory(50))
+    np.testing.assert_array_equal(back.predict(x).std(50), p.std(50))
+    vm = {k: np.asarray(v) for k, v in blend.selection_["variance_model"].items()}
+    assert set(vm) == {"a", "b"} and vm["a"].shape == vm["b"].shape == (round(0.25 / hold.dt), 4)
+    assert np.all(vm["a"] > 0) and np.all(vm["a"] <= 1) and np.all(vm["b"] >= 0)
+    assert np.all((vm["a"] == 1) | (vm["b"] == 0))
+    assert "blend of" in repr(blend) and "blend:" in blend.summary()

@@ -39,13 +39,13 @@ def user_server(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("user-model")
     save_demonstrations(d / "synth.csv", two_agent_demos(16, seed=3, frames=120), dt=0.01, columns=NAMES)
-    assert cli(["fit", str(d / "synth.csv"), "--observed", "hand_x,hand_y", "--n-basis", "8",
+    assert cli(["fit", "--model", "ip", str(d / "synth.csv"), "--observed", "hand_x,hand_y", "--n-basis", "8",
                 "-o", str(d / "synth.npz")]) == 0
     # a second user model, listed first, so that the test has to select "synth"
     rng = np.random.default_rng(0)
     one = [np.sin(np.linspace(0, 3, 80))[:, None] * rng.uniform(0.8, 1.2) for _ in range(6)]
     save_demonstrations(d / "a_wave.csv", one, dt=0.01, columns=["angle"])
-    assert cli(["fit", str(d / "a_wave.csv"), "--observed", "angle", "--n-basis", "6",
+    assert cli(["fit", "--model", "ip", str(d / "a_wave.csv"), "--observed", "angle", "--n-basis", "6",
                 "-o", str(d / "a_wave.npz")]) == 0
     models = load_models([d / "a_wave.npz", d / "synth.npz"])
     entry = models["synth"]

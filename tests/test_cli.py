@@ -41,7 +41,7 @@ def files(tmp_path_factory):
     save_demonstrations(d / "partial.csv", [test[0][:k, :2]], [np.arange(k) * 0.02], columns=COLS[:2])
     # a full demo with every column (the extra robot column is ignored by predict)
     save_demonstrations(d / "partial_full.npz", [test[0][:k]], [np.arange(k) * 0.02], columns=COLS)
-    assert main(["fit", str(d / "demos.csv"), "--observed", "human_x,human_y", "-o", str(d / "model.npz")]) == 0
+    assert main(["fit", "--model", "ip", str(d / "demos.csv"), "--observed", "human_x,human_y", "-o", str(d / "model.npz")]) == 0
     return d
 
 
@@ -69,7 +69,7 @@ def test_fit_writes_a_loadable_model_with_columns(files, capsys):
 
 @pytest.mark.parametrize("src", ["demos_meta.npz", "folder"])
 def test_fit_from_npz_metadata_and_folder(files, src, capsys, tmp_path):
-    argv = ["fit", str(files / src), "-o", str(tmp_path / "m.npz"), "--n-basis", "8", "--smoothing-window", "5"]
+    argv = ["fit", "--model", "ip", str(files / src), "-o", str(tmp_path / "m.npz"), "--n-basis", "8", "--smoothing-window", "5"]
     if src == "folder":
         argv += ["--observed", "0", "--observed", "1"]
     assert main(argv) == 0
@@ -78,7 +78,7 @@ def test_fit_from_npz_metadata_and_folder(files, src, capsys, tmp_path):
 
 
 def test_fit_single_agent_model(files, tmp_path, capsys):
-    assert main(["fit", str(files / "demos.csv"), "--observed", "0,1,2", "-o", str(tmp_path / "s.npz")]) == 0
+    assert main(["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "0,1,2", "-o", str(tmp_path / "s.npz")]) == 0
     assert "single-agent" in capsys.readouterr().out
 
 
@@ -127,23 +127,23 @@ def _err(capsys, argv, status=1):
 
 def test_fit_errors(files, tmp_path, capsys):
     m = str(tmp_path / "m.npz")
-    err = _err(capsys, ["fit", str(tmp_path / "missing.csv"), "--observed", "a", "-o", m])
+    err = _err(capsys, ["fit", "--model", "ip", str(tmp_path / "missing.csv"), "--observed", "a", "-o", m])
     assert "interprim fit: error:" in err and "not found" in err and "missing.csv" in err
     (tmp_path / "demos.txt").write_text("time,x\n0,1\n")
-    assert "unsupported file type '.txt'" in _err(capsys, ["fit", str(tmp_path / "demos.txt"), "--observed", "x", "-o", m])
-    err = _err(capsys, ["fit", str(files / "demos.csv"), "--observed", "human_z", "-o", m])
+    assert "unsupported file type '.txt'" in _err(capsys, ["fit", "--model", "ip", str(tmp_path / "demos.txt"), "--observed", "x", "-o", m])
+    err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "human_z", "-o", m])
     assert "unknown column 'human_z'" in err and "human_x, human_y, robot_q" in err
-    err = _err(capsys, ["fit", str(files / "demos.csv"), "-o", m])
+    err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "-o", m])
     assert "--observed is required" in err and "robot_q" in err
     bad = tmp_path / "bad.csv"
     bad.write_text("time,x,y\n0,1,2\n0.1,1,2\n0.1,1,2\n0.3,1,2\n0.4,1,2\n")
-    err = _err(capsys, ["fit", str(bad), "--observed", "x", "-o", m])
+    err = _err(capsys, ["fit", "--model", "ip", str(bad), "--observed", "x", "-o", m])
     assert "bad.csv" in err and "line 4" in err and "strictly increasing" in err
-    err = _err(capsys, ["fit", str(files / "demos.csv"), "--observed", "0", "--n-basis", "0", "-o", m])
+    err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "0", "--n-basis", "0", "-o", m])
     assert "--n-basis must be positive" in err
     one = tmp_path / "one.csv"
     save_demonstrations(one, [np.ones((10, 2))], dt=0.1, columns=["a", "b"])
-    assert "at least 2 are needed" in _err(capsys, ["fit", str(one), "--observed", "a", "-o", m])
+    assert "at least 2 are needed" in _err(capsys, ["fit", "--model", "ip", str(one), "--observed", "a", "-o", m])
     assert not Path(m).exists()
 
 
@@ -175,12 +175,12 @@ def test_console_script_round_trip(files, tmp_path):
     exe = Path(sys.executable).with_name("interprim")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "interprim.cli"]
     model = tmp_path / "m.npz"
-    r = subprocess.run(cmd + ["fit", str(files / "folder"), "--observed", "human_x,human_y", "-o", str(model)],
+    r = subprocess.run(cmd + ["fit", "--model", "ip", str(files / "folder"), "--observed", "human_x,human_y", "-o", str(model)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "saved" in r.stdout
     assert main(["predict", str(model), str(files / "partial.csv"), "-o", str(tmp_path / "p.csv")]) == 0
-    r = subprocess.run(cmd + ["fit", str(tmp_path / "nothing"), "--observed", "x", "-o", str(model)],
+    r = subprocess.run(cmd + ["fit", "--model", "ip", str(tmp_path / "nothing"), "--observed", "x", "-o", str(model)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 1 and "Traceback" not in r.stderr and "not found" in r.stderr
 
@@ -198,7 +198,7 @@ def test_fit_and_predict_irregular_time_stamps(tmp_path, capsys):
     save_demonstrations(tmp_path / "irr.npz", demos, times, columns=COLS)
     assert load_demonstrations(tmp_path / "irr.npz").dt is None
     model = tmp_path / "m.npz"
-    assert main(["fit", str(tmp_path / "irr.npz"), "--observed", "human_x,human_y", "-o", str(model)]) == 0
+    assert main(["fit", "--model", "ip", str(tmp_path / "irr.npz"), "--observed", "human_x,human_y", "-o", str(model)]) == 0
     test, _ = _demos(n=1, seed=7)
     k = 30
     t = 5.0 + np.cumsum(rng.uniform(0.015, 0.025, size=k))  # any clock origin
@@ -212,7 +212,7 @@ def test_fit_model_options(files, tmp_path, capsys):
     import interprim as ip
 
     m = tmp_path / "m.npz"
-    argv = ["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]
+    argv = ["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]
     assert main(argv + ["--sigma2", "0.01", "--observation", "position", "--phase-method", "likelihood"]) == 0
     model = ip.InteractionPrimitive.load(m)
     assert model.sigma2_ == pytest.approx(0.01) and model.observation == "position"
@@ -237,3 +237,30 @@ def test_predict_says_when_the_input_is_out_of_range(files, tmp_path, capsys):
     comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in out.read_text().splitlines()
                 if l.startswith("#") and ":" in l}
     assert float(comments["out_of_range"]) == 1.0 and float(comments["input_distance"]) > 8
+
+
+def test_fit_chooses_the_model_on_the_data_by_default(files, tmp_path, capsys):
+    """Without --model, fit compares the families on held-out folds and saves the blend; predict reads it, and an
+    option of the Interaction Primitive alone asks for --model ip."""
+    import interprim as ip
+
+    m = tmp_path / "auto.npz"
+    assert main(["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]) == 0
+    out = capsys.readouterr().out
+    assert "held-out real-time error of the controlled agent, by family" in out
+    for family in ("ip", "learned", "kernel", "nn", "prior"):
+        assert f"  {family} " in out
+    model = ip.load_any(m)
+    assert type(model) is ip.AutoInteraction and model.columns_ == COLS
+    assert set(model.selection_["cv_errors"]) == {"ip", "learned", "kernel", "nn", "prior"}
+    assert main(["predict", str(m), str(files / "partial.csv"), "-o", str(tmp_path / "p.npz")]) == 0
+    with np.load(tmp_path / "p.npz", allow_pickle=False) as f:
+        assert 0 < float(f["phase"]) < 1 and np.all(np.isfinite(f["mean"])) and f["mean"].shape == (100, 3)
+        assert np.all(np.isfinite(f["std"]))
+    assert main(["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "--sigma2", "cv",
+                 "-o", str(m)]) == 1
+    assert "--sigma2 configure(s) the Interaction Primitive alone: add --model ip" in capsys.readouterr().err
+    assert main(["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "--model", "nn",
+                 "-o", str(tmp_path / "nn.npz")]) == 0
+    assert "model: nn alone (NearestNeighbour)" in capsys.readouterr().out
+    assert type(ip.load_any(tmp_path / "nn.npz").model_).__name__ == "NearestNeighbour"

@@ -68,7 +68,7 @@ def test_an_optional_import_anywhere_in_a_command_is_one_line(monkeypatch, capsy
 
     _hide(monkeypatch, "tqdm")
     monkeypatch.setattr(fit_cli, "cmd_fit", needs_tqdm)  # registered by build_parser at each main()
-    assert main(["fit", "x.csv", "--observed", "0", "-o", "m.npz"]) == 1
+    assert main(["fit", "--model", "ip", "x.csv", "--observed", "0", "-o", "m.npz"]) == 1
     _one_line_error(capsys.readouterr().err, "interprim fit: error:", "tqdm", "pip install 'interprim[experiments]'")
 
 
@@ -151,13 +151,13 @@ def test_evaluate_demonstrations_minimum_is_the_documented_constant():
 @pytest.fixture(scope="module")
 def fitted(recordings, tmp_path_factory):
     path = tmp_path_factory.mktemp("model") / "model.npz"
-    assert main(["fit", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
+    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
     return path
 
 
 def test_fit_prints_what_it_chose(recordings, tmp_path, capsys):
     path = tmp_path / "m.npz"
-    assert main(["fit", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
+    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
     out = capsys.readouterr().out
     model = ip.InteractionPrimitive.load(path)
     sel = model.selection_

@@ -461,7 +461,7 @@ def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
     rows[4] = rows[4].split(",")[0] + ",nan," + rows[4].split(",")[2]
     (tmp_path / "gap.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
     out = str(tmp_path / "m.npz")
-    assert main(["fit", str(tmp_path / "gap.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "1"]) == 1
+    assert main(["fit", "--model", "ip", str(tmp_path / "gap.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "1"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "max_nan_gap" not in err, err
     assert "a run of 2 missing values (--max-nan-gap=1) starting at line 5" in err
@@ -470,7 +470,7 @@ def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
     rows = [f"{0.1 * i:.1f},{i},{2 * i}" for i in range(8)]
     rows[0] = "0.0,,0"
     (tmp_path / "start.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
-    assert main(["fit", str(tmp_path / "start.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "3"]) == 1
+    assert main(["fit", "--model", "ip", str(tmp_path / "start.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "3"]) == 1
     err = capsys.readouterr().err
     assert "at the start or end starting at line 2" in err and err.rstrip().endswith("fill or cut them"), err
     assert "nan-gap" not in err and "max_nan_gap" not in err
@@ -485,5 +485,5 @@ def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--max-sessions must be" in err and "max_sessions" not in err, err
     # a file name that contains an argument name is left alone
-    assert main(["fit", str(tmp_path / "max_nan_gap.csv"), "--observed", "x", "-o", out]) == 1
+    assert main(["fit", "--model", "ip", str(tmp_path / "max_nan_gap.csv"), "--observed", "x", "-o", out]) == 1
     assert "max_nan_gap.csv" in capsys.readouterr().err

@@ -74,7 +74,7 @@ def test_every_command_takes_rounded_stamps(tmp_path, capsys):
     ds = load_demonstrations(csv)
     assert ds.dt == pytest.approx(1 / 30, rel=1e-4)  # the least-squares interval, not the median 0.033
     model = tmp_path / "m.npz"
-    code, out, err = _cli(["fit", csv, "--n-basis", "5", "-o", model], capsys)
+    code, out, err = _cli(["fit", "--model", "ip", csv, "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     m = ip.InteractionPrimitive.load(model)
     assert m.dt_ == pytest.approx(1 / 30, rel=1e-4)

@@ -24,6 +24,7 @@ _LAZY = {
     "Recogniser": "interprim.recognition",
     "LearnedInteraction": "interprim.learned",
     "AutoInteraction": "interprim.auto",
+    "load_any": "interprim.io",
     "LearnedPhase": "interprim.phase.learned",
     "CouplingModel": "interprim.coupling",
 }
@@ -35,6 +36,7 @@ __all__ = [
     "Recogniser",
     "LearnedInteraction",
     "AutoInteraction",
+    "load_any",
     "LearnedPhase",
     "CouplingModel",
     "InterprimError",

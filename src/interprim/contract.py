@@ -46,7 +46,7 @@ from ._params import Params
 from ._validation import as_frame
 from .errors import NotFittedError
 
-__all__ = ["BasePrediction", "GridPrediction", "Predictor", "PrefixStream"]
+__all__ = ["BasePrediction", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
 
 
 class BasePrediction:
@@ -98,6 +98,30 @@ class BasePrediction:
     def goal(self) -> np.ndarray:  # pragma: no cover - interface
         """The predicted end point (goal) of every data column, shape ``(D,)``."""
         raise NotImplementedError
+
+
+def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
+    """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
+
+    The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
+    :mod:`interprim.evaluation.realtime` and the blend of :mod:`interprim.auto` use it): the position ``t`` seconds
+    after the last of ``n_frames`` observed frames is the prediction at normalised time ``s + t / D``.
+
+    * ``s`` is ``pred.normalised_time``; a prediction without one (NaN, e.g. the prior mean) is played by the
+      clock: ``s = elapsed / mean_duration`` (at most 1) and ``D = mean_duration``.
+    * ``D`` is ``pred.duration``; a prediction with a phase but no duration (e.g. the nearest demonstration) moves
+      at the speed its phase implies: ``D = elapsed / s`` (``mean_duration`` when ``s`` is 0).
+
+    ``elapsed = (n_frames - 1) * dt`` seconds; ``mean_duration`` is the demonstrations' mean duration in seconds.
+    """
+    elapsed = (int(n_frames) - 1) * float(dt)
+    s = float(pred.normalised_time)
+    dur = float(pred.duration)
+    if not math.isfinite(s):
+        return min(elapsed / mean_duration, 1.0), float(mean_duration)
+    if not math.isfinite(dur) or dur <= 0:
+        dur = elapsed / s if s > 0 else float(mean_duration)
+    return s, float(dur)
 
 
 class GridPrediction(BasePrediction):

@@ -68,7 +68,7 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["save_model", "load_model", "model_state", "model_from_state", "save_estimator", "load_estimator",
+__all__ = ["load_any", "MODEL_CLASSES", "save_model", "load_model", "model_state", "model_from_state", "save_estimator", "load_estimator",
            "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -440,3 +440,33 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
     except (TypeError, ValueError, OverflowError) as exc:
         raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
     return model
+
+
+#: Every model class a model file may hold, by the name in its ``metadata["model"]``, and the module defining it
+#: (imported only when such a file is read).
+MODEL_CLASSES = {
+    "InteractionPrimitive": "interprim.primitive",
+    "LearnedInteraction": "interprim.learned",
+    "AutoInteraction": "interprim.auto",
+    "Blend": "interprim.auto",
+    "KernelDemonstrations": "interprim.evaluation.kernel",
+    "NearestNeighbour": "interprim.evaluation.baselines",
+    "PriorMean": "interprim.evaluation.baselines",
+    "InteractionProMP": "interprim.evaluation.baselines",
+}
+
+
+def load_any(path):
+    """Read any interprim model file as the class it names (``interprim fit``'s output, whatever model it chose).
+
+    Raises :class:`~interprim.errors.ModelFileError` for a file that is not a readable interprim model, or that
+    holds a model class this version does not know.
+    """
+    import importlib
+
+    path = Path(path)
+    meta, _ = _read_archive(path)
+    kind = meta.get("model", "InteractionPrimitive")
+    _expect(isinstance(kind, str) and kind in MODEL_CLASSES, path,
+            f"holds a {kind!r} model, which this interprim does not know (it reads {', '.join(MODEL_CLASSES)})")
+    return getattr(importlib.import_module(MODEL_CLASSES[kind]), kind).load(path)

@@ -44,7 +44,7 @@ def add_parser(subparsers) -> None:
         epilog=_PREDICT_EPILOG,
         formatter_class=fmt,
     )
-    p.add_argument("model", metavar="MODEL", help="model file written by 'interprim fit'")
+    p.add_argument("model", metavar="MODEL", help="model file written by 'interprim fit' (any model)")
     p.add_argument("partial", metavar="PARTIAL", help="CSV or NPZ with the observed agent's frames so far")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file (.csv or .npz)")
     p.add_argument("--samples", type=int, default=0, metavar="K", help="also write K posterior samples")
@@ -87,7 +87,7 @@ def cmd_predict(args) -> int:
         raise CommandError(f"--observe-fraction must be in (0, 1], got {args.observe_fraction!r}")
     if not Path(args.model).exists():
         raise FileNotFoundError(f"model file not found: {args.model}")
-    model = ip.InteractionPrimitive.load(args.model)
+    model = ip.load_any(args.model)  # whatever 'interprim fit' saved (the model chosen on the data by default)
     columns = _model_columns(model) or [f"dof_{j}" for j in range(model.n_dofs_)]
     obs_names = [columns[i] for i in model.observed_dofs_]
     part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1, **recording_options(args))
@@ -115,7 +115,12 @@ def cmd_predict(args) -> int:
             warnings.simplefilter("ignore", OutOfRangeWarning)
             # frames on the model's grid up to rounding (the rule of every command) are taken as they are
             if frames.shape[0] > 1 and not sampling([t], dt=model.dt_).uniform:
-                pred = model.predict(frames, times=t - t[0])
+                if isinstance(model, ip.InteractionPrimitive):
+                    pred = model.predict(frames, times=t - t[0])
+                else:  # models of frames on their own grid: the observed frames resampled onto it (causal)
+                    from interprim.preprocessing import resample_uniform
+
+                    pred = model.predict(resample_uniform(frames, t, dt=model.dt_)[0])
             else:
                 pred = model.predict(frames)
     except InterprimError:
@@ -125,7 +130,8 @@ def cmd_predict(args) -> int:
     n = int(args.n_points)
     s = np.linspace(0.0, 1.0, n)
     mean = np.asarray(pred.trajectory(n))
-    std = np.asarray(pred.std(n))
+    sd = pred.std(n)
+    std = np.full_like(mean, np.nan) if sd is None else np.asarray(sd)  # NaN: the model gives no uncertainty
     samples = np.asarray(pred.samples(args.samples, n, random_state=args.seed)) if args.samples else None
     scalars = {
         "phase": float(pred.phase),

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contract import place_in_time
 from ..preprocessing import time_normalise
 from .nested import nested_choice_records, standard_error_ratio
 from .protocol import Prefixes, observed_frames
@@ -94,15 +95,8 @@ def _interp_rows(u, grid, Y):
 
 
 def _timing(pred, k, dt, mean_dur_s):
-    """``(phase s at frame k, duration in s)`` of a prediction, by the rules of the module docstring."""
-    elapsed = (k - 1) * dt
-    s = float(pred.normalised_time)  # every prediction has it (interprim.contract.BasePrediction)
-    dur = float(pred.duration)
-    if not math.isfinite(s):  # no timing at all: the clock
-        return min(elapsed / mean_dur_s, 1.0), mean_dur_s
-    if not math.isfinite(dur) or dur <= 0:
-        dur = elapsed / s if s > 0 else mean_dur_s
-    return s, float(dur)
+    """``(phase s at frame k, duration in s)`` of a prediction (:func:`interprim.contract.place_in_time`)."""
+    return place_in_time(pred, k, dt, mean_dur_s)
 
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
@@ -223,7 +217,7 @@ def folds(n: int, k: int | None = None):
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                    k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
-                   test=None) -> list:
+                   test=None, trace: bool = False) -> list:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -238,6 +232,7 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     ``test``: evaluate on a fixed hold-out instead of cross-validating: ``demos`` are then the training
     demonstrations (every method is fitted once on all of them) and ``test`` the held-out ones (a
     :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
+    ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record).
     """
     if test is not None:
         train = [np.asarray(d, dtype=np.float64) for d in demos]
@@ -271,7 +266,7 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
                 pre = (lambda k, j=j: prefixes(j, k))
                 orc = None if oracles is None else oracles[j]
                 for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
-                                       prefix=pre, oracle=orc if not first else None):
+                                       prefix=pre, oracle=orc if not first else None, trace=trace):
                     if r["method"] in ("clock", "oracle-duration", "oracle") and first:
                         continue
                     r["demo"] = int(j)

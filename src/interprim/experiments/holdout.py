@@ -26,8 +26,7 @@ import numpy as np
 
 from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
 from ..evaluation.protocol import Prefixes
-from ..evaluation.realtime import (RealTimeConfig, choose_method, default_methods, realtime_fold,
-                                   summarise_realtime, whole_movement_fold)
+from ..evaluation.realtime import RealTimeConfig, default_methods, realtime_fold, summarise_realtime, whole_movement_fold
 
 __all__ = ["holdout_tasks", "run_task", "main"]
 
@@ -74,21 +73,40 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
+    from ..auto import Blend, CrossValidation, choice
+
     cfg = RealTimeConfig(point_dim=point_dim)
     make = {m: f for m, f in default_methods(obs).items() if m in methods}
     t0 = time.perf_counter()
-    chosen, inner = choose_method(make, Prefixes(dev, obs), obs, dt,
-                                  RealTimeConfig(point_dim=point_dim, stride=3), k=3)
+    # the inner cross-validation of AutoInteraction on the development recordings: the "chosen" family and the
+    # blend's weights and variance model ("auto", what AutoInteraction.fit(dev) makes; "ip-paper" is not one of
+    # its candidates)
+    cand = {m: make[m] for m in make if m != "ip-paper"}
+    cv = CrossValidation(cand, Prefixes(dev, obs), obs, dt, RealTimeConfig(point_dim=point_dim, stride=3), 3)
+    chosen, _ = choice(cv, list(cand))
+    inner = dict(cv.errors)
+    w = cv.blend_weights()
+    weights = {m: float(x) for m, x in zip(cv.names, w) if x > 0}
+    scales = cv.blend_scales(w)
+    inner["blend"] = cv.blend_error(w)
     log(f"  {name}: chose {chosen} on the development recordings "
-        f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}) in {time.perf_counter() - t0:.0f} s")
+        f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
+        f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")
     train = [np.asarray(x, dtype=np.float64) for x in dev]
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
     records = {p: [] for p in prefixes}
-    for first, (m, factory) in enumerate(make.items()):
+    fitted = {}
+
+    def models():
+        for m, factory in make.items():
+            fitted[m] = factory().fit(train, dt=dt)
+            yield m, fitted[m]
+        yield "auto", Blend.from_fitted(obs, fitted, weights, scales, train, dt, cfg.horizon)
+
+    for first, (m, est) in enumerate(models()):
         t1 = time.perf_counter()
-        est = factory().fit(train, dt=dt)
         for j, test in enumerate(prefixes["causal"].demos):
             orc = None if oracles is None or first else oracles[j]
             for p, P in prefixes.items():
@@ -106,10 +124,11 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     for p in records:
         records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
     return {"records": records, "summary": {p: summarise_realtime(records[p]) for p in records},
-            "chosen": chosen, "inner": inner,
-            "se": {p: {b: standard_error_ratio(records[p], "chosen", b) for b in ("nn", "clock", "oracle-duration")}
-                   | {"wm_prior": standard_error_ratio(records[p], "chosen", "prior", key="wm_ctrl"),
-                      "wm_nn": standard_error_ratio(records[p], "chosen", "nn", key="wm_ctrl")}
+            "chosen": chosen, "inner": inner, "weights": weights,
+            "se": {p: {f"{a}|{b}": standard_error_ratio(records[p], a, b) for a in ("chosen", "auto")
+                       for b in ("nn", "clock", "oracle-duration", "prior")}
+                   | {f"{a}|wm_{b}": standard_error_ratio(records[p], a, b, key="wm_ctrl") for a in ("chosen", "auto")
+                      for b in ("prior", "nn")}
                    for p in records}}
 
 
@@ -122,7 +141,7 @@ COLUMNS = (("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle
 def tables(results, protocol="causal") -> str:
     """Markdown: one table per metric, tasks as columns, methods as rows, and the geometric mean over tasks."""
     names = [n for n in results if protocol in results[n]["summary"]]
-    methods = ["chosen", *METHODS, "clock", "oracle-duration", "oracle"]
+    methods = ["auto", "chosen", *METHODS, "clock", "oracle-duration", "oracle"]
     lines = []
     for key, title in COLUMNS:
         rows = []
@@ -141,6 +160,9 @@ def tables(results, protocol="causal") -> str:
                       "| method | " + " | ".join(names) + f" | {agg} |", "|---" * (len(names) + 2) + "|", *rows, ""]
     chosen = ", ".join(f"{n}: {results[n]['chosen']}" for n in names)
     lines.append(f"Chosen on the development recordings: {chosen}.")
+    blends = "; ".join(f"{n}: " + ", ".join(f"{m} {x:.2f}" for m, x in results[n].get("weights", {}).items())
+                       for n in names)
+    lines.append(f"Blend weights (auto), fitted on the development recordings: {blends}.")
     return "\n".join(lines)
 
 

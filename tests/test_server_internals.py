@@ -23,7 +23,7 @@ def test_worker_processes_give_the_same_predictions(models, test_demo):
     srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},
                           ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
     with ServerThread(srv) as st:
-        assert len(st.server._procs.workers) == 2
+        assert len(st.server.compute.procs.workers) == 2
         with Client(st.ws_url) as a, Client(st.ws_url) as b:  # consecutive session ids: different workers
             a.open("pair", points=10, std=True)
             b.open("pair", points=10)
@@ -332,7 +332,7 @@ def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
             e = ref.update(f)
             assert pb["type"] == "prediction" and len(pb["mean"]) == 5000 and len(pb["std"]) == 5000
             np.testing.assert_allclose(ps["mean"], e.trajectory(10)[:, 2:], atol=2e-6)
-        assert not st.server._procs.workers[0].dead
+        assert not st.server.compute.procs.workers[0].dead
 
 
 def test_replay_lists_every_interaction_loaded():

@@ -19,7 +19,7 @@ import logging
 
 from . import protocol as P
 from . import wsfast
-from .compute import _Open
+from .compute import _Open, _Recognition
 from .http_api import token_ok
 from .lanes import _Bucket, _Session
 from .wsfast import FastFrames
@@ -347,6 +347,13 @@ class Sessions:
             entries = [self.models[n] for n in o["candidates"]]
             for e in entries:
                 P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
+            rec = None
+            if len(entries) > 1:  # "auto": the Recogniser must take the candidates (made here, used in this process)
+                try:
+                    rec = _Recognition(entries)
+                except (TypeError, ValueError, AttributeError) as exc:
+                    raise P.ProtocolError("bad_message", f"'auto' cannot recognise among {o['candidates']}: {exc}") \
+                        from None
             streams, cols = [], []
             for e in entries:
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
@@ -363,7 +370,8 @@ class Sessions:
                                            points=o["points"], std=o["std"], robot_state=o["robot_state"])
                 except RuntimeError as exc:
                     raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
-            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
+            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"],
+                           recognition=None if self.compute.remote else rec)
             if streams:  # mean-only updates are much cheaper without a band (every stream takes need_cov)
                 s.open.update_kw = {"need_cov": o["std"]}
             s.consecutive_errors = 0

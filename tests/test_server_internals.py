@@ -234,7 +234,9 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     frames = test_demo[:25, :2]
     op = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
     fast = [json.loads(t) for t in _reply_text(op, frames)]
-    assert op.heads[0][3].ok  # the cached rollout was checked against Prediction.trajectory and is used
+    from interprim.prediction import MeanRollout
+
+    assert isinstance(op.heads[0][3].fn, MeanRollout)  # the IP's cached rollout is used (the contract's mean_rollout)
     ref_stream = e.model.stream()
     for k, (f, msg) in enumerate(zip(frames, fast)):
         p = ref_stream.update(f)

@@ -72,3 +72,26 @@ def test_one_phase_estimate_type():
     assert likelihood.PhaseEstimate is learned.PhaseEstimate is estimate.PhaseEstimate
     e = estimate.PhaseEstimate(0.4, log_likelihood=-1.0)
     assert e.s_end == e.phase == 0.4 and np.isnan(e.duration)
+
+
+def test_the_server_parts_use_only_what_they_are_given():
+    """The server is composed, not mixed in (issue 20): ``InterprimServer`` has no base classes, and each of its parts
+    (``HttpApi``, ``Compute``, ``Sessions``) reads on ``self`` only what it defines (methods, properties) or was
+    given and set in its own code -- no attribute that another class is expected to provide."""
+    from interprim.server.app import InterprimServer
+
+    assert InterprimServer.__bases__ == (object,)
+    parts = {"server/http_api.py": "HttpApi", "server/lanes.py": "Compute", "server/sessions.py": "Sessions"}
+    for rel, name in parts.items():
+        cls = next(n for n in ast.parse((SRC / rel).read_text(encoding="utf-8")).body
+                   if isinstance(n, ast.ClassDef) and n.name == name)
+        assert not cls.bases, f"{name} has base classes"
+        own = {n.name for n in cls.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+        own |= {t.id for n in cls.body if isinstance(n, (ast.Assign, ast.AnnAssign))
+                for t in (n.targets if isinstance(n, ast.Assign) else [n.target]) if isinstance(t, ast.Name)}
+        reads = set()
+        for node in ast.walk(cls):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "self":
+                (own.add if isinstance(node.ctx, ast.Store) else reads.add)(node.attr)
+        assert reads <= own, f"{name} reads {sorted(reads - own)} that it neither defines nor sets"
+        assert len(reads) > 3  # (the walk saw the class's code)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.contract import BasePrediction, Predictor
+from interprim.contract import BasePrediction, BaseStream, Predictor
 from interprim.evaluation.baselines import InteractionProMP, NearestNeighbour, PriorMean
 from interprim.evaluation.kernel import KernelDemonstrations
 from interprim.learned import LearnedInteraction
@@ -106,6 +106,49 @@ def test_stream_equals_batch(name, fitted, demos):
     assert st.n_frames == 60
     st.reset()
     assert st.n_frames == 0
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_extend_equals_update_frame_by_frame(name, fitted, demos):
+    """Every model's stream is a BaseStream, and extend (several frames at once, as a server that fell behind feeds
+    them) answers what update answers for the last of them: exactly, however the frames are grouped."""
+    model = fitted(name)
+    frames = demos[-1][:50, :2]
+    a, b = model.stream(), model.stream()
+    assert isinstance(a, BaseStream)
+    i = 0
+    for size in (1, 2, 5, 1, 9, 3, 17, 12):
+        for f in frames[i:i + size]:
+            pa = a.update(f)
+        pb = b.extend(frames[i:i + size])
+        i += size
+        assert b.n_frames == a.n_frames == i
+        np.testing.assert_array_equal(pb.trajectory(30), pa.trajectory(30))
+        assert pb.conditioned == pa.conditioned
+        assert pb.normalised_time == pa.normalised_time or (np.isnan(pb.normalised_time) and np.isnan(pa.normalised_time))
+    assert i == 50
+    for bad in (np.zeros((0, 2)), np.zeros((3, 3)), np.array([[0.0, np.nan]])):  # nothing enters on bad input
+        with pytest.raises(ValueError, match="frame"):
+            b.extend(bad)
+        assert b.n_frames == 50
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_mean_rollout_is_the_trajectory_columns(name, fitted, demos):
+    """``pred.mean_rollout(n, cols)`` (what the server encodes at every frame) gives ``trajectory(n)[:, cols]`` for
+    the prediction it was made from and for later predictions of the same model (an IP's MeanRollout builds the
+    grid's design once: the same maths in another order, so to 1e-12 of the trajectory's scale)."""
+    model = fitted(name)
+    test = demos[-1]
+    first = model.predict(test[:30, :2])
+    for cols in (slice(2, 5), [0, 3], None):
+        fn = first.mean_rollout(40, cols)
+        for M in (30, 55, 90):
+            pred = model.predict(test[:M, :2])
+            ref = pred.trajectory(40)[:, slice(None) if cols is None else cols]
+            got = fn(pred)
+            assert got.shape == ref.shape
+            np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * float(np.abs(ref).max()))
 
 
 @pytest.mark.parametrize("name", sorted(MODELS))

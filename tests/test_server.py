@@ -20,7 +20,7 @@ import urllib.request
 import numpy as np
 import pytest
 
-from interprim.contract import BasePrediction
+from interprim.contract import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
@@ -322,11 +322,15 @@ def test_disconnect_mid_session(server, test_demo, caplog):
 
 
 def test_internal_error_in_model_is_contained(test_demo):
-    class Boom:
+    class Boom(BaseStream):  # a stand-in model that is its own stream (the contract's BaseStream)
         observed_dofs_, controlled_dofs_, n_dofs_, dt_, mean_duration_ = [0, 1], [2], 3, 0.01, 1.0
+        n_frames = 0
 
         def stream(self, robot_state=None):
             return self
+
+        def reset(self, robot_state=None):
+            pass
 
         def update(self, frame, need_cov=False):
             if frame[0] > 100:
@@ -343,6 +347,16 @@ def test_internal_error_in_model_is_contained(test_demo):
             with pytest.raises(ServerError) as e:
                 c.frame(bad)
             assert e.value.code == "internal" and what in str(e.value)
+        assert c.frame([1.0, 1.0])["phase"] == 0.5
+        # "auto" recognises with the Recogniser, which takes fitted InteractionPrimitives only: refused at open,
+        # with the reason, instead of a rule that lets the model with the smallest noise win
+        srv2_models = {"boom": entry_for("boom", Boom()), "boom2": entry_for("boom2", Boom())}
+    srv2 = InterprimServer(srv2_models, ServerConfig(port=0))
+    with ServerThread(srv2) as st, Client(st.ws_url) as c:
+        with pytest.raises(ServerError) as e:
+            c.open("auto", candidates=["boom", "boom2"])
+        assert e.value.code == "bad_message" and "cannot recognise" in str(e.value) and "boom" in str(e.value)
+        c.open("boom", points=4)  # the session goes on
         assert c.frame([1.0, 1.0])["phase"] == 0.5
 
 

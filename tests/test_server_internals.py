@@ -23,7 +23,7 @@ def test_worker_processes_give_the_same_predictions(models, test_demo):
     srv = InterprimServer({"pair": models["pair"], "letter_c": models["letter_c"]},
                           ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
     with ServerThread(srv) as st:
-        assert len(st.server._procs.workers) == 2
+        assert len(st.server.compute.procs.workers) == 2
         with Client(st.ws_url) as a, Client(st.ws_url) as b:  # consecutive session ids: different workers
             a.open("pair", points=10, std=True)
             b.open("pair", points=10)
@@ -234,7 +234,9 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     frames = test_demo[:25, :2]
     op = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
     fast = [json.loads(t) for t in _reply_text(op, frames)]
-    assert op.heads[0][3].ok  # the cached rollout was checked against Prediction.trajectory and is used
+    from interprim.prediction import MeanRollout
+
+    assert isinstance(op.heads[0][3].fn, MeanRollout)  # the IP's cached rollout is used (the contract's mean_rollout)
     ref_stream = e.model.stream()
     for k, (f, msg) in enumerate(zip(frames, fast)):
         p = ref_stream.update(f)
@@ -332,7 +334,7 @@ def test_worker_replies_larger_than_the_socket_buffer(models, test_demo, loop):
             e = ref.update(f)
             assert pb["type"] == "prediction" and len(pb["mean"]) == 5000 and len(pb["std"]) == 5000
             np.testing.assert_allclose(ps["mean"], e.trajectory(10)[:, 2:], atol=2e-6)
-        assert not st.server._procs.workers[0].dead
+        assert not st.server.compute.procs.workers[0].dead
 
 
 def test_replay_lists_every_interaction_loaded():

@@ -16,7 +16,7 @@ import threading
 import numpy as np
 import pytest
 
-from interprim.contract import BasePrediction
+from interprim.contract import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
@@ -43,9 +43,8 @@ def _same(reply: dict) -> dict:
 
 
 def _assert_close(a, b, where="reply"):
-    """Same keys, same strings/booleans/None, numbers within 1e-5 relative (1e-5 absolute near 0): a coalesced batch
-    enters the streams with one Stream.extend, whose likelihood phase is update's to ~1e-7 (its log-likelihood
-    to ~1e-6; tests/test_stream_extend.py), and the reply's arrays are written with ~7 digits."""
+    """Same keys, same strings/booleans/None, the same numbers: a coalesced batch enters the streams with one
+    Stream.extend, whose answer is update's for the last frame exactly (tests/test_stream_extend.py)."""
     if isinstance(a, dict):
         assert isinstance(b, dict) and sorted(a) == sorted(b), where
         for k in a:
@@ -54,8 +53,6 @@ def _assert_close(a, b, where="reply"):
         assert isinstance(b, list) and len(a) == len(b), where
         for i, (x, y) in enumerate(zip(a, b)):
             _assert_close(x, y, f"{where}[{i}]")
-    elif isinstance(a, float) and not isinstance(b, bool):
-        assert b == pytest.approx(a, rel=1e-5, abs=1e-5), where
     else:
         assert a == b, where
 
@@ -74,8 +71,7 @@ def _open(models, names, std, points=12):
                          ids=["mean", "std-band", "auto"])
 def test_coalesced_batch_gives_the_reply_of_its_newest_frame(models, test_demo, names, std):
     """Feeding frames j..k and replying once gives the reply frame k gets when every frame is answered (the same
-    fields and values but for compute_ms/covers/first_seq, numbers to 1e-5), and the streams go on from the same
-    state."""
+    fields and values but for compute_ms/covers/first_seq), and the streams go on from the same state."""
     frames = test_demo[:60, :2]
     one = _open(models, names, std)
     per_frame = [json.loads(compute.compute_batch(one, [(f, k + 1, float(k))])[0][0]) for k, f in enumerate(frames)]
@@ -89,15 +85,23 @@ def test_coalesced_batch_gives_the_reply_of_its_newest_frame(models, test_demo, 
         r = json.loads(texts[0])
         assert r["type"] == "prediction" and r["seq"] == start + size and r["covers"] == size
         assert r["first_seq"] == start + 1 and r["t"] == float(start + size - 1)  # t: the newest frame's echo
-        _assert_close(_same(r), _same(per_frame[start + size - 1]))  # the same prediction (to 1e-5)
+        _assert_close(_same(r), _same(per_frame[start + size - 1]))  # the same prediction
         start += size
     assert start == len(frames) and many.frames == one.frames == len(frames)
 
 
-class _Boom:
-    """A model whose stream fails on frames with a first value above 100 (a model bug)."""
+class _Boom(BaseStream):
+    """A stand-in model (its own stream) whose ``update`` fails on frames with a first value above 100 (a model
+    bug); ``extend`` is the contract's default, ``update`` frame by frame."""
 
     observed_dofs_, controlled_dofs_, n_dofs_, dt_, mean_duration_ = [0, 1], [2], 3, 0.01, 1.0
+
+    def __init__(self):
+        self.n = 0
+
+    @property
+    def n_frames(self) -> int:
+        return self.n
 
     def stream(self, robot_state=None):
         return self
@@ -105,35 +109,45 @@ class _Boom:
     def update(self, frame, need_cov=False):
         if frame[0] > 100:
             raise RuntimeError("kaboom")
+        self.n += 1
         fields = {"phase": 0.5, "x": 1, "speed": 1, "duration": 1, "log_likelihood": 0, "goal": np.zeros(3),
                   "trajectory": lambda self, n: np.zeros((n, 3))}
         return type("Pred", (BasePrediction,), fields)()
 
-    def reset(self):
-        pass
+    def reset(self, robot_state=None):
+        self.n = 0
 
 
-def test_a_failing_frame_ends_its_batch_with_an_error_that_covers_it():
-    e = entry_for("boom", _Boom())
-    op = compute._Open("boom", [e], [e.model], [[2]], 4, False)
+def test_a_failing_frame_fails_its_batch_with_one_error_that_covers_it():
+    """A batch enters the stream with one ``extend`` (here the contract's default, update per frame): when the model
+    fails on one of its frames, one internal error with the newest frame's seq answers every frame of the batch,
+    and the next batch goes on."""
+    model = _Boom()
+    e = entry_for("boom", model)
+    op = compute._Open("boom", [e], [model], [[2]], 4, False)
     frames = [[1.0, 0.0], [2.0, 0.0], [200.0, 0.0], [3.0, 0.0], [4.0, 0.0], [5.0, 0.0]]
     texts, failures = compute.compute_batch(op, [(np.array(f), k + 1, None) for k, f in enumerate(frames)])
-    replies = [json.loads(t) for t in texts]
-    assert [r["type"] for r in replies] == ["error", "prediction"]
-    assert replies[0]["code"] == "internal" and "kaboom" in replies[0]["message"]
-    assert (replies[0]["seq"], replies[0]["covers"], replies[0]["first_seq"]) == (3, 3, 1)
-    assert (replies[1]["seq"], replies[1]["covers"], replies[1]["first_seq"]) == (6, 3, 4)
-    assert [q for r in replies for q in covered(r)] == [1, 2, 3, 4, 5, 6]
-    assert [seq for seq, _ in failures] == [3] and "RuntimeError: kaboom" in failures[0][1]
+    assert len(texts) == 1
+    r = json.loads(texts[0])
+    assert (r["type"], r["code"], r["seq"], r["covers"], r["first_seq"]) == ("error", "internal", 6, 6, 1)
+    assert "kaboom" in r["message"] and covered(r) == [1, 2, 3, 4, 5, 6]
+    assert [seq for seq, _ in failures] == [6] and "RuntimeError: kaboom" in failures[0][1]
+    texts, failures = compute.compute_batch(op, [(np.array([6.0, 0.0]), 7, 0.25), (np.array([7.0, 0.0]), 8, 0.5)])
+    r = json.loads(texts[0])
+    assert failures == [] and (r["type"], r["seq"], r["covers"], r["first_seq"], r["t"]) == ("prediction", 8, 2, 7, 0.5)
+    texts, failures = compute.compute_batch(op, [(np.array([300.0, 0.0]), 9, 1.5)])  # one frame: update
+    r = json.loads(texts[0])
+    assert (r["type"], r["code"], r["seq"], r["t"]) == ("error", "internal", 9, 1.5) and "covers" not in r
 
 
 class _BoomExtend(_Boom):
-    """As :class:`_Boom`, with ``extend`` (as Stream has): it fails when any of its frames is above 100."""
+    """As :class:`_Boom`, with its own ``extend`` (as Stream has): it fails when any of its frames is above 100."""
 
     def __init__(self):
+        super().__init__()
         self.calls = []
 
-    def extend(self, frames):
+    def extend(self, frames, need_cov=False):
         self.calls.append(len(frames))
         for f in frames[:-1]:
             if f[0] > 100:
@@ -142,7 +156,7 @@ class _BoomExtend(_Boom):
 
 
 def test_a_batch_enters_with_one_extend_and_a_failure_answers_all_its_frames():
-    """Streams with extend get a coalesced batch in one call; when it fails, one internal error covers the batch
+    """A coalesced batch enters each stream in one extend call; when it fails, one internal error covers the batch
     (its seq is the newest frame's, with covers/first_seq and the newest frame's t), and the session goes on."""
     model = _BoomExtend()
     e = entry_for("boom", model)
@@ -194,9 +208,13 @@ class GatedModel:
         return _GatedStream(self._model.stream(robot_state=robot_state), self._gate)
 
 
-class _GatedStream:
+class _GatedStream(BaseStream):
     def __init__(self, stream, gate):
         self._stream, self._gate = stream, gate
+
+    @property
+    def n_frames(self) -> int:
+        return self._stream.n_frames
 
     def update(self, frame, need_cov: bool = False):
         self._gate.wait()

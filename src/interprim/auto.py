@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._blas import one_blas_thread
-from .contract import GridPrediction, Predictor, place_in_time
+from .contract import BaseStream, GridPrediction, Predictor, place_in_time
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
 
@@ -541,8 +541,9 @@ class Blend(Predictor):
         return f"Blend({w})"
 
 
-class BlendStream:
-    """Online :class:`Blend`: one stream per member, combined after every frame (``update`` equals ``predict``)."""
+class BlendStream(BaseStream):
+    """Online :class:`Blend`: one stream per member, combined after every frame (``update`` equals ``predict``;
+    ``extend`` is :class:`~interprim.contract.BaseStream`'s, frame by frame)."""
 
     def __init__(self, blend: Blend):
         self.blend = blend
@@ -565,13 +566,6 @@ class BlendStream:
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
-
-    def extend(self, frames, need_cov: bool = False):
-        """Add several frames; returns the prediction after the last (``None`` for no frames)."""
-        out = None
-        for f in np.asarray(frames, dtype=np.float64).reshape(-1, len(self.blend.observed_dofs_)):
-            out = self.update(f, need_cov)
-        return out
 
 
 def _rows(u_at, grid, Y):

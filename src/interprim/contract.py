@@ -7,8 +7,10 @@ and the peer methods of :mod:`interprim.evaluation.baselines` -- is a :class:`Pr
   :class:`~interprim.errors.NotFittedError` before it;
 * ``predict(partial)`` takes the observed agent's frames from the start of the movement, shape
   ``(M, len(observed_dofs))``, and returns a :class:`BasePrediction`;
-* ``stream()`` returns an online predictor whose ``update(frame, need_cov=False)`` returns, after the ``M``-th
-  frame, the prediction ``predict`` gives for those ``M`` frames (``reset()`` and ``n_frames`` as well);
+* ``stream()`` returns a :class:`BaseStream`, an online predictor whose ``update(frame, need_cov=False)``
+  returns, after the ``M``-th frame, the prediction ``predict`` gives for those ``M`` frames, and whose
+  ``extend(frames, need_cov=False)`` takes several frames at once and returns what ``update`` returns for the
+  last of them (``reset()`` and ``n_frames`` as well);
 * ``save(path)`` / ``load(path)`` write and read a pickle-free, checksummed, versioned model file
   (:mod:`interprim.io`);
 * ``get_params(deep=True)`` / ``set_params(**params)`` follow scikit-learn, so ``sklearn.base.clone`` works.
@@ -43,10 +45,10 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from ._params import Params
-from ._validation import as_frame
+from ._validation import as_2d_finite, as_frame
 from .errors import NotFittedError
 
-__all__ = ["BasePrediction", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
+__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
 
 
 class BasePrediction:
@@ -98,6 +100,29 @@ class BasePrediction:
     def goal(self) -> np.ndarray:  # pragma: no cover - interface
         """The predicted end point (goal) of every data column, shape ``(D,)``."""
         raise NotImplementedError
+
+    def mean_rollout(self, n: int = 100, columns=None):
+        """A callable ``f`` with ``f(pred) == pred.trajectory(n)[:, columns]`` for this and every later prediction
+        of the same model (a server or controller that needs the same columns on the same grid at every frame).
+
+        This default calls :meth:`trajectory`; a model may return something cheaper that gives the same values
+        (the Interaction Primitive's :class:`~interprim.prediction.MeanRollout` builds the grid's design once).
+        """
+        return TrajectoryColumns(n, columns)
+
+
+class TrajectoryColumns:
+    """``pred.trajectory(n)[:, columns]`` (all columns for ``columns=None``): :meth:`BasePrediction.mean_rollout`'s
+    default."""
+
+    __slots__ = ("n", "columns")
+
+    def __init__(self, n: int, columns=None):
+        self.n = int(n)
+        self.columns = slice(None) if columns is None else columns
+
+    def __call__(self, pred) -> np.ndarray:
+        return np.asarray(pred.trajectory(self.n))[:, self.columns]
 
 
 def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
@@ -276,12 +301,53 @@ class GridPrediction(BasePrediction):
                 f"n_observed={self.n_observed})")
 
 
-class PrefixStream:
+class BaseStream:
+    """What every model's online predictor offers: :meth:`update`, :meth:`extend`, :meth:`reset` and ``n_frames``.
+
+    Subclasses implement :meth:`update`, :meth:`reset` and ``n_frames``; :meth:`extend` defaults to :meth:`update`
+    frame by frame, so a stream's answer never depends on how its frames were grouped (a server that fell behind
+    feeds a session's pending frames with one ``extend``).  A subclass may override :meth:`extend` with a cheaper
+    computation of the same answer.
+    """
+
+    @property
+    def n_frames(self) -> int:  # pragma: no cover - interface
+        """Number of frames received since the stream was created or last :meth:`reset`."""
+        raise NotImplementedError
+
+    def reset(self, robot_state=None):  # pragma: no cover - interface
+        """Forget all frames (start a new interaction)."""
+        raise NotImplementedError
+
+    def update(self, frame, need_cov: bool = False) -> BasePrediction:  # pragma: no cover - interface
+        """Add one frame of the observed agent, shape ``(n_observed,)``; returns the prediction for all frames seen."""
+        raise NotImplementedError
+
+    def extend(self, frames, need_cov: bool = False) -> BasePrediction:
+        """Add several frames of the observed agent at once, shape ``(k, n_observed)`` with ``k >= 1``, oldest first;
+        returns what ``k`` calls of :meth:`update` return for the last of them.
+
+        Raises
+        ------
+        ValueError, TypeError
+            ``frames`` is not a finite 2-D numeric array with at least one row; the message names it.  The
+            frames are checked before any enters the stream (a wrong number of columns is found by the first
+            frame's :meth:`update`).
+        """
+        block = as_2d_finite(frames, "frames", min_rows=1)
+        pred = None
+        for f in block:
+            pred = self.update(f, need_cov=need_cov)
+        return pred
+
+
+class PrefixStream(BaseStream):
     """Online use of a model whose prediction is a function of the observed prefix: one frame at a time.
 
     :meth:`update` appends a frame and returns ``model.predict`` of all frames seen (so a stream equals the
-    batch predictions by construction).  ``need_cov`` is accepted for the interface of
-    :class:`~interprim.stream.Stream` and has no effect.
+    batch predictions by construction); :meth:`extend` appends several and predicts once (the same answer as
+    :meth:`update` for the last, since the prediction depends on the frames only).  ``need_cov`` is accepted for
+    the interface of :class:`~interprim.stream.Stream` and has no effect.
     """
 
     def __init__(self, model):
@@ -308,6 +374,22 @@ class PrefixStream:
         self._n += 1
         return self.model.predict(self._buf[: self._n].copy())
 
+    def extend(self, frames, need_cov: bool = False):
+        """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns the prediction for
+        all frames seen, as :meth:`update` does for the last of them."""
+        block = as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1)
+        need = self._n + block.shape[0]
+        if need > self._buf.shape[0]:
+            cap = self._buf.shape[0]
+            while cap < need:
+                cap *= 2
+            buf = np.empty((cap, self._n_cols))
+            buf[: self._n] = self._buf[: self._n]
+            self._buf = buf
+        self._buf[self._n:need] = block
+        self._n = need
+        return self.model.predict(self._buf[: self._n].copy())
+
 
 class Predictor(Params):
     """Base of every model: the contract of the module docstring.
@@ -323,7 +405,7 @@ class Predictor(Params):
         if not hasattr(self, self._FITTED):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit(demos) before {what}")
 
-    def stream(self, robot_state=None) -> PrefixStream:
+    def stream(self, robot_state=None) -> BaseStream:
         """Online predictor that takes one observed frame at a time (:class:`PrefixStream`)."""
         self._check_fitted("stream")
         if robot_state is not None:

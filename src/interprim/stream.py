@@ -12,6 +12,7 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from ._compiled import loader
+from .contract import BaseStream
 from ._validation import as_2d_finite, as_frame
 from .input_range import mark
 from .phase import IncrementalDTW, estimate_phase, movement_prefix
@@ -20,7 +21,7 @@ from .prediction import Prediction
 __all__ = ["Stream"]
 
 
-class Stream:
+class Stream(BaseStream):
     """Online use of a fitted :class:`~interprim.primitive.InteractionPrimitive`: one observed frame at a time.
 
     Each :meth:`update` adds one column to the open-end DTW (Eq. 5-8, ``O(N D)``)
@@ -148,11 +149,11 @@ class Stream:
         """Add several frames of the observed agent at once, shape ``(k, len(observed_dofs))``; returns the
         :class:`Prediction` for the last of them.
 
-        The answer is the one ``k`` calls of :meth:`update` give for their last frame, and so the one
-        :meth:`~interprim.primitive.InteractionPrimitive.predict` gives for all the frames seen: exactly
-        (the same numbers) with the DTW and learned phases, which are functions of the frames; with the
-        likelihood phase the tracker walks its lattice frame by frame as :meth:`update` does, so that its
-        state does not depend on how frames were grouped.  It costs less: for each of the ``k`` frames only
+        The answer is the one ``k`` calls of :meth:`update` give for their last frame, exactly (the same
+        numbers), and so the one :meth:`~interprim.primitive.InteractionPrimitive.predict` gives for all the
+        frames seen: the DTW and learned phases are functions of the frames, and with the likelihood phase
+        the tracker walks its lattice frame by frame as :meth:`update` does, so that its state does not
+        depend on how frames were grouped.  It costs less: for each of the ``k`` frames only
         what the stream keeps from a frame is done, namely the DTW column (Eq. 5-8, ``O(N D_o)``), the
         tracker's step (likelihood phase) and the frame's place in the buffer; the observation statistics
         at the phase, the conditioning (Eq. 15-18) and the :class:`Prediction` are computed once, for the

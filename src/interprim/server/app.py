@@ -20,10 +20,12 @@ and closed with code 1008 instead of growing the server's memory.
 accepting connections, answers the frames every session has sent, closes each
 session with 1001 and joins the worker threads/processes.
 
-Here: the configuration, the server's life cycle and its compute lanes.  The
-server's two faces are :class:`~interprim.server.http_api.HttpSide` (page, static
-files, JSON API) and :class:`~interprim.server.sessions.SessionSide` (WebSocket
-sessions); :mod:`interprim.server.lanes` schedules the frames and
+Here: the configuration and the server's life cycle.  The server owns its state (the
+configuration, the models, the live sessions and the statistics) and three parts it wires
+together, each given exactly what it uses: :class:`~interprim.server.http_api.HttpApi`
+(page, static files, JSON API), :class:`~interprim.server.lanes.Compute` (the lanes, the
+thread pool or the worker processes) and :class:`~interprim.server.sessions.Sessions`
+(the WebSocket sessions, which hand their frames to the lanes and get the replies back);
 :mod:`interprim.server.compute` computes and encodes one reply.
 """
 
@@ -31,20 +33,15 @@ from __future__ import annotations
 
 import asyncio
 import ipaddress
-import itertools
 import logging
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-import numpy as np
-
 from . import protocol as P
-from .compute import compute_batch, warm_up
-from .http_api import HttpSide
-from .lanes import _Lane, _Session
+from .http_api import HttpApi
+from .lanes import Compute, _Session
 from .models import ModelEntry
-from .sessions import SHUTDOWN_REASON, SessionSide
+from .sessions import SHUTDOWN_REASON, Sessions
 
 log = logging.getLogger("interprim.server")
 
@@ -157,7 +154,7 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-class InterprimServer(HttpSide, SessionSide):
+class InterprimServer:
     """A streaming server for fitted models.
 
     Parameters
@@ -167,6 +164,22 @@ class InterprimServer(HttpSide, SessionSide):
     config : ServerConfig
     extra_info : dict, optional
         Extra JSON sent by ``GET /api/info`` (e.g. the sim's arm geometry).
+
+    Attributes
+    ----------
+    sessions : dict of id -> session
+        The live WebSocket sessions.
+    stats : dict
+        Counters since start: ``sessions``, ``predictions``, ``coalesced`` (frames answered by a later reply),
+        ``errors`` and ``rejected`` (connections refused).
+    port : int or None
+        The port listened on, once :meth:`start` has bound it.
+    http : HttpApi
+        The page, static files and JSON API.
+    compute : Compute
+        Where replies are computed (inline, threads or worker processes).
+    ws : Sessions
+        The WebSocket sessions.
     """
 
     def __init__(self, models: dict, config: ServerConfig | None = None, extra_info: dict | None = None):
@@ -176,17 +189,19 @@ class InterprimServer(HttpSide, SessionSide):
             raise ValueError("the server needs at least one model (model files, or --demo)")
         self.models: dict[str, ModelEntry] = dict(models)
         self.extra_info = dict(extra_info or {})
-        self._ids = itertools.count(1)
         self.sessions: dict[int, _Session] = {}
         self.stats = {"sessions": 0, "predictions": 0, "coalesced": 0, "errors": 0, "rejected": 0}
-        self._stopping = False
         c = self.config
-        self._pool = ThreadPoolExecutor(c.workers, thread_name_prefix="ip-worker") if c.workers and not c.processes else None
-        self._procs = None
-        self._lanes: list = []
+        self.http = HttpApi(c, self.models, self.stats, self.extra_info)
+        self.compute = Compute(self.models, workers=c.workers, processes=c.processes)
+        self.ws = Sessions(c, self.models, self.compute, self.sessions, self.stats, self.http.info)
         self._server = None
-        self._static = self._load_static()
         self.port = None
+
+    def info(self) -> dict:
+        """The JSON of ``GET /api/info`` (:meth:`HttpApi.info`): server and protocol versions, whether a token is
+        required, the models, the limits and the server's ``extra_info``."""
+        return self.http.info()
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self):
@@ -213,26 +228,12 @@ class InterprimServer(HttpSide, SessionSide):
                     log.warning("connection from %s: bad HTTP request: %s", _peer(self), self.protocol.handshake_exc)
 
         c = self.config
-        if not c.processes:
-            await asyncio.get_running_loop().run_in_executor(None, warm_up, list(self.models.values()))
-        if c.processes:
-            from .workers import ProcessPool
-
-            pool = ProcessPool(self.models, c.processes)
-            loop = asyncio.get_running_loop()
-            try:
-                await loop.run_in_executor(None, pool.start)
-            except BaseException:
-                pool.stop()
-                raise
-            pool.attach(loop)
-            self._procs = pool
-        self._lanes = self._make_lanes()
+        await self.compute.start(self.ws.deliver)
         self._server = await serve(
-            self._handler,
+            self.ws.handler,
             c.host,
             c.port,
-            process_request=self._process_request,
+            process_request=self.http.process_request,
             max_size=c.max_message_bytes,
             max_queue=16,
             write_limit=c.write_limit,
@@ -253,38 +254,9 @@ class InterprimServer(HttpSide, SessionSide):
             self.port,
             P.PROTOCOL_VERSION,
             ("uvloop, " if type(asyncio.get_running_loop()).__module__.startswith("uvloop") else "")
-            + (f"{c.processes} worker process(es)" if c.processes
-               else f"{c.workers} worker thread(s)" if c.workers else "inline compute"),
+            + self.compute.describe(),
         )
         return self
-
-    def _make_lanes(self) -> list:
-        deliver = self._deliver
-        if self._procs is not None:
-            procs = self._procs
-
-            async def run_proc(s, op, batch):
-                block = np.stack([f for f, _, _ in batch]).astype("<f8", copy=False)
-                ts = [t for _, _, t in batch]
-                kw = {"ts": ts} if any(t is not None for t in ts) else {}
-                head, body = await procs.request(s.id, "frames", payload=block.tobytes(), n=block.shape[0],
-                                                 d=block.shape[1], seq=batch[0][1], **kw)
-                texts = body.split(b"\n") if body else []  # UTF-8 JSON texts, sent as they are
-                return texts, [tuple(f) for f in head.get("failures", ())]
-
-            return [_Lane(run_proc, deliver) for _ in range(procs.n)]  # session i runs on worker i % n
-        if self._pool is not None:
-            pool = self._pool
-
-            async def run_thread(s, op, batch):
-                return await asyncio.get_running_loop().run_in_executor(pool, compute_batch, op, batch)
-
-            return [_Lane(run_thread, deliver) for _ in range(self.config.workers)]
-
-        def run_inline(s, op, batch):
-            return compute_batch(op, batch)
-
-        return [_Lane(run_inline, deliver, sync=True)]
 
     async def serve_forever(self):
         """:meth:`start` if needed, then serve until the task is cancelled or :meth:`stop` is called."""
@@ -297,40 +269,23 @@ class InterprimServer(HttpSide, SessionSide):
         answered, then close each session with 1001 (going away) and ``reason``; join the worker threads or
         processes.  Bounded: sessions still open ``close_timeout + 5`` s later are aborted.  Idempotent."""
         c = self.config
-        self._stopping = True
+        self.ws.stop_accepting()
         srv, self._server = self._server, None
         if srv is not None:
             srv.close(close_connections=False)  # stop listening; wait_closed() waits for the handlers
-            live = list(self.sessions.values())
-            if live:
-                log.info("shutting down: closing %d session(s) with 1001 once their frames are answered", len(live))
-            loop = asyncio.get_running_loop()
-            tasks = [loop.create_task(self._going_away(s, P.CLOSE_GOING_AWAY, reason)) for s in live]
             limit = c.close_timeout + 5.0
-            if tasks:
-                _, late = await asyncio.wait(tasks, timeout=limit)
-                for t in late:
-                    t.cancel()
+            await self.ws.close_all(P.CLOSE_GOING_AWAY, reason, limit)
             try:
                 await asyncio.wait_for(srv.wait_closed(), limit)
             except (TimeoutError, asyncio.TimeoutError):
                 log.warning("shutting down: %d session(s) still open after %.0f s; aborting them",
                             len(self.sessions), limit)
-                for s in list(self.sessions.values()):
-                    transport = getattr(s.ws, "transport", None)
-                    if transport is not None:
-                        transport.abort()
+                self.ws.abort_all()
                 try:
                     await asyncio.wait_for(srv.wait_closed(), limit)
                 except (TimeoutError, asyncio.TimeoutError):
                     log.error("shutting down: connection handlers did not return; giving up on them")
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)  # idle by now: the sessions are gone
-            self._pool = None
-        if self._procs is not None:
-            self._procs.stop()  # asks each worker to stop and joins it
-            self._procs = None
-            log.info("worker processes stopped")
+        self.compute.stop()  # idle by now: the sessions are gone
 
     async def stop(self):
         """:meth:`shutdown` with the default reason."""

@@ -32,7 +32,6 @@ class _Open:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
-    extend: bool | None = None  # every stream has extend() (see _can_extend; None: not checked yet)
     recognition: "_Recognition | None" = None  # with several candidates: which one (created on first use)
 
     def reset(self, robot_state=None) -> None:
@@ -50,19 +49,20 @@ class _Recognition:
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
     all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
-    ``log_likelihood``, as before) the model with the smallest noise would win by its normalising constant alone.
-    Stand-in models that the Recogniser does not take (not fitted InteractionPrimitives) fall back to that
-    softmax.
+    ``log_likelihood``) the model with the smallest noise would win by its normalising constant alone.
+
+    Raises
+    ------
+    TypeError, ValueError, AttributeError
+        The Recogniser does not take the candidates (e.g. a model that is not a fitted InteractionPrimitive);
+        the server checks this when the session opens ``"auto"``.
     """
 
     def __init__(self, entries):
         from ..recognition import Recogniser
 
         self.names = [e.name for e in entries]
-        try:
-            self.rec = Recogniser({e.name: e.model for e in entries})
-        except (TypeError, ValueError, AttributeError):
-            self.rec = None
+        self.rec = Recogniser({e.name: e.model for e in entries})
         self.buf = np.empty((64, entries[0].n_observed))
         self.n = 0
 
@@ -85,11 +85,8 @@ class _Recognition:
     def posterior(self, preds) -> tuple[list, int]:
         """``(probabilities in candidate order, index of the most probable)``; uniform (and the first candidate)
         while the predictions are not conditioned (too few frames)."""
-        if not all(getattr(p, "conditioned", True) for p in preds) or self.n < 2:
+        if not all(p.conditioned for p in preds) or self.n < 2:
             return [1.0 / len(preds)] * len(preds), 0
-        if self.rec is None:
-            probs = P.softmax([float(p.log_likelihood) for p in preds])
-            return probs, int(np.argmax(probs))
         r = self.rec.recognise(self.buf[: self.n])
         probs = [float(r.probabilities[n]) for n in self.names]
         return probs, self.names.index(r.label)
@@ -181,39 +178,30 @@ def _column_slice(cols, n_dofs):
 
 
 class _MeanRollout:
-    """``pred.trajectory(n)[:, cols]`` for the predictions of one model, cheaper: the core's
-    :class:`~interprim.prediction.MeanRollout` (the grid's design built once), checked once against the
-    public ``trajectory``; any prediction without it (stand-ins, other kinds) uses ``trajectory``.
+    """``pred.trajectory(n)[:, cols]`` for the predictions of one model: the prediction contract's
+    :meth:`~interprim.contract.BasePrediction.mean_rollout`, made from the first prediction (for an
+    Interaction Primitive the core's :class:`~interprim.prediction.MeanRollout`, the grid's design built once).
     """
 
-    __slots__ = ("n", "sel", "fn", "ok")
+    __slots__ = ("n", "sel", "fn")
 
     def __init__(self, n: int, sel):
-        self.n, self.sel, self.fn, self.ok = n, sel, None, None
-
-    def _setup(self, pred) -> bool:
-        try:
-            self.fn = pred.mean_rollout(self.n, self.sel)
-            return bool(np.allclose(self.fn(pred), np.asarray(pred.trajectory(self.n))[:, self.sel], rtol=1e-9,
-                                    atol=1e-9))
-        except Exception:
-            return False
+        self.n, self.sel, self.fn = n, sel, None
 
     def mean(self, pred) -> np.ndarray:
-        if self.ok is None:
-            self.ok = self._setup(pred)  # checked once against the public method
-        if self.ok:
-            return self.fn(pred)
-        return np.asarray(pred.trajectory(self.n))[:, self.sel]
+        fn = self.fn
+        if fn is None:
+            fn = self.fn = pred.mean_rollout(self.n, self.sel)
+        return fn(pred)
 
 
 def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None,
                        block: np.ndarray | None = None) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound).
 
-    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq``: the earlier ones were fed to the
-    streams by :func:`observe`, or, with ``block`` (all ``covers`` frames, ``(covers, n_observed)``, the last
-    one ``frame``), they enter with it in one ``stream.extend(block)`` (see :func:`compute_batch`); ``t0``:
+    ``covers``: frames this reply answers, ``seq - covers + 1 .. seq``; with ``block`` (all ``covers`` frames,
+    ``(covers, n_observed)``, the last one ``frame``) they enter the streams in one ``stream.extend(block)``
+    (see :func:`compute_batch`); ``t0``:
     start of their computation (``compute_ms`` counts from there).  The reply is built as text directly
     (same keys, order and number formats as ``P.dumps`` of the message would give): encoding a dict with
     :mod:`json` costs more than the rest of the reply.
@@ -269,21 +257,6 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
     return "".join(parts)
 
 
-def observe(op: _Open, frame: np.ndarray) -> None:
-    """Feed ``frame`` to every stream of ``op`` without encoding a reply (a frame that a later reply covers).
-
-    Mean-only (``need_cov=False``) whatever the session asked: the covariance of a frame whose reply is
-    not sent is never used, and the reply's own frame (:func:`compute_prediction`) is updated with the
-    session's options, from the same stream state as without coalescing.
-    """
-    kw = {"need_cov": False} if op.update_kw else op.update_kw
-    for st in op.streams:
-        st.update(frame, **kw)
-    op.frames += 1
-    if len(op.streams) > 1:
-        _recognition(op).add(np.asarray(frame, dtype=np.float64)[None])
-
-
 def _recognition(op: _Open) -> _Recognition:
     rec = op.recognition
     if rec is None:
@@ -291,58 +264,28 @@ def _recognition(op: _Open) -> _Recognition:
     return rec
 
 
-def _can_extend(op: _Open) -> bool:
-    """Whether every stream of ``op`` has :meth:`~interprim.stream.Stream.extend` (stand-in models may not)."""
-    ok = op.extend
-    if ok is None:
-        ok = op.extend = all(callable(getattr(st, "extend", None)) for st in op.streams)
-    return ok
-
-
 def compute_batch(op: _Open, batch) -> tuple[list, list]:
     """Feed a session's pending frames ``batch`` (a list of ``(frame, seq, t)``, seqs consecutive) to its
     streams in order and encode **one** reply for the newest: a ``prediction`` with ``covers = len(batch)``.
 
-    Every frame enters the streams (phase estimation and conditioning see all of them), so the reply is
-    the one the last frame would get had each frame been answered (same stream state, same update
-    options for the last frame).  Streams with :meth:`~interprim.stream.Stream.extend` take the frames in
-    one call (the per-frame cost is then the DTW column and the phase tracker's lattice step only; the
-    phase, conditioning and prediction are computed once): if the model fails, one ``internal`` error
-    answers the whole batch (``covers`` all its frames).  Streams without ``extend`` get one ``update``
-    per frame, and a frame on which the model fails ends the batch early: an ``internal`` error with
-    that frame's ``seq`` that also covers the frames before it since the last reply; the frames after
-    it go on.  Returns ``(texts, failures)``: the reply texts in ``seq`` order, and
-    ``(seq, traceback text)`` per failure (for the server's log).
+    Every frame enters the streams (phase estimation and conditioning see all of them): several frames in
+    one :meth:`~interprim.contract.BaseStream.extend` per stream, which every model's stream has and which
+    answers exactly what :meth:`~interprim.contract.BaseStream.update` answers for the last frame (the
+    per-frame cost of an IP's stream is then the DTW column and the phase tracker's lattice step only; the
+    phase, conditioning and prediction are computed once).  So the reply is the one the last frame would get
+    had each frame been answered.  If the model fails, one ``internal`` error with the newest frame's
+    ``seq`` and ``t`` answers the whole batch (``covers`` all its frames).  Returns ``(texts, failures)``:
+    the reply texts in ``seq`` order (one), and ``(seq, traceback text)`` per failure (for the server's log).
     """
     import traceback
 
-    texts, failures = [], []
-    if len(batch) > 1 and _can_extend(op):
-        t0 = time.perf_counter()
-        frame, seq, t = batch[-1]
-        n = len(batch)
-        try:
-            block = np.stack([f for f, _, _ in batch])
-            texts.append(compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block))
-        except Exception as exc:
-            failures.append((seq, traceback.format_exc()))
-            texts.append(P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq,
-                                         t=t, covers=n, first_seq=seq - n + 1)))
-        return texts, failures
     t0 = time.perf_counter()
-    first = 0
-    last = len(batch) - 1
-    for i, (frame, seq, t) in enumerate(batch):
-        try:
-            if i < last:
-                observe(op, frame)
-                continue
-            texts.append(compute_prediction(op, frame, seq, t, covers=i - first + 1, t0=t0))
-        except Exception as exc:
-            covers = i - first + 1
-            failures.append((seq, traceback.format_exc()))
-            texts.append(P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq,
-                                         **({"covers": covers, "first_seq": seq - covers + 1} if covers > 1 else {}))))
-            first = i + 1
-            t0 = time.perf_counter()
-    return texts, failures
+    frame, seq, t = batch[-1]
+    n = len(batch)
+    try:
+        block = np.stack([f for f, _, _ in batch]) if n > 1 else None
+        return [compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block)], []
+    except Exception as exc:
+        extra = {"covers": n, "first_seq": seq - n + 1} if n > 1 else {}
+        text = P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq, t=t, **extra))
+        return [text], [(seq, traceback.format_exc())]

@@ -1,8 +1,9 @@
 """The HTTP side of the server: the page, its static files and the JSON API (``/api/...``), with the
 token and origin checks that also guard the WebSocket upgrade.
 
-:class:`HttpSide` is a part of :class:`~interprim.server.app.InterprimServer` (which owns
-``config``, ``models`` and the rest of the state it reads).
+:class:`HttpApi` is given what it reads (the configuration, the models, the extra ``/api/info`` JSON) and
+the statistics it counts refusals in; :class:`~interprim.server.app.InterprimServer` owns them and passes
+:meth:`HttpApi.process_request` to the WebSocket library.
 """
 
 from __future__ import annotations
@@ -22,10 +23,37 @@ log = logging.getLogger("interprim.server")
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 
 
-class HttpSide:
-    """Requests that are not WebSocket frames: static files, ``/api/...`` and the upgrade checks."""
+def token_ok(want: str | None, given) -> bool:
+    """Whether ``given`` is the server's token ``want`` (any value when the server has none); constant time."""
+    if not want:
+        return True
+    return isinstance(given, str) and hmac.compare_digest(given.encode(), want.encode())
 
-    def _load_static(self) -> dict:
+
+class HttpApi:
+    """Requests that are not WebSocket frames: static files, ``/api/...`` and the upgrade checks.
+
+    Parameters
+    ----------
+    config : ServerConfig
+        The token, limits and allowed origins.
+    models : dict of name -> ModelEntry
+        The served models (``/api/info``, ``/api/replay/MODEL``).
+    stats : dict
+        The server's counters; a refused cross-origin upgrade adds one to ``stats["rejected"]``.
+    extra_info : dict, optional
+        Extra JSON sent by ``GET /api/info``.
+    """
+
+    def __init__(self, config, models: dict, stats: dict, extra_info: dict | None = None):
+        self.config = config
+        self.models = models
+        self.stats = stats
+        self.extra_info = {} if extra_info is None else extra_info  # the server's own dict (read at each request)
+        self._static = self._load_static()
+
+    @staticmethod
+    def _load_static() -> dict:
         files = {}
         if STATIC_DIR.is_dir():
             for p in STATIC_DIR.iterdir():
@@ -85,11 +113,9 @@ class HttpSide:
     def _json(self, conn, status: int, obj) -> object:
         return self._http(conn, status, json.dumps(obj).encode(), "application/json; charset=utf-8")
 
-    def _token_ok(self, given) -> bool:
-        want = self.config.token
-        if not want:
-            return True
-        return isinstance(given, str) and hmac.compare_digest(given.encode(), want.encode())
+    def token_ok(self, given) -> bool:
+        """Whether ``given`` is the server's token (:func:`token_ok`)."""
+        return token_ok(self.config.token, given)
 
     def _origin_ok(self, request) -> bool:
         origin = request.headers.get("Origin")
@@ -101,7 +127,9 @@ class HttpSide:
             return False
         return netloc == request.headers.get("Host")
 
-    def _process_request(self, conn, request):
+    def process_request(self, conn, request):
+        """The WebSocket library's ``process_request`` hook: answer a plain HTTP request (page, static file, API,
+        ``/healthz``) or refuse a cross-origin upgrade; ``None`` lets a ``/ws`` upgrade go on."""
         try:
             parts = urlsplit(request.path)
         except ValueError:
@@ -128,7 +156,7 @@ class HttpSide:
         if path.startswith("/api/"):
             auth = request.headers.get("Authorization", "")
             token = query.get("token", [None])[0] or (auth[7:] if auth.startswith("Bearer ") else None)
-            if not self._token_ok(token):
+            if not self.token_ok(token):
                 return self._json(conn, 401, {"error": "missing or wrong token (?token=... or Authorization: Bearer)"})
             if path == "/api/info":
                 return self._json(conn, 200, self.info())

@@ -2,7 +2,10 @@
 
 A :class:`_Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
 are computed (the event loop, a thread or a worker process), shared by several sessions in
-round-robin order; :class:`_Bucket` limits a session's message rate.
+round-robin order; :class:`_Bucket` limits a session's message rate.  :class:`Compute` owns the
+lanes and what runs them (the thread pool or the worker processes): the server creates it from its
+configuration and models, and the sessions (:class:`~interprim.server.sessions.Sessions`) hand it
+their frames with :meth:`Compute.push`.
 
 Frames are *coalesced* under overload: a session's handler puts every frame it receives into the
 session's ``pending`` list and goes on reading; when the session's turn comes, its lane feeds all
@@ -13,11 +16,17 @@ for the newest, that says how many frames it covers (:func:`interprim.server.com
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
-from .compute import _Open
+import numpy as np
+
+from .compute import _Open, compute_batch, warm_up
+
+log = logging.getLogger("interprim.server")
 
 
 class _Bucket:
@@ -61,7 +70,7 @@ class _Session:
     queued: bool = False  # in its lane's round-robin queue or being computed (then ``pending`` may grow)
     busy: bool = False  # the handler is inside a message (a control message may await a worker)
     ended: bool = False  # the connection's handler has finished
-    waiters: list = field(default_factory=list)  # futures woken when the above change (see SessionSide._until)
+    waiters: list = field(default_factory=list)  # futures woken when the above change (see Sessions._until)
     direct: bool = False  # replies may be written to the socket at once (interprim.server.wsfast.write_now)
 
     def wake(self) -> None:
@@ -172,3 +181,107 @@ class _Lane:
         finally:
             self._done(s)
             self._pump()
+
+
+class Compute:
+    """Where the server computes its replies: inline on the event loop, in a thread pool or in worker processes.
+
+    Parameters
+    ----------
+    models : dict of name -> ModelEntry
+        The served models (warmed up, or sent to the worker processes, by :meth:`start`).
+    workers : int
+        ``0``: compute inline on the event loop; ``N``: in a pool of ``N`` threads.
+    processes : int
+        ``N > 0``: session ``i`` runs in worker process ``i % N``, which owns its streams (overrides ``workers``).
+
+    :meth:`start` (on the event loop) makes the lanes, each of which hands its results to the ``deliver``
+    callback; :meth:`push` queues a session with pending frames on its lane; :meth:`call` runs a session's
+    control operation (``open``, ``reset``, ``drop``) in its worker process when ``remote``; :meth:`stop`
+    joins the threads or processes.
+    """
+
+    def __init__(self, models: dict, workers: int = 0, processes: int = 0):
+        self.models = models
+        self.workers = int(workers)
+        self.processes = int(processes)
+        self.pool = ThreadPoolExecutor(self.workers, thread_name_prefix="ip-worker") if (
+            self.workers and not self.processes) else None
+        self.procs = None  # the worker processes (interprim.server.workers.ProcessPool) once started
+        self.lanes: list = []
+
+    @property
+    def remote(self) -> bool:
+        """Whether the sessions' streams live in worker processes (else in this process, in each session)."""
+        return self.procs is not None
+
+    def describe(self) -> str:
+        """Where replies are computed, for the server's log."""
+        if self.processes:
+            return f"{self.processes} worker process(es)"
+        return f"{self.workers} worker thread(s)" if self.workers else "inline compute"
+
+    async def start(self, deliver) -> None:
+        """Warm the models up here or start the worker processes, then make the lanes, which hand each computed
+        batch to ``deliver(session, open model, batch, result)``."""
+        loop = asyncio.get_running_loop()
+        if not self.processes:
+            await loop.run_in_executor(None, warm_up, list(self.models.values()))
+        else:
+            from .workers import ProcessPool
+
+            pool = ProcessPool(self.models, self.processes)
+            try:
+                await loop.run_in_executor(None, pool.start)
+            except BaseException:
+                pool.stop()
+                raise
+            pool.attach(loop)
+            self.procs = pool
+        self.lanes = self._make_lanes(deliver)
+
+    def _make_lanes(self, deliver) -> list:
+        if self.procs is not None:
+            procs = self.procs
+
+            async def run_proc(s, op, batch):
+                block = np.stack([f for f, _, _ in batch]).astype("<f8", copy=False)
+                ts = [t for _, _, t in batch]
+                kw = {"ts": ts} if any(t is not None for t in ts) else {}
+                head, body = await procs.request(s.id, "frames", payload=block.tobytes(), n=block.shape[0],
+                                                 d=block.shape[1], seq=batch[0][1], **kw)
+                texts = body.split(b"\n") if body else []  # UTF-8 JSON texts, sent as they are
+                return texts, [tuple(f) for f in head.get("failures", ())]
+
+            return [_Lane(run_proc, deliver) for _ in range(procs.n)]  # session i runs on worker i % n
+        if self.pool is not None:
+            pool = self.pool
+
+            async def run_thread(s, op, batch):
+                return await asyncio.get_running_loop().run_in_executor(pool, compute_batch, op, batch)
+
+            return [_Lane(run_thread, deliver) for _ in range(self.workers)]
+
+        def run_inline(s, op, batch):
+            return compute_batch(op, batch)
+
+        return [_Lane(run_inline, deliver, sync=True)]
+
+    def push(self, s: _Session) -> None:
+        """Queue session ``s`` (pending frames, not queued) on its lane: lane ``s.id % len(lanes)``."""
+        self.lanes[s.id % len(self.lanes)].push(s)
+
+    async def call(self, sid: int, op: str, **fields):
+        """Run ``op`` for session ``sid`` in its worker process (``remote`` only); raises ``RuntimeError`` when it
+        fails there."""
+        return await self.procs.call(sid, op, **fields)
+
+    def stop(self) -> None:
+        """Join the worker threads (idle once the sessions are gone) or stop and join the worker processes."""
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+            self.pool = None
+        if self.procs is not None:
+            self.procs.stop()  # asks each worker to stop and joins it
+            self.procs = None
+            log.info("worker processes stopped")

@@ -1,7 +1,9 @@
 """The WebSocket side of the server: one session per connection, its messages, frames and replies.
 
-:class:`SessionSide` is a part of :class:`~interprim.server.app.InterprimServer` (which owns
-``config``, ``models``, ``sessions``, the compute lanes and the statistics it updates).
+:class:`Sessions` is given what it uses: the configuration, the models, the compute lanes
+(:class:`~interprim.server.lanes.Compute`), the table of live sessions and the statistics it updates,
+and the ``/api/info`` JSON that ``welcome`` repeats; :class:`~interprim.server.app.InterprimServer`
+owns them and passes :meth:`Sessions.handler` to the WebSocket library.
 
 A session's handler reads its messages as they come.  A valid frame joins the session's pending
 frames and its lane computes them in round-robin turns (:mod:`interprim.server.lanes`: one reply per
@@ -12,11 +14,13 @@ first waits until the session's pending frames are answered, so replies keep the
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 
 from . import protocol as P
-from .compute import _Open
 from . import wsfast
+from .compute import _Open, _Recognition
+from .http_api import token_ok
 from .lanes import _Bucket, _Session
 from .wsfast import FastFrames
 
@@ -27,17 +31,45 @@ log = logging.getLogger("interprim.server")
 _CLOSE = object()
 
 
-class SessionSide:
-    """A session's life: handshake, ``hello``/``open``/``close`` messages, frames, replies and errors."""
+class Sessions:
+    """The WebSocket sessions: each one's life (handshake, ``hello``/``open``/``close`` messages, frames, replies and
+    errors) and the server's shutdown of all of them.
 
-    async def _handler(self, ws):
+    Parameters
+    ----------
+    config : ServerConfig
+        Limits and options.
+    models : dict of name -> ModelEntry
+        The served models (what ``open`` may name).
+    compute : interprim.server.lanes.Compute
+        Where the sessions' frames are computed (:meth:`deliver` gets the results).
+    sessions : dict of id -> session
+        The live sessions, kept up to date here (the server's ``sessions``).
+    stats : dict
+        The server's counters (``sessions``, ``predictions``, ``coalesced``, ``errors``, ``rejected``), updated here.
+    info : callable
+        ``info()`` -> the ``/api/info`` JSON, whose ``server``, ``models`` and ``limits`` the ``welcome`` repeats.
+    """
+
+    def __init__(self, config, models: dict, compute, sessions: dict, stats: dict, info):
+        self.config = config
+        self.models = models
+        self.compute = compute
+        self.sessions = sessions
+        self.stats = stats
+        self._info = info
+        self._ids = itertools.count(1)
+        self.stopping = False  # shutting down: new connections are closed with 1001, messages no longer read
+
+    async def handler(self, ws):
+        """Serve one WebSocket connection (the WebSocket library's connection handler) until it closes."""
         c = self.config
         sid = next(self._ids)
         try:
             peer = "%s:%s" % tuple(ws.remote_address[:2])
         except Exception:
             peer = "?"
-        if self._stopping:  # accepted while shutting down
+        if self.stopping:  # accepted while shutting down
             await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
             return
         if len(self.sessions) >= c.max_sessions:
@@ -68,7 +100,7 @@ class SessionSide:
                 except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
                     self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
                     break
-                if self._stopping:
+                if self.stopping:
                     continue  # shutting down: not read any more (the close reason says which frames were answered)
                 if self._frame_at_once(s, data):  # the usual message: a valid frame of an open session
                     if s.queued and len(s.pending) >= c.max_pending:
@@ -103,10 +135,10 @@ class SessionSide:
                 ws.fast_frame = None
             s.wake()
             self.sessions.pop(sid, None)
-            if self._procs is not None and s.open is not None:
+            if self.compute.remote and s.open is not None:
                 s.open = None
                 try:
-                    await self._procs.call(sid, "drop")
+                    await self.compute.call(sid, "drop")
                 except Exception:
                     pass
             if s.closing and s.writer is not None:
@@ -214,7 +246,7 @@ class SessionSide:
         s.seq += 1
         s.pending.append((frame, s.seq, t))
         if not s.queued:
-            self._lanes[s.id % len(self._lanes)].push(s)
+            self.compute.push(s)
         return True
 
     def _fast_frame(self, s: _Session, data) -> bool:
@@ -222,7 +254,7 @@ class SessionSide:
         only while no earlier message waits for the handler): taken if it is a valid frame that
         :meth:`_frame_at_once` takes and the handler is between two messages (not waiting for an earlier one's
         turn) and the session is not near ``max_pending``; else ``False`` and the handler gets it, in order."""
-        if s.busy or s.closing or s.ended or self._stopping or len(s.pending) + 1 >= self.config.max_pending:
+        if s.busy or s.closing or s.ended or self.stopping or len(s.pending) + 1 >= self.config.max_pending:
             return False
         return self._frame_at_once(s, data)
 
@@ -296,41 +328,50 @@ class SessionSide:
             await fut
 
     async def _on_control(self, s: _Session, msg: dict) -> None:
+        c = self.config
         mtype = msg["type"]
         if mtype == "hello":
             h = P.check_hello(msg)
-            if not self._token_ok(h["token"]):
+            if not token_ok(c.token, h["token"]):
                 raise P.ProtocolError("unauthorized", "missing or wrong token in hello", fatal=True)
             s.ready = True
             s.consecutive_errors = 0
             reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
-            reply.update({k: v for k, v in self.info().items() if k in ("server", "models", "limits")})
+            reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
             self._send(s, P.dumps(reply))
             return
         if not s.ready:
             raise P.ProtocolError("not_ready", f"send hello first (got {mtype!r})")
         if mtype == "open":
-            o = P.check_open(msg, self.models, default_points=self.config.default_points, max_points=self.config.max_points)
+            o = P.check_open(msg, self.models, default_points=c.default_points, max_points=c.max_points)
             entries = [self.models[n] for n in o["candidates"]]
             for e in entries:
                 P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
+            rec = None
+            if len(entries) > 1:  # "auto": the Recogniser must take the candidates (made here, used in this process)
+                try:
+                    rec = _Recognition(entries)
+                except (TypeError, ValueError, AttributeError) as exc:
+                    raise P.ProtocolError("bad_message", f"'auto' cannot recognise among {o['candidates']}: {exc}") \
+                        from None
             streams, cols = [], []
             for e in entries:
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")
                 cols.append(list(range(e.n_dofs)) if dofs == "all" else e.controlled_dofs)
-                if self._procs is None:
+                if not self.compute.remote:
                     try:
                         streams.append(e.model.stream(robot_state=o["robot_state"]))
                     except (ValueError, TypeError) as exc:
                         raise P.ProtocolError("bad_message", f"open.robot_state for model {e.name!r}: {exc}") from None
-            if self._procs is not None:
+            if self.compute.remote:
                 s.open = None
                 try:
-                    await self._procs.call(s.id, "open", model=o["model"], candidates=o["candidates"], cols=cols,
+                    await self.compute.call(s.id, "open", model=o["model"], candidates=o["candidates"], cols=cols,
                                            points=o["points"], std=o["std"], robot_state=o["robot_state"])
                 except RuntimeError as exc:
                     raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
-            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"])
+            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"],
+                           recognition=None if self.compute.remote else rec)
             if streams:  # mean-only updates are much cheaper without a band (every stream takes need_cov)
                 s.open.update_kw = {"need_cov": o["std"]}
             s.consecutive_errors = 0
@@ -344,9 +385,9 @@ class SessionSide:
             rs = P.check_reset(msg)
             for e in s.open.entries:
                 P.check_robot_state_for(rs, e.name, len(e.controlled_dofs), "reset.robot_state")
-            if self._procs is not None:
+            if self.compute.remote:
                 try:
-                    await self._procs.call(s.id, "reset", robot_state=rs)
+                    await self.compute.call(s.id, "reset", robot_state=rs)
                 except RuntimeError as exc:
                     raise P.ProtocolError("internal", f"reset failed: {exc}") from None
             s.open.reset(robot_state=rs)
@@ -354,9 +395,9 @@ class SessionSide:
             self._send(s, P.dumps({"type": "reset_done", "seq": s.seq}))
         elif mtype == "close":
             s.open = None
-            if self._procs is not None:
+            if self.compute.remote:
                 try:
-                    await self._procs.call(s.id, "drop")
+                    await self.compute.call(s.id, "drop")
                 except RuntimeError:
                     pass
             s.consecutive_errors = 0
@@ -375,11 +416,11 @@ class SessionSide:
             frame, t = P.check_frame(msg, n)
         s.pending.append((frame, seq, t))
         if not s.queued:
-            self._lanes[s.id % len(self._lanes)].push(s)
+            self.compute.push(s)
         elif len(s.pending) >= self.config.max_pending:
             await self._until(s, lambda: len(s.pending) < self.config.max_pending or not s.queued)
 
-    def _deliver(self, s: _Session, op: _Open, batch: list, result) -> None:
+    def deliver(self, s: _Session, op: _Open, batch: list, result) -> None:
         """Send the replies of a computed batch (called by the lanes): ``result`` is ``(texts, failures)`` from
         :func:`~interprim.server.compute.compute_batch`, or the exception that stopped the computation."""
         if isinstance(result, BaseException):
@@ -411,6 +452,31 @@ class SessionSide:
         await self._until(s, lambda: s.ended or not (s.busy or s.queued))
         if not s.ended:
             self._fatal(s, code, f"{reason}; frames up to seq {s.seq} answered", level=logging.INFO)
+
+    def stop_accepting(self) -> None:
+        """From now on, close new connections with 1001 and stop reading the messages of the live sessions."""
+        self.stopping = True
+
+    async def close_all(self, code: int, reason: str, timeout: float) -> None:
+        """Close every live session with ``code`` once the frames it sent are answered (:meth:`_going_away`); the
+        sessions whose turn has not come within ``timeout`` seconds are left to :meth:`abort_all`."""
+        live = list(self.sessions.values())
+        if not live:
+            return
+        log.info("shutting down: closing %d session(s) with %d once their frames are answered", len(live), code)
+        loop = asyncio.get_running_loop()
+        tasks = [loop.create_task(self._going_away(s, code, reason)) for s in live]
+        _, late = await asyncio.wait(tasks, timeout=timeout)
+        for t in late:
+            t.cancel()
+
+    def abort_all(self) -> None:
+        """Abort the TCP connection of every session still open (a shutdown that waited long enough)."""
+        for s in list(self.sessions.values()):
+            transport = getattr(s.ws, "transport", None)
+            if transport is not None:
+                transport.abort()
+
 
 def _opened(o: dict, entries: list, cols: list) -> dict:
     """The ``opened`` reply: what was opened and how to label it (names and units of the returned columns

@@ -139,3 +139,28 @@ def test_blend_streams_saves_and_calibrates(blend, task, tmp_path):
     assert np.all(vm["a"] > 0) and np.all(vm["a"] <= 1) and np.all(vm["b"] >= 0)
     assert np.all((vm["a"] == 1) | (vm["b"] == 0))
     assert "blend of" in repr(blend) and "blend:" in blend.summary()
+
+
+def test_the_server_serves_a_saved_blend_like_its_stream(blend, task, tmp_path):
+    """A model file of the blend (what 'interprim fit' saves by default) is served: every reply equals the
+    blend's own stream."""
+    pytest.importorskip("websockets")
+    from interprim.server.app import InterprimServer, ServerConfig, ServerThread
+    from interprim.server.client import Client
+    from interprim.server.models import load_models
+
+    _, hold = task
+    path = tmp_path / "handover.npz"
+    blend.save(path)
+    models = load_models([path])
+    assert type(models["handover"].model) is ip.AutoInteraction
+    direct = blend.stream()
+    with ServerThread(InterprimServer(models, ServerConfig(port=0))) as st, Client(st.ws_url) as c:
+        op = c.open("handover", points=20, std=True)
+        assert op["n_observed"] == 2 and op["columns"] == [2, 3]
+        for k, f in enumerate(hold.demos[2][:25, :2], start=1):
+            p = c.frame(f)
+            d = direct.update(f)
+            np.testing.assert_allclose(p["mean"], d.trajectory(20)[:, 2:], rtol=1e-6, atol=1e-9)  # JSON: 7 digits
+            np.testing.assert_allclose(p["std"], d.std(20)[:, 2:], rtol=1e-6, atol=1e-9)
+            assert p["frames"] == k

@@ -191,9 +191,9 @@ class AutoInteraction(Predictor):
 
     Attributes
     ----------
-    observed_dofs_, n_dofs_, dt_, columns_
-        The observed columns, the number of columns, the sampling interval and the column names (``None``
-        without names) of the demonstrations.
+    observed_dofs_, controlled_dofs_, n_dofs_, dt_, mean_duration_, columns_
+        The two agents' columns, the number of columns, the sampling interval, the mean duration (s) and the
+        column names (``None`` without names) of the demonstrations.
     chosen_ : str
         The family with the smallest held-out error (``"blend"`` is not a family: see ``weights_``).
     weights_ : dict
@@ -303,7 +303,9 @@ class AutoInteraction(Predictor):
         self.weights_ = weights
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.n_dofs_ = int(train[0].shape[1])
+        self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in set(self.observed_dofs_)]
         self.dt_ = float(dt)
+        self.mean_duration_ = float(np.mean([len(d) - 1 for d in train])) * self.dt_
         cols = getattr(demos, "columns", None)
         self.columns_ = None if cols is None else [str(c) for c in cols]
         self.selection_ = selection
@@ -326,7 +328,8 @@ class AutoInteraction(Predictor):
         return ({f"model_{k}": v for k, v in arrays.items()},
                 {"chosen": self.chosen_, "class": type(self.model_).__name__, "params": self.model_.json_params(),
                  "state": meta, "selection": self.selection_, "observed_dofs_": self.observed_dofs_,
-                 "weights": self.weights_, "n_dofs_": self.n_dofs_, "dt_": self.dt_, "columns_": self.columns_})
+                 "weights": self.weights_, "n_dofs_": self.n_dofs_, "dt_": self.dt_, "columns_": self.columns_,
+                 "mean_duration_": self.mean_duration_})
 
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
@@ -336,8 +339,10 @@ class AutoInteraction(Predictor):
         self.selection_ = dict(meta["selection"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
         self.weights_ = {str(k): float(v) for k, v in meta.get("weights", {self.chosen_: 1.0}).items()}
-        self.n_dofs_ = int(meta["n_dofs_"]) if "n_dofs_" in meta else None
-        self.dt_ = float(meta["dt_"]) if "dt_" in meta else None
+        self.n_dofs_ = int(meta["n_dofs_"])
+        self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in set(self.observed_dofs_)]
+        self.dt_ = float(meta["dt_"])
+        self.mean_duration_ = float(meta["mean_duration_"])
         cols = meta.get("columns_")
         self.columns_ = None if cols is None else [str(c) for c in cols]
 

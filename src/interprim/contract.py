@@ -62,6 +62,8 @@ class BasePrediction:
     duration: float = float("nan")
     #: partner's speed relative to the mean demonstration (NaN when not estimated)
     speed: float = float("nan")
+    #: the DMP canonical-system value at ``phase`` (Eq. 2 and 9; NaN for a model without DMPs)
+    x: float = float("nan")
     #: ``log p(observation | model)`` at the estimated phase (NaN when the model has none)
     log_likelihood: float = float("nan")
     #: whether the prediction depends on the observed frames (``False``: the prior / mean movement)

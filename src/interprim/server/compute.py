@@ -154,8 +154,13 @@ def _json_array(a) -> str:
 _FORCE_PRINTF = False  # tests: the fallback encoder even when orjson is installed
 
 
-_HEAD_FMT = '"phase":%r,"x":%r,"speed":%r,"duration":%r,"log_likelihood":%r,'
+_HEAD_FMT = '"phase":%r,"x":%s,"speed":%r,"duration":%r,"log_likelihood":%s,'
 _UNCONDITIONED = '"phase":null,"x":null,"speed":null,"duration":null,"log_likelihood":null,"conditioned":false,'
+
+
+def _num(v: float) -> str:
+    """A finite float as JSON (``repr``, as ``%r`` writes it), NaN as ``null``."""
+    return "null" if v != v else repr(v)
 
 
 def _head_parts(op: _Open) -> list:
@@ -227,10 +232,14 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
     if pred.conditioned:  # every prediction has the attributes of interprim.contract.BasePrediction
-        vals = (float(pred.phase), float(pred.x), float(pred.speed), float(pred.duration), float(pred.log_likelihood))
+        vals = (float(pred.phase), float(pred.speed), float(pred.duration))
         if not all(map(math.isfinite, vals)):  # nan / inf: never put them on the wire
             raise FloatingPointError(_NONFINITE)
-        nums = _HEAD_FMT % vals + '"conditioned":true,'
+        # x (a DMP's canonical phase) and the likelihood: null for a model that has none (e.g. a blend)
+        x, ll = float(pred.x), float(pred.log_likelihood)
+        if math.isinf(x) or math.isinf(ll):
+            raise FloatingPointError(_NONFINITE)
+        nums = _HEAD_FMT % (vals[0], _num(x), vals[1], vals[2], _num(ll)) + '"conditioned":true,'
     else:  # the prior (too few frames): no phase, speed or likelihood to report
         nums = _UNCONDITIONED
     nums += '"frames":%d,' % pred.n_observed

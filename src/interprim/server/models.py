@@ -115,7 +115,7 @@ def entry_for(name: str, model, *, source: str = "", kind: str | None = None, me
         n_ctrl = len(model.controlled_dofs_)
         _ = model.observed_dofs_, model.n_dofs_, model.dt_, model.mean_duration_
     except AttributeError as exc:
-        raise ModelFileError(f"model {name!r} ({source or 'code'}) is not a fitted InteractionPrimitive: {exc}") from None
+        raise ModelFileError(f"model {name!r} ({source or 'code'}) is not a fitted interprim model: {exc}") from None
     if kind is None:
         kind = "single" if n_ctrl == 0 else "interaction"
     return ModelEntry(name=name, model=model, kind=kind, source=source, meta=dict(meta or {}))
@@ -131,7 +131,7 @@ def load_models(paths) -> dict[str, ModelEntry]:
     interprim.ModelFileError
         A file is corrupt / of the wrong format, or two files share a stem.
     """
-    from ..primitive import InteractionPrimitive
+    from ..io import load_any
 
     out: dict[str, ModelEntry] = {}
     for p in paths:
@@ -147,7 +147,7 @@ def load_models(paths) -> dict[str, ModelEntry]:
                 "file stems and must be unique"
             )
         try:
-            model = InteractionPrimitive.load(str(path))
+            model = load_any(str(path))  # whatever 'interprim fit' saved
         except ModelFileError as exc:
             msg = str(exc)
             if str(path) not in msg:

@@ -47,15 +47,6 @@ _ERROR: BaseException | None = None
 _PENDING = False  # auto mode, cold cache: numpy now, the compiled kernels once _LOADED
 _LOADED = threading.Event()  # the kernels are loaded in this process (set by _load on success or failure)
 
-#: the kernels called from Python (``module``, ``name``): loaded by :func:`_compile_all` and
-#: :func:`_load_phase_kernels`; the cache is warm when numba's index has an entry for each
-ENTRY_KERNELS = (("dtw", "_open_end_strips"), ("dtw", "_incremental_step"), ("dtw", "_accumulate"),
-                 ("dtw", "_backtrack"), ("observation", "forcing_values_into"), ("observation", "design_stats"),
-                 ("observation", "position_stats"), ("observation", "forcing_targets_batch"),
-                 ("conditioning", "lowrank_condition_mean"), ("rollout", "response_positions"),
-                 ("phase_likelihood", "phase_loglik_batch"), ("phase_likelihood", "track_step"))
-
-
 def _mode() -> str:
     return os.environ.get("INTERPRIM_JIT", "auto").strip().lower()
 
@@ -65,6 +56,7 @@ def _compile_all():
     from . import conditioning as k
     from . import dtw as dk
     from . import observation as ko
+    from . import phase_likelihood as kp
     from . import rollout as kr
 
     rng = np.random.default_rng(0)
@@ -94,13 +86,14 @@ def _compile_all():
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))
     Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
     ko.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
+    kp.warm_batch(kp.phase_loglik_batch)
+    kp.warm_track(kp.track_step)
 
 
 def _load():
     global _READY, _ERROR
     try:
-        _compile_all()
-        _load_phase_kernels()  # the likelihood phase's kernels: one loader, one decision for all kernels
+        _compile_all()  # every kernel of the registry: one loader, one decision for all kernels
         ok = True
     except BaseException as exc:  # numba missing or broken: numpy for the whole process
         _ERROR = exc
@@ -122,16 +115,17 @@ def _strict() -> bool:
 
 
 def cache_is_warm() -> bool:
-    """Whether numba's on-disk cache holds a current entry for every kernel of :data:`ENTRY_KERNELS`.
+    """Whether numba's on-disk cache holds a current entry for every kernel of the registry
+    (:data:`interprim._compiled.registry.KERNELS`).
 
     Reads the cache index files (numba checks their source stamps), compiles nothing.  If numba's cache
     layout cannot be read, answers True (the kernels are then loaded, or compiled, in the calling thread).
     """
     try:
-        import importlib
+        from .registry import KERNELS, compiled
 
-        for mod, name in ENTRY_KERNELS:
-            disp = getattr(importlib.import_module(f"{__package__}.{mod}"), name)
+        for name in KERNELS:
+            disp = compiled(name)
             if not disp._cache._cache_file._load_index():
                 return False
         return True
@@ -164,7 +158,6 @@ def _compile_main() -> int:
     """Entry point of the background compilation: compile every kernel into numba's cache."""
     try:
         _compile_all()
-        _load_phase_kernels()
     except BaseException:  # noqa: BLE001 -- the parent finds out when it loads
         return 1
     return 0
@@ -281,29 +274,6 @@ def warmup() -> bool:
         _LOADED.wait()
         return _switch()
     return bool(_READY)
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# the likelihood phase's kernels (interprim._compiled.phase_likelihood), loaded by _load with the others
-
-_PHASE_KERNELS: list = []  # [phase_loglik_batch, track_step] once loaded
-
-
-def _load_phase_kernels():
-    """Compile (or load from numba's cache) the phase kernels; raises if they cannot be compiled."""
-    if _PHASE_KERNELS:
-        return
-    from .phase_likelihood import phase_loglik_batch, track_step, warm_batch, warm_track
-
-    warm_batch(phase_loglik_batch)
-    warm_track(track_step)
-    _PHASE_KERNELS.extend([phase_loglik_batch, track_step])
-
-
-def phase_kernel():
-    """The compiled batch kernel of the likelihood phase, or ``None`` on the numpy path (:func:`ready` decides,
-    once per process; the first use waits for the kernels)."""
-    return _PHASE_KERNELS[0] if ready() else None
 
 
 if __name__ == "__main__":  # the background compilation (see _child_command)

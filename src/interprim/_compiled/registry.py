@@ -23,11 +23,12 @@ Importing this module does not import numba.
 from __future__ import annotations
 
 import importlib
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 from . import loader
 
-__all__ = ["Kernel", "KERNELS", "kernel", "implementation", "reference", "compiled", "names", "in_use"]
+__all__ = ["Kernel", "KERNELS", "kernel", "implementation", "reference", "compiled", "names", "in_use", "forced"]
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
 )}
 
 _RESOLVED: dict[str, object] = {}
+_FORCED: list = [None]  # None: loader.ready() decides; "numpy" / "compiled": forced (tests, see forced)
 
 
 def names() -> list[str]:
@@ -137,12 +139,31 @@ def reference(name: str):
 def in_use() -> bool:
     """Whether the compiled kernels are in use now (:func:`interprim._compiled.loader.ready`), for callers that
     prepare the compiled path's workspaces (:class:`interprim._compiled.observation.StatsWorkspace`)."""
-    return loader.ready()
+    forced_path = _FORCED[0]
+    return loader.ready() if forced_path is None else forced_path == "compiled"
+
+
+@contextmanager
+def forced(which: str):
+    """Run the block on one path, ``"numpy"`` or ``"compiled"``, whatever :func:`loader.ready` decided.
+
+    For tests that compare the two paths in one process (``tests/test_kernels_equivalence.py``); not
+    thread-safe (it applies to every thread while the block runs) and not for applications, whose path the
+    loader's environment switches choose.
+    """
+    if which not in ("numpy", "compiled"):
+        raise ValueError(f"which must be 'numpy' or 'compiled', got {which!r}")
+    before = _FORCED[0]
+    _FORCED[0] = which
+    try:
+        yield
+    finally:
+        _FORCED[0] = before
 
 
 def kernel(name: str):
     """The compiled kernel ``name`` if the compiled kernels are in use now (:func:`loader.ready`), else ``None``."""
-    if loader.ready():
+    if in_use():
         fn = _RESOLVED.get(name)
         return fn if fn is not None else compiled(name)
     _spec(name)
@@ -161,4 +182,4 @@ def implementation(name: str, which: str = "auto"):
         raise ValueError(f"which must be 'auto', 'compiled' or 'numpy', got {which!r}")
     if not spec.drop_in:
         raise ValueError(f"the numpy reference of {name!r} takes other arguments; use kernel({name!r})")
-    return compiled(name) if loader.ready() else reference(name)
+    return compiled(name) if in_use() else reference(name)

@@ -359,6 +359,12 @@ def test_stream_incremental_statistics_equal_recomputation(kw):
     assert worst[3] < 1e-9
 
 
+def _numpy_phase_kernels(mp):
+    """The likelihood phase's kernels answer ``None`` (numpy), the other kernels stay compiled."""
+    real = kernels.kernel
+    mp.setattr(kernels, "kernel", lambda name: None if name.startswith("phase_likelihood.") else real(name))
+
+
 def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     model = _small_model("position", 2, "shrinkage")
     assert kernels.kernel("phase_likelihood.phase_loglik_batch") is not None
@@ -369,8 +375,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     again = np.array([st.update(f).normalised_time for f in frames[:50]])
     np.testing.assert_array_equal(again, got[:50])
     with monkeypatch.context() as mp:  # no compiled kernel: the same candidates scored by numpy
-        mp.setattr(PL, "_kernel", lambda: None)
-        mp.setattr(PT, "_kernel", lambda: None)
+        _numpy_phase_kernels(mp)
         st.reset()
         num = np.array([st.update(f).normalised_time for f in frames])
     # the refinement's parabola vertex divides score differences by (curvature x lattice spacing): the two
@@ -381,8 +386,7 @@ def test_stream_tracker_numpy_fallback_and_reset(monkeypatch):
     for k, f in enumerate(frames):
         if k < 40:
             with monkeypatch.context() as mp:
-                mp.setattr(PL, "_kernel", lambda: None)
-                mp.setattr(PT, "_kernel", lambda: None)
+                _numpy_phase_kernels(mp)
                 p = st2.update(f)
         else:
             p = st2.update(f)

@@ -386,23 +386,27 @@ def stream_models(synthetic, fitted):
 
 # Stream vs batch (issue 12): both phases are the same local maximum of the log posterior reached by the same
 # last step (interprim.phase.likelihood._finish), so they differ by O(c e^2 / k) ~ 1e-8 of the movement plus the
-# scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  Bounds (issue 20,
-# tightened from issue 12's 1e-3): phase within 1e-5 of the movement, trajectories within 1e-4 relative (measured
-# worst: 5e-5 with the forcing observation a few frames in, 1.5e-5 at the benchmark's size, ~1e-6 typically).
-PHASE_TOL = 1e-5
-TRAJ_TOL = 1e-4
+# scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  Bounds per variant
+# (phase of the movement, trajectories and response relative), about twice to ten times the worst measured
+# (issue 20; measured phase / trajectory / response): default 1.6e-7 / 5.9e-7 / 4.8e-7, smooth 2.7e-7 / 1.4e-6 /
+# 1.1e-6, pca 2.2e-7 / 1.2e-6 / 1.2e-6, forcing 5.6e-6 / 4.8e-5 / 5.6e-5 (the forcing observation a few frames
+# in: its log posterior is steep, so score rounding moves the vertex most), benchmark size 1.4e-6 / 1.5e-5 /
+# 1.6e-5.  The prediction contract asserts 1e-5 for every model (tests/test_contract.py).
+STREAM_TOL = {"default": (2e-6, 1e-5), "smooth": (2e-6, 1e-5), "pca": (2e-6, 1e-5), "forcing": (1e-5, 1e-4),
+              "benchmark": (5e-6, 5e-5)}
 
 
-def _compare_stream_batch(p, q, where):
-    """``p`` (stream) vs ``q`` (``predict`` on the same frames): phase and trajectories; returns the differences."""
+def _compare_stream_batch(p, q, where, tol):
+    """``p`` (stream) vs ``q`` (``predict`` on the same frames): phase and trajectories within ``tol`` (phase,
+    relative trajectory); returns the differences."""
     assert p.n_observed == q.n_observed, where
     d_s = abs(p.normalised_time - q.normalised_time)
-    assert d_s <= PHASE_TOL, (where, "phase", d_s)
+    assert d_s <= tol[0], (where, "phase", d_s)
     out = {"phase": d_s}
     for name, a, b in [("trajectory", p.trajectory(50), q.trajectory(50)),
                        ("response", p.response(100)[1], q.response(100)[1])]:
         d = float(np.abs(a - b).max() / (np.abs(b).max() + 1e-300))
-        assert d <= TRAJ_TOL, (where, name, d)
+        assert d <= tol[1], (where, name, d)
         out[name] = d
     return out
 
@@ -425,7 +429,7 @@ def test_stream_equals_predict_at_every_frame(synthetic, stream_models, variant)
             if i < 2 or (i % 4 and not need_cov):
                 continue
             q = m.predict(d[: i + 1, :2], robot_state=rs)  # reset(None) keeps the stream's
-            for key, v in _compare_stream_batch(p, q, (variant, k, i)).items():
+            for key, v in _compare_stream_batch(p, q, (variant, k, i), STREAM_TOL[variant]).items():
                 worst[key] = max(worst.get(key, 0.0), v)
             if need_cov:
                 sc = np.abs(q.posterior_cov).max()
@@ -449,6 +453,6 @@ def test_stream_equals_predict_at_benchmark_size():
     for i, f in enumerate(test[:, :7]):
         p = a.update(f)
         if i >= 2 and i % 10 == 0:
-            for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i).items():
+            for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i, STREAM_TOL["benchmark"]).items():
                 worst[key] = max(worst.get(key, 0.0), v)
     print(worst)

@@ -1,7 +1,9 @@
 """The one loader of the compiled kernels (:mod:`interprim._compiled`).
 
 Every compiled kernel has a plain numpy equivalent that gives the same
-numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``;
+numbers (bitwise for DTW, to ~1e-13 for the rest; both are listed side by side in
+:mod:`interprim._compiled.registry`, which callers ask for a kernel, and are compared
+in ``tests/test_kernels_equivalence.py``;
 a whole fit + predict + stream agrees to ~2e-8 relative, the conditioning
 floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
 which one runs:

@@ -433,7 +433,9 @@ def test_stream_equals_predict_at_every_frame(synthetic, stream_models, variant)
                 worst[key] = max(worst.get(key, 0.0), v)
             if need_cov:
                 sc = np.abs(q.posterior_cov).max()
-                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=1e-2 * sc)
+                worst["cov"] = max(worst.get("cov", 0.0), float(np.abs(p.posterior_cov - q.posterior_cov).max() / sc))
+                # measured 3.5e-7 (default), 1.4e-7 (pca), 7.6e-8 (smooth), 6.0e-8 (forcing); was 1e-2
+                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=5e-6 * sc)
     print(variant, worst)
 
 

@@ -9,10 +9,11 @@ floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
 which one runs:
 
 * ``INTERPRIM_JIT=0``: numpy only;
-* ``INTERPRIM_JIT=1``: the compiled kernels from the first call on, compiled or
-  loaded from numba's on-disk cache in the calling thread (a fresh install
-  waits for the compilation once, ~15 s on 2 cores); one path for the whole
-  process;
+* ``INTERPRIM_JIT=1``: the compiled kernels from the first call on, loaded from
+  numba's on-disk cache in the calling thread (a fresh install waits once for a
+  child process that compiles them into the cache, ~15 s on 2 cores: so every
+  process runs the cached machine code, see :func:`_fill_cache`); one path for
+  the whole process;
 * default (``auto``): if numba's cache holds every kernel (checked from its
   index files, without compiling), the kernels are loaded on the first call that
   needs one (~0.3-1 s), as with ``1``.  If it does not (a fresh install, an
@@ -92,9 +93,30 @@ def _compile_all():
     kp.warm_track(kp.track_step)
 
 
+def _fill_cache():
+    """With a cold cache, compile every kernel into numba's cache in a child process and wait for it.
+
+    The kernels are then loaded from the cache in this process, as in every later one: numba's freshly
+    compiled machine code and the code it writes to (and later loads from) its cache can differ in the last
+    bits of floating-point results (measured: the conditioning and phase-likelihood kernels, 3e-16 relative
+    per call, 1.8e-5 in the calibrated std after a fit's many phase searches).  So the first run after an
+    install gives the answers of every later run.  Without a child process (or if it fails) the kernels are
+    compiled here.
+    """
+    if cache_is_warm():
+        return
+    try:
+        subprocess.run(_child_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL, check=False)
+    except OSError:
+        pass
+
+
 def _load():
     global _READY, _ERROR
     try:
+        if not _PENDING:  # (a background compilation has filled the cache already)
+            _fill_cache()
         _compile_all()  # every kernel of the registry: one loader, one decision for all kernels
         ok = True
     except BaseException as exc:  # numba missing or broken: numpy for the whole process

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim._compiled import loader
+from interprim._compiled import loader, registry
 from interprim.synthetic import two_agent_demos
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -53,13 +53,14 @@ def _compare(a, b):
         _close(a[k], b[k], k)
 
 
-def test_numpy_path_equals_compiled_path(monkeypatch):
+def test_numpy_path_equals_compiled_path():
     """The whole public workflow on the numpy equivalents (what a cold first run computes) equals the
     compiled one."""
     assert loader.warmup()
-    compiled = _workload()
-    monkeypatch.setattr(loader, "_READY", False)
-    numpy_path = _workload()
+    with registry.forced("compiled"):
+        compiled = _workload()
+    with registry.forced("numpy"):
+        numpy_path = _workload()
     _compare(numpy_path, compiled)
 
 

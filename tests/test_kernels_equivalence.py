@@ -280,12 +280,15 @@ def check_phase_likelihood_track_step(models, demos):
     """The stream's lattice search, compiled (track_step) against numpy (the reference's scores of the same
     lattice), frame by frame: the phases and the predictions."""
     m = models["likelihood"]
-    frames = _prefix(demos, 60)
+    moving = _prefix(demos, 60)
+    held = np.concatenate([np.repeat(moving[:1], 12, 0), moving[:30]])  # held still first: candidates below s_min
     out = {}
     for which in ("compiled", "numpy"):
         with registry.forced(which):
             st = m.stream()
-            out[which] = [(p.phase, p.trajectory(20)) for p in (st.update(f) for f in frames)]
+            out[which] = [(p.phase, p.trajectory(20)) for p in (st.update(f) for f in moving)]
+            st.reset()
+            out[which] += [(p.phase, p.trajectory(20)) for p in (st.update(f) for f in held)]
     worst = 0.0
     for (pc, tc), (pn, tn) in zip(out["compiled"], out["numpy"]):
         worst = max(worst, abs(pc - pn), rel(tc, tn))

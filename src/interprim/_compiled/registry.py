@@ -163,7 +163,8 @@ def forced(which: str):
 
 def kernel(name: str):
     """The compiled kernel ``name`` if the compiled kernels are in use now (:func:`loader.ready`), else ``None``."""
-    if in_use():
+    forced_path = _FORCED[0]
+    if loader.ready() if forced_path is None else forced_path == "compiled":
         fn = _RESOLVED.get(name)
         return fn if fn is not None else compiled(name)
     _spec(name)

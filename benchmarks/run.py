@@ -246,7 +246,7 @@ def bench_likelihood_phase(quick):
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")
-    loader.phase_kernel()
+    loader.warmup()
     partial = test[:250, :7]
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1

@@ -3,7 +3,8 @@
 # browser test when running as root on Debian), then pytest.
 #   bash scripts/test.sh          everything (what CI runs)
 #   bash scripts/test.sh --fast   without the tests marked slow (subprocesses, builds, whole pipelines)
-# Other arguments go to pytest.
+# Both first run the kernel-equivalence tests with NUMBA_DISABLE_JIT=1 (the kernels' bodies as Python).
+# Other arguments go to pytest (and then only that pytest run happens).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fast=0
@@ -17,6 +18,11 @@ if [ "$fast" = 0 ] && ! command -v chromium >/dev/null 2>&1 && [ "$(id -u)" = "0
     || echo "warning: could not install chromium; the browser test will be skipped" >&2
 fi
 export MPLBACKEND=Agg
+if [ "${#args[@]}" = 0 ]; then
+  # The compiled kernels' bodies run as Python (with NUMBA_DISABLE_JIT numba's njit returns the plain function)
+  # against their numpy references, so the kernel code itself is covered; about half a minute.
+  NUMBA_DISABLE_JIT=1 .venv/bin/python -m pytest -q tests/test_kernels_equivalence.py
+fi
 if [ "$fast" = 1 ]; then
   exec .venv/bin/python -m pytest -q -m "not slow" ${args[@]+"${args[@]}"}
 fi

@@ -101,8 +101,10 @@ def test_stream_equals_batch(name, fitted, demos):
         if k + 1 in (20, 45, 60):
             ref = model.predict(test[: k + 1, :2])
             scale = float(np.abs(ref.trajectory(30)).max())
-            np.testing.assert_allclose(p.trajectory(30), ref.trajectory(30), rtol=0, atol=1e-5 * scale)
-            assert p.normalised_time == pytest.approx(ref.normalised_time, abs=1e-5, nan_ok=True)
+            # measured: 0.0 (bitwise) for every model but ip-likelihood (trajectory 2.9e-9, phase 7.7e-10: the
+            # stream's lattice search and the batch search end with the same parabolic step, ~1e-8 apart at most)
+            np.testing.assert_allclose(p.trajectory(30), ref.trajectory(30), rtol=0, atol=1e-6 * scale)
+            assert p.normalised_time == pytest.approx(ref.normalised_time, abs=1e-6, nan_ok=True)
     assert st.n_frames == 60
     st.reset()
     assert st.n_frames == 0

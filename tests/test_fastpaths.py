@@ -7,7 +7,7 @@ import pytest
 from scipy.linalg import expm
 
 import interprim as ip
-from interprim._compiled import loader
+from interprim._compiled import loader, registry
 from interprim._compiled.observation import StatsWorkspace, start_position
 from interprim.basis import Basis
 from interprim.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
@@ -336,17 +336,20 @@ def test_stream_fast_path_equals_reference_path(synthetic, config, request):
             np.testing.assert_allclose(p.response(100)[1], p._response_reference(100)[1], rtol=1e-10, atol=1e-12)
 
 
-def test_numpy_fallback_predict_equals_compiled(fitted, synthetic, monkeypatch):
+def test_numpy_fallback_predict_equals_compiled(fitted, synthetic):
     """Before the kernels are loaded (fresh process) predictions come from numpy: same numbers."""
     _, test = synthetic
     z = test[2][:90, :2]
-    a = fitted.predict(z)
-    monkeypatch.setattr(loader, "_READY", False)
-    b = fitted.predict(z)
+    with registry.forced("compiled"):
+        a = fitted.predict(z)
+        ra = a.response(50)[1]
+    with registry.forced("numpy"):
+        b = fitted.predict(z)
+        rb = b.response(50)[1]
     assert a.n_star == b.n_star
     np.testing.assert_allclose(a.posterior_mean, b.posterior_mean, atol=1e-8 * np.abs(a.posterior_mean).max())
     assert a.log_likelihood == pytest.approx(b.log_likelihood, rel=1e-8)
-    np.testing.assert_allclose(a.response(50)[1], b.response(50)[1], atol=1e-8 * np.abs(a.response(50)[1]).max())
+    np.testing.assert_allclose(ra, rb, atol=1e-8 * np.abs(ra).max())
 
 
 @pytest.mark.parametrize("config", CONFIGS)
@@ -386,23 +389,27 @@ def stream_models(synthetic, fitted):
 
 # Stream vs batch (issue 12): both phases are the same local maximum of the log posterior reached by the same
 # last step (interprim.phase.likelihood._finish), so they differ by O(c e^2 / k) ~ 1e-8 of the movement plus the
-# scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  Bounds (issue 20,
-# tightened from issue 12's 1e-3): phase within 1e-5 of the movement, trajectories within 1e-4 relative (measured
-# worst: 5e-5 with the forcing observation a few frames in, 1.5e-5 at the benchmark's size, ~1e-6 typically).
-PHASE_TOL = 1e-5
-TRAJ_TOL = 1e-4
+# scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  Bounds per variant
+# (phase of the movement, trajectories and response relative), about twice to ten times the worst measured
+# (issue 20; measured phase / trajectory / response): default 1.6e-7 / 5.9e-7 / 4.8e-7, smooth 2.7e-7 / 1.4e-6 /
+# 1.1e-6, pca 2.2e-7 / 1.2e-6 / 1.2e-6, forcing 5.6e-6 / 4.8e-5 / 5.6e-5 (the forcing observation a few frames
+# in: its log posterior is steep, so score rounding moves the vertex most), benchmark size 1.4e-6 / 1.5e-5 /
+# 1.6e-5.  The prediction contract asserts 1e-5 for every model (tests/test_contract.py).
+STREAM_TOL = {"default": (2e-6, 1e-5), "smooth": (2e-6, 1e-5), "pca": (2e-6, 1e-5), "forcing": (1e-5, 1e-4),
+              "benchmark": (5e-6, 5e-5)}
 
 
-def _compare_stream_batch(p, q, where):
-    """``p`` (stream) vs ``q`` (``predict`` on the same frames): phase and trajectories; returns the differences."""
+def _compare_stream_batch(p, q, where, tol):
+    """``p`` (stream) vs ``q`` (``predict`` on the same frames): phase and trajectories within ``tol`` (phase,
+    relative trajectory); returns the differences."""
     assert p.n_observed == q.n_observed, where
     d_s = abs(p.normalised_time - q.normalised_time)
-    assert d_s <= PHASE_TOL, (where, "phase", d_s)
+    assert d_s <= tol[0], (where, "phase", d_s)
     out = {"phase": d_s}
     for name, a, b in [("trajectory", p.trajectory(50), q.trajectory(50)),
                        ("response", p.response(100)[1], q.response(100)[1])]:
         d = float(np.abs(a - b).max() / (np.abs(b).max() + 1e-300))
-        assert d <= TRAJ_TOL, (where, name, d)
+        assert d <= tol[1], (where, name, d)
         out[name] = d
     return out
 
@@ -425,11 +432,13 @@ def test_stream_equals_predict_at_every_frame(synthetic, stream_models, variant)
             if i < 2 or (i % 4 and not need_cov):
                 continue
             q = m.predict(d[: i + 1, :2], robot_state=rs)  # reset(None) keeps the stream's
-            for key, v in _compare_stream_batch(p, q, (variant, k, i)).items():
+            for key, v in _compare_stream_batch(p, q, (variant, k, i), STREAM_TOL[variant]).items():
                 worst[key] = max(worst.get(key, 0.0), v)
             if need_cov:
                 sc = np.abs(q.posterior_cov).max()
-                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=1e-2 * sc)
+                worst["cov"] = max(worst.get("cov", 0.0), float(np.abs(p.posterior_cov - q.posterior_cov).max() / sc))
+                # measured 3.5e-7 (default), 1.4e-7 (pca), 7.6e-8 (smooth), 6.0e-8 (forcing); was 1e-2
+                np.testing.assert_allclose(p.posterior_cov, q.posterior_cov, rtol=0, atol=5e-6 * sc)
     print(variant, worst)
 
 
@@ -449,6 +458,6 @@ def test_stream_equals_predict_at_benchmark_size():
     for i, f in enumerate(test[:, :7]):
         p = a.update(f)
         if i >= 2 and i % 10 == 0:
-            for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i).items():
+            for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i, STREAM_TOL["benchmark"]).items():
                 worst[key] = max(worst.get(key, 0.0), v)
     print(worst)

@@ -417,8 +417,9 @@ class LowRankConditioner:
 
     def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
-        from ._compiled.conditioning import lowrank_condition_mean
+        from ._compiled import registry as kernels
 
+        lowrank_condition_mean = kernels.compiled("conditioning.lowrank_condition_mean")
         if out is None:
             out = np.empty(self.P)
         ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,

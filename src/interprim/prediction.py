@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ._blas import one_blas_thread
-from ._compiled import loader
+from ._compiled import registry as kernels
 from .contract import BasePrediction
 from .gaussian import Posterior, sample
 
@@ -225,9 +225,9 @@ class Prediction(BasePrediction):
             Seconds from now, at the partner's estimated speed.
         y : ndarray, shape (n, len(controlled_dofs))
         """
-        if not loader.ready():
+        kern = kernels.kernel("rollout.response_positions")
+        if kern is None:
             return self._response_reference(n, state)
-        kern = _RESPONSE[0] if _RESPONSE else _load_response()
         m = self._m
         n = int(n)
         n_o = m.n_observed_latent_
@@ -299,16 +299,6 @@ class Prediction(BasePrediction):
     def __repr__(self):
         return (f"Prediction(phase={self.phase:.3f}, speed={self.speed:.3f}, n_observed={self.n_observed}, "
                 f"log_likelihood={self.log_likelihood:.3g})")
-
-
-_RESPONSE: list = []
-
-
-def _load_response():
-    from ._compiled.rollout import response_positions
-
-    _RESPONSE.append(response_positions)
-    return response_positions
 
 
 class MeanRollout:

@@ -27,7 +27,7 @@ from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report, warn_representation
 from .errors import NotFittedError
 from .input_range import fit_input_range, input_distance, mark
-from ._compiled import loader
+from ._compiled import registry as kernels
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
 from .phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
@@ -404,12 +404,11 @@ class InteractionPrimitive(Predictor):
             Zg = self._to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
             # DMP parameters (Eq. 3-4), normalised time s in [0, 1]; derivatives along time (axis 1)
             rdofs = slice(0, n_o) if want_resid else slice(0, 0)
-            if self.smoothing_window is None and loader.ready():  # one compiled pass: derivatives + Eq. 3
-                from ._compiled.observation import forcing_targets_batch
-
+            ftb = kernels.kernel("observation.forcing_targets_batch") if self.smoothing_window is None else None
+            if ftb is not None:  # one compiled pass: derivatives + Eq. 3
                 F = np.empty_like(Zg)
                 yd0 = np.empty((len(idx), Zg.shape[2]))
-                forcing_targets_batch(Zg, 1.0 / (T - 1), float(self.alpha_y), beta_y, np.empty(Zg.shape[1:]), F, yd0)
+                ftb(Zg, 1.0 / (T - 1), float(self.alpha_y), beta_y, np.empty(Zg.shape[1:]), F, yd0)
                 th, r = fit_weights_targets(F, Zg[:, -1, :], self.basis_, resid_dofs=rdofs)
                 y0 = Zg[:, 0, :]
             else:
@@ -775,7 +774,7 @@ class InteractionPrimitive(Predictor):
         give the same numbers (tested to 1e-12).
         """
         M = z.shape[0]
-        if M >= 3 and loader.ready():
+        if M >= 3 and kernels.in_use():
             from ._compiled.observation import StatsWorkspace, start_position
 
             if self.observation == "position":
@@ -809,7 +808,7 @@ class InteractionPrimitive(Predictor):
         G, B, yy, n = stats
         cond = self._conditioner()
         if cond is not None:
-            res = cond.mean_compiled(G, B, self.sigma2_, yy, n) if loader.ready() else \
+            res = cond.mean_compiled(G, B, self.sigma2_, yy, n) if kernels.in_use() else \
                 cond.mean_numpy(G, B, self.sigma2_, yy, n)
             if res is not None:
                 cov = cond.cov(G, self.sigma2_) if need_cov else None

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._blas import one_blas_thread
-from ._compiled import loader
+from ._compiled import registry as kernels
 from .contract import BaseStream
 from ._validation import as_2d_finite, as_frame
 from .input_range import mark
@@ -46,7 +46,7 @@ class Stream(BaseStream):
         self._buf = np.empty((cap, model.n_observed_latent_))
         # the compiled per-frame step when the kernels are in use (see interprim._compiled.loader)
         self._ws = None
-        if loader.ready():
+        if kernels.in_use():
             from ._compiled.observation import StatsWorkspace
 
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model.params_per_dof_, model.observation)

@@ -127,26 +127,6 @@ def _forward_rows(L, U, W):
 
 
 @njit(cache=True, fastmath=_FM)
-def _backward_rows(R, W, M):
-    """``M = R^{-1} W`` for an upper factor ``R`` (q, q, rows) and ``W`` (q, r); row updates vectorised over r."""
-    q, r = W.shape
-    for a in range(q - 1, -1, -1):
-        Ma = M[a]
-        Wa = W[a]
-        Ra = R[a]
-        for c in range(r):
-            Ma[c] = Wa[c]
-        for b in range(a + 1, q):
-            rab = Ra[b]
-            Mb = M[b]
-            for c in range(r):
-                Ma[c] -= rab * Mb[c]
-        inv = 1.0 / Ra[a]
-        for c in range(r):
-            Ma[c] *= inv
-
-
-@njit(cache=True, fastmath=_FM)
 def _syrk_sub(W, s2, K):
     """``K -= s2 W^T W`` on the lower triangle of ``K`` (all that :func:`_chol_inplace` reads) for ``W`` (q, r),
     four rows of ``W`` per sweep over ``K``."""

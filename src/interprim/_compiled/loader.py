@@ -1,16 +1,19 @@
 """The one loader of the compiled kernels (:mod:`interprim._compiled`).
 
 Every compiled kernel has a plain numpy equivalent that gives the same
-numbers (bitwise for DTW, to ~1e-13 for the rest; ``tests/test_fastpaths.py``;
+numbers (bitwise for DTW, to ~1e-13 for the rest; both are listed side by side in
+:mod:`interprim._compiled.registry`, which callers ask for a kernel, and are compared
+in ``tests/test_kernels_equivalence.py``;
 a whole fit + predict + stream agrees to ~2e-8 relative, the conditioning
 floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
 which one runs:
 
 * ``INTERPRIM_JIT=0``: numpy only;
-* ``INTERPRIM_JIT=1``: the compiled kernels from the first call on, compiled or
-  loaded from numba's on-disk cache in the calling thread (a fresh install
-  waits for the compilation once, ~15 s on 2 cores); one path for the whole
-  process;
+* ``INTERPRIM_JIT=1``: the compiled kernels from the first call on, loaded from
+  numba's on-disk cache in the calling thread (a fresh install waits once for a
+  child process that compiles them into the cache, ~15 s on 2 cores: so every
+  process runs the cached machine code, see :func:`_fill_cache`); one path for
+  the whole process;
 * default (``auto``): if numba's cache holds every kernel (checked from its
   index files, without compiling), the kernels are loaded on the first call that
   needs one (~0.3-1 s), as with ``1``.  If it does not (a fresh install, an
@@ -47,15 +50,6 @@ _ERROR: BaseException | None = None
 _PENDING = False  # auto mode, cold cache: numpy now, the compiled kernels once _LOADED
 _LOADED = threading.Event()  # the kernels are loaded in this process (set by _load on success or failure)
 
-#: the kernels called from Python (``module``, ``name``): loaded by :func:`_compile_all` and
-#: :func:`_load_phase_kernels`; the cache is warm when numba's index has an entry for each
-ENTRY_KERNELS = (("dtw", "_open_end_strips"), ("dtw", "_incremental_step"), ("dtw", "_accumulate"),
-                 ("dtw", "_backtrack"), ("observation", "forcing_values_into"), ("observation", "design_stats"),
-                 ("observation", "position_stats"), ("observation", "forcing_targets_batch"),
-                 ("conditioning", "lowrank_condition_mean"), ("rollout", "response_positions"),
-                 ("phase_likelihood", "phase_loglik_batch"), ("phase_likelihood", "track_step"))
-
-
 def _mode() -> str:
     return os.environ.get("INTERPRIM_JIT", "auto").strip().lower()
 
@@ -65,6 +59,7 @@ def _compile_all():
     from . import conditioning as k
     from . import dtw as dk
     from . import observation as ko
+    from . import phase_likelihood as kp
     from . import rollout as kr
 
     rng = np.random.default_rng(0)
@@ -94,13 +89,35 @@ def _compile_all():
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))
     Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
     ko.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
+    kp.warm_batch(kp.phase_loglik_batch)
+    kp.warm_track(kp.track_step)
+
+
+def _fill_cache():
+    """With a cold cache, compile every kernel into numba's cache in a child process and wait for it.
+
+    The kernels are then loaded from the cache in this process, as in every later one: numba's freshly
+    compiled machine code and the code it writes to (and later loads from) its cache can differ in the last
+    bits of floating-point results (measured: the conditioning and phase-likelihood kernels, 3e-16 relative
+    per call, 1.8e-5 in the calibrated std after a fit's many phase searches).  So the first run after an
+    install gives the answers of every later run.  Without a child process (or if it fails) the kernels are
+    compiled here.
+    """
+    if cache_is_warm():
+        return
+    try:
+        subprocess.run(_child_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL, check=False)
+    except OSError:
+        pass
 
 
 def _load():
     global _READY, _ERROR
     try:
-        _compile_all()
-        _load_phase_kernels()  # the likelihood phase's kernels: one loader, one decision for all kernels
+        if not _PENDING:  # (a background compilation has filled the cache already)
+            _fill_cache()
+        _compile_all()  # every kernel of the registry: one loader, one decision for all kernels
         ok = True
     except BaseException as exc:  # numba missing or broken: numpy for the whole process
         _ERROR = exc
@@ -122,16 +139,17 @@ def _strict() -> bool:
 
 
 def cache_is_warm() -> bool:
-    """Whether numba's on-disk cache holds a current entry for every kernel of :data:`ENTRY_KERNELS`.
+    """Whether numba's on-disk cache holds a current entry for every kernel of the registry
+    (:data:`interprim._compiled.registry.KERNELS`).
 
     Reads the cache index files (numba checks their source stamps), compiles nothing.  If numba's cache
     layout cannot be read, answers True (the kernels are then loaded, or compiled, in the calling thread).
     """
     try:
-        import importlib
+        from .registry import KERNELS, compiled
 
-        for mod, name in ENTRY_KERNELS:
-            disp = getattr(importlib.import_module(f"{__package__}.{mod}"), name)
+        for name in KERNELS:
+            disp = compiled(name)
             if not disp._cache._cache_file._load_index():
                 return False
         return True
@@ -164,7 +182,6 @@ def _compile_main() -> int:
     """Entry point of the background compilation: compile every kernel into numba's cache."""
     try:
         _compile_all()
-        _load_phase_kernels()
     except BaseException:  # noqa: BLE001 -- the parent finds out when it loads
         return 1
     return 0
@@ -281,29 +298,6 @@ def warmup() -> bool:
         _LOADED.wait()
         return _switch()
     return bool(_READY)
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# the likelihood phase's kernels (interprim._compiled.phase_likelihood), loaded by _load with the others
-
-_PHASE_KERNELS: list = []  # [phase_loglik_batch, track_step] once loaded
-
-
-def _load_phase_kernels():
-    """Compile (or load from numba's cache) the phase kernels; raises if they cannot be compiled."""
-    if _PHASE_KERNELS:
-        return
-    from .phase_likelihood import phase_loglik_batch, track_step, warm_batch, warm_track
-
-    warm_batch(phase_loglik_batch)
-    warm_track(track_step)
-    _PHASE_KERNELS.extend([phase_loglik_batch, track_step])
-
-
-def phase_kernel():
-    """The compiled batch kernel of the likelihood phase, or ``None`` on the numpy path (:func:`ready` decides,
-    once per process; the first use waits for the kernels)."""
-    return _PHASE_KERNELS[0] if ready() else None
 
 
 if __name__ == "__main__":  # the background compilation (see _child_command)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._compiled import loader
+from .._compiled import registry as kernels
 from .._validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
@@ -98,21 +98,16 @@ def _backtrack_np(Dm, n_end):
 
 
 def _accumulate(u, v):
-    if loader.ready():
-        from .._compiled.dtw import _accumulate as k
-
-        return k(u, v)
-    return _accumulate_np(u, v)
+    return kernels.implementation("dtw.accumulate")(u, v)
 
 
 def _open_end(u, v):
     """n* and D(n*, M) without storing the matrix (two columns of memory when compiled)."""
-    if loader.ready():
-        from .._compiled.dtw import _open_end_strips
-
+    k = kernels.kernel("dtw.open_end")
+    if k is not None:
         N = u.shape[0]
         uT = np.ascontiguousarray(u.T)
-        n, c = _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
+        n, c = k(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
         return int(n), float(c)
     Dm = _accumulate_np(u, v)
     n = _argmin_first_np(Dm[-1])
@@ -124,11 +119,7 @@ def _argmin_first(col):
 
 
 def _backtrack(Dm, n_end):
-    if loader.ready():
-        from .._compiled.dtw import _backtrack as k
-
-        return k(Dm, n_end)
-    return _backtrack_np(Dm, n_end)
+    return kernels.implementation("dtw.backtrack")(Dm, n_end)
 
 
 @dataclass(frozen=True)
@@ -192,16 +183,6 @@ def phase_from_index(n_star: int, N: int, alpha_x: float, tau: float = 1.0) -> f
     return float(np.exp(-alpha_x * ((n_star + 1) / N) * tau))
 
 
-_STEP: list = []
-
-
-def _load_step():
-    from .._compiled.dtw import _incremental_step
-
-    _STEP.append(_incremental_step)
-    return _incremental_step
-
-
 class IncrementalDTW:
     """Open-end DTW that takes one query frame at a time (``O(N D)`` per frame).
 
@@ -234,7 +215,7 @@ class IncrementalDTW:
     def update(self, frame, check: bool = True):
         """Add one query frame; returns ``(n_star, cost)``."""
         D = self.reference.shape[1]
-        step = _STEP[0] if _STEP else (_load_step() if loader.ready() else None)
+        step = kernels.kernel("dtw.incremental_step")
         fast_in = (step is not None and type(frame) is np.ndarray and frame.dtype == np.float64
                    and frame.shape == (D,))
         v = frame if (fast_in or not check) else as_frame(frame, "frame", D)

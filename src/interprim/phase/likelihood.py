@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._blas import single_thread
-from .._compiled.loader import phase_kernel as _kernel
+from .._compiled import registry as kernels
 from ..dmp import forcing_values
 from ..gaussian import _LOG2PI, LowRankPrior, condition, lowrank_case
 from ..preprocessing import derivatives
@@ -208,7 +208,7 @@ class _FastState:
         z = np.ascontiguousarray(z, dtype=np.float64)
         M = z.shape[0]
         Rg = self.mean_path(z[0])
-        kern = _kernel()
+        kern = kernels.kernel("phase_likelihood.phase_loglik_batch")
         if kern is not None:
             return kern(self.Zh, Rg, z, M, np.ascontiguousarray(s_values, dtype=np.float64), self.sq, self.Uh,
                         self.K0, float(s2), np.empty(s_values.shape[0]))
@@ -345,7 +345,7 @@ class _scorer:
         if self.dense:
             ll = np.array([_phase_log_likelihood_reference(self.model, self.z, s, self.s2) for s in s_values])
         else:
-            kern = _kernel()
+            kern = kernels.kernel("phase_likelihood.phase_loglik_batch")
             fs = self.fs
             if kern is not None:
                 ll = kern(fs.Zh, self.Rg, self.z, self.M, s_values, fs.sq, fs.Uh, fs.K0, self.s2,

@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._blas import single_thread
-from .._compiled.loader import _PHASE_KERNELS as _KERNEL
-from .._compiled.loader import phase_kernel as _kernel
+from .._compiled import registry as kernels
 from .likelihood import _S_MIN, _bounds, _finish, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
 
 __all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
@@ -125,7 +124,7 @@ class _Tracker:
         M = z.shape[0]
         model = self.model
         fs = _fast_state(model)
-        kern = _KERNEL[1] if (fs is not None and _kernel() is not None) else None
+        kern = kernels.kernel("phase_likelihood.track_step") if fs is not None else None
         s2 = phase_noise(model)
         if kern is None:
             if self._buf is not None:  # the slots are not kept up to date here

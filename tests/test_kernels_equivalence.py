@@ -1,0 +1,356 @@
+"""Every compiled kernel equals its numpy reference, in one process (interprim._compiled.registry).
+
+Each test asks the registry for both implementations explicitly (``implementation(name, "compiled")`` /
+``"numpy"``, or the ``forced`` path for the kernels whose reference is a whole numpy path) and compares them
+on the same inputs, with tolerances set from the measured differences (``MEASURED``).
+
+CI also runs this file with ``NUMBA_DISABLE_JIT=1`` (``scripts/test.sh``): numba's ``njit`` then returns the
+Python function, so the "compiled" side is each kernel's body run as Python and the kernel bodies are covered.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import types
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim._compiled import registry
+from interprim.dmp import forcing_targets
+from interprim.gaussian import LowRankConditioner
+from interprim.phase import likelihood as PL
+from interprim.phase.dtw import IncrementalDTW
+from interprim.preprocessing import derivatives
+from interprim.synthetic import two_agent_demos
+
+JIT_DISABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
+
+# Largest difference measured between the two implementations on this file's inputs (relative to the largest
+# magnitude of the reference; 0 = bitwise), with the compiled kernels and with NUMBA_DISABLE_JIT=1 (the bodies as
+# Python, no fastmath), and the tolerance asserted: about ten times the larger figure (summation order depends on
+# the CPU's vector width under fastmath's reassociation, the references' LAPACK on the BLAS build), bitwise for
+# the DTW kernels, which are written to perform the same operations in the same order.
+#   name: (compiled, as Python, tolerance)
+MEASURED = {
+    "dtw.accumulate": (0.0, 0.0, 0.0),
+    "dtw.open_end": (0.0, 0.0, 0.0),
+    "dtw.backtrack": (0.0, 0.0, 0.0),
+    "dtw.incremental_step": (0.0, 0.0, 0.0),
+    "observation.forcing_values_into": (9.0e-15, 0.0, 1e-13),
+    "observation.design_stats": (1.9e-16, 1.9e-16, 1e-14),
+    "observation.position_stats": (3.7e-15, 4.8e-16, 1e-13),
+    "observation.forcing_targets_batch": (1.4e-15, 0.0, 1e-13),
+    "conditioning.lowrank_condition_mean": (2.6e-11, 3.1e-10, 3e-9),  # sigma2 = 1e-3: condition number ~1e6
+    "rollout.response_positions": (2.3e-15, 8.6e-16, 1e-13),
+    "phase_likelihood.phase_loglik_batch": (1.9e-13, 1.5e-13, 2e-12),
+    # whole stream (phase + trajectory per frame); the phase ends with a parabolic step through the best three
+    # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/test_fastpaths.py)
+    "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
+}
+TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
+
+
+def rel(a, b) -> float:
+    """Largest absolute difference relative to the largest magnitude of ``b`` (0 when both are 0)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    assert a.shape == b.shape
+    scale = float(np.abs(b).max()) if b.size else 0.0
+    d = float(np.abs(a - b).max()) if b.size else 0.0
+    return d / scale if scale > 0 else d
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return two_agent_demos(8, seed=0, frames=80), two_agent_demos(2, seed=5, frames=80)
+
+
+@pytest.fixture(scope="module")
+def models(demos):
+    train, _ = demos
+    common = dict(observed_dofs=[0, 1], n_basis=8, sigma2=1e-3)
+    return {
+        "position": ip.InteractionPrimitive(**common, phase_method="dtw").fit(train, dt=0.01),
+        "smooth_pca": ip.InteractionPrimitive(**common, phase_method="dtw", smoothing_window=11,
+                                              pca_components=(2, 2)).fit(train, dt=0.01),
+        "forcing": ip.InteractionPrimitive(**common, observation="forcing", phase_method="dtw").fit(train, dt=0.01),
+        "likelihood": ip.InteractionPrimitive(**common, phase_method="likelihood").fit(train, dt=0.01),
+    }
+
+
+def both(name):
+    return registry.implementation(name, "compiled"), registry.implementation(name, "numpy")
+
+
+# ----------------------------------------------------------------------------------------------- DTW (Eq. 5-8)
+
+SHAPES = ((1, 1, 1), (7, 3, 2), (40, 13, 3), (33, 9, 10))
+
+
+def check_dtw_accumulate():
+    comp, ref = both("dtw.accumulate")
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for N, M, D in SHAPES:
+        u, v = rng.normal(size=(N, D)), rng.normal(size=(M, D))
+        worst = max(worst, rel(comp(u, v), ref(u, v)))
+    return worst
+
+
+def check_dtw_open_end():
+    comp, acc = both("dtw.open_end")
+    rng = np.random.default_rng(6)
+    worst = 0.0
+    for N, M, D in SHAPES + ((25, 4, 2), (25, 5, 2), (25, 8, 2)):  # the 4-column sweeps and the remainder
+        u, v = rng.normal(size=(N, D)), rng.normal(size=(M, D))
+        n, c = comp(np.ascontiguousarray(u.T), v, np.empty(N), np.empty(N), np.empty((4, N)))
+        last = acc(u, v)[-1]
+        n_ref = int(np.argmin(last))  # the first minimum, as Eq. 8 is implemented
+        assert int(n) == n_ref
+        worst = max(worst, rel(c, last[n_ref]))
+    return worst
+
+
+def check_dtw_backtrack():
+    comp, ref = both("dtw.backtrack")
+    acc = registry.implementation("dtw.accumulate", "numpy")
+    rng = np.random.default_rng(7)
+    for N, M, D in SHAPES:
+        Dm = acc(rng.normal(size=(N, D)), rng.normal(size=(M, D)))
+        for n_end in {0, N // 2, N - 1}:
+            np.testing.assert_array_equal(comp(Dm, n_end), ref(Dm, n_end))
+    return 0.0
+
+
+def check_dtw_incremental_step():
+    comp, step_np = both("dtw.incremental_step")
+    rng = np.random.default_rng(8)
+    worst = 0.0
+    for N, M, D in SHAPES:
+        u, v = rng.normal(size=(N, D)), rng.normal(size=(M, D))
+        uT = np.ascontiguousarray(u.T)
+        prev, col, cost = np.empty(N), np.empty(N), np.empty(N)
+        inc = IncrementalDTW(u)  # the reference keeps its columns on the object
+        for m in range(M):
+            first = m == 0
+            if not first:
+                prev, col = col, prev
+                inc._prev, inc._col = inc._col, inc._prev
+            n = comp(uT, v[m], prev, col, cost, first)
+            n_ref = step_np(inc, v[m], first)
+            assert int(n) == int(n_ref)
+            worst = max(worst, rel(col, inc._col))
+        bad = v[0].copy()
+        bad[-1] = np.nan
+        keep = col.copy()
+        assert comp(uT, bad, col, prev, cost, False) == -1  # a non-finite frame touches nothing
+        np.testing.assert_array_equal(col, keep)
+    return worst
+
+
+# ----------------------------------------------------------------------------------- observation (Eq. 3, 13-15)
+
+PREFIXES = ((3, 0.01), (4, 0.3), (40, 0.5), (70, 1.0))
+
+
+def _prefix(demos, M):
+    _, test = demos
+    d = np.concatenate([test[0], test[1]])
+    return np.ascontiguousarray(d[:M, :2])
+
+
+def check_observation_forcing_values_into(models, demos):
+    comp, obs = both("observation.forcing_values_into")
+    m = models["forcing"]
+    worst = 0.0
+    for M, s_end in PREFIXES:
+        z = _prefix(demos, M)
+        YT = np.empty((2, M + 2))
+        const = comp(z, M, s_end, float(m.alpha_y), float(m.beta_y_), np.empty((M + 1, 2)), np.empty((M + 1, 2)), YT)
+        _, Y, _ = obs(m, z, s_end)
+        assert const == pytest.approx(m.alpha_y * m.beta_y_, rel=1e-15)
+        worst = max(worst, rel(YT[:, :M].T, Y))
+    return worst
+
+
+def check_observation_design_stats(models, demos):
+    comp, obs = both("observation.design_stats")
+    m = models["forcing"]
+    basis = m.basis_
+    q = m.params_per_dof_
+    worst = 0.0
+    for M, s_end in PREFIXES:
+        z = _prefix(demos, M)
+        X, Y, _ = obs(m, z, s_end)
+        YT = np.ascontiguousarray(Y.T)
+        G, B = np.empty((q, q)), np.empty((q, 2))
+        yy = comp(YT, M, s_end, basis.centers, basis.widths, float(basis.alpha_x), float(m.alpha_y * m.beta_y_),
+                  np.empty((q, M)), G, B, np.empty((4, M)), np.empty(M, dtype=np.int64))
+        worst = max(worst, rel(G, X.T @ X), rel(B, X.T @ Y), rel(yy, np.sum(Y * Y)))
+    return worst
+
+
+def check_observation_position_stats(models, demos):
+    comp, obs = both("observation.position_stats")
+    worst = 0.0
+    for key in ("position", "smooth_pca"):
+        m = models[key]
+        q, n_o = m.params_per_dof_, m.n_observed_latent_
+        v0 = m.start_velocity_[:n_o]
+        ro = m.rollout_
+        for M, s_end in PREFIXES + ((65, 0.6), (130, 0.9)):  # one block of 64 frames, two, three
+            z = np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M)) + 0.3)  # y0 matters
+            X, Y, y0 = obs(m, z, s_end)
+            G, B = np.empty((q, q)), np.empty((q, n_o))
+            yy = comp(z, M, s_end, y0, v0, ro.Z, ro.powers, G, B, np.empty((q, 64)), np.empty((n_o, 64)))
+            worst = max(worst, rel(G, X.T @ X), rel(B, X.T @ Y), rel(yy, np.sum(Y * Y)))
+    return worst
+
+
+def check_observation_forcing_targets_batch():
+    comp, ref = both("observation.forcing_targets_batch")
+    rng = np.random.default_rng(2)
+    worst = 0.0
+    for n, T, D in ((1, 3, 1), (3, 50, 4)):
+        Z = np.cumsum(rng.normal(size=(n, T, D)), axis=1)
+        F, yd0 = np.empty_like(Z), np.empty((n, D))
+        comp(Z, 1 / (T - 1), 25.0, 6.25, np.empty((T, D)), F, yd0)
+        for k in range(n):
+            y, yd, ydd = derivatives(Z[k], 1 / (T - 1))
+            worst = max(worst, rel(F[k], ref(y, yd, ydd, y[-1], 25.0, 6.25)), rel(yd0[k], yd[0]))
+    return worst
+
+
+# ------------------------------------------------------------------------------------- Eq. 16-18 and the rollout
+
+def check_conditioning_lowrank_condition_mean(models, demos):
+    registry.implementation("conditioning.lowrank_condition_mean", "compiled")  # what mean_compiled runs
+    obs = registry.reference("observation.position_stats")
+    worst = 0.0
+    for key in ("position", "smooth_pca", "forcing"):
+        m = models[key]
+        cond = LowRankConditioner.from_prior(m.prior_, m.obs_index_, m.thetas_, float(m.ridge))
+        assert cond is not None
+        for M, s_end in PREFIXES:
+            X, Y, _ = obs(m, np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M))), s_end)
+            G, B, yy = X.T @ X, X.T @ Y, float(np.sum(Y * Y))
+            for s2 in (1e-3, 0.7):
+                (mc, llc), (mn, lln) = cond.mean_compiled(G, B, s2, yy, Y.size), cond.mean_numpy(G, B, s2, yy, Y.size)
+                worst = max(worst, rel(mc, mn), rel(llc, lln))
+    return worst
+
+
+def check_rollout_response_positions(models, demos):
+    worst = 0.0
+    for key in ("position", "smooth_pca"):
+        m = models[key]
+        for M in (1, 30, 70):
+            p = m.predict(_prefix(demos, M))
+            for state in (None, np.array([0.1, -0.2, 0.3]), np.array([[0.1, -0.2, 0.3], [1.0, 0.5, -2.0]])):
+                for n in (1, 2, 50):
+                    with registry.forced("compiled"):
+                        t1, y1 = p.response(n, state)
+                    with registry.forced("numpy"):
+                        t2, y2 = p.response(n, state)
+                    worst = max(worst, rel(t1, t2), rel(y1, y2))
+    return worst
+
+
+# ------------------------------------------------------------------------------------------ the likelihood phase
+
+def check_phase_likelihood_phase_loglik_batch(models, demos):
+    comp, ref = both("phase_likelihood.phase_loglik_batch")
+    m = models["likelihood"]
+    fs = PL._fast_state(m)
+    s2 = PL.phase_noise(m)
+    worst = 0.0
+    for M in (2, 5, 40, 70):
+        z = np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M)))
+        Rg = fs.mean_path(z[0])
+        s = np.linspace(0.05, 1.0, 7)
+        a = comp(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, s2, np.empty(s.size))
+        worst = max(worst, rel(a, ref(fs.Zh, Rg, z, s, fs.sq, fs.Uh, fs.K0, s2)))
+    return worst
+
+
+def check_phase_likelihood_track_step(models, demos):
+    """The stream's lattice search, compiled (track_step) against numpy (the reference's scores of the same
+    lattice), frame by frame: the phases and the predictions."""
+    m = models["likelihood"]
+    moving = _prefix(demos, 60)
+    held = np.concatenate([np.repeat(moving[:1], 12, 0), moving[:30]])  # held still first: candidates below s_min
+    out = {}
+    for which in ("compiled", "numpy"):
+        with registry.forced(which):
+            st = m.stream()
+            out[which] = [(p.phase, p.trajectory(20)) for p in (st.update(f) for f in moving)]
+            st.reset()
+            out[which] += [(p.phase, p.trajectory(20)) for p in (st.update(f) for f in held)]
+    worst = 0.0
+    for (pc, tc), (pn, tn) in zip(out["compiled"], out["numpy"]):
+        worst = max(worst, abs(pc - pn), rel(tc, tn))
+    return worst
+
+
+CHECKS = {
+    "dtw.accumulate": check_dtw_accumulate,
+    "dtw.open_end": check_dtw_open_end,
+    "dtw.backtrack": check_dtw_backtrack,
+    "dtw.incremental_step": check_dtw_incremental_step,
+    "observation.forcing_values_into": check_observation_forcing_values_into,
+    "observation.design_stats": check_observation_design_stats,
+    "observation.position_stats": check_observation_position_stats,
+    "observation.forcing_targets_batch": check_observation_forcing_targets_batch,
+    "conditioning.lowrank_condition_mean": check_conditioning_lowrank_condition_mean,
+    "rollout.response_positions": check_rollout_response_positions,
+    "phase_likelihood.phase_loglik_batch": check_phase_likelihood_phase_loglik_batch,
+    "phase_likelihood.track_step": check_phase_likelihood_track_step,
+}
+
+
+def run_check(name, request):
+    fn = CHECKS[name]
+    kwargs = {arg: request.getfixturevalue(arg) for arg in inspect.signature(fn).parameters}
+    return fn(**kwargs)
+
+
+@pytest.mark.parametrize("name", registry.names())
+def test_kernel_equals_numpy_reference(name, request):
+    worst = run_check(name, request)
+    print(f"measured {name}: {worst:.3g}")  # pytest -s shows the figures of MEASURED
+    assert worst <= TOL[name], f"{name}: compiled and numpy differ by {worst:.3g} (tolerance {TOL[name]:.3g})"
+
+
+def test_every_kernel_has_a_numpy_reference_and_an_equivalence_check():
+    assert set(CHECKS) == set(registry.names()) == set(TOL)
+    for name, spec in registry.KERNELS.items():
+        ref = registry.reference(name)
+        assert callable(ref), name
+        mod = importlib.import_module(spec.reference.split(":")[0])
+        src = inspect.getsource(mod)
+        assert "import numba" not in src and "from numba" not in src, f"{name}: the reference must not need numba"
+        comp = registry.compiled(name)
+        if JIT_DISABLED:  # the kernel's body as Python: what this file then covers
+            assert isinstance(comp, types.FunctionType), name
+        else:
+            assert hasattr(comp, "py_func"), name  # a numba dispatcher
+        if spec.drop_in:
+            assert inspect.signature(ref).parameters.keys() == inspect.signature(
+                getattr(comp, "py_func", comp)).parameters.keys(), name
+
+
+def test_the_registry_answers_by_name_and_path():
+    with registry.forced("numpy"):
+        assert registry.kernel("dtw.accumulate") is None and not registry.in_use()
+        assert registry.implementation("dtw.accumulate") is registry.reference("dtw.accumulate")
+    with registry.forced("compiled"):
+        assert registry.kernel("dtw.accumulate") is registry.compiled("dtw.accumulate")
+    with pytest.raises(KeyError, match="no compiled kernel named 'dtw.nope'"):
+        registry.kernel("dtw.nope")
+    with pytest.raises(ValueError, match="takes other arguments"):
+        registry.implementation("dtw.incremental_step")
+    with pytest.raises(ValueError, match="which must be"):
+        registry.implementation("dtw.accumulate", "fast")

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..contract import GridPrediction
 from .baselines import _Baseline
+from .protocol import observed_frames
 
 __all__ = ["KernelDemonstrations"]
 
@@ -177,7 +178,7 @@ class KernelDemonstrations(_Baseline):
         for i, a in enumerate(self.demos_):
             T = len(a)
             for f in (0.3, 0.5, 0.7):
-                k = max(3, int(round(f * T)))
+                k = observed_frames(T, f)
                 if k >= T:
                     continue
                 idx, n_star, cost = self._align(self.observed_[i][:k], exclude=i)

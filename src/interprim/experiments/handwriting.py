@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cv import folds
 from ..evaluation.protocol import observed_frames
 from ..preprocessing import time_normalise
 
@@ -99,10 +100,8 @@ def _rmse(pred, truth, mask=None):
 
 
 def _folds(n, n_folds, rng):
-    if n_folds is None or n_folds >= n:
-        return [np.array([i]) for i in range(n)]
-    perm = rng.permutation(n)
-    return [np.sort(f) for f in np.array_split(perm, n_folds)]
+    """Leave-one-out (``n_folds`` None or >= n) or a seeded ``"shuffled"`` split (:func:`interprim.cv.folds`)."""
+    return folds(n, n_folds, "shuffled", rng)
 
 
 def _resample_common(demos, times, dt):

@@ -61,6 +61,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
              ip_kwargs=None):
     """Phase errors (and real-time errors) of held-out demonstration ``j``; returns a dict of lists."""
     from interprim import InteractionPrimitive
+    from interprim.evaluation.protocol import observed_frames
     from interprim.phase.learned import LearnedPhase
 
     train = [d for i, d in enumerate(demos) if i != j]
@@ -77,7 +78,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
            "learned_method": lp.method_, "learned_features": list(lp.features_), "learned_std": [],
            "learned_time_ms": []}
     for p in FRACTIONS:
-        M = int(min(T, max(3, round(p * T))))
+        M = observed_frames(T, p)
         prefix = test[:M, obs]
         out["phase_true"].append((M - 1) / (T - 1))
         out["fractions"].append(p)

@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cv import folds, observed_frames
+from .preprocessing import interp_columns
 
 __all__ = ["Calibration", "fit_calibration", "fold_model"]
 
@@ -102,7 +103,7 @@ class Calibration:
         h = np.asarray(h, dtype=np.float64)
         if row.ndim == 1:
             return np.interp(h, self.lookaheads, row)  # held at the ends
-        return np.stack([np.interp(h, self.lookaheads, row[:, k]) for k in range(row.shape[1])], axis=-1)
+        return interp_columns(h, self.lookaheads, row)
 
     def factors(self, phase: float, lookahead=0.0):
         """``(c_observed, c_controlled)`` at an estimated phase and look-ahead(s) ``h`` (normalised time after
@@ -289,8 +290,8 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
                 b = np.clip(np.searchsorted(allEdges, h, side="left") - 1, 0, B - 1)  # (lo, hi] bins
                 Y = pred.trajectory(n)
                 Sd = pred.std(n, calibrated=False)
-                err = (np.stack([np.interp(u, grid, Y[:, c]) for c in range(D)], axis=1) - d[fut]) / spread
-                sd = np.stack([np.interp(u, grid, Sd[:, c]) for c in range(D)], axis=1) / spread
+                err = (interp_columns(u, grid, Y) - d[fut]) / spread
+                sd = interp_columns(u, grid, Sd) / spread
                 np.add.at(hsum[:, 0], b, h)
                 np.add.at(hsum[:, 1], b, 1.0)
                 np.add.at(sums[j, i, :, :, 0], b, err ** 2)

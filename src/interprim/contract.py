@@ -44,6 +44,7 @@ import numpy as np
 from ._blas import one_blas_thread
 from ._params import Params
 from ._validation import as_frame
+from .preprocessing import interp_columns
 from .errors import NotFittedError
 
 __all__ = ["BasePrediction", "GridPrediction", "Predictor", "PrefixStream"]
@@ -163,8 +164,7 @@ class GridPrediction(BasePrediction):
         self.out_of_range = False
 
     def _at(self, Y, s, cols=None):
-        cols = range(Y.shape[1]) if cols is None else cols
-        return np.stack([np.interp(s, self.times, Y[:, d]) for d in cols], axis=1)
+        return interp_columns(s, self.times, Y if cols is None else Y[:, list(cols)])
 
     def trajectory(self, n: int = 100) -> np.ndarray:
         """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)`` (linear interpolation)."""

@@ -179,7 +179,8 @@ def within_one_se(errors) -> np.ndarray:
     ndarray of bool, shape ``errors.shape[1:]``
         ``True`` for the best candidate (smallest mean error; the first on ties) and for every finite candidate
         ``c`` whose mean excess over the best, ``mean(errors[:, c] - errors[:, best])``, is at most the standard
-        error of those paired differences (:func:`paired_gain`; with a single case only the best).
+        error of those paired differences (:func:`paired_gain`; with a single case there is no standard error and
+        every finite candidate is within).
         The one-standard-error rule then picks the simplest or most conservative of them.
     """
     E = np.asarray(errors, dtype=np.float64)

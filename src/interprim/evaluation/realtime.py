@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..preprocessing import time_normalise
-from .nested import nested_choice_records, standard_error_ratio
 from ..cv import folds as cv_folds
+from ..preprocessing import interp_columns, time_normalise
+from .nested import nested_choice_records, standard_error_ratio
 from .protocol import Prefixes, observed_frames
 from .sweep import _point_rms
 
@@ -90,8 +90,7 @@ def mean_demo(demos, n: int = 201):
 
 def _interp_rows(u, grid, Y):
     """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
-    u = np.clip(u, 0.0, 1.0)
-    return np.stack([np.interp(u, grid, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+    return interp_columns(np.clip(u, 0.0, 1.0), grid, Y)
 
 
 def _timing(pred, k, dt, mean_dur_s):

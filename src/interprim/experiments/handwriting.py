@@ -40,7 +40,7 @@ import numpy as np
 
 from ..cv import folds
 from ..evaluation.protocol import observed_frames
-from ..preprocessing import time_normalise
+from ..preprocessing import resample_step, time_normalise
 
 __all__ = [
     "run_handwriting",
@@ -105,13 +105,7 @@ def _folds(n, n_folds, rng):
 
 
 def _resample_common(demos, times, dt):
-    out = []
-    for y, t in zip(demos, times):
-        t = t - t[0]
-        m = int(np.floor(t[-1] / dt + 1e-9)) + 1
-        g = np.arange(m) * dt
-        out.append(np.column_stack([np.interp(g, t, y[:, j]) for j in range(y.shape[1])]))
-    return out
+    return [resample_step(y, t - t[0], dt)[0] for y, t in zip(demos, times)]
 
 
 @dataclass

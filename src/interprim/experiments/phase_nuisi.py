@@ -53,8 +53,9 @@ def _mean_ctrl(train, ctrl, n=201):
 def _at(traj, u):
     """Rows of a trajectory on a uniform [0, 1] grid at normalised times ``u`` (clipped), linearly."""
     g = np.linspace(0.0, 1.0, traj.shape[0])
-    u = np.clip(u, 0.0, 1.0)
-    return np.stack([np.interp(u, g, traj[:, c]) for c in range(traj.shape[1])], axis=1)
+    from interprim.preprocessing import interp_columns
+
+    return interp_columns(np.clip(u, 0.0, 1.0), g, traj)
 
 
 def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0.25, learned_kwargs=None,

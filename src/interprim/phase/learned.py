@@ -71,6 +71,7 @@ import numpy as np
 
 from .._validation import as_2d_finite, as_frame, check_positive, check_times
 from ..cv import paired_gain
+from ..preprocessing import resample_step
 from ._learned_features import _group_dims, _jsonable, _kernel_loo, _prefix_features, _ridge_loo
 from .estimate import PhaseEstimate
 
@@ -421,9 +422,8 @@ class LearnedPhase:
 
     @staticmethod
     def _resample(y, t, step):
-        n = int(math.floor(t[-1] / step + 1e-9)) + 1
-        g = np.arange(n) * step
-        return np.stack([np.interp(g, t, y[:, d]) for d in range(y.shape[1])], axis=1)
+        """``y`` (times ``t`` from 0) at the times ``0, step, 2 step, ...`` up to ``t[-1]``."""
+        return resample_step(y, t, step)[0]
 
     def _standardise_train(self, X, groups, D):
         """Standardise features (K, n, p) and weight groups equally; returns ``(Z, mu, sd)``."""

@@ -227,3 +227,30 @@ def test_version_3_file_is_refused_by_a_reader_of_versions_1_and_2_with_a_clear_
     monkeypatch.setattr(ipio, "READ_VERSIONS", (1, 2))
     with pytest.raises(ip.ModelFileError, match="format_version 3 is not supported by this interprim"):
         ip.InteractionPrimitive.load(tmp_path / "m.npz")
+
+
+@pytest.mark.parametrize("value", ["with-cv", "auto"])  # "auto": the old name, still accepted
+def test_calibrate_with_cv_means_when_sigma2_is_cross_validated(tmp_path, value):
+    """``calibrate="with-cv"`` (the default) calibrates with ``sigma2="cv"`` and not with the paper's residual;
+    the value, old or new, survives get_params, clone and the model file."""
+    from interprim.cli.fit import _calibrate
+
+    clone = pytest.importorskip("sklearn.base").clone
+
+    assert ip.InteractionPrimitive([0, 1]).get_params()["calibrate"] == "with-cv"
+    demos = two_agent_demos(8, seed=0, frames=60)
+    m = ip.InteractionPrimitive([0, 1], n_basis=6, calibrate=value).fit(demos[:7], dt=0.01)
+    assert m.calibration_ is not None
+    assert clone(m).get_params()["calibrate"] == value
+    m.save(tmp_path / "m.npz")
+    back = ip.InteractionPrimitive.load(tmp_path / "m.npz")
+    assert back.get_params()["calibrate"] == value
+    part = demos[7][:25, :2]
+    np.testing.assert_array_equal(back.predict(part).std(20), m.predict(part).std(20))
+    paper = ip.InteractionPrimitive([0, 1], n_basis=6, sigma2="residual", calibrate=value).fit(demos[:7], dt=0.01)
+    assert paper.calibration_ is None
+    assert ip.InteractionPrimitive([0, 1], n_basis=6, sigma2="residual", calibrate=True).fit(
+        demos[:7], dt=0.01).calibration_ is not None
+    few = ip.InteractionPrimitive([0, 1], n_basis=6, calibrate=value).fit(demos[:5], dt=0.01)
+    assert few.calibration_ is None  # fewer than 6 demonstrations: no calibration
+    assert [_calibrate(t) for t in ("with-cv", "auto", "on", "off")] == ["with-cv", "auto", True, False]

@@ -78,7 +78,7 @@ def test_get_params_set_params_and_clone():
 
 
 @pytest.mark.parametrize("name, value, match", [
-    ("calibrate", "yes", "calibrate must be True, False or 'auto'"),
+    ("calibrate", "yes", "calibrate must be True, False or 'with-cv' \\('auto', its old name\\)"),
     ("n_steps", 0, "n_steps must be a positive integer"),
     ("n_steps", 2.5, "n_steps must be a positive integer"),
     ("ridge", -1.0, "ridge must be a finite number >= 0"),

@@ -22,6 +22,7 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from .contract import BaseStream, GridPrediction, Predictor, place_in_time
+from .preprocessing import interp_columns
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
 
@@ -477,9 +478,7 @@ class Blend(Predictor):
         a = np.asarray(self.scales["a"], dtype=np.float64)
         b = np.asarray(self.scales["b"], dtype=np.float64)
         steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
-        at = np.stack([np.interp(ahead, steps, a[:, j]) for j in range(a.shape[1])], axis=1)
-        bt = np.stack([np.interp(ahead, steps, b[:, j]) for j in range(b.shape[1])], axis=1)
-        return at * spread + bt
+        return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
 
     def combine(self, preds: dict, n_frames: int, n_grid: int = 401):
         """The blended :class:`~interprim.contract.GridPrediction` of the members' predictions ``{family: pred}``
@@ -495,7 +494,7 @@ class Blend(Predictor):
         Y = []
         for m, (sm, Dm) in zip(names, timing):
             um = np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0))
-            Y.append(_rows(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(int(n_grid))))
+            Y.append(interp_columns(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(int(n_grid))))
         Y = np.array(Y)
         mean = np.tensordot(w, Y, axes=1)
         var = self._variance(np.tensordot(w, (Y - mean) ** 2, axes=1), ahead)
@@ -571,11 +570,6 @@ class BlendStream(BaseStream):
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
-
-
-def _rows(u_at, grid, Y):
-    """Rows of ``Y`` (tabulated on ``grid``) at ``u_at``."""
-    return np.stack([np.interp(u_at, grid, Y[:, d]) for d in range(Y.shape[1])], axis=1)
 
 
 def _record(chosen, errors) -> dict:

@@ -52,6 +52,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cv import folds, observed_frames
+from .preprocessing import interp_columns
+
 __all__ = ["Calibration", "fit_calibration", "fold_model"]
 
 DEFAULT_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -100,7 +103,7 @@ class Calibration:
         h = np.asarray(h, dtype=np.float64)
         if row.ndim == 1:
             return np.interp(h, self.lookaheads, row)  # held at the ends
-        return np.stack([np.interp(h, self.lookaheads, row[:, k]) for k in range(row.shape[1])], axis=-1)
+        return interp_columns(h, self.lookaheads, row)
 
     def factors(self, phase: float, lookahead=0.0):
         """``(c_observed, c_controlled)`` at an estimated phase and look-ahead(s) ``h`` (normalised time after
@@ -261,22 +264,20 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
     e = np.asarray(edges, dtype=np.float64)
     allEdges = np.concatenate([-e[::-1], e[1:]])  # past bins then future bins; 0 closes the last past bin
     B = allEdges.size - 1
-    k = int(min(max(2, n_folds), S))
-    fold_edges = np.linspace(0, S, k + 1).round().astype(int)
     fr = np.asarray(fractions, dtype=np.float64)
     sums = np.zeros((S, fr.size, B, D, 3))
     phases = np.zeros((S, fr.size))
     hsum = np.zeros((B, 2))
     n = 101
     grid = np.linspace(0.0, 1.0, n)
-    for f in range(k):
-        held = set(range(fold_edges[f], fold_edges[f + 1]))
-        m = fold_model(model, [i for i in range(S) if i not in held], observed)
-        for j in sorted(held):
+    for held in folds(S, n_folds, "contiguous"):
+        held_set = set(held.tolist())
+        m = fold_model(model, [i for i in range(S) if i not in held_set], observed)
+        for j in held:
             d = demos[j]
             T = d.shape[0]
             for i, p in enumerate(fr):
-                M = int(min(T - 1, max(3, round(p * T))))
+                M = observed_frames(T, p, keep=1)  # at least one frame left to score
                 pred = m.predict(d[:M, obs])
                 s = phases[j, i] = float(pred.normalised_time)
                 h = (np.arange(T) - (M - 1)) * dt / float(pred.duration)
@@ -289,8 +290,8 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
                 b = np.clip(np.searchsorted(allEdges, h, side="left") - 1, 0, B - 1)  # (lo, hi] bins
                 Y = pred.trajectory(n)
                 Sd = pred.std(n, calibrated=False)
-                err = (np.stack([np.interp(u, grid, Y[:, c]) for c in range(D)], axis=1) - d[fut]) / spread
-                sd = np.stack([np.interp(u, grid, Sd[:, c]) for c in range(D)], axis=1) / spread
+                err = (interp_columns(u, grid, Y) - d[fut]) / spread
+                sd = interp_columns(u, grid, Sd) / spread
                 np.add.at(hsum[:, 0], b, h)
                 np.add.at(hsum[:, 1], b, 1.0)
                 np.add.at(sums[j, i, :, :, 0], b, err ** 2)
@@ -382,7 +383,7 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
     demos : list of ndarray, shape (T_i, D)
         The training demonstrations in data columns, at ``model.dt_``.
     n_folds : int
-        Folds (contiguous; at most one per demonstration).
+        Folds (``"contiguous"`` runs of :func:`interprim.cv.folds`; at most one per demonstration).
     fractions : sequence of float
         Fractions of each held-out demonstration observed.
     min_demos : int

@@ -46,6 +46,7 @@ import numpy as np
 from ._blas import one_blas_thread
 from ._params import Params
 from ._validation import as_2d_finite, as_frame
+from .preprocessing import interp_columns
 from .errors import NotFittedError
 
 __all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
@@ -214,8 +215,7 @@ class GridPrediction(BasePrediction):
         self.out_of_range = False
 
     def _at(self, Y, s, cols=None):
-        cols = range(Y.shape[1]) if cols is None else cols
-        return np.stack([np.interp(s, self.times, Y[:, d]) for d in cols], axis=1)
+        return interp_columns(s, self.times, Y if cols is None else Y[:, list(cols)])
 
     def trajectory(self, n: int = 100) -> np.ndarray:
         """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)`` (linear interpolation)."""

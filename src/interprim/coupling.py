@@ -71,6 +71,7 @@ import numpy as np
 from ._blas import one_blas_thread
 from ._validation import as_2d_finite
 from .contract import GridPrediction
+from .cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
 from .errors import NotFittedError
 
 __all__ = ["CouplingModel", "CouplingPrediction", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
@@ -457,8 +458,8 @@ class CouplingModel:
     def _cv_pass(self, cands, keep):
         """One pass of the grouped CV: per-demo losses of every candidate; residuals of candidate ``keep``."""
         n, D = self.n_demos_, self.n_dofs_
-        K = int(min(self.n_folds, n))
-        folds = [np.arange(n)[k::K] for k in range(K)]  # deterministic, demonstrations interleaved
+        K = cv_n_folds(self.n_folds, n)
+        folds = cv_folds(n, K, "interleaved")  # deterministic, demonstrations interleaved
         fr = self.fractions_
         nj = int(self.n_jitter)
         ctrl = self.controlled_dofs_
@@ -490,7 +491,6 @@ class CouplingModel:
         return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):
-        n = self.n_demos_
         cands = self._candidates()
         loss, _, _, K = self._cv_pass(cands, None)
         if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:
@@ -505,9 +505,8 @@ class CouplingModel:
         loss = loss.mean(axis=1)  # per candidate and held-out demonstration
         scores = loss.mean(axis=1)
         best = int(np.argmin(scores))
-        diff = loss[0] - loss[best]
-        se = float(diff.std(ddof=1) / math.sqrt(n))
-        gain = float(scores[0] - scores[best])
+        # the one-standard-error rule, paired over the held-out demonstrations (interprim.cv)
+        gain, se = (float(x) for x in paired_gain(loss[0], loss[best]))
         if best == 0 or gain <= se:
             choice = 0
             reason = ("the prior mean: no coupling beat it on held-out demonstrations by more than one "

@@ -14,7 +14,65 @@ import numpy as np
 
 from ._validation import as_2d_finite, check_times
 
-__all__ = ["resample_uniform", "derivatives", "PCA", "time_normalise"]
+__all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "derivatives", "PCA",
+           "time_normalise"]
+
+
+def interp_columns(x_new, x, y) -> np.ndarray:
+    """Linear interpolation of every column of ``y`` (sampled at ``x``) at ``x_new``: the one resampling rule.
+
+    Parameters
+    ----------
+    x_new : float or array_like, shape (n,)
+        Where to evaluate (held at the end values outside ``x``, as :func:`numpy.interp`).
+    x : array_like, shape (T,)
+        Increasing sample positions (times, normalised times or frame indices).
+    y : array_like, shape (T, D)
+        Values.
+
+    Returns
+    -------
+    ndarray, shape (n, D) (``(D,)`` for a scalar ``x_new``)
+        Column ``d`` is ``numpy.interp(x_new, x, y[:, d])``.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    if y.shape[1] == 0:
+        return np.empty(np.shape(x_new) + (0,))
+    return np.stack([np.interp(x_new, x, y[:, d]) for d in range(y.shape[1])], axis=-1)
+
+
+def step_count(duration: float, dt: float) -> int:
+    """Frames of a grid ``0, dt, 2 dt, ...`` that fit in ``duration`` (a ``1e-9`` step of tolerance for rounding)."""
+    return int(np.floor(duration / dt + 1e-9)) + 1
+
+
+def step_grid(duration: float, dt: float) -> np.ndarray:
+    """The grid ``0, dt, ..., (n - 1) dt`` of :func:`step_count` frames (it ends at or before ``duration``)."""
+    return np.arange(step_count(duration, dt)) * dt
+
+
+def resample_step(y, times, dt: float):
+    """Interpolate a ``(T, D)`` movement onto ``times[0] + k dt`` up to ``times[-1]`` (the step kept exactly).
+
+    Unlike :func:`resample_uniform`, which stretches its step so that the grid ends at ``times[-1]``, the grid
+    keeps the step ``dt`` and stops at or before the last time stamp (:func:`step_grid`).
+
+    Parameters
+    ----------
+    y : array_like, shape (T, D)
+    times : array_like, shape (T,)
+        Increasing time stamps in seconds.
+    dt : float
+        Output sampling interval in seconds.
+
+    Returns
+    -------
+    y_step : ndarray, shape (n, D)
+    t_step : ndarray, shape (n,)
+    """
+    t = np.asarray(times, dtype=np.float64)
+    t_new = t[0] + step_grid(t[-1] - t[0], dt)
+    return interp_columns(t_new, t, y), t_new
 
 
 def resample_uniform(y, times, n: int | None = None, dt: float | None = None):
@@ -44,10 +102,7 @@ def resample_uniform(y, times, n: int | None = None, dt: float | None = None):
         n = int(round((t[-1] - t[0]) / dt)) + 1
     n = max(int(n), 2)
     tu = np.linspace(t[0], t[-1], n)
-    out = np.empty((n, y.shape[1]))
-    for d in range(y.shape[1]):
-        out[:, d] = np.interp(tu, t, y[:, d])
-    return out, tu
+    return interp_columns(tu, t, y), tu
 
 
 def time_normalise(y, n: int) -> np.ndarray:
@@ -55,12 +110,7 @@ def time_normalise(y, n: int) -> np.ndarray:
     y = np.asarray(y, dtype=np.float64)
     if y.shape[0] == n:
         return y.copy()
-    s_in = np.linspace(0.0, 1.0, y.shape[0])
-    s_out = np.linspace(0.0, 1.0, n)
-    out = np.empty((n, y.shape[1]))
-    for d in range(y.shape[1]):
-        out[:, d] = np.interp(s_out, s_in, y[:, d])
-    return out
+    return interp_columns(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, y.shape[0]), y)
 
 
 def savgol_window(T: int, window, polyorder: int = 3):

@@ -40,6 +40,7 @@ OBSERVATION_MODELS = ("forcing", "position")
 COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
 PHASE_METHODS = ("dtw", "likelihood", "learned", "cv", "auto")  # "auto": the old name of "cv"
 SIGMA2_RULES = ("cv", "residual", "auto")  # "auto": the old name of "residual"
+CALIBRATE_RULES = ("with-cv", "auto")  # "auto": the old name of "with-cv"
 
 
 class InteractionPrimitive(Predictor):
@@ -131,12 +132,15 @@ class InteractionPrimitive(Predictor):
         moves the prediction far more than it should (measured on the simulated
         high five with 0.01 rad input noise: goal error 0.35 m without, 0.05 m
         with ``input_noise=0.01``).
-    calibrate : bool or "auto", default "auto"
+    calibrate : bool or "with-cv", default "with-cv"
         Calibrate the predictive uncertainty on held-out folds of the training demonstrations
         (:mod:`interprim.calibration`): :meth:`Prediction.std` and :meth:`Prediction.samples` are the
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
-        held-out movements, timing errors included.  ``"auto"``: with ``sigma2="cv"`` (the default) and at
-        least 6 demonstrations; the fitted scales are ``calibration_`` (``None`` when not calibrated).
+        held-out movements, timing errors included.  ``"with-cv"``: calibrate when ``sigma2="cv"`` (the
+        default; the folds re-use what that cross-validation chose), not with the paper's ``sigma2="residual"``
+        or a fixed ``sigma2``; ``"auto"`` is its old name, still accepted.  ``True`` calibrates whatever
+        ``sigma2``, ``False`` never.  A calibration needs at least 6 demonstrations (with fewer there is
+        none); the fitted scales are ``calibration_`` (``None`` when not calibrated).
 
     Attributes
     ----------
@@ -200,7 +204,7 @@ class InteractionPrimitive(Predictor):
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
                  reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "auto",
-                 input_noise: float | None = None, calibrate="auto"):
+                 input_noise: float | None = None, calibrate="with-cv"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
         self.alpha_y = alpha_y
@@ -280,8 +284,9 @@ class InteractionPrimitive(Predictor):
         if isinstance(self.n_steps, bool) or not isinstance(self.n_steps, numbers.Integral) or self.n_steps < 1:
             raise ValueError(f"n_steps must be a positive integer, got {self.n_steps!r}")
         if not (self.calibrate is True or self.calibrate is False or isinstance(self.calibrate, np.bool_)
-                or (isinstance(self.calibrate, str) and self.calibrate == "auto")):
-            raise ValueError(f"calibrate must be True, False or 'auto', got {self.calibrate!r}")
+                or (isinstance(self.calibrate, str) and self.calibrate in CALIBRATE_RULES)):
+            raise ValueError(f"calibrate must be True, False or 'with-cv' ('auto', its old name), "
+                             f"got {self.calibrate!r}")
         ref = self.reference
         if isinstance(ref, str):
             if ref != "mean":
@@ -486,7 +491,7 @@ class InteractionPrimitive(Predictor):
         self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
             np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
-        if self.calibrate is True or (self.calibrate == "auto" and self.sigma2 == "cv"):
+        if self.calibrate is True or (self.calibrate in CALIBRATE_RULES and self.sigma2 == "cv"):
             from .calibration import fit_calibration  # predictive std scaled to held-out errors
             with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
                 self.calibration_ = fit_calibration(self, arrays)

@@ -27,7 +27,10 @@ model by K-fold cross-validation on the training demonstrations:
    with its best ``(lambda, sigma^2)`` at that ``gamma`` (ties, as with
    ``gamma = 1``, broken by the observed agent's error) (Hastie et al.'s
    one-standard-error rule: a few dozen demonstrations make the CV noisy), the standard
-   error being that of the paired per-case differences from the best candidate.  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
+   error being that of the paired per-case differences from the best candidate
+   (:func:`interprim.cv.within_one_se`; every candidate is scored on the same held-out cases, so their own
+   spread cancels: the unpaired standard error counted it and kept ``gamma = 1``, the prior mean, on NuiSI,
+   where the coupling helps).  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
    covariance (observed x controlled) towards zero: the controlled agent's
    posterior mean moves from the prior mean by ``(1 - gamma)`` times the
    conditioned shift, so spurious correlations between the agents (few
@@ -58,6 +61,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._blas import single_thread
+from .cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
 from .gaussian import (LowRankPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
                        shrinkage_intensity)
 from .phase.dtw import open_end_dtw
@@ -153,8 +157,8 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     n_o = model.n_observed_latent_
     q = model.params_per_dof_
     n_lat = model.n_latent_
-    K = int(min(max(n_folds, 2), S))
-    fold = np.arange(S) % K
+    K = _n_folds(n_folds, S)
+    fold = fold_labels(S, K, "interleaved")
     method = model.covariance
     if method == "shrinkage" and select_sigma2:
         lam_grid = sorted(set([round(float(shrinkage_intensity(thetas)), 6)] + [float(x) for x in shrinkage_grid]))
@@ -179,7 +183,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     for j, z in enumerate(latent):
         T = z.shape[0]
         for p in fractions:
-            M = int(np.clip(round(p * T), max(3, model.min_observed), T))
+            M = observed_frames(T, p, max(3, model.min_observed))
             s_end = (M - 1) / (T - 1)
             if dtw_refs is not None:
                 ref = dtw_refs[fold[j]]
@@ -228,9 +232,9 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         # 1. the observed agent's completion: the (lambda, sigma2) within one standard error of its best
         # 2. among those, the controlled agent's: its best, then the most conservative cross-agent damping gamma
         #    within one standard error of that (Hastie et al.'s rule), then its best (lambda, sigma2) at that gamma
-        human_ok = _within_one_se(Eo)  # (lam, s2)
+        human_ok = within_one_se(Eo)  # (lam, s2)
         E = np.where(human_ok[None, :, :, None], E, np.inf)
-        ok = _within_one_se(E)  # (lam, s2, gamma)
+        ok = within_one_se(E)  # (lam, s2, gamma)
         c = int(np.flatnonzero(ok.any(axis=(0, 1))).max())
         err = np.where(ok, err_all, np.inf)
         a, b = _best_at(err[:, :, c], err_o)
@@ -304,21 +308,6 @@ def _criteria(per_case, n_lam, n_o, n_lat):
     return Eo[..., None], Eo, p_o, p_o
 
 
-def _within_one_se(E):
-    """Candidates whose mean CV error exceeds the best's by at most one standard error of the paired per-case
-    differences (every candidate is scored on the same held-out cases, so the cases' own spread cancels; the
-    unpaired standard error counted it and kept gamma = 1, the prior mean, on NuiSI, where the coupling helps).
-    ``E`` (cases, ...) per-case errors, ``inf`` for excluded candidates; returns a bool array ``E.shape[1:]``."""
-    flat = E.reshape(E.shape[0], -1)
-    best = int(np.argmin(flat.mean(axis=0)))
-    with np.errstate(invalid="ignore"):  # excluded candidates: inf - finite
-        Dif = flat - flat[:, best][:, None]
-        se = Dif.std(axis=0, ddof=1) / np.sqrt(Dif.shape[0]) if Dif.shape[0] > 1 else np.full(Dif.shape[1], np.inf)
-        ok = (Dif.mean(axis=0) <= se) & np.isfinite(flat.mean(axis=0))
-    ok[best] = True
-    return ok.reshape(E.shape[1:])
-
-
 def _best_at(err_c, err_o):
     """``(lambda, sigma^2)`` indices with the smallest controlled-agent error ``err_c`` (lam, s2; ``inf`` excluded);
     among candidates tied on it (to rounding; with ``gamma = 1`` the controlled agent keeps its prior mean whatever
@@ -381,7 +370,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         prior = priors[f]
         z = latent[j]
         T = z.shape[0]
-        M = int(np.clip(round(p * T), max(3, model.min_observed), T))
+        M = observed_frames(T, p, max(3, model.min_observed))
         s_true = (M - 1) / (T - 1)
         lo = max(_S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
         grid = np.exp(np.linspace(np.log(lo), 0.0, n_phase))

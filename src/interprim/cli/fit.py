@@ -102,6 +102,14 @@ def add_parser(subparsers) -> None:
         "(regressed on the demonstrations' own prefixes) or dtw (the paper's open-end DTW, Eq. 5-9) (ip)",
     )
     p.add_argument(
+        "--calibrate",
+        type=_calibrate,
+        default=None,
+        metavar="{with-cv,on,off}",
+        help="scale the predictive std to held-out errors of the demonstrations: with-cv (default: when sigma2 is "
+        "cross-validated and there are at least 6 demonstrations; 'auto' is its old name), on or off",
+    )
+    p.add_argument(
         "--input-noise",
         type=float,
         default=None,
@@ -145,6 +153,13 @@ def _sigma2(text):
     return v
 
 
+def _calibrate(text):
+    choices = {"with-cv": "with-cv", "auto": "auto", "on": True, "off": False}
+    if text not in choices:
+        raise argparse.ArgumentTypeError(f"expected with-cv, on or off, got {text!r}")
+    return choices[text]
+
+
 def cmd_fit(args) -> int:
     """``interprim fit``: load demonstrations, fit an InteractionPrimitive, save it."""
     import time
@@ -181,6 +196,7 @@ def cmd_fit(args) -> int:
         ("sigma2", args.sigma2),
         ("phase_method", args.phase_method),
         ("input_noise", args.input_noise),
+        ("calibrate", args.calibrate),
         ("smoothing_window", args.smoothing_window),
         ("pca_components", args.pca),
     ):

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataFileError
+from ..preprocessing import resample_step
 from ._base import DataNotFoundError, Demonstrations, RawStream, sampling, select_columns, uniform_dt
 from ._checks import _check_frames, _check_times, _fill_nans
 
@@ -503,11 +504,7 @@ def load_demonstrations(
         ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]
                   for y, t in zip(ds.demos, ds.times)]
         for y, t in zip(ds.demos, ds.times):
-            n = int(np.floor((t[-1] - t[0]) / resample_dt + 1e-9)) + 1
-            t_new = t[0] + np.arange(n) * resample_dt
-            yy = np.empty((n, y.shape[1]))
-            for j in range(y.shape[1]):
-                yy[:, j] = np.interp(t_new, t, y[:, j])
+            yy, t_new = resample_step(y, t, resample_dt)
             new_d.append(yy)
             new_t.append(t_new)
         ds.demos, ds.times, ds.dt = new_d, new_t, float(resample_dt)

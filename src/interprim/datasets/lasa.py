@@ -15,6 +15,7 @@ import io
 
 import numpy as np
 
+from ..preprocessing import interp_columns
 from ._base import Demonstrations, uniform_dt
 
 __all__ = ["load_lasa", "lasa_shapes"]
@@ -85,7 +86,7 @@ def load_lasa(shape_name: str, *, subsample: int = 1) -> Demonstrations:
         if step > 1:
             n = int(round((pos.shape[0] - 1) / step)) + 1
             t_new = np.linspace(0.0, t[-1], n)
-            pos = np.column_stack([np.interp(t_new, t, pos[:, j]) for j in range(pos.shape[1])])
+            pos = interp_columns(t_new, t, pos)
             t = t_new
         demos.append(np.ascontiguousarray(pos))
         times.append(t)

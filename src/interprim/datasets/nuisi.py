@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import DataFileError
+from ..preprocessing import interp_columns, step_grid
 from ._base import Demonstrations, RawStream, resolve_data_path
 
 __all__ = ["load_nuisi", "nuisi_actions", "NUISI_JOINTS", "JOINT_GROUPS", "NUISI_DEFAULT_PATH"]
@@ -110,10 +111,7 @@ def _joints(spec, what: str) -> tuple:
 
 
 def _interp(t_src, y, t_new):
-    flat = y.reshape(y.shape[0], -1)
-    out = np.empty((t_new.shape[0], flat.shape[1]))
-    for d in range(flat.shape[1]):
-        out[:, d] = np.interp(t_new, t_src, flat[:, d])
+    out = interp_columns(t_new, t_src, y.reshape(y.shape[0], -1))
     return out.reshape((t_new.shape[0],) + y.shape[1:])
 
 
@@ -219,8 +217,8 @@ def load_nuisi(
             end = min(t1[-1], t2[-1])
             if end - origin < 2 * dt:
                 raise DataFileError(f"{p}: in {key} the two agents overlap for only {end - origin:.3f} s")
-            n = int(np.floor((end - origin) / dt + 1e-9)) + 1
-            grid = np.arange(n) * dt
+            grid = step_grid(end - origin, dt)
+            n = grid.shape[0]
             cols = [_interp(t1 - origin, a1[:, i1, :], grid).reshape(n, -1)]
             streams = [RawStream(t1 - origin, tuple(range(3 * len(i1))), a1[:, i1, :].reshape(len(t1), -1))]
             if i2:

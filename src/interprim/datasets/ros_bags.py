@@ -60,6 +60,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataFileError, MissingExtraError
+from ..preprocessing import interp_columns, step_count
 
 __all__ = ["read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
 
@@ -525,9 +526,7 @@ def _max_step(t, split_gap):
 def _interp(t_new, t, y, max_step):
     """Linear interpolation of ``y`` (stamps ``t``) at ``t_new``; NaN inside pauses longer than ``max_step``."""
     t_new, t = np.asarray(t_new, dtype=np.float64), np.asarray(t, dtype=np.float64)
-    out = np.empty((len(t_new), y.shape[1]))
-    for j in range(y.shape[1]):
-        out[:, j] = np.interp(t_new, t, y[:, j])
+    out = interp_columns(t_new, t, y)
     i = np.clip(np.searchsorted(t, t_new, "right"), 1, max(len(t) - 1, 1))
     if len(t) > 1:
         out[(t[i] - t[i - 1] > max_step) & (t_new > t[i - 1]) & (t_new < t[i])] = np.nan
@@ -591,7 +590,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
                               for s, p in zip(streams, parts))
             raise DataFileError(f"{where}: the streams do not overlap in time ({spans})")
         if grid_dt is not None:
-            n = int(np.floor((hi - lo) / (grid_dt * 1e9) + 1e-9)) + 1
+            n = step_count(hi - lo, grid_dt * 1e9)
             t_ns = lo + np.round(np.arange(n) * grid_dt * 1e9).astype(np.int64)
         else:
             t_obs = parts[0][0]

@@ -22,7 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..contract import GridPrediction
+from ..preprocessing import interp_columns
 from .baselines import _Baseline
+from .protocol import observed_frames
 
 __all__ = ["KernelDemonstrations"]
 
@@ -142,7 +144,7 @@ class KernelDemonstrations(_Baseline):
             f = n + (t_ahead / R * r if R > 0 else 0 * t_ahead)
             a = self.demos_[j]
             f = np.minimum(f, len(a) - 1)
-            Y[i] = np.stack([np.interp(f, np.arange(len(a)), a[:, c]) for c in cols], axis=1)
+            Y[i] = interp_columns(f, np.arange(len(a)), a[:, cols])
         mean = np.einsum("j,jhc->hc", w, Y)
         if not spread:
             return mean
@@ -177,7 +179,7 @@ class KernelDemonstrations(_Baseline):
         for i, a in enumerate(self.demos_):
             T = len(a)
             for f in (0.3, 0.5, 0.7):
-                k = max(3, int(round(f * T)))
+                k = observed_frames(T, f)
                 if k >= T:
                     continue
                 idx, n_star, cost = self._align(self.observed_[i][:k], exclude=i)
@@ -239,7 +241,7 @@ class KernelDemonstrations(_Baseline):
             past = u <= s
             f = np.where(past, u / max(s, 1e-12) * n, n + (u - s) / max(1 - s, 1e-12) * (T - 1 - n))
             f = np.clip(f, 0, T - 1)
-            Y[i] = np.stack([np.interp(f, np.arange(T), a[:, c]) for c in range(a.shape[1])], axis=1)
+            Y[i] = interp_columns(f, np.arange(T), a)
         mean = np.einsum("j,jkd->kd", w, Y)
         spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)

@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from ..cv import paired_gain
+
 __all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio"]
 
 #: The untouched hold-out, fixed on 2026-11-26 before any new model was developed (docs/evaluation.md):
@@ -66,5 +68,5 @@ def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl") -> tuple
     ratio = ma / mb
     if len(pairs) < 2:
         return float(ratio), float("nan")
-    d = pairs[:, 0] - ratio * pairs[:, 1]
-    return float(ratio), float(np.std(d, ddof=1) / math.sqrt(len(pairs)) / mb)
+    _, se = paired_gain(pairs[:, 0], ratio * pairs[:, 1])  # the paired standard error of a - ratio b
+    return float(ratio), float(se / mb)

@@ -1,10 +1,11 @@
 """The evaluation protocol shared by every experiment: what a prediction may see of a held-out recording.
 
-Two rules, each defined once here:
+Two rules:
 
 * **How much is observed.** A held-out demonstration of ``T`` frames observed "``p`` % of the way" shows
   its first :func:`observed_frames` frames: ``round(p T)``, at least 3 (the fewest frames that give a
-  phase, a speed and the derivatives of Eq. 15) and at most ``T``.
+  phase, a speed and the derivatives of Eq. 15) and at most ``T``.  The rule is defined once, in
+  :func:`interprim.cv.observed_frames` (the core's own cross-validations use it too), and re-exported here.
 * **Causality.** The first ``k`` frames are what a robot would have had at the time of frame ``k``: when the
   demonstrations were interpolated onto a uniform grid from raw samples (NuiSI's ~9 Hz skeletons, a
   resampled recording), frame ``k - 1`` of the grid can be built from a raw sample recorded *after* it.  A
@@ -17,17 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["observed_frames", "MIN_OBSERVED_FRAMES", "causal_prefix", "Prefixes"]
+from ..cv import MIN_OBSERVED_FRAMES, observed_frames
 
-MIN_OBSERVED_FRAMES = 3
+__all__ = ["observed_frames", "MIN_OBSERVED_FRAMES", "causal_prefix", "Prefixes"]
 
 #: Time stamps within this many seconds of a frame's time count as recorded at that time (rounding).
 TIME_TOLERANCE = 1e-9
-
-
-def observed_frames(T: int, fraction: float, min_frames: int = MIN_OBSERVED_FRAMES) -> int:
-    """Number of frames of a ``T``-frame demonstration observed at ``fraction`` (in [0, 1]) of it."""
-    return int(min(T, max(min_frames, round(fraction * T))))
 
 
 def causal_prefix(times, streams, k: int, columns) -> np.ndarray:

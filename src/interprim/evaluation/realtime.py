@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..contract import place_in_time
-from ..preprocessing import time_normalise
+from ..cv import folds as cv_folds
+from ..preprocessing import interp_columns, time_normalise
 from .nested import nested_choice_records, standard_error_ratio
 from .protocol import Prefixes, observed_frames
 from .sweep import _point_rms
@@ -90,8 +91,7 @@ def mean_demo(demos, n: int = 201):
 
 def _interp_rows(u, grid, Y):
     """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
-    u = np.clip(u, 0.0, 1.0)
-    return np.stack([np.interp(u, grid, Y[:, d]) for d in range(Y.shape[1])], axis=1)
+    return interp_columns(np.clip(u, 0.0, 1.0), grid, Y)
 
 
 def _timing(pred, k, dt, mean_dur_s):
@@ -206,13 +206,11 @@ def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8
 
 
 def folds(n: int, k: int | None = None):
-    """Held-out index sets: leave-one-out (``k`` None or >= n) or ``k`` contiguous folds."""
-    if k is None or k >= n:
-        return [[j] for j in range(n)]
-    if k < 2:
+    """Held-out index sets (lists of int): leave-one-out (``k`` None or >= n) or ``k`` contiguous folds
+    (:func:`interprim.cv.folds`, ``order="contiguous"``)."""
+    if k is not None and k < n and k < 2:
         raise ValueError(f"k-fold needs k >= 2, got {k}")
-    edges = np.linspace(0, n, k + 1).round().astype(int)
-    return [list(range(edges[i], edges[i + 1])) for i in range(k)]
+    return [f.tolist() for f in cv_folds(n, k, "contiguous")]
 
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),

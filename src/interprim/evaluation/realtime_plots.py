@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .protocol import observed_frames
 from .realtime import Z90, RealTimeConfig, realtime_fold, summarise_realtime
 
 __all__ = ["realtime_interaction_figure", "nuisi_realtime_figure", "NUISI_FIGURE_METHODS"]
@@ -119,7 +120,7 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
     cfg = RealTimeConfig(horizon=horizon, point_dim=point_dim)
     out = {"T": T, "dt": float(dt), "horizon_s": float(horizon), "files": {}, "models": {}}
     ks = np.unique(np.linspace(3, T, max(2, min(int(n_frames), T - 2))).round().astype(int))
-    snap_k = [int(min(T, max(3, round(f * T)))) for f in snapshots]
+    snap_k = [observed_frames(T, f) for f in snapshots]
     all_k = sorted(set(ks.tolist()) | set(snap_k))
     traces = {}
     for label, model in models.items():

@@ -62,6 +62,7 @@ def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", 
     import interprim
     from interprim.evaluation.baselines import NearestNeighbour, PriorMean
     from interprim.coupling import CouplingModel
+    from interprim.evaluation.protocol import observed_frames
     from interprim.preprocessing import time_normalise
 
     train = [d for i, d in enumerate(demos) if i != j]
@@ -86,7 +87,7 @@ def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", 
         fit_time[m] = time.perf_counter() - t0
     out = []
     for p in fractions:
-        M = int(min(T, max(3, round(p * T))))
+        M = observed_frames(T, p)
         s_true = (M - 1) / (T - 1)
         s_clock = float(min(1.0, max((M - 1) * dt / mean_dur, 1e-3)))
         part = test[:M, obs]

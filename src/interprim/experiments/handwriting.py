@@ -38,8 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cv import folds
 from ..evaluation.protocol import observed_frames
-from ..preprocessing import time_normalise
+from ..preprocessing import resample_step, time_normalise
 
 __all__ = [
     "run_handwriting",
@@ -99,20 +100,12 @@ def _rmse(pred, truth, mask=None):
 
 
 def _folds(n, n_folds, rng):
-    if n_folds is None or n_folds >= n:
-        return [np.array([i]) for i in range(n)]
-    perm = rng.permutation(n)
-    return [np.sort(f) for f in np.array_split(perm, n_folds)]
+    """Leave-one-out (``n_folds`` None or >= n) or a seeded ``"shuffled"`` split (:func:`interprim.cv.folds`)."""
+    return folds(n, n_folds, "shuffled", rng)
 
 
 def _resample_common(demos, times, dt):
-    out = []
-    for y, t in zip(demos, times):
-        t = t - t[0]
-        m = int(np.floor(t[-1] / dt + 1e-9)) + 1
-        g = np.arange(m) * dt
-        out.append(np.column_stack([np.interp(g, t, y[:, j]) for j in range(y.shape[1])]))
-    return out
+    return [resample_step(y, t - t[0], dt)[0] for y, t in zip(demos, times)]
 
 
 @dataclass

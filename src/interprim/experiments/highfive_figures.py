@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..preprocessing import interp_columns
 from .highfive_common import METHOD_LABELS, METHODS, _goal_spread, _n_observed
 
 def _draw_arm(ax, arm, q, **kw):
@@ -188,8 +189,7 @@ ANIMATION_PANELS = (
 
 def _interp_rows(s, grid, Y):
     """Rows of ``Y`` (on the normalised-time ``grid``) at ``s`` (a scalar, clipped to [0, 1])."""
-    s = min(max(float(s), 0.0), 1.0)
-    return np.array([np.interp(s, grid, Y[:, c]) for c in range(Y.shape[1])])
+    return interp_columns(min(max(float(s), 0.0), 1.0), grid, Y)
 
 
 def animation_states(models, test, idx, cfg, n_frames=None, n_samples=8):

@@ -53,14 +53,16 @@ def _mean_ctrl(train, ctrl, n=201):
 def _at(traj, u):
     """Rows of a trajectory on a uniform [0, 1] grid at normalised times ``u`` (clipped), linearly."""
     g = np.linspace(0.0, 1.0, traj.shape[0])
-    u = np.clip(u, 0.0, 1.0)
-    return np.stack([np.interp(u, g, traj[:, c]) for c in range(traj.shape[1])], axis=1)
+    from interprim.preprocessing import interp_columns
+
+    return interp_columns(np.clip(u, 0.0, 1.0), g, traj)
 
 
 def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0.25, learned_kwargs=None,
              ip_kwargs=None):
     """Phase errors (and real-time errors) of held-out demonstration ``j``; returns a dict of lists."""
     from interprim import InteractionPrimitive
+    from interprim.evaluation.protocol import observed_frames
     from interprim.phase.learned import LearnedPhase
 
     train = [d for i, d in enumerate(demos) if i != j]
@@ -77,7 +79,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
            "learned_method": lp.method_, "learned_features": list(lp.features_), "learned_std": [],
            "learned_time_ms": []}
     for p in FRACTIONS:
-        M = int(min(T, max(3, round(p * T))))
+        M = observed_frames(T, p)
         prefix = test[:M, obs]
         out["phase_true"].append((M - 1) / (T - 1))
         out["fractions"].append(p)

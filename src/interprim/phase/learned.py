@@ -70,6 +70,8 @@ import math
 import numpy as np
 
 from .._validation import as_2d_finite, as_frame, check_positive, check_times
+from ..cv import paired_gain
+from ..preprocessing import resample_step
 from ._learned_features import _group_dims, _jsonable, _kernel_loo, _prefix_features, _ridge_loo
 from .estimate import PhaseEstimate
 
@@ -351,11 +353,11 @@ class LearnedPhase:
         self.cv_error_featureless_ = float(np.mean(np.abs(flat_loo - S)[mask]))
         e_ref = e_f if self.cv_error_featureless_ < clock_err else e_c
         if best is not None and best[0] < min(clock_err, self.cv_error_featureless_):
-            # paired per-demonstration comparison (one-standard-error rule)
+            # paired per-demonstration comparison (one-standard-error rule, interprim.cv)
             e_m = np.sum(np.where(mask, np.abs(best[4] - S), 0.0), axis=0) / cnt
-            diff = e_m - e_ref
-            se = float(diff.std(ddof=1) / math.sqrt(n))
-            self.cv_improvement_se_ = float(-diff.mean() / se) if se > 0 else math.inf
+            gain, se = paired_gain(e_ref, e_m)
+            se = float(se)
+            self.cv_improvement_se_ = float(gain / se) if se > 0 else math.inf
             use = self.cv_improvement_se_ > float(self.fallback_se)
         if use:
             err, m, tg, hyp, P = best
@@ -420,9 +422,8 @@ class LearnedPhase:
 
     @staticmethod
     def _resample(y, t, step):
-        n = int(math.floor(t[-1] / step + 1e-9)) + 1
-        g = np.arange(n) * step
-        return np.stack([np.interp(g, t, y[:, d]) for d in range(y.shape[1])], axis=1)
+        """``y`` (times ``t`` from 0) at the times ``0, step, 2 step, ...`` up to ``t[-1]``."""
+        return resample_step(y, t, step)[0]
 
     def _standardise_train(self, X, groups, D):
         """Standardise features (K, n, p) and weight groups equally; returns ``(Z, mu, sd)``."""

@@ -48,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..preprocessing import interp_columns
+
 __all__ = ["MJCF_FILE", "ROBOT_JOINTS", "HUMAN_JOINTS", "mjcf_path", "load_arms", "JointController", "ArmSim",
            "track_reference", "fit_highfive_model", "run_mujoco_highfive", "MujocoResult",
            "draw_mujoco_highfive"]
@@ -426,7 +428,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
                 ref = (Y[-1], np.zeros(3), np.zeros(3))
             else:
                 sc = max(s, 0.0)
-                ref = tuple(np.array([np.interp(sc, grid, A[:, c]) for c in range(3)]) * f
+                ref = tuple(interp_columns(sc, grid, A[:, :3]) * f
                             for A, f in ((Y, 1.0), (dY, 1.0 / D_k), (ddY, 1.0 / D_k ** 2)))
             q_ref = np.clip(ref[0], lo, hi)
             sim.step(q_ref, ref[1], ref[2])

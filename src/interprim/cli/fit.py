@@ -107,7 +107,7 @@ def add_parser(subparsers) -> None:
         default=None,
         metavar="{with-cv,on,off}",
         help="scale the predictive std to held-out errors of the demonstrations: with-cv (default: when sigma2 is "
-        "cross-validated and there are at least 6 demonstrations; 'auto' is its old name), on or off",
+        "cross-validated and there are at least 6 demonstrations; 'auto' is its old name), on or off (ip)",
     )
     p.add_argument(
         "--input-noise",
@@ -138,7 +138,8 @@ def add_parser(subparsers) -> None:
 MODELS = ("auto", "ip", "learned", "kernel", "nn", "prior")
 #: options that configure the Interaction Primitive alone (--model ip)
 IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("sigma2", "--sigma2"),
-           ("phase_method", "--phase-method"), ("input_noise", "--input-noise"), ("pca", "--pca"))
+           ("phase_method", "--phase-method"), ("input_noise", "--input-noise"), ("pca", "--pca"),
+           ("calibrate", "--calibrate"))
 
 
 def _sigma2(text):

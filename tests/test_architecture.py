@@ -72,3 +72,49 @@ def test_one_phase_estimate_type():
     assert likelihood.PhaseEstimate is learned.PhaseEstimate is estimate.PhaseEstimate
     e = estimate.PhaseEstimate(0.4, log_likelihood=-1.0)
     assert e.s_end == e.phase == 0.4 and np.isnan(e.duration)
+
+
+def _entries_into(path_end: str, call):
+    """Frames of code in a file ending with ``path_end`` called from a frame outside it, while ``call()`` runs."""
+    import sys
+
+    entries = []
+
+    def prof(frame, event, arg):
+        if event == "call" and frame.f_code.co_filename.endswith(path_end):
+            back = frame.f_back
+            if back is None or not back.f_code.co_filename.endswith(path_end):
+                entries.append(f"{frame.f_code.co_name} from {back.f_code.co_filename if back else '?'}")
+
+    sys.setprofile(prof)
+    try:
+        result = call()
+    finally:
+        sys.setprofile(None)
+    return entries, result
+
+
+def test_one_predict_enters_primitive_py_once():
+    """The estimator hands a prediction to its fitted state (``interprim.fitted``): a ``predict`` call enters
+    primitive.py once (the call itself), the prediction's methods and a stream never."""
+    import os
+
+    from interprim.synthetic import two_agent_demos
+
+    demos = two_agent_demos(8, seed=5)
+    sep = os.sep + "interprim" + os.sep + "primitive.py"
+    for kw in (dict(phase_method="likelihood", sigma2=1e-3), dict(phase_method="dtw", sigma2=1e-3, pca_components=2)):
+        model = interprim.InteractionPrimitive([0, 1], n_basis=8, calibrate=False, **kw).fit(demos, dt=0.01)
+        partial = demos[0][:60, :2]
+        model.predict(partial).std(20)  # warm: lazy imports and derived values
+        entries, pred = _entries_into(sep, lambda: model.predict(partial))
+        assert len(entries) == 1 and entries[0].startswith("predict from"), entries
+        entries, _ = _entries_into(sep, lambda: (pred.trajectory(20), pred.std(20), pred.samples(2, 20, random_state=0),
+                                               pred.response(10), pred.completion(10), pred.goal,
+                                               pred.posterior_cov))
+        assert entries == [], entries
+        stream = model.stream()
+        entries, _ = _entries_into(sep, lambda: [stream.update(f) for f in partial[:10]])
+        assert entries == [], entries
+        # and it is the estimator's answer: the state's own predict gives the same numbers
+        np.testing.assert_array_equal(model.fitted_.predict(partial).trajectory(20), pred.trajectory(20))

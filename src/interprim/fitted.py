@@ -29,8 +29,7 @@ from ._blas import one_blas_thread, single_thread
 from ._compiled import loader
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
-from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report, \
-    warn_representation
+from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
 from .input_range import fit_input_range, input_distance, mark
 from .phase import estimate_phase, fit_phase_model, movement_prefix
@@ -245,7 +244,6 @@ class FittedPrimitive:
         self.representation_ = representation_report(
             latent, ders, theta, self.rollout_,
             groups={"observed": slice(0, n_o), "controlled": slice(n_o, None)} if ctrl else {"observed": slice(None)})
-        warn_representation(self.representation_, int(self.n_basis))
 
         # observation noise (Eq. 16)
         if isinstance(self.sigma2, str):

@@ -24,6 +24,7 @@ import numpy as np
 from .contract import Predictor
 from ._blas import one_blas_thread
 from ._validation import as_2d_finite, check_positive, check_times
+from .dmp import warn_representation
 from .errors import NotFittedError
 from .fitted import FITTED_NAMES, FittedPrimitive
 from .prediction import Prediction
@@ -136,6 +137,10 @@ class InteractionPrimitive(Predictor):
 
     Attributes
     ----------
+    fitted_ : FittedPrimitive
+        The fitted state (:class:`interprim.fitted.FittedPrimitive`), made anew by every :meth:`fit` (and by
+        :meth:`load`); it computes the predictions.  The attributes below are read-only views of it;
+        :meth:`with_fitted` gives a copy with some of them replaced.
     observed_dofs_, controlled_dofs_ : list of int
         Data columns of the observed and the controlled agent.
     n_dofs_ : int
@@ -365,6 +370,7 @@ class InteractionPrimitive(Predictor):
 
         self.__dict__.pop("fitted_", None)  # a fit that fails leaves the estimator unfitted
         self.fitted_ = FittedPrimitive.learn(self.json_params(), arrays, dt, columns, obs, ctrl, kk)
+        warn_representation(self.fitted_.representation_, int(self.n_basis))  # at the caller's line
         return self
 
     # ------------------------------------------------------------------ the fitted state
@@ -571,7 +577,8 @@ def _view(name: str) -> property:
             raise AttributeError(f"{name} (this InteractionPrimitive is not fitted yet)")
         return getattr(st, name)
 
-    return property(get, doc=f"``fitted_.{name}`` (read-only; see the class docstring's Attributes).")
+    get.__doc__ = f"``fitted_.{name}``: a read-only view of the fitted state (see the class docstring's Attributes)."
+    return property(get)
 
 
 for _name in FITTED_NAMES:  # the fitted attributes, read-only views of the fitted state

@@ -98,7 +98,7 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         Being fitted: needs ``thetas_``, ``basis_``, ``rollout_``, ``start_velocity_``,
         ``n_observed_latent_``, ``covariance``, ``ridge``, ``observation``.
     latent : list of ndarray, shape (T_j, D_latent)

@@ -279,7 +279,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         A fitted model.
     z : ndarray, shape (M, n_observed_latent)
         Observed frames in the model's latent space (after PCA), at the training ``dt``.

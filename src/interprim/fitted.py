@@ -30,7 +30,7 @@ from ._compiled import loader
 from ._validation import as_2d_finite, check_positive, check_times
 from .basis import Basis
 from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
-from .gaussian import LowRankConditioner, Posterior, condition, fit_prior
+from .gaussian import Posterior, fit_prior
 from .input_range import fit_input_range, input_distance, mark
 from .phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
@@ -518,8 +518,8 @@ class FittedPrimitive:
     def conditioner(self):
         """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.gaussian.LowRankConditioner`),
         or ``None`` when the prior has no such form."""
-        return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: LowRankConditioner.from_prior(
-            self.prior_, self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
+        return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: self.prior_.conditioner(
+            self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 
     def condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
@@ -532,13 +532,11 @@ class FittedPrimitive:
         G, B, yy, n = stats
         cond = self.conditioner()
         if cond is not None:
-            res = cond.mean_compiled(G, B, self.sigma2_, yy, n) if loader.ready() else \
-                cond.mean_numpy(G, B, self.sigma2_, yy, n)
+            res = cond.mean_and_evidence(G, B, self.sigma2_, yy, n)
             if res is not None:
                 cov = cond.cov(G, self.sigma2_) if need_cov else None
                 return Posterior(res[0], cov, res[1])
-        return condition(self.prior_.mean, self.prior_.cov, self.obs_index_, G, B, self.sigma2_,
-                         yy=yy, n_obs=n, need_cov=need_cov)
+        return self.prior_.condition(self.obs_index_, G, B, self.sigma2_, yy=yy, n_obs=n, need_cov=need_cov)
 
     def __repr__(self):
         return (f"<FittedPrimitive {self.n_demos_} demonstrations, {len(self.observed_dofs_)}+"

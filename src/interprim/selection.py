@@ -58,7 +58,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._blas import single_thread
-from .gaussian import (LowRankPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
+from .gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
                        shrinkage_intensity)
 from .phase.dtw import open_end_dtw
 from .phase.likelihood import observation_design
@@ -203,7 +203,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         if train.sum() < 2:
             continue
         for a, lam in enumerate(lam_grid):
-            prior = LowRankPrior(thetas[train], method, model.ridge, lam)
+            prior = GaussianPrior.factored(thetas[train], method, model.ridge, lam)
             held = [c for c in cases if fold[c[0]] == f]
             if select_sigma2:
                 pm_shift = H @ prior.mean.reshape(n_lat, q).T  # prior mean's positions minus the start's
@@ -375,8 +375,8 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
     for j, p in cases:
         f = fold[j]
         if f not in priors:
-            pr = LowRankPrior(model.thetas_[fold != f], model.covariance, model.ridge, lam)
-            pr.mean, pr.d, pr.W = pr.mean[: n_o * q], pr.d[: n_o * q], pr.W[:, : n_o * q]  # observed block
+            pr = GaussianPrior.factored(model.thetas_[fold != f], model.covariance, model.ridge, lam)
+            pr = pr.marginal(n_o * q)  # observed block
             priors[f] = pr
         prior = priors[f]
         z = latent[j]

@@ -366,8 +366,6 @@ class InteractionPrimitive(Predictor):
         for j, a in enumerate(arrays):
             if a.shape[0] < min_frames:
                 raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
-
-
         self.__dict__.pop("fitted_", None)  # a fit that fails leaves the estimator unfitted
         self.fitted_ = FittedPrimitive.learn(self.json_params(), arrays, dt, columns, obs, ctrl, kk)
         warn_representation(self.fitted_.representation_, int(self.n_basis))  # at the caller's line

@@ -49,11 +49,12 @@ def test_the_counter_sees_private_accesses(tmp_path):
 def test_no_module_sets_attributes_on_the_estimator():
     """Outside primitive.py nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
     constructor parameters may be set): selection and calibration return
-    their choices, the phase likelihood keeps derived arrays in ``InteractionPrimitive.cached``, io hands the
-    fitted attributes to ``load_fitted``."""
+    their choices, the phase likelihood keeps derived arrays in the fitted state's store
+    (``FittedPrimitive.cached``), io hands the fitted attributes to ``load_fitted``; the fitted state
+    (``fitted``, ``state``) is written only by its own module."""
     bad = []
     for path in sorted(SRC.rglob("*.py")):
-        if path.name == "primitive.py":
+        if path.name in ("primitive.py", "fitted.py"):
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(
@@ -61,7 +62,7 @@ def test_no_module_sets_attributes_on_the_estimator():
             for t in targets:
                 for el in (t.elts if isinstance(t, ast.Tuple) else [t]):
                     if (isinstance(el, ast.Attribute) and isinstance(el.value, ast.Name) and el.value.id in (
-                            "model", "m", "ip", "est", "estimator") and (el.attr.endswith("_") or el.attr[0] == "_")):
+                            "model", "m", "ip", "est", "estimator", "fitted", "state") and (el.attr.endswith("_") or el.attr[0] == "_")):
                         bad.append(f"{path.relative_to(SRC)}:{el.lineno} {ast.unparse(el)}")
     assert not bad, "\n".join(bad)
 
@@ -95,3 +96,48 @@ def test_the_server_parts_use_only_what_they_are_given():
                 (own.add if isinstance(node.ctx, ast.Store) else reads.add)(node.attr)
         assert reads <= own, f"{name} reads {sorted(reads - own)} that it neither defines nor sets"
         assert len(reads) > 3  # (the walk saw the class's code)
+
+def _entries_into(path_end: str, call):
+    """Frames of code in a file ending with ``path_end`` called from a frame outside it, while ``call()`` runs."""
+    import sys
+
+    entries = []
+
+    def prof(frame, event, arg):
+        if event == "call" and frame.f_code.co_filename.endswith(path_end):
+            back = frame.f_back
+            if back is None or not back.f_code.co_filename.endswith(path_end):
+                entries.append(f"{frame.f_code.co_name} from {back.f_code.co_filename if back else '?'}")
+
+    sys.setprofile(prof)
+    try:
+        result = call()
+    finally:
+        sys.setprofile(None)
+    return entries, result
+
+
+def test_one_predict_enters_primitive_py_once():
+    """The estimator hands a prediction to its fitted state (``interprim.fitted``): a ``predict`` call enters
+    primitive.py once (the call itself), the prediction's methods and a stream never."""
+    import os
+
+    from interprim.synthetic import two_agent_demos
+
+    demos = two_agent_demos(8, seed=5)
+    sep = os.sep + "interprim" + os.sep + "primitive.py"
+    for kw in (dict(phase_method="likelihood", sigma2=1e-3), dict(phase_method="dtw", sigma2=1e-3, pca_components=2)):
+        model = interprim.InteractionPrimitive([0, 1], n_basis=8, calibrate=False, **kw).fit(demos, dt=0.01)
+        partial = demos[0][:60, :2]
+        model.predict(partial).std(20)  # warm: lazy imports and derived values
+        entries, pred = _entries_into(sep, lambda: model.predict(partial))
+        assert len(entries) == 1 and entries[0].startswith("predict from"), entries
+        entries, _ = _entries_into(sep, lambda: (pred.trajectory(20), pred.std(20), pred.samples(2, 20, random_state=0),
+                                               pred.response(10), pred.completion(10), pred.goal,
+                                               pred.posterior_cov))
+        assert entries == [], entries
+        stream = model.stream()
+        entries, _ = _entries_into(sep, lambda: [stream.update(f) for f in partial[:10]])
+        assert entries == [], entries
+        # and it is the estimator's answer: the state's own predict gives the same numbers
+        np.testing.assert_array_equal(model.fitted_.predict(partial).trajectory(20), pred.trajectory(20))

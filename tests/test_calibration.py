@@ -84,9 +84,7 @@ def test_shrinkage_keeps_real_deviations_and_removes_noise():
 
 def test_prediction_std_applies_each_points_lookahead_factor(noisy):
     model, _, test = noisy
-    m = ip.InteractionPrimitive.__new__(ip.InteractionPrimitive)
-    m.__dict__.update(model.__dict__)
-    m.calibration_ = _hand_made()
+    m = model.with_fitted(calibration_=_hand_made())
     p = m.predict(test[0][:90, :2])
     n = 51
     u = np.linspace(0, 1, n)

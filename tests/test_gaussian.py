@@ -118,3 +118,51 @@ def test_sample_is_continuous_in_cov_and_handles_singular_cov():
     resid = (s - 1.0) - (s - 1.0) @ U @ np.linalg.pinv(U)  # the part outside range(U)
     assert np.abs(resid).max() < 1e-5 * np.abs(s - 1.0).max()
     np.testing.assert_allclose(np.cov(s.T), singular, atol=0.15 * np.abs(singular).max())
+
+
+@pytest.mark.parametrize("method", ["shrinkage", "ridge", "empirical"])
+@pytest.mark.parametrize("S", [5, 40])  # fewer and more demonstrations than parameters
+def test_one_prior_type_every_form_equals_literal_eq18(method, S):
+    """``GaussianPrior`` is the one prior: its factored form (``factored``, what cross-validation uses) has the
+    covariance of ``fit_prior``; its conditioner, its dense ``condition``, ``posterior_means`` and ``evidence``
+    (one or many sigma^2 at once, factored or dense) all equal Eq. 17-18 as printed (``condition_literal``)."""
+    from interprim.gaussian import GaussianPrior, LowRankPrior
+
+    rng = np.random.default_rng(S)
+    q, D_o, D_c, T = 4, 2, 2, 9
+    P = q * (D_o + D_c)
+    thetas = rng.normal(size=(S, P)) @ rng.normal(size=(P, P)) * 0.3
+    dense = fit_prior(thetas, method, 1e-3)
+    lam = dense.shrinkage
+    fact = GaussianPrior.factored(thetas, method, 1e-3, lam)
+    assert type(fact) is type(dense) is type(LowRankPrior(thetas, method, 1e-3, lam))  # one type; the old name
+    assert "cov" not in vars(fact)  # the dense covariance is built only when asked for
+    np.testing.assert_allclose(fact.cov, dense.cov, rtol=1e-10, atol=1e-12 * np.abs(dense.cov).max())
+    X = rng.normal(size=(T, q))
+    F = rng.normal(size=(T, D_o))
+    Omega = np.zeros((T * D_o, P))
+    for i in range(D_o):
+        Omega[i * T:(i + 1) * T, i * q:(i + 1) * q] = X
+    idx = np.arange(D_o * q).reshape(D_o, q)
+    s2 = np.array([0.05, 0.7, 3.0])
+    lit = [condition_literal(dense.mean, dense.cov, Omega, F.T.reshape(-1), v) for v in s2]
+    tol = dict(rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(fact.evidence(D_o, q, X, F, s2), [p.log_likelihood for p in lit], **tol)
+    np.testing.assert_allclose(dense.evidence(D_o, q, X, F, s2), [p.log_likelihood for p in lit], **tol)
+    np.testing.assert_allclose(fact.posterior_means(D_o, q, X, F, s2), [p.mean for p in lit], **tol)
+    assert isinstance(fact.evidence(D_o, q, X, F, 0.7), float)
+    assert fact.evidence(D_o, q, X, F, 0.7) == pytest.approx(lit[1].log_likelihood, rel=1e-8)
+    G, B, yy, n = X.T @ X, X.T @ F, float(np.sum(F * F)), F.size
+    post = dense.condition(idx, G, B, 0.7, yy=yy, n_obs=n)
+    np.testing.assert_allclose(post.mean, lit[1].mean, **tol)
+    np.testing.assert_allclose(post.cov, lit[1].cov, rtol=1e-8, atol=1e-9 * np.abs(dense.cov).max())
+    cond = dense.conditioner(idx)
+    mean, ll = cond.mean_and_evidence(G, B, 0.7, yy, n)  # compiled or numpy, chosen inside
+    np.testing.assert_allclose(mean, lit[1].mean, **tol)
+    assert ll == pytest.approx(lit[1].log_likelihood, rel=1e-8)
+    ref = cond.mean_numpy(G, B, 0.7, yy, n)
+    np.testing.assert_allclose(mean, ref[0], rtol=1e-12, atol=1e-12)
+    # the observed block: the marginal of the first D_o q parameters, in the forms the prior has
+    m = fact.marginal(D_o * q)
+    np.testing.assert_allclose(m.cov, dense.cov[:D_o * q, :D_o * q], rtol=1e-10, atol=1e-12 * np.abs(dense.cov).max())
+    np.testing.assert_array_equal(m.mean, dense.mean[:D_o * q])

@@ -59,3 +59,18 @@ def test_the_check_survives_save_and_load(model_and_demos, tmp_path):
     assert loaded.input_limit_ == m.input_limit_
     with pytest.warns(ip.OutOfRangeWarning):
         assert loaded.predict(demos[1][:40, :2] * 1000).out_of_range
+
+
+def test_the_warning_points_at_the_callers_line(model_and_demos):
+    """However many of the library's calls lie between (the estimator, its fitted state, a stream), the
+    warning is attributed to the line that called predict / update."""
+    model, demos = model_and_demos[0], model_and_demos[1]
+    frames = demos[0][:40, model.observed_dofs_] * 1000.0  # millimetres to a model in metres
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.predict(frames)
+        stream = model.stream()
+        for f in frames[:5]:
+            stream.update(f)
+    hits = [w for w in caught if issubclass(w.category, ip.OutOfRangeWarning)]
+    assert len(hits) == 2 and all(w.filename == __file__ for w in hits), [(w.filename, w.lineno) for w in hits]

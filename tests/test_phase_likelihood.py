@@ -184,13 +184,13 @@ def test_batched_log_likelihood_matches_extended_precision_where_reference_loses
 def test_dense_fallback_when_prior_is_not_low_rank():
     import copy
 
-    model = copy.deepcopy(_small_model("position", None, "shrinkage"))
+    model = _small_model("position", None, "shrinkage")
     n = model.n_observed_latent_ * model._q
     prior = copy.copy(model.prior_)
     cov = prior.cov.copy()
     cov[:n, :n] += 0.05 * np.mean(np.diag(cov[:n, :n])) * np.eye(n)  # no longer diag(d) + W^T W of thetas_
     prior.cov = cov
-    model.prior_ = prior
+    model = model.with_fitted(prior_=prior)
     assert PL._factored(model) is None and PL._fast_state(model) is None
     z = _latent(model, _demos(1, seed=7)[0][:50])
     s = np.array([0.2, 0.45, 0.9])

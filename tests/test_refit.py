@@ -126,3 +126,51 @@ def test_to_state_from_state_round_trip():
     bad = dict(arrays, thetas=arrays["thetas"][:, :-1])
     with pytest.raises(ip.ModelFileError, match="<state>: array 'thetas' has shape"):
         ip.InteractionPrimitive.from_state(bad, meta)
+
+
+# ----------------------------------------------------------------------------- the fitted state (interprim.fitted)
+def test_fit_builds_a_new_fitted_state_and_the_attributes_are_its_read_only_views():
+    from interprim.fitted import FITTED_NAMES, FittedPrimitive
+
+    demos = two_agent_demos(8, seed=4)
+    model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, phase_method="likelihood", calibrate=False)
+    assert "fitted_" not in vars(model) and not hasattr(model, "prior_")
+    model.fit(demos, dt=0.01)
+    first = model.fitted_
+    assert isinstance(first, FittedPrimitive)
+    for name in FITTED_NAMES:  # every fitted attribute is the state's own object
+        if hasattr(first, name):
+            assert getattr(model, name) is getattr(first, name), name
+    with pytest.raises(AttributeError):
+        model.prior_ = None  # read-only: the state is changed only by a new fit
+    prior, part = first.prior_, demos[2][:60, :2]
+    before = model.predict(part).trajectory(20)
+    model.fit([d[:, :4] for d in demos], dt=0.01)
+    assert model.fitted_ is not first and first.prior_ is prior  # a new state; the old one is untouched
+    assert model.predict(part).trajectory(20).shape == (20, 4)
+    np.testing.assert_array_equal(first.predict(part).trajectory(20), before)  # the old state still predicts
+
+
+def test_fitted_state_round_trip_and_with_fitted_with_params():
+    from interprim.fitted import FittedPrimitive
+
+    demos = two_agent_demos(8, seed=4)
+    model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, phase_method="likelihood",
+                                    calibrate=False).fit(demos, dt=0.01)
+    st, part = model.fitted_, demos[1][:60, :2]
+    arrays, meta = st.to_state()
+    twin = FittedPrimitive.from_state(arrays, meta, model.json_params())
+    np.testing.assert_array_equal(twin.predict(part).trajectory(30), model.predict(part).trajectory(30))
+    # with_fitted: a copy with its own store; the original is unchanged
+    wide = st.with_fitted(sigma2_=10.0 * st.sigma2_)
+    assert wide.sigma2_ == 10.0 * st.sigma2_ and st.sigma2_ == model.sigma2_
+    assert wide.conditioner() is not st.conditioner()
+    with pytest.raises(ValueError, match="not fitted attributes"):
+        st.with_fitted(n_basis=3)
+    # a phase_method set on the estimator after fit is used by its next predict (the state's with_params)
+    model.phase_method = "dtw"
+    got = model.predict(part)
+    want = st.with_params(phase_method="dtw").predict(part)
+    assert model.fitted_ is st and st.phase_method == "likelihood"
+    np.testing.assert_array_equal(got.trajectory(30), want.trajectory(30))
+    assert got.n_star == want.n_star

@@ -378,7 +378,7 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         Fitted on ``demos``.
     demos : list of ndarray, shape (T_i, D)
         The training demonstrations in data columns, at ``model.dt_``.

@@ -28,28 +28,138 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GaussianPrior", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
+__all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
 
 _LOG2PI = float(np.log(2.0 * np.pi))
 
 
-@dataclass
 class GaussianPrior:
-    """``p(theta) = N(mean, cov)`` with how the covariance was regularised.
+    """``p(theta) = N(mean, cov)`` (Eq. 10) with how the covariance was regularised: the one prior type.
 
-    ``diag`` and ``factor`` (optional) give the same covariance in the
-    diagonal-plus-low-rank form ``cov = diag(diag) + factor @ factor.T`` that
-    every method of :func:`fit_prior` produces (``factor`` has at most ``S``
-    columns, ``S`` demonstrations); :class:`LowRankConditioner` uses it.
+    ``diag`` and ``factor`` (optional) give the same covariance in the diagonal-plus-low-rank form
+    ``cov = diag(diag) + factor @ factor.T`` that every method of :func:`fit_prior` produces (``factor`` has at
+    most ``S`` columns, ``S`` demonstrations).  A prior made by :meth:`factored` (the folds of cross-validation,
+    the phase likelihood's observed block) has only that form; its dense ``cov`` is built on first use.
+
+    Conditioning on an observation of the observed DoFs (Eq. 16-18) and its evidence ``log p(tau_o)`` have one
+    home: :meth:`conditioner` (the low-rank form, compiled or numpy chosen inside
+    :meth:`LowRankConditioner.mean_and_evidence`), :meth:`condition` (the structured dense form), :meth:`evidence` and
+    :meth:`posterior_means` (every ``sigma^2`` candidate at once, :func:`lowrank_case`); :func:`condition_literal`
+    is Eq. 17-18 as printed, the reference they are tested against.
+
+    Parameters
+    ----------
+    mean : ndarray, shape (P,)
+    cov : ndarray, shape (P, P) or None
+        ``None``: ``diag(diag) + factor factor^T``, built when first asked for.
+    method : str
+        The covariance method of :func:`fit_prior`.
+    shrinkage : float
+        The shrinkage intensity ``lambda`` (0 unless ``method="shrinkage"``).
+    diag, factor : ndarray, shape (P,) and (P, r), optional
+        The diagonal-plus-low-rank form of ``cov``.
     """
 
-    mean: np.ndarray
-    cov: np.ndarray
-    method: str
-    shrinkage: float
-    diag: np.ndarray | None = None
-    factor: np.ndarray | None = None
+    def __init__(self, mean, cov, method: str, shrinkage: float, diag=None, factor=None):
+        if cov is None and (diag is None or factor is None):
+            raise ValueError("GaussianPrior: give cov, or diag and factor")
+        self.mean = mean
+        if cov is not None:  # else built on first use (__getattr__)
+            self.cov = cov
+        self.method = method
+        self.shrinkage = shrinkage
+        self.diag = diag
+        self.factor = factor
+
+    @classmethod
+    def factored(cls, thetas, method: str, ridge: float, lam) -> "GaussianPrior":
+        """The prior of :func:`fit_prior` in factored form only, ``N(mean, diag(d) + W^T W)``, without the
+        ``P x P`` matrix: what the folds of cross-validation condition on (:func:`lowrank_case`).
+
+        Every covariance method of ``fit_prior`` is ``(1 - lam) S + lam diag(S) + floor I`` with the sample
+        covariance ``S = Xc^T Xc / n`` of ``n`` demonstrations (``lam = 0`` for ``"ridge"`` and
+        ``"empirical"``), i.e. a diagonal plus a rank-``n`` term.  Conditioning then needs only ``k x k``
+        eigendecompositions per observed DoF and ``n x n`` solves (Woodbury), for all ``sigma^2`` candidates at
+        once, instead of a ``(D_o k)``-sized eigendecomposition.
+        """
+        X = np.asarray(thetas, dtype=np.float64)
+        n, P = X.shape
+        mean = X.mean(axis=0)
+        Xc = X - mean
+        diag = np.sum(Xc * Xc, axis=0) / n
+        scale = float(np.mean(diag)) if P else 0.0
+        floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
+        lam = 0.0 if (method != "shrinkage" or lam is None) else float(lam)
+        W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
+        return cls(mean, None, method, lam, lam * diag + floor, W.T)
+
+    def __getattr__(self, name):
+        # ``cov`` of a factored prior: diag(diag) + factor factor^T, built on first use and then kept
+        if name != "cov" or self.__dict__.get("factor") is None or self.__dict__.get("diag") is None:
+            raise AttributeError(f"GaussianPrior has no attribute {name!r}")
+        U = np.asarray(self.factor, dtype=np.float64)
+        cov = U @ U.T
+        cov[np.diag_indices(cov.shape[0])] += self.diag
+        self.cov = cov
+        return cov
+
+    @property
+    def d(self) -> np.ndarray:
+        """The diagonal part ``d`` of ``cov = diag(d) + W^T W`` (``diag``)."""
+        return self.diag
+
+    @property
+    def W(self) -> np.ndarray:
+        """The low-rank part ``W`` (``r x P``, ``factor.T``) of ``cov = diag(d) + W^T W``."""
+        return self.factor.T
+
+    def marginal(self, n: int) -> "GaussianPrior":
+        """The prior of the first ``n`` parameters (the observed agent's block when ``n = D_o q``), in the forms
+        this one has (views, no copies)."""
+        cut = (lambda a: None if a is None else a[:n])
+        cov = self.__dict__.get("cov")
+        return GaussianPrior(self.mean[:n], None if cov is None else cov[:n, :n], self.method,
+                             self.shrinkage, cut(self.diag), cut(self.factor))
+
+    def conditioner(self, obs_index, thetas=None, ridge: float | None = None) -> "LowRankConditioner | None":
+        """Eq. 16-18 precomputed for this prior and the observed parameters ``obs_index`` (``(D_o, q)``):
+        :meth:`LowRankConditioner.from_prior`, or ``None`` when the covariance has no low-rank form."""
+        return LowRankConditioner.from_prior(self, obs_index, thetas, ridge)
+
+    def condition(self, obs_index, G, B, sigma2: float, yy: float | None = None, n_obs: int | None = None,
+                  need_cov: bool = True) -> "Posterior":
+        """Eq. 16-18 in the structured dense form (:func:`condition`) from the statistics ``G = X^T X``,
+        ``B = X^T F`` of an observation of the parameters ``obs_index``."""
+        return condition(self.mean, self.cov, obs_index, G, B, sigma2, yy=yy, n_obs=n_obs, need_cov=need_cov)
+
+    def posterior_means(self, n_o: int, q: int, X, Y, sigma2, compressed=None) -> np.ndarray:
+        """Posterior means ``(len(sigma2), P)`` of Eq. 18 for the observation ``Y = X theta_i + noise`` of the
+        first ``n_o`` DoFs (``q`` parameters each), every noise candidate at once (:func:`lowrank_case`)."""
+        return lowrank_case(self, n_o, q, X, Y, np.atleast_1d(np.asarray(sigma2, dtype=np.float64)),
+                            compressed=compressed)[0]
+
+    def evidence(self, n_o: int, q: int, X, Y, sigma2, compressed=None):
+        """The evidence ``log p(tau_o)`` (Eq. 16-17: the marginal log-likelihood) of the observation
+        ``Y = X theta_i + noise`` of the first ``n_o`` DoFs: a float for one ``sigma2``, an array for an array of
+        candidates (all at once, :func:`lowrank_case`); the structured dense form when the prior has no
+        low-rank form."""
+        s2 = np.asarray(sigma2, dtype=np.float64)
+        many = s2.ndim > 0
+        s2 = np.atleast_1d(s2)
+        if self.diag is not None and self.factor is not None:
+            ll = lowrank_case(self, n_o, q, X, Y, s2, need_mean=False, need_ll=True, compressed=compressed)[1]
+        else:
+            idx = np.arange(n_o * q).reshape(n_o, q)
+            G, B = X.T @ X, X.T @ Y
+            yy = float(np.sum(Y * Y))
+            ll = np.array([self.condition(idx, G, B, float(v), yy=yy, n_obs=Y.size, need_cov=False).log_likelihood
+                           for v in s2])
+        return ll if many else float(ll[0])
+
+    def __repr__(self):
+        return (f"GaussianPrior(P={np.shape(self.mean)[0]}, method={self.method!r}, shrinkage={self.shrinkage:.3g}"
+                f"{', low rank' if self.factor is not None else ''})")
 
 
 def shrink_cross(prior: GaussianPrior, gamma: float, n_first: int) -> GaussianPrior:
@@ -415,6 +525,15 @@ class LowRankConditioner:
         logdet = n_obs * np.log(sigma2) + ld_T - D_o * q * np.log(sigma2) + ld_K
         return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
+    def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
+        """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
+        kernels are in use (:func:`interprim._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
+        numbers to rounding); ``None`` if a factorisation failed."""
+        from ._compiled import registry
+
+        return self.mean_compiled(G, B, sigma2, yy, n_obs) if registry.in_use() else \
+            self.mean_numpy(G, B, sigma2, yy, n_obs)
+
     def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
         from ._compiled import registry as kernels
@@ -478,27 +597,9 @@ class LowRankConditioner:
         return out
 
 
-class LowRankPrior:
-    """``N(mean, diag(d) + W^T W)``: the covariance of :func:`~interprim.gaussian.fit_prior` in factored form.
-
-    Every covariance method of ``fit_prior`` is ``(1 - lam) S + lam diag(S) + floor I`` with the
-    sample covariance ``S = Xc^T Xc / n`` of ``n`` demonstrations (``lam = 0`` for ``"ridge"`` and
-    ``"empirical"``), i.e. a diagonal plus a rank-``n`` term.  Conditioning then needs only
-    ``k x k`` eigendecompositions per observed DoF and ``n x n`` solves (Woodbury), for all
-    ``sigma^2`` candidates at once, instead of a ``(D_o k)``-sized eigendecomposition.
-    """
-
-    def __init__(self, thetas, method, ridge, lam):
-        X = np.asarray(thetas, dtype=np.float64)
-        n, P = X.shape
-        self.mean = X.mean(axis=0)
-        Xc = X - self.mean
-        diag = np.sum(Xc * Xc, axis=0) / n
-        scale = float(np.mean(diag)) if P else 0.0
-        floor = max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
-        lam = 0.0 if (method != "shrinkage" or lam is None) else float(lam)
-        self.d = lam * diag + floor
-        self.W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
+def LowRankPrior(thetas, method, ridge, lam) -> GaussianPrior:
+    """:meth:`GaussianPrior.factored` (the name of the factored prior when it was a type of its own)."""
+    return GaussianPrior.factored(thetas, method, ridge, lam)
 
 
 def compress_observation(X, Y):
@@ -519,7 +620,8 @@ def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=Fal
 
     Parameters
     ----------
-    pr : LowRankPrior
+    pr : GaussianPrior
+        With its low-rank form (``diag``/``factor``; e.g. :meth:`GaussianPrior.factored`).
     n_o, q : int
         Observed DoFs (the first ``n_o q`` parameters) and parameters per DoF.
     X, Y : ndarray, shape (M, q), (M, n_o)

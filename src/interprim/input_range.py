@@ -45,13 +45,19 @@ def input_distance(model, frames) -> float:
 
 
 def mark(model, prediction, dist, warn: bool = True):
-    """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.errors.OutOfRangeWarning`)."""
+    """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.errors.OutOfRangeWarning`)
+    at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
     if prediction.out_of_range and warn:
+        import inspect
+
+        level, f = 1, inspect.currentframe()  # stacklevel 1 is this function
+        while f is not None and str(f.f_globals.get("__name__", "")).split(".")[0] == "interprim":
+            f, level = f.f_back, level + 1
         warnings.warn(OutOfRangeWarning(
             f"the observed frames are {dist:.3g} standard deviations from the training demonstrations' mean "
             f"(limit {limit:.3g}): wrong units, column order or frame of reference? The prediction "
-            "extrapolates (Prediction.out_of_range is True)"), stacklevel=4)
+            "extrapolates (Prediction.out_of_range is True)"), stacklevel=level)
     return prediction

@@ -68,7 +68,8 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["load_any", "MODEL_CLASSES", "save_model", "load_model", "model_state", "model_from_state", "save_estimator", "load_estimator",
+__all__ = ["load_any", "MODEL_CLASSES", "save_model", "load_model", "model_state", "model_from_state", "fitted_from_state",
+           "save_estimator", "load_estimator",
            "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -325,7 +326,26 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
     (:meth:`~interprim.primitive.InteractionPrimitive.from_state`)."""
     try:
         model = model_class(**meta["params"])
-        st = SimpleNamespace()  # the fitted attributes, handed to the model at the end (load_fitted)
+        params = model.json_params()  # the file's parameters, with the defaults of those it predates
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
+    fitted = fitted_from_state(data, meta, params, path)
+    try:
+        model.load_fitted(fitted)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
+    return model
+
+
+def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> dict:
+    """The fitted attributes (names ending in ``_``) of ``(data, meta)``, a model file's arrays and metadata
+    (format versions 1-3), every array checked, for a model with the parameters ``params`` (complete, as
+    :meth:`~interprim.primitive.InteractionPrimitive.json_params` gives them); problems raise
+    :class:`~interprim.errors.ModelFileError` naming ``path``
+    (:meth:`~interprim.fitted.FittedPrimitive.from_state` builds the state from them)."""
+    phase_method = params["phase_method"]
+    try:
+        st = SimpleNamespace()  # the fitted attributes
         st.observed_dofs_ = [int(i) for i in meta["observed_dofs"]]
         st.controlled_dofs_ = [int(i) for i in meta["controlled_dofs"]]
         st.n_dofs_ = int(meta["n_dofs"])
@@ -376,10 +396,10 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
                 meta["phase_model"])
         used = meta.get("phase_method_used")  # absent in files older than phase_method="auto": as set there
         st.phase_method_ = str(used if used is not None else
-                               (model.phase_method if model.phase_method not in ("cv", "auto") else "likelihood"))
+                               (phase_method if phase_method not in ("cv", "auto") else "likelihood"))
         _expect(st.phase_method_ in ("dtw", "likelihood", "learned"), path,
                 f"unknown phase method {st.phase_method_!r} in the metadata")
-        used = st.phase_method_ if model.phase_method in ("cv", "auto") else model.phase_method
+        used = st.phase_method_ if phase_method in ("cv", "auto") else phase_method
         _expect(used != "learned" or st.phase_model_ is not None, path,
                 "the phase method is 'learned' but the file holds no phase model")
         st.calibration_ = None
@@ -411,7 +431,7 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
 
-    q = model.n_basis + 1
+    q = int(params["n_basis"]) + 1
     P = st.n_latent_ * q
     checks = {
         "prior_mean": (P,), "prior_cov": (P, P), "thetas": (st.n_demos_, P),
@@ -435,11 +455,7 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
             f"array 'reference' has shape {ref.shape}, expected (N>=2, {st.n_observed_latent_})")
     _expect(sorted(st.observed_dofs_ + st.controlled_dofs_) == list(range(st.n_dofs_)), path,
             "observed_dofs and controlled_dofs do not partition the columns")
-    try:
-        model.load_fitted(vars(st))
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
-    return model
+    return vars(st)
 
 
 #: Every model class a model file may hold, by the name in its ``metadata["model"]``, and the module defining it

@@ -312,7 +312,7 @@ class MeanRollout:
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         A fitted model.
     n : int
         Points of the uniform normalised-time grid from 0 to 1.

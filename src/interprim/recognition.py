@@ -81,7 +81,7 @@ class Recogniser:
             raise TypeError("models must be a non-empty dict {label: fitted InteractionPrimitive}")
         obs = None
         for k, m in models.items():
-            if not hasattr(m, "prior_"):
+            if getattr(m, "fitted_", None) is None:
                 raise ValueError(f"model {k!r} is not fitted")
             if obs is None:
                 obs = list(m.observed_dofs_)
@@ -102,7 +102,7 @@ class Recogniser:
         if isinstance(noise, str):
             if noise not in ("shared", "own"):
                 raise ValueError(f"noise must be 'shared', 'own' or a positive float, got {noise!r}")
-            own = {k: phase_noise(m) for k, m in self.models.items()}
+            own = {k: phase_noise(m.fitted_) for k, m in self.models.items()}
             shared = float(np.exp(np.mean(np.log(list(own.values())))))
             self.noise = own if noise == "own" else {k: shared for k in self.models}
         else:
@@ -118,7 +118,8 @@ class Recogniser:
         from .phase.likelihood import estimate_phase
 
         scores, phases = {}, {}
-        for k, m in self.models.items():
+        for k, model in self.models.items():
+            m = model.fitted_  # the fitted state (interprim.fitted)
             o = as_2d_finite(partial, "partial", n_cols=len(m.observed_dofs_), min_rows=2)
             z = m.observed_to_latent(o)
             N1 = m.reference_.shape[0] - 1

@@ -62,7 +62,7 @@ import numpy as np
 
 from ._blas import single_thread
 from .cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
-from .gaussian import (LowRankPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
+from .gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
                        shrinkage_intensity)
 from .phase.dtw import open_end_dtw
 from .phase.likelihood import observation_design
@@ -102,7 +102,7 @@ def select_hyperparameters(model, latent, n_folds: int = 5, fractions=DEFAULT_FR
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         Being fitted: needs ``thetas_``, ``basis_``, ``rollout_``, ``start_velocity_``,
         ``n_observed_latent_``, ``covariance``, ``ridge``, ``observation``.
     latent : list of ndarray, shape (T_j, D_latent)
@@ -207,7 +207,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         if train.sum() < 2:
             continue
         for a, lam in enumerate(lam_grid):
-            prior = LowRankPrior(thetas[train], method, model.ridge, lam)
+            prior = GaussianPrior.factored(thetas[train], method, model.ridge, lam)
             held = [c for c in cases if fold[c[0]] == f]
             if select_sigma2:
                 pm_shift = H @ prior.mean.reshape(n_lat, q).T  # prior mean's positions minus the start's
@@ -364,8 +364,8 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
     for j, p in cases:
         f = fold[j]
         if f not in priors:
-            pr = LowRankPrior(model.thetas_[fold != f], model.covariance, model.ridge, lam)
-            pr.mean, pr.d, pr.W = pr.mean[: n_o * q], pr.d[: n_o * q], pr.W[:, : n_o * q]  # observed block
+            pr = GaussianPrior.factored(model.thetas_[fold != f], model.covariance, model.ridge, lam)
+            pr = pr.marginal(n_o * q)  # observed block
             priors[f] = pr
         prior = priors[f]
         z = latent[j]

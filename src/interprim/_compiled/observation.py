@@ -6,12 +6,12 @@ tested against (``tests/test_fastpaths.py``):
 * :func:`forcing_values_into` / :func:`design_stats` -- sufficient statistics ``G = X^T X``, ``B = X^T Y``
   and ``|Y|^2`` of the paper's forcing observation (Eq. 13-15) at ``M``
   observed frames spread uniformly over ``[0, s_end]``; reference:
-  ``InteractionPrimitive._observation`` (``np.gradient`` derivatives,
+  ``FittedPrimitive.observation_design`` (``np.gradient`` derivatives,
   :meth:`interprim.basis.Basis.phi_tilde`, :func:`interprim.dmp.forcing_values`).
 * :func:`position_stats` -- the same statistics for the position observation
   (``observation="position"``: ``Y = z - free [y0; v0]``, ``X = H``, the rows of
   :meth:`interprim.dmp.LinearRollout.design` from ``s0 = 0``), accumulated in
-  fixed-size blocks of frames; reference: ``InteractionPrimitive._observation``.
+  fixed-size blocks of frames; reference: ``FittedPrimitive.observation_design``.
 * :func:`forcing_targets_batch` -- the forcing targets of Eq. 3 of a batch of equally long
   demonstrations (the fit); reference: :func:`interprim.dmp.forcing_targets`.
 
@@ -423,7 +423,7 @@ class StatsWorkspace:
     def position_stats(self, z, M, s_end, y0, v0, rollout):
         """``(G, B, |Y|^2)`` of the position observation of ``z[:M]`` over ``[0, s_end]`` from start ``[y0; v0]``.
 
-        Reference: ``InteractionPrimitive._observation`` (``LinearRollout.design(0, s)``).
+        Reference: ``FittedPrimitive.observation_design`` (``LinearRollout.design(0, s)``).
         ``G`` and ``B`` are this workspace's buffers (overwritten by the next call).
         """
         yy = position_stats(z, M, float(s_end), y0, v0, rollout.Z, rollout.powers, self.G, self.B,

@@ -27,7 +27,7 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         A fitted model (its ``reference_`` has ``N`` frames).
     z : ndarray, shape (M, n_observed_latent)
         The frames seen so far, in the model's latent space, at the training ``dt``.

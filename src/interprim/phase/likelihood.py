@@ -46,7 +46,7 @@ import numpy as np
 from .._blas import single_thread
 from .._compiled import registry as kernels
 from ..dmp import forcing_values
-from ..gaussian import _LOG2PI, LowRankPrior, condition, lowrank_case
+from ..gaussian import _LOG2PI, GaussianPrior, condition
 from ..preprocessing import derivatives
 from .estimate import PhaseEstimate
 
@@ -106,7 +106,7 @@ def _marginal(model):
 
 
 def _factored(model):
-    """The observed block of the prior as diagonal + low rank (see :class:`interprim.gaussian.LowRankPrior`).
+    """The observed block of the prior as diagonal + low rank (:meth:`interprim.gaussian.GaussianPrior.factored`).
 
     Exact when ``prior_`` was fitted by :func:`~interprim.gaussian.fit_prior` from ``thetas_`` (checked
     once); ``None`` otherwise (then the dense path is used).
@@ -120,8 +120,7 @@ def _build_factored(model, prior):
     th = getattr(model, "thetas_", None)
     if th is not None:
         n = model.n_observed_latent_ * model.params_per_dof_
-        cand = LowRankPrior(th, prior.method, float(model.ridge), prior.shrinkage)
-        cand.mean, cand.d, cand.W = cand.mean[:n], cand.d[:n], cand.W[:, :n]
+        cand = GaussianPrior.factored(th, prior.method, float(model.ridge), prior.shrinkage).marginal(n)
         dense = prior.cov[:n, :n]
         approx = cand.W.T @ cand.W
         approx[np.diag_indices(n)] += cand.d
@@ -157,14 +156,13 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
 
 
 def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None = None) -> float:
-    """The per-candidate evaluation (explicit design matrix, :func:`interprim.gaussian.lowrank_case` or
+    """The per-candidate evaluation (explicit design matrix, :meth:`interprim.gaussian.GaussianPrior.evidence` or
     :func:`interprim.gaussian.condition`): the reference the batched paths are tested against."""
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)
     if pr is not None:  # O(D_o k^3 + D_o k S^2) instead of O((D_o k)^3)
-        return float(lowrank_case(pr, model.n_observed_latent_, model.params_per_dof_, X, Y, np.array([s2]),
-                                  need_mean=False, need_ll=True)[1][0])
+        return pr.evidence(model.n_observed_latent_, model.params_per_dof_, X, Y, s2)
     mean_o, cov_o, idx = _marginal(model)
     post = condition(mean_o, cov_o, idx, X.T @ X, X.T @ Y, s2, yy=float(np.sum(Y * Y)), n_obs=Y.size,
                      need_cov=False)
@@ -279,7 +277,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
 
     Parameters
     ----------
-    model : InteractionPrimitive
+    model : FittedPrimitive
         A fitted model.
     z : ndarray, shape (M, n_observed_latent)
         Observed frames in the model's latent space (after PCA), at the training ``dt``.

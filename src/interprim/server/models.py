@@ -72,8 +72,9 @@ class ModelEntry:
     def start(self) -> list | None:
         """Mean start position of the demonstrations in every data column, or ``None`` if unknown."""
         try:
-            M, off = self.model.latent_map()
-            return [float(v) for v in M @ np.asarray(self.model.start_position_, dtype=np.float64) + off]
+            st = self.model.fitted_  # an Interaction Primitive's fitted state (interprim.fitted)
+            M, off = st.latent_map()
+            return [float(v) for v in M @ np.asarray(st.start_position_, dtype=np.float64) + off]
         except Exception:  # a stand-in model without these attributes
             return None
 

@@ -170,7 +170,7 @@ def check_observation_forcing_values_into(models, demos):
         z = _prefix(demos, M)
         YT = np.empty((2, M + 2))
         const = comp(z, M, s_end, float(m.alpha_y), float(m.beta_y_), np.empty((M + 1, 2)), np.empty((M + 1, 2)), YT)
-        _, Y, _ = obs(m, z, s_end)
+        _, Y, _ = obs(m.fitted_, z, s_end)
         assert const == pytest.approx(m.alpha_y * m.beta_y_, rel=1e-15)
         worst = max(worst, rel(YT[:, :M].T, Y))
     return worst
@@ -184,7 +184,7 @@ def check_observation_design_stats(models, demos):
     worst = 0.0
     for M, s_end in PREFIXES:
         z = _prefix(demos, M)
-        X, Y, _ = obs(m, z, s_end)
+        X, Y, _ = obs(m.fitted_, z, s_end)
         YT = np.ascontiguousarray(Y.T)
         G, B = np.empty((q, q)), np.empty((q, 2))
         yy = comp(YT, M, s_end, basis.centers, basis.widths, float(basis.alpha_x), float(m.alpha_y * m.beta_y_),
@@ -203,7 +203,7 @@ def check_observation_position_stats(models, demos):
         ro = m.rollout_
         for M, s_end in PREFIXES + ((65, 0.6), (130, 0.9)):  # one block of 64 frames, two, three
             z = np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M)) + 0.3)  # y0 matters
-            X, Y, y0 = obs(m, z, s_end)
+            X, Y, y0 = obs(m.fitted_, z, s_end)
             G, B = np.empty((q, q)), np.empty((q, n_o))
             yy = comp(z, M, s_end, y0, v0, ro.Z, ro.powers, G, B, np.empty((q, 64)), np.empty((n_o, 64)))
             worst = max(worst, rel(G, X.T @ X), rel(B, X.T @ Y), rel(yy, np.sum(Y * Y)))
@@ -235,7 +235,7 @@ def check_conditioning_lowrank_condition_mean(models, demos):
         cond = LowRankConditioner.from_prior(m.prior_, m.obs_index_, m.thetas_, float(m.ridge))
         assert cond is not None
         for M, s_end in PREFIXES:
-            X, Y, _ = obs(m, np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M))), s_end)
+            X, Y, _ = obs(m.fitted_, np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M))), s_end)
             G, B, yy = X.T @ X, X.T @ Y, float(np.sum(Y * Y))
             for s2 in (1e-3, 0.7):
                 (mc, llc), (mn, lln) = cond.mean_compiled(G, B, s2, yy, Y.size), cond.mean_numpy(G, B, s2, yy, Y.size)

@@ -48,6 +48,7 @@ def _page(site, path):
     ("reference/client", ["interprim.server.client.Client.reset", "interprim.server.client.AsyncClient.frame"]),
     ("reference/server", ["interprim.server.app.InterprimServer.start", "interprim.server.app.ServerThread.stop"]),
     ("reference/errors", ["interprim.errors.ModelFileError", "interprim.errors.OutOfRangeWarning"]),
+    ("reference/auto", ["interprim.auto.AutoInteraction", "interprim.auto.Blend"]),
     ("reference/cv", ["interprim.cv.folds", "interprim.cv.within_one_se", "interprim.cv.observed_frames"]),
     ("reference/evaluation", ["interprim.evaluation.sweep.run_sweep",
                               "interprim.evaluation.baselines.PriorMean.fit"]),

@@ -146,7 +146,7 @@ def cache_is_warm() -> bool:
     layout cannot be read, answers True (the kernels are then loaded, or compiled, in the calling thread).
     """
     try:
-        from .registry import KERNELS, compiled
+        from .table import KERNELS, compiled
 
         for name in KERNELS:
             disp = compiled(name)

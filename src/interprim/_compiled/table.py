@@ -1,0 +1,115 @@
+"""The table of the compiled kernels: each with its numpy reference (see :mod:`interprim._compiled.registry`).
+
+Importing this module does not import numba; :func:`compiled` imports a kernel's module (and numba) on demand.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+__all__ = ["Kernel", "KERNELS", "names", "spec", "compiled", "reference"]
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """One compiled kernel and its numpy reference.
+
+    Attributes
+    ----------
+    name : str
+        ``"<module>.<short name>"``, the key callers use.
+    compiled : str
+        ``"<module of interprim._compiled>:<function>"``.
+    reference : str
+        ``"<module>:<qualified name>"`` of the numpy reference (a module that does not import numba).
+    drop_in : bool
+        The reference takes the kernel's arguments and returns its result (:func:`implementation` may
+        return either); otherwise it computes the same quantities at the level its callers use (e.g. the
+        whole observation statistics instead of the kernel's workspaces), as stated in ``what``.
+    what : str
+        What is computed (with the paper's equations) and how the reference corresponds.
+    """
+
+    name: str
+    compiled: str
+    reference: str
+    drop_in: bool
+    what: str
+
+
+KERNELS: dict[str, Kernel] = {k.name: k for k in (
+    Kernel("dtw.accumulate", "dtw:_accumulate", "interprim.phase.dtw:_accumulate_np", True,
+           "the accumulated cost matrix of Eq. 5-7, (M, N); bitwise equal"),
+    Kernel("dtw.open_end", "dtw:_open_end_strips", "interprim.phase.dtw:_accumulate_np", False,
+           "n* and D(n*, M) of Eq. 5-8 with two columns of memory; the reference's last column, first argmin; "
+           "bitwise equal"),
+    Kernel("dtw.backtrack", "dtw:_backtrack", "interprim.phase.dtw:_backtrack_np", True,
+           "the alignment path from D (Eq. 5-8); equal"),
+    Kernel("dtw.incremental_step", "dtw:_incremental_step", "interprim.phase.dtw:IncrementalDTW._step_np", False,
+           "one query frame of the open-end DTW (the new last column and n*); bitwise equal"),
+    Kernel("observation.forcing_values_into", "observation:forcing_values_into",
+           "interprim.fitted:FittedPrimitive.observation_design", False,
+           "forcing values of Eq. 15 (np.gradient derivatives); the reference's targets Y"),
+    Kernel("observation.design_stats", "observation:design_stats",
+           "interprim.fitted:FittedPrimitive.observation_design", False,
+           "X^T X, X^T Y, |Y|^2 of the forcing observation (Eq. 13-15); the reference's X, Y"),
+    Kernel("observation.position_stats", "observation:position_stats",
+           "interprim.fitted:FittedPrimitive.observation_design", False,
+           "X^T X, X^T Y, |Y|^2 of the position observation (rows of LinearRollout.design); the reference's X, Y"),
+    Kernel("observation.forcing_targets_batch", "observation:forcing_targets_batch",
+           "interprim.dmp:forcing_targets", False,
+           "forcing targets of Eq. 3 of equally long demonstrations; reference: preprocessing.derivatives + "
+           "dmp.forcing_targets"),
+    Kernel("conditioning.lowrank_condition_mean", "conditioning:lowrank_condition_mean",
+           "interprim.gaussian:LowRankConditioner.mean_numpy", False,
+           "posterior mean and evidence of Eq. 16-18 for a diagonal + low-rank prior; the reference returns "
+           "(mean, log-likelihood), the kernel (log-dets, residual) for LowRankConditioner.mean_compiled"),
+    Kernel("rollout.response_positions", "rollout:response_positions",
+           "interprim.prediction:Prediction._response_reference", False,
+           "the controlled agent's mean movement from the current phase (Eq. 1, exact discretisation)"),
+    Kernel("phase_likelihood.phase_loglik_batch", "phase_likelihood:phase_loglik_batch",
+           "interprim.phase.likelihood:_loglik_batch_numpy", False,
+           "log-likelihood of the observation at many candidate phases (the likelihood phase); the reference "
+           "takes the same arrays without M and out"),
+    Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
+           "interprim.phase.likelihood:_loglik_batch_numpy", False,
+           "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "
+           "log posteriors are the reference's log-likelihoods plus the speed prior"),
+)}
+
+_RESOLVED: dict[str, object] = {}
+
+def names() -> list[str]:
+    """Names of the registered kernels."""
+    return list(KERNELS)
+
+
+def spec(name: str) -> Kernel:
+    """The row of kernel ``name`` (``KeyError`` naming the registered ones if there is none)."""
+    try:
+        return KERNELS[name]
+    except KeyError:
+        raise KeyError(f"no compiled kernel named {name!r}; registered: {', '.join(KERNELS)}") from None
+
+
+def compiled(name: str):
+    """The compiled kernel ``name`` (imports numba; compiles it, or loads it from the cache, on its first call).
+
+    With ``NUMBA_DISABLE_JIT=1`` this is the kernel's body as a plain Python function.
+    """
+    fn = _RESOLVED.get(name)
+    if fn is None:
+        mod, attr = spec(name).compiled.split(":")
+        fn = getattr(importlib.import_module(f"{__package__}.{mod}"), attr)
+        _RESOLVED[name] = fn
+    return fn
+
+
+def reference(name: str):
+    """The numpy reference of the kernel ``name`` (a function, or an unbound method)."""
+    mod, qual = spec(name).reference.split(":")
+    obj = importlib.import_module(mod)
+    for part in qual.split("."):
+        obj = getattr(obj, part)
+    return obj

@@ -50,7 +50,7 @@ def test_one_thread_during_std_restored_after(model, human, monkeypatch):
 @pytest.mark.parametrize("entry", ["fit", "predict", "update", "posterior_cov", "samples"])
 def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
     """The limit is in force in the numeric core of each public call (spied on one inner function each)."""
-    from interprim import prediction, primitive
+    from interprim import fitted, prediction
 
     seen = []
 
@@ -65,14 +65,14 @@ def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
 
     with threadpool_limits(2, user_api="blas"):
         if entry == "fit":
-            spy_on(primitive, "fit_prior")
+            spy_on(fitted, "fit_prior")
             ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6, sigma2=1e-3, phase_method="dtw",
                                     calibrate=False).fit(two_agent_demos(5, seed=1, frames=80), dt=0.01)
         elif entry == "predict":
-            spy_on(type(model), "condition")
+            spy_on(type(model.fitted_), "condition")
             model.predict(human[:40])
         elif entry == "update":
-            spy_on(type(model), "predict_latent")
+            spy_on(type(model.fitted_), "predict_latent")
             s = model.stream()
             for f in human[:5]:
                 s.update(f)
@@ -80,7 +80,7 @@ def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
             s = model.stream()
             for f in human[:30]:
                 p = s.update(f)  # mean only: the covariance is computed on first access
-            spy_on(type(model), "condition")
+            spy_on(type(model.fitted_), "condition")
             p.posterior_cov
         else:
             p = model.predict(human[:40])

@@ -665,6 +665,8 @@ def main(argv=None):
         bench_likelihood_phase(args.quick)
         from benchmarks.learned import bench_learned
         bench_learned(args.quick, fitted_model, make_demos, timed, row)
+        from benchmarks.auto import bench_auto
+        bench_auto(args.quick, make_demos, timed, row)
         bench_dtw(args.quick)
         bench_fit(args.quick)
         bench_promp(model, test, args.quick)

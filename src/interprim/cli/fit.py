@@ -162,10 +162,7 @@ def _calibrate(text):
 
 
 def cmd_fit(args) -> int:
-    """``interprim fit``: load demonstrations, fit an InteractionPrimitive, save it."""
-    import time
-    from pathlib import Path
-
+    """``interprim fit``: load demonstrations, fit the model (chosen on them by default), save it."""
     import interprim as ip
     from interprim.datasets import load_demonstrations
 
@@ -203,19 +200,9 @@ def cmd_fit(args) -> int:
     ):
         if val is not None:
             kwargs[key] = val
-    try:
-        model = ip.InteractionPrimitive(observed_dofs=obs, **kwargs)
-        t0 = time.perf_counter()
-        model.fit(ds)  # its dt or time stamps, and its column names (stored in the model file)
-        fit_seconds = time.perf_counter() - t0
-    except InterprimError:
-        raise
-    except (ValueError, TypeError) as exc:
-        raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
-    out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out)
+    model = ip.InteractionPrimitive(observed_dofs=obs, **kwargs)
+    # its dt or time stamps, and its column names (stored in the model file)
+    fit_seconds, out = _fit_and_save(model, lambda: model.fit(ds), args)
     obs_names = [ds.columns[i] for i in model.observed_dofs_]
     ctrl_names = [ds.columns[i] for i in model.controlled_dofs_]
     print(
@@ -235,9 +222,6 @@ def cmd_fit(args) -> int:
 
 def _fit_other(args, ds, obs, n_read) -> int:
     """``--model auto`` (the model chosen on the data) or one of the other families alone."""
-    import time
-    from pathlib import Path
-
     import numpy as np
 
     from interprim.auto import AutoInteraction
@@ -247,18 +231,8 @@ def _fit_other(args, ds, obs, n_read) -> int:
                            "folds and needs at least 3 (or use --model ip)")
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window)
-    try:
-        t0 = time.perf_counter()
-        model = auto.fit(ds, dt=ds.dt)  # one family alone: fitted without comparison
-        fit_seconds = time.perf_counter() - t0
-    except InterprimError:
-        raise
-    except (ValueError, TypeError) as exc:
-        raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
-    out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out)
+    model = auto
+    fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]
     mean_dur = float(np.mean([len(d) - 1 for d in ds])) * ds.dt
     what = model.summary()
@@ -272,3 +246,23 @@ def _fit_other(args, ds, obs, n_read) -> int:
         + f"fit in {fit_seconds:.1f} s; saved {out}"
     )
     return 0
+
+
+def _fit_and_save(model, fit, args):
+    """Run ``fit()`` (bad data: a one-line error naming the file), save ``model`` to ``-o``; ``(seconds, path)``."""
+    import time
+    from pathlib import Path
+
+    try:
+        t0 = time.perf_counter()
+        fit()
+        fit_seconds = time.perf_counter() - t0
+    except InterprimError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
+    out = Path(args.output)
+    if out.parent and not out.parent.exists():
+        out.parent.mkdir(parents=True, exist_ok=True)
+    model.save(out)
+    return fit_seconds, out

@@ -53,8 +53,11 @@ class InteractionPrimitive(Predictor):
         human).  All other columns are the controlled agent (the robot).
         Listing every column gives the single-agent model of the paper's
         handwriting experiments (Fig. 3-4).
-    n_basis : int, default 20
-        Basis functions per DoF (Eq. 2); ``theta`` has ``n_basis + 1`` entries per DoF.
+    n_basis : int or "cv", default 20
+        Basis functions per DoF (Eq. 2); ``theta`` has ``n_basis + 1`` entries per DoF.  ``"cv"``: chosen from the
+        demonstrations by :func:`choose_n_basis` (the fewest of :data:`N_BASIS_GRID` whose held-out error of the
+        mean movement is within one standard error of the best; ``selection_["n_basis"]`` says what was compared);
+        the fitted state, and a model file, hold the number chosen.
     alpha_y : float, default 25.0
         (Advanced.) Spring constant of Eq. 1.
     beta_y : float, optional
@@ -231,7 +234,8 @@ class InteractionPrimitive(Predictor):
         pca = self.pca_components
         return {
             "observed_dofs": [int(i) for i in obs] if obs is not None else None,
-            "n_basis": int(self.n_basis), "alpha_y": float(self.alpha_y),
+            "n_basis": self.n_basis if isinstance(self.n_basis, str) else int(self.n_basis),
+            "alpha_y": float(self.alpha_y),
             "beta_y": None if self.beta_y is None else float(self.beta_y), "alpha_x": float(self.alpha_x),
             "sigma2": self.sigma2 if isinstance(self.sigma2, str) else float(self.sigma2),
             "covariance": self.covariance, "ridge": float(self.ridge), "observation": self.observation,
@@ -258,8 +262,10 @@ class InteractionPrimitive(Predictor):
         bad = [i for i in obs if not 0 <= i < n_dofs]
         if bad:
             raise ValueError(f"observed_dofs {bad} out of range for demonstrations with {n_dofs} columns")
-        if not isinstance(self.n_basis, numbers.Integral) or self.n_basis < 2:
-            raise ValueError(f"n_basis must be an integer >= 2, got {self.n_basis!r}")
+        if not (self.n_basis == "cv" if isinstance(self.n_basis, str) else
+                (isinstance(self.n_basis, numbers.Integral) and not isinstance(self.n_basis, bool)
+                 and self.n_basis >= 2)):
+            raise ValueError(f"n_basis must be an integer >= 2 or 'cv', got {self.n_basis!r}")
         for name in ("alpha_y", "alpha_x"):
             check_positive(getattr(self, name), name)
         if self.beta_y is not None:
@@ -372,8 +378,15 @@ class InteractionPrimitive(Predictor):
             if a.shape[0] < min_frames:
                 raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
         self.__dict__.pop("fitted_", None)  # a fit that fails leaves the estimator unfitted
-        self.fitted_ = FittedPrimitive.learn(self.json_params(), arrays, dt, columns, obs, ctrl, kk)
-        warn_representation(self.fitted_.representation_, int(self.n_basis))  # at the caller's line
+        params = self.json_params()
+        chosen = None
+        if self.n_basis == "cv":  # the representation chosen from the demonstrations
+            chosen = choose_n_basis(params, arrays, dt, columns, obs, ctrl, kk)
+            params["n_basis"] = chosen["chosen"]
+        self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk)
+        if chosen is not None:
+            self.fitted_.selection_["n_basis"] = chosen  # fit assigns what the choice returned
+        warn_representation(self.fitted_.representation_, int(params["n_basis"]))  # at the caller's line
         return self
 
     # ------------------------------------------------------------------ the fitted state
@@ -587,3 +600,56 @@ def _view(name: str) -> property:
 for _name in FITTED_NAMES:  # the fitted attributes, read-only views of the fitted state
     setattr(InteractionPrimitive, _name, _view(_name))
 del _name
+
+
+#: The numbers of basis functions per DoF that ``n_basis="cv"`` compares (capped by the demonstrations' length).
+N_BASIS_GRID = (10, 15, 20, 30, 40, 60)
+
+
+def choose_n_basis(params: dict, arrays, dt: float, columns, obs, ctrl, kk, grid=N_BASIS_GRID, n: int = 101) -> dict:
+    """The number of basis functions chosen from the demonstrations by held-out error (``n_basis="cv"``).
+
+    For each candidate ``K`` (at most half the shortest demonstration's frames), the DMPs of every
+    demonstration are fitted (Eq. 3-4; the paper's residual sigma2, no calibration: only the parameters matter
+    here).  Each demonstration ``j`` is then held out in turn: the mean of the *other* demonstrations' parameters
+    is rolled out (Eq. 1) from the mean start (of all of them) and compared with demonstration ``j`` on a normalised-time grid of
+    ``n`` points (every column divided by its spread over all frames).  This is the error of the model's own mean
+    on a movement it did not see: it falls while more basis functions remove the representation's bias (a
+    periodic movement that 20 cannot follow) and stops falling once the spread between demonstrations dominates.
+    The smallest ``K`` within one paired standard error of the best (:func:`interprim.cv.within_one_se`), or within
+    1 % of it, is kept.
+
+    Returns
+    -------
+    dict
+        ``chosen``, ``candidates``, ``cv_error`` (mean held-out error per candidate) and ``rule``.
+    """
+    from .cv import within_one_se
+    from .preprocessing import time_normalise
+
+    T_min = min(a.shape[0] for a in arrays)
+    cands = [int(k) for k in grid if k + 1 <= max(T_min // 2, 3)] or [min(int(k) for k in grid)]
+    truth = np.stack([time_normalise(a, n) for a in arrays])  # (S, n, D)
+    scale = np.concatenate(arrays).std(axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    S = len(arrays)
+    s = np.linspace(0.0, 1.0, n)
+    errors = np.empty((S, len(cands)))
+    for c, K in enumerate(cands):
+        cheap = dict(params, n_basis=K, sigma2="residual", phase_method="dtw", calibrate=False)
+        st = FittedPrimitive.learn(cheap, arrays, dt, columns, obs, ctrl, kk)
+        th = st.thetas_.reshape(S, st.n_latent_, K + 1)
+        free, H = st.rollout_.design(0.0, s)
+        M, off = st.latent_map()
+        start = free @ np.stack([st.start_position_, st.start_velocity_])  # (n, d)
+        total = th.sum(axis=0)
+        for j in range(S):
+            loo = (total - th[j]) / (S - 1)  # the mean of the other demonstrations' parameters
+            y = (start + H @ loo.T) @ M.T + off
+            errors[j, c] = float(np.sqrt(np.mean(((y - truth[j]) / scale) ** 2)))
+    mean = errors.mean(axis=0)
+    ok = within_one_se(errors) | (mean <= 1.01 * mean.min())  # and practically equal (1 %) counts as within
+    chosen = cands[int(np.flatnonzero(ok)[0])]  # the fewest basis functions within one SE of the best
+    return {"chosen": chosen, "candidates": cands, "cv_error": [float(e) for e in mean],
+            "rule": "fewest basis functions whose leave-one-out error of the mean movement is within one "
+                    "standard error (or 1 %) of the best"}

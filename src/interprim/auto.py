@@ -1,19 +1,17 @@
-"""The model chosen on the user's own demonstrations: several families compared on held-out folds.
+"""The model chosen on the user's own demonstrations: several families compared on held-out folds, then blended.
 
-:class:`AutoInteraction` fits nothing by itself: it runs the real-time protocol of
+:class:`AutoInteraction` (what ``interprim fit`` gives by default) runs the real-time protocol of
 :mod:`interprim.evaluation.realtime` in a ``folds``-fold cross-validation on the *training* demonstrations for
 each candidate family -- the Interaction Primitive with the library's defaults (``ip``),
 :class:`~interprim.learned.LearnedInteraction` (``learned``), the kernel-weighted demonstrations (``kernel``,
 :class:`~interprim.evaluation.kernel.KernelDemonstrations`), the nearest demonstration (``nn``) and the mean
-demonstration at the mean speed (``prior``) -- keeps the one with the smallest held-out error of the controlled
-agent over the next ``horizon`` seconds, and fits it on all the demonstrations.  Predictions, streams and model
-files are the chosen model's (the contract of :mod:`interprim.contract`); ``selection_`` says what was chosen
-and by how much.
-
-On the project's untouched hold-out (docs/evaluation.md) a choice made on 12-20 demonstrations is noisy: it
-picked a worse family on one NuiSI interaction of six, and over nine tasks it was 0.66x the clock where
-``ip`` alone was 0.65x and ``LearnedInteraction`` 0.63x.  It is therefore offered, not the default; compare it
-with ``interprim evaluate`` on your data (its ``chosen`` row is this choice, made inside each training fold).
+demonstration at the mean speed (``prior``) -- and keeps, for every held-out case, each family's prediction of the
+controlled agent over the next ``horizon`` seconds (:class:`CrossValidation`).  From them it fits a :class:`Blend`:
+the convex weights that minimise the protocol's own error (stacking; a choice of one family made on 12-20
+demonstrations proved noisy: on the project's hold-out it picked a worse family on one NuiSI interaction of six),
+and a variance fitted to the held-out errors step by step over the look-ahead.  ``combine="best"`` keeps the
+family with the smallest held-out error alone.  Predictions, streams and model files follow
+:mod:`interprim.contract`; ``selection_`` says what was compared and chosen, and by how much.
 """
 
 from __future__ import annotations

@@ -128,7 +128,9 @@ def test_evaluate_methods_are_honoured_with_a_file(recordings, tmp_path, capsys)
                  "--n-basis", "6"]) == 0
     cap = capsys.readouterr()
     summary = json.loads((out / "realtime.json").read_text())["summary"]
-    assert set(summary) == {"nn", "prior", "clock", "oracle-duration", "chosen"}
+    # "auto": the blend interprim fit makes (here of nn and prior), fitted inside each training fold
+    assert set(summary) == {"nn", "prior", "clock", "oracle-duration", "chosen", "auto"}
+    assert "The blend that 'interprim fit' makes by default (auto)" in cap.out
     assert "left out" not in cap.err
 
 

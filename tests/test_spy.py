@@ -84,21 +84,23 @@ def test_no_prediction_sees_its_held_out_recording(monkeypatch):
     def spied_methods(*a, **kw):
         return {name: (lambda f=f, name=name: _Spy(f(), name, world)) for name, f in real_methods(*a, **kw).items()}
 
-    real_choose = realtime.choose_method
+    from interprim import auto
 
-    def spied_choose(make, demos, *a, **kw):
+    real_cv = auto.CrossValidation
+
+    def spied_cv(make, demos, *a, **kw):  # the nested choice (and the blend's weights) of each outer fold
         allowed = set()
         for d in demos.demos:
             allowed |= {j for j, x in enumerate(ds.demos) if x.shape == d.shape and np.array_equal(x, d)}
         world.allowed = allowed
         world.choices += 1
         try:
-            return real_choose(make, demos, *a, **kw)
+            return real_cv(make, demos, *a, **kw)
         finally:
             world.allowed = None
 
     monkeypatch.setattr(realtime, "default_methods", spied_methods)
-    monkeypatch.setattr(realtime, "choose_method", spied_choose)
+    monkeypatch.setattr(auto, "CrossValidation", spied_cv)
     recs, summary, sentence = realtime.evaluate_demonstrations(
         ds, [0, 1], ds.dt, k=3, inner_k=2, cfg=realtime.RealTimeConfig(horizon=0.1, stride=4),
         whole_movement=(0.6,))
@@ -106,3 +108,5 @@ def test_no_prediction_sees_its_held_out_recording(monkeypatch):
     assert "chosen" in summary and sentence.startswith("chosen inside the training folds")
     chosen = {r["demo"]: r["chosen"] for r in recs if r["method"] == "chosen"}
     assert sorted(chosen) == list(range(len(ds)))
+    # the blend interprim fit makes, fitted inside each outer fold, predicted every held-out recording too
+    assert "auto" in summary and sorted({r["demo"] for r in recs if r["method"] == "auto"}) == list(range(len(ds)))

@@ -86,6 +86,16 @@ class CrossValidation:
         D = self.truth.shape[-1] if self.truth.size else len(self.observed)
         self.controlled = [i for i in range(D) if i not in set(self.observed)]
 
+    def subset(self, names) -> "CrossValidation":
+        """The same cases restricted to the families ``names`` (those with finite errors, in this order)."""
+        keep = [i for i, m in enumerate(self.names) if m in set(names)]
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
+        out.names = [self.names[i] for i in keep]
+        out.mean, out.std = self.mean[keep], self.std[keep]
+        return out
+
     def blend_weights(self) -> np.ndarray:
         """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean real-time
         error of the controlled agent over the cases, the very figure :attr:`errors` reports (stacking, Breiman

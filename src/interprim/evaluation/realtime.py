@@ -494,6 +494,20 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     w = m.get("wm_ctrl_vs_prior")
     if w is not None and np.isfinite(w):
         parts.append(f"Whole movement: {w:.2f}x the mean demonstration's error.")
+    a = summary.get("auto")
+    if a is not None and "rt_ctrl_vs_clock" in a:  # what interprim fit makes by default, fitted inside the folds
+        ra, se = standard_error_ratio(records, "auto", method)
+        parts.append(f"The blend that 'interprim fit' makes by default (auto): {a['rt_ctrl_vs_clock']:.2f}x the clock "
+                     f"and {a.get('rt_ctrl_vs_oracle', float('nan')):.2f}x the mean at the true duration in real "
+                     f"time ({ra:.2f}x ± {se:.2f} the chosen family's error)"
+                     + (f", {a['wm_ctrl_vs_prior']:.2f}x the mean demonstration on the whole movement."
+                        if np.isfinite(a.get("wm_ctrl_vs_prior", np.nan)) else "."))
+        online = [x for x in summary if x in BASELINES and "rt_ctrl" in summary[x]]
+        if online:
+            b = min(online, key=lambda x: summary[x]["rt_ctrl"])
+            rb, seb = standard_error_ratio(records, b, "auto")
+            if np.isfinite(rb) and rb < 1 - (seb if np.isfinite(seb) else 0):
+                parts.append(f"A baseline beats the blend: {b} has {rb:.2f}x (± {seb:.2f}) its real-time error.")
     if order:
         parts.append("To fit it: " + FIT_COMMANDS.get(order[0], order[0]).format(data=data, observed=observed))
     return " ".join(parts)
@@ -559,26 +573,62 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     recs = realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
                           whole_movement=whole_movement)
     if nested:
-        choices = {}
-        for held in folds(len(prefixes), k):
-            train = [i for i in range(len(prefixes)) if i not in set(held)]
-            kk = min(int(inner_k), len(train))
-            if kk >= 2 and len(train) >= 3:
-                best, _ = choose_method(make, prefixes.subset(train), observed_dofs, dt,
-                                        RealTimeConfig(horizon=cfg.horizon, start=cfg.start, stop=cfg.stop,
-                                                       stride=max(cfg.stride, 3), n_grid=cfg.n_grid,
-                                                       point_dim=cfg.point_dim), k=kk)
-            else:
-                best = next(iter(make))
-            for j in held:
-                choices[j] = best
-        recs = recs + nested_choice_records(recs, choices)
+        choices, blended = _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement)
+        recs = recs + nested_choice_records(recs, choices) + blended
     summary = summarise_realtime(recs)
     if nested:
         return recs, summary, nested_verdict(summary, recs, data=data, observed=observed)
     cands = [m for m in ("ip", "learned") if m in summary] or [next(iter(make))]
     best = min(cands, key=lambda m: summary[m].get("rt_ctrl", np.inf))
     return recs, summary, f"{best}: " + verdict(summary, best)
+
+
+def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
+    """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
+    inner cross-validated error}, outer records of the blend)``.  The blend that ``interprim fit`` makes by default
+    is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.auto.Blend`, fitted on the
+    outer training demonstrations with the inner cross-validation's weights and variance model; only when at least
+    two of its candidate families are compared)."""
+    from ..auto import CANDIDATES, Blend, CrossValidation, choice
+
+    inner_cfg = RealTimeConfig(horizon=cfg.horizon, start=cfg.start, stop=cfg.stop, stride=max(cfg.stride, 3),
+                               n_grid=cfg.n_grid, point_dim=cfg.point_dim)
+    blendable = [m for m in make if m in CANDIDATES]
+    choices, out = {}, []
+    for held in folds(len(prefixes), k):
+        train = [i for i in range(len(prefixes)) if i not in set(held)]
+        kk = min(int(inner_k), len(train))
+        if not (kk >= 2 and len(train) >= 3):
+            for j in held:
+                choices[j] = next(iter(make))
+            continue
+        cv = CrossValidation(make, prefixes.subset(train), observed_dofs, dt, inner_cfg, kk)
+        try:
+            best, _ = choice(cv, list(make))
+        except ValueError:  # no family could be fitted on every inner training fold
+            best = next(iter(make))
+        for j in held:
+            choices[j] = best
+        sub = cv.subset(blendable)
+        if len(sub.names) < 2:
+            continue
+        w = sub.blend_weights()
+        weights = {m: float(x) for m, x in zip(sub.names, w) if x > 0}
+        arrays = [prefixes.demos[i] for i in train]
+        members = {m: make[m]().fit(arrays, dt=dt) for m in weights}
+        blend = Blend.from_fitted(observed_dofs, members, weights, sub.blend_scales(w), arrays, dt, cfg.horizon)
+        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in weights.items())
+        for j in held:
+            pre = (lambda kf, j=j: prefixes(j, kf))
+            for r in realtime_fold(blend, arrays, prefixes.demos[j], observed_dofs, dt, cfg, name="auto",
+                                   fitted=True, prefix=pre):
+                if r["method"] == "auto":
+                    out.append(dict(r, demo=int(j), chosen=tag))
+            if whole_movement:
+                for r in whole_movement_fold(blend, prefixes.demos[j], observed_dofs, whole_movement,
+                                             point_dim=cfg.point_dim, name="auto", prefix=pre):
+                    out.append(dict(r, demo=int(j), protocol="whole", chosen=tag))
+    return choices, out
 
 
 def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = 0.25, notes=(),

@@ -119,8 +119,10 @@ def test_evaluate_command_on_a_users_file(tmp_path, capsys):
     assert res["summary"]["ip"]["rt_ctrl_vs_clock"] < 0.8  # synthetic data: the human helps
     v = res["verdict"]
     assert v.startswith("chosen inside the training folds: ")  # nested: no choice on a test fold
-    assert "Conditioning on the human helps" in v and "To fit it: " in v
+    assert "Conditioning on the human helps" in v
+    assert f"To fit the blend: interprim fit {path} --observed h1,h2 -o model.npz; the chosen family alone: " in v
     assert "chosen" in res["summary"] and res["summary"]["chosen"]["rt_ctrl_vs_clock"] < 0.8
+    assert res["summary"]["auto"]["rt_ctrl_vs_clock"] < 0.8 and "| auto |" in printed
     assert "| chosen |" in printed
     assert (out / "report.md").read_text().count("|") > 20
     # no observed columns named and none in the file: a one-line error naming the flag

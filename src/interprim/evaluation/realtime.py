@@ -442,13 +442,14 @@ BASELINES = ("nn", "prior", "clock")
 
 #: How each method of :func:`default_methods` is fitted outside the evaluation.
 FIT_COMMANDS = {
-    "ip": "interprim fit {data} --observed {observed} -o model.npz",
-    "ip-paper": "interprim fit {data} --observed {observed} --observation forcing --sigma2 auto "
+    "auto": "interprim fit {data} --observed {observed} -o model.npz",
+    "ip": "interprim fit {data} --observed {observed} --model ip -o model.npz",
+    "ip-paper": "interprim fit {data} --observed {observed} --model ip --observation forcing --sigma2 auto "
                 "--phase-method dtw -o model.npz",
-    "learned": "python: interprim.LearnedInteraction(observed_dofs).fit(demos, dt)",
-    "kernel": "python: interprim.evaluation.kernel.KernelDemonstrations(observed_dofs).fit(demos, dt)",
-    "nn": "no model to fit: replay the nearest demonstration (interprim.evaluation.baselines.NearestNeighbour)",
-    "prior": "no model to fit: replay the mean demonstration at the mean duration",
+    "learned": "interprim fit {data} --observed {observed} --model learned -o model.npz",
+    "kernel": "interprim fit {data} --observed {observed} --model kernel -o model.npz",
+    "nn": "interprim fit {data} --observed {observed} --model nn -o model.npz (replays the nearest demonstration)",
+    "prior": "interprim fit {data} --observed {observed} --model prior -o model.npz (replays the mean demonstration)",
 }
 
 
@@ -484,7 +485,7 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
             parts.append(f"A baseline beats it: {best} has {rb:.2f}x (± {se:.2f}) the chosen model's real-time "
                          f"error; use {best} on this data.")
         else:
-            parts.append(f"Best single method: {best} ({summary[best]['rt_ctrl_vs_clock']:.2f}x the clock).")
+            parts.append(f"Best method: {best} ({summary[best]['rt_ctrl_vs_clock']:.2f}x the clock).")
     if r <= 1 - threshold:
         parts.append(f"Conditioning on the human helps: {100 * (1 - r):.0f} % less real-time error than the clock.")
     elif r < 1 + threshold:
@@ -508,7 +509,11 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
             rb, seb = standard_error_ratio(records, b, "auto")
             if np.isfinite(rb) and rb < 1 - (seb if np.isfinite(seb) else 0):
                 parts.append(f"A baseline beats the blend: {b} has {rb:.2f}x (± {seb:.2f}) its real-time error.")
-    if order:
+    if order and a is not None and "rt_ctrl_vs_clock" in a:
+        parts.append("To fit the blend: " + FIT_COMMANDS["auto"].format(data=data, observed=observed)
+                     + "; the chosen family alone: "
+                     + FIT_COMMANDS.get(order[0], order[0]).format(data=data, observed=observed))
+    elif order:
         parts.append("To fit it: " + FIT_COMMANDS.get(order[0], order[0]).format(data=data, observed=observed))
     return " ".join(parts)
 

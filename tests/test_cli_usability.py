@@ -142,7 +142,8 @@ def test_evaluate_states_the_minimum_and_bad_methods_in_one_line(recordings, tmp
 
 
 def test_evaluate_demonstrations_minimum_is_the_documented_constant():
-    from interprim.evaluation.realtime import MIN_DEMONSTRATIONS, evaluate_demonstrations
+    from interprim.assessment import evaluate_demonstrations
+    from interprim.evaluation.realtime import MIN_DEMONSTRATIONS
 
     demos = list(highfive_recordings(2, seed=0).demos)
     with pytest.raises(ValueError, match=f"at least {MIN_DEMONSTRATIONS} demonstrations"):

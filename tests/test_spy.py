@@ -101,7 +101,9 @@ def test_no_prediction_sees_its_held_out_recording(monkeypatch):
 
     monkeypatch.setattr(realtime, "default_methods", spied_methods)
     monkeypatch.setattr(auto, "CrossValidation", spied_cv)
-    recs, summary, sentence = realtime.evaluate_demonstrations(
+    from interprim.assessment import evaluate_demonstrations
+
+    recs, summary, sentence = evaluate_demonstrations(
         ds, [0, 1], ds.dt, k=3, inner_k=2, cfg=realtime.RealTimeConfig(horizon=0.1, stride=4),
         whole_movement=(0.6,))
     assert world.choices == 3 and world.fits > 15 and world.predicts > 50

@@ -47,7 +47,7 @@ class CrossValidation:
 
     One case is one evaluated frame of one held-out training demonstration; for every family that could be
     fitted on every inner fold, the prediction of the next ``horizon`` seconds placed in time by the family's own
-    timing (:func:`interprim.contract.place_in_time`), its std and the truth.
+    timing (:func:`interprim.contract.place_in_time`), and the truth.
 
     Attributes
     ----------
@@ -55,8 +55,8 @@ class CrossValidation:
         ``{family: mean real-time error of the controlled agent}`` (``inf``: could not be fitted on a fold).
     names : list of str
         The families with finite errors, in the order of the arrays below.
-    mean, std : ndarray, shape (n_families, n_cases, H, D)
-        Placed predictions and their std (0 where a family gives none).
+    mean : ndarray, shape (n_families, n_cases, H, D)
+        Placed predictions.
     truth : ndarray, shape (n_cases, H, D)
     controlled, observed : list of int
         Columns of the two agents.
@@ -81,8 +81,6 @@ class CrossValidation:
         first = per[self.names[0]] if self.names else {}
         self.truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
         self.mean = np.array([[per[m][c]["mean"] for c in cases] for m in self.names], dtype=np.float64)
-        self.std = np.array([[np.zeros_like(per[m][c]["mean"]) if per[m][c]["std"] is None else per[m][c]["std"]
-                              for c in cases] for m in self.names], dtype=np.float64)
         D = self.truth.shape[-1] if self.truth.size else len(self.observed)
         self.controlled = [i for i in range(D) if i not in set(self.observed)]
 
@@ -93,7 +91,7 @@ class CrossValidation:
         out.__dict__.update(self.__dict__)
         out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
         out.names = [self.names[i] for i in keep]
-        out.mean, out.std = self.mean[keep], self.std[keep]
+        out.mean = self.mean[keep]
         return out
 
     def blend_weights(self) -> np.ndarray:

@@ -129,8 +129,9 @@ def run_user_data(args) -> int:
     from ..errors import InterprimError
     import sys
 
+    from ..assessment import evaluate_demonstrations
     from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, default_methods,
-                                       evaluate_demonstrations, markdown_table, save_report)
+                                       markdown_table, save_report)
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")

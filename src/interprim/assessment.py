@@ -1,0 +1,135 @@
+"""Evaluating a user's demonstrations with every model interprim offers: the real-time and whole-movement
+protocols of :mod:`interprim.evaluation.realtime` for each method, the family chosen and the blend that
+``interprim fit`` makes (:mod:`interprim.auto`) fitted inside each outer training fold only, and a verdict.
+
+This sits above :mod:`interprim.auto`, which itself uses the protocols: the protocols know nothing of the models
+chosen with them.  ``interprim evaluate`` runs :func:`evaluate_demonstrations`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .evaluation import realtime as rt
+from .evaluation.nested import nested_choice_records
+from .evaluation.protocol import Prefixes
+
+__all__ = ["evaluate_demonstrations"]
+
+
+def _trainable(make, demos, k, dt, log=None) -> dict:
+    """``make`` without the methods that cannot be fitted on the smallest training set of the folds.
+
+    With few demonstrations (training sets under :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` - 1), each method is fitted once on
+    the first demonstrations as a probe; one that refuses them (``ValueError``: too few for its
+    cross-validation) is left out, and ``log`` (if given) receives a one-line note naming it and why.
+    """
+    n_train = len(demos) - max(len(f) for f in rt.folds(len(demos), k))
+    if n_train >= rt.ALL_METHODS_FROM - 1:
+        return dict(make)
+    keep = {}
+    for name, factory in make.items():
+        try:
+            factory().fit(demos[:n_train], dt=dt)
+        except ValueError as exc:
+            if log is not None:
+                log(f"{name} left out: it cannot be fitted on the {n_train} demonstrations of a training fold "
+                    f"({' '.join(str(exc).split())})")
+            continue
+        keep[name] = factory
+    if not keep:
+        raise ValueError(f"no method can be fitted on the {n_train} demonstrations of a training fold")
+    return keep
+
+
+def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
+                            cfg: rt.RealTimeConfig = rt.RealTimeConfig(), smoothing_window=None, n_basis: int = 20,
+                            methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False, log=None,
+                            nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS"):
+    """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
+
+    Returns ``(records, summary, verdict_sentence)``; see :func:`~interprim.evaluation.realtime.realtime_sweep`, :func:`~interprim.evaluation.realtime.summarise_realtime`
+    and :func:`~interprim.evaluation.realtime.nested_verdict`.  ``methods``: names among ``ip``, ``learned``, ``ip-paper``, ``kernel``, ``nn``,
+    ``prior`` (default all).  ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples
+    (causal prefixes).  Needs at least :data:`~interprim.evaluation.realtime.MIN_DEMONSTRATIONS` (3) demonstrations; with fewer than
+    :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` (5; leave-one-out) a method that cannot be fitted on a training fold (``ip`` needs
+    3 demonstrations to train on, ``learned`` 4) is left out, with a note to ``log`` (a callable taking one
+    line).
+
+    With ``nested`` (default), the method a verdict names is chosen for each outer fold by an ``inner_k``-fold
+    cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
+    and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
+    """
+    prefixes = Prefixes(demos, observed_dofs)
+    demos = prefixes.demos
+    if len(demos) < rt.MIN_DEMONSTRATIONS:
+        raise ValueError(f"the evaluation needs at least {rt.MIN_DEMONSTRATIONS} demonstrations (each fold trains on "
+                         f"at least 2), got {len(demos)}")
+    make = rt.default_methods(observed_dofs, smoothing_window=smoothing_window, n_basis=n_basis)
+    if methods is not None:
+        unknown = [m for m in methods if m not in make]
+        if unknown:
+            raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(make)}")
+        make = {m: make[m] for m in methods}
+    make = _trainable(make, demos, k, dt, log)
+    if whole_movement and "prior" not in make:
+        make["prior"] = rt.default_methods(observed_dofs)["prior"]
+    recs = rt.realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
+                          whole_movement=whole_movement)
+    if nested:
+        choices, blended = _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement)
+        recs = recs + nested_choice_records(recs, choices) + blended
+    summary = rt.summarise_realtime(recs)
+    if nested:
+        return recs, summary, rt.nested_verdict(summary, recs, data=data, observed=observed)
+    cands = [m for m in ("ip", "learned") if m in summary] or [next(iter(make))]
+    best = min(cands, key=lambda m: summary[m].get("rt_ctrl", np.inf))
+    return recs, summary, f"{best}: " + rt.verdict(summary, best)
+
+
+def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
+    """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
+    inner cross-validated error}, outer records of the blend)``.  The blend that ``interprim fit`` makes by default
+    is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.auto.Blend`, fitted on the
+    outer training demonstrations with the inner cross-validation's weights and variance model; only when at least
+    two of its candidate families are compared)."""
+    from . import auto  # looked up at call time (tests spy on auto.CrossValidation)
+
+    inner_cfg = rt.RealTimeConfig(horizon=cfg.horizon, start=cfg.start, stop=cfg.stop, stride=max(cfg.stride, 3),
+                               n_grid=cfg.n_grid, point_dim=cfg.point_dim)
+    blendable = [m for m in make if m in auto.CANDIDATES]
+    choices, out = {}, []
+    for held in rt.folds(len(prefixes), k):
+        train = [i for i in range(len(prefixes)) if i not in set(held)]
+        kk = min(int(inner_k), len(train))
+        if not (kk >= 2 and len(train) >= 3):
+            for j in held:
+                choices[j] = next(iter(make))
+            continue
+        cv = auto.CrossValidation(make, prefixes.subset(train), observed_dofs, dt, inner_cfg, kk)
+        try:
+            best, _ = auto.choice(cv, list(make))
+        except ValueError:  # no family could be fitted on every inner training fold
+            best = next(iter(make))
+        for j in held:
+            choices[j] = best
+        sub = cv.subset(blendable)
+        if len(sub.names) < 2:
+            continue
+        w = sub.blend_weights()
+        weights = {m: float(x) for m, x in zip(sub.names, w) if x > 0}
+        arrays = [prefixes.demos[i] for i in train]
+        members = {m: make[m]().fit(arrays, dt=dt) for m in weights}
+        blend = auto.Blend.from_fitted(observed_dofs, members, weights, sub.blend_scales(w), arrays, dt, cfg.horizon)
+        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in weights.items())
+        for j in held:
+            pre = (lambda kf, j=j: prefixes(j, kf))
+            for r in rt.realtime_fold(blend, arrays, prefixes.demos[j], observed_dofs, dt, cfg, name="auto",
+                                   fitted=True, prefix=pre):
+                if r["method"] == "auto":
+                    out.append(dict(r, demo=int(j), chosen=tag))
+            if whole_movement:
+                for r in rt.whole_movement_fold(blend, prefixes.demos[j], observed_dofs, whole_movement,
+                                             point_dim=cfg.point_dim, name="auto", prefix=pre):
+                    out.append(dict(r, demo=int(j), protocol="whole", chosen=tag))
+    return choices, out

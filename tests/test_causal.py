@@ -112,3 +112,53 @@ def test_causal_prefix_errors_name_the_problem(rng):
     late = [RawStream(s[0].times + 1.0, s[0].columns, s[0].values)]
     with pytest.raises(ValueError, match="no raw sample"):
         causal_prefix(t, late, 2, [0])
+
+
+def test_take_keeps_raw_samples_and_labels_of_the_chosen_recordings(rng):
+    ds = _raw_set(rng, n=5)
+    sub = ds.take([3, 1])
+    assert len(sub) == 2 and sub.labels == [ds.labels[3], ds.labels[1]]
+    for i, j in enumerate([3, 1]):
+        np.testing.assert_array_equal(sub.demos[i], ds.demos[j])
+        np.testing.assert_array_equal(sub.times[i], ds.times[j])
+        assert sub.raw[i] is ds.raw[j]
+    # the causal prefixes of the subset are those of the full set
+    P, Q = Prefixes(ds, [0, 1]), Prefixes(sub, [0, 1])
+    assert Q.causal
+    np.testing.assert_array_equal(Q(0, 7), P(3, 7))
+    with pytest.raises(IndexError, match="index 9 out of range for 5"):
+        ds.take([0, 9])
+
+
+def test_development_only_sweep_never_loads_the_holdout():
+    """``EvalConfig(development_only=True)``: the NuiSI tasks hold the first two thirds of the recordings."""
+    from interprim.evaluation.nested import split_holdout
+    from interprim.evaluation.sweep import EvalConfig, _task
+
+    full = _task("nuisi", "handshake2", EvalConfig())
+    dev = _task("nuisi", "handshake2", EvalConfig(development_only=True))
+    keep, hold = split_holdout(len(full.demos))
+    assert len(dev.demos) == len(keep) < len(full.demos)
+    for i, j in enumerate(keep):
+        np.testing.assert_array_equal(dev.demos[i], full.demos[j])
+        np.testing.assert_array_equal(dev.prefix(i, 9), full.prefix(j, 9))
+    held = {full.demos[j].tobytes() for j in hold}
+    assert not any(d.tobytes() in held for d in dev.demos)
+
+
+def test_remeasure_tables_and_deciles():
+    from interprim.experiments.remeasure import calibration_deciles, realtime_tables
+
+    recs = [{"method": "ip", "fraction": f, "z_ctrl": z, "z_obs": 2 * z} for f, z in
+            [(0.21, 1.0), (0.29, 3.0), (0.55, 0.5), (0.9, 4.0), (0.95, 9.0)]]
+    recs.append({"method": "ip", "fraction": 0.25, "protocol": "whole", "z_ctrl": 100.0})
+    d = calibration_deciles(recs)
+    assert d["ip"]["ctrl"] == {"0.2": 2.0, "0.5": 0.5, "0.8": 4.0}  # 0.95 is past the last decile
+    assert d["ip"]["obs"]["0.2"] == 4.0
+    summary = {"ip": {"rt_ctrl_vs_clock": 0.5, "cov_ctrl": 0.9}, "clock": {"rt_ctrl_vs_clock": 1.0}}
+    res = {"highfive1": {"summary": summary, "deciles": d},
+           "wave1": {"summary": {"ip": {"rt_ctrl_vs_clock": 2.0, "cov_ctrl": 0.8}}, "deciles": {}}}
+    md = realtime_tables(res, methods=("ip",))
+    assert "| ip | 0.50 | 2.00 | 1.00 |" in md  # geometric mean over the NuiSI tasks
+    assert "| ip | 0.90 | 0.80 | 0.85 |" in md  # coverage: arithmetic mean
+    assert "| highfive1 | robot | 2.00 | — | — | 0.50 | — | — | 4.00 |" in md

@@ -59,6 +59,9 @@ def add_parser(subparsers):
     p.add_argument("--quick", action="store_true",
                    help="hold out only 4 demonstrations per task and observe 20/40/60/80/100 %%")
     p.add_argument("--no-recognition", action="store_true", help="skip the recognition sweep")
+    p.add_argument("--development-only", action="store_true",
+                   help="NuiSI: use only the development recordings (the first two thirds of each interaction), "
+                        "leaving the hold-out untouched")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--pca", type=int, default=6, help="principal components per agent of '+pca' methods")
     p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF of the IP models")
@@ -191,7 +194,8 @@ def run(args) -> int:
 
     from ..evaluation import EvalConfig, recognition_table, run_sweep, save_results, summarise
 
-    cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis)
+    cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis,
+                     development_only=args.development_only)
     if args.fractions:
         cfg = replace(cfg, fractions=tuple(float(f) for f in args.fractions.split(",") if f.strip()))
     if args.quick:

@@ -152,6 +152,33 @@ class Demonstrations(Sequence):
         """
         return select_columns(self.columns, names, where=self.source or self.name or "demonstrations")
 
+    def take(self, indices) -> "Demonstrations":
+        """A new set holding only the demonstrations ``indices`` (in that order), with their time stamps,
+        labels and raw samples (a hold-out split keeps causal prefixes).
+
+        Raises
+        ------
+        IndexError
+            If an index is out of range.
+        """
+        idx = [int(i) for i in indices]
+        n = len(self.demos)
+        bad = [i for i in idx if not -n <= i < n]
+        if bad:
+            raise IndexError(f"demonstration index {bad[0]} out of range for {n} demonstrations")
+        return Demonstrations(
+            demos=[self.demos[i] for i in idx],
+            times=[self.times[i] for i in idx],
+            columns=list(self.columns),
+            dt=self.dt,
+            observed_dofs=None if self.observed_dofs is None else list(self.observed_dofs),
+            name=self.name,
+            source=self.source,
+            labels=[self.labels[i] for i in idx],
+            units=None if self.units is None else list(self.units),
+            raw=None if self.raw is None else [self.raw[i] for i in idx],
+        )
+
     def select(self, names) -> "Demonstrations":
         """A new set holding only the columns ``names`` (in that order)."""
         idx = self.column_indices(names)

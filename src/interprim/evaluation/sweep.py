@@ -80,6 +80,9 @@ class EvalConfig:
         Points of the normalised-time grid on which errors are computed.
     nuisi_dt : float
         Resampling interval of the NuiSI loader (s).
+    development_only : bool
+        NuiSI: use only the development recordings (the first two thirds of each interaction;
+        :data:`interprim.evaluation.nested.HOLDOUT`), leaving the untouched hold-out out of every fit and test.
     data_path : str or None
         NuiSI file or data folder (default: the loaders' default).
     """
@@ -91,6 +94,7 @@ class EvalConfig:
     n_out: int = 100
     nuisi_dt: float = 0.05
     data_path: str | None = None
+    development_only: bool = False
     fractions: tuple = FRACTIONS
     recognition_fractions: tuple = (0.2, 0.4, 0.6, 0.8)
     recognition_covariance: str = "ridge"
@@ -124,6 +128,10 @@ def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
         from .protocol import Prefixes
 
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)
+        if cfg.development_only:
+            from .nested import split_holdout
+
+            d = d.take(split_holdout(len(d))[0])
         return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns),
                     Prefixes(d, d.observed_dofs))
     if dataset == "synthetic":

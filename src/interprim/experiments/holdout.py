@@ -47,7 +47,7 @@ def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):
         for a in NUISI_ACTIONS:
             d = load_nuisi(data_path, action=a, observed="right_arm", controlled="right_hand", dt=0.05)
             dev_i, hold_i = split_holdout(len(d))
-            out.append((a, _subset(d, dev_i), _subset(d, hold_i), list(d.observed_dofs), float(d.dt), 3, None))
+            out.append((a, d.take(dev_i), d.take(hold_i), list(d.observed_dofs), float(d.dt), 3, None))
     if "synthetic" in which:
         from ..synthetic import benchmark_tasks
 
@@ -57,14 +57,6 @@ def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):
             out.append((f"synthetic/{name}", dev[name].demos, hold[name].demos, dev[name].observed_dofs,
                         dev[name].dt, 1, hold[name].oracles))
     return out
-
-
-def _subset(ds, idx):
-    from ..datasets import Demonstrations
-
-    return Demonstrations([ds.demos[i] for i in idx], [ds.times[i] for i in idx], list(ds.columns), ds.dt,
-                          list(ds.observed_dofs), ds.name, ds.source, [ds.labels[i] for i in idx],
-                          ds.units, None if ds.raw is None else [ds.raw[i] for i in idx])
 
 
 def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS, lookahead=False,

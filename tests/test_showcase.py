@@ -258,7 +258,10 @@ def test_nuisi_realtime_figure_holds_the_recording_out(tmp_path):
     # same as the demo's
     res = nuisi_realtime_figure("highfive1", 2, tmp_path, n_frames=10, methods={"fast": {"sigma2": 1e-3,
                                                                                         "phase_method": "learned"}})
-    assert res["n_train"] == _nuisi()["highfive1"] - 1 and res["demo"] == 2
+    from interprim.evaluation.nested import split_holdout
+
+    n_dev = len(split_holdout(_nuisi()["highfive1"])[0])
+    assert res["n_train"] == n_dev - 1 and res["demo"] == 2  # the other development recordings only
     n, _ = _gif_frames(tmp_path / "nuisi_highfive1_02_realtime.gif")
     assert n == res["n_frames"] == 10
     _png_ok(tmp_path / "nuisi_highfive1_02_realtime.png")
@@ -266,6 +269,8 @@ def test_nuisi_realtime_figure_holds_the_recording_out(tmp_path):
     assert 0 < m["rt_ctrl"] < 1 and 0 < m["clock_rt_ctrl"] < 1  # metres
     with pytest.raises(ValueError, match="demo must be"):
         nuisi_realtime_figure("highfive1", 99, tmp_path, gif=False, png=False)
+    with pytest.raises(ValueError, match="untouched hold-out"):  # a hold-out recording is refused
+        nuisi_realtime_figure("highfive1", n_dev, tmp_path, gif=False, png=False)
 
 
 @needs_nuisi

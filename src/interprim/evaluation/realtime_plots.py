@@ -58,7 +58,7 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
                                 horizon: float = 0.25, point_dim: int = 3, view=(0, 2), facing: bool = True,
                                 n_frames: int = 60, fps: int = 5, dpi: int = 85, snapshots=(0.3, 0.5, 0.7, 0.9),
                                 title: str = "", axis_labels=("forward [m]", "up [m]"),
-                                unit: tuple = ("cm", 100.0)) -> dict:
+                                unit: tuple = ("cm", 100.0), prefix=None) -> dict:
     """Animation (GIF) and static strip (PNG) of real-time prediction on one held-out demonstration.
 
     After each observed frame ``k`` every model predicts the controlled agent's next ``horizon`` seconds,
@@ -97,6 +97,10 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
         their own frames.
     unit : (str, float)
         Unit of the errors printed on the figure and its factor from data units (default centimetres).
+    prefix : callable, optional
+        ``prefix(k)``: the observed columns of the first ``k`` frames as a robot had them (a causal prefix of
+        an interpolated recording, :class:`~interprim.evaluation.protocol.Prefixes`); default the first ``k``
+        rows of ``test``.
 
     Returns
     -------
@@ -124,13 +128,15 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
     all_k = sorted(set(ks.tolist()) | set(snap_k))
     traces = {}
     for label, model in models.items():
-        recs = realtime_fold(model, train, test, obs, dt, cfg, name=label, fitted=True)  # the protocol's frames
+        recs = realtime_fold(model, train, test, obs, dt, cfg, name=label, fitted=True,
+                             prefix=prefix)  # the protocol's frames
         summ = summarise_realtime(recs)
         m, c = summ[label], summ["clock"]
         out["models"][label] = {"rt_ctrl": m["rt_ctrl"], "clock_rt_ctrl": c["rt_ctrl"], "rt_ctrl_vs_clock": m["rt_ctrl_vs_clock"],
                       "phase_err": m["phase_err"], "clock_phase_err": c["phase_err"], "cov_ctrl": m["cov_ctrl"],
                       "z_ctrl": m["z_ctrl"], "n_evaluated": m["n"]}
-        tr = realtime_fold(model, train, test, obs, dt, cfg, name=label, fitted=True, frames=all_k, trace=True)
+        tr = realtime_fold(model, train, test, obs, dt, cfg, name=label, fitted=True, frames=all_k, trace=True,
+                           prefix=prefix)
         traces[label] = {k: {r["method"]: r for r in tr if r["k"] == k} for k in all_k}
     if gif_path is None and png_path is None:
         out["n_frames"] = 0
@@ -248,23 +254,39 @@ NUISI_FIGURE_METHODS = {"library defaults": {}, "learned phase": {"phase_method"
 
 
 def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".", data_path=None, dt: float = 0.05,
-                          n_frames: int = 60, gif: bool = True, png: bool = True, methods=None) -> dict:
+                          n_frames: int = 60, gif: bool = True, png: bool = True, methods=None,
+                          development_only: bool = True) -> dict:
     """:func:`realtime_interaction_figure` for one NuiSI recording, held out (leave-one-out).
 
     Agent 1's right shoulder, elbow and hand are observed (9 columns), agent 2's right hand is predicted
     (:func:`interprim.datasets.load_nuisi` with ``observed="right_arm", controlled="right_hand"``).  The
     models (:data:`NUISI_FIGURE_METHODS`: ``InteractionPrimitive`` with its defaults, and with
-    ``phase_method="learned"``) are fitted on the other recordings of ``action``.  Writes
+    ``phase_method="learned"``) are fitted on the other recordings of ``action``; with ``development_only``
+    (default) only on the development recordings (the first two thirds: the untouched hold-out of
+    :data:`interprim.evaluation.nested.HOLDOUT` is neither fitted on nor shown), and ``demo`` must be one of
+    them.  The held-out recording is seen through causal prefixes (the raw samples recorded by each frame's
+    time).  Writes
     ``nuisi_<action>_<demo>_realtime.gif`` / ``.png`` to ``out_dir`` (unless ``gif``/``png`` is False) and
     returns the figure's numbers (metres) with ``action``, ``demo`` and ``n_train``.
     """
     from ..datasets import load_nuisi
     from ..primitive import InteractionPrimitive
 
+    from .nested import split_holdout
+    from .protocol import Prefixes
+
     ds = load_nuisi(data_path, action=action, observed="right_arm", controlled="right_hand", dt=dt)
+    if development_only:
+        n_all = len(ds.demos)
+        ds = ds.take(split_holdout(n_all)[0])
+        if not 0 <= int(demo) < len(ds.demos):
+            raise ValueError(f"{action} has {len(ds.demos)} development recordings (the last {n_all - len(ds.demos)} "
+                             f"of {n_all} are the untouched hold-out); demo must be in 0..{len(ds.demos) - 1}, got "
+                             f"{demo} (development_only=False to use them all)")
     if not 0 <= int(demo) < len(ds.demos):
         raise ValueError(f"{action} has {len(ds.demos)} recordings; demo must be in 0..{len(ds.demos) - 1}, got {demo}")
     test = ds.demos[int(demo)]
+    prefixes = Prefixes(ds, ds.observed_dofs)
     train = [d for i, d in enumerate(ds.demos) if i != int(demo)]
     obs = list(ds.observed_dofs)
     models = {label: InteractionPrimitive(observed_dofs=obs, **kw).fit(train, dt=ds.dt)
@@ -275,6 +297,7 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     res = realtime_interaction_figure(
         models, train, test, obs, ds.dt, gif_path=stem.with_suffix(".gif") if gif else None,
         png_path=stem.with_suffix(".png") if png else None, n_frames=n_frames,
-        title=f"NuiSI {action}, recording {ds.labels[int(demo)]} held out (models fitted on the other {len(train)})")
+        title=f"NuiSI {action}, recording {ds.labels[int(demo)]} held out (models fitted on the other {len(train)})",
+        prefix=lambda k: prefixes(int(demo), k))
     res.update(action=action, demo=int(demo), n_train=len(train))
     return res

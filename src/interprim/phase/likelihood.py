@@ -321,20 +321,25 @@ def _bounds(model, M, bounds=None):
     duration stays below 4x the longest demonstration)."""
     lo, hi = (_S_MIN, 1.0) if bounds is None else (float(bounds[0]), float(bounds[1]))
     elapsed = (M - 1) * model.dt_
-    return max(lo, min(hi, elapsed / (4.0 * float(np.max(model.durations_))))), hi
+    dur = model.durations_
+    longest = model.cached("phase_longest_duration", (dur,), lambda: float(np.max(dur)))
+    return max(lo, min(hi, elapsed / (4.0 * longest))), hi
 
 
 class _scorer:
     """``s -> (log posterior, log likelihood)`` for one observation, batched over candidate phases."""
 
-    def __init__(self, model, z, s2, speed_prior=True):
+    def __init__(self, model, z, s2, speed_prior=True, _parts=None):
         self.z = np.ascontiguousarray(z, dtype=np.float64)
         self.M = self.z.shape[0]
         self.s2 = float(s2)
-        self.fs = _fast_state(model)
+        if _parts is None:
+            self.fs = _fast_state(model)
+            self.prior = _speed_prior_params(model, self.M) if speed_prior else None
+        else:  # a caller that already has them for this model and M (the stream's tracker)
+            self.fs, self.prior = _parts
         self.dense = self.fs is None
         self.model = model
-        self.prior = _speed_prior_params(model, self.M) if speed_prior else None
         if not self.dense:
             self.Rg = self.fs.mean_path(self.z[0])
 
@@ -473,6 +478,7 @@ def _vertex(x, y):
     """Abscissa of the maximum of the parabola through three points ``(x_k, y_k)`` (``x`` increasing), or
     ``None`` when it is not concave (the middle point not above the chord of the outer two)."""
     (x0, x1, x2), (y0, y1, y2) = x, y
+    x0, x1, x2, y0, y1, y2 = float(x0), float(x1), float(x2), float(y0), float(y1), float(y2)  # no numpy scalars
     den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
     if not (den != 0.0 and y1 * (x2 - x0) > y0 * (x2 - x1) + y2 * (x1 - x0)):
         return None

@@ -41,6 +41,8 @@ evaluation it is tested against.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._blas import single_thread
@@ -359,8 +361,9 @@ class _scorer:
         if self.prior is None:
             return ll, ll
         logel, mu, sd = self.prior
-        logdur = logel - np.log(s_values)
-        return ll + (-0.5 * ((logdur - mu) / sd) ** 2 - np.log(s_values)), ll
+        log_s = np.log(s_values)
+        logdur = logel - log_s
+        return ll + (-0.5 * ((logdur - mu) / sd) ** 2 - log_s), ll
 
 
 def _speed_prior_params(model, M):
@@ -502,11 +505,12 @@ def _finish(scores, ss, lps, i, lo, hi, max_rounds: int = 6) -> float:
     ``d_lp`` from moving the vertex by more than ``d_lp / (2 k h)``.
     """
     n = len(ss)
-    x = float(np.log(ss[i]))
-    if 0 < i < n - 1 and np.isfinite(lps[i - 1]) and np.isfinite(lps[i + 1]):
-        u = _vertex(np.log(ss[i - 1:i + 2]), lps[i - 1:i + 2])
+    log_ss = np.log(ss)  # elementwise: the same numbers as one logarithm per candidate
+    x = float(log_ss[i])
+    if 0 < i < n - 1 and math.isfinite(lps[i - 1]) and math.isfinite(lps[i + 1]):
+        u = _vertex(log_ss[i - 1:i + 2], lps[i - 1:i + 2])
         if u is not None:
-            x = min(max(u, float(np.log(ss[i - 1]))), float(np.log(ss[i + 1])))
+            x = min(max(u, float(log_ss[i - 1])), float(log_ss[i + 1]))
     a, b = float(np.log(lo)), float(np.log(hi))
     h = _H_FINAL
     if b - a < 2.0 * h:

@@ -159,7 +159,7 @@ class _Tracker:
         self.kc = int(j)
         n = self._n_out
         s_out, lp_out = buf[-2][:n], buf[-1][:n]
-        if s_out.min() > 0.0:  # no merged (clipped) candidate: all of the window, in increasing s
+        if s_out[0] > 0.0 and s_out[n - 1] > 0.0:  # merged (clipped) candidates, marked -1, sit at the ends only
             cand, lp = s_out.copy(), lp_out.copy()
         else:
             keep = s_out > 0.0

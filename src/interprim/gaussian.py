@@ -24,6 +24,7 @@ at most ``q N_o`` instead of ``T N_o``.  This is exact, not an approximation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -522,7 +523,8 @@ class LowRankConditioner:
         if n_obs is None:
             return float("nan")
         D_o, q = self.D_o, self.q
-        logdet = n_obs * np.log(sigma2) + ld_T - D_o * q * np.log(sigma2) + ld_K
+        log_s2 = np.log(sigma2)
+        logdet = n_obs * log_s2 + ld_T - D_o * q * log_s2 + ld_K
         return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
     def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
@@ -543,7 +545,7 @@ class LowRankConditioner:
             out = np.empty(self.P)
         ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
                                                    self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, out)
-        if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
+        if not (math.isfinite(ld_T) and math.isfinite(ld_K)):
             return None
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
 

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._compiled import registry as _kernels  # (does not import numba)
+
 __all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
 
@@ -531,16 +533,12 @@ class LowRankConditioner:
         """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
         kernels are in use (:func:`interprim._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
         numbers to rounding); ``None`` if a factorisation failed."""
-        from ._compiled import registry
-
-        return self.mean_compiled(G, B, sigma2, yy, n_obs) if registry.in_use() else \
+        return self.mean_compiled(G, B, sigma2, yy, n_obs) if _kernels.in_use() else \
             self.mean_numpy(G, B, sigma2, yy, n_obs)
 
     def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
-        from ._compiled import registry as kernels
-
-        lowrank_condition_mean = kernels.compiled("conditioning.lowrank_condition_mean")
+        lowrank_condition_mean = _kernels.compiled("conditioning.lowrank_condition_mean")
         if out is None:
             out = np.empty(self.P)
         ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,

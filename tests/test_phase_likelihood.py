@@ -462,3 +462,28 @@ def test_batch_predict_reports_the_dtw_cost_on_demand(synthetic, lik_model):
     z = lik_model._observed_to_latent(obs)
     assert p.dtw_cost == pytest.approx(open_end_dtw(lik_model.reference_, z, return_path=False).cost, rel=1e-12)
     assert isinstance(p.dtw_cost, float)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_scorer_prior_and_shared_parts_are_the_same_numbers(compiled, monkeypatch):
+    """The scorer adds the speed prior element by element and the stream's tracker hands it the parts it already
+    looked up for the frame: both give exactly (bit for bit) the log posterior ``log p(z | s) + log p(s)`` of
+    :func:`~interprim.phase.likelihood._log_speed_prior`, on the compiled and the numpy path, also at a clipped
+    candidate."""
+    model = _small_model("position", None, "shrinkage").fitted_
+    if not compiled:
+        _numpy_phase_kernels(monkeypatch)
+    z = _demos(1, seed=11)[0][:70, model.observed_dofs_]
+    M = z.shape[0]
+    s2 = PL.phase_noise(model)
+    s = np.append(np.exp(np.linspace(np.log(PL._S_MIN), 0.0, 150)), [0.3107, 0.52])  # the bounds included
+    sc = PL._scorer(model, z, s2)
+    lp, ll = sc(s)
+    np.testing.assert_array_equal(lp, ll + PL._log_speed_prior(model, M, s))
+    parts = (PL._fast_state(model), PL._speed_prior_params(model, M))
+    lp2, ll2 = PL._scorer(model, z, s2, _parts=parts)(s)
+    np.testing.assert_array_equal(lp2, lp)
+    np.testing.assert_array_equal(ll2, ll)
+    lp3, ll3 = PL._scorer(model, z, s2, speed_prior=False)(s)  # no prior: the log-likelihood itself
+    np.testing.assert_array_equal(lp3, ll)
+    np.testing.assert_array_equal(ll3, ll)

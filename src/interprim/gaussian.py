@@ -24,9 +24,12 @@ at most ``q N_o`` instead of ``T N_o``.  This is exact, not an approximation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ._compiled import registry as _kernels  # light: the kernels themselves load on first use
 
 __all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
@@ -522,28 +525,25 @@ class LowRankConditioner:
         if n_obs is None:
             return float("nan")
         D_o, q = self.D_o, self.q
-        logdet = n_obs * np.log(sigma2) + ld_T - D_o * q * np.log(sigma2) + ld_K
+        log_s2 = np.log(sigma2)
+        logdet = n_obs * log_s2 + ld_T - D_o * q * log_s2 + ld_K
         return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
     def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
         """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
         kernels are in use (:func:`interprim._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
         numbers to rounding); ``None`` if a factorisation failed."""
-        from ._compiled import registry
-
-        return self.mean_compiled(G, B, sigma2, yy, n_obs) if registry.in_use() else \
+        return self.mean_compiled(G, B, sigma2, yy, n_obs) if _kernels.in_use() else \
             self.mean_numpy(G, B, sigma2, yy, n_obs)
 
     def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
-        from ._compiled import registry as kernels
-
-        lowrank_condition_mean = kernels.compiled("conditioning.lowrank_condition_mean")
+        lowrank_condition_mean = _kernels.compiled("conditioning.lowrank_condition_mean")
         if out is None:
             out = np.empty(self.P)
         ld_T, ld_K, resid = lowrank_condition_mean(G, B, float(sigma2), float(yy), self.sq, self.Uh, self.K0,
                                                    self.mean, self.mu_o, self.obs_flat, self.other, self.Uc, out)
-        if not (np.isfinite(ld_T) and np.isfinite(ld_K)):
+        if not (math.isfinite(ld_T) and math.isfinite(ld_K)):
             return None
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
 

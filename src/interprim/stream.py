@@ -133,15 +133,16 @@ class Stream(BaseStream):
         self._buf[self._n] = f
         self._n += 1
         tr = None
-        if m.phase_method_used() == "likelihood":  # local search around the previous estimate on a speed lattice
+        method = m.phase_method_used()
+        if method == "likelihood":  # local search around the previous estimate on a speed lattice
             tr = self._tracker
             if tr is None or tr.model is not m:
                 from .phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
-        n_star, cost = estimate_phase(m, self._buf[: self._n], m.phase_method_used(), dtw=(n_star, cost),
-                                      tracker=tr)
-        z = movement_prefix(m, self._buf[: self._n], n_star)  # learned phase past the end: where it ended
+        z_all = self._buf[: self._n]
+        n_star, cost = estimate_phase(m, z_all, method, dtw=(n_star, cost), tracker=tr)
+        z = movement_prefix(m, z_all, n_star)  # learned phase past the end: where it ended
         return m.predict_latent(z, n_star, cost, None, need_cov=need_cov, robot_start=self._robot_start,
                                  workspace=self._ws)
 

@@ -97,35 +97,39 @@ class _Tracker:
             if self._buf is not None:
                 self._buf[0][:] = _SLOT_FREE
             return s
-        ss, lps, i, found = self._lattice_step(z)
+        model = self.model
+        # what every window and the refinement of this frame share, looked up once per frame
+        fs = _fast_state(model)
+        s2 = phase_noise(model)
+        prior = _speed_prior_params(model, M) if self.speed_prior else None
+        kern = kernels.kernel("phase_likelihood.track_step") if fs is not None else None
+        ss, lps, i, found = self._lattice_step(z, fs, s2, prior, kern)
         if not found:  # the maximum moved further than the hops reach: the batch search, lattice re-anchored
-            s = estimate_phase(self.model, z, speed_prior=self.speed_prior).s_end
+            s = estimate_phase(model, z, speed_prior=self.speed_prior).s_end
             self.kc = int(round(np.log(s / (self.v0 * (M - 1))) / self.dlog))
             return s
-        return _finish(_scorer(self.model, z, phase_noise(self.model), self.speed_prior), ss, lps, i, *_bounds(self.model, M))
+        return _finish(_scorer(model, z, s2, self.speed_prior, _parts=(fs, prior)), ss, lps, i, *_bounds(model, M))
 
-    def _lattice_step(self, z):
+    def _lattice_step(self, z, fs, s2, prior, kern):
         """Best lattice point for ``z``: ``(phases, log posteriors, index of the best, found)`` of the last
-        window scored.
+        window scored (``fs``, ``s2``, ``prior``, ``kern``: the frame's :func:`_fast_state`, :func:`phase_noise`,
+        speed prior parameters or ``None``, and the compiled step or ``None``).
 
         When the best point is at an unclipped edge of the window, the window is re-centred on it and scored
         again; ``found`` is false when it is still at an edge after ``_MAX_HOPS`` re-centrings.
         """
         for _ in range(_MAX_HOPS + 1):
             kc0 = self.kc
-            ss, lps, i = self._window(z)
+            ss, lps, i = self._window(z, fs, s2, prior, kern)
             edge = self.kc in (kc0 - self.nh, kc0 + self.nh)
             if not edge or ss[i] <= _S_MIN or ss[i] >= 1.0 or self.nh == 0:
                 return ss, lps, i, True
         return ss, lps, i, False
 
-    def _window(self, z):
+    def _window(self, z, fs, s2, prior, kern):
         """Score the window ``kc - nh .. kc + nh``; sets ``kc`` to the best point; returns ``(ss, lps, i)``."""
         M = z.shape[0]
         model = self.model
-        fs = _fast_state(model)
-        kern = kernels.kernel("phase_likelihood.track_step") if fs is not None else None
-        s2 = phase_noise(model)
         if kern is None:
             if self._buf is not None:  # the slots are not kept up to date here
                 self._buf[0][:] = _SLOT_FREE
@@ -144,18 +148,23 @@ class _Tracker:
             from .._compiled.phase_likelihood import track_buffers
 
             self._buf = track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
+            self._n_out = 2 * self.nh + 1
             self.Rg = None
         if self.Rg is None:
             self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))
-        logel, mu, sd = _speed_prior_params(model, M) if self.speed_prior else (0.0, 0.0, 1.0)
+        logel, mu, sd = (0.0, 0.0, 1.0) if prior is None else prior
+        buf = self._buf
         j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, _S_MIN, fs.sq, fs.Uh, fs.K0, s2,
-                    self.speed_prior, logel, mu, sd, _MAX_GAP, *self._buf)
+                    self.speed_prior, logel, mu, sd, _MAX_GAP, *buf)
         self.kc = int(j)
-        n = 2 * self.nh + 1
-        s_out, lp_out = self._buf[-2][:n], self._buf[-1][:n]
-        keep = s_out > 0.0
-        cand, lp = s_out[keep].copy(), lp_out[keep].copy()
-        return cand, lp, int(np.searchsorted(cand, s))
+        n = self._n_out
+        s_out, lp_out = buf[-2][:n], buf[-1][:n]
+        if s_out[0] > 0.0 and s_out[n - 1] > 0.0:  # merged (clipped) candidates, marked -1, sit at the ends only
+            cand, lp = s_out.copy(), lp_out.copy()
+        else:
+            keep = s_out > 0.0
+            cand, lp = s_out[keep].copy(), lp_out[keep].copy()
+        return cand, lp, int(cand.searchsorted(s))
 
 
 _MAX_HOPS = 8  # window re-centrings per frame before a full search (each moves the speed by up to exp(spread))

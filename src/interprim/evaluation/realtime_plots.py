@@ -248,9 +248,11 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
     return out
 
 
-#: The two models of :func:`nuisi_realtime_figure`: the library's defaults and the learned phase
-#: (recommended for recordings of people, docs/phase-learned.md); nothing else differs.
-NUISI_FIGURE_METHODS = {"library defaults": {}, "learned phase": {"phase_method": "learned"}}
+#: The two models of :func:`nuisi_realtime_figure`: the library's defaults and the paper's method exactly
+#: (forcing observation, open-end DTW phase, the noise from the fit residual).  Until 2026-11-26 the second row
+#: was the learned phase, which the defaults' ``phase_method="auto"`` now picks on these recordings.
+NUISI_FIGURE_METHODS = {"library defaults": {},
+                        "the paper exactly": {"observation": "forcing", "sigma2": "auto", "phase_method": "dtw"}}
 
 
 def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".", data_path=None, dt: float = 0.05,
@@ -260,8 +262,8 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
 
     Agent 1's right shoulder, elbow and hand are observed (9 columns), agent 2's right hand is predicted
     (:func:`interprim.datasets.load_nuisi` with ``observed="right_arm", controlled="right_hand"``).  The
-    models (:data:`NUISI_FIGURE_METHODS`: ``InteractionPrimitive`` with its defaults, and with
-    ``phase_method="learned"``) are fitted on the other recordings of ``action``; with ``development_only``
+    models (:data:`NUISI_FIGURE_METHODS`: ``InteractionPrimitive`` with its defaults, and as in the paper) are
+    fitted on the other recordings of ``action``; with ``development_only``
     (default) only on the development recordings (the first two thirds: the untouched hold-out of
     :data:`interprim.evaluation.nested.HOLDOUT` is neither fitted on nor shown), and ``demo`` must be one of
     them.  The held-out recording is seen through causal prefixes (the raw samples recorded by each frame's

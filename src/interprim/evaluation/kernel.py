@@ -23,7 +23,7 @@ import numpy as np
 
 from ..contract import GridPrediction
 from ..preprocessing import interp_columns
-from .baselines import _Baseline
+from .baselines import AlignedStream, _Baseline
 from .protocol import observed_frames
 
 __all__ = ["KernelDemonstrations"]
@@ -60,6 +60,8 @@ class KernelDemonstrations(_Baseline):
     """
 
     _FITTED = "demos_"
+    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
+    exact_stream = True
 
     def __init__(self, observed_dofs, bandwidth="cv", horizon: float = 0.25, n: int = 201):
         self.observed_dofs = observed_dofs
@@ -226,9 +228,24 @@ class KernelDemonstrations(_Baseline):
         demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
         """
         v = self._partial(partial)
-        idx, n_star, cost = self._align(v)
+        _, n_star, cost = self._align(v)
+        return self._from_alignment(v.shape[0], n_star, cost)
+
+    def stream(self, robot_state=None) -> AlignedStream:
+        """Online predictor (:class:`~interprim.evaluation.baselines.AlignedStream`: the alignments advance one
+        frame at a time, ``O(N)`` per demonstration, instead of re-aligning the prefix; every ``update`` equals
+        :meth:`predict` of all frames seen)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return AlignedStream(self)
+
+    def _from_alignment(self, M, n_star, cost) -> GridPrediction:
+        """The prediction after ``M`` observed frames from every training demonstration's matched frame
+        ``n_star`` and normalised cost ``cost`` (steps 2 and 3 of the module docstring)."""
+        idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
-        elapsed = (v.shape[0] - 1) * self.dt_
+        elapsed = (M - 1) * self.dt_
         rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
         R = float(w @ rem) * self.dt_
         dur = max(elapsed + R, self.dt_)
@@ -247,4 +264,4 @@ class KernelDemonstrations(_Baseline):
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
         self.weights_ = dict(zip(idx, w))
         return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
-                              duration=dur, mean_duration=self.mean_duration_, n_observed=v.shape[0])
+                              duration=dur, mean_duration=self.mean_duration_, n_observed=M)

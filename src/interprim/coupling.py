@@ -469,18 +469,30 @@ class CouplingModel:
         resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
+        # what depends only on the fold and the phase (training rows, held-out queries and the smoothers' shared
+        # context) is computed once per fit and reused by every pass (_cross_validate makes up to three)
+        cache = getattr(self, "_cv_cache", None)
+        cache = {} if cache is None else cache
         for hold in folds:
             train = np.setdiff1d(np.arange(n), hold)
             for a, s in enumerate(fr):
-                sig = float(self._phase_std(s))
-                X, g = self._rows(train, s, sig)
-                # held-out prefixes: true phases spread around the estimate s by the phase error
-                z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
-                s_true = np.clip(s - sig * z, 0.02, 1.0)
-                xq = np.concatenate([self._feat(_resample(self.obs_frames_[j], s_true * (self.obs_frames_[j].shape[0] - 1),
-                                                           int(self.n_in))) for j in hold])
+                key = (tuple(int(j) for j in hold), a)
+                if key not in cache:
+                    sig = float(self._phase_std(s))
+                    if ("rows", a) not in cache:  # every demonstration's training rows at this phase (_rows)
+                        cache["rows", a] = self._rows(np.arange(n), s, sig)
+                    X_all, g_all = cache["rows", a]
+                    sel = np.isin(g_all, train)
+                    X, g = X_all[sel], g_all[sel]
+                    # held-out prefixes: true phases spread around the estimate s by the phase error
+                    z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
+                    s_true = np.clip(s - sig * z, 0.02, 1.0)
+                    xq = np.concatenate([self._feat(_resample(self.obs_frames_[j],
+                                                              s_true * (self.obs_frames_[j].shape[0] - 1),
+                                                              int(self.n_in))) for j in hold])
+                    cache[key] = self._context(X, g, Yflat, xq)
+                ctx = cache[key]
                 truth = np.repeat(Yflat[hold], nj, axis=0)
-                ctx = self._context(X, g, Yflat, xq)
                 for c, (m, prm) in enumerate(cands):
                     mean, h = self._predict_rows(m, prm, ctx)
                     e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
@@ -491,6 +503,13 @@ class CouplingModel:
         return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):
+        self._cv_cache = {}
+        try:
+            self._cross_validate_cached()
+        finally:
+            del self._cv_cache
+
+    def _cross_validate_cached(self):
         cands = self._candidates()
         loss, _, _, K = self._cv_pass(cands, None)
         if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:

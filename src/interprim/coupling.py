@@ -332,12 +332,36 @@ class CouplingModel:
         """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
         z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
         s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
-        X, g = [], []
-        for j in idx:
-            fr = self.obs_frames_[j]
-            X.append(self._feat(_resample(fr, s_true * (fr.shape[0] - 1), int(self.n_in))))
-            g.append(np.full(s_true.size, j))
-        return np.concatenate(X), np.concatenate(g)
+        idx = np.asarray(idx, dtype=np.intp)
+        if idx.size == 0:
+            return np.empty((0, int(self.n_in) * len(self.observed_dofs_))), np.empty(0, dtype=np.intp)
+        # _resample of every demonstration at once, on its frames padded to a common length (the same elementwise
+        # operations per demonstration, so the same numbers as one _resample per demonstration)
+        frames, T = self._padded_obs()
+        T, frames = T[idx], frames[idx]
+        lin = np.linspace(0.0, 1.0, int(self.n_in))
+        stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
+        pos = np.clip(stops[:, :, None] * lin[None, None, :], 0.0, (T - 1.0)[:, None, None])  # (J, R, n_in)
+        i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
+        w = (pos - i0)[..., None]
+        i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
+        J = np.arange(idx.size)[:, None, None]
+        pts = frames[J, i0] * (1.0 - w) + frames[J, i1] * w  # (J, R, n_in, Do)
+        X = self._feat(pts)
+        return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
+
+    def _padded_obs(self):
+        """``(frames (n, T_max, Do), lengths (n,))``: the observed frames of the demonstrations, zero-padded
+        (rebuilt when ``obs_frames_`` is replaced, by a fit or a load)."""
+        cached = self.__dict__.get("_padded")
+        if cached is None or cached[0] is not self.obs_frames_:
+            T = np.array([f.shape[0] for f in self.obs_frames_], dtype=np.intp)
+            frames = np.zeros((len(T), int(T.max()), self.obs_frames_[0].shape[1]))
+            for j, f in enumerate(self.obs_frames_):
+                frames[j, : f.shape[0]] = f
+            cached = (self.obs_frames_, frames, T)
+            self.__dict__["_padded"] = cached
+        return cached[1], cached[2]
 
     # ------------------------------------------------------------------ the smoothers
     @staticmethod

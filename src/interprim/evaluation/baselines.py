@@ -30,7 +30,7 @@ from .._validation import as_2d_finite, as_frame, check_positive
 from ..contract import BaseStream, GridPrediction, Predictor
 from ..preprocessing import time_normalise
 
-__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction"]
+__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction", "AlignedStream"]
 
 
 #: the prediction type of every method here (:class:`interprim.contract.GridPrediction`; the old name is kept)
@@ -91,7 +91,7 @@ class AlignedStream(BaseStream):
 
     One :class:`~interprim.phase.dtw.IncrementalDTW` per training demonstration takes each frame in ``O(N)``
     (one new column of Eq. 7) instead of re-aligning the whole prefix, and gives exactly the batch alignment;
-    the model then predicts from the alignments (``model._from_alignment``), so :meth:`update` returns exactly
+    the model then predicts from the alignments (``model.predict_from_alignment``), so :meth:`update` returns exactly
     what ``model.predict`` returns for all frames seen, and :meth:`extend` advances the alignments by several
     frames and predicts once.  ``need_cov`` is accepted for the interface and has no effect.
     """
@@ -123,7 +123,7 @@ class AlignedStream(BaseStream):
         n_star = np.array([d.n_star for d in self._dtw], dtype=np.int64)
         # the batch's normalisation D(n*, M) / (n* + 1 + M), with the same scalar operations
         cost = np.array([d.cost / (d.n_star + 1 + self._n) for d in self._dtw])
-        return self.model._from_alignment(self._n, n_star, cost)
+        return self.model.predict_from_alignment(self._n, n_star, cost)
 
     def update(self, frame, need_cov: bool = False):
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns its prediction."""
@@ -276,7 +276,7 @@ class NearestNeighbour(_Baseline):
         and its ``std`` is ``None``.
         """
         v = self._partial(partial)
-        return self._from_alignment(v.shape[0], *_align_all(self.observed_, v))
+        return self.predict_from_alignment(v.shape[0], *_align_all(self.observed_, v))
 
     def stream(self, robot_state=None) -> AlignedStream:
         """Online predictor (:class:`AlignedStream`: the alignments advance one frame at a time; every
@@ -286,9 +286,23 @@ class NearestNeighbour(_Baseline):
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         return AlignedStream(self)
 
-    def _from_alignment(self, M, n_star, cost):
-        """The prediction after ``M`` frames from every demonstration's matched frame ``n_star`` and normalised
-        cost (ties: the first demonstration)."""
+    def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
+        """The prediction after ``M`` observed frames from the prefix's alignments to the demonstrations.
+
+        Parameters
+        ----------
+        M : int
+            Observed frames.
+        n_star : ndarray of int, shape (J,)
+            Each training demonstration's matched frame (Eq. 8, 0-based).
+        cost : ndarray, shape (J,)
+            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
+
+        Returns
+        -------
+        GridPrediction
+            What :meth:`predict` returns for a prefix with these alignments (ties: the first demonstration).
+        """
         best, best_c, frac = 0, np.inf, float("nan")
         for j, u in enumerate(self.observed_):
             if cost[j] < best_c:

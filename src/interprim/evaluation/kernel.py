@@ -229,7 +229,7 @@ class KernelDemonstrations(_Baseline):
         """
         v = self._partial(partial)
         _, n_star, cost = self._align(v)
-        return self._from_alignment(v.shape[0], n_star, cost)
+        return self.predict_from_alignment(v.shape[0], n_star, cost)
 
     def stream(self, robot_state=None) -> AlignedStream:
         """Online predictor (:class:`~interprim.evaluation.baselines.AlignedStream`: the alignments advance one
@@ -240,9 +240,24 @@ class KernelDemonstrations(_Baseline):
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         return AlignedStream(self)
 
-    def _from_alignment(self, M, n_star, cost) -> GridPrediction:
-        """The prediction after ``M`` observed frames from every training demonstration's matched frame
-        ``n_star`` and normalised cost ``cost`` (steps 2 and 3 of the module docstring)."""
+    def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
+        """The prediction after ``M`` observed frames from the prefix's alignments (steps 2 and 3 of the module
+        docstring).
+
+        Parameters
+        ----------
+        M : int
+            Observed frames.
+        n_star : ndarray of int, shape (J,)
+            Each training demonstration's matched frame (Eq. 8, 0-based).
+        cost : ndarray, shape (J,)
+            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
+
+        Returns
+        -------
+        GridPrediction
+            What :meth:`predict` returns for a prefix with these alignments (sets ``weights_``).
+        """
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_

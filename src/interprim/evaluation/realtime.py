@@ -205,15 +205,17 @@ def _prefix_predictions(estimator, test, obs, frames, prefix):
             and all(a < b for a, b in zip(frames, frames[1:]))):
         return lambda k: estimator.predict(get(k))
     last = np.asarray(get(frames[-1]), dtype=np.float64)
-    if prefix is not None and not all(np.array_equal(np.asarray(get(k), dtype=np.float64), last[:k])
-                                      for k in frames[:-1]):
-        return lambda k: estimator.predict(get(k))
+    if prefix is not None:  # each prefix computed once, for the check and, if it fails, for predict
+        seen = {k: get(k) for k in frames[:-1]}
+        if not all(np.array_equal(np.asarray(x, dtype=np.float64), last[:k]) for k, x in seen.items()):
+            seen[frames[-1]] = last
+            return lambda k: estimator.predict(seen[k])
     stream = estimator.stream()
-    seen = [0]
+    fed = [0]  # frames fed to the stream so far
 
     def predict(k):
-        pred = stream.extend(last[seen[0]:k])
-        seen[0] = k
+        pred = stream.extend(last[fed[0]:k])
+        fed[0] = k
         return pred
 
     return predict

@@ -190,3 +190,32 @@ def test_protocol_predicts_anew_when_the_prefixes_are_not_nested(reach):
         k = r["k"]
         p = m.predict(shifted(k))
         assert r["phase"] == p.normalised_time
+
+
+def test_frames_of_all_demonstrations_at_once_equal_one_interpolation_each(reach):
+    """The continuations of every demonstration are read at fractional frames all at once (padded frames,
+    numpy.interp's own operations on the frame grid): the numbers of one interp_columns per demonstration, on
+    samples, between them and at the last frame (bitwise on x86-64, whose numpy has no fused multiply-add in
+    interp; elsewhere to rounding)."""
+    import platform
+
+    from interprim.preprocessing import interp_columns
+
+    dev, _ = reach
+    m = KernelDemonstrations([0, 1], bandwidth=0.3).fit(dev.demos, dt=dev.dt)
+    rng = np.random.default_rng(0)
+    idx = [3, 0, 7, 7, 11]
+    T = np.array([len(m.demos_[j]) for j in idx])[:, None]
+    f = rng.uniform(0.0, 1.0, size=(len(idx), 40)) * (T - 1)
+    f[:, :5] = np.array([0, 1, 2, T.min() - 2, T.min() - 1])  # samples
+    f[:, 5] = (T - 1)[:, 0]  # each one's last frame
+    f[:, 6] = (T - 1)[:, 0] - 0.25
+    for cols in (slice(None), [2, 3], [1]):
+        got = m._frames_at(idx, f, cols)
+        ref = np.stack([interp_columns(f[i], np.arange(len(m.demos_[j])), m.demos_[j][:, cols])
+                        for i, j in enumerate(idx)])
+        assert got.shape == ref.shape
+        if platform.machine().lower() in ("x86_64", "amd64"):
+            np.testing.assert_array_equal(got, ref)
+        else:
+            np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14 * np.abs(ref).max())

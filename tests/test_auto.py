@@ -164,3 +164,43 @@ def test_the_server_serves_a_saved_blend_like_its_stream(blend, task, tmp_path):
             np.testing.assert_allclose(p["mean"], d.trajectory(20)[:, 2:], rtol=1e-6, atol=1e-9)  # JSON: 7 digits
             np.testing.assert_allclose(p["std"], d.std(20)[:, 2:], rtol=1e-6, atol=1e-9)
             assert p["frames"] == k
+
+
+def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
+    """The inner cross-validation skips what it does not use (the families' std, the clock's records) and streams
+    the kernel and nearest-demonstration predictions frame by frame; its errors, placed means and truth equal,
+    bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
+    weights and variance model are those the plain protocol gives."""
+    from interprim._blas import single_thread
+    from interprim.auto import CrossValidation
+    from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
+
+    dev, _ = task
+    fams = ("kernel", "nn", "prior")
+    make = {m: f for m, f in default_methods([0, 1]).items() if m in fams}
+    cfg = RealTimeConfig(stride=3)
+    cv = CrossValidation(make, dev.demos, [0, 1], dev.dt, cfg, k=3)
+
+    def plain(factory):  # the same family with the stream shortcut off
+        def build():
+            est = factory()
+            est.exact_stream = False
+            return est
+        return build
+
+    assert cv.names == list(fams)
+    for i, m in enumerate(fams):
+        recs = realtime_sweep({m: plain(make[m])}, dev.demos, [0, 1], dev.dt, cfg, k=3, trace=True)
+        assert {r["method"] for r in recs} == {m, "clock", "oracle-duration"}
+        assert cv.errors[m] == summarise_realtime(recs)[m]["rt_ctrl"]
+        mine = sorted((r["demo"], r["k"]) for r in recs if r["method"] == m)
+        by = {(r["demo"], r["k"]): r for r in recs if r["method"] == m}
+        np.testing.assert_array_equal(cv.mean[i], np.array([by[c]["mean"] for c in mine]))
+        np.testing.assert_array_equal(cv.truth, np.array([by[c]["truth"] for c in mine]))
+    auto = ip.AutoInteraction([0, 1], candidates=fams).fit(dev.demos, dt=dev.dt)
+    with single_thread():  # as fit computes them (a BLAS thread count changes the last bits of the weights)
+        w = cv.blend_weights()
+        vm = cv.blend_scales(w)
+    assert auto.weights_ == {m: float(x) for m, x in zip(cv.names, w) if x > 0}
+    np.testing.assert_array_equal(np.asarray(auto.selection_["variance_model"]["a"]), vm["a"])
+    np.testing.assert_array_equal(np.asarray(auto.selection_["variance_model"]["b"]), vm["b"])

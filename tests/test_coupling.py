@@ -172,3 +172,30 @@ def test_learned_interaction_std_adds_the_timing_uncertainty():
     assert np.allclose(p.std(11, timing=False), sd)
     still = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.0, 1.0))  # a phase known exactly
     assert np.allclose(still.std(11), sd)
+
+
+def test_training_rows_equal_one_resample_per_demonstration():
+    """The training rows are built for all demonstrations at once (padded to a common length) and equal, bitwise,
+    one ``_resample`` per demonstration of its own length; a refit on other demonstrations rebuilds them."""
+    from interprim.coupling import _jitter_nodes, _resample
+
+    rng = np.random.default_rng(3)
+    demos = [np.cumsum(rng.normal(size=(int(L), 4)), axis=0) for L in rng.integers(12, 60, size=9)]
+    m = CouplingModel(OBS, phase_std=0.05).fit(demos)
+
+    def reference(model, idx, s_hat, sig):
+        z = _jitter_nodes(int(model.n_jitter)) if sig > 0 else np.zeros(1)
+        s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
+        X = [model._feat(_resample(model.obs_frames_[j], s_true * (model.obs_frames_[j].shape[0] - 1),
+                                   int(model.n_in))) for j in idx]
+        return np.concatenate(X), np.concatenate([np.full(s_true.size, j) for j in idx])
+
+    for idx in (np.arange(9), np.array([0, 4, 8]), np.array([5])):
+        for s_hat, sig in ((0.02, 0.0), (0.37, 0.05), (0.99, 0.2), (1.0, 0.0)):
+            X, g = m._rows(idx, s_hat, sig)
+            Xr, gr = reference(m, idx, s_hat, sig)
+            np.testing.assert_array_equal(X, Xr)
+            np.testing.assert_array_equal(g, gr)
+    m.fit(demos[:5] + [d[::2] for d in demos[5:]])
+    X, _ = m._rows(np.arange(9), 0.5, 0.05)
+    np.testing.assert_array_equal(X, reference(m, np.arange(9), 0.5, 0.05)[0])

@@ -70,7 +70,9 @@ class CrossValidation:
         self.errors, per = {}, {}
         for name, factory in make.items():
             try:
-                recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True)
+                # only the family's errors and placed means are kept: its std and the clock's records are skipped
+                recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True, std=False,
+                                      references=False)
             except ValueError:  # e.g. too few demonstrations in an inner training fold for this family
                 self.errors[name] = float("inf")
                 continue

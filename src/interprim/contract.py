@@ -402,6 +402,9 @@ class Predictor(Params):
 
     _FITTED = "observed_dofs_"
     STATE_VERSION = 1
+    #: whether :meth:`stream` gives, bitwise, what ``predict`` gives on the same frames and is cheaper than predicting
+    #: every prefix anew (the real-time protocol then streams: :func:`interprim.evaluation.realtime.realtime_fold`)
+    exact_stream = False
 
     def _check_fitted(self, what: str):
         if not hasattr(self, self._FITTED):

@@ -332,12 +332,36 @@ class CouplingModel:
         """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
         z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
         s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
-        X, g = [], []
-        for j in idx:
-            fr = self.obs_frames_[j]
-            X.append(self._feat(_resample(fr, s_true * (fr.shape[0] - 1), int(self.n_in))))
-            g.append(np.full(s_true.size, j))
-        return np.concatenate(X), np.concatenate(g)
+        idx = np.asarray(idx, dtype=np.intp)
+        if idx.size == 0:
+            return np.empty((0, int(self.n_in) * len(self.observed_dofs_))), np.empty(0, dtype=np.intp)
+        # _resample of every demonstration at once, on its frames padded to a common length (the same elementwise
+        # operations per demonstration, so the same numbers as one _resample per demonstration)
+        frames, T = self._padded_obs()
+        T, frames = T[idx], frames[idx]
+        lin = np.linspace(0.0, 1.0, int(self.n_in))
+        stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
+        pos = np.clip(stops[:, :, None] * lin[None, None, :], 0.0, (T - 1.0)[:, None, None])  # (J, R, n_in)
+        i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
+        w = (pos - i0)[..., None]
+        i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
+        J = np.arange(idx.size)[:, None, None]
+        pts = frames[J, i0] * (1.0 - w) + frames[J, i1] * w  # (J, R, n_in, Do)
+        X = self._feat(pts)
+        return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
+
+    def _padded_obs(self):
+        """``(frames (n, T_max, Do), lengths (n,))``: the observed frames of the demonstrations, zero-padded
+        (rebuilt when ``obs_frames_`` is replaced, by a fit or a load)."""
+        cached = self.__dict__.get("_padded")
+        if cached is None or cached[0] is not self.obs_frames_:
+            T = np.array([f.shape[0] for f in self.obs_frames_], dtype=np.intp)
+            frames = np.zeros((len(T), int(T.max()), self.obs_frames_[0].shape[1]))
+            for j, f in enumerate(self.obs_frames_):
+                frames[j, : f.shape[0]] = f
+            cached = (self.obs_frames_, frames, T)
+            self.__dict__["_padded"] = cached
+        return cached[1], cached[2]
 
     # ------------------------------------------------------------------ the smoothers
     @staticmethod
@@ -469,18 +493,30 @@ class CouplingModel:
         resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
+        # what depends only on the fold and the phase (training rows, held-out queries and the smoothers' shared
+        # context) is computed once per fit and reused by every pass (_cross_validate makes up to three)
+        cache = getattr(self, "_cv_cache", None)
+        cache = {} if cache is None else cache
         for hold in folds:
             train = np.setdiff1d(np.arange(n), hold)
             for a, s in enumerate(fr):
-                sig = float(self._phase_std(s))
-                X, g = self._rows(train, s, sig)
-                # held-out prefixes: true phases spread around the estimate s by the phase error
-                z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
-                s_true = np.clip(s - sig * z, 0.02, 1.0)
-                xq = np.concatenate([self._feat(_resample(self.obs_frames_[j], s_true * (self.obs_frames_[j].shape[0] - 1),
-                                                           int(self.n_in))) for j in hold])
+                key = (tuple(int(j) for j in hold), a)
+                if key not in cache:
+                    sig = float(self._phase_std(s))
+                    if ("rows", a) not in cache:  # every demonstration's training rows at this phase (_rows)
+                        cache["rows", a] = self._rows(np.arange(n), s, sig)
+                    X_all, g_all = cache["rows", a]
+                    sel = np.isin(g_all, train)
+                    X, g = X_all[sel], g_all[sel]
+                    # held-out prefixes: true phases spread around the estimate s by the phase error
+                    z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
+                    s_true = np.clip(s - sig * z, 0.02, 1.0)
+                    xq = np.concatenate([self._feat(_resample(self.obs_frames_[j],
+                                                              s_true * (self.obs_frames_[j].shape[0] - 1),
+                                                              int(self.n_in))) for j in hold])
+                    cache[key] = self._context(X, g, Yflat, xq)
+                ctx = cache[key]
                 truth = np.repeat(Yflat[hold], nj, axis=0)
-                ctx = self._context(X, g, Yflat, xq)
                 for c, (m, prm) in enumerate(cands):
                     mean, h = self._predict_rows(m, prm, ctx)
                     e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
@@ -491,6 +527,13 @@ class CouplingModel:
         return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):
+        self._cv_cache = {}
+        try:
+            self._cross_validate_cached()
+        finally:
+            del self._cv_cache
+
+    def _cross_validate_cached(self):
         cands = self._candidates()
         loss, _, _, K = self._cv_pass(cands, None)
         if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:

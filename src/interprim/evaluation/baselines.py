@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_2d_finite, check_positive
-from ..contract import GridPrediction, Predictor
+from .._validation import as_2d_finite, as_frame, check_positive
+from ..contract import BaseStream, GridPrediction, Predictor
 from ..preprocessing import time_normalise
 
-__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction"]
+__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction", "AlignedStream"]
 
 
 #: the prediction type of every method here (:class:`interprim.contract.GridPrediction`; the old name is kept)
@@ -83,6 +83,73 @@ class _Baseline(Predictor):
         self.dt_ = float(meta["dt_"])
         self.mean_duration_ = float(meta["mean_duration_"])
         self.n_dofs_ = int(meta["n_dofs_"])
+
+
+class AlignedStream(BaseStream):
+    """Online prediction of a model that aligns the observed prefix to every training demonstration by open-end
+    DTW (:class:`NearestNeighbour`, :class:`~interprim.evaluation.kernel.KernelDemonstrations`).
+
+    One :class:`~interprim.phase.dtw.IncrementalDTW` per training demonstration takes each frame in ``O(N)``
+    (one new column of Eq. 7) instead of re-aligning the whole prefix, and gives exactly the batch alignment;
+    the model then predicts from the alignments (``model.predict_from_alignment``), so :meth:`update` returns exactly
+    what ``model.predict`` returns for all frames seen, and :meth:`extend` advances the alignments by several
+    frames and predicts once.  ``need_cov`` is accepted for the interface and has no effect.
+    """
+
+    def __init__(self, model):
+        from ..phase.dtw import IncrementalDTW
+
+        self.model = model
+        self._n_cols = len(model.observed_dofs_)
+        self._dtw = [IncrementalDTW(o) for o in model.observed_]
+        self._n = 0
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames received since the stream was created or last :meth:`reset`."""
+        return self._n
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        for d in self._dtw:
+            d.reset()
+        self._n = 0
+
+    def _advance(self, block):
+        for f in block:
+            for d in self._dtw:
+                d.update(f, check=False)
+        self._n += block.shape[0]
+        n_star = np.array([d.n_star for d in self._dtw], dtype=np.int64)
+        # the batch's normalisation D(n*, M) / (n* + 1 + M), with the same scalar operations
+        cost = np.array([d.cost / (d.n_star + 1 + self._n) for d in self._dtw])
+        return self.model.predict_from_alignment(self._n, n_star, cost)
+
+    def update(self, frame, need_cov: bool = False):
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns its prediction."""
+        f = np.ascontiguousarray(as_frame(frame, "frame", self._n_cols), dtype=np.float64)
+        return self._advance(f[None])
+
+    def extend(self, frames, need_cov: bool = False):
+        """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns the prediction for
+        all frames seen, as :meth:`update` does for the last of them."""
+        block = np.ascontiguousarray(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1),
+                                     dtype=np.float64)
+        return self._advance(block)
+
+
+def _align_all(observed, v):
+    """``(n_star (J,), cost (J,))``: open-end DTW of the prefix ``v`` against every reference of ``observed``,
+    the cost normalised by the alignment length, ``D(n*, M) / (n* + 1 + M)``."""
+    from ..phase.dtw import open_end_dtw
+
+    n_star = np.empty(len(observed), dtype=np.int64)
+    cost = np.empty(len(observed))
+    for j, u in enumerate(observed):
+        r = open_end_dtw(u, v, return_path=False)
+        n_star[j] = r.n_star
+        cost[j] = r.cost / (r.n_star + 1 + v.shape[0])
+    return n_star, cost
 
 
 def _check_demos(demos):
@@ -160,6 +227,9 @@ class NearestNeighbour(_Baseline):
     time-normalised, and its matched fraction ``(n*+1)/N_j`` is the phase.
     """
 
+    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
+    exact_stream = True
+
     def __init__(self, observed_dofs, n: int = 200):
         self.observed_dofs = observed_dofs
         self.n = n
@@ -205,17 +275,40 @@ class NearestNeighbour(_Baseline):
         Sets ``neighbour_`` to its index; the prediction's phase is its matched fraction ``(n*+1)/N_j``
         and its ``std`` is ``None``.
         """
-        from ..phase.dtw import open_end_dtw
-
         v = self._partial(partial)
+        return self.predict_from_alignment(v.shape[0], *_align_all(self.observed_, v))
+
+    def stream(self, robot_state=None) -> AlignedStream:
+        """Online predictor (:class:`AlignedStream`: the alignments advance one frame at a time; every
+        ``update`` equals :meth:`predict` of all frames seen)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return AlignedStream(self)
+
+    def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
+        """The prediction after ``M`` observed frames from the prefix's alignments to the demonstrations.
+
+        Parameters
+        ----------
+        M : int
+            Observed frames.
+        n_star : ndarray of int, shape (J,)
+            Each training demonstration's matched frame (Eq. 8, 0-based).
+        cost : ndarray, shape (J,)
+            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
+
+        Returns
+        -------
+        GridPrediction
+            What :meth:`predict` returns for a prefix with these alignments (ties: the first demonstration).
+        """
         best, best_c, frac = 0, np.inf, float("nan")
         for j, u in enumerate(self.observed_):
-            r = open_end_dtw(u, v, return_path=False)
-            c = r.cost / (r.n_star + 1 + v.shape[0])
-            if c < best_c:
-                best, best_c, frac = j, c, r.fraction
+            if cost[j] < best_c:
+                best, best_c, frac = j, cost[j], (int(n_star[j]) + 1) / u.shape[0]
         self.neighbour_ = best
-        return self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, v.shape[0], phase=frac,
+        return self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, M, phase=frac,
                                 method=f"demonstration {best}")
 
 

@@ -22,8 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..contract import GridPrediction
-from ..preprocessing import interp_columns
-from .baselines import _Baseline
+from .baselines import AlignedStream, _Baseline
 from .protocol import observed_frames
 
 __all__ = ["KernelDemonstrations"]
@@ -60,6 +59,8 @@ class KernelDemonstrations(_Baseline):
     """
 
     _FITTED = "demos_"
+    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
+    exact_stream = True
 
     def __init__(self, observed_dofs, bandwidth="cv", horizon: float = 0.25, n: int = 201):
         self.observed_dofs = observed_dofs
@@ -120,6 +121,34 @@ class KernelDemonstrations(_Baseline):
             cost[i] = r.cost / (r.n_star + 1 + v.shape[0])
         return idx, n_star, cost
 
+    def _frames_at(self, idx, f, cols):
+        """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
+        ``(len(idx), n)`` within ``[0, T_j - 1]``, i.e. ``interp_columns(f[i], arange(T_j), demos_[j][:, cols])``.
+
+        All demonstrations at once on their zero-padded frames, with :func:`numpy.interp`'s own operations on a
+        unit grid (``y[k]`` at an integer ``f = k``, else ``(y[k+1] - y[k]) * (f - k) + y[k]``), so the numbers
+        are those of one ``interp_columns`` per demonstration.
+        """
+        cached = self.__dict__.get("_padded")
+        if cached is None or cached[0] is not self.demos_:
+            lengths = np.array([len(a) for a in self.demos_], dtype=np.intp)
+            padded = np.zeros((len(lengths), int(lengths.max()) + 1, self.demos_[0].shape[1]))
+            for j, a in enumerate(self.demos_):
+                padded[j, : len(a)] = a
+            cached = (self.demos_, padded, lengths)
+            self.__dict__["_padded"] = cached
+        _, padded, lengths = cached
+        idx = np.asarray(idx, dtype=np.intp)
+        A = padded[idx][..., cols]
+        k = np.floor(f).astype(np.intp)
+        frac = f - k
+        J = np.arange(idx.size)[:, None]
+        lo = A[J, k]
+        out = (A[J, k + 1] - lo) * frac[..., None] + lo
+        exact = frac == 0.0  # on a sample (also the last one, whose successor is padding)
+        out[exact] = lo[exact]
+        return out
+
     def _cost_scale(self):
         """The median DTW cost between halves of different training demonstrations (the weights' unit)."""
         costs = []
@@ -139,12 +168,10 @@ class KernelDemonstrations(_Baseline):
         (and, with ``spread``, the weighted spread there)."""
         rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
         R = float(w @ rem) * self.dt_
-        Y = np.empty((len(idx), len(t_ahead), len(cols)))
-        for i, (j, n, r) in enumerate(zip(idx, n_star, rem)):
-            f = n + (t_ahead / R * r if R > 0 else 0 * t_ahead)
-            a = self.demos_[j]
-            f = np.minimum(f, len(a) - 1)
-            Y[i] = interp_columns(f, np.arange(len(a)), a[:, cols])
+        n = np.asarray(n_star)[:, None]
+        T = np.array([len(self.demos_[j]) for j in idx])[:, None]
+        f = n + ((t_ahead / R)[None, :] * rem[:, None] if R > 0 else (0 * t_ahead)[None, :])
+        Y = self._frames_at(idx, np.minimum(f, T - 1), cols)
         mean = np.einsum("j,jhc->hc", w, Y)
         if not spread:
             return mean
@@ -226,25 +253,52 @@ class KernelDemonstrations(_Baseline):
         demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
         """
         v = self._partial(partial)
-        idx, n_star, cost = self._align(v)
+        _, n_star, cost = self._align(v)
+        return self.predict_from_alignment(v.shape[0], n_star, cost)
+
+    def stream(self, robot_state=None) -> AlignedStream:
+        """Online predictor (:class:`~interprim.evaluation.baselines.AlignedStream`: the alignments advance one
+        frame at a time, ``O(N)`` per demonstration, instead of re-aligning the prefix; every ``update`` equals
+        :meth:`predict` of all frames seen)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return AlignedStream(self)
+
+    def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
+        """The prediction after ``M`` observed frames from the prefix's alignments (steps 2 and 3 of the module
+        docstring).
+
+        Parameters
+        ----------
+        M : int
+            Observed frames.
+        n_star : ndarray of int, shape (J,)
+            Each training demonstration's matched frame (Eq. 8, 0-based).
+        cost : ndarray, shape (J,)
+            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
+
+        Returns
+        -------
+        GridPrediction
+            What :meth:`predict` returns for a prefix with these alignments (sets ``weights_``).
+        """
+        idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
-        elapsed = (v.shape[0] - 1) * self.dt_
+        elapsed = (M - 1) * self.dt_
         rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
         R = float(w @ rem) * self.dt_
         dur = max(elapsed + R, self.dt_)
         s = elapsed / dur
         u = np.linspace(0.0, 1.0, int(self.n))
-        Y = np.zeros((len(idx), u.size, self.demos_[0].shape[1]))
-        for i, (j, n) in enumerate(zip(idx, n_star)):
-            a = self.demos_[j]
-            T = len(a)
-            past = u <= s
-            f = np.where(past, u / max(s, 1e-12) * n, n + (u - s) / max(1 - s, 1e-12) * (T - 1 - n))
-            f = np.clip(f, 0, T - 1)
-            Y[i] = interp_columns(f, np.arange(T), a)
+        n = np.asarray(n_star)[:, None]
+        T = np.array([len(a) for a in self.demos_])[:, None]
+        past = u <= s
+        f = np.where(past, (u / max(s, 1e-12))[None, :] * n, n + ((u - s) / max(1 - s, 1e-12))[None, :] * (T - 1 - n))
+        Y = self._frames_at(idx, np.clip(f, 0, T - 1), slice(None))
         mean = np.einsum("j,jkd->kd", w, Y)
         spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
         self.weights_ = dict(zip(idx, w))
         return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
-                              duration=dur, mean_duration=self.mean_duration_, n_observed=v.shape[0])
+                              duration=dur, mean_duration=self.mean_duration_, n_observed=M)

@@ -101,7 +101,7 @@ def _timing(pred, k, dt, mean_dur_s):
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                   name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
-                  prefix=None, oracle=None) -> list:
+                  prefix=None, oracle=None, std: bool = True, references: bool = True) -> list:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
@@ -119,6 +119,16 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     default ``test[:k, observed_dofs]``, which is causal only when ``test`` holds the recorded samples.
     ``oracle``: ``(T, D)``, the best possible prediction of ``test`` (synthetic data,
     :class:`~interprim.synthetic.SyntheticTask`); adds ``"oracle"`` records, the floor.
+
+    ``std=False`` skips the method's std (``cov_*`` and ``z_*`` are then NaN, ``"std"`` None) and
+    ``references=False`` the clock and oracle-duration records, for a caller that needs only the method's errors
+    and placed means (:class:`interprim.auto.CrossValidation`); the method's records are unchanged.
+
+    When the estimator's stream gives exactly what ``predict`` gives (``exact_stream = True``, e.g.
+    :class:`~interprim.evaluation.kernel.KernelDemonstrations`, whose stream updates its alignments one frame
+    at a time), the frames are fed through one stream instead of predicting every prefix anew, provided every
+    evaluated prefix is the start of the longest one (always so for recorded samples; a causal prefix of an
+    interpolated recording may differ, and is then predicted anew): the same predictions, cheaper.
     """
     test = np.asarray(test, dtype=np.float64)
     obs = [int(i) for i in observed_dofs]
@@ -126,7 +136,10 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     if not fitted:
         estimator.fit(train, dt=dt)
     grid = np.linspace(0.0, 1.0, cfg.n_grid)
-    mean, mean_dur = mean_demo(train, cfg.n_grid)
+    if references:
+        mean, mean_dur = mean_demo(train, cfg.n_grid)
+    else:
+        mean, mean_dur = None, float(np.mean([len(d) - 1 for d in train]))  # mean_demo's duration, alone
     mean_dur_s = mean_dur * dt
     T = test.shape[0]
     true_dur_s = (T - 1) * dt
@@ -135,26 +148,30 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
         k0 = max(3, int(math.ceil(cfg.start * T)))
         k1 = max(k0, int(math.floor(cfg.stop * T)))
         frames = range(k0, k1 + 1, max(1, int(cfg.stride)))
-    out = []
+    frames = [int(k) for k in frames]
     for k in frames:
-        k = int(k)
         if not 1 <= k <= T:
             raise ValueError(f"frames must be numbers of frames seen in 1..{T}, got {k}")
+    predict = _prefix_predictions(estimator, test, obs, frames, prefix)
+    out = []
+    for k in frames:
         idx = np.minimum(np.arange(k, k + H), T - 1)  # frames k .. k+H-1 (0-based), held at the end
         t_ahead = (np.arange(1, H + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
         truth = test[idx]
         phase_true = (k - 1) / (T - 1)
         elapsed = (k - 1) * dt
-        pred = estimator.predict(test[:k, obs] if prefix is None else prefix(k))
+        pred = predict(k)
         s, dur = _timing(pred, k, dt, mean_dur_s)
         Y = pred.trajectory(cfg.n_grid)
-        S = pred.std(cfg.n_grid)
+        S = pred.std(cfg.n_grid) if std else None
         rows = {
             name: (s, _interp_rows(s + t_ahead / dur, grid, Y),
                    None if S is None else _interp_rows(s + t_ahead / dur, grid, S)),
-            "clock": (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean), None),
-            "oracle-duration": (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None),
         }
+        if references:
+            rows["clock"] = (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean),
+                             None)
+            rows["oracle-duration"] = (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None)
         if oracle is not None:
             rows["oracle"] = (phase_true, np.asarray(oracle, dtype=np.float64)[idx], None)
         for method, (sm, Yh, Sh) in rows.items():
@@ -177,6 +194,31 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
                 rec.update(t_ahead=t_ahead, truth=truth, mean=Yh, std=Sh)
             out.append(rec)
     return out
+
+
+def _prefix_predictions(estimator, test, obs, frames, prefix):
+    """``predict(k)``: the estimator's prediction from the first ``k`` frames (``prefix(k)``, default
+    ``test[:k, obs]``) for the increasing ``frames``, through one stream when that gives the same answers
+    (see :func:`realtime_fold`)."""
+    get = (lambda k: test[:k, obs]) if prefix is None else prefix
+    if not (getattr(estimator, "exact_stream", False) and len(frames) > 1
+            and all(a < b for a, b in zip(frames, frames[1:]))):
+        return lambda k: estimator.predict(get(k))
+    last = np.asarray(get(frames[-1]), dtype=np.float64)
+    if prefix is not None:  # each prefix computed once, for the check and, if it fails, for predict
+        seen = {k: get(k) for k in frames[:-1]}
+        if not all(np.array_equal(np.asarray(x, dtype=np.float64), last[:k]) for k, x in seen.items()):
+            seen[frames[-1]] = last
+            return lambda k: estimator.predict(seen[k])
+    stream = estimator.stream()
+    fed = [0]  # frames fed to the stream so far
+
+    def predict(k):
+        pred = stream.extend(last[fed[0]:k])
+        fed[0] = k
+        return pred
+
+    return predict
 
 
 def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
@@ -215,7 +257,7 @@ def folds(n: int, k: int | None = None):
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                    k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
-                   test=None, trace: bool = False) -> list:
+                   test=None, trace: bool = False, std: bool = True, references: bool = True) -> list:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -230,7 +272,8 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     ``test``: evaluate on a fixed hold-out instead of cross-validating: ``demos`` are then the training
     demonstrations (every method is fitted once on all of them) and ``test`` the held-out ones (a
     :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
-    ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record).
+    ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record); ``std`` and
+    ``references`` as there too (``references=False``: no clock and oracle-duration records at all).
     """
     if test is not None:
         train = [np.asarray(d, dtype=np.float64) for d in demos]
@@ -264,7 +307,8 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
                 pre = (lambda k, j=j: prefixes(j, k))
                 orc = None if oracles is None else oracles[j]
                 for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
-                                       prefix=pre, oracle=orc if not first else None, trace=trace):
+                                       prefix=pre, oracle=orc if not first else None, trace=trace, std=std,
+                                       references=references and not first):
                     if r["method"] in ("clock", "oracle-duration", "oracle") and first:
                         continue
                     r["demo"] = int(j)

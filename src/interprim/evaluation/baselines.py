@@ -30,7 +30,7 @@ from .._validation import as_2d_finite, as_frame, check_positive
 from ..contract import BaseStream, GridPrediction, Predictor
 from ..preprocessing import time_normalise
 
-__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction", "AlignedStream"]
+__all__ = ["PriorMean", "NearestNeighbour", "InteractionProMP", "BaselinePrediction", "AlignedStream", "AlignedBaseline"]
 
 
 #: the prediction type of every method here (:class:`interprim.contract.GridPrediction`; the old name is kept)
@@ -163,6 +163,43 @@ def _check_demos(demos):
     return arrays
 
 
+class AlignedBaseline(_Baseline):
+    """A baseline that predicts from the open-end DTW alignments of the observed prefix to every training
+    demonstration (:class:`NearestNeighbour`, :class:`~interprim.evaluation.kernel.KernelDemonstrations`): its
+    :meth:`stream` advances the alignments one frame at a time (:class:`AlignedStream`) and gives exactly what
+    ``predict`` gives."""
+
+    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
+    exact_stream = True
+
+    def stream(self, robot_state=None) -> AlignedStream:
+        """Online predictor (:class:`AlignedStream`: the alignments advance one frame at a time; every
+        ``update`` equals :meth:`predict` of all frames seen)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return AlignedStream(self)
+
+    def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:  # pragma: no cover - interface
+        """The prediction after ``M`` observed frames from the prefix's alignments to the demonstrations.
+
+        Parameters
+        ----------
+        M : int
+            Observed frames.
+        n_star : ndarray of int, shape (J,)
+            Each training demonstration's matched frame (Eq. 8, 0-based).
+        cost : ndarray, shape (J,)
+            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
+
+        Returns
+        -------
+        GridPrediction
+            What ``predict`` returns for a prefix with these alignments.
+        """
+        raise NotImplementedError
+
+
 class PriorMean(_Baseline):
     """Replay the mean demonstration (time-normalised), with the demonstrations' spread as ``std``.
 
@@ -217,7 +254,7 @@ class PriorMean(_Baseline):
         self.mean_, self.std_ = arrays["mean"], arrays["std"]
 
 
-class NearestNeighbour(_Baseline):
+class NearestNeighbour(AlignedBaseline):
     """The training demonstration nearest to the observed prefix under open-end DTW.
 
     The cost of demonstration ``j`` is ``D(n*, M) / (n* + M)`` of the open-end
@@ -226,9 +263,6 @@ class NearestNeighbour(_Baseline):
     different lengths compare fairly); the prediction is that demonstration,
     time-normalised, and its matched fraction ``(n*+1)/N_j`` is the phase.
     """
-
-    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
-    exact_stream = True
 
     def __init__(self, observed_dofs, n: int = 200):
         self.observed_dofs = observed_dofs
@@ -278,31 +312,9 @@ class NearestNeighbour(_Baseline):
         v = self._partial(partial)
         return self.predict_from_alignment(v.shape[0], *_align_all(self.observed_, v))
 
-    def stream(self, robot_state=None) -> AlignedStream:
-        """Online predictor (:class:`AlignedStream`: the alignments advance one frame at a time; every
-        ``update`` equals :meth:`predict` of all frames seen)."""
-        self._check_fitted("stream")
-        if robot_state is not None:
-            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
-        return AlignedStream(self)
-
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
-        """The prediction after ``M`` observed frames from the prefix's alignments to the demonstrations.
-
-        Parameters
-        ----------
-        M : int
-            Observed frames.
-        n_star : ndarray of int, shape (J,)
-            Each training demonstration's matched frame (Eq. 8, 0-based).
-        cost : ndarray, shape (J,)
-            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
-
-        Returns
-        -------
-        GridPrediction
-            What :meth:`predict` returns for a prefix with these alignments (ties: the first demonstration).
-        """
+        """The nearest demonstration given the prefix's alignments (:meth:`AlignedBaseline.predict_from_alignment`;
+        ties: the first demonstration)."""
         best, best_c, frac = 0, np.inf, float("nan")
         for j, u in enumerate(self.observed_):
             if cost[j] < best_c:

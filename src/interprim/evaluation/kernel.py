@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..contract import GridPrediction
-from .baselines import AlignedStream, _Baseline
+from .baselines import AlignedBaseline
 from .protocol import observed_frames
 
 __all__ = ["KernelDemonstrations"]
@@ -30,7 +30,7 @@ __all__ = ["KernelDemonstrations"]
 BANDWIDTHS = (0.03, 0.1, 0.3, 1.0, 3.0, 1e6)
 
 
-class KernelDemonstrations(_Baseline):
+class KernelDemonstrations(AlignedBaseline):
     """Kernel-weighted, DTW-aligned training demonstrations continued at their own timing.
 
     Parameters
@@ -59,8 +59,6 @@ class KernelDemonstrations(_Baseline):
     """
 
     _FITTED = "demos_"
-    #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
-    exact_stream = True
 
     def __init__(self, observed_dofs, bandwidth="cv", horizon: float = 0.25, n: int = 201):
         self.observed_dofs = observed_dofs
@@ -256,33 +254,9 @@ class KernelDemonstrations(_Baseline):
         _, n_star, cost = self._align(v)
         return self.predict_from_alignment(v.shape[0], n_star, cost)
 
-    def stream(self, robot_state=None) -> AlignedStream:
-        """Online predictor (:class:`~interprim.evaluation.baselines.AlignedStream`: the alignments advance one
-        frame at a time, ``O(N)`` per demonstration, instead of re-aligning the prefix; every ``update`` equals
-        :meth:`predict` of all frames seen)."""
-        self._check_fitted("stream")
-        if robot_state is not None:
-            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
-        return AlignedStream(self)
-
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
-        """The prediction after ``M`` observed frames from the prefix's alignments (steps 2 and 3 of the module
-        docstring).
-
-        Parameters
-        ----------
-        M : int
-            Observed frames.
-        n_star : ndarray of int, shape (J,)
-            Each training demonstration's matched frame (Eq. 8, 0-based).
-        cost : ndarray, shape (J,)
-            Each one's normalised cost ``D(n*, M) / (n* + 1 + M)``.
-
-        Returns
-        -------
-        GridPrediction
-            What :meth:`predict` returns for a prefix with these alignments (sets ``weights_``).
-        """
+        """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
+        :meth:`~interprim.evaluation.baselines.AlignedBaseline.predict_from_alignment`; sets ``weights_``)."""
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_

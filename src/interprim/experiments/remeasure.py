@@ -10,6 +10,8 @@ development seed) in place of the smoke set:
 * ``realtime``: the 5-fold real-time protocol (:func:`interprim.evaluation.realtime.realtime_sweep`) on NuiSI
   (agent 1's right arm observed, agent 2's right hand predicted, 20 Hz), the synthetic benchmark and the
   simulated high five; real time 0.25 s ahead, phase, bands over the horizon, whole movement at 40/60/80 %.
+* ``upperbody``: the same real-time protocol on NuiSI with agent 1's upper body observed (24 columns) and agent 2's
+  right arm predicted (9 columns), the defaults and the prior mean.
 * ``sweep``: the normalised-time protocol of the paper's Fig. 7 (:func:`interprim.evaluation.sweep.run_sweep`,
   NuiSI with agent 1's upper body observed) on ``--max-demos`` evenly spread held-out development recordings
   per interaction (each predicted by models fitted on the other development recordings), with recognition.
@@ -50,14 +52,17 @@ COLUMNS = (("rt_ctrl_vs_clock", "Real time (agent 2 / the robot, next 0.25 s), R
            ("z_obs", "RMS error ÷ RMS predicted std over the horizon, agent 1"))
 
 
-def realtime_tasks(which=("nuisi", "synthetic", "highfive-sim"), data_path=None):
-    """``[(name, demos, observed_dofs, dt, point_dim, oracles or None)]``: the development recordings only."""
+def realtime_tasks(which=("nuisi", "synthetic", "highfive-sim"), data_path=None, observed="right_arm",
+                   controlled="right_hand"):
+    """``[(name, demos, observed_dofs, dt, point_dim, oracles or None)]``: the development recordings only.
+
+    ``observed``, ``controlled``: NuiSI's joints (:func:`interprim.datasets.load_nuisi`)."""
     out = []
     if "nuisi" in which:
         from ..datasets import load_nuisi
 
         for a in NUISI_ACTIONS:
-            d = load_nuisi(data_path, action=a, observed="right_arm", controlled="right_hand", dt=0.05)
+            d = load_nuisi(data_path, action=a, observed=observed, controlled=controlled, dt=0.05)
             dev = d.take(split_holdout(len(d))[0])
             out.append((a, dev, list(d.observed_dofs), float(d.dt), 3, None))
     if "synthetic" in which:
@@ -176,7 +181,8 @@ def main(argv=None) -> int:
     """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.remeasure", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="remeasured", help="output folder (outside the repository)")
-    ap.add_argument("--part", default="realtime,sweep", help="realtime, sweep or both")
+    ap.add_argument("--part", default="realtime,sweep", help="comma-separated: realtime, sweep, upperbody (agent 1's "
+                    "upper body observed, agent 2's right arm predicted)")
     ap.add_argument("--tasks", default="nuisi,synthetic,highfive-sim", help="real-time part: which data")
     ap.add_argument("--max-demos", type=int, default=8, help="sweep: held-out recordings per interaction")
     ap.add_argument("--jobs", type=int, default=1, help="sweep: parallel workers")
@@ -193,6 +199,13 @@ def main(argv=None) -> int:
         (out / "realtime.json").write_text(json.dumps(_jsonable(res), indent=1))
         (out / "realtime.md").write_text(realtime_tables(res))
         print(f"wrote {out / 'realtime.md'}")
+    if "upperbody" in parts:  # the second configuration: agent 1's upper body observed, agent 2's right arm
+        with single_thread():
+            res = run_realtime(realtime_tasks(("nuisi",), args.data, observed="upper_body", controlled="right_arm"),
+                               methods=("ip", "prior"))
+        (out / "upperbody.json").write_text(json.dumps(_jsonable(res), indent=1))
+        (out / "upperbody.md").write_text(realtime_tables(res, methods=("ip", "prior")))
+        print(f"wrote {out / 'upperbody.md'}")
     if "sweep" in parts:
         t0 = time.perf_counter()
         res = run_nuisi_sweep(args.max_demos, args.jobs, args.data)

@@ -141,6 +141,12 @@ def test_evaluate_states_the_minimum_and_bad_methods_in_one_line(recordings, tmp
     _one_line_error(capsys.readouterr().err, "--methods ip-forcing", "ip,learned,ip-paper,kernel,nn,prior")
 
 
+def test_evaluate_development_only_is_refused_with_a_file(recordings, tmp_path, capsys):
+    # the flag leaves out the built-in NuiSI hold-out; with the user's own file it would silently do nothing
+    assert main(["evaluate", "--data", str(recordings[3]), "--development-only", "--out", str(tmp_path)]) == 1
+    _one_line_error(capsys.readouterr().err, "--development-only", "keep your own hold-out recordings out")
+
+
 def test_evaluate_demonstrations_minimum_is_the_documented_constant():
     from interprim.assessment import evaluate_demonstrations
     from interprim.evaluation.realtime import MIN_DEMONSTRATIONS

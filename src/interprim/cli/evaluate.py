@@ -138,6 +138,9 @@ def run_user_data(args) -> int:
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
+    if getattr(args, "development_only", False):
+        raise InterprimError("--development-only holds out the built-in NuiSI hold-out; with --data FILE keep your own "
+                             "hold-out recordings out of the file instead")
     from ._common import _positive, _split_cols, agent_columns, recording_options
 
     _positive(args.resample, "--resample")

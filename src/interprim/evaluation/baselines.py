@@ -138,20 +138,6 @@ class AlignedStream(BaseStream):
         return self._advance(block)
 
 
-def _align_all(observed, v):
-    """``(n_star (J,), cost (J,))``: open-end DTW of the prefix ``v`` against every reference of ``observed``,
-    the cost normalised by the alignment length, ``D(n*, M) / (n* + 1 + M)``."""
-    from ..phase.dtw import open_end_dtw
-
-    n_star = np.empty(len(observed), dtype=np.int64)
-    cost = np.empty(len(observed))
-    for j, u in enumerate(observed):
-        r = open_end_dtw(u, v, return_path=False)
-        n_star[j] = r.n_star
-        cost[j] = r.cost / (r.n_star + 1 + v.shape[0])
-    return n_star, cost
-
-
 def _check_demos(demos):
     arrays = [np.asarray(d, dtype=np.float64) for d in demos]
     if len(arrays) < 2:
@@ -179,6 +165,21 @@ class AlignedBaseline(_Baseline):
         if robot_state is not None:
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         return AlignedStream(self)
+
+    def _alignments(self, v, exclude=None):
+        """``(idx, n_star (J,), cost (J,))``: open-end DTW (Eq. 5-8) of the prefix ``v`` against the observed agent
+        of every training demonstration ``idx`` (all but ``exclude``), the cost normalised by the alignment length,
+        ``D(n*, M) / (n* + 1 + M)``; :class:`AlignedStream` gives the same numbers one frame at a time."""
+        from ..phase.dtw import open_end_dtw
+
+        idx = [j for j in range(len(self.observed_)) if j != exclude]
+        n_star = np.empty(len(idx), dtype=np.int64)
+        cost = np.empty(len(idx))
+        for i, j in enumerate(idx):
+            r = open_end_dtw(self.observed_[j], v, return_path=False)
+            n_star[i] = r.n_star
+            cost[i] = r.cost / (r.n_star + 1 + v.shape[0])
+        return idx, n_star, cost
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:  # pragma: no cover - interface
         """The prediction after ``M`` observed frames from the prefix's alignments to the demonstrations.
@@ -310,7 +311,8 @@ class NearestNeighbour(AlignedBaseline):
         and its ``std`` is ``None``.
         """
         v = self._partial(partial)
-        return self.predict_from_alignment(v.shape[0], *_align_all(self.observed_, v))
+        _, n_star, cost = self._alignments(v)
+        return self.predict_from_alignment(v.shape[0], n_star, cost)
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
         """The nearest demonstration given the prefix's alignments (:meth:`AlignedBaseline.predict_from_alignment`;

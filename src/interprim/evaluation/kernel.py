@@ -106,19 +106,6 @@ class KernelDemonstrations(AlignedBaseline):
         self.bandwidth_ = self._choose_bandwidth()
         return self
 
-    def _align(self, v, exclude=None):
-        """``(n_star (J,), cost (J,))`` of the prefix ``v`` against every training demonstration."""
-        from ..phase.dtw import open_end_dtw
-
-        idx = [j for j in range(len(self.observed_)) if j != exclude]
-        n_star = np.empty(len(idx), dtype=np.int64)
-        cost = np.empty(len(idx))
-        for i, j in enumerate(idx):
-            r = open_end_dtw(self.observed_[j], v, return_path=False)
-            n_star[i] = r.n_star
-            cost[i] = r.cost / (r.n_star + 1 + v.shape[0])
-        return idx, n_star, cost
-
     def _frames_at(self, idx, f, cols):
         """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
         ``(len(idx), n)`` within ``[0, T_j - 1]``, i.e. ``interp_columns(f[i], arange(T_j), demos_[j][:, cols])``.
@@ -152,7 +139,7 @@ class KernelDemonstrations(AlignedBaseline):
         costs = []
         for i, o in enumerate(self.observed_):
             k = max(3, len(o) // 2)
-            costs.extend(self._align(o[:k], exclude=i)[2])
+            costs.extend(self._alignments(o[:k], exclude=i)[2])
         c = float(np.median(costs)) if costs else 1.0
         return c if c > 0 else 1.0
 
@@ -207,7 +194,7 @@ class KernelDemonstrations(AlignedBaseline):
                 k = observed_frames(T, f)
                 if k >= T:
                     continue
-                idx, n_star, cost = self._align(self.observed_[i][:k], exclude=i)
+                idx, n_star, cost = self._alignments(self.observed_[i][:k], exclude=i)
                 truth = a[np.minimum(np.arange(k, k + H), T - 1)]
                 cases.append((idx, n_star, cost, truth))
         for h in BANDWIDTHS:
@@ -251,7 +238,7 @@ class KernelDemonstrations(AlignedBaseline):
         demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
         """
         v = self._partial(partial)
-        _, n_star, cost = self._align(v)
+        _, n_star, cost = self._alignments(v)
         return self.predict_from_alignment(v.shape[0], n_star, cost)
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:

@@ -83,10 +83,15 @@ class RealTimeConfig:
     point_dim: int = 1
 
 
+def mean_duration(demos) -> float:
+    """Mean duration of the demonstrations in frames - 1 (the clock's)."""
+    return float(np.mean([len(d) - 1 for d in demos]))
+
+
 def mean_demo(demos, n: int = 201):
     """``(mean (n, D), mean duration in frames - 1)`` of time-normalised demonstrations."""
     Y = np.stack([time_normalise(np.asarray(d, dtype=np.float64), n) for d in demos])
-    return Y.mean(axis=0), float(np.mean([len(d) - 1 for d in demos]))
+    return Y.mean(axis=0), mean_duration(demos)
 
 
 def _interp_rows(u, grid, Y):
@@ -139,7 +144,7 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     if references:
         mean, mean_dur = mean_demo(train, cfg.n_grid)
     else:
-        mean, mean_dur = None, float(np.mean([len(d) - 1 for d in train]))  # mean_demo's duration, alone
+        mean, mean_dur = None, mean_duration(train)
     mean_dur_s = mean_dur * dt
     T = test.shape[0]
     true_dur_s = (T - 1) * dt

@@ -165,18 +165,6 @@ def run_nuisi_sweep(max_demos: int = 8, n_jobs: int = 1, data_path=None) -> dict
     return {"results": res, "summary": summary, "markdown": "\n".join(parts)}
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return x
-
-
 def main(argv=None) -> int:
     """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.remeasure", description=__doc__.split("\n")[0])
@@ -196,20 +184,20 @@ def main(argv=None) -> int:
     if "realtime" in parts:
         with single_thread():
             res = run_realtime(realtime_tasks(tuple(t.strip() for t in args.tasks.split(",")), args.data))
-        (out / "realtime.json").write_text(json.dumps(_jsonable(res), indent=1))
+        (out / "realtime.json").write_text(json.dumps(res, indent=1, default=float))
         (out / "realtime.md").write_text(realtime_tables(res))
         print(f"wrote {out / 'realtime.md'}")
     if "upperbody" in parts:  # the second configuration: agent 1's upper body observed, agent 2's right arm
         with single_thread():
             res = run_realtime(realtime_tasks(("nuisi",), args.data, observed="upper_body", controlled="right_arm"),
                                methods=("ip", "prior"))
-        (out / "upperbody.json").write_text(json.dumps(_jsonable(res), indent=1))
+        (out / "upperbody.json").write_text(json.dumps(res, indent=1, default=float))
         (out / "upperbody.md").write_text(realtime_tables(res, methods=("ip", "prior")))
         print(f"wrote {out / 'upperbody.md'}")
     if "sweep" in parts:
         t0 = time.perf_counter()
         res = run_nuisi_sweep(args.max_demos, args.jobs, args.data)
-        (out / "sweep.json").write_text(json.dumps(_jsonable({"summary": res["summary"]}), indent=1))
+        (out / "sweep.json").write_text(json.dumps({"summary": res["summary"]}, indent=1, default=float))
         (out / "sweep.md").write_text(res["markdown"])
         print(f"wrote {out / 'sweep.md'} in {time.perf_counter() - t0:.0f} s")
     return 0

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 def bench_learned(quick, fitted_model, make_demos, timed, row):
     """Learned timing (phase.learned) and LearnedInteraction at the reference size, beside the likelihood phase."""
-    from interprim.learned import LearnedInteraction
+    from interprim.models.learned import LearnedInteraction
     from interprim.phase.learned import LearnedPhase
 
     print("learned timing")

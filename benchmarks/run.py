@@ -41,7 +41,7 @@ if str(ROOT / "src") not in sys.path:
 
 import interprim as ip  # noqa: E402
 from interprim._compiled import loader  # noqa: E402
-from interprim.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
+from interprim.core.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
 from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
 
 ROWS: list[dict] = []
@@ -361,9 +361,9 @@ def bench_fit(quick):
     # agreement on the least-squares step (Eq. 4) with identical basis and identical forcing targets:
     # movement-primitives' basis is ours with alpha_x = -ln(0.01), overlap 1/sqrt(2 ln(1/0.8)); its forcing
     # targets (np.gradient with edge_order=1 and zeroed final velocity/acceleration, real time) are given to
-    # our solver (interprim.dmp.fit_weights_targets, no ridge) -> weights compared to DMP.imitate's.
-    from interprim.basis import Basis
-    from interprim.dmp import fit_weights_targets
+    # our solver (interprim.core.dmp.fit_weights_targets, no ridge) -> weights compared to DMP.imitate's.
+    from interprim.core.basis import Basis
+    from interprim.core.dmp import fit_weights_targets
 
     W_theirs = np.stack(imitate_all())  # (S, D, m)
     ft = ForcingTerm(D, 25, Tt[-1], 0.0, 0.8, -np.log(0.01))

@@ -1,7 +1,7 @@
 """Benchmark rows of the BLAS thread pools under load and of the first run after an install, run by
 :mod:`benchmarks.run` (the helpers are passed in to keep one timing code).
 
-* **Threads**: every public numeric call runs with one BLAS thread (:mod:`interprim._blas`), so a caller that
+* **Threads**: every public numeric call runs with one BLAS thread (:mod:`interprim.core.blas`), so a caller that
   leaves BLAS at its default (one thread per core) and one that limits it to one thread must see the same
   times, also while other work runs.  Two busy-loop processes (one per core of the reference machine, each
   ending by itself after at most ``BUSY_SECONDS``, and stopped when the rows are done) run during these rows.
@@ -201,7 +201,7 @@ def section_md(rows, table_md, load=None):
                "caller's `threadpool_limits(1)` (*peer*), interleaved, while two busy-loop processes (one per "
                "core, started by the benchmark, each ending by itself after at most "
                f"{BUSY_SECONDS} s) compete for the CPU.  The library runs its linear algebra with one thread "
-               "either way (`interprim._blas`), so the two must agree in time (target: within 1.5x) and in "
+               "either way (`interprim.core.blas`), so the two must agree in time (target: within 1.5x) and in "
                "value (*agree*: largest relative difference of the outputs).", "", table_md(th, True), ""]
     if fr:
         md += ["`import interprim` + `fit` (12 demonstrations, defaults) + `predict` + 60 streamed frames in a fresh "

@@ -13,7 +13,7 @@ import numpy as np
 
 import interprim as ip
 from interprim.datasets import load_bvh
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 
 
 def person(p, x):

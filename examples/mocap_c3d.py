@@ -15,7 +15,7 @@ import numpy as np
 
 import interprim as ip
 from interprim.datasets import load_c3d
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 
 LABELS = ["A:RHand", "A:RWrist", "B:RHand", "B:RWrist"]
 

@@ -17,7 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 
 import interprim as ip
 from interprim.datasets import load_rosbag
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 
 
 def write_bag(path, rng):

@@ -47,14 +47,14 @@ def test_the_counter_sees_private_accesses(tmp_path):
 
 
 def test_no_module_sets_attributes_on_the_estimator():
-    """Outside primitive.py nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
+    """Outside the primitive estimator (models/primitive/estimator.py) nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
     constructor parameters may be set): selection and calibration return
     their choices, the phase likelihood keeps derived arrays in the fitted state's store
     (``FittedPrimitive.cached``), io hands the fitted attributes to ``load_fitted``; the fitted state
     (``fitted``, ``state``) is written only by its own module."""
     bad = []
     for path in sorted(SRC.rglob("*.py")):
-        if path.name in ("primitive.py", "fitted.py"):
+        if path.name in ("estimator.py", "fitted.py"):
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(
@@ -118,14 +118,14 @@ def _entries_into(path_end: str, call):
 
 
 def test_one_predict_enters_primitive_py_once():
-    """The estimator hands a prediction to its fitted state (``interprim.fitted``): a ``predict`` call enters
-    primitive.py once (the call itself), the prediction's methods and a stream never."""
+    """The estimator hands a prediction to its fitted state (``interprim.models.primitive.fitted``): a ``predict`` call enters
+    models/primitive/estimator.py once (the call itself), the prediction's methods and a stream never."""
     import os
 
     from interprim.synthetic import two_agent_demos
 
     demos = two_agent_demos(8, seed=5)
-    sep = os.sep + "interprim" + os.sep + "primitive.py"
+    sep = os.sep + "primitive" + os.sep + "estimator.py"
     for kw in (dict(phase_method="likelihood", sigma2=1e-3), dict(phase_method="dtw", sigma2=1e-3, pca_components=2)):
         model = interprim.InteractionPrimitive([0, 1], n_basis=8, calibrate=False, **kw).fit(demos, dt=0.01)
         partial = demos[0][:60, :2]

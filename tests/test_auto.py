@@ -75,7 +75,7 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
     assert s["blend_cv_error"] <= s["cv_errors"][blend.chosen_] + 1e-12
     assert s["blend_vs_best"] <= 1.0 + 1e-12
     # ... and no other point of the simplex does better (the optimiser found the minimum of a convex loss)
-    from interprim.auto import CrossValidation
+    from interprim.models.ensemble import CrossValidation
     from interprim.evaluation.realtime import RealTimeConfig
 
     cv = CrossValidation(blend.factories(), dev.demos, [0, 1], dev.dt, RealTimeConfig(stride=3), k=3)
@@ -99,7 +99,7 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
 def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     """Ahead of now, the blend at the instant t seconds ahead is the weighted mean of every member's prediction at
     that same instant (each member placed in time by its own phase and duration)."""
-    from interprim.contract import place_in_time
+    from interprim.models.base import place_in_time
 
     _, hold = task
     x = hold.demos[1][:35, :2]
@@ -171,8 +171,8 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     the kernel and nearest-demonstration predictions frame by frame; its errors, placed means and truth equal,
     bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
     weights and variance model are those the plain protocol gives."""
-    from interprim._blas import single_thread
-    from interprim.auto import CrossValidation
+    from interprim.core.blas import single_thread
+    from interprim.models.ensemble import CrossValidation
     from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
 
     dev, _ = task

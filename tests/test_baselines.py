@@ -1,10 +1,11 @@
-"""Peer methods on small data (interprim.evaluation.baselines)."""
+"""Peer methods on small data (interprim.models.demonstrations)."""
 
 import numpy as np
 import pytest
 
-from interprim.evaluation.baselines import InteractionProMP, NearestNeighbour, PriorMean
-from interprim.preprocessing import time_normalise
+from interprim.models.demonstrations import NearestNeighbour, PriorMean
+from interprim.models.promp import InteractionProMP
+from interprim.core.preprocessing import time_normalise
 from interprim.synthetic import two_agent_demos
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 from interprim.synthetic import benchmark_tasks, two_agent_demos
 
 

@@ -1,4 +1,4 @@
-"""One BLAS thread at the public numeric calls (interprim._blas): in force during the call, restored after it,
+"""One BLAS thread at the public numeric calls (interprim.core.blas): in force during the call, restored after it,
 the same numbers with any thread count, and the path switch of the kernel loader only between calls."""
 
 import threading
@@ -10,7 +10,7 @@ from threadpoolctl import threadpool_info, threadpool_limits
 import interprim as ip
 from interprim import _blas
 from interprim._compiled import loader
-from interprim.prediction import Prediction
+from interprim.models.primitive.prediction import Prediction
 from interprim.synthetic import two_agent_demos
 
 

@@ -1,4 +1,4 @@
-"""Calibrated predictive std (interprim.calibration): look-ahead-aware factors, held-out coverage on data with
+"""Calibrated predictive std (interprim.models.primitive.calibration): look-ahead-aware factors, held-out coverage on data with
 known noise, shrinkage, model files with and without the look-ahead arrays."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 import interprim as ip
 from interprim import io as ipio
-from interprim.calibration import Calibration, _shrink
+from interprim.models.primitive.calibration import Calibration, _shrink
 from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
 from interprim.synthetic import two_agent_demos
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from interprim.datasets import Demonstrations, RawStream, load_nuisi
-from interprim.evaluation.protocol import Prefixes, causal_prefix
+from interprim.model_selection.prefixes import Prefixes, causal_prefix
 from interprim.evaluation.realtime import RealTimeConfig, realtime_sweep
 
 
@@ -77,7 +77,7 @@ class Spy:
 
     def predict(self, partial):
         self.log.append(("predict", np.array(partial)))
-        from interprim.evaluation.baselines import PriorMean
+        from interprim.models.demonstrations import PriorMean
 
         return PriorMean([0, 1]).fit(self.train).predict(partial)
 

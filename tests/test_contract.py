@@ -1,13 +1,14 @@
-"""The prediction contract (interprim.contract): every model fits, predicts, streams, saves and clones alike."""
+"""The prediction contract (interprim.models.base): every model fits, predicts, streams, saves and clones alike."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.contract import BasePrediction, BaseStream, Predictor
-from interprim.evaluation.baselines import InteractionProMP, NearestNeighbour, PriorMean
-from interprim.evaluation.kernel import KernelDemonstrations
-from interprim.learned import LearnedInteraction
+from interprim.models.base import BasePrediction, BaseStream, Predictor
+from interprim.models.demonstrations import NearestNeighbour, PriorMean
+from interprim.models.promp import InteractionProMP
+from interprim.models.kernel import KernelDemonstrations
+from interprim.models.learned import LearnedInteraction
 from interprim.synthetic import two_agent_demos
 
 OBS = [0, 1]

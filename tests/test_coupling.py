@@ -1,11 +1,11 @@
-"""The coupling model between the agents (interprim.coupling)."""
+"""The coupling model between the agents (interprim.models.coupling)."""
 
 import numpy as np
 import pytest
 
-from interprim.coupling import CouplingModel, CouplingPrediction
-from interprim.errors import NotFittedError
-from interprim.preprocessing import time_normalise
+from interprim.models.coupling import CouplingModel, CouplingPrediction
+from interprim.core.errors import NotFittedError
+from interprim.core.preprocessing import time_normalise
 
 T = 40
 OBS = [0, 1]
@@ -94,7 +94,7 @@ def test_phase_error_model_is_used_and_prediction_shapes():
     p = m.predict(demos[0][:15, OBS], 0.4)
     assert isinstance(p, CouplingPrediction)
     assert p.trajectory(30).shape == (30, 4) and p.std(30).shape == (30, 4) and np.all(p.std(30) > 0)
-    t, y = p.response(30)  # the contract of interprim.contract: (t, y) like the Interaction Primitive's
+    t, y = p.response(30)  # the contract of interprim.models.base: (t, y) like the Interaction Primitive's
     assert t.shape == (30,) and t[0] == 0.0 and y.shape == (30, 2)
     np.testing.assert_allclose(y[-1], p.trajectory(30)[-1, m.controlled_dofs_])
     s, cm = p.completion(10)
@@ -154,7 +154,7 @@ def test_bad_inputs_name_the_problem():
 def test_learned_interaction_std_adds_the_timing_uncertainty():
     """``LearnedInteraction``'s std = the coupling's std (+) |dy/du| u std(s)/s, the first-order effect of a
     relative phase error on a point placed in real time; without phase uncertainty it is the coupling's std."""
-    from interprim.learned import _Prediction
+    from interprim.models.learned import _Prediction
     from interprim.phase.learned import PhaseEstimate
 
     u = np.linspace(0.0, 1.0, 11)
@@ -177,7 +177,7 @@ def test_learned_interaction_std_adds_the_timing_uncertainty():
 def test_training_rows_equal_one_resample_per_demonstration():
     """The training rows are built for all demonstrations at once (padded to a common length) and equal, bitwise,
     one ``_resample`` per demonstration of its own length; a refit on other demonstrations rebuilds them."""
-    from interprim.coupling import _jitter_nodes, _resample
+    from interprim.models.coupling import _jitter_nodes, _resample
 
     rng = np.random.default_rng(3)
     demos = [np.cumsum(rng.normal(size=(int(L), 4)), axis=0) for L in rng.integers(12, 60, size=9)]

@@ -1,4 +1,4 @@
-"""The shared cross-validation rules (interprim.cv) and resampling (interprim.preprocessing), tested directly,
+"""The shared cross-validation rules (interprim.core.cv) and resampling (interprim.core.preprocessing), tested directly,
 and a check that no other module writes its own copy of them."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 import interprim
 from interprim import cv
-from interprim.preprocessing import (interp_columns, resample_step, resample_uniform, step_count, step_grid,
+from interprim.core.preprocessing import (interp_columns, resample_step, resample_uniform, step_count, step_grid,
                                      time_normalise)
 
 SRC = Path(interprim.__file__).resolve().parent

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from interprim.errors import DataFileError
+from interprim.core.errors import DataFileError
 from interprim.datasets import (
     DataNotFoundError,
     Demonstrations,
@@ -228,7 +228,7 @@ def test_csv_demo_column_column_selection_and_resample(tmp_path):
     np.testing.assert_allclose(r.demos[0][1], [0.5, 1.0])  # halfway between frames 0 and 1
     np.testing.assert_allclose(r.demos[1][:, 0], -r.times[1] / 0.2, atol=1e-12)
     # the recorded samples are kept: a causal prefix ending between two samples holds the earlier one
-    from interprim.evaluation.protocol import Prefixes
+    from interprim.model_selection.prefixes import Prefixes
 
     P = Prefixes(r, [0])
     assert P.causal

@@ -37,21 +37,21 @@ def _page(site, path):
 
 
 @pytest.mark.parametrize("page, symbols", [
-    ("reference/dmp", ["interprim.basis.Basis", "interprim.dmp.fit_weights", "interprim.dmp.LinearRollout"]),
+    ("reference/dmp", ["interprim.core.basis.Basis", "interprim.core.dmp.fit_weights", "interprim.core.dmp.LinearRollout"]),
     ("reference/phase", ["interprim.phase.estimate_phase", "interprim.phase.dtw.open_end_dtw",
                          "interprim.phase.dtw.IncrementalDTW.update", "interprim.phase.learned.LearnedPhase"]),
-    ("reference/distribution", ["interprim.primitive.InteractionPrimitive",
-                                "interprim.primitive.InteractionPrimitive.fit",
-                                "interprim.primitive.InteractionPrimitive.predict", "interprim.gaussian.fit_prior"]),
-    ("reference/conditioning", ["interprim.gaussian.condition", "interprim.gaussian.condition_literal",
-                                "interprim.prediction.Prediction.trajectory", "interprim.stream.Stream.update"]),
+    ("reference/distribution", ["interprim.models.primitive.estimator.InteractionPrimitive",
+                                "interprim.models.primitive.estimator.InteractionPrimitive.fit",
+                                "interprim.models.primitive.estimator.InteractionPrimitive.predict", "interprim.core.gaussian.fit_prior"]),
+    ("reference/conditioning", ["interprim.core.gaussian.condition", "interprim.core.gaussian.condition_literal",
+                                "interprim.models.primitive.prediction.Prediction.trajectory", "interprim.models.primitive.stream.Stream.update"]),
     ("reference/client", ["interprim.server.client.Client.reset", "interprim.server.client.AsyncClient.frame"]),
     ("reference/server", ["interprim.server.app.InterprimServer.start", "interprim.server.app.ServerThread.stop"]),
-    ("reference/errors", ["interprim.errors.ModelFileError", "interprim.errors.OutOfRangeWarning"]),
-    ("reference/auto", ["interprim.auto.AutoInteraction", "interprim.auto.Blend"]),
-    ("reference/cv", ["interprim.cv.folds", "interprim.cv.within_one_se", "interprim.cv.observed_frames"]),
+    ("reference/errors", ["interprim.core.errors.ModelFileError", "interprim.core.errors.OutOfRangeWarning"]),
+    ("reference/auto", ["interprim.models.ensemble.AutoInteraction", "interprim.models.ensemble.Blend"]),
+    ("reference/cv", ["interprim.core.cv.folds", "interprim.core.cv.within_one_se", "interprim.core.cv.observed_frames"]),
     ("reference/evaluation", ["interprim.evaluation.sweep.run_sweep",
-                              "interprim.evaluation.baselines.PriorMean.fit"]),
+                              "interprim.models.demonstrations.PriorMean.fit"]),
 ])
 def test_reference_pages_render_the_api(site, page, symbols):
     html = _page(site, page)
@@ -64,7 +64,7 @@ def test_reference_pages_render_the_api(site, page, symbols):
 
 def test_predict_entry_has_signature_and_parameters(site):
     html = _page(site, "reference/distribution")
-    start = html.index('id="interprim.primitive.InteractionPrimitive.predict"')
+    start = html.index('id="interprim.models.primitive.estimator.InteractionPrimitive.predict"')
     entry = re.sub(r"<[^>]+>", " ", html[start:start + 20000])
     for text in ("partial", "robot_state", "Predict the interaction from a partial observation"):
         assert text in entry

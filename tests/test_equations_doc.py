@@ -92,7 +92,7 @@ def test_eq9_one_convention(fitted_paper, synthetic):
     at s = 0, frame N-1 at s = 1, the DMP's normalised time), and ``x = canonical_phase(s)``.  The paper's
     ``n*/N`` with a 1-based ``n*`` (:func:`~interprim.phase.dtw.phase_from_index`) maps the same frames to
     ``(n*+1)/N``, at most ``1/N`` away (docs/equations.md)."""
-    from interprim.basis import canonical_phase
+    from interprim.core.basis import canonical_phase
     from interprim.phase.dtw import phase_from_index
 
     fitted = fitted_paper  # the paper's configuration: the DTW phase, an integer n*

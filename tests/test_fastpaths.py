@@ -9,12 +9,12 @@ from scipy.linalg import expm
 import interprim as ip
 from interprim._compiled import loader, registry
 from interprim._compiled.observation import StatsWorkspace, start_position
-from interprim.basis import Basis
-from interprim.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
-from interprim.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
+from interprim.core.basis import Basis
+from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
+from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
                                 shrinkage_intensity)
 from interprim.phase.dtw import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
-from interprim.preprocessing import derivatives
+from interprim.core.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 

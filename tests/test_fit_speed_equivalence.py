@@ -1,7 +1,7 @@
-"""The fast conditioning of the hyper-parameter selection (:func:`interprim.gaussian.lowrank_case`: matrix products,
+"""The fast conditioning of the hyper-parameter selection (:func:`interprim.core.gaussian.lowrank_case`: matrix products,
 and a compressed observation reused across priors) against Eq. 17-18 as printed, with the ``N x N`` matrix
 ``A = sigma^2 I + Omega Sigma Omega^T`` built and factorised (by Cholesky: the explicit inverse of
-:func:`~interprim.gaussian.condition_literal` is less accurate than what it would check).
+:func:`~interprim.core.gaussian.condition_literal` is less accurate than what it would check).
 
 Error analysis (for the tolerances).  In whitened coordinates the posterior mean's shift is
 ``delta = Sigma^{1/2} u`` with ``u = (K + sigma^2 I)^-1 Sigma^{1/2} Omega^T r``,
@@ -24,7 +24,7 @@ log-likelihood); at the largest (``kappa ~ 1``) they are a few ``eps``.  The dif
 import numpy as np
 import pytest
 
-from interprim.gaussian import LowRankPrior, compress_observation, lowrank_case
+from interprim.core.gaussian import LowRankPrior, compress_observation, lowrank_case
 
 EPS = np.finfo(float).eps
 
@@ -145,7 +145,7 @@ def test_cv_scores_equal_direct_form(n_o, n_lat):
     ``(n_out + q + 10) eps m`` (the classical running bound); doubled for a reference that is only float64 where
     ``longdouble`` is.
     """
-    from interprim.selection import _score
+    from interprim.models.primitive.selection import _score
 
     rng = np.random.default_rng(7)
     B, ns, n_out, q = 3, 4, 7, 4
@@ -192,7 +192,7 @@ def test_lowrank_conditioner_cov_equals_dense(seed, n_o, n_c, q, M, S, gamma):
     """
     from scipy.linalg import cho_factor, cho_solve
 
-    from interprim.gaussian import LowRankConditioner, fit_prior, shrink_cross
+    from interprim.core.gaussian import LowRankConditioner, fit_prior, shrink_cross
 
     rng = np.random.default_rng(seed)
     P = (n_o + n_c) * q

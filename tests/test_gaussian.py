@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from interprim.gaussian import condition, condition_literal, fit_prior, sample, shrinkage_intensity
+from interprim.core.gaussian import condition, condition_literal, fit_prior, sample, shrinkage_intensity
 
 
 def _problem(seed, q, D_o, D_c, T, S):
@@ -126,7 +126,7 @@ def test_one_prior_type_every_form_equals_literal_eq18(method, S):
     """``GaussianPrior`` is the one prior: its factored form (``factored``, what cross-validation uses) has the
     covariance of ``fit_prior``; its conditioner, its dense ``condition``, ``posterior_means`` and ``evidence``
     (one or many sigma^2 at once, factored or dense) all equal Eq. 17-18 as printed (``condition_literal``)."""
-    from interprim.gaussian import GaussianPrior, LowRankPrior
+    from interprim.core.gaussian import GaussianPrior, LowRankPrior
 
     rng = np.random.default_rng(S)
     q, D_o, D_c, T = 4, 2, 2, 9

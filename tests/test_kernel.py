@@ -1,11 +1,11 @@
-"""Kernel-weighted demonstrations (interprim.evaluation.kernel)."""
+"""Kernel-weighted demonstrations (interprim.models.kernel)."""
 
 import numpy as np
 import pytest
 
-from interprim.errors import NotFittedError
-from interprim.evaluation.baselines import NearestNeighbour
-from interprim.evaluation.kernel import BANDWIDTHS, KernelDemonstrations
+from interprim.core.errors import NotFittedError
+from interprim.models.demonstrations import NearestNeighbour
+from interprim.models.kernel import BANDWIDTHS, KernelDemonstrations
 from interprim.synthetic import benchmark_tasks
 
 
@@ -117,7 +117,7 @@ def test_aligned_stream_equals_predict_on_every_frame(reach, cls, path):
     gives exactly (bitwise) what predict gives on every prefix, on either path of the DTW kernels; extend in
     uneven blocks gives the same; reset starts again."""
     from interprim._compiled import loader, registry
-    from interprim.evaluation.baselines import AlignedStream
+    from interprim.models.demonstrations import AlignedStream
 
     if path == "compiled" and not loader.warmup():
         pytest.skip("numba kernels unavailable")
@@ -199,7 +199,7 @@ def test_frames_of_all_demonstrations_at_once_equal_one_interpolation_each(reach
     interp; elsewhere to rounding)."""
     import platform
 
-    from interprim.preprocessing import interp_columns
+    from interprim.core.preprocessing import interp_columns
 
     dev, _ = reach
     m = KernelDemonstrations([0, 1], bandwidth=0.3).fit(dev.demos, dt=dev.dt)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
-from interprim.errors import DataFileError, DataFileWarning, MissingExtraError
+from interprim.core.errors import DataFileError, DataFileWarning, MissingExtraError
 
 import c3d  # the [mocap] extra, part of the test extra
 
@@ -174,7 +174,7 @@ def test_c3d_damaged_files_name_file_and_position(tmp_path):
 def test_c3d_header_announcing_more_frames_than_held_keeps_the_complete_ones(tmp_path, extra):
     """Like ezc3d's Optotrak.c3d (header: frames 1-1149, data: 29 complete frames): the complete frames are
     read, with a warning saying how many announced frames are missing."""
-    from interprim.errors import DataFileWarning
+    from interprim.core.errors import DataFileWarning
 
     xyz = handover(40)
     write_c3d(tmp_path / "good.c3d", xyz, LABELS, first_frame=1)

@@ -14,7 +14,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from interprim.datasets import load_demonstrations, load_rosbag
-from interprim.errors import DataFileError, MissingExtraError
+from interprim.core.errors import DataFileError, MissingExtraError
 
 KINDS = ("ros1", "db3", "mcap")
 

@@ -12,7 +12,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from interprim.datasets import load_rosbag
-from interprim.errors import DataFileError
+from interprim.core.errors import DataFileError
 
 TURTLE_POSE = "float32 x\nfloat32 y\nfloat32 theta\nfloat32 linear_velocity\nfloat32 angular_velocity\n"
 

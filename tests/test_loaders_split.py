@@ -12,7 +12,7 @@ from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
 
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
-from interprim.errors import DataFileError
+from interprim.core.errors import DataFileError
 
 import c3d
 

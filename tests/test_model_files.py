@@ -56,7 +56,7 @@ def saved(models, tmp_path_factory):
 # ----------------------------------------------------------------------------- helpers
 def fitted_attributes(model) -> dict:
     """Every public fitted attribute (``name_``) of a model (the views of its fitted state)."""
-    from interprim.fitted import FITTED_NAMES
+    from interprim.models.primitive.fitted import FITTED_NAMES
 
     return {k: getattr(model, k) for k in FITTED_NAMES if hasattr(model, k)}
 

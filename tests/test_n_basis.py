@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.primitive import N_BASIS_GRID, choose_n_basis
+from interprim.models.primitive.estimator import N_BASIS_GRID, choose_n_basis
 from interprim.synthetic import benchmark_tasks
 
 
@@ -43,7 +43,7 @@ def test_the_held_out_error_is_that_of_a_model_fitted_without_the_demonstration(
     demos = wave.demos[:6]
     obs = wave.observed_dofs
     params = ip.InteractionPrimitive(obs, n_basis="cv").json_params()
-    from interprim.primitive import InteractionPrimitive
+    from interprim.models.primitive.estimator import InteractionPrimitive
 
     D = demos[0].shape[1]
     ctrl = [i for i in range(D) if i not in obs]

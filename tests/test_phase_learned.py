@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from interprim.errors import NotFittedError
+from interprim.core.errors import NotFittedError
 from interprim.phase.learned import FEATURE_GROUPS, LearnedPhase, _prefix_features
 
 DT = 0.05

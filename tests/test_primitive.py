@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 
 
 def _ctrl_mse(model, demos, frac, oracle):
@@ -166,7 +166,7 @@ def test_pca_model(synthetic):
 
 
 def test_pca_roundtrip():
-    from interprim.preprocessing import PCA
+    from interprim.core.preprocessing import PCA
 
     rng = np.random.default_rng(0)
     X = rng.normal(size=(200, 3)) @ rng.normal(size=(3, 8))  # rank 3 in 8-D

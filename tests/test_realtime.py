@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from interprim.evaluation.baselines import PriorMean
-from interprim.preprocessing import time_normalise
+from interprim.models.demonstrations import PriorMean
+from interprim.core.preprocessing import time_normalise
 from interprim.evaluation.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
 
 

@@ -1,10 +1,10 @@
-"""Recognising the interaction from a partial observation (interprim.recognition)."""
+"""Recognising the interaction from a partial observation (interprim.models.recognition)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.recognition import Recogniser
+from interprim.models.recognition import Recogniser
 from interprim.synthetic import two_agent_demos
 
 

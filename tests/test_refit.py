@@ -88,12 +88,12 @@ def test_get_params_set_params_and_clone():
     ("reference", "median", "reference must be 'mean' or a demo index"),
 ])
 def test_every_parameter_is_checked_before_the_cross_validation(monkeypatch, name, value, match):
-    import interprim.selection
+    import interprim.models.primitive.selection
 
     def expensive(*args, **kwargs):  # pragma: no cover - reaching it is the failure
         raise AssertionError("the cross-validation ran before the parameters were checked")
 
-    monkeypatch.setattr(interprim.selection, "select_hyperparameters", expensive)
+    monkeypatch.setattr(interprim.models.primitive.selection, "select_hyperparameters", expensive)
     model = ip.InteractionPrimitive([0, 1], n_basis=8, **{name: value})  # sigma2="cv": selection would run
     with pytest.raises(ValueError, match=match):
         model.fit(two_agent_demos(8, seed=4), dt=0.01)
@@ -128,9 +128,9 @@ def test_to_state_from_state_round_trip():
         ip.InteractionPrimitive.from_state(bad, meta)
 
 
-# ----------------------------------------------------------------------------- the fitted state (interprim.fitted)
+# ----------------------------------------------------------------------------- the fitted state (interprim.models.primitive.fitted)
 def test_fit_builds_a_new_fitted_state_and_the_attributes_are_its_read_only_views():
-    from interprim.fitted import FITTED_NAMES, FittedPrimitive
+    from interprim.models.primitive.fitted import FITTED_NAMES, FittedPrimitive
 
     demos = two_agent_demos(8, seed=4)
     model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, phase_method="likelihood", calibrate=False)
@@ -152,7 +152,7 @@ def test_fit_builds_a_new_fitted_state_and_the_attributes_are_its_read_only_view
 
 
 def test_fitted_state_round_trip_and_with_fitted_with_params():
-    from interprim.fitted import FittedPrimitive
+    from interprim.models.primitive.fitted import FittedPrimitive
 
     demos = two_agent_demos(8, seed=4)
     model = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2=1e-3, phase_method="likelihood",

@@ -1,10 +1,10 @@
-"""Choosing sigma2 and the covariance shrinkage from the data (interprim.selection)."""
+"""Choosing sigma2 and the covariance shrinkage from the data (interprim.models.primitive.selection)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.preprocessing import time_normalise
+from interprim.core.preprocessing import time_normalise
 from interprim.synthetic import two_agent_demos
 
 
@@ -86,8 +86,8 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
 
 
 def test_lowrank_cv_equals_dense_conditioning():
-    from interprim.gaussian import condition, fit_prior
-    from interprim.gaussian import LowRankPrior, lowrank_case
+    from interprim.core.gaussian import condition, fit_prior
+    from interprim.core.gaussian import LowRankPrior, lowrank_case
 
     rng = np.random.default_rng(0)
     n_o, q, n_c = 3, 6, 2
@@ -140,7 +140,7 @@ def test_cv_keeps_the_observed_agent_within_its_noise_then_scores_the_controlled
 
 
 def test_best_candidate_ties_broken_by_the_observed_agent():
-    from interprim.selection import _best_at
+    from interprim.models.primitive.selection import _best_at
 
     err_c = np.array([[1.0, 1.0], [1.0, 2.0]])
     err_o = np.array([[5.0, 3.0], [1.0, 0.0]])  # (1, 1) has the best observed error but not the best controlled
@@ -154,7 +154,7 @@ def test_best_candidate_ties_broken_by_the_observed_agent():
 def test_selection_criteria_per_agent():
     """``_criteria`` averages each agent's summed errors over its own DoFs; without a controlled agent the
     criterion is the observed agent's error."""
-    from interprim.selection import _criteria
+    from interprim.models.primitive.selection import _criteria
 
     rng = np.random.default_rng(1)
     n_lam, S2, G, n_cases = 2, 3, 4, 5

@@ -20,13 +20,13 @@ import urllib.request
 import numpy as np
 import pytest
 
-from interprim.contract import BasePrediction, BaseStream
+from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
 
-from interprim.errors import ModelFileError  # noqa: E402
+from interprim.core.errors import ModelFileError  # noqa: E402
 from interprim.server import protocol as P  # noqa: E402
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.client import Client, ServerError  # noqa: E402
@@ -123,10 +123,10 @@ def test_auto_recognises_the_letter(server, validator):
 
 
 def test_auto_probabilities_are_the_recognisers(server, models):
-    """Issue 20: "auto" recognises with interprim.recognition.Recogniser (the candidates' likelihoods of the observed
+    """Issue 20: "auto" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the observed
     positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
     own-noise log-likelihood; coalesced frames (one reply for several) count as well, and reset starts over."""
-    from interprim.recognition import Recogniser
+    from interprim.models.recognition import Recogniser
 
     names = ["letter_c", "letter_s", "letter_u"]
     rec = Recogniser({n: models[n].model for n in names})
@@ -543,7 +543,7 @@ def test_corrupt_model_fails_at_start(tmp_path, models, capsys):
 
 
 def test_cli_options(tmp_path):
-    from interprim.errors import InterprimError
+    from interprim.core.errors import InterprimError
 
     parser = _serve_parser()
     args = parser.parse_args(["serve", "--host", "0.0.0.0", "--port", "0", "x.npz"])
@@ -577,7 +577,7 @@ def test_cli_replay_and_units_for_a_model_file(tmp_path):
     import interprim as ip
     from interprim.cli.serve import _attach_replays, _attach_units
     from interprim.datasets import save_demonstrations
-    from interprim.errors import InterprimError
+    from interprim.core.errors import InterprimError
     from interprim.synthetic import two_agent_demos
 
     names = ["a", "b", "c", "d", "e"]

@@ -234,7 +234,7 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     frames = test_demo[:25, :2]
     op = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
     fast = [json.loads(t) for t in _reply_text(op, frames)]
-    from interprim.prediction import MeanRollout
+    from interprim.models.primitive.prediction import MeanRollout
 
     assert isinstance(op.heads[0][3].fn, MeanRollout)  # the IP's cached rollout is used (the contract's mean_rollout)
     ref_stream = e.model.stream()

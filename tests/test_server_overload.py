@@ -16,7 +16,7 @@ import threading
 import numpy as np
 import pytest
 
-from interprim.contract import BasePrediction, BaseStream
+from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 

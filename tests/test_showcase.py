@@ -191,7 +191,7 @@ def test_realtime_trace_matches_a_direct_prediction(realtime_case):
     """The error drawn for a frame is the point RMS, over the next 0.25 s, of predict() placed in time by its own
     phase and duration; the clock's is the training mean played at the mean duration (computed here by hand)."""
     from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
-    from interprim.preprocessing import time_normalise
+    from interprim.core.preprocessing import time_normalise
 
     models, train, test, obs = realtime_case
     dt, k = 0.05, 14

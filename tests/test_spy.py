@@ -16,7 +16,7 @@ import pytest
 
 from interprim.datasets import Demonstrations, RawStream
 from interprim.evaluation import realtime
-from interprim.evaluation.protocol import Prefixes
+from interprim.model_selection.prefixes import Prefixes
 
 
 def _data(seed=3, n=8, dt=0.05):

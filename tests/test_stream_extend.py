@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.errors import OutOfRangeWarning
+from interprim.core.errors import OutOfRangeWarning
 from interprim.synthetic import two_agent_demos
 
 # chunk sizes of the extends: single frames, the first frames (M < 3: no conditioning; M = 2: the

@@ -12,21 +12,21 @@ from __future__ import annotations
 
 import importlib
 
-from .errors import (DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning,
+from .core.errors import (DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning,
                      RepresentationWarning)
 
 __version__ = "0.1.0"
 
 _LAZY = {
-    "InteractionPrimitive": "interprim.primitive",
-    "Prediction": "interprim.prediction",
-    "Stream": "interprim.stream",
-    "Recogniser": "interprim.recognition",
-    "LearnedInteraction": "interprim.learned",
-    "AutoInteraction": "interprim.auto",
-    "load_any": "interprim.io",
+    "InteractionPrimitive": "interprim.models.primitive.estimator",
+    "Prediction": "interprim.models.primitive.prediction",
+    "Stream": "interprim.models.primitive.stream",
+    "Recogniser": "interprim.models.recognition",
+    "LearnedInteraction": "interprim.models.learned",
+    "AutoInteraction": "interprim.models.ensemble",
+    "load_any": "interprim.models.files",
     "LearnedPhase": "interprim.phase.learned",
-    "CouplingModel": "interprim.coupling",
+    "CouplingModel": "interprim.models.coupling",
 }
 
 __all__ = [

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 
-from .errors import MissingExtraError
+from .core.errors import MissingExtraError
 
 __all__ = ["EXTRA_OF", "missing", "require", "install_hint", "extra_for_import_error"]
 
@@ -55,7 +55,7 @@ def install_hint(modules, extra: str | None = None) -> str:
 
 
 def require(modules, what: str, extra: str | None = None, otherwise: str = "") -> None:
-    """Raise :class:`~interprim.errors.MissingExtraError` (one line) if any of ``modules`` is not installed.
+    """Raise :class:`~interprim.core.errors.MissingExtraError` (one line) if any of ``modules`` is not installed.
 
     ``what`` says what needs them (``"the demo"``); ``extra`` the extra to name (default: the first missing
     module's own extra, :data:`EXTRA_OF`); ``otherwise`` a way around it (``"pass --no-figures"``).

@@ -1,4 +1,4 @@
-"""What a fitted :class:`~interprim.primitive.InteractionPrimitive` chose, in a few lines of text.
+"""What a fitted :class:`~interprim.models.primitive.estimator.InteractionPrimitive` chose, in a few lines of text.
 
 Used by ``repr(model)`` (one line), :meth:`InteractionPrimitive.summary` and ``interprim fit``.  Reads only public
 fitted attributes and ``selection_`` (keys documented in :data:`SELECTION_KEYS`); a key a model does not have

@@ -1,8 +1,8 @@
 """Evaluating a user's demonstrations with every model interprim offers: the real-time and whole-movement
 protocols of :mod:`interprim.evaluation.realtime` for each method, the family chosen and the blend that
-``interprim fit`` makes (:mod:`interprim.auto`) fitted inside each outer training fold only, and a verdict.
+``interprim fit`` makes (:mod:`interprim.models.ensemble`) fitted inside each outer training fold only, and a verdict.
 
-This sits above :mod:`interprim.auto`, which itself uses the protocols: the protocols know nothing of the models
+This sits above :mod:`interprim.models.ensemble`, which itself uses the protocols: the protocols know nothing of the models
 chosen with them.  ``interprim evaluate`` runs :func:`evaluate_demonstrations`.
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from .evaluation import realtime as rt
 from .evaluation.nested import nested_choice_records
-from .evaluation.protocol import Prefixes
+from .model_selection.prefixes import Prefixes
 
 __all__ = ["evaluate_demonstrations"]
 
@@ -90,7 +90,7 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
 def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
     """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
     inner cross-validated error}, outer records of the blend)``.  The blend that ``interprim fit`` makes by default
-    is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.auto.Blend`, fitted on the
+    is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.models.ensemble.Blend`, fitted on the
     outer training demonstrations with the inner cross-validation's weights and variance model; only when at least
     two of its candidate families are compared)."""
     from . import auto  # looked up at call time (tests spy on auto.CrossValidation)

@@ -12,7 +12,7 @@ Versions (``format_version``):
 
 * **3** (written now): version 2 with a look-ahead-aware calibration of the predictive std: the arrays
   ``calibration_lookaheads (H,)`` and ``calibration_column_scale (F, H, D)``, and ``calibration_scale_{observed,
-  controlled}`` of shape ``(F, H)`` (:class:`~interprim.calibration.Calibration`).  An older interprim refuses
+  controlled}`` of shape ``(F, H)`` (:class:`~interprim.models.primitive.calibration.Calibration`).  An older interprim refuses
   the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
   calibration, ``(F,)`` scales, acts at every look-ahead as it did).
 * **2**: ``metadata`` also holds
@@ -21,7 +21,7 @@ Versions (``format_version``):
   the hyper-parameter selection record of ``fit``, or ``null``); and the
   arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
   prior covariance), ``pca_*_explained_variance_ratio`` and ``calibration_{fractions,scale_observed,
-  scale_controlled,n_cases}`` (:class:`~interprim.calibration.Calibration`) and ``input_mean``/``input_std``
+  scale_controlled,n_cases}`` (:class:`~interprim.models.primitive.calibration.Calibration`) and ``input_mean``/``input_std``
   (with ``input_limit`` in the metadata: the out-of-range check of the observed frames) when the model has them.
 * **1**: the same without ``checksums``, ``selection`` and those arrays;
   still read (every array's shape is checked, the rest is unset or rebuilt).
@@ -29,7 +29,7 @@ Versions (``format_version``):
 Every problem -- a missing, empty, truncated or corrupt file, a checksum that
 does not match, a file that is not an interprim model at all (text, CSV, a
 plain ``.npy``, a ``.npz`` of other arrays) or an unknown version -- raises
-:class:`~interprim.errors.ModelFileError` with a message that names the file
+:class:`~interprim.core.errors.ModelFileError` with a message that names the file
 and what is wrong.
 
 Arrays: ``prior_mean (P,)``, ``prior_cov (P, P)``, ``thetas (S, P)``,
@@ -60,15 +60,15 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import ModelFileError
-from .gaussian import GaussianPrior
-from .preprocessing import PCA
+from .core.errors import ModelFileError
+from .core.gaussian import GaussianPrior
+from .core.preprocessing import PCA
 
 FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["load_any", "MODEL_CLASSES", "save_model", "load_model", "model_state", "model_from_state", "fitted_from_state",
+__all__ = ["model_kind", "save_model", "load_model", "model_state", "model_from_state", "fitted_from_state",
            "save_estimator", "load_estimator",
            "FORMAT", "FORMAT_VERSION", "READ_VERSIONS"]
 
@@ -130,7 +130,7 @@ def _arrays(model) -> dict:
 
 def save_model(model, path) -> None:
     """Write a fitted :class:`~interprim.InteractionPrimitive` to ``path`` (``.npz``, format version 3): its
-    :meth:`~interprim.primitive.InteractionPrimitive.to_state`, each array checksummed."""
+    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.to_state`, each array checksummed."""
     path = Path(path)
     arrays, meta = model.to_state()
     meta["checksums"] = {k: _checksum(v) for k, v in arrays.items()}
@@ -139,7 +139,7 @@ def save_model(model, path) -> None:
 
 def model_state(model):
     """``(arrays, meta)`` of a fitted Interaction Primitive as a model file holds them (without checksums;
-    :meth:`~interprim.primitive.InteractionPrimitive.to_state`)."""
+    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.to_state`)."""
     meta = _metadata(model)
     arrays = _arrays(model)
     for name in ("diag", "factor"):  # the prior's diagonal + low-rank form (exact reload of the fast path)
@@ -161,7 +161,7 @@ def model_state(model):
         pm_arrays, meta["phase_model"] = pm.to_state()
         for k, v in pm_arrays.items():
             arrays[f"phase_model_{k}"] = np.asarray(v)
-    cal = getattr(model, "calibration_", None)  # calibrated predictive std (interprim.calibration)
+    cal = getattr(model, "calibration_", None)  # calibrated predictive std (interprim.models.primitive.calibration)
     if cal is not None:
         for k, v in cal.to_arrays().items():
             arrays[f"calibration_{k}"] = np.asarray(v)
@@ -171,12 +171,12 @@ def model_state(model):
 
 
 def save_estimator(model, path) -> None:
-    """Write a fitted model other than the Interaction Primitive (any :class:`~interprim.contract.Predictor`).
+    """Write a fitted model other than the Interaction Primitive (any :class:`~interprim.models.base.Predictor`).
 
     The same container as :func:`save_model` (format version 3: checksummed ``.npy`` members and a JSON
     ``metadata``), with ``metadata["model"]`` the class name, ``metadata["model_version"]`` its
     ``STATE_VERSION``, ``params`` its constructor arguments and ``state`` the JSON part of its
-    :meth:`~interprim.contract.Predictor.to_state`.
+    :meth:`~interprim.models.base.Predictor.to_state`.
     """
     path = Path(path)
     arrays, state = model.to_state()
@@ -312,7 +312,7 @@ def _read_archive(path: Path):
 
 def load_model(path, model_class):
     """Read a model written by :func:`save_model` (format version 1, 2 or 3; no pickle, every array checked) as a
-    ``model_class`` (:class:`~interprim.primitive.InteractionPrimitive`)."""
+    ``model_class`` (:class:`~interprim.models.primitive.estimator.InteractionPrimitive`)."""
     path = Path(path)
     meta, data = _read_archive(path)
     kind = meta.get("model", "InteractionPrimitive")
@@ -322,8 +322,8 @@ def load_model(path, model_class):
 
 def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
     """The model of ``(data, meta)`` (a model file's arrays and metadata, format versions 1-3), every array
-    checked; problems raise :class:`~interprim.errors.ModelFileError` naming ``path``
-    (:meth:`~interprim.primitive.InteractionPrimitive.from_state`)."""
+    checked; problems raise :class:`~interprim.core.errors.ModelFileError` naming ``path``
+    (:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.from_state`)."""
     try:
         model = model_class(**meta["params"])
         params = model.json_params()  # the file's parameters, with the defaults of those it predates
@@ -340,9 +340,9 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
 def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> dict:
     """The fitted attributes (names ending in ``_``) of ``(data, meta)``, a model file's arrays and metadata
     (format versions 1-3), every array checked, for a model with the parameters ``params`` (complete, as
-    :meth:`~interprim.primitive.InteractionPrimitive.json_params` gives them); problems raise
-    :class:`~interprim.errors.ModelFileError` naming ``path``
-    (:meth:`~interprim.fitted.FittedPrimitive.from_state` builds the state from them)."""
+    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.json_params` gives them); problems raise
+    :class:`~interprim.core.errors.ModelFileError` naming ``path``
+    (:meth:`~interprim.models.primitive.fitted.FittedPrimitive.from_state` builds the state from them)."""
     phase_method = params["phase_method"]
     try:
         st = SimpleNamespace()  # the fitted attributes
@@ -404,7 +404,7 @@ def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> d
                 "the phase method is 'learned' but the file holds no phase model")
         st.calibration_ = None
         if any(k.startswith("calibration_") for k in data):
-            from .calibration import Calibration
+            from .models.primitive.calibration import Calibration
 
             try:
                 st.calibration_ = Calibration.from_arrays({k[len("calibration_"):]: v for k, v in data.items()
@@ -458,31 +458,11 @@ def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> d
     return vars(st)
 
 
-#: Every model class a model file may hold, by the name in its ``metadata["model"]``, and the module defining it
-#: (imported only when such a file is read).
-MODEL_CLASSES = {
-    "InteractionPrimitive": "interprim.primitive",
-    "LearnedInteraction": "interprim.learned",
-    "AutoInteraction": "interprim.auto",
-    "Blend": "interprim.auto",
-    "KernelDemonstrations": "interprim.evaluation.kernel",
-    "NearestNeighbour": "interprim.evaluation.baselines",
-    "PriorMean": "interprim.evaluation.baselines",
-    "InteractionProMP": "interprim.evaluation.baselines",
-}
-
-
-def load_any(path):
-    """Read any interprim model file as the class it names (``interprim fit``'s output, whatever model it chose).
-
-    Raises :class:`~interprim.errors.ModelFileError` for a file that is not a readable interprim model, or that
-    holds a model class this version does not know.
-    """
-    import importlib
-
+def model_kind(path) -> str:
+    """The model class a model file names (``metadata["model"]``; files of version 1 hold the Interaction
+    Primitive), after the whole file has been checked as a container."""
     path = Path(path)
     meta, _ = _read_archive(path)
     kind = meta.get("model", "InteractionPrimitive")
-    _expect(isinstance(kind, str) and kind in MODEL_CLASSES, path,
-            f"holds a {kind!r} model, which this interprim does not know (it reads {', '.join(MODEL_CLASSES)})")
-    return getattr(importlib.import_module(MODEL_CLASSES[kind]), kind).load(path)
+    _expect(isinstance(kind, str), path, f"metadata 'model' must be a class name, got {kind!r}")
+    return kind

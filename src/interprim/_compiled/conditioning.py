@@ -1,8 +1,8 @@
 """Compiled Eq. 16-18 for a prior ``Sigma = diag(d) + U U^T`` (numba, cached on disk).
 
 * :func:`lowrank_condition_mean` -- posterior mean and marginal
-  log-likelihood of Eq. 16-18; reference: :meth:`interprim.gaussian.LowRankConditioner.mean_numpy`,
-  :func:`interprim.gaussian.condition` / ``condition_literal``.
+  log-likelihood of Eq. 16-18; reference: :meth:`interprim.core.gaussian.LowRankConditioner.mean_numpy`,
+  :func:`interprim.core.gaussian.condition` / ``condition_literal``.
 
 Nothing here allocates memory proportional to the number of observed frames:
 callers pass preallocated buffers.

@@ -21,7 +21,7 @@ which one runs:
   (``python -m interprim._compiled.loader``, which fills the cache for every later
   process too), the calling process computes with the numpy equivalents
   meanwhile, and switches to the compiled kernels once they are loaded -- only
-  between two public calls (:func:`interprim._blas.one_blas_thread` marks them),
+  between two public calls (:func:`interprim.core.blas.one_blas_thread` marks them),
   never inside one, so each ``fit``, ``predict``, ``Stream.update``, ``std``...
   runs on one path.  A first run after an install then costs about what a warm
   one does instead of waiting for the compiler.  If numba is missing or fails
@@ -231,19 +231,19 @@ def _switch() -> bool:
 
 
 def _outside_calls() -> bool:
-    from .. import _blas
+    from ..core import blas as _blas
 
     return _blas.depth() == 0
 
 
 def _arm_switch():
-    from .. import _blas
+    from ..core import blas as _blas
 
     _blas.on_outer_entry(_switch)
 
 
 def _disarm_switch():
-    from .. import _blas
+    from ..core import blas as _blas
 
     _blas.on_outer_entry(None)
 

@@ -7,13 +7,13 @@ tested against (``tests/test_fastpaths.py``):
   and ``|Y|^2`` of the paper's forcing observation (Eq. 13-15) at ``M``
   observed frames spread uniformly over ``[0, s_end]``; reference:
   ``FittedPrimitive.observation_design`` (``np.gradient`` derivatives,
-  :meth:`interprim.basis.Basis.phi_tilde`, :func:`interprim.dmp.forcing_values`).
+  :meth:`interprim.core.basis.Basis.phi_tilde`, :func:`interprim.core.dmp.forcing_values`).
 * :func:`position_stats` -- the same statistics for the position observation
   (``observation="position"``: ``Y = z - free [y0; v0]``, ``X = H``, the rows of
-  :meth:`interprim.dmp.LinearRollout.design` from ``s0 = 0``), accumulated in
+  :meth:`interprim.core.dmp.LinearRollout.design` from ``s0 = 0``), accumulated in
   fixed-size blocks of frames; reference: ``FittedPrimitive.observation_design``.
 * :func:`forcing_targets_batch` -- the forcing targets of Eq. 3 of a batch of equally long
-  demonstrations (the fit); reference: :func:`interprim.dmp.forcing_targets`.
+  demonstrations (the fit); reference: :func:`interprim.core.dmp.forcing_targets`.
 
 :class:`StatsWorkspace` holds the preallocated buffers the statistics kernels write into.
 Nothing here allocates memory proportional to the number of observed frames.
@@ -119,7 +119,7 @@ def design_stats(YT, M, s_end, centers, widths, alpha_x, const, XT, G, B, work, 
     """``G = X^T X``, ``B = X^T Y`` and ``|Y|^2`` of Eq. 13 rows at ``s_j = linspace(0, s_end, M)``.
 
     ``YT`` holds the targets transposed, ``(D, >= M)``.  Row ``j`` of ``X`` is ``[phi(x(s_j)), const]`` (Eq. 2 and 13, ``const = alpha_y beta_y``),
-    computed as :meth:`interprim.basis.Basis.phi` (max-shifted exponentials) with the
+    computed as :meth:`interprim.core.basis.Basis.phi` (max-shifted exponentials) with the
     exponentials of :func:`vexp_nonpos`.  ``XT`` is a ``(q, >= M)`` workspace, ``work``
     a ``(4, >= M)`` one and ``ibuf`` an int64 ``(>= M)`` one; ``G`` ``(q, q)`` and ``B``
     ``(q, D)`` are outputs.  Loops run along the frames, so they vectorise.
@@ -201,7 +201,7 @@ def position_stats(z, M, s_end, y0, v0, Z, powers, G, B, HT, YT):
         h_j = (1 - a) Z[kf, 0] + a Z[kf + 1, 0]          (Z[0] = 0, so P Z[0] drops out)
         Y_j = z_j - ((1 - a) P[kf, 0] + a P[kf + 1, 0]) @ [y0; v0]
 
-    with ``Z`` (K+1, 2, q) and ``powers`` (K+1, 2, 2) of :class:`interprim.dmp.LinearRollout`.
+    with ``Z`` (K+1, 2, q) and ``powers`` (K+1, 2, 2) of :class:`interprim.core.dmp.LinearRollout`.
     Neither ``H`` nor ``Y`` is formed: frames are taken in blocks of
     ``C = HT.shape[1]`` into the fixed workspaces ``HT`` (q, C) and ``YT``
     (D, C), and each block is added to ``G`` (q, q) and ``B`` (q, D)
@@ -312,9 +312,9 @@ def forcing_targets_batch(Z, ds, alpha_y, beta_y, yd_work, F, yd0):
 
     ``F[k] = ydd - alpha_y (beta_y (g - y) - yd)`` with ``g = y[T-1]`` and
     second-order central differences in normalised time (``np.gradient``
-    twice with ``edge_order=2``, as :func:`interprim.preprocessing.derivatives`
+    twice with ``edge_order=2``, as :func:`interprim.core.preprocessing.derivatives`
     without smoothing).  ``yd0[k]`` receives the start velocity.  ``yd_work``
-    is a ``(T, D)`` workspace.  Reference: ``derivatives`` + :func:`interprim.dmp.forcing_targets`.
+    is a ``(T, D)`` workspace.  Reference: ``derivatives`` + :func:`interprim.core.dmp.forcing_targets`.
     """
     n, T, D = Z.shape
     two_ds = 2.0 * ds
@@ -363,13 +363,13 @@ def _savgol_start_coeffs(w: int, p: int) -> np.ndarray:
 
 
 def start_position(z, window, polyorder: int = 3) -> np.ndarray:
-    """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`interprim.preprocessing.derivatives`) in ``O(window D)``.
+    """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`interprim.core.preprocessing.derivatives`) in ``O(window D)``.
 
     The first frame of the smoothed observation, with the same window rule
     (shrunk to the largest odd number not above ``len(z)``); the raw first
     frame when ``window`` is None or too short to smooth.  A new array.
     """
-    from ..preprocessing import savgol_window
+    from ..core.preprocessing import savgol_window
 
     wp = savgol_window(z.shape[0], window, polyorder)
     if wp is not None:

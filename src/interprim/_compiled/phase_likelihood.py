@@ -4,7 +4,7 @@
 observed positions (``interprim.phase.likelihood.phase_log_likelihood``) at
 several candidate phases in one call.  Reference:
 ``interprim.phase.likelihood._phase_log_likelihood_reference`` (the
-per-candidate design matrix and :func:`interprim.gaussian.lowrank_case`);
+per-candidate design matrix and :func:`interprim.core.gaussian.lowrank_case`);
 plain numpy equivalent: ``interprim.phase.likelihood._loglik_batch_numpy``
 (``tests/test_phase_likelihood.py`` checks all three agree).
 
@@ -16,7 +16,7 @@ the residual ``r = z - (free(s) [z0; v0] + H(s) mu)`` taken from a
 precomputed grid of the prior-mean path (no cancellation in ``|r|^2``).  The
 prior of the observed block is ``diag(d) + W^T W`` (rank ``n`` = number of
 demonstrations); with ``S_i = diag(sqrt(d_i))``, ``Uh_i = S_i^{-1} W_i^T`` and
-``T_i = sigma^2 I + S_i G S_i`` (as in :class:`interprim.gaussian.LowRankConditioner`)::
+``T_i = sigma^2 I + S_i G S_i`` (as in :class:`interprim.core.gaussian.LowRankConditioner`)::
 
     log det Cov = sum_i (log det T_i + (M - q) log sigma^2) + log det K,
     K = I + sum_i Uh_i^T (I - sigma^2 T_i^{-1}) Uh_i                  (n x n)

@@ -1,9 +1,9 @@
 """Compiled rollout of the DMPs (paper Eq. 1): the controlled agent's mean movement from the current phase.
 
 :func:`response_positions` integrates the posterior mean of the controlled agent from
-the current phase to the end on the rollout grid of :class:`interprim.dmp.LinearRollout`;
-reference: :meth:`interprim.prediction.Prediction._response_reference`
-(:meth:`interprim.dmp.LinearRollout.design`).
+the current phase to the end on the rollout grid of :class:`interprim.core.dmp.LinearRollout`;
+reference: :meth:`interprim.models.primitive.prediction.Prediction._response_reference`
+(:meth:`interprim.core.dmp.LinearRollout.design`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ def response_positions(Z, powers, s0, n, th, z0, at_s0, out, duration, t_out):
 
     The state at ``s0`` is that of the movement started at ``s = 0`` in ``z0``
     (2, d) (positions, velocities), or ``z0`` itself when ``at_s0``; the continuation uses the exact
-    discretisation of :class:`interprim.dmp.LinearRollout` (same snapping and
-    interpolation as :meth:`~interprim.dmp.LinearRollout.design`).
+    discretisation of :class:`interprim.core.dmp.LinearRollout` (same snapping and
+    interpolation as :meth:`~interprim.core.dmp.LinearRollout.design`).
     ``out`` has shape (n, d); ``t_out`` (n,) receives ``(s - s0) * duration``.
     """
     Kn = Z.shape[0] - 1

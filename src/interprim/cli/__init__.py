@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from ..errors import InterprimError, ModelFileError
+from ..core.errors import InterprimError, ModelFileError
 
 # Modules that register sub-commands, in the order they appear in --help.
 COMMAND_MODULES = [

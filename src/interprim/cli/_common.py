@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import InterprimError
+from ..core.errors import InterprimError
 
 __all__ = ["CommandError"]
 

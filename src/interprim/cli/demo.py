@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import InterprimError
+from ..core.errors import InterprimError
 
 
 class DemoArgumentError(InterprimError, ValueError):

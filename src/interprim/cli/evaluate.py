@@ -79,7 +79,7 @@ DATA_SETS = ("nuisi", "synthetic", "synthetic-noisy", "highfive-sim", "character
 
 def _check_names(datasets, methods, cfg):
     """One-line errors (naming the flag) for unknown --data / --methods, before any work starts."""
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
     from ..evaluation import make_estimator
 
     bad = [d for d in datasets if d not in DATA_SETS] or ([] if datasets else ["''"])
@@ -111,7 +111,7 @@ def _available(methods) -> list:
         else:
             keep.append(m)
     if not keep:
-        from ..errors import MissingExtraError
+        from ..core.errors import MissingExtraError
 
         raise MissingExtraError(f"--methods: none of {', '.join(methods)} can run without its peer packages")
     return keep
@@ -129,7 +129,7 @@ def run_user_data(args) -> int:
     from pathlib import Path
 
     from ..datasets import load_demonstrations
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
     import sys
 
     from ..assessment import evaluate_demonstrations

@@ -1,7 +1,7 @@
 """``interprim fit``: learn a model of the interaction from demonstration files and save it.
 
 By default (``--model auto``) the model is chosen on the demonstrations themselves
-(:class:`~interprim.auto.AutoInteraction`: the Interaction Primitive, the learned interaction, the
+(:class:`~interprim.models.ensemble.AutoInteraction`: the Interaction Primitive, the learned interaction, the
 kernel-weighted and the nearest demonstration and the mean, compared on held-out folds and blended);
 ``--model ip`` fits the Interaction Primitive alone, with every option of the paper's model.
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import InterprimError
+from ..core.errors import InterprimError
 from ._common import CommandError, _positive, _split_cols, add_recording_args, agent_columns, recording_options
 
 __all__ = ["add_parser", "CommandError"]
@@ -135,7 +135,13 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=cmd_fit)
 
 
-MODELS = ("auto", "ip", "learned", "kernel", "nn", "prior")
+def _models():
+    from ..models.registry import FAMILIES
+
+    return ("auto",) + tuple(n for n, f in FAMILIES.items() if f.cli)
+
+
+MODELS = _models()
 #: options that configure the Interaction Primitive alone (--model ip)
 IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("sigma2", "--sigma2"),
            ("phase_method", "--phase-method"), ("input_noise", "--input-noise"), ("pca", "--pca"),
@@ -224,7 +230,7 @@ def _fit_other(args, ds, obs, n_read) -> int:
     """``--model auto`` (the model chosen on the data) or one of the other families alone."""
     import numpy as np
 
-    from interprim.auto import AutoInteraction
+    from interprim.models.ensemble import AutoInteraction
 
     if args.model == "auto" and len(ds) < 3:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..errors import InterprimError
+from ..core.errors import InterprimError
 from ._common import CommandError
 
 __all__ = ["add_parser"]

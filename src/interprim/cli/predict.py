@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import DataFileError, InterprimError
+from ..core.errors import DataFileError, InterprimError
 from ._common import CommandError, _positive, add_recording_args, recording_options
 
 __all__ = ["add_parser"]
@@ -72,7 +72,7 @@ def cmd_predict(args) -> int:
 
     import interprim as ip
     from interprim.datasets import load_demonstrations
-    from interprim.errors import OutOfRangeWarning
+    from interprim.core.errors import OutOfRangeWarning
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -118,7 +118,7 @@ def cmd_predict(args) -> int:
                 if isinstance(model, ip.InteractionPrimitive):
                     pred = model.predict(frames, times=t - t[0])
                 else:  # models of frames on their own grid: the observed frames resampled onto it (causal)
-                    from interprim.preprocessing import resample_uniform
+                    from interprim.core.preprocessing import resample_uniform
 
                     pred = model.predict(resample_uniform(frames, t, dt=model.dt_)[0])
             else:

@@ -118,7 +118,7 @@ def _run(args) -> int:
     import logging
     import signal
 
-    from ..errors import InterprimError, ModelFileError
+    from ..core.errors import InterprimError, ModelFileError
 
     logging.basicConfig(level=getattr(logging, args.log_level), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log = logging.getLogger("interprim.server")
@@ -225,7 +225,7 @@ def _run(args) -> int:
 
 
 def _pairs(values, flag):
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
 
     for text in values:
         name, sep, value = text.partition("=")
@@ -235,7 +235,7 @@ def _pairs(values, flag):
 
 
 def _entry(models, name, flag, text):
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
 
     if name not in models:
         raise InterprimError(f"{flag} {text!r}: no model named {name!r} (loaded: {', '.join(sorted(models))})")
@@ -248,7 +248,7 @@ LENGTH_UNITS = ("mm", "cm", "m", "in", "ft")
 def _split_units(values, length_unit):
     """``--units`` values as (MODEL=U1,... entries, the recordings' length unit): a bare ``--units cm`` is the
     length unit of the ``--replay`` recordings, as ``--length-unit cm``."""
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
 
     labels, bare = [], []
     for text in values:
@@ -261,7 +261,7 @@ def _split_units(values, length_unit):
 
 
 def _attach_units(models, values) -> None:
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
 
     for name, value in _pairs(values, "--units"):
         e = _entry(models, name, "--units", f"{name}={value}")
@@ -274,7 +274,7 @@ def _attach_units(models, values) -> None:
 
 def _attach_replays(models, values, options=None) -> None:
     """Load each ``--replay MODEL=DEMOS`` with the recording ``options`` (``load_demonstrations`` keywords)."""
-    from ..errors import InterprimError
+    from ..core.errors import InterprimError
     from ..server.models import load_replay
 
     for name, path in _pairs(values, "--replay"):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..core.errors import DataFileError
 
 __all__ = ["Demonstrations", "RawStream", "DataNotFoundError", "data_dir", "resolve_data_path", "sampling", "Sampling",
            "UNIFORM_TOLERANCE"]
@@ -87,7 +87,7 @@ class Demonstrations(Sequence):
         sample streams (:class:`RawStream`, time stamps on the clock of ``times``) that the
         interpolated columns were made from.  ``None`` when the demonstrations are the recorded
         samples themselves.  An evaluation builds a causal prefix from them
-        (:func:`interprim.evaluation.protocol.causal_prefix`): interpolating over the whole
+        (:func:`interprim.model_selection.prefixes.causal_prefix`): interpolating over the whole
         recording lets a frame near the end of a prefix depend on a raw sample after it.
     """
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..core.errors import DataFileError
 
 
 def _fill_nans(y, max_nan_gap, where, row_of):

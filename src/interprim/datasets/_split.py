@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..core.errors import DataFileError
 
 __all__ = ["spans", "split_take", "parse_ranges", "PAUSE_SPEED"]
 

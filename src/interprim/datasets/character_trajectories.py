@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..core.errors import DataFileError
 from ._base import Demonstrations, resolve_data_path
 
 __all__ = ["load_character_trajectories", "CHARACTER_TRAJECTORIES_DEFAULT_PATH", "CHARACTER_DT"]

@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..preprocessing import resample_step
+from ..core.errors import DataFileError
+from ..core.preprocessing import resample_step
 from ._base import DataNotFoundError, Demonstrations, RawStream, sampling, select_columns, uniform_dt
 from ._checks import _check_frames, _check_times, _fill_nans
 
@@ -355,7 +355,7 @@ def load_demonstrations(
     folder with ``metadata.yaml`` (:func:`~interprim.datasets.recordings.load_rosbag`); any other
     folder is read file by file (every ``.csv``, ``.npz``, ``.c3d``, ``.bvh``, ``.bag``, ``.db3``
     and ``.mcap`` in it, natural order).  Every problem is reported as a
-    :class:`~interprim.errors.DataFileError` naming the file and the position: the line (CSV,
+    :class:`~interprim.core.errors.DataFileError` naming the file and the position: the line (CSV,
     1-based, counting the header and comments; BVH), the row (NPZ, 0-based frame index), the
     frame (C3D, as the capture software numbers it) or the topic, message and time (ROS bags).
 
@@ -372,7 +372,7 @@ def load_demonstrations(
         has time stamps.
     resample_dt : float, optional
         If given, every demonstration is linearly interpolated onto a uniform grid with this
-        interval (:func:`interprim.preprocessing.resample_uniform`).  For a ROS bag both
+        interval (:func:`interprim.core.preprocessing.resample_uniform`).  For a ROS bag both
         agents' streams are interpolated onto that grid directly (instead of onto the
         observed agent's stamps).
     max_nan_gap : int
@@ -548,7 +548,7 @@ def save_demonstrations(path, demos, times=None, *, dt=None, columns=None, obser
     Path
         The written file or folder.
     """
-    from .._validation import as_2d_finite, check_times
+    from ..core.validation import as_2d_finite, check_times
 
     if isinstance(demos, Demonstrations):
         times = demos.times if times is None else times

@@ -15,7 +15,7 @@ import io
 
 import numpy as np
 
-from ..preprocessing import interp_columns
+from ..core.preprocessing import interp_columns
 from ._base import Demonstrations, uniform_dt
 
 __all__ = ["load_lasa", "lasa_shapes"]

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..core.errors import DataFileError
 
 __all__ = ["read_bvh"]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError, DataFileWarning, MissingExtraError
+from ..core.errors import DataFileError, DataFileWarning, MissingExtraError
 
 __all__ = ["read_c3d", "LENGTH_UNITS"]
 

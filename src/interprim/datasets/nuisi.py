@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..preprocessing import interp_columns, step_grid
+from ..core.errors import DataFileError
+from ..core.preprocessing import interp_columns, step_grid
 from ._base import Demonstrations, RawStream, resolve_data_path
 
 __all__ = ["load_nuisi", "nuisi_actions", "NUISI_JOINTS", "JOINT_GROUPS", "NUISI_DEFAULT_PATH"]

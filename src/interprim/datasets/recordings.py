@@ -27,7 +27,7 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
     first frame.  A marker that is missing in a frame (residual < 0, or the coordinates
     ``(0, 0, 0)``, which some exporters write for a lost marker) is a missing value: interior
     gaps of up to ``max_nan_gap`` frames are filled by linear interpolation, any other gap is a
-    :class:`~interprim.errors.DataFileError` naming the file, the marker and the frame number
+    :class:`~interprim.core.errors.DataFileError` naming the file, the marker and the frame number
     (as the capture software numbers it).
 
     Parameters

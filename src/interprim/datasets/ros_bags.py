@@ -59,8 +59,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError, MissingExtraError
-from ..preprocessing import interp_columns, step_count
+from ..core.errors import DataFileError, MissingExtraError
+from ..core.preprocessing import interp_columns, step_count
 
 __all__ = ["read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
 

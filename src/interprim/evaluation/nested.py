@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..cv import paired_gain
+from ..core.cv import paired_gain
 
 __all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio"]
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .protocol import observed_frames
+from ..model_selection.prefixes import observed_frames
 
 __all__ = ["evaluation_figures", "error_curves", "recognition_curves", "trajectory_figure", "skeleton_animation"]
 
@@ -84,7 +84,7 @@ def recognition_curves(summary, path):
 def trajectory_figure(model, test, observed_dofs, controlled_dofs, path, fractions=(0.4, 0.6, 0.8), title="",
                       labels=("x", "y", "z"), n=100):
     """Agent 2's true and predicted hand coordinates at several fractions observed, with the 90 % band."""
-    from ..preprocessing import time_normalise
+    from ..core.preprocessing import time_normalise
 
     plt = _plt()
     truth = time_normalise(test, n)

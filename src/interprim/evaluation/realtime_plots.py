@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .protocol import observed_frames
+from ..model_selection.prefixes import observed_frames
 from .realtime import Z90, RealTimeConfig, realtime_fold, summarise_realtime
 
 __all__ = ["realtime_interaction_figure", "nuisi_realtime_figure", "NUISI_FIGURE_METHODS"]
@@ -99,7 +99,7 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
         Unit of the errors printed on the figure and its factor from data units (default centimetres).
     prefix : callable, optional
         ``prefix(k)``: the observed columns of the first ``k`` frames as a robot had them (a causal prefix of
-        an interpolated recording, :class:`~interprim.evaluation.protocol.Prefixes`); default the first ``k``
+        an interpolated recording, :class:`~interprim.model_selection.prefixes.Prefixes`); default the first ``k``
         rows of ``test``.
 
     Returns
@@ -272,10 +272,10 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     returns the figure's numbers (metres) with ``action``, ``demo`` and ``n_train``.
     """
     from ..datasets import load_nuisi
-    from ..primitive import InteractionPrimitive
+    from ..models.primitive.estimator import InteractionPrimitive
 
     from .nested import split_holdout
-    from .protocol import Prefixes
+    from ..model_selection.prefixes import Prefixes
 
     ds = load_nuisi(data_path, action=action, observed="right_arm", controlled="right_hand", dt=dt)
     if development_only:

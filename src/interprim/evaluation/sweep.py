@@ -3,7 +3,7 @@
 Protocol: for every task (one NuiSI
 interaction, the synthetic set, ...) and every demonstration ``j``: fit each
 method on the other demonstrations, observe the first ``p`` % of demonstration
-``j``'s observed agent (:func:`~interprim.evaluation.protocol.observed_frames`) (``p`` = 10, 20, ..., 100), predict the whole
+``j``'s observed agent (:func:`~interprim.model_selection.prefixes.observed_frames`) (``p`` = 10, 20, ..., 100), predict the whole
 interaction and compare it with the truth on a common normalised-time grid.
 
 Metrics per (task, method, held-out demo, fraction):
@@ -23,13 +23,13 @@ Methods (:data:`METHODS`): ``ip-forcing`` and ``ip-position`` (this library with
 ``sigma2="cv"`` and ``phase_method="likelihood"``, conditioning on forcing
 values, Eq. 15, or on positions), ``ip-paper`` (the paper exactly: forcing,
 DTW phase, ``sigma2="auto"``), ``*-dtw`` variants (same but DTW phase),
-``iprompt`` (:class:`~interprim.evaluation.baselines.InteractionProMP`), ``nn``
-(:class:`~interprim.evaluation.baselines.NearestNeighbour`) and ``prior``
-(:class:`~interprim.evaluation.baselines.PriorMean`); a ``+pca`` suffix projects each
+``iprompt`` (:class:`~interprim.models.promp.InteractionProMP`), ``nn``
+(:class:`~interprim.models.demonstrations.NearestNeighbour`) and ``prior``
+(:class:`~interprim.models.demonstrations.PriorMean`); a ``+pca`` suffix projects each
 agent on ``pca_components`` principal components first (paper Sec. IV).
 
 Recognition (:func:`recognition_fold`): one model per interaction; the held-out
-demonstration's prefix is scored by every model (:mod:`interprim.recognition`).
+demonstration's prefix is scored by every model (:mod:`interprim.models.recognition`).
 
 Sweeps run as independent tasks through joblib (``backend="loky"`` on local
 cores, or ``"dask"`` for a Dask cluster through joblib's Dask backend); see
@@ -45,9 +45,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..preprocessing import time_normalise
+from ..core.preprocessing import time_normalise
 
-from .protocol import observed_frames
+from ..model_selection.metrics import Z90, point_rms
+from ..model_selection.prefixes import observed_frames
 
 __all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
            "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
@@ -59,7 +60,6 @@ METHOD_NEEDS = {"iprompt": ("movement_primitives", "gmr")}
 #: phase variants evaluated from the same fitted IP model (``ip-forcing`` -> ``ip-forcing-dtw``, ...)
 PHASE_VARIANTS = ("likelihood", "dtw", "oracle")
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
-Z90 = 1.6448536269514722
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,7 @@ def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     if dataset == "nuisi":
         from ..datasets import load_nuisi
 
-        from .protocol import Prefixes
+        from ..model_selection.prefixes import Prefixes
 
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)
         if cfg.development_only:
@@ -166,38 +166,26 @@ def task_names(dataset: str) -> list:
 
 
 def make_estimator(method: str, observed_dofs, cfg: EvalConfig):
-    """An unfitted estimator for a method name of :data:`METHODS` (optionally with a ``+pca`` suffix)."""
-    from .baselines import InteractionProMP, NearestNeighbour, PriorMean
-    from ..primitive import InteractionPrimitive
+    """An unfitted estimator for a method name of :data:`METHODS` (optionally with a ``+pca`` suffix): a family
+    of :mod:`interprim.models.registry` with this sweep's settings (``ip-*``: the Interaction Primitive with the
+    observation model and phase named)."""
+    from ..models import registry
 
     base, _, suffix = method.partition("+")
     pca = cfg.pca_components if suffix == "pca" else None
-    common = dict(observed_dofs=list(observed_dofs), n_basis=cfg.n_basis, smoothing_window=cfg.smoothing_window,
-                  pca_components=pca)
-    if base == "ip-forcing":
-        return InteractionPrimitive(observation="forcing", sigma2="cv", phase_method="likelihood", **common)
-    if base == "ip-position":
-        return InteractionPrimitive(observation="position", sigma2="cv", phase_method="likelihood", **common)
-    if base == "ip-forcing-dtw":
-        return InteractionPrimitive(observation="forcing", sigma2="cv", phase_method="dtw", **common)
-    if base == "ip-position-dtw":
-        return InteractionPrimitive(observation="position", sigma2="cv", phase_method="dtw", **common)
-    if base == "ip-paper":
-        return InteractionPrimitive(observation="forcing", sigma2="auto", phase_method="dtw", **common)
+    ip_variants = {"ip-forcing": ("forcing", "cv", "likelihood"), "ip-position": ("position", "cv", "likelihood"),
+                   "ip-forcing-dtw": ("forcing", "cv", "dtw"), "ip-position-dtw": ("position", "cv", "dtw"),
+                   "ip-paper": ("forcing", "auto", "dtw")}
+    if base in ip_variants:
+        observation, sigma2, phase = ip_variants[base]
+        return registry.family("ip").cls(observed_dofs=list(observed_dofs), n_basis=cfg.n_basis,
+                                         smoothing_window=cfg.smoothing_window, pca_components=pca,
+                                         observation=observation, sigma2=sigma2, phase_method=phase)
     if base == "iprompt":
-        return InteractionProMP(observed_dofs, n_weights=cfg.promp_weights)
-    if base == "nn":
-        return NearestNeighbour(observed_dofs)
-    if base == "prior":
-        return PriorMean(observed_dofs)
+        return registry.family("iprompt").cls(observed_dofs, n_weights=cfg.promp_weights)
+    if base in ("nn", "prior"):
+        return registry.family(base).build(registry.Settings(tuple(observed_dofs)))
     raise ValueError(f"unknown method {method!r}; expected one of {METHODS} (optionally with '+pca')")
-
-
-def _point_rms(err, point_dim):
-    """Root mean square of the point errors: ``err`` (n, C) with C = k * point_dim columns."""
-    n, C = err.shape
-    pd = point_dim if C % point_dim == 0 else 1
-    return float(np.sqrt(np.mean(np.sum(err.reshape(n, C // pd, pd) ** 2, axis=2))))
 
 
 def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig = EvalConfig()) -> list:
@@ -205,7 +193,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 
     Returns one record (dict) per fraction (see the module docstring for the metrics).
     """
-    from .._blas import single_thread
+    from ..core.blas import single_thread
 
     t = _task(dataset, task, cfg)
     demos = t.demos
@@ -239,7 +227,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
             rec = {
                 "dataset": dataset, "task": t.name, "method": name, "demo": int(j), "fraction": float(p),
                 "n_observed": M, "phase_true": (M - 1) / (T - 1), "phase": float(pred.phase),
-                "rmse_obs": _point_rms(err[:, obs], t.point_dim),
+                "rmse_obs": point_rms(err[:, obs], t.point_dim),
                 "log_likelihood": float(pred.log_likelihood),
             }
             if ctrl:
@@ -247,7 +235,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
                 start = truth[0, ctrl]
                 k = int(np.argmax(np.linalg.norm(truth[:, ctrl] - start, axis=1)))
                 rec.update({
-                    "rmse_ctrl": _point_rms(ec, t.point_dim),
+                    "rmse_ctrl": point_rms(ec, t.point_dim),
                     "final_err": float(np.linalg.norm(ec[-1])),
                     "contact_err": float(np.linalg.norm(ec[k])),
                     "coverage": (float(np.mean(np.abs(ec) <= Z90 * S[:, ctrl] + 1e-12)) if S is not None
@@ -262,7 +250,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 
 @lru_cache(maxsize=32)
 def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int):
-    from ..primitive import InteractionPrimitive
+    from ..models.primitive.estimator import InteractionPrimitive
 
     t = _task(dataset, task, cfg)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
@@ -277,8 +265,8 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
 
     The task's own model is fitted without ``j``; the other tasks' models on all their demonstrations.
     """
-    from .._blas import single_thread
-    from ..recognition import Recogniser
+    from ..core.blas import single_thread
+    from ..models.recognition import Recogniser
 
     names = task_names(dataset)
     with single_thread():

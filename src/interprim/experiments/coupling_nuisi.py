@@ -13,9 +13,9 @@ the truth (``M = round(p T)`` frames seen, true phase ``(M - 1) / (T - 1)``, as
 
 Methods:
 
-- ``coupling`` - :class:`interprim.coupling.CouplingModel` with its defaults;
+- ``coupling`` - :class:`interprim.models.coupling.CouplingModel` with its defaults;
 - ``ip`` - :class:`interprim.InteractionPrimitive` with its defaults;
-- ``prior`` - :class:`interprim.evaluation.baselines.PriorMean`; ``nn`` - :class:`interprim.evaluation.baselines.NearestNeighbour`.
+- ``prior`` - :class:`interprim.models.demonstrations.PriorMean`; ``nn`` - :class:`interprim.models.demonstrations.NearestNeighbour`.
 
 ``coupling`` and ``ip`` are given the phase in two ways: ``true`` (the true fraction seen; the
 coupling is told its std is 0) and ``clock`` (elapsed time / mean training duration, clipped to 1;
@@ -60,10 +60,10 @@ def _fmt_param(p):
 def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", "prior", "nn"), coupling_kw=None):
     """Fit every method without demonstration ``j``; records for every fraction and phase source."""
     import interprim
-    from interprim.evaluation.baselines import NearestNeighbour, PriorMean
-    from interprim.coupling import CouplingModel
-    from interprim.evaluation.protocol import observed_frames
-    from interprim.preprocessing import time_normalise
+    from interprim.models.demonstrations import NearestNeighbour, PriorMean
+    from interprim.models.coupling import CouplingModel
+    from interprim.model_selection.prefixes import observed_frames
+    from interprim.core.preprocessing import time_normalise
 
     train = [d for i, d in enumerate(demos) if i != j]
     test = demos[j]
@@ -214,7 +214,7 @@ def main(argv=None):
                     help="only summarise these results.json files (of earlier runs) into --out")
     args = ap.parse_args(argv)
     from interprim.datasets import load_nuisi
-    from interprim._blas import single_thread
+    from interprim.core.blas import single_thread
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

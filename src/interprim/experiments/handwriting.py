@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cv import folds
-from ..evaluation.protocol import observed_frames
-from ..preprocessing import resample_step, time_normalise
+from ..core.cv import folds
+from ..model_selection.prefixes import observed_frames
+from ..core.preprocessing import resample_step, time_normalise
 
 __all__ = [
     "run_handwriting",
@@ -100,7 +100,7 @@ def _rmse(pred, truth, mask=None):
 
 
 def _folds(n, n_folds, rng):
-    """Leave-one-out (``n_folds`` None or >= n) or a seeded ``"shuffled"`` split (:func:`interprim.cv.folds`)."""
+    """Leave-one-out (``n_folds`` None or >= n) or a seeded ``"shuffled"`` split (:func:`interprim.core.cv.folds`)."""
     return folds(n, n_folds, "shuffled", rng)
 
 

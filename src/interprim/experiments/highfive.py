@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..preprocessing import time_normalise
+from ..core.preprocessing import time_normalise
 
 from .highfive_common import METHOD_LABELS, METHODS, _goal_spread, _n_observed
 from .highfive_figures import animate, plot_fig6, plot_fig7, plot_fig8, plot_setup
@@ -182,7 +182,7 @@ def _fit_optional(train, cfg, sigma2, log):
       likelihood of the observation instead of DTW), same ``sigma2``.
     - ``ip_default``: the library's defaults (conditioning on positions, ``sigma2`` and shrinkage
       chosen by cross-validation on the training demonstrations, no validation set needed).
-    - ``promp``: :class:`interprim.evaluation.baselines.InteractionProMP` (needs the ``bench`` extra).
+    - ``promp``: :class:`interprim.models.promp.InteractionProMP` (needs the ``bench`` extra).
     """
     import interprim as ip
 
@@ -194,7 +194,7 @@ def _fit_optional(train, cfg, sigma2, log):
     except (TypeError, ValueError) as exc:  # a core without likelihood phase estimation
         log(f"(skipping the likelihood-phase IP: {exc})")
     try:
-        from ..evaluation.baselines import InteractionProMP
+        from ..models.promp import InteractionProMP
 
         extra["promp"] = InteractionProMP(observed_dofs=[0, 1]).fit(train.demos, dt=train.dt)
     except Exception as exc:  # ImportError without the bench extra, or an incompatible peer version
@@ -337,7 +337,7 @@ def run_highfive(out_dir="interprim-demo", config: HighFiveConfig | None = None,
 
     matplotlib.use("Agg", force=True)
 
-    from .._blas import single_thread
+    from ..core.blas import single_thread
 
     with single_thread():  # small matrices: one BLAS thread is fastest
         return _run_highfive(out_dir, config, progress, log)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluation.protocol import observed_frames
+from ..model_selection.prefixes import observed_frames
 
 METHODS = ("ip", "ip_likelihood", "ip_known_phase", "ip_default", "prior", "nn", "promp")
 METHOD_LABELS = {
@@ -20,7 +20,7 @@ METHOD_LABELS = {
 
 
 def _n_observed(T: int, p: float) -> int:
-    """Frames observed at ``p`` % (:func:`interprim.evaluation.protocol.observed_frames`)."""
+    """Frames observed at ``p`` % (:func:`interprim.model_selection.prefixes.observed_frames`)."""
     return observed_frames(T, p / 100.0)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..preprocessing import interp_columns
+from ..core.preprocessing import interp_columns
 from .highfive_common import METHOD_LABELS, METHODS, _goal_spread, _n_observed
 
 def _draw_arm(ax, arm, q, **kw):

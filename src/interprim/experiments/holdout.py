@@ -5,7 +5,7 @@ last third of each NuiSI interaction's recordings (highest demo numbers), and th
 with seed 1 (:func:`interprim.synthetic.benchmark_tasks`; development uses seed 0).  Every choice is made on
 the development recordings: each estimator's own hyper-parameters in its ``fit``, and the ``chosen`` method
 by a 3-fold cross-validation on them (:func:`interprim.evaluation.realtime.choose_method`).  Predictions see
-causal prefixes (:mod:`interprim.evaluation.protocol`); ``--lookahead`` adds the same figures with the
+causal prefixes (:mod:`interprim.model_selection.prefixes`); ``--lookahead`` adds the same figures with the
 uncut interpolation (the old, flattering protocol) for NuiSI, to show what causality changes.
 
 Run::
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
-from ..evaluation.protocol import Prefixes
+from ..model_selection.prefixes import Prefixes
 from ..evaluation.realtime import RealTimeConfig, default_methods, realtime_fold, summarise_realtime, whole_movement_fold
 
 __all__ = ["holdout_tasks", "run_task", "main"]
@@ -65,7 +65,7 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
-    from ..auto import Blend, CrossValidation, choice
+    from ..models.ensemble import Blend, CrossValidation, choice
 
     cfg = RealTimeConfig(point_dim=point_dim)
     make = {m: f for m, f in default_methods(obs).items() if m in methods}
@@ -167,7 +167,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     ap.add_argument("--lookahead", action="store_true", help="also measure with the uncut interpolation (NuiSI)")
     args = ap.parse_args(argv)
-    from .._blas import single_thread
+    from ..core.blas import single_thread
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -45,7 +45,7 @@ RT_METHODS = ("clock-mean", "oracle-mean", "learned-mean", "ip-default", "ip-lea
 
 
 def _mean_ctrl(train, ctrl, n=201):
-    from interprim.preprocessing import time_normalise
+    from interprim.core.preprocessing import time_normalise
 
     return np.mean([time_normalise(d[:, ctrl], n) for d in train], axis=0)
 
@@ -53,7 +53,7 @@ def _mean_ctrl(train, ctrl, n=201):
 def _at(traj, u):
     """Rows of a trajectory on a uniform [0, 1] grid at normalised times ``u`` (clipped), linearly."""
     g = np.linspace(0.0, 1.0, traj.shape[0])
-    from interprim.preprocessing import interp_columns
+    from interprim.core.preprocessing import interp_columns
 
     return interp_columns(np.clip(u, 0.0, 1.0), g, traj)
 
@@ -62,7 +62,7 @@ def run_fold(demos, obs, ctrl, dt, j, ip_methods=True, realtime=False, horizon=0
              ip_kwargs=None):
     """Phase errors (and real-time errors) of held-out demonstration ``j``; returns a dict of lists."""
     from interprim import InteractionPrimitive
-    from interprim.evaluation.protocol import observed_frames
+    from interprim.model_selection.prefixes import observed_frames
     from interprim.phase.learned import LearnedPhase
 
     train = [d for i, d in enumerate(demos) if i != j]

@@ -19,7 +19,7 @@ import numpy as np
 
 
 def _mse_ctrl(pred, demo, n_obs_cols):
-    from interprim.preprocessing import time_normalise
+    from interprim.core.preprocessing import time_normalise
 
     gt = time_normalise(demo, 100)
     return float(np.mean((pred.trajectory(100)[:, n_obs_cols:] - gt[:, n_obs_cols:]) ** 2))
@@ -36,7 +36,7 @@ CONFIGS = {
 
 def run(n_train: int = 30, n_test: int = 20, seed: int = 0, fractions=(0.1, 0.3, 0.6, 1.0), configs=None) -> dict:
     import interprim as ip
-    from interprim.preprocessing import time_normalise
+    from interprim.core.preprocessing import time_normalise
     from interprim.synthetic import two_agent_demos
 
     train = two_agent_demos(n_train, seed=seed)

@@ -176,7 +176,7 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="sweep: parallel workers")
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     args = ap.parse_args(argv)
-    from .._blas import single_thread
+    from ..core.blas import single_thread
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -8,8 +8,8 @@
   demonstrations' own prefixes (beyond the paper; the one that beats a clock on recordings of people).
 
 :func:`estimate_phase` is the one dispatch on ``phase_method`` that both
-:meth:`~interprim.primitive.InteractionPrimitive.predict` and
-:meth:`~interprim.stream.Stream.update` use.
+:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` and
+:meth:`~interprim.models.primitive.stream.Stream.update` use.
 """
 
 from __future__ import annotations
@@ -107,8 +107,8 @@ def movement_prefix(model, z, n_star):
     Past its end the learned phase stays at 1 and its duration grows with the elapsed time; conditioning on every
     frame would squeeze a partner who holds still onto ``[0, 1]`` and move the robot's goal with each still frame
     (NuiSI highfive1: up to 3.5 cm over 30 frames).  A pure function of ``z`` (binary search over prefix lengths
-    for the first whose estimate is 1; ``O(M log M)``), so :meth:`~interprim.stream.Stream.update` and
-    :meth:`~interprim.primitive.InteractionPrimitive.predict` agree.  Other phase methods: ``z`` unchanged.
+    for the first whose estimate is 1; ``O(M log M)``), so :meth:`~interprim.models.primitive.stream.Stream.update` and
+    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` agree.  Other phase methods: ``z`` unchanged.
     """
     if model.phase_method_used() != "learned" or n_star < model.reference_.shape[0] - 1 or z.shape[0] < 3:
         return z

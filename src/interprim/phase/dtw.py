@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._compiled import registry as kernels
-from .._validation import as_2d_finite, as_frame
+from ..core.validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
 

@@ -69,9 +69,9 @@ import math
 
 import numpy as np
 
-from .._validation import as_2d_finite, as_frame, check_positive, check_times
-from ..cv import paired_gain
-from ..preprocessing import resample_step
+from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
+from ..core.cv import paired_gain
+from ..core.preprocessing import resample_step
 from ._learned_features import _group_dims, _jsonable, _kernel_loo, _prefix_features, _ridge_loo
 from .estimate import PhaseEstimate
 
@@ -353,7 +353,7 @@ class LearnedPhase:
         self.cv_error_featureless_ = float(np.mean(np.abs(flat_loo - S)[mask]))
         e_ref = e_f if self.cv_error_featureless_ < clock_err else e_c
         if best is not None and best[0] < min(clock_err, self.cv_error_featureless_):
-            # paired per-demonstration comparison (one-standard-error rule, interprim.cv)
+            # paired per-demonstration comparison (one-standard-error rule, interprim.core.cv)
             e_m = np.sum(np.where(mask, np.abs(best[4] - S), 0.0), axis=0) / cnt
             gain, se = paired_gain(e_ref, e_m)
             se = float(se)
@@ -448,7 +448,7 @@ class LearnedPhase:
     # ------------------------------------------------------------------ estimate
     def _check_fitted(self):
         if not hasattr(self, "method_"):
-            from ..errors import NotFittedError
+            from ..core.errors import NotFittedError
 
             raise NotFittedError("this LearnedPhase is not fitted yet; call fit(demos, dt=...) first")
 

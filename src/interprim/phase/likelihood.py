@@ -14,10 +14,10 @@ movements (as Interaction ProMPs do, Maeda et al. 2017)::
 with the ``M`` observed frames placed at ``s_m = s (m - 1) / (M - 1)`` (a
 constant speed over the observed part).  The likelihood is that of the
 *positions*: DMP positions are linear in ``theta = [w, g]`` for a given start
-state (:meth:`interprim.dmp.LinearRollout.design`), so
+state (:meth:`interprim.core.dmp.LinearRollout.design`), so
 ``y = free(s) z0 + H(s) theta_o + eps`` and ``p(y | s)`` is Gaussian with
 covariance ``H Sigma_oo H^T + sigma_p^2 I`` (evaluated in the structured form
-of :func:`interprim.gaussian.condition`, on the observed block of the prior
+of :func:`interprim.core.gaussian.condition`, on the observed block of the prior
 only).  Positions are used whatever observation model the model conditions
 on, because their likelihoods at different ``s`` are densities of the *same*
 data (forcing values of Eq. 15 change with ``s`` through their derivatives).
@@ -45,11 +45,11 @@ import math
 
 import numpy as np
 
-from .._blas import single_thread
+from ..core.blas import single_thread
 from .._compiled import registry as kernels
-from ..dmp import forcing_values
-from ..gaussian import _LOG2PI, GaussianPrior, condition
-from ..preprocessing import derivatives
+from ..core.dmp import forcing_values
+from ..core.gaussian import _LOG2PI, GaussianPrior, condition
+from ..core.preprocessing import derivatives
 from .estimate import PhaseEstimate
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
@@ -62,7 +62,7 @@ def observation_design(model, z, s_end: float, kind: str = "position"):
     """Design ``X`` (rows per observed frame) and targets ``Y`` (one column per observed latent DoF).
 
     ``kind="position"``: ``Y = z - free @ [y0; v0]`` and ``X = H`` of
-    :meth:`~interprim.dmp.LinearRollout.design` from ``s = 0`` (start position
+    :meth:`~interprim.core.dmp.LinearRollout.design` from ``s = 0`` (start position
     = first observed frame, start velocity = the demonstrations' mean);
     ``kind="forcing"``: Eq. 13 rows and Eq. 15 forcing values.
     """
@@ -82,7 +82,7 @@ def phase_noise(model) -> float:
     """Position noise variance used by the phase likelihood.
 
     ``model.phase_sigma2_`` when the model has it (chosen in ``fit`` by
-    held-out marginal likelihood, see :mod:`interprim.selection`); else the
+    held-out marginal likelihood, see :mod:`interprim.models.primitive.selection`); else the
     model's ``sigma2_`` for the position observation model; else 1 % of the
     observed agent's spread in the DTW reference.
     """
@@ -108,9 +108,9 @@ def _marginal(model):
 
 
 def _factored(model):
-    """The observed block of the prior as diagonal + low rank (:meth:`interprim.gaussian.GaussianPrior.factored`).
+    """The observed block of the prior as diagonal + low rank (:meth:`interprim.core.gaussian.GaussianPrior.factored`).
 
-    Exact when ``prior_`` was fitted by :func:`~interprim.gaussian.fit_prior` from ``thetas_`` (checked
+    Exact when ``prior_`` was fitted by :func:`~interprim.core.gaussian.fit_prior` from ``thetas_`` (checked
     once); ``None`` otherwise (then the dense path is used).
     """
     prior = model.prior_
@@ -140,7 +140,7 @@ def phase_log_likelihood(model, z, s_end: float, sigma2: float | None = None) ->
 def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np.ndarray:
     """:func:`phase_log_likelihood` at every phase in ``s_values`` (one batched evaluation).
 
-    With the diagonal-plus-low-rank prior of :func:`~interprim.gaussian.fit_prior` (the usual case) all
+    With the diagonal-plus-low-rank prior of :func:`~interprim.core.gaussian.fit_prior` (the usual case) all
     candidates go through one compiled kernel (:mod:`interprim._compiled.phase_likelihood`; its numpy equivalent
     until the kernel is loaded): per candidate only ``G = H^T H``, ``H^T r`` and ``|r|^2`` of the
     ``M`` frames are formed, ``O(M q (q + D_o))``, plus ``O(D_o (q^3 + q^2 n + q n^2))`` for the
@@ -158,8 +158,8 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
 
 
 def _phase_log_likelihood_reference(model, z, s_end: float, sigma2: float | None = None) -> float:
-    """The per-candidate evaluation (explicit design matrix, :meth:`interprim.gaussian.GaussianPrior.evidence` or
-    :func:`interprim.gaussian.condition`): the reference the batched paths are tested against."""
+    """The per-candidate evaluation (explicit design matrix, :meth:`interprim.core.gaussian.GaussianPrior.evidence` or
+    :func:`interprim.core.gaussian.condition`): the reference the batched paths are tested against."""
     X, Y = observation_design(model, z, float(s_end), "position")
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     pr = _factored(model)

@@ -1,6 +1,6 @@
 """Online phase tracking for streams: the likelihood phase by local search (beyond the paper's DTW).
 
-:class:`_Tracker` (used by :class:`~interprim.stream.Stream`) scores candidates around the previous
+:class:`_Tracker` (used by :class:`~interprim.models.primitive.stream.Stream`) scores candidates around the previous
 estimate on a fixed lattice of speeds, so the compiled step
 (:func:`interprim._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
 frame instead of recomputing them; it scores with :mod:`interprim.phase.likelihood` and ends where the batch
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._blas import single_thread
+from ..core.blas import single_thread
 from .._compiled import registry as kernels
 from .likelihood import _S_MIN, _bounds, _finish, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
 
@@ -46,7 +46,7 @@ def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
 
 
 class _Tracker:
-    """Online phase of one :class:`~interprim.primitive.Stream` (the likelihood phase, local search).
+    """Online phase of one :class:`~interprim.models.primitive.estimator.Stream` (the likelihood phase, local search).
 
     The candidates are *speeds* on a fixed lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread /
     (n_candidates - 1)`` (default: 3 candidates 1 % apart), anchored at the first estimate (the batch search's,

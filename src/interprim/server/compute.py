@@ -44,7 +44,7 @@ class _Open:
 
 
 class _Recognition:
-    """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.recognition.Recogniser` on
+    """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
     the frames of the current interaction.
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
@@ -59,7 +59,7 @@ class _Recognition:
     """
 
     def __init__(self, entries):
-        from ..recognition import Recogniser
+        from ..models.recognition import Recogniser
 
         self.names = [e.name for e in entries]
         self.rec = Recogniser({e.name: e.model for e in entries})
@@ -184,8 +184,8 @@ def _column_slice(cols, n_dofs):
 
 class _MeanRollout:
     """``pred.trajectory(n)[:, cols]`` for the predictions of one model: the prediction contract's
-    :meth:`~interprim.contract.BasePrediction.mean_rollout`, made from the first prediction (for an
-    Interaction Primitive the core's :class:`~interprim.prediction.MeanRollout`, the grid's design built once).
+    :meth:`~interprim.models.base.BasePrediction.mean_rollout`, made from the first prediction (for an
+    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design built once).
     """
 
     __slots__ = ("n", "sel", "fn")
@@ -231,7 +231,7 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
         probs, best = rec.posterior(preds)
     pred = preds[best]
     model_part, cols_part, sel, rollout = _head_parts(op)[best]
-    if pred.conditioned:  # every prediction has the attributes of interprim.contract.BasePrediction
+    if pred.conditioned:  # every prediction has the attributes of interprim.models.base.BasePrediction
         vals = (float(pred.phase), float(pred.speed), float(pred.duration))
         if not all(map(math.isfinite, vals)):  # nan / inf: never put them on the wire
             raise FloatingPointError(_NONFINITE)
@@ -278,8 +278,8 @@ def compute_batch(op: _Open, batch) -> tuple[list, list]:
     streams in order and encode **one** reply for the newest: a ``prediction`` with ``covers = len(batch)``.
 
     Every frame enters the streams (phase estimation and conditioning see all of them): several frames in
-    one :meth:`~interprim.contract.BaseStream.extend` per stream, which every model's stream has and which
-    answers exactly what :meth:`~interprim.contract.BaseStream.update` answers for the last frame (the
+    one :meth:`~interprim.models.base.BaseStream.extend` per stream, which every model's stream has and which
+    answers exactly what :meth:`~interprim.models.base.BaseStream.update` answers for the last frame (the
     per-frame cost of an IP's stream is then the DTW column and the phase tracker's lattice step only; the
     phase, conditioning and prediction are computed once).  So the reply is the one the last frame would get
     had each frame been answered.  If the model fails, one ``internal`` error with the newest frame's

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelFileError
+from ..core.errors import ModelFileError
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 
@@ -72,7 +72,7 @@ class ModelEntry:
     def start(self) -> list | None:
         """Mean start position of the demonstrations in every data column, or ``None`` if unknown."""
         try:
-            st = self.model.fitted_  # an Interaction Primitive's fitted state (interprim.fitted)
+            st = self.model.fitted_  # an Interaction Primitive's fitted state (interprim.models.primitive.fitted)
             M, off = st.latent_map()
             return [float(v) for v in M @ np.asarray(st.start_position_, dtype=np.float64) + off]
         except Exception:  # a stand-in model without these attributes
@@ -132,7 +132,7 @@ def load_models(paths) -> dict[str, ModelEntry]:
     interprim.ModelFileError
         A file is corrupt / of the wrong format, or two files share a stem.
     """
-    from ..io import load_any
+    from ..models.files import load_any
 
     out: dict[str, ModelEntry] = {}
     for p in paths:

@@ -5,7 +5,7 @@ arrays, so threads do not run it in parallel (the GIL).  With ``--processes N`` 
 pinned to one of N worker processes, which owns that session's ``model.stream()``; the event loop
 only does the network I/O.  A slow session then only delays the sessions of its own worker.
 
-Models reach the workers as safe ``.npz`` model files (``model.save`` / ``InteractionPrimitive.load``);
+Models reach the workers as safe ``.npz`` model files (``model.save`` / :func:`interprim.load_any`, whatever model a file holds);
 requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
 pickle).  A request is one JSON header line, then (for frames) the frames as raw little-endian float64
 values; a reply is one JSON header line, then (for predictions) the finished JSON texts for the
@@ -39,11 +39,11 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
         signal.signal(sig, signal.SIG_IGN)
     import numpy as np
 
-    from ..primitive import InteractionPrimitive
+    from ..models.files import load_any
     from .compute import _Open, compute_batch, warm_up
     from .models import entry_for
 
-    entries = {n: entry_for(n, InteractionPrimitive.load(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}
+    entries = {n: entry_for(n, load_any(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}
     warm_up(entries.values())
     sessions: dict = {}
     conn.send_bytes(b'{"ready":true}\n')
@@ -72,7 +72,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
                 es = [entries[n] for n in req["candidates"]]
                 streams = [e.model.stream(robot_state=req.get("robot_state")) for e in es]
                 o = _Open(req["model"], es, streams, req["cols"], req["points"], req["std"])
-                if streams:  # every stream takes need_cov (interprim.contract)
+                if streams:  # every stream takes need_cov (interprim.models.base)
                     o.update_kw = {"need_cov": req["std"]}
                 sessions[req["sid"]] = o
             elif op == "reset":

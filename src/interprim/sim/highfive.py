@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._blas import single_thread
+from ..core.blas import single_thread
 from .arm import PlanarArm, controlled_arm, observed_arm
 
 __all__ = [

@@ -7,7 +7,7 @@ The partner (the observed agent) is replayed from a recording: its joint angles 
 step.  At every frame of the partner (the model's ``dt``, 100 Hz for the simulated high five) the frame goes
 to ``model.stream()`` (paper Sec. III-B-D online: phase, Eq. 5-9 or the likelihood phase; conditioning,
 Eq. 16-18), and the posterior-mean response of the controlled agent (Eq. 1 rolled out from the posterior,
-:class:`interprim.prediction.MeanRollout`) becomes the controller's reference.
+:class:`interprim.models.primitive.prediction.MeanRollout`) becomes the controller's reference.
 
 The model (``highfive_arms.xml``, shipped beside this module) is the pair of planar chains of
 :mod:`interprim.sim.arm` placed in MuJoCo's x-z plane (x towards the partner, z up): the simulated plane's
@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..preprocessing import interp_columns
+from ..core.preprocessing import interp_columns
 
 __all__ = ["MJCF_FILE", "ROBOT_JOINTS", "HUMAN_JOINTS", "mjcf_path", "load_arms", "JointController", "ArmSim",
            "track_reference", "fit_highfive_model", "run_mujoco_highfive", "MujocoResult",
@@ -238,7 +238,7 @@ def fit_highfive_model(n_train: int = 40, seed: int = 0, n_basis: int = 10, inpu
     phase then bends the prediction far off (the predicted high-five point moved 12-41 cm in the second half
     of the six held-out movements we tried, against 2-8 cm with ``input_noise=0.01``).
     """
-    from ..primitive import InteractionPrimitive
+    from ..models.primitive.estimator import InteractionPrimitive
     from .highfive import generate_highfive
 
     train = generate_highfive(n_train, seed=seed, region="train", progress=False)

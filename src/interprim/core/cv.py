@@ -1,8 +1,8 @@
 """The rules every cross-validation in the package shares, each defined once.
 
 Several parts of the library choose something on held-out parts of the *training* demonstrations:
-``sigma^2`` and the shrinkage (:mod:`interprim.selection`), the calibration of the predictive std
-(:mod:`interprim.calibration`), the coupling model (:mod:`interprim.coupling`), the learned phase
+``sigma^2`` and the shrinkage (:mod:`interprim.models.primitive.selection`), the calibration of the predictive std
+(:mod:`interprim.models.primitive.calibration`), the coupling model (:mod:`interprim.models.coupling`), the learned phase
 (:mod:`interprim.phase.learned`), the kernel baseline's bandwidth and the evaluation's folds
 (:mod:`interprim.evaluation`).  They share four rules, which live here:
 
@@ -19,10 +19,10 @@ Several parts of the library choose something on held-out parts of the *training
 * **How much of a demonstration is observed** (:func:`observed_frames`): a held-out demonstration of ``T``
   frames observed at fraction ``p`` shows its first ``round(p T)`` frames, at least 3 (the fewest that give a
   phase, a speed and the derivatives of Eq. 15) and at most ``T`` (or ``T - keep`` when ``keep`` frames must
-  remain to be predicted).  :mod:`interprim.evaluation.protocol` states the evaluation's protocol with it.
+  remain to be predicted).  :mod:`interprim.model_selection.prefixes` states the evaluation's protocol with it.
 
-Resampling, the fourth shared rule, lives with the other preprocessing (:func:`interprim.preprocessing.interp_columns`,
-:func:`interprim.preprocessing.resample_step`).
+Resampling, the fourth shared rule, lives with the other preprocessing (:func:`interprim.core.preprocessing.interp_columns`,
+:func:`interprim.core.preprocessing.resample_step`).
 
 Pure numpy, no I/O; part of the core (it imports nothing from :mod:`interprim.evaluation`).
 """

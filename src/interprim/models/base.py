@@ -1,10 +1,10 @@
 """The prediction contract shared by every model of the package.
 
-Every model -- :class:`~interprim.primitive.InteractionPrimitive`, :class:`~interprim.learned.LearnedInteraction`
-and the peer methods of :mod:`interprim.evaluation.baselines` -- is a :class:`Predictor`:
+Every model -- :class:`~interprim.models.primitive.estimator.InteractionPrimitive`, :class:`~interprim.models.learned.LearnedInteraction`
+and the peer methods of :mod:`interprim.models.demonstrations` -- is a :class:`Predictor`:
 
 * ``fit(demos, dt=None)`` returns the model; ``predict(partial)`` and ``stream()`` raise
-  :class:`~interprim.errors.NotFittedError` before it;
+  :class:`~interprim.core.errors.NotFittedError` before it;
 * ``predict(partial)`` takes the observed agent's frames from the start of the movement, shape
   ``(M, len(observed_dofs))``, and returns a :class:`BasePrediction`;
 * ``stream()`` returns a :class:`BaseStream`, an online predictor whose ``update(frame, need_cov=False)``
@@ -34,7 +34,7 @@ Every prediction is a :class:`BasePrediction`: the same attributes (``phase``, `
 
 :class:`GridPrediction` is the prediction of the models that tabulate their mean and standard deviation on a
 normalised-time grid (the coupling, the learned interaction and the baselines); the Interaction Primitive's
-:class:`~interprim.prediction.Prediction` integrates its DMPs instead.
+:class:`~interprim.models.primitive.prediction.Prediction` integrates its DMPs instead.
 """
 
 from __future__ import annotations
@@ -43,11 +43,11 @@ import math
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from ._params import Params
-from ._validation import as_2d_finite, as_frame
-from .preprocessing import interp_columns
-from .errors import NotFittedError
+from ..core.blas import one_blas_thread
+from ..core.params import Params
+from ..core.validation import as_2d_finite, as_frame
+from ..core.preprocessing import interp_columns
+from ..core.errors import NotFittedError
 
 __all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
 
@@ -109,7 +109,7 @@ class BasePrediction:
         of the same model (a server or controller that needs the same columns on the same grid at every frame).
 
         This default calls :meth:`trajectory`; a model may return something cheaper that gives the same values
-        (the Interaction Primitive's :class:`~interprim.prediction.MeanRollout` builds the grid's design once).
+        (the Interaction Primitive's :class:`~interprim.models.primitive.prediction.MeanRollout` builds the grid's design once).
         """
         return TrajectoryColumns(n, columns)
 
@@ -132,7 +132,7 @@ def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
     """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
 
     The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
-    :mod:`interprim.evaluation.realtime` and the blend of :mod:`interprim.auto` use it): the position ``t`` seconds
+    :mod:`interprim.evaluation.realtime` and the blend of :mod:`interprim.models.ensemble` use it): the position ``t`` seconds
     after the last of ``n_frames`` observed frames is the prediction at normalised time ``s + t / D``.
 
     * ``s`` is ``pred.normalised_time``; a prediction without one (NaN, e.g. the prior mean) is played by the
@@ -155,7 +155,7 @@ def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
 class GridPrediction(BasePrediction):
     """A prediction of the whole movement of all DoFs tabulated on normalised time ``0 .. 1``.
 
-    Made by :class:`~interprim.coupling.CouplingModel`, :class:`~interprim.learned.LearnedInteraction` and
+    Made by :class:`~interprim.models.coupling.CouplingModel`, :class:`~interprim.models.learned.LearnedInteraction` and
     the baselines (formerly ``CouplingPrediction`` and ``BaselinePrediction``, both still importable).
 
     Parameters
@@ -175,7 +175,7 @@ class GridPrediction(BasePrediction):
     method : str, optional
         What made it (e.g. the coupling chosen, ``"mean"`` for the prior mean).
     leverage : float
-        ``h`` of :mod:`interprim.coupling` (parameter variance / residual variance; NaN when not defined).
+        ``h`` of :mod:`interprim.models.coupling` (parameter variance / residual variance; NaN when not defined).
     log_likelihood : float
     duration : float
         Estimated duration of the whole movement in seconds (NaN when not estimated).
@@ -349,7 +349,7 @@ class PrefixStream(BaseStream):
     :meth:`update` appends a frame and returns ``model.predict`` of all frames seen (so a stream equals the
     batch predictions by construction); :meth:`extend` appends several and predicts once (the same answer as
     :meth:`update` for the last, since the prediction depends on the frames only).  ``need_cov`` is accepted for
-    the interface of :class:`~interprim.stream.Stream` and has no effect.
+    the interface of :class:`~interprim.models.primitive.stream.Stream` and has no effect.
     """
 
     def __init__(self, model):
@@ -434,14 +434,14 @@ class Predictor(Params):
     def save(self, path):
         """Save to a safe ``.npz`` model file (arrays + JSON metadata, no pickle); see :mod:`interprim.io`."""
         self._check_fitted("save")
-        from .io import save_estimator
+        from ..io import save_estimator
 
         save_estimator(self, path)
 
     @classmethod
     def load(cls, path):
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
-        from .io import load_estimator
+        from ..io import load_estimator
 
         return load_estimator(path, cls)
 

@@ -379,7 +379,7 @@ def representation_report(latent, starts, theta, rollout, n: int = 101, groups=N
 
 
 #: Above this ratio (error / spread between demonstrations) the DMPs lose most of what distinguishes the
-#: demonstrations, and fit warns (:class:`~interprim.errors.RepresentationWarning`).
+#: demonstrations, and fit warns (:class:`~interprim.core.errors.RepresentationWarning`).
 REPRESENTATION_LIMIT = 0.5
 
 

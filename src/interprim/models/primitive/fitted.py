@@ -1,6 +1,6 @@
 """What an Interaction Primitive learned, and the one path of its predictions (paper Sec. III, Eq. 1-18).
 
-:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.primitive.InteractionPrimitive`: the
+:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: the
 hyper-parameters it was fitted with, the DMP basis and rollout (Eq. 1-2), the per-agent PCA and latent maps
 (Sec. IV), the demonstrations' parameters and the prior ``p(theta)`` (Eq. 10) with its conditioner
 (Eq. 16-18), the observation noise, the phase model and its reference (Sec. III-B), the observation
@@ -13,10 +13,10 @@ in its own store (:meth:`FittedPrimitive.cached`), so a refit, which makes a new
 derived from the previous fit.
 
 Its attribute names are the estimator's fitted attributes (names ending in ``_``, documented in
-:class:`~interprim.primitive.InteractionPrimitive`) and constructor parameters, so that a reader finds one
-name for one thing; the estimator shows them as read-only views.  :class:`~interprim.prediction.Prediction`,
-:class:`~interprim.stream.Stream`, :mod:`interprim.phase`, :mod:`interprim.selection`,
-:mod:`interprim.calibration` and :mod:`interprim.recognition` work on this object, not on the estimator.
+:class:`~interprim.models.primitive.estimator.InteractionPrimitive`) and constructor parameters, so that a reader finds one
+name for one thing; the estimator shows them as read-only views.  :class:`~interprim.models.primitive.prediction.Prediction`,
+:class:`~interprim.models.primitive.stream.Stream`, :mod:`interprim.phase`, :mod:`interprim.models.primitive.selection`,
+:mod:`interprim.models.primitive.calibration` and :mod:`interprim.models.recognition` work on this object, not on the estimator.
 """
 
 from __future__ import annotations
@@ -25,16 +25,16 @@ import copy
 
 import numpy as np
 
-from ._blas import one_blas_thread, single_thread
-from ._compiled import registry as kernels
-from ._validation import as_2d_finite, check_positive, check_times
-from .basis import Basis
-from .dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
-from .gaussian import Posterior, fit_prior
-from .input_range import fit_input_range, input_distance, mark
-from .phase import estimate_phase, fit_phase_model, movement_prefix
+from ...core.blas import one_blas_thread, single_thread
+from ..._compiled import registry as kernels
+from ...core.validation import as_2d_finite, check_positive, check_times
+from ...core.basis import Basis
+from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
+from ...core.gaussian import Posterior, fit_prior
+from ...core.input_range import fit_input_range, input_distance, mark
+from ...phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
-from .preprocessing import PCA, derivatives, resample_uniform, time_normalise
+from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
 
 __all__ = ["FittedPrimitive", "PARAM_NAMES", "FITTED_NAMES"]
 
@@ -105,7 +105,7 @@ class FittedPrimitive:
 
     def with_fitted(self, **fitted) -> "FittedPrimitive":
         """A copy with some fitted attributes (names ending in ``_``) replaced, e.g. the prior re-estimated on a
-        subset of the demonstrations (:func:`interprim.calibration.fold_model`).  The copy shares the other
+        subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the other
         fitted arrays and has its own store of derived values; ``self`` is unchanged."""
         bad = [k for k in fitted if not k.endswith("_") or k.startswith("_") or not hasattr(self, k)]
         if bad:
@@ -150,7 +150,7 @@ class FittedPrimitive:
     def to_state(self):
         """``(arrays, meta)``: this state as a model file holds it (numeric arrays and JSON metadata;
         :func:`interprim.io.model_state`); :meth:`from_state` restores it."""
-        from .io import model_state
+        from ...io import model_state
 
         return model_state(self)
 
@@ -159,7 +159,7 @@ class FittedPrimitive:
         """The state of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's), every array checked
         (:func:`interprim.io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
         ``meta["params"]`` with the defaults filled in)."""
-        from .io import fitted_from_state
+        from ...io import fitted_from_state
 
         return cls(params, fitted_from_state(arrays, meta, params, source))
 
@@ -168,8 +168,8 @@ class FittedPrimitive:
     def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> "FittedPrimitive":
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
-        with ``sigma2="cv"``, :mod:`interprim.selection`), the phase model, the DTW reference (Sec. III-B), the
-        input range and the calibration (:mod:`interprim.calibration`).  ``obs``, ``ctrl``: the agents'
+        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec. III-B), the
+        input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``, ``ctrl``: the agents'
         columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter check returns)."""
         st = cls(params)
         cls._learn(st, arrays, dt, columns, obs, ctrl, kk)
@@ -291,7 +291,7 @@ class FittedPrimitive:
             self.reference_ = np.mean([time_normalise(z[:, :n_o], n_ref) for z in latent], axis=0)
         else:
             self.reference_ = time_normalise(latent[int(self.reference)][:, :n_o], n_ref)
-        # what the observed agent's frames look like in training (the out-of-range check, interprim.input_range)
+        # what the observed agent's frames look like in training (the out-of-range check, interprim.core.input_range)
         self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
             np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
@@ -401,13 +401,13 @@ class FittedPrimitive:
 
     def input_distance(self, frames) -> float:
         """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
-        (:mod:`interprim.input_range`); NaN for a model file without those statistics."""
+        (:mod:`interprim.core.input_range`); NaN for a model file without those statistics."""
         return input_distance(self, frames)
 
     @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> Prediction:
-        """:meth:`InteractionPrimitive.predict <interprim.primitive.InteractionPrimitive.predict>` (the same
+        """:meth:`InteractionPrimitive.predict <interprim.models.primitive.estimator.InteractionPrimitive.predict>` (the same
         arguments): validate and resample the partial observation, estimate its phase, condition (Eq. 13-18)."""
         n_cols = len(self.observed_dofs_)
         o = as_2d_finite(partial, "partial", n_cols=n_cols, min_rows=1)
@@ -429,7 +429,7 @@ class FittedPrimitive:
         return mark(self, p, dist)
 
     def stream(self, robot_state=None):
-        """Online predictor that takes one observed frame at a time (:class:`~interprim.stream.Stream`)."""
+        """Online predictor that takes one observed frame at a time (:class:`~interprim.models.primitive.stream.Stream`)."""
         from .stream import Stream
 
         return Stream(self, robot_state)
@@ -497,7 +497,7 @@ class FittedPrimitive:
         """
         M = z.shape[0]
         if M >= 3 and kernels.in_use():
-            from ._compiled.observation import StatsWorkspace, start_position
+            from ..._compiled.observation import StatsWorkspace, start_position
 
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)
@@ -515,7 +515,7 @@ class FittedPrimitive:
         return (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size), y0
 
     def conditioner(self):
-        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.gaussian.LowRankConditioner`),
+        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.core.gaussian.LowRankConditioner`),
         or ``None`` when the prior has no such form."""
         return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: self.prior_.conditioner(
             self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
@@ -523,9 +523,9 @@ class FittedPrimitive:
     def condition(self, stats, need_cov: bool) -> Posterior:
         """Eq. 16-18 with Omega~ = [Omega, 0] from sufficient statistics ``(X^T X, X^T Y, |Y|^2, n)``.
 
-        Uses the exact low-rank form of :class:`~interprim.gaussian.LowRankConditioner`
+        Uses the exact low-rank form of :class:`~interprim.core.gaussian.LowRankConditioner`
         (compiled) when the prior has it, else the structured dense form of
-        :func:`~interprim.gaussian.condition`; the covariance is computed only
+        :func:`~interprim.core.gaussian.condition`; the covariance is computed only
         when asked for (``need_cov``; :attr:`Prediction.posterior_cov` asks lazily).
         """
         G, B, yy, n = stats

@@ -21,14 +21,14 @@ import numbers
 
 import numpy as np
 
-from .contract import Predictor
-from ._blas import one_blas_thread
-from ._validation import as_2d_finite, check_positive, check_times
-from .dmp import warn_representation
-from .errors import NotFittedError
+from ..base import Predictor
+from ...core.blas import one_blas_thread
+from ...core.validation import as_2d_finite, check_positive, check_times
+from ...core.dmp import warn_representation
+from ...core.errors import NotFittedError
 from .fitted import FITTED_NAMES, FittedPrimitive
 from .prediction import Prediction
-from .preprocessing import resample_uniform
+from ...core.preprocessing import resample_uniform
 from .stream import Stream
 
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
@@ -68,7 +68,7 @@ class InteractionPrimitive(Predictor):
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
         K-fold cross-validation (the observed agent's completion within its noise, then the controlled
-        agent's response) on the training demonstrations (:func:`interprim.selection.select_hyperparameters`);
+        agent's response) on the training demonstrations (:func:`interprim.models.primitive.selection.select_hyperparameters`);
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).
@@ -78,7 +78,7 @@ class InteractionPrimitive(Predictor):
         scale of the chosen observation; on noisy or recorded data it is
         overconfident (see ``docs/observation-models.md``).
     covariance : {"shrinkage", "ridge", "empirical"}, default "shrinkage"
-        Regularisation of Eq. 10's covariance (see :func:`interprim.gaussian.fit_prior`).
+        Regularisation of Eq. 10's covariance (see :func:`interprim.core.gaussian.fit_prior`).
     ridge : float, default 1e-6
         (Advanced.) Relative diagonal loading of the covariance.
     observation : {"position", "forcing"}, default "position"
@@ -101,7 +101,7 @@ class InteractionPrimitive(Predictor):
     min_observed : int, default 3
         (Advanced.) Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
-        (Advanced.) Integration steps over the movement (see :class:`interprim.dmp.LinearRollout`).
+        (Advanced.) Integration steps over the movement (see :class:`interprim.core.dmp.LinearRollout`).
     phase_method : {"auto", "cv", "likelihood", "learned", "dtw"}, default "auto"
         How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
 
@@ -134,7 +134,7 @@ class InteractionPrimitive(Predictor):
         with ``input_noise=0.01``).
     calibrate : bool or "with-cv", default "with-cv"
         Calibrate the predictive uncertainty on held-out folds of the training demonstrations
-        (:mod:`interprim.calibration`): :meth:`Prediction.std` and :meth:`Prediction.samples` are the
+        (:mod:`interprim.models.primitive.calibration`): :meth:`Prediction.std` and :meth:`Prediction.samples` are the
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"with-cv"``: calibrate when ``sigma2="cv"`` (the
         default; the folds re-use what that cross-validation chose), not with the paper's ``sigma2="residual"``
@@ -145,7 +145,7 @@ class InteractionPrimitive(Predictor):
     Attributes
     ----------
     fitted_ : FittedPrimitive
-        The fitted state (:class:`interprim.fitted.FittedPrimitive`), made anew by every :meth:`fit` (and by
+        The fitted state (:class:`interprim.models.primitive.fitted.FittedPrimitive`), made anew by every :meth:`fit` (and by
         :meth:`load`); it computes the predictions.  The attributes below are read-only views of it;
         :meth:`with_fitted` gives a copy with some of them replaced.
     observed_dofs_, controlled_dofs_ : list of int
@@ -174,7 +174,7 @@ class InteractionPrimitive(Predictor):
         How well the DMPs represent the demonstrations, per agent (``"observed"``, ``"controlled"``):
         ``reconstruction`` (each demonstration rolled out from its own parameters, Eq. 1) and ``mean_offset``
         (the mean parameters' rollout against the demonstrations' mean), both as RMS error / the RMS spread
-        between demonstrations, and ``spread`` (:func:`interprim.dmp.representation_report`).  Above 0.5 ``fit``
+        between demonstrations, and ``spread`` (:func:`interprim.core.dmp.representation_report`).  Above 0.5 ``fit``
         warns (:class:`~interprim.RepresentationWarning`); also kept in ``selection_["representation"]``.
     sigma2_ : float
         Observation noise of Eq. 16 in use; ``phase_sigma2_`` the position noise of the likelihood phase
@@ -199,9 +199,9 @@ class InteractionPrimitive(Predictor):
     start_position_, start_velocity_ : ndarray, shape (n_latent_,)
         Mean start state of the demonstrations (latent DoFs; velocity per unit normalised time).
     input_mean_, input_std_, input_limit_ : ndarray, ndarray, float
-        Range of the observed agent's training frames (:mod:`interprim.input_range`).
+        Range of the observed agent's training frames (:mod:`interprim.core.input_range`).
     calibration_ : Calibration or None
-        Scales of the predictive std (:mod:`interprim.calibration`).
+        Scales of the predictive std (:mod:`interprim.models.primitive.calibration`).
     """
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
@@ -402,7 +402,7 @@ class InteractionPrimitive(Predictor):
             raise NotFittedError(f"this InteractionPrimitive is not fitted yet; call fit(demos) before {what}")
 
     def load_fitted(self, fitted) -> "InteractionPrimitive":
-        """Take the fitted state ``fitted``: a :class:`~interprim.fitted.FittedPrimitive`, or a dict of fitted
+        """Take the fitted state ``fitted``: a :class:`~interprim.models.primitive.fitted.FittedPrimitive`, or a dict of fitted
         attributes (names ending in ``_``, as :mod:`interprim.io` reads them from a model file) from which one is
         built with this estimator's parameters; returns ``self``."""
         if not isinstance(fitted, FittedPrimitive):
@@ -420,7 +420,7 @@ class InteractionPrimitive(Predictor):
 
     def with_fitted(self, **fitted) -> "InteractionPrimitive":
         """A copy of this fitted model with some fitted attributes (names ending in ``_``) replaced
-        (:meth:`FittedPrimitive.with_fitted <interprim.fitted.FittedPrimitive.with_fitted>`); ``self`` is
+        (:meth:`FittedPrimitive.with_fitted <interprim.models.primitive.fitted.FittedPrimitive.with_fitted>`); ``self`` is
         unchanged."""
         self._check_fitted("with_fitted")
         new = copy.copy(self)
@@ -447,11 +447,11 @@ class InteractionPrimitive(Predictor):
 
     def condition(self, stats, need_cov: bool):
         """Eq. 16-18 from sufficient statistics (:meth:`FittedPrimitive.condition
-        <interprim.fitted.FittedPrimitive.condition>`)."""
+        <interprim.models.primitive.fitted.FittedPrimitive.condition>`)."""
         return self._fitted("condition").condition(stats, need_cov)
 
     def predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None, workspace=None):
-        """:meth:`FittedPrimitive.predict_latent <interprim.fitted.FittedPrimitive.predict_latent>`."""
+        """:meth:`FittedPrimitive.predict_latent <interprim.models.primitive.fitted.FittedPrimitive.predict_latent>`."""
         return self._state().predict_latent(z, n_star, cost, robot_state, need_cov, robot_start, workspace)
 
     def phase_method_used(self) -> str:
@@ -462,12 +462,12 @@ class InteractionPrimitive(Predictor):
 
     def input_distance(self, frames) -> float:
         """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
-        (:mod:`interprim.input_range`); NaN for a model file without those statistics."""
+        (:mod:`interprim.core.input_range`); NaN for a model file without those statistics."""
         return self._fitted("input_distance").input_distance(frames)
 
     def cached(self, name: str, key: tuple, build):
         """The fitted state's store of derived values (:meth:`FittedPrimitive.cached
-        <interprim.fitted.FittedPrimitive.cached>`)."""
+        <interprim.models.primitive.fitted.FittedPrimitive.cached>`)."""
         return self._fitted("cached").cached(name, key, build)
 
     def _fitted(self, what: str) -> FittedPrimitive:
@@ -500,7 +500,7 @@ class InteractionPrimitive(Predictor):
         Returns
         -------
         Prediction
-            Computed by the fitted state (:meth:`FittedPrimitive.predict <interprim.fitted.FittedPrimitive.predict>`).
+            Computed by the fitted state (:meth:`FittedPrimitive.predict <interprim.models.primitive.fitted.FittedPrimitive.predict>`).
         """
         self._check_fitted("predict")
         return self._state().predict(partial, robot_state, dt, times, phase)
@@ -516,7 +516,7 @@ class InteractionPrimitive(Predictor):
     def save(self, path):
         """Save to a safe ``.npz`` model file (arrays + JSON metadata, no pickle); see :mod:`interprim.io`."""
         self._check_fitted("save")
-        from .io import save_model
+        from ...io import save_model
 
         save_model(self, path)
 
@@ -530,14 +530,14 @@ class InteractionPrimitive(Predictor):
     def from_state(cls, arrays: dict, meta: dict, source="<state>") -> "InteractionPrimitive":
         """The model of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's); raises
         :class:`~interprim.ModelFileError` naming ``source`` when they are inconsistent."""
-        from .io import model_from_state
+        from ...io import model_from_state
 
         return model_from_state(arrays, meta, cls, source)
 
     @classmethod
     def load(cls, path) -> "InteractionPrimitive":
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
-        from .io import load_model
+        from ...io import load_model
 
         return load_model(path, cls)
 
@@ -550,7 +550,7 @@ class InteractionPrimitive(Predictor):
                           if k in ("observed_dofs", "n_basis") or v != defaults.get(k, inspect.Parameter.empty))
         if getattr(self, "prior_", None) is None:
             return f"InteractionPrimitive({shown})"
-        from ._summary import one_line
+        from ..._summary import one_line
 
         return f"<InteractionPrimitive({shown}) {one_line(self)}>"
 
@@ -559,7 +559,7 @@ class InteractionPrimitive(Predictor):
         damping and the held-out error against the prior mean (from :attr:`selection_`), and whether the
         uncertainty is calibrated.  ``fit_seconds``: a fit time to report (``interprim fit`` passes it)."""
         self._check_fitted("summary")
-        from ._summary import summary
+        from ..._summary import summary
 
         return summary(self, fit_seconds)
 
@@ -616,7 +616,7 @@ def choose_n_basis(params: dict, arrays, dt: float, columns, obs, ctrl, kk, grid
     ``n`` points (every column divided by its spread over all frames).  This is the error of the model's own mean
     on a movement it did not see: it falls while more basis functions remove the representation's bias (a
     periodic movement that 20 cannot follow) and stops falling once the spread between demonstrations dominates.
-    The smallest ``K`` within one paired standard error of the best (:func:`interprim.cv.within_one_se`), or within
+    The smallest ``K`` within one paired standard error of the best (:func:`interprim.core.cv.within_one_se`), or within
     1 % of it, is kept.
 
     Returns
@@ -624,8 +624,8 @@ def choose_n_basis(params: dict, arrays, dt: float, columns, obs, ctrl, kk, grid
     dict
         ``chosen``, ``candidates``, ``cv_error`` (mean held-out error per candidate) and ``rule``.
     """
-    from .cv import within_one_se
-    from .preprocessing import time_normalise
+    from ...core.cv import within_one_se
+    from ...core.preprocessing import time_normalise
 
     T_min = min(a.shape[0] for a in arrays)
     cands = [int(k) for k in grid if k + 1 <= max(T_min // 2, 3)] or [min(int(k) for k in grid)]

@@ -68,11 +68,11 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from ._validation import as_2d_finite
-from .contract import GridPrediction
-from .cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
-from .errors import NotFittedError
+from ..core.blas import one_blas_thread
+from ..core.validation import as_2d_finite
+from .base import GridPrediction
+from ..core.cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
+from ..core.errors import NotFittedError
 
 __all__ = ["CouplingModel", "CouplingPrediction", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
            "DEFAULT_BANDWIDTH_GRID"]
@@ -127,7 +127,7 @@ def _smooth_time(v, w):
     return (c[..., hi, :] - c[..., lo, :]) / (hi - lo)[:, None]
 
 
-#: the prediction of :meth:`CouplingModel.predict` (:class:`interprim.contract.GridPrediction`; the old name is kept)
+#: the prediction of :meth:`CouplingModel.predict` (:class:`interprim.models.base.GridPrediction`; the old name is kept)
 CouplingPrediction = GridPrediction
 
 
@@ -297,7 +297,7 @@ class CouplingModel:
         self.durations_ = (lengths - 1) * (float(dt) if dt is not None else 1.0)
         rel = lengths.mean() / lengths
         self.clock_rel_std_ = float(np.std(rel - 1.0)) if n > 1 else 0.0
-        from .preprocessing import time_normalise
+        from ..core.preprocessing import time_normalise
 
         Y = np.stack([time_normalise(a, int(self.n_out)) for a in arrays])  # (n, n_out, D)
         self.Y_ = Y
@@ -548,7 +548,7 @@ class CouplingModel:
         loss = loss.mean(axis=1)  # per candidate and held-out demonstration
         scores = loss.mean(axis=1)
         best = int(np.argmin(scores))
-        # the one-standard-error rule, paired over the held-out demonstrations (interprim.cv)
+        # the one-standard-error rule, paired over the held-out demonstrations (interprim.core.cv)
         gain, se = (float(x) for x in paired_gain(loss[0], loss[best]))
         if best == 0 or gain <= se:
             choice = 0

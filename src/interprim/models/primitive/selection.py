@@ -28,7 +28,7 @@ model by K-fold cross-validation on the training demonstrations:
    ``gamma = 1``, broken by the observed agent's error) (Hastie et al.'s
    one-standard-error rule: a few dozen demonstrations make the CV noisy), the standard
    error being that of the paired per-case differences from the best candidate
-   (:func:`interprim.cv.within_one_se`; every candidate is scored on the same held-out cases, so their own
+   (:func:`interprim.core.cv.within_one_se`; every candidate is scored on the same held-out cases, so their own
    spread cancels: the unpaired standard error counted it and kept ``gamma = 1``, the prior mean, on NuiSI,
    where the coupling helps).  ``gamma`` in [0, 1] shrinks the *cross-agent* block of the
    covariance (observed x controlled) towards zero: the controlled agent's
@@ -43,7 +43,7 @@ model by K-fold cross-validation on the training demonstrations:
 
 All ``sigma^2`` candidates cost one eigendecomposition per (fold, ``lambda``,
 held-out demo, fraction): with ``A0 = L Sigma L^T`` (compressed observation,
-see :mod:`interprim.gaussian`) ``= U diag(e) U^T`` the posterior mean for any
+see :mod:`interprim.core.gaussian`) ``= U diag(e) U^T`` the posterior mean for any
 ``sigma^2`` is ``mu + Sigma L^T U diag(1 / (e + sigma^2)) U^T r``.
 
 The same loop gives the held-out marginal likelihood of the *positions* of the
@@ -60,13 +60,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._blas import single_thread
-from .cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
-from .gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
+from ...core.blas import single_thread
+from ...core.cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
+from ...core.gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
                        shrinkage_intensity)
-from .phase.dtw import open_end_dtw
-from .phase.likelihood import observation_design
-from .preprocessing import time_normalise
+from ...phase.dtw import open_end_dtw
+from ...phase.likelihood import observation_design
+from ...core.preprocessing import time_normalise
 
 __all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
 
@@ -349,7 +349,7 @@ def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):
     """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate."""
-    from .phase.likelihood import _S_MIN, _log_speed_prior
+    from ...phase.likelihood import _S_MIN, _log_speed_prior
 
     if max_cases <= 0:
         return None
@@ -389,7 +389,7 @@ def _refined_phase_error(model, kept, s2, b) -> float:
     cases' grid curves), each estimate refined as :func:`interprim.phase.likelihood.estimate_phase` refines
     its grid maximum (Brent between the grid neighbours): the figure ``phase_method="auto"`` compares with the
     learned phase's cross-validated error (the grid maximum alone is off by up to half a grid step, ~8 %)."""
-    from .phase.likelihood import _brent_min, _log_speed_prior
+    from ...phase.likelihood import _brent_min, _log_speed_prior
 
     n_o, q = model.n_observed_latent_, model.params_per_dof_
     s2a = np.array([s2])

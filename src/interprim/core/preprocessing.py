@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validation import as_2d_finite, check_times
+from .validation import as_2d_finite, check_times
 
 __all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "derivatives", "PCA",
            "time_normalise"]
@@ -137,7 +137,7 @@ def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
         Positions, time on axis 0.
     ds : float
         Sampling interval (in whatever time unit the derivatives should use;
-        interprim uses normalised time, see :mod:`interprim.dmp`).
+        interprim uses normalised time, see :mod:`interprim.core.dmp`).
     window : int or None
         Savitzky-Golay window length in frames (odd; it is shrunk to the
         largest odd number not above ``T`` when the movement is short).

@@ -45,7 +45,7 @@ def input_distance(model, frames) -> float:
 
 
 def mark(model, prediction, dist, warn: bool = True):
-    """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.errors.OutOfRangeWarning`)
+    """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)

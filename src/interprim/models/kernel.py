@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contract import GridPrediction
-from .baselines import AlignedBaseline
-from .protocol import observed_frames
+from .base import GridPrediction
+from .demonstrations import AlignedBaseline
+from ..model_selection.prefixes import observed_frames
 
 __all__ = ["KernelDemonstrations"]
 
@@ -207,7 +207,7 @@ class KernelDemonstrations(AlignedBaseline):
 
     # -- prediction ------------------------------------------------------------------------------
     def to_state(self):
-        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.models.base.Predictor.to_state`)."""
         self._check_fitted("to_state")
         arrays = {"demos": np.concatenate(self.demos_), "lengths": np.array([len(a) for a in self.demos_]),
                   "std_scale": self.std_scale_, "std_floor": self.std_floor_}
@@ -243,7 +243,7 @@ class KernelDemonstrations(AlignedBaseline):
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
         """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
-        :meth:`~interprim.evaluation.baselines.AlignedBaseline.predict_from_alignment`; sets ``weights_``)."""
+        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; sets ``weights_``)."""
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_

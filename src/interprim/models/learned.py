@@ -6,18 +6,18 @@ clock, a response better than the mean):
 1. **timing** -- :class:`~interprim.phase.learned.LearnedPhase` (extends Sec. III-B): the phase and the duration
    regressed on features of the observed prefix, trained on the demonstrations' own prefixes and chosen by
    leave-one-demonstration-out CV (the clock when nothing beats it);
-2. **coupling** -- :class:`~interprim.coupling.CouplingModel` (Eq. 17-18 with the observed prefix resampled on
+2. **coupling** -- :class:`~interprim.models.coupling.CouplingModel` (Eq. 17-18 with the observed prefix resampled on
    ``[0, s]`` as the observation): conditioning trained on prefixes taken at phases jittered by the timing
    model's *own* held-out error, so that it is robust to the phase error it will see; the mean when nothing
    beats it; calibrated predictive std.
 
 The phase error the coupling is trained with is the learned phase's cross-validated error at each elapsed
 time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The model follows the prediction
-contract of :mod:`interprim.contract` (``fit``, ``predict``, ``stream``, ``save``/``load``, ``get_params``/
-``set_params``); its prediction is a :class:`~interprim.contract.GridPrediction` whose ``std`` includes the
+contract of :mod:`interprim.models.base` (``fit``, ``predict``, ``stream``, ``save``/``load``, ``get_params``/
+``set_params``); its prediction is a :class:`~interprim.models.base.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP, no rollout from a
+It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP, no rollout from a
 robot state and no streaming state here (each :meth:`predict` is a pure function of the prefix, so a stream
 of predictions equals the batch ones by construction).
 """
@@ -26,18 +26,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from ._validation import as_2d_finite
-from .contract import GridPrediction, Predictor
+from ..core.blas import one_blas_thread
+from ..core.validation import as_2d_finite
+from .base import GridPrediction, Predictor
 from .coupling import CouplingModel
-from .phase.learned import LearnedPhase
+from ..phase.learned import LearnedPhase
 
 __all__ = ["LearnedInteraction"]
 
 
 def _Prediction(cp: GridPrediction, est) -> GridPrediction:
     """``cp`` (the coupling's prediction) placed in time by the phase estimate ``est``, with the timing
-    uncertainty added to its std (:meth:`~interprim.contract.GridPrediction.std`)."""
+    uncertainty added to its std (:meth:`~interprim.models.base.GridPrediction.std`)."""
     out = GridPrediction(cp.times, cp.mean, cp.std_values, est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
                          cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
                          conditioned=cp.conditioned)
@@ -55,7 +55,7 @@ class LearnedInteraction(Predictor):
         Columns of the observed agent.
     phase_kwargs, coupling_kwargs : dict, optional
         Extra arguments of :class:`~interprim.phase.learned.LearnedPhase` and
-        :class:`~interprim.coupling.CouplingModel`.
+        :class:`~interprim.models.coupling.CouplingModel`.
 
     Attributes
     ----------
@@ -117,7 +117,7 @@ class LearnedInteraction(Predictor):
         return _Prediction(cp, est)
 
     def to_state(self):
-        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
+        """``(arrays, meta)`` of the fitted model (see :meth:`interprim.models.base.Predictor.to_state`)."""
         self._check_fitted("to_state")
         pa, pm = self.phase_.to_state()
         ca, cm = self.coupling_.to_state()

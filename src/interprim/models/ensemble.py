@@ -1,26 +1,28 @@
 """The model chosen on the user's own demonstrations: several families compared on held-out folds, then blended.
 
 :class:`AutoInteraction` (what ``interprim fit`` gives by default) runs the real-time protocol of
-:mod:`interprim.evaluation.realtime` in a ``folds``-fold cross-validation on the *training* demonstrations for
+:mod:`interprim.model_selection.realtime` in a ``folds``-fold cross-validation on the *training* demonstrations for
 each candidate family -- the Interaction Primitive with the library's defaults (``ip``),
-:class:`~interprim.learned.LearnedInteraction` (``learned``), the kernel-weighted demonstrations (``kernel``,
-:class:`~interprim.evaluation.kernel.KernelDemonstrations`), the nearest demonstration (``nn``) and the mean
+:class:`~interprim.models.learned.LearnedInteraction` (``learned``), the kernel-weighted demonstrations (``kernel``,
+:class:`~interprim.models.kernel.KernelDemonstrations`), the nearest demonstration (``nn``) and the mean
 demonstration at the mean speed (``prior``) -- and keeps, for every held-out case, each family's prediction of the
 controlled agent over the next ``horizon`` seconds (:class:`CrossValidation`).  From them it fits a :class:`Blend`:
 the convex weights that minimise the protocol's own error (stacking; a choice of one family made on 12-20
 demonstrations proved noisy: on the project's hold-out it picked a worse family on one NuiSI interaction of six),
 and a variance fitted to the held-out errors step by step over the look-ahead.  ``combine="best"`` keeps the
 family with the smallest held-out error alone.  Predictions, streams and model files follow
-:mod:`interprim.contract`; ``selection_`` says what was compared and chosen, and by how much.
+:mod:`interprim.models.base`; ``selection_`` says what was compared and chosen, and by how much.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from .contract import BaseStream, GridPrediction, Predictor, place_in_time
-from .preprocessing import interp_columns
+from ..core.blas import one_blas_thread
+from ..model_selection.realtime import RealTimeConfig, realtime_sweep, summarise_realtime
+from . import registry
+from .base import BaseStream, GridPrediction, Predictor, place_in_time
+from ..core.preprocessing import interp_columns
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
 
@@ -29,10 +31,10 @@ CANDIDATES = ("ip", "learned", "kernel", "nn", "prior")
 
 
 def _classes():
-    from .evaluation.baselines import NearestNeighbour, PriorMean
-    from .evaluation.kernel import KernelDemonstrations
+    from .demonstrations import NearestNeighbour, PriorMean
+    from .kernel import KernelDemonstrations
     from .learned import LearnedInteraction
-    from .primitive import InteractionPrimitive
+    from .primitive.estimator import InteractionPrimitive
 
     return {c.__name__: c for c in (InteractionPrimitive, LearnedInteraction, KernelDemonstrations,
                                     NearestNeighbour, PriorMean)}
@@ -47,7 +49,7 @@ class CrossValidation:
 
     One case is one evaluated frame of one held-out training demonstration; for every family that could be
     fitted on every inner fold, the prediction of the next ``horizon`` seconds placed in time by the family's own
-    timing (:func:`interprim.contract.place_in_time`), and the truth.
+    timing (:func:`interprim.models.base.place_in_time`), and the truth.
 
     Attributes
     ----------
@@ -63,8 +65,6 @@ class CrossValidation:
     """
 
     def __init__(self, make, demos, observed_dofs, dt, cfg, k):
-        from .evaluation.realtime import realtime_sweep, summarise_realtime
-
         self.observed = [int(i) for i in observed_dofs]
         self.point_dim = int(cfg.point_dim)
         self.errors, per = {}, {}
@@ -167,12 +167,12 @@ class CrossValidation:
 class AutoInteraction(Predictor):
     """The model chosen on the user's own demonstrations: several families compared on held-out folds.
 
-    ``fit`` runs the real-time protocol of :mod:`interprim.evaluation.realtime` in a ``folds``-fold
+    ``fit`` runs the real-time protocol of :mod:`interprim.model_selection.realtime` in a ``folds``-fold
     cross-validation on the *training* demonstrations for each candidate family and then, with ``combine="blend"``
     (the default), fits a convex combination of the families' predictions placed in time, with weights that
     minimise the held-out error (stacking) and a std calibrated to the held-out error step by step over the
     look-ahead (:class:`Blend`); with ``combine="best"`` it uses the family with the smallest held-out error alone.
-    Predictions, streams and model files follow :mod:`interprim.contract`; ``selection_`` says what was chosen and
+    Predictions, streams and model files follow :mod:`interprim.models.base`; ``selection_`` says what was chosen and
     by how much.
 
     Parameters
@@ -181,7 +181,7 @@ class AutoInteraction(Predictor):
         The observed agent's columns.
     candidates : sequence of str, default CANDIDATES
         Families to compare, among ``ip``, ``learned``, ``ip-paper``, ``kernel``, ``nn``, ``prior``
-        (:func:`interprim.evaluation.realtime.default_methods`).
+        (:data:`interprim.models.registry.FAMILIES`).
     combine : {"blend", "best"}, default "blend"
         Blend the families, or keep the best one.
     folds : int, default 3
@@ -196,7 +196,7 @@ class AutoInteraction(Predictor):
         Savitzky-Golay window of the Interaction Primitive candidates.
     point_dim : int, default 1
         Columns per point in the error (3 for 3-D positions), as in
-        :class:`~interprim.evaluation.realtime.RealTimeConfig`.
+        :class:`~interprim.model_selection.realtime.RealTimeConfig`.
 
     Attributes
     ----------
@@ -233,12 +233,10 @@ class AutoInteraction(Predictor):
         self.point_dim = point_dim
 
     def _check(self):
-        from .evaluation.realtime import default_methods
-
-        known = default_methods([0])
+        known = list(registry.FAMILIES)
         bad = [c for c in self.candidates if c not in known]
         if bad or not self.candidates:
-            raise ValueError(f"candidates must name some of {sorted(known)}, got {list(self.candidates)!r}")
+            raise ValueError(f"candidates must name some of {known}, got {list(self.candidates)!r}")
         if self.combine not in COMBINE:
             raise ValueError(f"combine must be one of {COMBINE}, got {self.combine!r}")
         if not (isinstance(self.folds, (int, np.integer)) and self.folds >= 2):
@@ -252,11 +250,12 @@ class AutoInteraction(Predictor):
 
     def factories(self) -> dict:
         """``{family: factory of an unfitted estimator}`` of the candidates, with this model's settings."""
-        from .evaluation.realtime import default_methods
+        return registry.factories(self.candidates, self.settings())
 
-        make = default_methods([int(i) for i in self.observed_dofs], smoothing_window=self.smoothing_window,
-                               n_basis=self.n_basis)
-        return {c: make[c] for c in self.candidates}
+    def settings(self) -> "registry.Settings":
+        """The settings every member is built with (given once here and passed down to each family)."""
+        return registry.Settings(tuple(self.observed_dofs), n_basis=self.n_basis,
+                                 smoothing_window=self.smoothing_window, horizon=float(self.horizon))
 
     @one_blas_thread
     def fit(self, demos, dt: float | None = None):
@@ -275,8 +274,6 @@ class AutoInteraction(Predictor):
         AutoInteraction
             ``self``.
         """
-        from .evaluation.realtime import RealTimeConfig
-
         self._check()
         if dt is None:
             dt = getattr(demos, "dt", None) or 0.01
@@ -321,7 +318,7 @@ class AutoInteraction(Predictor):
         return self
 
     def predict(self, partial, **kwargs):
-        """The model's prediction (:meth:`interprim.contract.Predictor` contract)."""
+        """The model's prediction (:meth:`interprim.models.base.Predictor` contract)."""
         self._check_fitted("predict")
         return self.model_.predict(partial, **kwargs)
 
@@ -401,7 +398,9 @@ def _restore(cls_name, params, arrays, state):
         model = Blend(**params)
         model.load_state(arrays, state)
         return model
-    cls = _classes()[cls_name]
+    cls = registry.class_named(cls_name)
+    if cls is None:
+        raise ValueError(f"a blend member of unknown class {cls_name!r}")
     if hasattr(cls, "from_state"):  # the Interaction Primitive restores itself whole
         return cls.from_state(arrays, state)
     model = cls(**params)
@@ -413,7 +412,7 @@ class Blend(Predictor):
     """A convex combination of fitted models' predictions, each placed in time by its own timing.
 
     After ``k`` observed frames each member ``m`` says where "now" is in its normalised time (``s_m``) and how long
-    the movement lasts (``D_m``; :func:`interprim.contract.place_in_time`).  The blend's own timing is the weighted
+    the movement lasts (``D_m``; :func:`interprim.models.base.place_in_time`).  The blend's own timing is the weighted
     mean ``s = sum w_m s_m``, ``D = sum w_m D_m``; its mean at normalised time ``u`` is ``sum w_m y_m(u_m)``
     with ``u_m = s_m + (u - s) D / D_m`` ahead of now (the same instant in seconds for every member) and
     ``u_m = u s_m / s`` before it.  Its variance is the mixture's, ``sum w_m (sd_m^2 + (y_m - mean)^2)``,
@@ -425,7 +424,7 @@ class Blend(Predictor):
     ----------
     observed_dofs : sequence of int
     weights : dict
-        ``{family: weight}`` (families of :func:`interprim.evaluation.realtime.default_methods`).
+        ``{family: weight}`` (families of :data:`interprim.models.registry.FAMILIES`).
     scales : dict, optional
         ``{"a": (H, D), "b": (H, D)}``, the variance model per step ahead and column (default ``a = 1, b = 0``:
         the spread alone).
@@ -466,12 +465,11 @@ class Blend(Predictor):
 
     def fit(self, demos, dt: float | None = None):
         """Fit every member with a positive weight on ``demos`` (the weights and scales are kept)."""
-        from .evaluation.realtime import default_methods
-
         if dt is None:
             dt = getattr(demos, "dt", None) or 0.01
-        make = default_methods([int(i) for i in self.observed_dofs], smoothing_window=self.smoothing_window,
-                               n_basis=self.n_basis)
+        make = registry.factories([m for m in self.weights if m in registry.FAMILIES], registry.Settings(
+            tuple(self.observed_dofs), n_basis=self.n_basis, smoothing_window=self.smoothing_window,
+            horizon=float(self.horizon)))
         bad = [m for m in self.weights if m not in make]
         if bad or not self.weights:
             raise ValueError(f"weights must name some of {sorted(make)}, got {list(self.weights)!r}")
@@ -489,7 +487,7 @@ class Blend(Predictor):
         return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
 
     def combine(self, preds: dict, n_frames: int, n_grid: int = 401):
-        """The blended :class:`~interprim.contract.GridPrediction` of the members' predictions ``{family: pred}``
+        """The blended :class:`~interprim.models.base.GridPrediction` of the members' predictions ``{family: pred}``
         after ``n_frames`` observed frames."""
         names = list(self.members_)
         w = np.array([self.weights[m] for m in names], dtype=np.float64)
@@ -555,7 +553,7 @@ class Blend(Predictor):
 
 class BlendStream(BaseStream):
     """Online :class:`Blend`: one stream per member, combined after every frame (``update`` equals ``predict``;
-    ``extend`` is :class:`~interprim.contract.BaseStream`'s, frame by frame)."""
+    ``extend`` is :class:`~interprim.models.base.BaseStream`'s, frame by frame)."""
 
     def __init__(self, blend: Blend):
         self.blend = blend

@@ -52,8 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cv import folds, observed_frames
-from .preprocessing import interp_columns
+from ...core.cv import folds, observed_frames
+from ...core.preprocessing import interp_columns
 
 __all__ = ["Calibration", "fit_calibration", "fold_model"]
 
@@ -220,7 +220,7 @@ def fold_model(model, keep, observed=None):
     (``phase_model_``) is refitted on the kept demonstrations' observed columns ``observed`` (one array per
     demonstration, the model's latent space) when given: it is fitted on the very prefixes it is asked about,
     and kept as is it would make the held-out timing, and so the calibrated band, optimistic."""
-    from .gaussian import fit_prior, shrink_cross
+    from ...core.gaussian import fit_prior, shrink_cross
 
     keep = np.asarray(keep, dtype=np.intp)
     thetas = model.thetas_[keep]
@@ -231,7 +231,7 @@ def fold_model(model, keep, observed=None):
     shrink_cross(prior, gamma, model.n_observed_latent_ * model.params_per_dof_)
     phase_model = getattr(model, "phase_model_", None)
     if observed is not None and phase_model is not None:
-        from .phase.learned import LearnedPhase
+        from ...phase.learned import LearnedPhase
 
         phase_model = LearnedPhase(**phase_model.get_params()).fit([observed[i] for i in keep], dt=model.dt_)
     return model.with_fitted(thetas_=thetas, durations_=durations, mean_duration_=float(durations.mean()),
@@ -383,7 +383,7 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
     demos : list of ndarray, shape (T_i, D)
         The training demonstrations in data columns, at ``model.dt_``.
     n_folds : int
-        Folds (``"contiguous"`` runs of :func:`interprim.cv.folds`; at most one per demonstration).
+        Folds (``"contiguous"`` runs of :func:`interprim.core.cv.folds`; at most one per demonstration).
     fractions : sequence of float
         Fractions of each held-out demonstration observed.
     min_demos : int

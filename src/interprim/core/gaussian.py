@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._compiled import registry as _kernels  # light: the kernels themselves load on first use
+from .._compiled import registry as _kernels  # light: the kernels themselves load on first use
 
 __all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._blas import one_blas_thread
+from ..core.blas import one_blas_thread
 
 __all__ = ["Recogniser", "Recognition"]
 
@@ -97,7 +97,7 @@ class Recogniser:
         if not tot > 0:
             raise ValueError("prior probabilities must be positive")
         self.log_prior = {k: float(np.log(max(prior[k] / tot, 1e-300))) for k in models}
-        from .phase.likelihood import phase_noise
+        from ..phase.likelihood import phase_noise
 
         if isinstance(noise, str):
             if noise not in ("shared", "own"):
@@ -113,13 +113,13 @@ class Recogniser:
     @one_blas_thread
     def recognise(self, partial, respond: bool = False) -> Recognition:
         """Posterior probability of each interaction given the observed prefix ``partial`` (M, n_observed)."""
-        from ._validation import as_2d_finite
-        from .phase.dtw import open_end_dtw
-        from .phase.likelihood import estimate_phase
+        from ..core.validation import as_2d_finite
+        from ..phase.dtw import open_end_dtw
+        from ..phase.likelihood import estimate_phase
 
         scores, phases = {}, {}
         for k, model in self.models.items():
-            m = model.fitted_  # the fitted state (interprim.fitted)
+            m = model.fitted_  # the fitted state (interprim.models.primitive.fitted)
             o = as_2d_finite(partial, "partial", n_cols=len(m.observed_dofs_), min_rows=2)
             z = m.observed_to_latent(o)
             N1 = m.reference_.shape[0] - 1

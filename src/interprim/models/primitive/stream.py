@@ -3,26 +3,26 @@
 :class:`Stream` keeps the frames seen and the incremental open-end DTW (Eq. 5-8) or the
 likelihood phase tracker (:class:`interprim.phase.tracking._Tracker`, which ends where the batch
 search ends), conditions on all frames seen at the phase found (Eq. 15-18), and returns a
-:class:`~interprim.prediction.Prediction` per frame: the one ``predict`` gives for the same frames.
+:class:`~interprim.models.primitive.prediction.Prediction` per frame: the one ``predict`` gives for the same frames.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from ._compiled import registry as kernels
-from .contract import BaseStream
-from ._validation import as_2d_finite, as_frame
-from .input_range import mark
-from .phase import IncrementalDTW, estimate_phase, movement_prefix
+from ...core.blas import one_blas_thread
+from ..._compiled import registry as kernels
+from ..base import BaseStream
+from ...core.validation import as_2d_finite, as_frame
+from ...core.input_range import mark
+from ...phase import IncrementalDTW, estimate_phase, movement_prefix
 from .prediction import Prediction
 
 __all__ = ["Stream"]
 
 
 class Stream(BaseStream):
-    """Online use of a fitted :class:`~interprim.primitive.InteractionPrimitive`: one observed frame at a time.
+    """Online use of a fitted :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: one observed frame at a time.
 
     Each :meth:`update` adds one column to the open-end DTW (Eq. 5-8, ``O(N D)``)
     and conditions on all frames seen so far at their new phases (Eq. 15-18).
@@ -32,7 +32,7 @@ class Stream(BaseStream):
     With the likelihood phase (what ``phase_method="auto"`` picks on most data) the phase is tracked on a lattice of speeds whose
     scores are extended frame by frame (:class:`interprim.phase.tracking._Tracker`) and then taken
     to the maximum of the log posterior by the batch search's own last step, so that the stream's
-    phase, and hence its prediction, is :meth:`~interprim.primitive.InteractionPrimitive.predict`'s
+    phase, and hence its prediction, is :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict`'s
     on the same frames (issue 12: within 1e-3, measured ~1e-6).  Eq. 16-18 are then evaluated at that
     phase for all frames seen.
     """
@@ -47,7 +47,7 @@ class Stream(BaseStream):
         # the compiled per-frame step when the kernels are in use (see interprim._compiled.loader)
         self._ws = None
         if kernels.in_use():
-            from ._compiled.observation import StatsWorkspace
+            from ..._compiled.observation import StatsWorkspace
 
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model.params_per_dof_, model.observation)
         self._n = 0
@@ -89,7 +89,7 @@ class Stream(BaseStream):
         return self._check_range(p, frame)
 
     def _check_range(self, p, frames):
-        """Mark ``p`` with the largest input distance of the frames seen so far (:mod:`interprim.input_range`),
+        """Mark ``p`` with the largest input distance of the frames seen so far (:mod:`interprim.core.input_range`),
         warning once when it leaves the training range."""
         m = self.model
         mean = getattr(m, "input_mean_", None)
@@ -137,7 +137,7 @@ class Stream(BaseStream):
         if method == "likelihood":  # local search around the previous estimate on a speed lattice
             tr = self._tracker
             if tr is None or tr.model is not m:
-                from .phase.tracking import _Tracker
+                from ...phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
         z_all = self._buf[: self._n]
@@ -151,7 +151,7 @@ class Stream(BaseStream):
         :class:`Prediction` for the last of them.
 
         The answer is the one ``k`` calls of :meth:`update` give for their last frame, exactly (the same
-        numbers), and so the one :meth:`~interprim.primitive.InteractionPrimitive.predict` gives for all the
+        numbers), and so the one :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` gives for all the
         frames seen: the DTW and learned phases are functions of the frames, and with the likelihood phase
         the tracker walks its lattice frame by frame as :meth:`update` does, so that its state does not
         depend on how frames were grouped.  It costs less: for each of the ``k`` frames only
@@ -201,7 +201,7 @@ class Stream(BaseStream):
         if method == "likelihood":
             tr = self._tracker
             if tr is None or tr.model is not m:
-                from .phase.tracking import _Tracker
+                from ...phase.tracking import _Tracker
 
                 self._tracker = tr = _Tracker(m)
         dtw, buf = self._dtw, self._buf

@@ -39,7 +39,7 @@ class OutOfRangeWarning(UserWarning):
     """An observation lies far outside what the model was trained on (wrong units, a wrong column order, another
     frame of reference, a tracking failure): the prediction extrapolates and is not to be trusted.  The
     prediction carries ``input_distance`` and ``out_of_range``
-    (:attr:`interprim.primitive.Prediction.out_of_range`)."""
+    (:attr:`interprim.models.primitive.estimator.Prediction.out_of_range`)."""
 
 
 class RepresentationWarning(UserWarning):

@@ -1,8 +1,8 @@
 """The model's belief about the whole interaction after a partial observation (paper Sec. III-C/D, Eq. 1, 18).
 
 A :class:`Prediction` holds the posterior ``p(theta | tau_o)`` (Eq. 18) of one
-:meth:`~interprim.primitive.InteractionPrimitive.predict` or
-:meth:`~interprim.stream.Stream.update` and integrates the DMPs (Eq. 1) from it:
+:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` or
+:meth:`~interprim.models.primitive.stream.Stream.update` and integrates the DMPs (Eq. 1) from it:
 the whole movement of both agents, its uncertainty and samples, the robot's
 response from the current phase and the completion of the observed agent.
 :class:`MeanRollout` is the mean trajectory of many predictions of one model on
@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 
-from ._blas import one_blas_thread
-from ._compiled import registry as kernels
-from .contract import BasePrediction
-from .gaussian import Posterior, sample
+from ...core.blas import one_blas_thread
+from ..._compiled import registry as kernels
+from ..base import BasePrediction
+from ...core.gaussian import Posterior, sample
 
 __all__ = ["Prediction", "MeanRollout"]
 
@@ -152,7 +152,7 @@ class Prediction(BasePrediction):
 
     def _calibration_scale(self, n: int):
         """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``
-        (:mod:`interprim.calibration`: per column, at this prediction's phase and each point's look-ahead
+        (:mod:`interprim.models.primitive.calibration`: per column, at this prediction's phase and each point's look-ahead
         ``u - phase``), or ``None``."""
         m = self._m
         cal = getattr(m, "calibration_", None)
@@ -166,7 +166,7 @@ class Prediction(BasePrediction):
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
         ``calibrated=True`` (default): the posterior std (Eq. 18) scaled by the model's
-        :class:`~interprim.calibration.Calibration` (held-out errors on the training demonstrations), per
+        :class:`~interprim.models.primitive.calibration.Calibration` (held-out errors on the training demonstrations), per
         column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
         included), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what happens;
         ``False``, or a model without calibration: the posterior std itself.
@@ -248,7 +248,7 @@ class Prediction(BasePrediction):
         return t, (lat if Mc is None else lat @ Mc + offc)
 
     def _response_reference(self, n: int = 100, state=None):
-        """:meth:`response` with :meth:`interprim.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
+        """:meth:`response` with :meth:`interprim.core.dmp.LinearRollout.design` (numpy; the fast path's reference)."""
         m = self._m
         n_o = m.n_observed_latent_
         s0 = self.normalised_time

@@ -5,7 +5,7 @@ Two rules:
 * **How much is observed.** A held-out demonstration of ``T`` frames observed "``p`` % of the way" shows
   its first :func:`observed_frames` frames: ``round(p T)``, at least 3 (the fewest frames that give a
   phase, a speed and the derivatives of Eq. 15) and at most ``T``.  The rule is defined once, in
-  :func:`interprim.cv.observed_frames` (the core's own cross-validations use it too), and re-exported here.
+  :func:`interprim.core.cv.observed_frames` (the core's own cross-validations use it too), and re-exported here.
 * **Causality.** The first ``k`` frames are what a robot would have had at the time of frame ``k``: when the
   demonstrations were interpolated onto a uniform grid from raw samples (NuiSI's ~9 Hz skeletons, a
   resampled recording), frame ``k - 1`` of the grid can be built from a raw sample recorded *after* it.  A
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cv import MIN_OBSERVED_FRAMES, observed_frames
+from ..core.cv import MIN_OBSERVED_FRAMES, observed_frames
 
 __all__ = ["observed_frames", "MIN_OBSERVED_FRAMES", "causal_prefix", "Prefixes"]
 

@@ -1,0 +1,352 @@
+"""The scorer of the real-time protocol (a robot's view: predictions in seconds from now, from causal prefixes).
+
+:func:`realtime_fold` scores one fitted estimator on one held-out demonstration, :func:`realtime_sweep` runs it
+over folds, :func:`summarise_realtime` averages the records.  It takes factories of estimators and names no model:
+the ensemble's inner cross-validation (:mod:`interprim.models.ensemble`) and the reports
+(:mod:`interprim.evaluation.realtime`, which documents the protocol) both use it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.cv import folds as cv_folds
+from ..core.preprocessing import interp_columns, time_normalise
+from ..models.base import place_in_time
+from .metrics import Z90, coverage, point_rms, z_ratio
+from .prefixes import Prefixes, observed_frames
+
+__all__ = ["RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold", "folds",
+           "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
+
+#: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at least 2)
+MIN_DEMONSTRATIONS = 3
+#: from this many demonstrations (leave-one-out), every default method can be fitted on every training fold
+ALL_METHODS_FROM = 5
+
+
+@dataclass(frozen=True)
+class RealTimeConfig:
+    """Settings of the real-time protocol.
+
+    Parameters
+    ----------
+    horizon : float
+        Seconds ahead that are predicted after each observed frame.
+    start, stop : float
+        Fractions of the held-out movement between which frames are evaluated.
+    stride : int
+        Evaluate every ``stride``-th frame in that range (1 = every frame).
+    n_grid : int
+        Points of the normalised-time grid on which predictions are interpolated.
+    point_dim : int
+        Columns per point (3 for 3-D positions: errors are Euclidean distances of points), 1 for scalars.
+    """
+
+    horizon: float = 0.25
+    start: float = 0.2
+    stop: float = 0.9
+    stride: int = 1
+    n_grid: int = 201
+    point_dim: int = 1
+
+
+def mean_duration(demos) -> float:
+    """Mean duration of the demonstrations in frames - 1 (the clock's)."""
+    return float(np.mean([len(d) - 1 for d in demos]))
+
+
+def mean_demo(demos, n: int = 201):
+    """``(mean (n, D), mean duration in frames - 1)`` of time-normalised demonstrations."""
+    Y = np.stack([time_normalise(np.asarray(d, dtype=np.float64), n) for d in demos])
+    return Y.mean(axis=0), mean_duration(demos)
+
+
+def _interp_rows(u, grid, Y):
+    """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
+    return interp_columns(np.clip(u, 0.0, 1.0), grid, Y)
+
+
+def _timing(pred, k, dt, mean_dur_s):
+    """``(phase s at frame k, duration in s)`` of a prediction (:func:`interprim.models.base.place_in_time`)."""
+    return place_in_time(pred, k, dt, mean_dur_s)
+
+
+def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
+                  name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
+                  prefix=None, oracle=None, std: bool = True, references: bool = True) -> list:
+    """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
+
+    Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
+    ``{"method", "k", "fraction", "phase_true", "phase", "phase_err", "rt_ctrl", "rt_obs", "cov_ctrl",
+    "cov_obs", "z_ctrl", "z_obs"}`` (``z_*``: RMS error / RMS std over the horizon; NaN without a std).
+
+    ``frames``: the numbers of frames seen ``k`` to evaluate instead of the protocol's (``cfg.start`` to
+    ``cfg.stop``, every ``cfg.stride``-th), e.g. every frame for a figure.  ``trace=True`` adds what the
+    numbers were computed from to every record (for figures; not JSON-serialisable): ``"t_ahead"`` (seconds
+    after frame ``k``, ``(H,)``), ``"truth"`` (the held-out frames there, ``(H, D)``), ``"mean"`` and ``"std"``
+    (the prediction placed in time there, ``(H, D)``; ``std`` None without one).
+
+    ``prefix``: ``prefix(k)`` returns the observed columns of the first ``k`` frames as a robot had them at
+    frame ``k`` (:class:`~interprim.model_selection.prefixes.Prefixes`; causal prefixes of interpolated recordings);
+    default ``test[:k, observed_dofs]``, which is causal only when ``test`` holds the recorded samples.
+    ``oracle``: ``(T, D)``, the best possible prediction of ``test`` (synthetic data,
+    :class:`~interprim.synthetic.SyntheticTask`); adds ``"oracle"`` records, the floor.
+
+    ``std=False`` skips the method's std (``cov_*`` and ``z_*`` are then NaN, ``"std"`` None) and
+    ``references=False`` the clock and oracle-duration records, for a caller that needs only the method's errors
+    and placed means (:class:`interprim.models.ensemble.CrossValidation`); the method's records are unchanged.
+
+    When the estimator's stream gives exactly what ``predict`` gives (``exact_stream = True``, e.g.
+    :class:`~interprim.models.kernel.KernelDemonstrations`, whose stream updates its alignments one frame
+    at a time), the frames are fed through one stream instead of predicting every prefix anew, provided every
+    evaluated prefix is the start of the longest one (always so for recorded samples; a causal prefix of an
+    interpolated recording may differ, and is then predicted anew): the same predictions, cheaper.
+    """
+    test = np.asarray(test, dtype=np.float64)
+    obs = [int(i) for i in observed_dofs]
+    ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
+    if not fitted:
+        estimator.fit(train, dt=dt)
+    grid = np.linspace(0.0, 1.0, cfg.n_grid)
+    if references:
+        mean, mean_dur = mean_demo(train, cfg.n_grid)
+    else:
+        mean, mean_dur = None, mean_duration(train)
+    mean_dur_s = mean_dur * dt
+    T = test.shape[0]
+    true_dur_s = (T - 1) * dt
+    H = max(1, int(round(cfg.horizon / dt)))
+    if frames is None:
+        k0 = max(3, int(math.ceil(cfg.start * T)))
+        k1 = max(k0, int(math.floor(cfg.stop * T)))
+        frames = range(k0, k1 + 1, max(1, int(cfg.stride)))
+    frames = [int(k) for k in frames]
+    for k in frames:
+        if not 1 <= k <= T:
+            raise ValueError(f"frames must be numbers of frames seen in 1..{T}, got {k}")
+    predict = _prefix_predictions(estimator, test, obs, frames, prefix)
+    out = []
+    for k in frames:
+        idx = np.minimum(np.arange(k, k + H), T - 1)  # frames k .. k+H-1 (0-based), held at the end
+        t_ahead = (np.arange(1, H + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
+        truth = test[idx]
+        phase_true = (k - 1) / (T - 1)
+        elapsed = (k - 1) * dt
+        pred = predict(k)
+        s, dur = _timing(pred, k, dt, mean_dur_s)
+        Y = pred.trajectory(cfg.n_grid)
+        S = pred.std(cfg.n_grid) if std else None
+        rows = {
+            name: (s, _interp_rows(s + t_ahead / dur, grid, Y),
+                   None if S is None else _interp_rows(s + t_ahead / dur, grid, S)),
+        }
+        if references:
+            rows["clock"] = (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean),
+                             None)
+            rows["oracle-duration"] = (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None)
+        if oracle is not None:
+            rows["oracle"] = (phase_true, np.asarray(oracle, dtype=np.float64)[idx], None)
+        for method, (sm, Yh, Sh) in rows.items():
+            err = Yh - truth
+            rec = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true, "phase": float(sm),
+                   "phase_err": abs(float(sm) - phase_true)}
+            for agent, cols in (("ctrl", ctrl), ("obs", obs)):
+                if not cols:
+                    continue
+                e = err[:, cols]
+                rec[f"rt_{agent}"] = point_rms(e, cfg.point_dim)
+                if Sh is not None:
+                    sd = Sh[:, cols]
+                    rec[f"cov_{agent}"] = coverage(e, sd)
+                    rec[f"z_{agent}"] = z_ratio(e, sd)
+                else:
+                    rec[f"cov_{agent}"] = float("nan")
+                    rec[f"z_{agent}"] = float("nan")
+            if trace:
+                rec.update(t_ahead=t_ahead, truth=truth, mean=Yh, std=Sh)
+            out.append(rec)
+    return out
+
+
+def _prefix_predictions(estimator, test, obs, frames, prefix):
+    """``predict(k)``: the estimator's prediction from the first ``k`` frames (``prefix(k)``, default
+    ``test[:k, obs]``) for the increasing ``frames``, through one stream when that gives the same answers
+    (see :func:`realtime_fold`)."""
+    get = (lambda k: test[:k, obs]) if prefix is None else prefix
+    if not (getattr(estimator, "exact_stream", False) and len(frames) > 1
+            and all(a < b for a, b in zip(frames, frames[1:]))):
+        return lambda k: estimator.predict(get(k))
+    last = np.asarray(get(frames[-1]), dtype=np.float64)
+    if prefix is not None:  # each prefix computed once, for the check and, if it fails, for predict
+        seen = {k: get(k) for k in frames[:-1]}
+        if not all(np.array_equal(np.asarray(x, dtype=np.float64), last[:k]) for k, x in seen.items()):
+            seen[frames[-1]] = last
+            return lambda k: estimator.predict(seen[k])
+    stream = estimator.stream()
+    fed = [0]  # frames fed to the stream so far
+
+    def predict(k):
+        pred = stream.extend(last[fed[0]:k])
+        fed[0] = k
+        return pred
+
+    return predict
+
+
+def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
+                        point_dim: int = 1, name: str = "method", prefix=None, oracle=None) -> list:
+    """The paper's Fig. 7 protocol for one held-out demonstration and a fitted ``estimator``: observe the first
+    ``p`` of the observed agent, predict the whole movement, RMSE of each agent on a normalised-time grid
+    (timing errors hidden by construction: compare with :func:`realtime_fold`).  ``prefix`` as in
+    :func:`realtime_fold`; with ``oracle`` (``(T, D)``), ``"oracle"`` records are added too."""
+    test = np.asarray(test, dtype=np.float64)
+    obs = [int(i) for i in observed_dofs]
+    ctrl = [i for i in range(test.shape[1]) if i not in set(obs)]
+    truth = time_normalise(test, n)
+    T = test.shape[0]
+    out = []
+    for p in fractions:
+        M = observed_frames(T, p)
+        rows = [(name, estimator.predict(test[:M, obs] if prefix is None else prefix(M)).trajectory(n))]
+        if oracle is not None:
+            rows.append(("oracle", time_normalise(np.asarray(oracle, dtype=np.float64), n)))
+        for method, Y in rows:
+            err = Y - truth
+            rec = {"method": method, "fraction": float(p), "wm_obs": point_rms(err[:, obs], point_dim)}
+            if ctrl:
+                rec["wm_ctrl"] = point_rms(err[:, ctrl], point_dim)
+            out.append(rec)
+    return out
+
+
+def folds(n: int, k: int | None = None):
+    """Held-out index sets (lists of int): leave-one-out (``k`` None or >= n) or ``k`` contiguous folds
+    (:func:`interprim.core.cv.folds`, ``order="contiguous"``)."""
+    if k is not None and k < n and k < 2:
+        raise ValueError(f"k-fold needs k >= 2, got {k}")
+    return [f.tolist() for f in cv_folds(n, k, "contiguous")]
+
+
+def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
+                   k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
+                   test=None, trace: bool = False, std: bool = True, references: bool = True) -> list:
+    """Cross-validated real-time protocol for several methods on one set of demonstrations.
+
+    ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
+    fits every method on the other demonstrations; clock and oracle rows are added once (from the first
+    method's pass).  ``whole_movement``: fractions at which :func:`whole_movement_fold` records (with
+    ``"protocol": "whole"``) are added too.  Returns records with ``"demo"`` added.
+
+    ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (NuiSI, resampled
+    recordings): every prediction then sees a causal prefix (:class:`~interprim.model_selection.prefixes.Prefixes`).
+    ``oracles``: one ``(T_i, D)`` best possible prediction per demonstration (synthetic data); adds the floor.
+
+    ``test``: evaluate on a fixed hold-out instead of cross-validating: ``demos`` are then the training
+    demonstrations (every method is fitted once on all of them) and ``test`` the held-out ones (a
+    :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
+    ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record); ``std`` and
+    ``references`` as there too (``references=False``: no clock and oracle-duration records at all).
+    """
+    if test is not None:
+        train = [np.asarray(d, dtype=np.float64) for d in demos]
+        prefixes = test if isinstance(test, Prefixes) else Prefixes(test, observed_dofs)
+        demos = train + prefixes.demos
+        n_train = len(train)
+        prefixes = _Offset(prefixes, n_train)
+        sets = [list(range(n_train, len(demos)))]
+        oracles = None if oracles is None else [None] * n_train + list(oracles)
+    else:
+        prefixes = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
+        demos = prefixes.demos
+        sets = None
+    if len(demos) < 3:
+        raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
+    recs = []
+    sets = sets or folds(len(demos), k)
+    it = sets
+    if progress:
+        try:
+            from tqdm import tqdm  # the [experiments] extra
+        except ImportError:
+            tqdm = None
+        if tqdm is not None:
+            it = tqdm(sets, desc="folds", unit="fold")
+    for held in it:
+        train = [d for i, d in enumerate(demos) if i not in set(held)]
+        for first, (name, factory) in enumerate(make_estimators.items()):
+            est = factory().fit(train, dt=dt)
+            for j in held:
+                pre = (lambda k, j=j: prefixes(j, k))
+                orc = None if oracles is None else oracles[j]
+                for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
+                                       prefix=pre, oracle=orc if not first else None, trace=trace, std=std,
+                                       references=references and not first):
+                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
+                        continue
+                    r["demo"] = int(j)
+                    recs.append(r)
+                if whole_movement:
+                    for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
+                                                 point_dim=cfg.point_dim, name=name, prefix=pre,
+                                                 oracle=orc if not first else None):
+                        r["demo"] = int(j)
+                        r["protocol"] = "whole"
+                        recs.append(r)
+    return recs
+
+
+class _Offset:
+    """Prefixes of a hold-out numbered after the training demonstrations."""
+
+    def __init__(self, prefixes, n_train):
+        self.prefixes, self.n_train = prefixes, n_train
+
+    def __call__(self, j, k):
+        return self.prefixes(j - self.n_train, k)
+
+
+def summarise_realtime(records) -> dict:
+    """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
+    the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
+    by = {}
+    whole = {}
+    for r in records:
+        if r.get("protocol") == "whole":
+            whole.setdefault(r["method"], []).append(r)
+        else:
+            by.setdefault(r["method"], []).append(r)
+    out = {}
+    keys = ("phase_err", "rt_ctrl", "rt_obs", "cov_ctrl", "cov_obs", "z_ctrl", "z_obs")
+    for m, rs in by.items():
+        out[m] = {key: float(np.nanmean([r.get(key, np.nan) for r in rs])) if any(
+            np.isfinite(r.get(key, np.nan)) for r in rs) else float("nan") for key in keys}
+        out[m]["n"] = len(rs)
+    clock = out.get("clock")
+    oracle = out.get("oracle-duration")
+    for m in out:
+        if clock:
+            for key in ("rt_ctrl", "rt_obs", "phase_err"):
+                if key in clock and clock[key] > 0:
+                    out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
+        if oracle and oracle.get("rt_ctrl", 0) > 0:
+            out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
+    prior = whole.get("prior")
+    for m, rs in whole.items():  # whole movement (Fig. 7): mean over demos per fraction, ratio to the prior mean
+        w = out.setdefault(m, {})
+        for key in ("wm_ctrl", "wm_obs"):
+            vals = [r[key] for r in rs if key in r]
+            if vals:
+                w[key] = float(np.mean(vals))
+                if prior and any(key in r for r in prior):
+                    w[f"{key}_vs_prior"] = w[key] / float(np.mean([r[key] for r in prior if key in r]))
+    floor = out.get("oracle")
+    if floor:  # synthetic data: the gap to the best possible prediction
+        for m in out:
+            for key in ("rt_ctrl", "rt_obs", "wm_ctrl", "wm_obs"):
+                if floor.get(key, 0) > 0 and key in out[m]:
+                    out[m][f"{key}_vs_floor"] = out[m][key] / floor[key]
+    return out

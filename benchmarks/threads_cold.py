@@ -78,7 +78,7 @@ def bench_threads(quick, fitted_model, make_demos, row, rel):
             err = rel(outs["default"], outs["one"])
             _row(row, name, res, err)
         # the same std(50) with the library's limiter switched off: what the caller's BLAS setting did before
-        from interprim import _blas
+        from interprim.core import blas as _blas
 
         saved = _blas._controllers
         _blas._controllers = lambda: []

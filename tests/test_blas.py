@@ -8,7 +8,7 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import interprim as ip
-from interprim import _blas
+from interprim.core import blas as _blas
 from interprim._compiled import loader
 from interprim.models.primitive.prediction import Prediction
 from interprim.synthetic import two_agent_demos
@@ -50,7 +50,7 @@ def test_one_thread_during_std_restored_after(model, human, monkeypatch):
 @pytest.mark.parametrize("entry", ["fit", "predict", "update", "posterior_cov", "samples"])
 def test_one_thread_at_every_public_entry(model, human, monkeypatch, entry):
     """The limit is in force in the numeric core of each public call (spied on one inner function each)."""
-    from interprim import fitted, prediction
+    from interprim.models.primitive import fitted, prediction
 
     seen = []
 

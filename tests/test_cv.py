@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import interprim
-from interprim import cv
+from interprim.core import cv
 from interprim.core.preprocessing import (interp_columns, resample_step, resample_uniform, step_count, step_grid,
                                      time_normalise)
 
@@ -138,7 +138,7 @@ def test_observed_frames_lengths():
     assert of(10, 1.0, keep=1) == 9 and of(3, 0.9, keep=1) == 2  # at most T - keep, which wins over min_frames
     assert of(100, 0.02, min_frames=5) == 5 and of(100, 0.4, min_frames=5) == 40
     assert cv.MIN_OBSERVED_FRAMES == 3
-    from interprim.evaluation import protocol
+    from interprim.model_selection import prefixes as protocol
 
     assert protocol.observed_frames is cv.observed_frames  # the evaluation's protocol states the core's rule
 
@@ -190,18 +190,18 @@ def _sources():
 
 #: (what, pattern, the modules allowed to hold it)
 RULES = [
-    ("a fold split with array_split", r"array_split\(", {"cv.py"}),
-    ("interleaved folds by slicing or modulo", r"\[\w+::\w+\]|np\.arange\(\w+\) % ", {"cv.py"}),
-    ("contiguous fold edges", r"linspace\(0, \w+, \w+ \+ 1\)", {"cv.py"}),
-    ("a one-standard-error helper", r"def _?within_one_se|_within_one_se\(", {"cv.py"}),
-    ("a standard error computed by hand", r"ddof=1\)\s*/\s*(math|np)\.sqrt", {"cv.py"}),
-    ("the prefix length round(p T) written out", r"round\(\s*\w+\s*\*\s*T\s*\)", {"cv.py"}),
+    ("a fold split with array_split", r"array_split\(", {"core/cv.py"}),
+    ("interleaved folds by slicing or modulo", r"\[\w+::\w+\]|np\.arange\(\w+\) % ", {"core/cv.py"}),
+    ("contiguous fold edges", r"linspace\(0, \w+, \w+ \+ 1\)", {"core/cv.py"}),
+    ("a one-standard-error helper", r"def _?within_one_se|_within_one_se\(", {"core/cv.py"}),
+    ("a standard error computed by hand", r"ddof=1\)\s*/\s*(math|np)\.sqrt", {"core/cv.py"}),
+    ("the prefix length round(p T) written out", r"round\(\s*\w+\s*\*\s*T\s*\)", {"core/cv.py"}),
     ("a per-column np.interp loop", r"(stack|array|column_stack)\(\[np\.interp\(|\[:, \w+\] = np\.interp\(",
      # causal_prefix: each column interpolated from its own raw stream's samples (a different abscissa each)
-     {"preprocessing.py", "evaluation/protocol.py"}),
+     {"core/preprocessing.py", "model_selection/prefixes.py"}),
     ("a step grid counted by hand", r"\+ 1e-9\)\) \+ 1",
      # the rollout's integration steps in canonical time (not a resampling of data)
-     {"preprocessing.py", "dmp.py"}),
+     {"core/preprocessing.py", "core/dmp.py"}),
 ]
 
 

@@ -39,7 +39,7 @@ def test_sweep_summary_tables_and_files(tmp_path):
 
 
 def test_point_rms_uses_3d_distance():
-    from interprim.evaluation.sweep import _point_rms
+    from interprim.model_selection.metrics import point_rms as _point_rms
 
     err = np.tile([3.0, 4.0, 0.0], (10, 1))
     assert _point_rms(err, 3) == pytest.approx(5.0)

@@ -65,7 +65,7 @@ def test_time_stretched_prefix_gets_true_phase(stretch, frac):
     # a movement of the same shape as the reference, stretched in time
     ref = model.reference_
     T = int(round((len(ref) - 1) * stretch)) + 1
-    moving = ip.preprocessing.time_normalise(ref, T)
+    moving = ip.core.preprocessing.time_normalise(ref, T)
     M = int(round(frac * (T - 1))) + 1
     pred = model.predict(moving[:M])
     true_phase = (M - 1) / (T - 1)

@@ -93,10 +93,8 @@ def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_mo
     is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.models.ensemble.Blend`, fitted on the
     outer training demonstrations with the inner cross-validation's weights and variance model; only when at least
     two of its candidate families are compared)."""
-    from . import auto  # looked up at call time (tests spy on auto.CrossValidation)
+    from .models import ensemble as auto  # looked up at call time (tests spy on auto.CrossValidation)
 
-    inner_cfg = rt.RealTimeConfig(horizon=cfg.horizon, start=cfg.start, stop=cfg.stop, stride=max(cfg.stride, 3),
-                               n_grid=cfg.n_grid, point_dim=cfg.point_dim)
     blendable = [m for m in make if m in auto.CANDIDATES]
     choices, out = {}, []
     for held in rt.folds(len(prefixes), k):
@@ -106,7 +104,10 @@ def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_mo
             for j in held:
                 choices[j] = next(iter(make))
             continue
-        cv = auto.CrossValidation(make, prefixes.subset(train), observed_dofs, dt, inner_cfg, kk)
+        arrays = [prefixes.demos[i] for i in train]
+        long_cfg = auto.scoring_config(cfg.horizon, arrays, dt, start=cfg.start, stop=cfg.stop,
+                                       stride=max(cfg.stride, 3), n_grid=cfg.n_grid, point_dim=cfg.point_dim)
+        cv = auto.CrossValidation(make, prefixes.subset(train), observed_dofs, dt, long_cfg, kk, horizon=cfg.horizon)
         try:
             best, _ = auto.choice(cv, list(make))
         except ValueError:  # no family could be fitted on every inner training fold
@@ -116,12 +117,8 @@ def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_mo
         sub = cv.subset(blendable)
         if len(sub.names) < 2:
             continue
-        w = sub.blend_weights()
-        weights = {m: float(x) for m, x in zip(sub.names, w) if x > 0}
-        arrays = [prefixes.demos[i] for i in train]
-        members = {m: make[m]().fit(arrays, dt=dt) for m in weights}
-        blend = auto.Blend.from_fitted(observed_dofs, members, weights, sub.blend_scales(w), arrays, dt, cfg.horizon)
-        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in weights.items())
+        blend, info = auto.blend_from_cv(sub, make, arrays, dt, observed_dofs, cfg.horizon)
+        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in info["weights"].items())
         for j in held:
             pre = (lambda kf, j=j: prefixes(j, kf))
             for r in rt.realtime_fold(blend, arrays, prefixes.demos[j], observed_dofs, dt, cfg, name="auto",

@@ -236,7 +236,7 @@ def _fit_other(args, ds, obs, n_read) -> int:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "
                            "folds and needs at least 3 (or use --model ip)")
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
-                           n_basis=args.n_basis, smoothing_window=args.smoothing_window)
+                           n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True)
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]

@@ -49,7 +49,49 @@ from ..core.validation import as_2d_finite, as_frame
 from ..core.preprocessing import interp_columns
 from ..core.errors import NotFittedError
 
-__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time"]
+__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time",
+           "uniform_demonstrations", "DEFAULT_DT"]
+
+#: Sampling interval (s) assumed for plain arrays given without ``dt``.
+DEFAULT_DT = 0.01
+
+
+def uniform_demonstrations(demos, dt=None):
+    """The one rule by which every family reads demonstrations and their time stamps.
+
+    Returns ``(arrays, dt, columns)``: ``(T_i, D)`` float arrays on a uniform grid, the sampling interval in
+    seconds and the column names (``None`` without).  A :class:`~interprim.datasets.Demonstrations` with a common
+    interval (``demos.dt``) is used as it is; one whose time stamps are irregular (jitter beyond 1 %, dropped
+    frames: ``demos.dt is None``) is resampled linearly onto a grid at the median interval of all its stamps, so
+    its durations are the recorded ones.  Plain arrays take ``dt`` (default :data:`DEFAULT_DT`).
+    """
+    from ..core.preprocessing import resample_uniform
+    from ..core.validation import check_positive, check_times
+
+    columns = None
+    if hasattr(demos, "demos") and hasattr(demos, "times"):  # interprim.datasets.Demonstrations
+        columns = getattr(demos, "columns", None)
+        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos.demos)]
+        if dt is None and getattr(demos, "dt", None) is None:
+            ts = [check_times(t, a.shape[0], f"times[{j}]") for j, (t, a) in enumerate(zip(demos.times, arrays))]
+            dt = float(np.median(np.concatenate([np.diff(t) for t in ts])))
+            arrays = [resample_uniform(a, t, dt=dt)[0] for a, t in zip(arrays, ts)]
+        elif dt is None:
+            dt = demos.dt
+    else:
+        if isinstance(demos, np.ndarray) and demos.ndim == 3:
+            demos = list(demos)
+        if not isinstance(demos, (list, tuple)):
+            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
+        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
+    if not arrays:
+        raise ValueError("demos is empty: at least one demonstration is needed")
+    D = arrays[0].shape[1]
+    for j, a in enumerate(arrays):
+        if a.shape[1] != D:
+            raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
+    dt = DEFAULT_DT if dt is None else check_positive(dt, "dt")
+    return arrays, float(dt), None if columns is None else [str(c) for c in columns]
 
 
 class BasePrediction:

@@ -132,6 +132,7 @@ class AlignedStream(BaseStream):
 
 
 def check_demos(demos):
+    """The demonstrations as ``(T_i, D)`` float arrays of one width with finite values (a clear error otherwise)."""
     arrays = [np.asarray(d, dtype=np.float64) for d in demos]
     if len(arrays) < 2:
         raise ValueError(f"at least 2 demonstrations are needed, got {len(arrays)}")

@@ -16,28 +16,130 @@ family with the smallest held-out error alone.  Predictions, streams and model f
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..core.blas import one_blas_thread
 from ..model_selection.realtime import RealTimeConfig, realtime_sweep, summarise_realtime
 from . import registry
-from .base import BaseStream, GridPrediction, Predictor, place_in_time
+from ..core.errors import OutOfRangeWarning
+from ..core.input_range import fit_input_range, mark
+from .base import BaseStream, GridPrediction, Predictor, place_in_time, uniform_demonstrations
 from ..core.preprocessing import interp_columns
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
 
-#: The families compared by default.
-CANDIDATES = ("ip", "learned", "kernel", "nn", "prior")
+#: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
+CANDIDATES = registry.CANDIDATES
 
 
-def _classes():
-    from .demonstrations import NearestNeighbour, PriorMean
-    from .kernel import KernelDemonstrations
-    from .learned import LearnedInteraction
-    from .primitive.estimator import InteractionPrimitive
+def look_ahead_bands(horizon: float, longest: float) -> np.ndarray:
+    """Upper edges (s) of the look-ahead bands over which the blend's weights are fitted: ``horizon`` (the real-time
+    band), then doubling, up to ``longest`` (the rest of the longest movement)."""
+    edges = [float(horizon)]
+    while edges[-1] < longest:
+        edges.append(edges[-1] * 2.0)
+    return np.array(edges)
 
-    return {c.__name__: c for c in (InteractionPrimitive, LearnedInteraction, KernelDemonstrations,
-                                    NearestNeighbour, PriorMean)}
+
+def weights_at(ahead, edges, W) -> np.ndarray:
+    """Blend weights ``(len(ahead), families)`` at ``ahead`` seconds after now, from the weights ``W`` ``(bands,
+    families)`` fitted per look-ahead band (upper edges ``edges``): linear between the bands' middles, held beyond
+    the first and the last, renormalised onto the simplex (so the blend moves smoothly from the real-time weights
+    to the whole-movement weights, with no jump at a band's edge)."""
+    W = np.atleast_2d(np.asarray(W, dtype=np.float64))
+    ahead = np.asarray(ahead, dtype=np.float64)
+    if W.shape[0] == 1:
+        return np.broadcast_to(W[0], (ahead.size, W.shape[1])).copy()
+    edges = np.asarray(edges, dtype=np.float64)
+    mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges)
+    out = np.stack([np.interp(ahead, mids, W[:, m]) for m in range(W.shape[1])], axis=1)
+    out = np.clip(out, 0.0, None)
+    return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+
+
+def scoring_config(horizon: float, train, dt: float, **kw) -> RealTimeConfig:
+    """The inner cross-validation's protocol: every case scored from the next frame to the end of the longest
+    training movement, so that the blend's weights and variance are fitted for every look-ahead, not only for the
+    real-time ``horizon`` (``kw``: other :class:`~interprim.model_selection.realtime.RealTimeConfig` fields)."""
+    longest = max((len(d) - 1) * float(dt) for d in train)
+    return RealTimeConfig(horizon=max(float(horizon), longest), **kw)
+
+
+def blend_from_cv(cv: "CrossValidation", make: dict, train, dt: float, observed_dofs, horizon: float,
+                  n_basis: int = 20, smoothing_window=None, progress=None) -> tuple:
+    """``(Blend, record)``: the blend of the families compared by ``cv``, fitted on ``train``.
+
+    Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
+    look-ahead ``cv`` scored) by :meth:`CrossValidation.blend_weights` on that band's steps; the variance model on
+    every step with the weights there (:func:`weights_at`).  ``record``: ``weights`` (the real-time band's),
+    ``band_weights``, ``bands``, ``blend_cv_error`` (real-time band, in-sample for the weights) and
+    ``variance_model``."""
+    edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
+    steps = cv.band_steps(edges)
+    edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the non-empty bands, up to their last step
+    W = np.array([cv.blend_weights(s) for s in steps])  # (bands, families)
+    keep = [i for i in range(len(cv.names)) if np.any(W[:, i] > 0)]
+    W = W[:, keep]
+    W = W / W.sum(axis=1, keepdims=True)
+    names = [cv.names[i] for i in keep]
+    sub = cv.subset(names)
+    per_step = weights_at(cv.t_ahead, edges, W)
+    scales = sub.blend_scales(per_step)
+    scales["t"] = cv.t_ahead
+    band_weights = {m: [float(x) for x in W[:, i]] for i, m in enumerate(names)}
+    members = {}
+    for m in names:
+        members[m] = make[m]().fit(train, dt=dt)
+        if progress is not None:
+            progress.step(f"fitted {m}")
+    blend = Blend.from_fitted(observed_dofs, members, band_weights, scales, train, dt, horizon, bands=edges,
+                              n_basis=n_basis, smoothing_window=smoothing_window)
+    record = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)}, "band_weights": band_weights,
+              "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+              "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()}}
+    return blend, record
+
+
+class _Progress:
+    """A progress bar (tqdm, when installed and asked for) over the steps of a fit; silent otherwise."""
+
+    def __init__(self, on: bool, total: int):
+        self.bar = None
+        if on:
+            try:
+                from tqdm import tqdm
+            except ImportError:  # the [experiments] extra; without it, one line per step on stderr
+                tqdm = None
+            self.bar = tqdm(total=total, desc="fit", unit="step", leave=False) if tqdm else _Lines(total)
+
+    def step(self, what: str = ""):
+        if self.bar is not None:
+            if what:
+                self.bar.set_postfix_str(what, refresh=False)
+            self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+class _Lines:
+    def __init__(self, total):
+        self.total, self.n, self.what = total, 0, ""
+
+    def set_postfix_str(self, what, refresh=False):
+        self.what = what
+
+    def update(self, k):
+        import sys
+
+        self.n += k
+        print(f"fit: step {self.n}/{self.total} {self.what}", file=sys.stderr, flush=True)
+
+    def close(self):
+        pass
 
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
@@ -64,20 +166,37 @@ class CrossValidation:
         Columns of the two agents.
     """
 
-    def __init__(self, make, demos, observed_dofs, dt, cfg, k):
+    def __init__(self, make, demos, observed_dofs, dt, cfg, k, horizon=None, progress=None):
+        import warnings
+
+        from ..core.errors import OutOfRangeWarning, RepresentationWarning
+
         self.observed = [int(i) for i in observed_dofs]
         self.point_dim = int(cfg.point_dim)
+        self.dt = float(dt)
+        #: seconds of the real-time band (the protocol's look-ahead; ``cfg.horizon`` may reach further)
+        self.horizon = float(cfg.horizon if horizon is None else horizon)
         self.errors, per = {}, {}
+        #: ``{family: why it could not be compared}`` for the families with an infinite error
+        self.why = {}
         for name, factory in make.items():
             try:
                 # only the family's errors and placed means are kept: its std and the clock's records are skipped
-                recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True, std=False,
-                                      references=False)
-            except ValueError:  # e.g. too few demonstrations in an inner training fold for this family
+                with warnings.catch_warnings():  # about held-out training folds, not the user's data
+                    warnings.simplefilter("ignore", OutOfRangeWarning)
+                    warnings.simplefilter("ignore", RepresentationWarning)
+                    recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True,
+                                          std=False, references=False)
+            except ValueError as exc:  # e.g. too few demonstrations in an inner training fold for this family
                 self.errors[name] = float("inf")
+                self.why[name] = str(exc).splitlines()[0]
                 continue
-            self.errors[name] = float(summarise_realtime(recs).get(name, {}).get("rt_ctrl", np.inf))
+            finally:
+                if progress is not None:
+                    progress.step(f"compared {name}")
             per[name] = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
+            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in per[name].values()])
+                                      ) if per[name] else float("inf")
         self.names = [m for m in per if np.isfinite(self.errors[m])]
         cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
         first = per[self.names[0]] if self.names else {}
@@ -85,6 +204,32 @@ class CrossValidation:
         self.mean = np.array([[per[m][c]["mean"] for c in cases] for m in self.names], dtype=np.float64)
         D = self.truth.shape[-1] if self.truth.size else len(self.observed)
         self.controlled = [i for i in range(D) if i not in set(self.observed)]
+        H = self.truth.shape[1] if self.truth.ndim == 3 else 0
+        #: seconds ahead of every step of the arrays
+        self.t_ahead = np.arange(1, H + 1) * self.dt
+
+    def _rt_error(self, mean, truth):
+        """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
+        from ..model_selection.metrics import point_rms
+
+        n = max(1, int(round(self.horizon / self.dt)))
+        cols = self.controlled_cols(np.asarray(truth).shape[-1])
+        return point_rms((np.asarray(mean) - np.asarray(truth))[:n][:, cols], self.point_dim)
+
+    def controlled_cols(self, D):
+        """The controlled agent's columns (the observed ones for a single-agent model)."""
+        ctrl = [i for i in range(D) if i not in set(self.observed)]
+        return ctrl or self.observed
+
+    def band_steps(self, edges) -> list:
+        """Step indices of each look-ahead band (upper edges ``edges`` in seconds; each band non-empty)."""
+        out, lo = [], 0.0
+        for e in edges:
+            idx = np.flatnonzero((self.t_ahead > lo + 1e-12) & (self.t_ahead <= e + 1e-12))
+            if idx.size:
+                out.append(idx)
+            lo = e
+        return out
 
     def subset(self, names) -> "CrossValidation":
         """The same cases restricted to the families ``names`` (those with finite errors, in this order)."""
@@ -96,7 +241,7 @@ class CrossValidation:
         out.mean = self.mean[keep]
         return out
 
-    def blend_weights(self) -> np.ndarray:
+    def blend_weights(self, steps=None) -> np.ndarray:
         """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean real-time
         error of the controlled agent over the cases, the very figure :attr:`errors` reports (stacking, Breiman
         1996, on the protocol's own loss: a convex problem whose solution is a convex combination, so the blend can
@@ -108,8 +253,9 @@ class CrossValidation:
         if M == 1:
             return np.ones(1)
         c = self.controlled or self.observed
-        P = self.mean[..., c].reshape(M, self.mean.shape[1], -1)  # (M, cases, H * C)
-        T = self.truth[..., c].reshape(self.truth.shape[0], -1)
+        sel = slice(None) if steps is None else steps
+        P = self.mean[:, :, sel][..., c].reshape(M, self.mean.shape[1], -1)  # (M, cases, H * C)
+        T = self.truth[:, sel][..., c].reshape(self.truth.shape[0], -1)
         scale = max(float(np.sqrt(np.mean(T * T))), 1e-300)
         P, T = P / scale, T / scale
 
@@ -120,7 +266,7 @@ class CrossValidation:
             return float(np.mean(r)), grad
 
         start = np.full(M, 1.0 / M)
-        best = min(range(M), key=lambda m: self.errors[self.names[m]])
+        best = min(range(M), key=lambda m: float(np.mean(np.sqrt(np.mean((P[m] - T) ** 2, axis=1)))))
         res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
                        constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
                        options={"ftol": 1e-10, "maxiter": 300})
@@ -144,7 +290,8 @@ class CrossValidation:
 
         Returns ``{"a": (H, D), "b": (H, D)}``.
         """
-        w = np.asarray(w, dtype=np.float64)[:, None, None, None]
+        w = np.asarray(w, dtype=np.float64)
+        w = (w[:, None] if w.ndim == 1 else w.T)[:, None, :, None]  # (M, 1, H or 1, 1)
         mix = np.sum(w * self.mean, axis=0)
         spread = np.sum(w * (self.mean - mix) ** 2, axis=0).mean(axis=0)  # (H, D)
         err2 = ((mix - self.truth) ** 2).mean(axis=0)
@@ -156,8 +303,12 @@ class CrossValidation:
     def blend_error(self, w) -> float:
         """The blend's mean real-time error of the controlled agent over the cases, as :attr:`errors` measures it
         (in-sample for the weights: an optimistic figure)."""
-        mix = np.tensordot(np.asarray(w, dtype=np.float64), self.mean, axes=1)
-        e = (mix - self.truth)[..., self.controlled or self.observed]
+        w = np.asarray(w, dtype=np.float64)
+        if w.ndim == 2:  # per-step weights (H, M): the real-time band's
+            w = w[0]
+        n = max(1, int(round(self.horizon / self.dt)))
+        mix = np.tensordot(w, self.mean[:, :, :n], axes=1)
+        e = (mix - self.truth[:, :n])[..., self.controlled or self.observed]
         n_case, H, C = e.shape
         pd = self.point_dim if C % self.point_dim == 0 else 1
         point2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3)  # squared point errors
@@ -197,6 +348,9 @@ class AutoInteraction(Predictor):
     point_dim : int, default 1
         Columns per point in the error (3 for 3-D positions), as in
         :class:`~interprim.model_selection.realtime.RealTimeConfig`.
+    progress : bool, default False
+        Show the fit's progress (a tqdm bar when installed, else one line per step on stderr); ``interprim fit``
+        turns it on.
 
     Attributes
     ----------
@@ -218,10 +372,13 @@ class AutoInteraction(Predictor):
     """
 
     _FITTED = "model_"
+    #: 2: the training frames' range (the out-of-range check) and per-look-ahead blend weights
+    STATE_VERSION = 2
     CANDIDATES = CANDIDATES
 
     def __init__(self, observed_dofs, candidates=CANDIDATES, combine: str = "blend", folds: int = 3,
-                 horizon: float = 0.25, stride: int = 3, n_basis: int = 20, smoothing_window=None, point_dim: int = 1):
+                 horizon: float = registry.DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
+                 point_dim: int = 1, progress: bool = False):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -231,6 +388,7 @@ class AutoInteraction(Predictor):
         self.n_basis = n_basis
         self.smoothing_window = smoothing_window
         self.point_dim = point_dim
+        self.progress = progress
 
     def _check(self):
         known = list(registry.FAMILIES)
@@ -275,36 +433,41 @@ class AutoInteraction(Predictor):
             ``self``.
         """
         self._check()
-        if dt is None:
-            dt = getattr(demos, "dt", None) or 0.01
-        n = len(demos)
+        source = demos
+        train, dt, cols = uniform_demonstrations(demos, dt)
+        n = len(train)
         if n < 3:
             raise ValueError(f"AutoInteraction needs at least 3 demonstrations to compare families, got {n}")
+        # a Demonstrations sampled at a common interval keeps its raw samples (causal prefixes in the inner CV);
+        # irregular stamps were resampled above and the CV sees the resampled frames
+        cv_demos = source if getattr(source, "dt", None) is not None and hasattr(source, "times") else train
         make = self.factories()
-        cfg = RealTimeConfig(horizon=float(self.horizon), stride=int(self.stride), point_dim=int(self.point_dim))
-        train = [np.asarray(d, dtype=np.float64) for d in demos]
+        cfg = scoring_config(float(self.horizon), train, dt, stride=int(self.stride), point_dim=int(self.point_dim))
+        progress = _Progress(self.progress, len(make) + 1)
         if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
             cv = None
             chosen = next(iter(make))
             selection = _record(chosen, {chosen: float("nan")})
         else:
-            cv = CrossValidation(make, demos, self.observed_dofs, float(dt), cfg, k=min(int(self.folds), n))
+            cv = CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg, k=min(int(self.folds), n),
+                                 horizon=float(self.horizon), progress=progress)
             chosen, selection = choice(cv, list(make))
+            if cv.why:
+                selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
-            w = cv.blend_weights()
-            weights = {m: float(x) for m, x in zip(cv.names, w) if x > 0}
-            scales = cv.blend_scales(w)
-            members = {m: make[m]().fit(train, dt=float(dt)) for m in weights}
-            self.model_ = Blend.from_fitted(self.observed_dofs, members, weights, scales, train, float(dt),
-                                            float(self.horizon))
-            selection.update(combine="blend", weights=weights, blend_cv_error=cv.blend_error(w),
-                             variance_model={k: np.asarray(v).tolist() for k, v in scales.items()})
+            self.model_, info = blend_from_cv(cv, make, train, dt, self.observed_dofs, float(self.horizon),
+                                              n_basis=self.n_basis, smoothing_window=self.smoothing_window,
+                                              progress=progress)
+            weights = info["weights"]
+            selection.update(combine="blend", **info)
             best = selection["cv_errors"][chosen]
             selection["blend_vs_best"] = selection["blend_cv_error"] / best if best > 0 else float("nan")
         else:
-            self.model_ = make[chosen]().fit(train, dt=float(dt))
+            self.model_ = make[chosen]().fit(train, dt=dt)
             weights = {chosen: 1.0}
             selection.update(combine="best", weights=weights)
+        progress.close()
+        dt = float(dt)
         self.chosen_ = chosen
         self.weights_ = weights
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
@@ -312,20 +475,41 @@ class AutoInteraction(Predictor):
         self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in set(self.observed_dofs_)]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in train])) * self.dt_
-        cols = getattr(demos, "columns", None)
-        self.columns_ = None if cols is None else [str(c) for c in cols]
+        self.columns_ = cols
         self.selection_ = selection
+        self.input_range_ = fit_input_range(np.concatenate([d[:, self.observed_dofs_] for d in train]))
         return self
 
     def predict(self, partial, **kwargs):
-        """The model's prediction (:meth:`interprim.models.base.Predictor` contract)."""
+        """The model's prediction (:meth:`interprim.models.base.Predictor` contract), with ``input_distance`` and
+        ``out_of_range`` of the frames against the training demonstrations (:mod:`interprim.core.input_range`;
+        an :class:`~interprim.OutOfRangeWarning` when out of range)."""
         self._check_fitted("predict")
-        return self.model_.predict(partial, **kwargs)
+        with warnings.catch_warnings():  # the members' own checks: this model warns once, below
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = self.model_.predict(partial, **kwargs)
+        return mark(self, pred, self.input_distance(partial))
+
+    def input_distance(self, frames) -> float:
+        """Largest standardised distance of the observed frames ``(t, len(observed_dofs))`` from the training
+        frames (:func:`interprim.core.input_range.input_distance`)."""
+        self._check_fitted("input_distance")
+        if self.input_range_ is None:
+            return float("nan")
+        mean, std, _ = self.input_range_
+        f = np.asarray(frames, dtype=np.float64)
+        return float(np.max(np.abs(f - mean) / std)) if f.size else 0.0
+
+    @property
+    def input_limit_(self):
+        """The input distance above which a prediction is out of range (None for a version-1 file)."""
+        return None if self.input_range_ is None else self.input_range_[2]
 
     def stream(self, robot_state=None):
-        """The model's online predictor."""
+        """The model's online predictor, each prediction marked with the largest input distance of the frames
+        seen so far (warned once per stream)."""
         self._check_fitted("stream")
-        return self.model_.stream(robot_state)
+        return CheckedStream(self, self.model_.stream(robot_state))
 
     def to_state(self):
         """``(arrays, meta)``: the model's state with its class and parameters."""
@@ -335,7 +519,9 @@ class AutoInteraction(Predictor):
                 {"chosen": self.chosen_, "class": type(self.model_).__name__, "params": self.model_.json_params(),
                  "state": meta, "selection": self.selection_, "observed_dofs_": self.observed_dofs_,
                  "weights": self.weights_, "n_dofs_": self.n_dofs_, "dt_": self.dt_, "columns_": self.columns_,
-                 "mean_duration_": self.mean_duration_})
+                 "mean_duration_": self.mean_duration_,
+                 "input_range": [np.asarray(self.input_range_[0]).tolist(), np.asarray(self.input_range_[1]).tolist(),
+                                 float(self.input_range_[2])]})
 
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
@@ -351,6 +537,14 @@ class AutoInteraction(Predictor):
         self.mean_duration_ = float(meta["mean_duration_"])
         cols = meta.get("columns_")
         self.columns_ = None if cols is None else [str(c) for c in cols]
+        if "input_range" not in meta:  # a file of version 1: no statistics, no check (input_distance NaN)
+            self.input_range_ = None
+            return
+        mean, std, limit = meta["input_range"]
+        mean, std = np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64)
+        if mean.shape != (len(self.observed_dofs_),) or std.shape != mean.shape or not np.all(std > 0):
+            raise ValueError("input_range does not match the observed columns")
+        self.input_range_ = (mean, std, float(limit))
 
     def __repr__(self):
         if not hasattr(self, "model_"):
@@ -371,9 +565,13 @@ class AutoInteraction(Predictor):
         if s.get("runner_up") is None:
             return f"model: {self.chosen_} alone ({type(self.model_).__name__})"
         lines = ["held-out real-time error of the controlled agent, by family (inner cross-validation):"]
+        why = s.get("not_compared", {})
         for m, e in sorted(s["cv_errors"].items(), key=lambda kv: kv[1]):
             tag = " <- best" if m == self.chosen_ else ""
-            lines.append(f"  {m:10s} {e:.4g}{tag}")
+            if np.isfinite(e):
+                lines.append(f"  {m:10s} {e:.4g}{tag}")
+            else:
+                lines.append(f"  {m:10s} not compared: {why.get(m, 'could not be fitted on every inner fold')}")
         if s.get("combine") == "blend":
             w = ", ".join(f"{m} {x:.2f}" for m, x in sorted(self.weights_.items(), key=lambda kv: -kv[1]))
             lines.append(f"blend: {w} -> {s['blend_cv_error']:.4g} ({s['blend_vs_best']:.2f}x the best family; "
@@ -388,7 +586,8 @@ def choice(cv: CrossValidation, order) -> tuple:
     errors = cv.errors
     finite = {m: e for m, e in errors.items() if np.isfinite(e)}
     if not finite:
-        raise ValueError("no candidate family could be fitted on every inner training fold")
+        why = "; ".join(f"{m}: {w}" for m, w in getattr(cv, "why", {}).items())
+        raise ValueError("no candidate family could be fitted on every inner training fold" + (f" ({why})" if why else ""))
     chosen = min(finite, key=lambda m: (finite[m], list(order).index(m)))
     return chosen, _record(chosen, errors)
 
@@ -409,14 +608,18 @@ def _restore(cls_name, params, arrays, state):
 
 
 class Blend(Predictor):
-    """A convex combination of fitted models' predictions, each placed in time by its own timing.
+    """A convex combination of fitted models' predictions, each placed in time by its own timing, with weights that
+    depend on how far ahead the prediction is.
 
     After ``k`` observed frames each member ``m`` says where "now" is in its normalised time (``s_m``) and how long
-    the movement lasts (``D_m``; :func:`interprim.models.base.place_in_time`).  The blend's own timing is the weighted
-    mean ``s = sum w_m s_m``, ``D = sum w_m D_m``; its mean at normalised time ``u`` is ``sum w_m y_m(u_m)``
-    with ``u_m = s_m + (u - s) D / D_m`` ahead of now (the same instant in seconds for every member) and
-    ``u_m = u s_m / s`` before it.  Its variance is the mixture's, ``sum w_m (sd_m^2 + (y_m - mean)^2)``,
-    times a factor per agent and per step ahead fitted to held-out errors (``scales``).
+    the movement lasts (``D_m``; :func:`interprim.models.base.place_in_time`).  The blend's own timing is the
+    weighted mean ``s = sum w_m(0) s_m``, ``D = sum w_m(0) D_m`` with the real-time weights; its mean at normalised
+    time ``u``, ``a = (u - s) D`` seconds ahead of now, is ``sum w_m(a) y_m(u_m)`` with ``u_m = s_m + a / D_m`` (the
+    same instant in seconds for every member) and ``u_m = u s_m / s`` before now (where ``a = 0``).  The weights
+    ``w(a)`` were fitted per look-ahead band on held-out folds (:func:`weights_at`): the next ``horizon`` seconds,
+    then bands doubling in length to the end of the longest demonstration.  Its variance is the members' weighted
+    disagreement ``sum w_m(a) (y_m - mean)^2``, scaled per column and per second ahead to the held-out errors
+    (``scales``).
 
     Made by :class:`AutoInteraction`; :meth:`fit` refits the members with the stored weights.
 
@@ -424,58 +627,85 @@ class Blend(Predictor):
     ----------
     observed_dofs : sequence of int
     weights : dict
-        ``{family: weight}`` (families of :data:`interprim.models.registry.FAMILIES`).
+        ``{family: weight}``, or ``{family: [weight per band]}`` with ``bands`` (families of
+        :data:`interprim.models.registry.FAMILIES`).
     scales : dict, optional
-        ``{"a": (H, D), "b": (H, D)}``, the variance model per step ahead and column (default ``a = 1, b = 0``:
-        the spread alone).
+        ``{"a": (H, D), "b": (H, D), "t": (H,)}``: the variance ``a * spread + b`` at ``t`` seconds ahead (default
+        ``a = 1, b = 0``: the spread alone; without ``t``, ``H`` steps spanning ``horizon``).
     horizon : float
-        Seconds spanned by the ``H`` steps of ``scales``.
+        Seconds of the real-time band.
     n_basis, smoothing_window
         Settings of the Interaction Primitive members.
+    bands : list of float, optional
+        Upper edges (s) of the look-ahead bands of the weights (None: one set of weights for every look-ahead).
     """
 
     _FITTED = "members_"
+    #: 2: weights per look-ahead band, the variance model's own time axis
+    STATE_VERSION = 2
+    #: points of the normalised-time grid on which the members' predictions are read
+    N_GRID = 201
 
-    def __init__(self, observed_dofs, weights, scales=None, horizon: float = 0.25, n_basis: int = 20,
-                 smoothing_window=None):
+    def __init__(self, observed_dofs, weights, scales=None, horizon: float = registry.DEFAULT_HORIZON,
+                 n_basis: int = 20, smoothing_window=None, bands=None):
         self.observed_dofs = observed_dofs
         self.weights = weights
         self.scales = scales
         self.horizon = horizon
         self.n_basis = n_basis
         self.smoothing_window = smoothing_window
+        self.bands = bands
 
     @classmethod
     def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
-                    horizon: float = 0.25) -> "Blend":
+                    horizon: float = registry.DEFAULT_HORIZON, bands=None, n_basis: int = 20,
+                    smoothing_window=None) -> "Blend":
         """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
-        blend = cls(list(observed_dofs), dict(weights), {k: np.asarray(v, dtype=np.float64).tolist()
-                                                         for k, v in scales.items()} if scales is not None else None,
-                    horizon)
+        sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
+        blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
+                    None if bands is None else [float(b) for b in bands])
         blend.adopt(members, demos, dt)
         return blend
 
+    def _weight_table(self):
+        """``(names, W (bands, M), edges)`` of the stored weights."""
+        names = list(self.weights)
+        if self.bands is None:
+            W = np.array([[float(self.weights[m]) for m in names]])
+            return names, W, np.array([np.inf])
+        W = np.array([[float(x) for x in self.weights[m]] for m in names]).T
+        if W.shape[0] != len(self.bands):
+            raise ValueError(f"weights have {W.shape[0]} bands, bands has {len(self.bands)} edges")
+        return names, W, np.asarray(self.bands, dtype=np.float64)
+
     def adopt(self, members, demos, dt):
         """Take ``members`` (``{family: fitted model}``, trained on ``demos`` at ``dt``) as the fitted blend."""
-        self.members_ = {m: members[m] for m in self.weights}
+        names, W, edges = self._weight_table()
+        if np.any(W < 0) or not np.all(np.isfinite(W)) or np.any(W.sum(axis=1) <= 0):
+            raise ValueError("weights must be finite, non-negative and not all zero in any band")
+        self.members_ = {m: members[m] for m in names}
+        self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
         self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
 
     def fit(self, demos, dt: float | None = None):
-        """Fit every member with a positive weight on ``demos`` (the weights and scales are kept)."""
-        if dt is None:
-            dt = getattr(demos, "dt", None) or 0.01
-        make = registry.factories([m for m in self.weights if m in registry.FAMILIES], registry.Settings(
+        """Fit every member on ``demos`` (the weights and scales are kept)."""
+        train, dt, _ = uniform_demonstrations(demos, dt)
+        bad = [m for m in self.weights if m not in registry.FAMILIES]
+        if bad or not self.weights:
+            raise ValueError(f"weights must name some of {list(registry.FAMILIES)}, got {list(self.weights)!r}")
+        make = registry.factories(list(self.weights), registry.Settings(
             tuple(self.observed_dofs), n_basis=self.n_basis, smoothing_window=self.smoothing_window,
             horizon=float(self.horizon)))
-        bad = [m for m in self.weights if m not in make]
-        if bad or not self.weights:
-            raise ValueError(f"weights must name some of {sorted(make)}, got {list(self.weights)!r}")
-        train = [np.asarray(d, dtype=np.float64) for d in demos]
-        self.adopt({m: make[m]().fit(train, dt=float(dt)) for m in self.weights}, train, dt)
+        self.adopt({m: make[m]().fit(train, dt=dt) for m in self.weights}, train, dt)
         return self
+
+    def weights_at(self, ahead) -> np.ndarray:
+        """The blend's weights ``(len(ahead), members)`` at ``ahead`` seconds after now (:func:`weights_at`)."""
+        self._check_fitted("weights_at")
+        return weights_at(np.atleast_1d(ahead), self._edges, self._W)
 
     def _variance(self, spread, ahead):
         """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
@@ -483,30 +713,30 @@ class Blend(Predictor):
             return spread
         a = np.asarray(self.scales["a"], dtype=np.float64)
         b = np.asarray(self.scales["b"], dtype=np.float64)
-        steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+        if "t" in self.scales:
+            steps = np.asarray(self.scales["t"], dtype=np.float64)
+        else:
+            steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
         return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
 
-    def combine(self, preds: dict, n_frames: int, n_grid: int = 401):
-        """The blended :class:`~interprim.models.base.GridPrediction` of the members' predictions ``{family: pred}``
-        after ``n_frames`` observed frames."""
-        names = list(self.members_)
-        w = np.array([self.weights[m] for m in names], dtype=np.float64)
-        w = w / w.sum()
+    def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
+        """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
+        (a :class:`~interprim.models.base.GridPrediction` whose std is computed when first asked for)."""
+        n_grid = self.N_GRID if n_grid is None else int(n_grid)
+        names = self._names
+        w0 = weights_at(np.zeros(1), self._edges, self._W)[0]
         timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
-        s = float(np.dot(w, [t[0] for t in timing]))
-        D = float(np.dot(w, [t[1] for t in timing]))
-        u = np.linspace(0.0, 1.0, int(n_grid))
+        s = float(np.dot(w0, [t[0] for t in timing]))
+        D = float(np.dot(w0, [t[1] for t in timing]))
+        u = np.linspace(0.0, 1.0, n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
-        Y = []
-        for m, (sm, Dm) in zip(names, timing):
+        W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)
+        Y = np.empty((len(names), n_grid, self.n_dofs_))
+        for i, (m, (sm, Dm)) in enumerate(zip(names, timing)):
             um = np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0))
-            Y.append(interp_columns(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(int(n_grid))))
-        Y = np.array(Y)
-        mean = np.tensordot(w, Y, axes=1)
-        var = self._variance(np.tensordot(w, (Y - mean) ** 2, axes=1), ahead)
-        std = np.sqrt(var) if np.any(var > 0) else None
-        return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="blend", duration=D,
-                              mean_duration=self.mean_duration_, n_observed=n_frames)
+            Y[i] = interp_columns(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(n_grid))
+        mean = np.einsum("gm,mgd->gd", W, Y)
+        return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
 
     def predict(self, partial, **kwargs):
         """The blend of every member's prediction for the observed frames ``partial`` ``(M, n_observed)``."""
@@ -530,25 +760,52 @@ class Blend(Predictor):
         for m, est in self.members_.items():
             a, meta = est.to_state()
             arrays.update({f"{m}__{k}": v for k, v in a.items()})
-            members[m] = {"class": type(est).__name__, "params": est.json_params(), "state": meta}
+            members[m] = {"class": type(est).__name__, "params": est.json_params(), "state": meta,
+                          "version": int(est.STATE_VERSION)}
         return arrays, {"members": members, "dt": self.dt_, "mean_duration": self.mean_duration_,
                         "n_dofs": self.n_dofs_, "observed_dofs_": self.observed_dofs_}
 
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
-        self.members_ = {}
+        members = {}
         for m in self.weights:
             info = meta["members"][m]
             inner = {k[len(m) + 2:]: v for k, v in arrays.items() if k.startswith(f"{m}__")}
-            self.members_[m] = _restore(info["class"], info["params"], inner, info["state"])
-        self.dt_ = float(meta["dt"])
+            members[m] = _restore(info["class"], info["params"], inner, info["state"])
+        n_dofs = int(meta["n_dofs"])
+        self.adopt(members, [np.zeros((2, n_dofs))], float(meta["dt"]))
         self.mean_duration_ = float(meta["mean_duration"])
-        self.n_dofs_ = int(meta["n_dofs"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
 
     def __repr__(self):
-        w = ", ".join(f"{m} {x:.2f}" for m, x in self.weights.items())
-        return f"Blend({w})"
+        w = ", ".join(f"{m} {np.atleast_1d(x)[0]:.2f}" for m, x in self.weights.items())
+        return f"Blend({w}{'' if self.bands is None else f'; {len(self.bands)} look-ahead bands'})"
+
+
+class BlendPrediction(GridPrediction):
+    """The blend's prediction: its mean on the grid, its std (the members' weighted disagreement through the
+    variance model) computed when first asked for."""
+
+    def __init__(self, blend, u, mean, Y, W, ahead, phase, duration, n_observed):
+        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_, method="blend",
+                         duration=duration, mean_duration=blend.mean_duration_, n_observed=n_observed)
+        self._parts = (blend, Y, W, ahead)
+
+    @property
+    def std_values(self):
+        parts = self.__dict__.get("_parts")
+        if parts is None:
+            return self.__dict__.get("_std")
+        blend, Y, W, ahead = parts
+        spread = np.einsum("gm,mgd->gd", W, (Y - self.mean[None]) ** 2)
+        var = blend._variance(spread, ahead)
+        self.__dict__["_std"] = np.sqrt(np.clip(var, 0.0, None)) if np.any(var > 0) else None
+        self.__dict__["_parts"] = None
+        return self.__dict__["_std"]
+
+    @std_values.setter
+    def std_values(self, value):
+        self.__dict__["_std"] = value
 
 
 class BlendStream(BaseStream):
@@ -576,6 +833,48 @@ class BlendStream(BaseStream):
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
+
+
+class CheckedStream(BaseStream):
+    """A model's stream whose predictions carry ``input_distance`` and ``out_of_range`` of every frame seen so far
+    (the largest distance, :mod:`interprim.core.input_range`), warned once per stream."""
+
+    def __init__(self, model, inner):
+        self.model, self.inner = model, inner
+        self._max = 0.0
+        self._warned = False
+
+    @property
+    def n_frames(self) -> int:
+        """Frames received since the stream was created or last reset."""
+        return self.inner.n_frames
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        self.inner.reset(robot_state)
+        self._max = 0.0
+        self._warned = False
+
+    def _mark(self, pred, frames):
+        d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
+        self._max = max(self._max, d) if np.isfinite(d) else d
+        mark(self.model, pred, self._max, warn=not self._warned)
+        self._warned = self._warned or pred.out_of_range
+        return pred
+
+    def update(self, frame, need_cov: bool = False):
+        """Add one observed frame; the inner stream's prediction, marked."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = self.inner.update(frame, need_cov=need_cov)
+        return self._mark(pred, frame)
+
+    def extend(self, frames, need_cov: bool = False):
+        """Add several frames; the inner stream's prediction for the last, marked."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = self.inner.extend(frames, need_cov=need_cov)
+        return self._mark(pred, frames)
 
 
 def _record(chosen, errors) -> dict:

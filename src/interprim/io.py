@@ -181,6 +181,9 @@ def save_estimator(model, path) -> None:
     path = Path(path)
     arrays, state = model.to_state()
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    rng = getattr(model, "input_range_", None)
+    if rng is not None and "input_range" not in state:  # the out-of-range check of the model contract
+        state = dict(state, input_range=[np.asarray(rng[0]).tolist(), np.asarray(rng[1]).tolist(), float(rng[2])])
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "model": type(model).__name__,
             "model_version": int(model.STATE_VERSION), "params": model.json_params(), "state": state,
             "checksums": {k: _checksum(v) for k, v in arrays.items()}}
@@ -201,6 +204,8 @@ def load_estimator(path, model_class):
     try:
         model = model_class(**meta["params"])
         model.load_state(data, meta["state"])
+        if "input_range" in meta["state"] and getattr(model, "input_range_", None) is None:
+            model.set_input_range(meta["state"]["input_range"])
     except ModelFileError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as exc:

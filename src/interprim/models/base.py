@@ -39,7 +39,9 @@ normalised-time grid (the coupling, the learned interaction and the baselines); 
 
 from __future__ import annotations
 
+import functools
 import math
+import warnings
 
 import numpy as np
 
@@ -47,10 +49,11 @@ from ..core.blas import one_blas_thread
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from ..core.preprocessing import interp_columns
-from ..core.errors import NotFittedError
+from ..core.errors import NotFittedError, OutOfRangeWarning
+from ..core.input_range import fit_input_range, mark
 
 __all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time",
-           "uniform_demonstrations", "DEFAULT_DT"]
+           "uniform_demonstrations", "DEFAULT_DT", "CheckedStream"]
 
 #: Sampling interval (s) assumed for plain arrays given without ``dt``.
 DEFAULT_DT = 0.01
@@ -435,12 +438,93 @@ class PrefixStream(BaseStream):
         return self.model.predict(self._buf[: self._n].copy())
 
 
+def _fit_then_range(fit):
+    @functools.wraps(fit)
+    def wrapper(self, demos, *args, **kwargs):
+        out = fit(self, demos, *args, **kwargs)
+        obs = getattr(self, "observed_dofs_", None)
+        if obs is not None:
+            arrays, _, _ = uniform_demonstrations(demos, kwargs.get("dt", args[0] if args else None))
+            self.set_input_range(fit_input_range(np.concatenate([a[:, list(obs)] for a in arrays])))
+        return out
+
+    return wrapper
+
+
+def _predict_then_mark(predict):
+    @functools.wraps(predict)
+    def wrapper(self, partial, *args, **kwargs):
+        pred = predict(self, partial, *args, **kwargs)
+        if getattr(self, "input_range_", None) is not None and not np.isfinite(
+                getattr(pred, "input_distance", float("nan"))):
+            mark(self, pred, self.input_distance(partial))
+        return pred
+
+    return wrapper
+
+
+def _checked_stream(stream):
+    @functools.wraps(stream)
+    def wrapper(self, *args, **kwargs):
+        inner = stream(self, *args, **kwargs)
+        if getattr(self, "input_range_", None) is None or isinstance(inner, CheckedStream):
+            return inner
+        return CheckedStream(self, inner)
+
+    return wrapper
+
+
 class Predictor(Params):
     """Base of every model: the contract of the module docstring.
 
     Subclasses implement ``fit``, ``predict``, :meth:`to_state` and :meth:`load_state`, and name one fitted
     attribute in ``_FITTED``; ``STATE_VERSION`` is the version of their model-file content.
+
+    **The out-of-range check is part of the contract.**  After ``fit``, every model knows the range of its
+    training frames of the observed agent (:func:`interprim.core.input_range.fit_input_range`, kept in
+    ``input_range_`` and in its model file); every prediction carries ``input_distance`` and ``out_of_range``
+    (:func:`interprim.core.input_range.mark`; a stream: the largest distance of the frames seen so far) and warns
+    once.  The base class adds this around a subclass's ``fit``, ``predict`` and ``stream``, unless the class does it
+    itself (``_CHECKS_INPUT = True``: the Interaction Primitive, :class:`~interprim.models.ensemble.AutoInteraction`).
     """
+
+    #: whether the class computes ``input_distance`` / ``out_of_range`` itself
+    _CHECKS_INPUT = False
+    #: ``(mean, std, limit)`` of the observed training frames (None: unknown, e.g. a member inside a blend's file)
+    input_range_ = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("_CHECKS_INPUT", False):
+            return
+        for name, wrap in (("fit", _fit_then_range), ("predict", _predict_then_mark), ("stream", _checked_stream)):
+            if name in cls.__dict__ and not getattr(cls.__dict__[name], "_checked", False):
+                f = wrap(cls.__dict__[name])
+                f._checked = True
+                setattr(cls, name, f)
+
+    def set_input_range(self, input_range):
+        """Set ``input_range_`` (``(mean, std, limit)`` or None), e.g. from a model file."""
+        if input_range is None:
+            self.input_range_ = self.input_limit_ = None
+            return
+        mean, std, limit = input_range
+        mean, std = np.asarray(mean, dtype=np.float64).ravel(), np.asarray(std, dtype=np.float64).ravel()
+        if std.shape != mean.shape or not np.all(std > 0) or not float(limit) > 0:
+            raise ValueError("input_range: mean and std of one shape, std and limit positive")
+        self.input_range_ = (mean, std, float(limit))
+        #: the input distance above which a prediction is out of range
+        self.input_limit_ = float(limit)
+
+    def input_distance(self, frames) -> float:
+        """Largest standardised distance of observed frames ``(t, len(observed_dofs))`` from the training frames
+        (:mod:`interprim.core.input_range`); NaN when the range is unknown."""
+        if self.input_range_ is None:
+            return float("nan")
+        mean, std, _ = self.input_range_
+        f = np.atleast_2d(np.asarray(frames, dtype=np.float64))
+        return float(np.max(np.abs(f - mean) / std)) if f.size else 0.0
+
 
     _FITTED = "observed_dofs_"
     STATE_VERSION = 1
@@ -488,9 +572,56 @@ class Predictor(Params):
         return load_estimator(path, cls)
 
 
+Predictor.stream = _checked_stream(Predictor.stream)  # PrefixStream of every model that has no stream of its own
+
+
 def _jsonable(v):
     if isinstance(v, np.ndarray):
         return v.tolist()
     if isinstance(v, np.generic):
         return v.item()
     raise TypeError(f"parameter value {v!r} cannot be stored in a model file")
+
+
+class CheckedStream(BaseStream):
+    """A model's stream whose predictions carry ``input_distance`` and ``out_of_range`` of every frame seen so far
+    (the largest distance, :mod:`interprim.core.input_range`), warned once per stream."""
+
+    def __init__(self, model, inner):
+        self.model, self.inner = model, inner
+        self._max = 0.0
+        self._warned = False
+
+    @property
+    def n_frames(self) -> int:
+        """Frames received since the stream was created or last reset."""
+        return self.inner.n_frames
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        self.inner.reset(robot_state)
+        self._max = 0.0
+        self._warned = False
+
+    def _mark(self, pred, frames):
+        d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
+        self._max = max(self._max, d) if np.isfinite(d) else d
+        mark(self.model, pred, self._max, warn=not self._warned)
+        self._warned = self._warned or pred.out_of_range
+        return pred
+
+    def update(self, frame, need_cov: bool = False):
+        """Add one observed frame; the inner stream's prediction, marked."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = self.inner.update(frame, need_cov=need_cov)
+        return self._mark(pred, frame)
+
+    def extend(self, frames, need_cov: bool = False):
+        """Add several frames; the inner stream's prediction for the last, marked."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = self.inner.extend(frames, need_cov=need_cov)
+        return self._mark(pred, frames)
+
+

@@ -25,7 +25,7 @@ from ..model_selection.realtime import RealTimeConfig, realtime_sweep, summarise
 from . import registry
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
-from .base import BaseStream, GridPrediction, Predictor, place_in_time, uniform_demonstrations
+from .base import BaseStream, CheckedStream, GridPrediction, Predictor, place_in_time, uniform_demonstrations
 from ..core.preprocessing import interp_columns
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
@@ -372,6 +372,7 @@ class AutoInteraction(Predictor):
     """
 
     _FITTED = "model_"
+    _CHECKS_INPUT = True
     #: 2: the training frames' range (the out-of-range check) and per-look-ahead blend weights
     STATE_VERSION = 2
     CANDIDATES = CANDIDATES
@@ -477,7 +478,7 @@ class AutoInteraction(Predictor):
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in train])) * self.dt_
         self.columns_ = cols
         self.selection_ = selection
-        self.input_range_ = fit_input_range(np.concatenate([d[:, self.observed_dofs_] for d in train]))
+        self.set_input_range(fit_input_range(np.concatenate([d[:, self.observed_dofs_] for d in train])))
         return self
 
     def predict(self, partial, **kwargs):
@@ -489,21 +490,6 @@ class AutoInteraction(Predictor):
             warnings.simplefilter("ignore", OutOfRangeWarning)
             pred = self.model_.predict(partial, **kwargs)
         return mark(self, pred, self.input_distance(partial))
-
-    def input_distance(self, frames) -> float:
-        """Largest standardised distance of the observed frames ``(t, len(observed_dofs))`` from the training
-        frames (:func:`interprim.core.input_range.input_distance`)."""
-        self._check_fitted("input_distance")
-        if self.input_range_ is None:
-            return float("nan")
-        mean, std, _ = self.input_range_
-        f = np.asarray(frames, dtype=np.float64)
-        return float(np.max(np.abs(f - mean) / std)) if f.size else 0.0
-
-    @property
-    def input_limit_(self):
-        """The input distance above which a prediction is out of range (None for a version-1 file)."""
-        return None if self.input_range_ is None else self.input_range_[2]
 
     def stream(self, robot_state=None):
         """The model's online predictor, each prediction marked with the largest input distance of the frames
@@ -537,14 +523,10 @@ class AutoInteraction(Predictor):
         self.mean_duration_ = float(meta["mean_duration_"])
         cols = meta.get("columns_")
         self.columns_ = None if cols is None else [str(c) for c in cols]
-        if "input_range" not in meta:  # a file of version 1: no statistics, no check (input_distance NaN)
-            self.input_range_ = None
-            return
-        mean, std, limit = meta["input_range"]
-        mean, std = np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64)
-        if mean.shape != (len(self.observed_dofs_),) or std.shape != mean.shape or not np.all(std > 0):
+        # a file of version 1 has no statistics: no check (input_distance NaN)
+        self.set_input_range(meta.get("input_range"))
+        if self.input_range_ is not None and self.input_range_[0].shape != (len(self.observed_dofs_),):
             raise ValueError("input_range does not match the observed columns")
-        self.input_range_ = (mean, std, float(limit))
 
     def __repr__(self):
         if not hasattr(self, "model_"):
@@ -833,48 +815,6 @@ class BlendStream(BaseStream):
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
-
-
-class CheckedStream(BaseStream):
-    """A model's stream whose predictions carry ``input_distance`` and ``out_of_range`` of every frame seen so far
-    (the largest distance, :mod:`interprim.core.input_range`), warned once per stream."""
-
-    def __init__(self, model, inner):
-        self.model, self.inner = model, inner
-        self._max = 0.0
-        self._warned = False
-
-    @property
-    def n_frames(self) -> int:
-        """Frames received since the stream was created or last reset."""
-        return self.inner.n_frames
-
-    def reset(self, robot_state=None):
-        """Forget all frames (start a new interaction)."""
-        self.inner.reset(robot_state)
-        self._max = 0.0
-        self._warned = False
-
-    def _mark(self, pred, frames):
-        d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
-        self._max = max(self._max, d) if np.isfinite(d) else d
-        mark(self.model, pred, self._max, warn=not self._warned)
-        self._warned = self._warned or pred.out_of_range
-        return pred
-
-    def update(self, frame, need_cov: bool = False):
-        """Add one observed frame; the inner stream's prediction, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
-            pred = self.inner.update(frame, need_cov=need_cov)
-        return self._mark(pred, frame)
-
-    def extend(self, frames, need_cov: bool = False):
-        """Add several frames; the inner stream's prediction for the last, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
-            pred = self.inner.extend(frames, need_cov=need_cov)
-        return self._mark(pred, frames)
 
 
 def _record(chosen, errors) -> dict:

@@ -204,6 +204,8 @@ class InteractionPrimitive(Predictor):
         Scales of the predictive std (:mod:`interprim.models.primitive.calibration`).
     """
 
+    _CHECKS_INPUT = True  # its fitted state and stream compute input_distance / out_of_range themselves
+
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,

@@ -141,3 +141,45 @@ def test_one_predict_enters_primitive_py_once():
         assert entries == [], entries
         # and it is the estimator's answer: the state's own predict gives the same numbers
         np.testing.assert_array_equal(model.fitted_.predict(partial).trajectory(20), pred.trajectory(20))
+
+
+def private_imports() -> list[str]:
+    """``file:line module name`` of every ``from m import _x`` between interprim's own modules (a name another
+    module uses is public: no leading underscore)."""
+    out = []
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("interprim")):
+                for a in node.names:
+                    if a.name.startswith("_") and not a.name.startswith("__"):
+                        out.append(f"{path.relative_to(SRC)}:{node.lineno} {node.module} {a.name}")
+    return out
+
+
+def test_no_module_imports_another_modules_private_names():
+    found = private_imports()
+    assert not found, "\n".join(found)
+
+
+def test_the_import_guard_sees_private_imports():
+    tree = ast.parse("from .x import _y\nfrom . import _z as z\nfrom .a import b\nfrom numpy import _c\n")
+    hits = [a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level > 0 for a in n.names
+            if a.name.startswith("_")]
+    assert hits == ["_y", "_z"]
+
+
+def test_models_never_import_the_layers_above_them():
+    """``interprim.models`` and ``interprim.model_selection`` import nothing from evaluation, experiments, cli or
+    server, and the model families are named in one table (the registry)."""
+    bad = []
+    for pkg in ("models", "model_selection", "core"):
+        for path in sorted((SRC / pkg).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.ImportFrom):
+                    mod = ("." * node.level) + (node.module or "")
+                    if any(part in mod.split(".") for part in ("evaluation", "experiments", "cli", "server")):
+                        bad.append(f"{path.relative_to(SRC)}:{node.lineno} {mod}")
+    assert not bad, "\n".join(bad)
+    from interprim.models import registry
+
+    assert set(registry.CANDIDATES) <= set(registry.FAMILIES)

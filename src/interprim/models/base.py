@@ -498,9 +498,9 @@ class Predictor(Params):
         if cls.__dict__.get("_CHECKS_INPUT", False):
             return
         for name, wrap in (("fit", _fit_then_range), ("predict", _predict_then_mark), ("stream", _checked_stream)):
-            if name in cls.__dict__ and not getattr(cls.__dict__[name], "_checked", False):
+            if name in cls.__dict__ and not getattr(cls.__dict__[name], "__interprim_checked__", False):
                 f = wrap(cls.__dict__[name])
-                f._checked = True
+                f.__interprim_checked__ = True
                 setattr(cls, name, f)
 
     def set_input_range(self, input_range):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.validation import as_2d_finite, as_frame, check_positive
-from .base import BaseStream, GridPrediction, Predictor
+from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise
 
 __all__ = ["Baseline", "PriorMean", "NearestNeighbour", "BaselinePrediction", "AlignedStream", "AlignedBaseline",
@@ -34,9 +34,7 @@ class Baseline(Predictor):
     """What the three methods share: the column layout, the sampling interval and the prediction's timing."""
 
     def _fit_common(self, demos, dt):
-        if hasattr(demos, "demos") and not isinstance(demos, (list, tuple, np.ndarray)):
-            dt = getattr(demos, "dt", None) if dt is None else dt
-            demos = list(demos.demos)
+        demos, dt, _ = uniform_demonstrations(demos, dt)
         arrays = check_demos(demos)
         D = arrays[0].shape[1]
         obs = self.observed_dofs
@@ -47,7 +45,7 @@ class Baseline(Predictor):
         if bad or len(set(obs)) != len(obs):
             raise ValueError(f"observed_dofs {list(self.observed_dofs)} must be distinct columns of the "
                              f"{D}-column demonstrations")
-        self.dt_ = 0.01 if dt is None else check_positive(dt, "dt")
+        self.dt_ = dt
         self.mean_duration_ = float(np.mean([(a.shape[0] - 1) * self.dt_ for a in arrays]))
         self.n_dofs_ = D
         self.observed_dofs_ = obs

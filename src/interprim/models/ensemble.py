@@ -54,7 +54,7 @@ def weights_at(ahead, edges, W) -> np.ndarray:
         return np.broadcast_to(W[0], (ahead.size, W.shape[1])).copy()
     edges = np.asarray(edges, dtype=np.float64)
     mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges)
-    out = np.stack([np.interp(ahead, mids, W[:, m]) for m in range(W.shape[1])], axis=1)
+    out = interp_columns(ahead, mids, W)
     out = np.clip(out, 0.0, None)
     return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
 
@@ -689,7 +689,7 @@ class Blend(Predictor):
         self._check_fitted("weights_at")
         return weights_at(np.atleast_1d(ahead), self._edges, self._W)
 
-    def _variance(self, spread, ahead):
+    def variance(self, spread, ahead):
         """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
         if not self.scales:
             return spread
@@ -780,7 +780,7 @@ class BlendPrediction(GridPrediction):
             return self.__dict__.get("_std")
         blend, Y, W, ahead = parts
         spread = np.einsum("gm,mgd->gd", W, (Y - self.mean[None]) ** 2)
-        var = blend._variance(spread, ahead)
+        var = blend.variance(spread, ahead)
         self.__dict__["_std"] = np.sqrt(np.clip(var, 0.0, None)) if np.any(var > 0) else None
         self.__dict__["_parts"] = None
         return self.__dict__["_std"]

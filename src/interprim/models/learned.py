@@ -28,7 +28,7 @@ import numpy as np
 
 from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite
-from .base import GridPrediction, Predictor
+from .base import GridPrediction, Predictor, uniform_demonstrations
 from .coupling import CouplingModel
 from ..phase.learned import LearnedPhase
 
@@ -78,12 +78,7 @@ class LearnedInteraction(Predictor):
     @one_blas_thread
     def fit(self, demos, dt: float | None = None):
         """Fit the timing model on the observed columns, then the coupling with the timing model's own error."""
-        if hasattr(demos, "demos") and hasattr(demos, "times"):
-            dt = demos.dt if dt is None else dt
-            demos = list(demos.demos)
-        demos = [np.asarray(d, dtype=np.float64) for d in demos]
-        if dt is None:
-            raise ValueError("dt (the demonstrations' sampling interval in seconds) is required")
+        demos, dt, _ = uniform_demonstrations(demos, dt)
         for name in ("phase_kwargs", "coupling_kwargs"):
             v = getattr(self, name)
             if v is not None and not isinstance(v, dict):
@@ -93,6 +88,12 @@ class LearnedInteraction(Predictor):
         coupling = CouplingModel(obs, **self._coupling_kwargs(phase)).fit(demos, dt=dt)
         self.phase_, self.coupling_, self.dt_, self.observed_dofs_ = phase, coupling, float(dt), obs
         return self
+
+    @property
+    def mean_duration_(self) -> float:
+        """Mean duration of the training demonstrations in seconds (the timing model's)."""
+        self._check_fitted("mean_duration_")
+        return float(self.phase_.mean_duration_)
 
     def _coupling_kwargs(self, phase: LearnedPhase) -> dict:
         grid_t = np.arange(len(phase.std_grid_)) * float(phase.dt_)

@@ -225,12 +225,12 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
     from interprim.phase import likelihood as PL
 
     M = z.shape[0]
-    lo = max(PL._S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
+    lo = max(PL.S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
     grid = np.unique(np.append(np.exp(np.linspace(np.log(lo), 0.0, n_grid)), np.clip(s_init, lo, 1.0)))
     s2 = PL.phase_noise(model)
 
     def score(s):
-        return PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL._log_speed_prior(model, M, s))
+        return PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL.log_speed_prior(model, M, s))
 
     curve = np.array([score(s) for s in grid])
     i = int(np.argmax(curve))

@@ -133,10 +133,10 @@ def test_take_keeps_raw_samples_and_labels_of_the_chosen_recordings(rng):
 def test_development_only_sweep_never_loads_the_holdout():
     """``EvalConfig(development_only=True)``: the NuiSI tasks hold the first two thirds of the recordings."""
     from interprim.evaluation.nested import split_holdout
-    from interprim.evaluation.sweep import EvalConfig, _task
+    from interprim.evaluation.sweep import EvalConfig, load_task
 
-    full = _task("nuisi", "handshake2", EvalConfig())
-    dev = _task("nuisi", "handshake2", EvalConfig(development_only=True))
+    full = load_task("nuisi", "handshake2", EvalConfig())
+    dev = load_task("nuisi", "handshake2", EvalConfig(development_only=True))
     keep, hold = split_holdout(len(full.demos))
     assert len(dev.demos) == len(keep) < len(full.demos)
     for i, j in enumerate(keep):

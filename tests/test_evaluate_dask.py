@@ -74,7 +74,7 @@ def test_evaluate_on_a_dask_cluster_equals_the_serial_run(tmp_path):
     # same records: keys, strings and NaNs exactly, numbers to 1e-6 relative.  Not to the bit: the same fold
     # computed in another process can differ by a rounding (array alignment changes numpy's SIMD summation
     # order), and the likelihood phase, the vertex of a parabola through scores 0.2 % apart
-    # (phase.likelihood._finish), moves by d_lp / (2 k h): for a flat posterior (curvature k ~ 10-100) and
+    # (phase.likelihood.finish), moves by d_lp / (2 k h): for a flat posterior (curvature k ~ 10-100) and
     # rounding d_lp ~ 1e-13 |lp|, ~1e-10-1e-9 of the movement, which the errors carry ~10x.  Measured: up to 6e-9
     # (a fresh clone under stress-ng); any real difference between backends is orders of magnitude larger.
     assert len(on_cluster["folds"]) == len(serial["folds"]) > 0

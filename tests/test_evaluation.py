@@ -54,9 +54,9 @@ def test_cli_has_evaluate():
 
 
 def test_unknown_method_and_dataset():
-    from interprim.evaluation.sweep import _task, make_estimator
+    from interprim.evaluation.sweep import load_task, make_estimator
 
     with pytest.raises(ValueError, match="unknown method"):
         make_estimator("magic", [0], CFG)
     with pytest.raises(ValueError, match="unknown data set"):
-        _task("nope", "nope", CFG)
+        load_task("nope", "nope", CFG)

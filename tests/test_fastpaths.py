@@ -13,7 +13,7 @@ from interprim.core.basis import Basis
 from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
 from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
                                 shrinkage_intensity)
-from interprim.phase.dtw import IncrementalDTW, _accumulate_np, accumulated_cost, open_end_dtw
+from interprim.phase.dtw import IncrementalDTW, accumulate_np, accumulated_cost, open_end_dtw
 from interprim.core.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -213,7 +213,7 @@ def test_dtw_kernels_equal_numpy_and_each_other():
     for N, M, D in ((1, 1, 1), (7, 3, 2), (40, 13, 3), (120, 250, 4), (33, 9, 10)):
         u = rng.normal(size=(N, D))
         v = rng.normal(size=(M, D))
-        Dm = _accumulate_np(u, v)
+        Dm = accumulate_np(u, v)
         np.testing.assert_array_equal(accumulated_cost(u, v), Dm.T)  # compiled == numpy, bitwise
         r = open_end_dtw(u, v, return_path=False)  # four-column strips
         assert r.n_star == int(np.argmin(Dm[-1])) and r.cost == Dm[-1, r.n_star]
@@ -388,7 +388,7 @@ def stream_models(synthetic, fitted):
 
 
 # Stream vs batch (issue 12): both phases are the same local maximum of the log posterior reached by the same
-# last step (interprim.phase.likelihood._finish), so they differ by O(c e^2 / k) ~ 1e-8 of the movement plus the
+# last step (interprim.phase.likelihood.finish), so they differ by O(c e^2 / k) ~ 1e-8 of the movement plus the
 # scores' rounding over (curvature x spacing); the predictions then differ by ~10x the phase.  Bounds per variant
 # (phase of the movement, trajectories and response relative), about twice to ten times the worst measured
 # (issue 20; measured phase / trajectory / response): default 1.6e-7 / 5.9e-7 / 4.8e-7, smooth 2.7e-7 / 1.4e-6 /

@@ -264,7 +264,7 @@ def check_rollout_response_positions(models, demos):
 def check_phase_likelihood_phase_loglik_batch(models, demos):
     comp, ref = both("phase_likelihood.phase_loglik_batch")
     m = models["likelihood"]
-    fs = PL._fast_state(m)
+    fs = PL.fast_state(m)
     s2 = PL.phase_noise(m)
     worst = 0.0
     for M in (2, 5, 40, 70):

@@ -120,7 +120,7 @@ def _latent(model, frames):
 
 
 def _both_paths(model, z, s, s2):
-    fs = PL._fast_state(model)
+    fs = PL.fast_state(model)
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
@@ -191,7 +191,7 @@ def test_dense_fallback_when_prior_is_not_low_rank():
     cov[:n, :n] += 0.05 * np.mean(np.diag(cov[:n, :n])) * np.eye(n)  # no longer diag(d) + W^T W of thetas_
     prior.cov = cov
     model = model.with_fitted(prior_=prior)
-    assert PL._factored(model) is None and PL._fast_state(model) is None
+    assert PL._factored(model) is None and PL.fast_state(model) is None
     z = _latent(model, _demos(1, seed=7)[0][:50])
     s = np.array([0.2, 0.45, 0.9])
     ref = [PL._phase_log_likelihood_reference(model, z, x) for x in s]
@@ -201,7 +201,7 @@ def test_dense_fallback_when_prior_is_not_low_rank():
 
 
 def _paused(frames, pre=20, post=40):
-    """Frames held still before and after the movement (the tracker's phase clips at _S_MIN and at 1)."""
+    """Frames held still before and after the movement (the tracker's phase clips at S_MIN and at 1)."""
     return np.concatenate([np.repeat(frames[:1], pre, 0), frames, np.repeat(frames[-1:], post, 0)])
 
 
@@ -209,7 +209,7 @@ def _window_reference(model, z, ss):
     """Log posterior of each candidate phase, one reference evaluation each (no batching, no kernel)."""
     s2 = PL.phase_noise(model)
     M = z.shape[0]
-    return np.array([PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL._log_speed_prior(model, M, s))
+    return np.array([PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL.log_speed_prior(model, M, s))
                      for s in ss])
 
 
@@ -221,13 +221,13 @@ def test_stream_lattice_scores_equal_reference(observation, monkeypatch):
     assert kernels.kernel("phase_likelihood.phase_loglik_batch") is not None
     frames = _paused(_demos(1, seed=11)[0])[:, model.observed_dofs_]
     seen = []
-    real = PT._finish
+    real = PT.finish
 
     def spy(scores, ss, lps, i, lo, hi):
         seen.append((scores.M, np.array(ss), np.array(lps), i))
         return real(scores, ss, lps, i, lo, hi)
 
-    monkeypatch.setattr(PT, "_finish", spy)
+    monkeypatch.setattr(PT, "finish", spy)
     st = model.stream()
     for f in frames:
         st.update(f)
@@ -243,7 +243,7 @@ def test_stream_lattice_scores_equal_reference(observation, monkeypatch):
 def test_stream_phase_and_prediction_equal_batch(observation, paused):
     """Issue 12: streaming a movement frame by frame ends where ``predict`` on the same frames is, at every
     frame.  Both phases are the same local maximum of the same log posterior reached by the same last step
-    (``_finish``), so they differ by ~1e-8 of the movement at most; measured (issue 20): phase 2.9e-12,
+    (``finish``), so they differ by ~1e-8 of the movement at most; measured (issue 20): phase 2.9e-12,
     trajectory 4e-12 (position) and 1.2e-9 (forcing) relative.  Asserted: phase 1e-8, trajectory 1e-7
     (tightened from issue 12's 1e-3)."""
     model = _small_model(observation, None, "shrinkage")
@@ -266,7 +266,7 @@ def test_stream_phase_and_prediction_equal_batch(observation, paused):
 
 
 def test_finish_finds_the_maximum_and_does_not_depend_on_the_starting_candidates():
-    """``_finish`` (a parabola through the best candidate and its neighbours, then one through ``u1 -+ h``):
+    """``finish`` (a parabola through the best candidate and its neighbours, then one through ``u1 -+ h``):
     on smooth peaked functions it lands within ``c h^2 / (2 k)`` of the maximiser, and from two different
     sets of candidates (a coarse grid or a fine lattice) at the same point to ~1e-8, which is what makes the
     stream's phase the batch's; a maximum at a bound is returned as the bound."""
@@ -291,13 +291,13 @@ def test_finish_finds_the_maximum_and_does_not_depend_on_the_starting_candidates
         out = []
         for ss in (ss1, ss2):
             lps = f(ss)
-            out.append(PL._finish(sc, ss, lps, int(np.argmax(lps)), 0.02, 1.0))
+            out.append(PL.finish(sc, ss, lps, int(np.argmax(lps)), 0.02, 1.0))
         bias = 0.3 * PL._H_FINAL ** 2  # c h^2 / (2 k) in log s, with c = 0.3 k (and the grid of the reference)
         assert abs(np.log(out[0] / s_max)) < bias + 2e-6
         assert abs(out[0] - out[1]) < 1e-7
     inc = scorer(lambda s: s)  # increasing: the maximum is the bound
     ss = np.array([0.9, 0.95, 1.0])
-    assert PL._finish(inc, ss, ss, 2, 0.02, 1.0) == 1.0
+    assert PL.finish(inc, ss, ss, 2, 0.02, 1.0) == 1.0
 
 
 def _slot_errors(tr, z):
@@ -415,7 +415,7 @@ def test_brent_search_matches_scipy_bounded_minimiser():
     minimiser that scipy.optimize.minimize_scalar(method='bounded') finds, to the requested tolerance."""
     from scipy.optimize import minimize_scalar
 
-    from interprim.phase.likelihood import _brent_min
+    from interprim.phase.likelihood import brent_min
 
     rng = np.random.default_rng(3)
     for _ in range(40):
@@ -427,13 +427,13 @@ def test_brent_search_matches_scipy_bounded_minimiser():
         a, b = max(0.0, c - rng.uniform(0.05, 0.3)), min(1.0, c + rng.uniform(0.05, 0.3))
         x0 = rng.uniform(a, b)
         tol = 1e-3 * b
-        x, fx = _brent_min(f, a, b, x0, f(x0), xatol=tol, maxiter=50)
+        x, fx = brent_min(f, a, b, x0, f(x0), xatol=tol, maxiter=50)
         ref = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": tol})
         assert a <= x <= b and fx == pytest.approx(f(x))
         assert abs(x - ref.x) < 2 * tol
         assert fx <= ref.fun + 1e-6
     # a minimum at the bracket's end
-    x, _ = _brent_min(lambda s: s, 0.2, 0.6, 0.4, 0.4, xatol=1e-4, maxiter=60)
+    x, _ = brent_min(lambda s: s, 0.2, 0.6, 0.4, 0.4, xatol=1e-4, maxiter=60)
     assert x == pytest.approx(0.2, abs=3e-4)
 
 
@@ -444,9 +444,9 @@ def test_refined_phase_is_a_local_maximum(synthetic, lik_model):
         est = estimate_phase(lik_model, z, refine=True)
         coarse = estimate_phase(lik_model, z, refine=False)
         assert est.log_posterior >= coarse.log_posterior - 1e-12
-        from interprim.phase.likelihood import _scorer, phase_noise
+        from interprim.phase.likelihood import make_scorer, phase_noise
 
-        sc = _scorer(lik_model, z, phase_noise(lik_model), True)
+        sc = make_scorer(lik_model, z, phase_noise(lik_model), True)
         h = 2e-3 * est.s_end
         nb = np.clip(np.array([est.s_end - h, est.s_end + h]), 1e-3, 1.0)
         nb = nb[np.abs(nb - est.s_end) > 1e-12]
@@ -468,7 +468,7 @@ def test_batch_predict_reports_the_dtw_cost_on_demand(synthetic, lik_model):
 def test_scorer_prior_and_shared_parts_are_the_same_numbers(compiled, monkeypatch):
     """The scorer adds the speed prior element by element and the stream's tracker hands it the parts it already
     looked up for the frame: both give exactly (bit for bit) the log posterior ``log p(z | s) + log p(s)`` of
-    :func:`~interprim.phase.likelihood._log_speed_prior`, on the compiled and the numpy path, also at a clipped
+    :func:`~interprim.phase.likelihood.log_speed_prior`, on the compiled and the numpy path, also at a clipped
     candidate."""
     model = _small_model("position", None, "shrinkage").fitted_
     if not compiled:
@@ -476,14 +476,14 @@ def test_scorer_prior_and_shared_parts_are_the_same_numbers(compiled, monkeypatc
     z = _demos(1, seed=11)[0][:70, model.observed_dofs_]
     M = z.shape[0]
     s2 = PL.phase_noise(model)
-    s = np.append(np.exp(np.linspace(np.log(PL._S_MIN), 0.0, 150)), [0.3107, 0.52])  # the bounds included
-    sc = PL._scorer(model, z, s2)
+    s = np.append(np.exp(np.linspace(np.log(PL.S_MIN), 0.0, 150)), [0.3107, 0.52])  # the bounds included
+    sc = PL.make_scorer(model, z, s2)
     lp, ll = sc(s)
-    np.testing.assert_array_equal(lp, ll + PL._log_speed_prior(model, M, s))
-    parts = (PL._fast_state(model), PL._speed_prior_params(model, M))
-    lp2, ll2 = PL._scorer(model, z, s2, _parts=parts)(s)
+    np.testing.assert_array_equal(lp, ll + PL.log_speed_prior(model, M, s))
+    parts = (PL.fast_state(model), PL.speed_prior_params(model, M))
+    lp2, ll2 = PL.make_scorer(model, z, s2, _parts=parts)(s)
     np.testing.assert_array_equal(lp2, lp)
     np.testing.assert_array_equal(ll2, ll)
-    lp3, ll3 = PL._scorer(model, z, s2, speed_prior=False)(s)  # no prior: the log-likelihood itself
+    lp3, ll3 = PL.make_scorer(model, z, s2, speed_prior=False)(s)  # no prior: the log-likelihood itself
     np.testing.assert_array_equal(lp3, ll)
     np.testing.assert_array_equal(ll3, ll)

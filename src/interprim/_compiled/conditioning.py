@@ -15,7 +15,7 @@ from numba import njit
 
 from . import FASTMATH as _FM
 
-from .linalg import _chol_inplace, _chol_solve_vec, _forward_rows, _syrk_sub
+from .linalg import chol_inplace, chol_solve_vec, forward_rows, syrk_sub
 
 
 @njit(cache=True, fastmath=_FM)
@@ -76,12 +76,12 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
             for b in range(a + 1):
                 Ti[a, b] = si[a] * G[a, b] * si[b]
             Ti[a, a] += sigma2
-        ld = _chol_inplace(Ti, q)
+        ld = chol_inplace(Ti, q)
         logdet_T += ld
         Ui = Uh[i]
         W = Ws[i] if keepW else Ws[0]
-        _forward_rows(Ti, Ui, W)
-        _syrk_sub(W, sigma2, K)
+        forward_rows(Ti, Ui, W)
+        syrk_sub(W, sigma2, K)
         # c_i = b_i - G mu_i ;  residual |f_i - X mu_i|^2 = yy_i - mu.b - mu.c
         c = ca[0, i]
         mu = mu_o[i]
@@ -96,7 +96,7 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
             tmp[a] = si[a] * cc
         # a_i = T_i^{-1} S c_i ;  beta += Uh_i^T a_i
         ai = ca[1, i]
-        _chol_solve_vec(Ti, q, tmp, ai)
+        chol_solve_vec(Ti, q, tmp, ai)
         for a in range(q):
             aa = ai[a]
             Ua = Ui[a]
@@ -106,9 +106,9 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
         for a in range(r):
             for b in range(a + 1):
                 Kpre[a, b] = K[a, b]
-    ld_K = _chol_inplace(K, r)
+    ld_K = chol_inplace(K, r)
     gamma = np.empty(r)
-    _chol_solve_vec(K, r, beta, gamma)
+    chol_solve_vec(K, r, beta, gamma)
     for i in range(Do):
         Ui = Uh[i]
         si = sq[i]
@@ -119,7 +119,7 @@ def _lowrank_mean(G, B, sigma2, yy, sq, Uh, K0, mean, mu_o, obs_flat, other, Uc,
                 acc += Ua[k] * gamma[k]
             tmp[a] = acc
         w = ca[2, i]
-        _chol_solve_vec(T[i], q, tmp, w)
+        chol_solve_vec(T[i], q, tmp, w)
         c = ca[0, i]
         ai = ca[1, i]
         for a in range(q):

@@ -15,7 +15,7 @@ from . import FASTMATH as _FM
 
 
 @njit(cache=True, fastmath=_FM)
-def _chol_inplace(A, n):
+def chol_inplace(A, n):
     """Lower Cholesky factor of the leading ``n x n`` block of ``A`` in place; returns log det, or NaN."""
     logdet = 0.0
     for j in range(n):
@@ -37,7 +37,7 @@ def _chol_inplace(A, n):
 
 
 @njit(cache=True, fastmath=_FM)
-def _chol_solve_vec(L, n, b, out):
+def chol_solve_vec(L, n, b, out):
     """``out = (L L^T)^{-1} b`` for a lower Cholesky factor ``L``."""
     for i in range(n):
         s = b[i]
@@ -52,7 +52,7 @@ def _chol_solve_vec(L, n, b, out):
 
 
 @njit(cache=True, fastmath=_FM)
-def _solve_R(R, b, p, out):
+def solve_R(R, b, p, out):
     """``out = (R^T R)^{-1} b`` for an upper factor ``R`` (rows); ``p = R^{-T} b``; returns ``|p|^2``."""
     q = R.shape[0]
     for j in range(q):
@@ -75,7 +75,7 @@ def _solve_R(R, b, p, out):
 
 
 @njit(cache=True, fastmath=_FM)
-def _chol_update_R(R, u):
+def chol_update_R(R, u):
     """``R <- chol(R^T R + u u^T)`` for an upper Cholesky factor ``R`` (rows), ``O(q^2)``; ``u`` is consumed."""
     q = R.shape[0]
     for k in range(q):
@@ -94,7 +94,7 @@ def _chol_update_R(R, u):
 
 
 @njit(cache=True, fastmath=_FM)
-def _forward_rows(L, U, W):
+def forward_rows(L, U, W):
     """``W = L^{-1} U`` for lower-triangular ``L`` (q, q) and ``U`` (q, r); row updates vectorised over r."""
     q, r = U.shape
     for a in range(q):
@@ -127,8 +127,8 @@ def _forward_rows(L, U, W):
 
 
 @njit(cache=True, fastmath=_FM)
-def _syrk_sub(W, s2, K):
-    """``K -= s2 W^T W`` on the lower triangle of ``K`` (all that :func:`_chol_inplace` reads) for ``W`` (q, r),
+def syrk_sub(W, s2, K):
+    """``K -= s2 W^T W`` on the lower triangle of ``K`` (all that :func:`chol_inplace` reads) for ``W`` (q, r),
     four rows of ``W`` per sweep over ``K``."""
     q, r = W.shape
     a = 0

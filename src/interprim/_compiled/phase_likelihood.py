@@ -40,7 +40,7 @@ from numba import njit
 
 from . import FASTMATH as _FM
 from . import LOG2PI as _LOG2PI
-from .linalg import _chol_inplace, _chol_update_R, _forward_rows, _solve_R
+from .linalg import chol_inplace, chol_update_R, forward_rows, solve_R
 
 
 BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames
@@ -213,7 +213,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
                 for c in range(a + 1):
                     Ta[c] = sa * G[c, a] * si[c]
                 Ta[a] += s2
-            ld = _chol_inplace(T, q)
+            ld = chol_inplace(T, q)
             if not np.isfinite(ld):
                 ok = False
                 break
@@ -224,7 +224,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
                 for c in range(n):
                     Uba[c] = Ua[c]
                 Uba[n] = si[a] * G[a, q4 + i]
-            _forward_rows(T, Ub, V)
+            forward_rows(T, Ub, V)
             off = i * q
             for a in range(q):
                 Va = V[a]
@@ -354,7 +354,7 @@ def _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs, Ks, Ys, ts, T, Ub, V, VT, Kacc, c
             for cc in range(a + 1):
                 Ta[cc] = sa * G[cc, a] * si[cc]
             Ta[a] += s2
-        ld = _chol_inplace(T, q)
+        ld = chol_inplace(T, q)
         if not np.isfinite(ld):
             return np.nan, 0.0
         ld_T += ld
@@ -371,7 +371,7 @@ def _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs, Ks, Ys, ts, T, Ub, V, VT, Kacc, c
                 Uba[cc] = Ua[cc]
             for cc in range(n, r4):
                 Uba[cc] = 0.0
-        _forward_rows(T, Ub, V)
+        forward_rows(T, Ub, V)
         off = i * q
         for a in range(q):
             Va = V[a]
@@ -380,7 +380,7 @@ def _dense_full(G, rr, q4, sq, Uh, K0, s2, Rs, Ks, Ys, ts, T, Ub, V, VT, Kacc, c
         for a in range(q):
             c[a] = si[a] * G[a, q4 + i]
         y = Ys[i]
-        J -= _solve_R(Ri, c, p, y)
+        J -= solve_R(Ri, c, p, y)
         for a in range(q):
             ya = y[a]
             Ua = Ui[a]
@@ -419,7 +419,7 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, Ys, ts, u, p, x, w):
             uj = si[j] * h[j]
             u[j] = uj
             e -= uj * y[j]
-        g = 1.0 + _solve_R(R, u, p, x)  # x = T^{-1} u
+        g = 1.0 + solve_R(R, u, p, x)  # x = T^{-1} u
         for a in range(n):
             w[a] = 0.0
         Ui = Uh[i]
@@ -441,7 +441,7 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, Ys, ts, u, p, x, w):
             ts[a] += w[a] * eg
         dld += np.log(g)
         dJ += e * eg
-        _chol_update_R(R, u)  # R^T R + u u^T (u is consumed)
+        chol_update_R(R, u)  # R^T R + u u^T (u is consumed)
     return dld, dJ
 
 

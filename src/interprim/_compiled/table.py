@@ -39,9 +39,9 @@ class Kernel:
 
 
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
-    Kernel("dtw.accumulate", "dtw:_accumulate", "interprim.phase.dtw:_accumulate_np", True,
+    Kernel("dtw.accumulate", "dtw:_accumulate", "interprim.phase.dtw:accumulate_np", True,
            "the accumulated cost matrix of Eq. 5-7, (M, N); bitwise equal"),
-    Kernel("dtw.open_end", "dtw:_open_end_strips", "interprim.phase.dtw:_accumulate_np", False,
+    Kernel("dtw.open_end", "dtw:_open_end_strips", "interprim.phase.dtw:accumulate_np", False,
            "n* and D(n*, M) of Eq. 5-8 with two columns of memory; the reference's last column, first argmin; "
            "bitwise equal"),
     Kernel("dtw.backtrack", "dtw:_backtrack", "interprim.phase.dtw:_backtrack_np", True,

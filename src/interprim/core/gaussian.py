@@ -34,7 +34,7 @@ from .._compiled import registry as _kernels  # light: the kernels themselves lo
 __all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
 
-_LOG2PI = float(np.log(2.0 * np.pi))
+LOG2PI = float(np.log(2.0 * np.pi))
 
 
 class GaussianPrior:
@@ -379,7 +379,7 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
         resid_total = yy - 2.0 * np.sum(mu_o * B.T) + np.sum((mu_o @ G) * mu_o)
         quad = max(resid_total - float(c @ shift[flat]), 0.0) / sigma2
         logdet = (n_obs - Po) * np.log(sigma2) + 2.0 * float(np.sum(np.log(np.diag(cf[0]))))
-        loglik = -0.5 * (n_obs * _LOG2PI + logdet + quad)
+        loglik = -0.5 * (n_obs * LOG2PI + logdet + quad)
     return Posterior(post_mean, post_cov, loglik)
 
 
@@ -397,7 +397,7 @@ def condition_literal(mean, cov, Omega, F, sigma2: float) -> Posterior:
     post_cov = cov - K @ Omega @ cov
     sign, logdet = np.linalg.slogdet(A)
     r = F - Omega @ mean
-    loglik = -0.5 * (F.shape[0] * _LOG2PI + logdet + r @ Ainv @ r)
+    loglik = -0.5 * (F.shape[0] * LOG2PI + logdet + r @ Ainv @ r)
     return Posterior(post_mean, post_cov, float(loglik))
 
 
@@ -527,7 +527,7 @@ class LowRankConditioner:
         D_o, q = self.D_o, self.q
         log_s2 = np.log(sigma2)
         logdet = n_obs * log_s2 + ld_T - D_o * q * log_s2 + ld_K
-        return float(-0.5 * (n_obs * _LOG2PI + logdet + max(resid, 0.0) / sigma2))
+        return float(-0.5 * (n_obs * LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
     def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
         """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
@@ -669,5 +669,5 @@ def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=Fal
         resid_perp = max(resid_total - float(r.reshape(-1) @ r.reshape(-1)), 0.0)
         n_obs, dk = Y.size, n_o * k
         logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
-        ll = -0.5 * (n_obs * _LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2 + at @ rt)
+        ll = -0.5 * (n_obs * LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2 + at @ rt)
     return means, ll

@@ -10,7 +10,7 @@ The sweep's public names are importable from here.
 """
 
 from .sweep import (METHODS, EvalConfig, evaluate_fold, make_estimator, markdown_tables, recognition_fold,
-                    recognition_table, run_sweep, save_results, summarise, task_names)
+                    recognition_table, run_sweep, save_results, summarise, task_names, load_task)
 
 __all__ = ["METHODS", "EvalConfig", "evaluate_fold", "make_estimator", "markdown_tables", "recognition_fold",
-           "recognition_table", "run_sweep", "save_results", "summarise", "task_names"]
+           "recognition_table", "run_sweep", "save_results", "summarise", "task_names", "load_task"]

@@ -186,7 +186,7 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
 
 def evaluation_figures(results, summary, cfg, out_dir, datasets, traj_method="ip-position", animate=True):
     """All figures of an evaluation run; returns the paths written."""
-    from .sweep import _task, make_estimator, task_names
+    from .sweep import load_task, make_estimator, task_names
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -199,7 +199,7 @@ def evaluation_figures(results, summary, cfg, out_dir, datasets, traj_method="ip
         paths.append(recognition_curves(summary, out / "recognition.png"))
     for ds in datasets:
         for tk in task_names(ds):
-            t = _task(ds, tk, cfg)
+            t = load_task(ds, tk, cfg)
             ctrl = [i for i in range(t.demos[0].shape[1]) if i not in set(t.observed_dofs)]
             if not ctrl:
                 continue

@@ -121,7 +121,9 @@ class Task:
 
 
 @lru_cache(maxsize=64)
-def _task(dataset: str, name: str, cfg: EvalConfig) -> Task:
+def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
+    """The demonstrations, observed columns and sampling of one task of a data set (``nuisi``: one action, with
+    causal prefixes; the built-in synthetic and simulated sets; the handwritten characters)."""
     if dataset == "nuisi":
         from ..datasets import load_nuisi
 
@@ -195,7 +197,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
     """
     from ..core.blas import single_thread
 
-    t = _task(dataset, task, cfg)
+    t = load_task(dataset, task, cfg)
     demos = t.demos
     train = [d for i, d in enumerate(demos) if i != j]
     test = demos[j]
@@ -252,7 +254,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
 def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int):
     from ..models.primitive.estimator import InteractionPrimitive
 
-    t = _task(dataset, task, cfg)
+    t = load_task(dataset, task, cfg)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
     # recognition uses the prior and the phase noise only (chosen in fit), not the conditioning sigma2
     return InteractionPrimitive(observed_dofs=t.observed_dofs, n_basis=cfg.n_basis,
@@ -272,7 +274,7 @@ def recognition_fold(dataset: str, task: str, j: int, cfg: EvalConfig = EvalConf
     with single_thread():
         models = {nm: _recognition_model(dataset, nm, cfg, j if nm == task else -1) for nm in names}
         rec = Recogniser(models, noise=cfg.recognition_noise)
-        tk = _task(dataset, task, cfg)
+        tk = load_task(dataset, task, cfg)
         T = tk.demos[j].shape[0]
         out = []
         for p in cfg.recognition_fractions:
@@ -288,7 +290,7 @@ def _jobs(datasets, methods, cfg, recognition: bool, max_demos=None):
     jobs = []
     for ds in datasets:
         for tk in task_names(ds):
-            n = len(_task(ds, tk, cfg).demos)
+            n = len(load_task(ds, tk, cfg).demos)
             idx = range(n) if max_demos is None else np.unique(np.linspace(0, n - 1, min(max_demos, n)).astype(int))
             for j in idx:
                 for m in methods:

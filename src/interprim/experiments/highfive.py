@@ -42,7 +42,7 @@ import numpy as np
 
 from ..core.preprocessing import time_normalise
 
-from .highfive_common import METHOD_LABELS, METHODS, _goal_spread, _n_observed
+from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 from .highfive_figures import animate, plot_fig6, plot_fig7, plot_fig8, plot_setup
 
 __all__ = [
@@ -121,7 +121,7 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
         A complete reference movement.
     use_numba : bool
         Use the core's compiled incremental DTW (:class:`interprim.phase.dtw.IncrementalDTW`, default) or the
-        core's numpy reference of the accumulated cost (``interprim.phase.dtw._accumulate_np``).
+        core's numpy reference of the accumulated cost (``interprim.phase.dtw.accumulate_np``).
 
     Returns
     -------
@@ -140,9 +140,9 @@ def open_end_dtw_prefix_costs(query, ref, use_numba: bool = True) -> np.ndarray:
         for m in range(q.shape[0]):
             out[m] = inc.update(q[m], check=False)[1]
         return out
-    from ..phase.dtw import _accumulate_np
+    from ..phase.dtw import accumulate_np
 
-    return _accumulate_np(r, q).min(axis=1)  # Eq. 8: open end over the reference, for every prefix
+    return accumulate_np(r, q).min(axis=1)  # Eq. 8: open end over the reference, for every prefix
 
 
 def nearest_neighbours(query, refs, prefix_lengths) -> np.ndarray:
@@ -223,7 +223,7 @@ def _select_sigma2(train, val, cfg, progress):
         errs = []
         for d, gt in zip(val.demos, gts):
             for p in (20, 40, 60, 80, 100):
-                pred = model.predict(d[: _n_observed(len(d), p), :2])
+                pred = model.predict(d[: n_observed(len(d), p), :2])
                 errs.append(np.mean((pred.trajectory(cfg.n_points)[:, 2:] - gt[:, 2:]) ** 2))
         scores[str(s2)] = float(np.mean(errs))
         models[str(s2)] = model
@@ -269,7 +269,7 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
         d = test.demos[i]
         T = len(d)
         gt = time_normalise(d, cfg.n_points)
-        ks = [_n_observed(T, p) for p in P]
+        ks = [n_observed(T, p) for p in P]
         nn = nearest_neighbours(d[:, :2], train_obs, ks)
         out["nn_index"][i] = nn
         for j, (p, k) in enumerate(zip(P, ks)):
@@ -384,9 +384,9 @@ def _run_highfive(out_dir, config, progress, log):
     spreads_all = {40: [], 60: []}
     for i, d in enumerate(test.demos):
         for p in (40, 60):
-            pred = model.predict(d[: _n_observed(len(d), p), :2])
+            pred = model.predict(d[: n_observed(len(d), p), :2])
             S = pred.samples(cfg.n_samples, cfg.n_points, random_state=cfg.seed + i)
-            spreads_all[p].append(_goal_spread(S[:, :, 2:], test.controlled_arm)[0])
+            spreads_all[p].append(goal_spread(S[:, :, 2:], test.controlled_arm)[0])
     plot_fig7(ev, cfg, out / "fig7_mse.png")
     files["fig7"] = "fig7_mse.png"
     p8 = 60 if 60 in cfg.percents else cfg.percents[len(cfg.percents) // 2]

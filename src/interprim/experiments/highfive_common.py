@@ -19,12 +19,12 @@ METHOD_LABELS = {
 }
 
 
-def _n_observed(T: int, p: float) -> int:
+def n_observed(T: int, p: float) -> int:
     """Frames observed at ``p`` % (:func:`interprim.model_selection.prefixes.observed_frames`)."""
     return observed_frames(T, p / 100.0)
 
 
-def _goal_spread(samples_ctrl, arm):
+def goal_spread(samples_ctrl, arm):
     """RMS distance (m) of the sampled end points (FK of the final joint angles) from their mean."""
     ends = arm.hand(samples_ctrl[:, -1, :])
     return float(np.sqrt(np.mean(np.sum((ends - ends.mean(axis=0)) ** 2, axis=1)))), ends

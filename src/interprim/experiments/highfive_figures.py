@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.preprocessing import interp_columns
-from .highfive_common import METHOD_LABELS, METHODS, _goal_spread, _n_observed
+from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 
 def _draw_arm(ax, arm, q, **kw):
     pts = arm.forward_kinematics(q)
@@ -80,10 +80,10 @@ def plot_fig6(model, test, idx, cfg, path, percents=(40, 60), model_label=None):
     fig, axes = plt.subplots(1, len(percents), figsize=(5.2 * len(percents), 4.8), sharey=True)
     spreads = []
     for ax, p in zip(np.atleast_1d(axes), percents):
-        k = _n_observed(len(d), p)
+        k = n_observed(len(d), p)
         pred = model.predict(d[:k, :2])
         S = pred.samples(cfg.n_samples, cfg.n_points, random_state=cfg.seed)
-        spread, ends = _goal_spread(S[:, :, 2:], ca)
+        spread, ends = goal_spread(S[:, :, 2:], ca)
         spreads.append(spread)
         hands = ca.hand(S[:, :, 2:])
         for h in hands:

@@ -170,11 +170,11 @@ def run(actions=ACTIONS, observed="right_arm", ip_methods=True, realtime=False, 
 def run_builtin(datasets=("synthetic", "synthetic-noisy", "highfive-sim"), max_demos=10, learned_kwargs=None,
                 progress=True):
     """The phase protocol on built-in data sets (:func:`interprim.evaluation.task_names`), for comparison."""
-    from interprim.evaluation import EvalConfig, _task
+    from interprim.evaluation import EvalConfig, load_task
 
     results = {}
     for ds in datasets:
-        t = _task(ds, ds, EvalConfig())
+        t = load_task(ds, ds, EvalConfig())
         demos, obs = list(t.demos), list(t.observed_dofs)
         ctrl = [c for c in range(demos[0].shape[1]) if c not in set(obs)]
         idx = np.unique(np.linspace(0, len(demos) - 1, min(max_demos, len(demos))).astype(int))

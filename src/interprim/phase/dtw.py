@@ -49,7 +49,7 @@ def _cost_matrix_np(u, v):
     return C
 
 
-def _accumulate_np(u, v):
+def accumulate_np(u, v):
     """Eq. 5-7 by anti-diagonals (cells of one anti-diagonal are independent); returns (M, N) like the kernel."""
     C = _cost_matrix_np(u, v)
     N, M = C.shape
@@ -109,7 +109,7 @@ def _open_end(u, v):
         uT = np.ascontiguousarray(u.T)
         n, c = k(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
         return int(n), float(c)
-    Dm = _accumulate_np(u, v)
+    Dm = accumulate_np(u, v)
     n = _argmin_first_np(Dm[-1])
     return n, float(Dm[-1, n])
 

@@ -48,14 +48,14 @@ import numpy as np
 from ..core.blas import single_thread
 from .._compiled import registry as kernels
 from ..core.dmp import forcing_values
-from ..core.gaussian import _LOG2PI, GaussianPrior, condition
+from ..core.gaussian import LOG2PI, GaussianPrior, condition
 from ..core.preprocessing import derivatives
 from .estimate import PhaseEstimate
 
 __all__ = ["PhaseEstimate", "observation_design", "phase_log_likelihood", "phase_log_likelihoods", "estimate_phase",
            "phase_noise"]
 
-_S_MIN = 0.02
+S_MIN = 0.02
 
 
 def observation_design(model, z, s_end: float, kind: str = "position"):
@@ -150,7 +150,7 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
     z = np.asarray(z, dtype=np.float64)
     s_values = np.atleast_1d(np.asarray(s_values, dtype=np.float64))
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
-    fs = _fast_state(model)
+    fs = fast_state(model)
     if fs is None:
         with single_thread():
             return np.array([_phase_log_likelihood_reference(model, z, s, s2) for s in s_values])
@@ -216,7 +216,7 @@ class _FastState:
             return _loglik_batch_numpy(self.Zh, Rg, z, s_values, self.sq, self.Uh, self.K0, float(s2))
 
 
-def _fast_state(model):
+def fast_state(model):
     """The :class:`_FastState` of ``model`` (``None`` when the prior is not diagonal plus low rank)."""
     def build():
         pr = _factored(model)
@@ -259,10 +259,10 @@ def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
     tKt = np.sum(w * w, axis=1)
     N = M * n_o
     logdet = n_o * (M - q) * np.log(s2) + ld_T + ld_K
-    return -0.5 * (N * _LOG2PI + logdet + (rr - cTc) / s2 - tKt)
+    return -0.5 * (N * LOG2PI + logdet + (rr - cTc) / s2 - tKt)
 
 
-def _log_speed_prior(model, M: int, s):
+def log_speed_prior(model, M: int, s):
     """Log-normal prior on the implied duration ``(M - 1) dt / s`` (density in ``s``)."""
     d = np.log(np.asarray(model.durations_, dtype=np.float64))
     mu = float(d.mean())
@@ -292,7 +292,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
         interactions (5 held-out demonstrations each), the benchmark's 7 + 7 DoF data and the two-agent
         synthetic set; 20 points had in turn matched 40 on the test suite's observations.
     refine : bool
-        Refine the best candidate by Brent's bounded search between its grid neighbours (:func:`_brent_min`).
+        Refine the best candidate by Brent's bounded search between its grid neighbours (:func:`brent_min`).
     speed_prior : bool
         Add the log-normal duration prior of the training demonstrations.
     sigma2 : float, optional
@@ -303,7 +303,7 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     """
     z = np.asarray(z, dtype=np.float64)
     M = z.shape[0]
-    lo, hi = _bounds(model, M, bounds)
+    lo, hi = search_bounds(model, M, bounds)
     if M < 2:
         s = float(np.clip(s_init if s_init is not None else lo, lo, hi))
         return PhaseEstimate(s, log_likelihood=0.0, log_posterior=0.0, grid=np.array([s]), curve=np.array([0.0]))
@@ -311,24 +311,24 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     if s_init is not None and np.isfinite(s_init):
         grid = np.unique(np.append(grid, np.clip(float(s_init), lo, hi)))
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
-    scores = _scorer(model, z, s2, speed_prior)
+    scores = make_scorer(model, z, s2, speed_prior)
     if scores.dense:
         with single_thread():
             return _search(grid, scores, refine, lo, hi)
     return _search(grid, scores, refine, lo, hi)
 
 
-def _bounds(model, M, bounds=None):
+def search_bounds(model, M, bounds=None):
     """``(lo, hi)``: the phases searched for ``M`` frames (default ``(0.02, 1)``, ``lo`` raised so that the implied
     duration stays below 4x the longest demonstration)."""
-    lo, hi = (_S_MIN, 1.0) if bounds is None else (float(bounds[0]), float(bounds[1]))
+    lo, hi = (S_MIN, 1.0) if bounds is None else (float(bounds[0]), float(bounds[1]))
     elapsed = (M - 1) * model.dt_
     dur = model.durations_
     longest = model.cached("phase_longest_duration", (dur,), lambda: float(np.max(dur)))
     return max(lo, min(hi, elapsed / (4.0 * longest))), hi
 
 
-class _scorer:
+class make_scorer:
     """``s -> (log posterior, log likelihood)`` for one observation, batched over candidate phases."""
 
     def __init__(self, model, z, s2, speed_prior=True, _parts=None):
@@ -336,8 +336,8 @@ class _scorer:
         self.M = self.z.shape[0]
         self.s2 = float(s2)
         if _parts is None:
-            self.fs = _fast_state(model)
-            self.prior = _speed_prior_params(model, self.M) if speed_prior else None
+            self.fs = fast_state(model)
+            self.prior = speed_prior_params(model, self.M) if speed_prior else None
         else:  # a caller that already has them for this model and M (the stream's tracker)
             self.fs, self.prior = _parts
         self.dense = self.fs is None
@@ -361,7 +361,7 @@ class _scorer:
         if self.prior is None:
             return ll, ll
         logel, mu, sd = self.prior
-        # the log-normal prior of _log_speed_prior, element by element in floats (a few candidates: cheaper than
+        # the log-normal prior of log_speed_prior, element by element in floats (a few candidates: cheaper than
         # six numpy operations on arrays of three, and the same IEEE operations in the same order)
         lp = []
         for l_i, ls_i in zip(ll.tolist(), np.log(s_values).tolist()):
@@ -370,8 +370,8 @@ class _scorer:
         return np.array(lp), ll
 
 
-def _speed_prior_params(model, M):
-    """``(log elapsed time, mean, sd)`` of :func:`_log_speed_prior` (the log-duration statistics cached per model)."""
+def speed_prior_params(model, M):
+    """``(log elapsed time, mean, sd)`` of :func:`log_speed_prior` (the log-duration statistics cached per model)."""
     dur = model.durations_
 
     def build():
@@ -382,10 +382,10 @@ def _speed_prior_params(model, M):
     return float(np.log(max(M - 1, 1) * model.dt_)), mu, sd
 
 
-def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
+def _search(grid, scores, refine, lo=S_MIN, hi=1.0):
     """Grid search, then (``refine``) Brent's method between the best point's grid neighbours to ``1e-3 s``,
     then three points ``_POLISH`` apart around it (moved towards the maximum while it is not the middle one)
-    and :func:`_finish` on them: the same last step as the stream's tracker, whose lattice has that spacing."""
+    and :func:`finish` on them: the same last step as the stream's tracker, whose lattice has that spacing."""
     lp, ll = scores(grid)
     curve = lp
     i = int(np.argmax(curve))
@@ -401,7 +401,7 @@ def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
                 seen[s] = float(ll1[0])
                 return -float(lp1[0])
 
-            s, neg = _brent_min(f, a, b, best_s, -best_lp, xatol=1e-3 * max(b, 1e-3), maxiter=20)
+            s, neg = brent_min(f, a, b, best_s, -best_lp, xatol=1e-3 * max(b, 1e-3), maxiter=20)
             if -neg > best_lp:
                 best_s, best_lp, best_ll = s, -neg, seen[s]
         ss = np.unique(np.clip(best_s * np.exp(np.array([-_POLISH, 0.0, _POLISH])), lo, hi))
@@ -415,7 +415,7 @@ def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
             new = float(scores(np.array([x]))[0][0])
             lps = np.array([lps[1], lps[2], new]) if k == 2 else np.array([new, lps[0], lps[1]])
             k = int(np.argmax(lps))
-        s = _finish(scores, ss, lps, k, lo, hi)
+        s = finish(scores, ss, lps, k, lo, hi)
         lp1, ll1 = scores(np.array([s]))
         best_s, best_lp, best_ll = s, float(lp1[0]), float(ll1[0])
     return PhaseEstimate(best_s, log_likelihood=float(best_ll), log_posterior=float(best_lp), grid=grid, curve=curve)
@@ -423,10 +423,10 @@ def _search(grid, scores, refine, lo=_S_MIN, hi=1.0):
 
 _GOLD = 0.5 * (3.0 - 5.0 ** 0.5)
 _POLISH = 0.01  # spacing in log s of the last refinement (batch) = the stream's lattice spacing (tracking._Tracker)
-_H_FINAL = 2e-3  # spacing in log s of the last parabola (_finish)
+_H_FINAL = 2e-3  # spacing in log s of the last parabola (finish)
 
 
-def _brent_min(f, a, b, x, fx, xatol, maxiter):
+def brent_min(f, a, b, x, fx, xatol, maxiter):
     """Minimise ``f`` on ``[a, b]`` by Brent's method (golden-section steps, parabolic steps through the
     three best points when they fall inside the bracket and shrink fast enough; Brent 1973, ch. 5), started
     from an interior point ``x`` whose value ``fx`` is known.  Returns ``(x, f(x))``.  Replaces
@@ -492,7 +492,7 @@ def _vertex(x, y):
     return x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
 
 
-def _finish(scores, ss, lps, i, lo, hi, max_rounds: int = 6) -> float:
+def finish(scores, ss, lps, i, lo, hi, max_rounds: int = 6) -> float:
     """The phase from candidates ``ss`` (increasing, log posteriors ``lps``, best ``i``): the last step of
     both the batch search (:func:`_search`) and the stream's tracker (:class:`~interprim.phase.tracking._Tracker`).
 

@@ -1,6 +1,6 @@
 """Online phase tracking for streams: the likelihood phase by local search (beyond the paper's DTW).
 
-:class:`_Tracker` (used by :class:`~interprim.models.primitive.stream.Stream`) scores candidates around the previous
+:class:`Tracker` (used by :class:`~interprim.models.primitive.stream.Stream`) scores candidates around the previous
 estimate on a fixed lattice of speeds, so the compiled step
 (:func:`interprim._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
 frame instead of recomputing them; it scores with :mod:`interprim.phase.likelihood` and ends where the batch
@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core.blas import single_thread
 from .._compiled import registry as kernels
-from .likelihood import _S_MIN, _bounds, _finish, _fast_state, _scorer, _speed_prior_params, estimate_phase, phase_noise
+from .likelihood import S_MIN, search_bounds, finish, fast_state, make_scorer, speed_prior_params, estimate_phase, phase_noise
 
 __all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
 
@@ -31,11 +31,11 @@ def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
     js, ss = [], []
     for j in range(kc - nh, kc + nh + 1):
         s = float(v0 * np.exp(dlog * j)) * (M - 1)
-        if s < _S_MIN:
-            if js and ss[-1] == _S_MIN:
+        if s < S_MIN:
+            if js and ss[-1] == S_MIN:
                 js[-1] = j
                 continue
-            s = _S_MIN
+            s = S_MIN
         elif s > 1.0:
             if ss and ss[-1] == 1.0:
                 continue
@@ -45,18 +45,18 @@ def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
     return js, np.array(ss)
 
 
-class _Tracker:
+class Tracker:
     """Online phase of one :class:`~interprim.models.primitive.estimator.Stream` (the likelihood phase, local search).
 
     The candidates are *speeds* on a fixed lattice ``v_j = v0 exp(dlog j)``, ``dlog = 2 spread /
     (n_candidates - 1)`` (default: 3 candidates 1 % apart), anchored at the first estimate (the batch search's,
     ``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
-    to ``[_S_MIN, 1]`` (clipped candidates merged).  Frame ``m`` of lattice point ``j`` always sits at phase
+    to ``[S_MIN, 1]`` (clipped candidates merged).  Frame ``m`` of lattice point ``j`` always sits at phase
     ``v_j m``, so the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
     point's statistics and factors by the new frame (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them
     (``O(M q (q + D_o) + D_o q^2 n + ...)``).  While the best candidate is at an unclipped edge the window is
     re-centred on it (:meth:`_lattice_step`); the phase returned is then taken off the lattice to the maximum
-    of the log posterior by :func:`~interprim.phase.likelihood._finish`, the batch search's own last step.
+    of the log posterior by :func:`~interprim.phase.likelihood.finish`, the batch search's own last step.
     Without the kernel (or with a dense prior) the same candidates are scored from scratch.
     """
 
@@ -82,7 +82,7 @@ class _Tracker:
         """Phase of the last of the frames ``z`` (the frames seen so far, a prefix of the next call's).
 
         The lattice step (:meth:`_lattice_step`) finds the best speed on the lattice around the previous one;
-        :func:`~interprim.phase.likelihood._finish` then takes the phase to the maximum of the log posterior
+        :func:`~interprim.phase.likelihood.finish` then takes the phase to the maximum of the log posterior
         by the same last step as :func:`~interprim.phase.likelihood.estimate_phase`, so that a stream's
         phase is the batch phase of the same frames (within ``1e-3`` of the movement, tested; measured
         ``~1e-6``), not a lattice point ``exp(dlog / 2)`` away.
@@ -90,7 +90,7 @@ class _Tracker:
         M = z.shape[0]
         if M < 2:
             self.reset()
-            return _S_MIN
+            return S_MIN
         if self.v0 is None:  # the first estimate: the batch search itself
             s = estimate_phase(self.model, z, speed_prior=self.speed_prior).s_end
             self.v0, self.kc, self.Rg = s / (M - 1), 0, None
@@ -99,20 +99,20 @@ class _Tracker:
             return s
         model = self.model
         # what every window and the refinement of this frame share, looked up once per frame
-        fs = _fast_state(model)
+        fs = fast_state(model)
         s2 = phase_noise(model)
-        prior = _speed_prior_params(model, M) if self.speed_prior else None
+        prior = speed_prior_params(model, M) if self.speed_prior else None
         kern = kernels.kernel("phase_likelihood.track_step") if fs is not None else None
         ss, lps, i, found = self._lattice_step(z, fs, s2, prior, kern)
         if not found:  # the maximum moved further than the hops reach: the batch search, lattice re-anchored
             s = estimate_phase(model, z, speed_prior=self.speed_prior).s_end
             self.kc = int(round(np.log(s / (self.v0 * (M - 1))) / self.dlog))
             return s
-        return _finish(_scorer(model, z, s2, self.speed_prior, _parts=(fs, prior)), ss, lps, i, *_bounds(model, M))
+        return finish(make_scorer(model, z, s2, self.speed_prior, _parts=(fs, prior)), ss, lps, i, *search_bounds(model, M))
 
     def _lattice_step(self, z, fs, s2, prior, kern):
         """Best lattice point for ``z``: ``(phases, log posteriors, index of the best, found)`` of the last
-        window scored (``fs``, ``s2``, ``prior``, ``kern``: the frame's :func:`_fast_state`, :func:`phase_noise`,
+        window scored (``fs``, ``s2``, ``prior``, ``kern``: the frame's :func:`fast_state`, :func:`phase_noise`,
         speed prior parameters or ``None``, and the compiled step or ``None``).
 
         When the best point is at an unclipped edge of the window, the window is re-centred on it and scored
@@ -122,7 +122,7 @@ class _Tracker:
             kc0 = self.kc
             ss, lps, i = self._window(z, fs, s2, prior, kern)
             edge = self.kc in (kc0 - self.nh, kc0 + self.nh)
-            if not edge or ss[i] <= _S_MIN or ss[i] >= 1.0 or self.nh == 0:
+            if not edge or ss[i] <= S_MIN or ss[i] >= 1.0 or self.nh == 0:
                 return ss, lps, i, True
         return ss, lps, i, False
 
@@ -134,7 +134,7 @@ class _Tracker:
             if self._buf is not None:  # the slots are not kept up to date here
                 self._buf[0][:] = _SLOT_FREE
             js, cand = _lattice_candidates(self.v0, self.kc, self.nh, self.dlog, M)
-            sc = _scorer(model, z, s2, self.speed_prior)
+            sc = make_scorer(model, z, s2, self.speed_prior)
             if sc.dense:
                 with single_thread():
                     lp = sc(cand)[0]
@@ -154,7 +154,7 @@ class _Tracker:
             self.Rg = fs.mean_path(np.ascontiguousarray(z[0]))
         logel, mu, sd = (0.0, 0.0, 1.0) if prior is None else prior
         buf = self._buf
-        j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, _S_MIN, fs.sq, fs.Uh, fs.K0, s2,
+        j, s = kern(fs.Zh, self.Rg, z, M, self.v0, self.kc, self.nh, self.dlog, S_MIN, fs.sq, fs.Uh, fs.K0, s2,
                     self.speed_prior, logel, mu, sd, _MAX_GAP, *buf)
         self.kc = int(j)
         n = self._n_out

@@ -349,7 +349,7 @@ def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):
     """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate."""
-    from ...phase.likelihood import _S_MIN, _log_speed_prior
+    from ...phase.likelihood import S_MIN, log_speed_prior
 
     if max_cases <= 0:
         return None
@@ -372,13 +372,13 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         T = z.shape[0]
         M = observed_frames(T, p, max(3, model.min_observed))
         s_true = (M - 1) / (T - 1)
-        lo = max(_S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
+        lo = max(S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
         grid = np.exp(np.linspace(np.log(lo), 0.0, n_phase))
         curves = np.empty((grid.size, len(s2_grid)))
         for i, s in enumerate(grid):
             X, Y = observation_design(model, z[:M, :n_o], float(s), "position")
             curves[i] = (lowrank_case(prior, n_o, q, X, Y, s2_grid, need_mean=False, need_ll=True)[1]
-                         + _log_speed_prior(model, M, s))
+                         + log_speed_prior(model, M, s))
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
         kept.append((prior, z[:M, :n_o], M, s_true, grid, curves))
     return errs / len(cases), kept
@@ -389,7 +389,7 @@ def _refined_phase_error(model, kept, s2, b) -> float:
     cases' grid curves), each estimate refined as :func:`interprim.phase.likelihood.estimate_phase` refines
     its grid maximum (Brent between the grid neighbours): the figure ``phase_method="auto"`` compares with the
     learned phase's cross-validated error (the grid maximum alone is off by up to half a grid step, ~8 %)."""
-    from ...phase.likelihood import _brent_min, _log_speed_prior
+    from ...phase.likelihood import brent_min, log_speed_prior
 
     n_o, q = model.n_observed_latent_, model.params_per_dof_
     s2a = np.array([s2])
@@ -398,14 +398,14 @@ def _refined_phase_error(model, kept, s2, b) -> float:
         def f(s):
             X, Y = observation_design(model, zo, float(s), "position")
             return -float(lowrank_case(prior, n_o, q, X, Y, s2a, need_mean=False, need_ll=True)[1][0]
-                          + _log_speed_prior(model, M, s))
+                          + log_speed_prior(model, M, s))
 
         c = curves[:, b]
         i = int(np.argmax(c))
         lo, hi = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, grid.size - 1)])
         x = float(grid[i])
         if hi - lo > 1e-4:
-            x, fx = _brent_min(f, lo, hi, x, -float(c[i]), xatol=1e-3 * hi, maxiter=20)
+            x, fx = brent_min(f, lo, hi, x, -float(c[i]), xatol=1e-3 * hi, maxiter=20)
             if -fx < c[i]:
                 x = float(grid[i])
         errs.append(abs(x - s_true))

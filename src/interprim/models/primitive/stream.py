@@ -1,7 +1,7 @@
 """Online use of a fitted Interaction Primitive: one observed frame at a time (paper Sec. III-B/C/D).
 
 :class:`Stream` keeps the frames seen and the incremental open-end DTW (Eq. 5-8) or the
-likelihood phase tracker (:class:`interprim.phase.tracking._Tracker`, which ends where the batch
+likelihood phase tracker (:class:`interprim.phase.tracking.Tracker`, which ends where the batch
 search ends), conditions on all frames seen at the phase found (Eq. 15-18), and returns a
 :class:`~interprim.models.primitive.prediction.Prediction` per frame: the one ``predict`` gives for the same frames.
 """
@@ -30,7 +30,7 @@ class Stream(BaseStream):
     the last of them.  The frame buffer is preallocated and grows by doubling.
 
     With the likelihood phase (what ``phase_method="auto"`` picks on most data) the phase is tracked on a lattice of speeds whose
-    scores are extended frame by frame (:class:`interprim.phase.tracking._Tracker`) and then taken
+    scores are extended frame by frame (:class:`interprim.phase.tracking.Tracker`) and then taken
     to the maximum of the log posterior by the batch search's own last step, so that the stream's
     phase, and hence its prediction, is :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict`'s
     on the same frames (issue 12: within 1e-3, measured ~1e-6).  Eq. 16-18 are then evaluated at that
@@ -51,7 +51,7 @@ class Stream(BaseStream):
 
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model.params_per_dof_, model.observation)
         self._n = 0
-        self._tracker = None  # likelihood phase: interprim.phase.tracking._Tracker (created on first use)
+        self._tracker = None  # likelihood phase: interprim.phase.tracking.Tracker (created on first use)
         self._max_dist = 0.0  # largest standardised distance of a frame since reset (out-of-range check)
         self._warned = False
 
@@ -137,9 +137,9 @@ class Stream(BaseStream):
         if method == "likelihood":  # local search around the previous estimate on a speed lattice
             tr = self._tracker
             if tr is None or tr.model is not m:
-                from ...phase.tracking import _Tracker
+                from ...phase.tracking import Tracker
 
-                self._tracker = tr = _Tracker(m)
+                self._tracker = tr = Tracker(m)
         z_all = self._buf[: self._n]
         n_star, cost = estimate_phase(m, z_all, method, dtw=(n_star, cost), tracker=tr)
         z = movement_prefix(m, z_all, n_star)  # learned phase past the end: where it ended
@@ -201,9 +201,9 @@ class Stream(BaseStream):
         if method == "likelihood":
             tr = self._tracker
             if tr is None or tr.model is not m:
-                from ...phase.tracking import _Tracker
+                from ...phase.tracking import Tracker
 
-                self._tracker = tr = _Tracker(m)
+                self._tracker = tr = Tracker(m)
         dtw, buf = self._dtw, self._buf
         n_star = cost = None
         for i in range(k):

@@ -39,4 +39,4 @@ def bench_learned(quick, fitted_model, make_demos, timed, row):
 def estimate_phase_only(model, partial):
     from interprim.phase.likelihood import estimate_phase
 
-    return estimate_phase(model, model._observed_to_latent(partial))
+    return estimate_phase(model, model.observed_to_latent(partial))

@@ -135,13 +135,13 @@ def agree_str(err, tol=AGREE_TOL):
 def ref_online_step(model, z, n_star, cost):
     """The online step with the reference pieces: numpy statistics, dense structured Eq. 18, LinearRollout.design."""
     M = z.shape[0]
-    s_end, duration = model._phase_info(n_star, M)
-    X, Y, y0 = model._observation(z, s_end)
+    s_end, duration = model.fitted_.phase_info(n_star, M)
+    X, Y, y0 = model.fitted_.observation_design(z, s_end)
     G, B = X.T @ X, X.T @ Y
     post = condition(model.prior_.mean, model.prior_.cov, model.obs_index_, G, B, model.sigma2_,
                      yy=float(np.sum(Y * Y)), n_obs=Y.size, need_cov=False)
     pred = ip.Prediction(model, post, (G, B, float(np.sum(Y * Y)), Y.size), s_end, duration, n_star, cost, M, y0,
-                         model._robot_start(None), z[-1])
+                         model.robot_start(None), z[-1])
     return pred._response_reference(100)
 
 
@@ -198,7 +198,7 @@ def bench_predict(model, test, quick, label="defaults: likelihood phase"):
     p = model.predict(partial)
     # literal Eq. 17-18 on the same input (same phase, same observation): Omega is (T D_o) x P
     s_end = p.normalised_time
-    X, Y, _ = model._observation(partial, s_end)
+    X, Y, _ = model.fitted_.observation_design(partial, s_end)
     D_o, q = model.obs_index_.shape
     Omega = np.zeros((X.shape[0] * D_o, model.prior_.mean.size))
     for i in range(D_o):
@@ -251,7 +251,7 @@ def bench_likelihood_phase(quick):
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1
     s_ours = model.predict(partial).normalised_time
-    s_dtw = open_end_dtw(model.reference_, model._observed_to_latent(partial), return_path=False).n_star / N1
+    s_dtw = open_end_dtw(model.reference_, model.observed_to_latent(partial), return_path=False).n_star / N1
     t_ref = timed(lambda: ref_likelihood_phase(model, partial, s_dtw), n=1 if quick else 3, warm=0)
     s_ref = ref_likelihood_phase(model, partial, s_dtw)
     row("predict, phase_method='likelihood'", "250 frames, 7+7 DoF", ours, "per-candidate reference phase only",
@@ -327,9 +327,9 @@ def bench_fit(quick):
     S, D, T = 100, 14, 500
     demos = make_demos(S, 7, 7, T, seed=3, stretch=(1.0, 1.0))
     # the DMP fit itself (Eq. 3-4, Eq. 10): sigma2 from the fit residual, DTW phase: no cross-validation
-    model = ip.InteractionPrimitive(observed_dofs=list(range(7)), n_basis=25, observation="forcing", sigma2="auto",
+    model = ip.InteractionPrimitive(observed_dofs=list(range(7)), n_basis=25, observation="forcing", sigma2="residual",
                                     phase_method="dtw")
-    mpos = ip.InteractionPrimitive(observed_dofs=list(range(7)), n_basis=25, sigma2="auto", phase_method="dtw")
+    mpos = ip.InteractionPrimitive(observed_dofs=list(range(7)), n_basis=25, sigma2="residual", phase_method="dtw")
     t_pos = timed(lambda: mpos.fit(demos, dt=0.01), n=3 if quick else 10)
     row("fit, observation='position' (sigma2 from the fit residual)", f"{S} demos x {D} DoF x {T}", t_pos, None,
         note="as the paper configuration plus one rollout per demonstration for the position residual")
@@ -392,7 +392,7 @@ def bench_promp(model, test, quick):
     M = 50 if quick else 250
     partial = test[:M, :7]
     s_end = 0.5
-    X, Y, _ = model._observation(partial, s_end)
+    X, Y, _ = model.fitted_.observation_design(partial, s_end)
     G, B = X.T @ X, X.T @ Y
     cond = LowRankConditioner.from_prior(model.prior_, model.obs_index_)
     s2 = model.sigma2_
@@ -522,22 +522,22 @@ def scaling(quick):
     dofs = [2, 8, 14, 30] if quick else [2, 4, 8, 14, 20, 30]
     for D in dofs:
         Do = max(D // 2, 1)
-        m, test = fitted_model(Do, D - Do, 25, 30, 500, sigma2="auto")
+        m, test = fitted_model(Do, D - Do, 25, 30, 500, sigma2="residual")
         med, last = online_median(m, test)
         tp = float(np.median(timed(lambda: m.predict(test[:250, :Do]), min_time=0.3, clock=CPU)))
         demos = make_demos(100, Do, D - Do, 500, seed=3, stretch=(1, 1))
-        mm = ip.InteractionPrimitive(observed_dofs=list(range(Do)), n_basis=25, sigma2="auto", phase_method="dtw")
+        mm = ip.InteractionPrimitive(observed_dofs=list(range(Do)), n_basis=25, sigma2="residual", phase_method="dtw")
         tf = float(np.median(timed(lambda: mm.fit(demos, dt=0.01), n=3, clock=CPU)))
         out["dof"].append((D, med, last, tp, tf))
         print(f"  D={D}: online median {fmt_t(med)} (last 10% {fmt_t(last)}), predict {fmt_t(tp)}, fit {fmt_t(tf)}")
     for nb in ([10, 25, 50] if quick else [10, 20, 25, 35, 50]):
-        m, test = fitted_model(7, 7, nb, 30, 500, sigma2="auto")
+        m, test = fitted_model(7, 7, nb, 30, 500, sigma2="residual")
         med, last = online_median(m, test)
         tp = float(np.median(timed(lambda: m.predict(test[:250, :7]), min_time=0.3, clock=CPU)))
         out["basis"].append((nb, med, last, tp))
         print(f"  basis={nb}: online median {fmt_t(med)} (last 10% {fmt_t(last)}), predict {fmt_t(tp)}")
     for T in ([100, 500, 2000] if quick else [100, 250, 500, 1000, 2000]):
-        m, test = fitted_model(7, 7, 25, 30, T, sigma2="auto")
+        m, test = fitted_model(7, 7, 25, 30, T, sigma2="residual")
         med, last = online_median(m, test)
         tp = float(np.median(timed(lambda: m.predict(test[: T // 2, :7]), min_time=0.3, clock=CPU)))
         out["length"].append((T, med, last, tp))
@@ -604,7 +604,7 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "Cpu time of the calling thread (so other jobs on the machine do not blur the growth; BLAS is "
            "single-threaded).  Online step = `stream.update(frame)` + `response(100)`; median over a whole "
            "interaction (frames 1..T) and over its last 10 % of frames (M close to T).", "",
-           "Models of the scaling sweeps: library defaults (positions, likelihood phase) with sigma2='auto' "
+           "Models of the scaling sweeps: library defaults (positions, likelihood phase) with sigma2='residual' "
            "(the CV does not change the per-frame cost).", "",
            "### With the number of DoF (half observed, half controlled; 25 basis, 500 frames, 30 demos; "
            "fit on 100 demos)", "", "| DoF | online median | online, last 10 % | predict (250 frames) | fit (100 demos) |",

@@ -41,7 +41,7 @@ def fitted_paper(synthetic):
     import interprim as ip
 
     train, _ = synthetic
-    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=20, observation="forcing", sigma2="auto",
+    return ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=20, observation="forcing", sigma2="residual",
                                    phase_method="dtw").fit(train, dt=0.01)
 
 

@@ -227,7 +227,7 @@ def test_version_3_file_is_refused_by_a_reader_of_versions_1_and_2_with_a_clear_
         ip.InteractionPrimitive.load(tmp_path / "m.npz")
 
 
-@pytest.mark.parametrize("value", ["with-cv", "auto"])  # "auto": the old name, still accepted
+@pytest.mark.parametrize("value", ["with-cv"])
 def test_calibrate_with_cv_means_when_sigma2_is_cross_validated(tmp_path, value):
     """``calibrate="with-cv"`` (the default) calibrates with ``sigma2="cv"`` and not with the paper's residual;
     the value, old or new, survives get_params, clone and the model file."""
@@ -251,4 +251,4 @@ def test_calibrate_with_cv_means_when_sigma2_is_cross_validated(tmp_path, value)
         demos[:7], dt=0.01).calibration_ is not None
     few = ip.InteractionPrimitive([0, 1], n_basis=6, calibrate=value).fit(demos[:5], dt=0.01)
     assert few.calibration_ is None  # fewer than 6 demonstrations: no calibration
-    assert [_calibrate(t) for t in ("with-cv", "auto", "on", "off")] == ["with-cv", "auto", True, False]
+    assert [_calibrate(t) for t in ("with-cv", "on", "off")] == ["with-cv", True, False]

@@ -27,7 +27,7 @@ SCRIPT = textwrap.dedent(
     test = two_agent_demos(3, seed=1)
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15).fit(train, dt=0.01)
     out = {"compiled": _fast.ready(), "sigma2": m.sigma2_, "prior_mean": m.prior_.mean.tolist(),
-           "kappa": float(np.linalg.cond(m._conditioner().K0)), "cases": []}
+           "kappa": float(np.linalg.cond(m.fitted_.conditioner().K0)), "cases": []}
     for d in test:
         for frac in (0.3, 0.6, 0.9):
             p = m.predict(d[: int(frac * len(d)), :2])

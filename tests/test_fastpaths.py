@@ -130,9 +130,9 @@ def test_forcing_statistics_kernel_equals_numpy(fitted_paper, synthetic, M, s_en
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
     z = np.ascontiguousarray(d[:M, :2])
-    ws = StatsWorkspace(8, 2, fitted._q)  # too small: grows
+    ws = StatsWorkspace(8, 2, fitted.params_per_dof_)  # too small: grows
     G, B, yy = ws.forcing_stats(z, M, s_end, fitted)
-    X, Y, _ = fitted._observation(z, s_end)
+    X, Y, _ = fitted.fitted_.observation_design(z, s_end)
     np.testing.assert_allclose(G, X.T @ X, rtol=1e-12, atol=1e-12 * np.abs(G).max())
     np.testing.assert_allclose(B, X.T @ Y, rtol=1e-10, atol=1e-11 * np.abs(B).max())
     assert yy == pytest.approx(float(np.sum(Y * Y)), rel=1e-12)
@@ -180,18 +180,18 @@ def test_position_statistics_kernel_equals_numpy(fitted, fitted_smooth, fitted_s
     assert m.observation == "position"
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
-    z = m._observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
-    ws = StatsWorkspace(8, z.shape[1], m._q, "position")
+    z = m.observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
+    ws = StatsWorkspace(8, z.shape[1], m.params_per_dof_, "position")
     for workspace in (ws, None, ws):  # reused, fresh, reused after a call with other sizes
-        (G, B, yy, n), y0 = m._stats(z, s_end, workspace)
-        X, Y, y0r = m._observation(z, s_end)
+        (G, B, yy, n), y0 = m.fitted_.observation_stats(z, s_end, workspace)
+        X, Y, y0r = m.fitted_.observation_design(z, s_end)
         Gr, Br = X.T @ X, X.T @ Y
         np.testing.assert_allclose(G, Gr, rtol=1e-12, atol=1e-12 * np.abs(Gr).max())
         np.testing.assert_allclose(B, Br, rtol=1e-12, atol=1e-12 * np.abs(Br).max())
         assert yy == pytest.approx(float(np.sum(Y * Y)), rel=1e-12)
         assert n == Y.size
         np.testing.assert_allclose(y0, y0r, rtol=0, atol=1e-13 * np.abs(z).max())
-        m._stats(z[: max(3, M // 3)], 0.5 * s_end + 0.1, ws)
+        m.fitted_.observation_stats(z[: max(3, M // 3)], 0.5 * s_end + 0.1, ws)
 
 
 @pytest.mark.parametrize("pca", [None, (2, 2)])
@@ -243,9 +243,9 @@ def test_incremental_rejects_bad_frames_without_corruption():
 def test_fit_fast_path_equals_per_demo_reference(synthetic):
     """Compiled derivatives + forcing targets + stacked least squares == per-demo np.gradient + fit_weights."""
     train, _ = synthetic
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, observation="forcing", sigma2="auto").fit(
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=15, observation="forcing", sigma2="residual").fit(
         train, dt=0.01)
-    lat = [m._to_latent(a) for a in train]
+    lat = [m.fitted_.to_latent(a) for a in train]
     ders = [derivatives(z, 1.0 / (z.shape[0] - 1)) for z in lat]
     theta, resid = fit_weights([d[0] for d in ders], [d[1] for d in ders], [d[2] for d in ders], m.basis_,
                                m.alpha_y, m.beta_y_)
@@ -317,15 +317,15 @@ def test_stream_fast_path_equals_reference_path(synthetic, config, request):
     dtw = IncrementalDTW(fitted.reference_)
     for i in range(120):
         p = st.update(d[i, :2])
-        n, c = dtw.update(fitted._observed_to_latent(d[i : i + 1, :2])[0])
+        n, c = dtw.update(fitted.observed_to_latent(d[i : i + 1, :2])[0])
         if i in (2, 3, 10, 60, 64, 119):
-            z = fitted._observed_to_latent(d[: i + 1, :2])
+            z = fitted.observed_to_latent(d[: i + 1, :2])
             if fitted.phase_method == "dtw":
-                s_end, _ = fitted._phase_info(n, i + 1)
+                s_end, _ = fitted.fitted_.phase_info(n, i + 1)
                 assert p.normalised_time == s_end
             else:
                 s_end = p.normalised_time
-            X, Y, y0 = fitted._observation(z, s_end)
+            X, Y, y0 = fitted.fitted_.observation_design(z, s_end)
             ref = condition(fitted.prior_.mean, fitted.prior_.cov, fitted.obs_index_, X.T @ X, X.T @ Y,
                             fitted.sigma2_, yy=float(np.sum(Y * Y)), n_obs=Y.size, need_cov=True)
             np.testing.assert_allclose(p._y0_obs, y0, rtol=0, atol=1e-13 * (1 + np.abs(z).max()))

@@ -25,7 +25,7 @@ CONFIGS = {
     "default": {},
     "pca": {"pca_components": (2, 2)},
     "forcing": {"observation": "forcing"},
-    "paper": {"observation": "forcing", "sigma2": "auto", "phase_method": "dtw"},  # fit sets no selection_
+    "paper": {"observation": "forcing", "sigma2": "residual", "phase_method": "dtw"},  # fit sets no selection_
     "learned": {"phase_method": "learned"},  # a learned phase model inside the file
 }
 
@@ -122,7 +122,7 @@ def test_round_trip_keeps_every_fitted_attribute_and_predictions(models, saved, 
     expected = {"selection_", "prior_", "thetas_", "reference_", "columns_", "phase_sigma2_", "sigma2_", "dt_",
                 "durations_", "pca_observed_", "pca_controlled_", "start_position_", "start_velocity_"}
     if name == "paper":
-        expected.discard("selection_")  # sigma2="auto" with the DTW phase selects nothing
+        expected.discard("selection_")  # sigma2="residual" with the DTW phase selects nothing
     assert expected <= set(attrs), expected - set(attrs)
     loaded = ip.InteractionPrimitive.load(saved[name])
     assert set(fitted_attributes(loaded)) == set(attrs)
@@ -287,8 +287,8 @@ def _save_v1(model, path, legacy_columns_array=False):
 @pytest.mark.parametrize("name", list(CONFIGS))
 def test_version_1_files_still_load(models, data, tmp_path, name):
     model = models[name]
-    if model._phase() == "learned":  # version 1 predates the learned phase: such a model has no v1 file
-        assert name == "learned" or model.phase_method == "auto"
+    if model.phase_method_used() == "learned":  # version 1 predates the learned phase: such a model has no v1 file
+        assert name == "learned" or model.phase_method == "cv"
         model = model.with_fitted(phase_method_="likelihood", phase_model_=None)
         model.phase_method = "likelihood"
     path = tmp_path / "v1.npz"

@@ -116,7 +116,7 @@ def _small_model(observation, pca, covariance):
 
 
 def _latent(model, frames):
-    return model._observed_to_latent(frames[:, model.observed_dofs_])
+    return model.observed_to_latent(frames[:, model.observed_dofs_])
 
 
 def _both_paths(model, z, s, s2):
@@ -153,7 +153,7 @@ def test_batched_log_likelihood_matches_extended_precision_where_reference_loses
     model = _small_model("position", None, "shrinkage")
     z = _latent(model, _demos(1, seed=7)[0][:30])
     pr = PL._factored(model)
-    n_o, q = model.n_observed_latent_, model._q
+    n_o, q = model.n_observed_latent_, model.params_per_dof_
     LD = np.longdouble
     for s2 in (1e-2, 1e-6):
         for s in (0.3, 0.8):
@@ -185,7 +185,7 @@ def test_dense_fallback_when_prior_is_not_low_rank():
     import copy
 
     model = _small_model("position", None, "shrinkage")
-    n = model.n_observed_latent_ * model._q
+    n = model.n_observed_latent_ * model.params_per_dof_
     prior = copy.copy(model.prior_)
     cov = prior.cov.copy()
     cov[:n, :n] += 0.05 * np.mean(np.diag(cov[:n, :n])) * np.eye(n)  # no longer diag(d) + W^T W of thetas_
@@ -459,7 +459,7 @@ def test_batch_predict_reports_the_dtw_cost_on_demand(synthetic, lik_model):
     _, test = synthetic
     obs = test[2][:70, :2]
     p = lik_model.predict(obs)
-    z = lik_model._observed_to_latent(obs)
+    z = lik_model.observed_to_latent(obs)
     assert p.dtw_cost == pytest.approx(open_end_dtw(lik_model.reference_, z, return_path=False).cost, rel=1e-12)
     assert isinstance(p.dtw_cost, float)
 

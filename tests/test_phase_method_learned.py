@@ -81,10 +81,10 @@ def test_learned_phase_survives_save_and_load(fitted, tmp_path):
 
 
 def test_auto_chooses_the_phase_with_the_smaller_held_out_error(tmp_path):
-    """phase_method="auto" on clean synthetic data keeps the likelihood phase (far more accurate there), and
+    """phase_method="cv" on clean synthetic data keeps the likelihood phase (far more accurate there), and
     the choice it made is used by predict and stream and kept in the model file."""
     demos = two_agent_demos(16, seed=6)
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, sigma2=1e-3, phase_method="auto").fit(demos, dt=0.01)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12, sigma2=1e-3, phase_method="cv").fit(demos, dt=0.01)
     lik = m.selection_["phase_error_refined"]
     lp = ip.LearnedPhase().fit([d[:, :2] for d in demos], dt=0.01)
     assert m.selection_["learned_phase_error"] == pytest.approx(lp.cv_error_)
@@ -100,7 +100,7 @@ def test_auto_chooses_the_phase_with_the_smaller_held_out_error(tmp_path):
 
 @pytest.mark.slow  # fits on recordings-like data with both phases
 def test_auto_is_the_default_and_picks_the_learned_phase_on_recordings_of_people():
-    """The default phase_method "auto" picks the learned phase on a NuiSI interaction (held-out phase error
+    """The default phase_method "cv" picks the learned phase on a NuiSI interaction (held-out phase error
     0.026 vs 0.034 for the likelihood phase on highfive1; 0.78x vs 0.99x the clock in real time over 5 folds),
     and the likelihood phase on the simulated data (test above)."""
     from interprim.datasets import DataNotFoundError, load_nuisi
@@ -110,7 +110,7 @@ def test_auto_is_the_default_and_picks_the_learned_phase_on_recordings_of_people
     except DataNotFoundError:
         pytest.fail("the NuiSI data (../shared/data) is needed: CI has it beside the clone")
     m = ip.InteractionPrimitive(observed_dofs=list(range(9))).fit(demos, dt=0.05)
-    assert m.phase_method == "auto"
+    assert m.phase_method == "cv"
     sel = m.selection_
     assert m.phase_method_ == "learned", sel
     assert sel["learned_phase_error"] < sel["phase_error_refined"]

@@ -87,7 +87,7 @@ def test_likelihood_stream_tracks_batch_phase(fitted, synthetic):
     batch estimate, and given its phase it conditions exactly as the batch path does."""
     _, test = synthetic
     d = test[1]
-    assert fitted._phase() == "likelihood"
+    assert fitted.phase_method_used() == "likelihood"
     st = fitted.stream()
     T = d.shape[0]
     for m in range(1, T + 1):
@@ -309,7 +309,7 @@ def test_fit_takes_a_demonstrations_object_and_keeps_column_names(synthetic, tmp
     train, _ = synthetic
     cols = ["h_x", "h_y", "r_1", "r_2", "r_3"]
     ds = Demonstrations(demos=train[:8], times=[np.arange(len(d)) * 0.02 for d in train[:8]], columns=cols)
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8, sigma2="auto").fit(ds)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=8, sigma2="residual").fit(ds)
     assert m.dt_ == pytest.approx(0.02) and m.columns_ == cols
     m.save(tmp_path / "m.npz")
     assert ip.InteractionPrimitive.load(tmp_path / "m.npz").columns_ == cols
@@ -321,7 +321,7 @@ def test_fit_takes_a_demonstrations_object_and_keeps_column_names(synthetic, tmp
 def test_prediction_does_not_depend_on_the_callers_array_afterwards(synthetic, phase_method):
     """A robot loop reuses its frame buffer: a Prediction must not keep views into it."""
     train, test = synthetic
-    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2="auto", phase_method=phase_method).fit(
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2="residual", phase_method=phase_method).fit(
         train[:12], dt=0.01)
     buf = np.ascontiguousarray(test[0][:60, :2], dtype=np.float64)
     p = m.predict(buf)

@@ -78,7 +78,7 @@ def test_get_params_set_params_and_clone():
 
 
 @pytest.mark.parametrize("name, value, match", [
-    ("calibrate", "yes", "calibrate must be True, False or 'with-cv' \\('auto', its old name\\)"),
+    ("calibrate", "yes", "calibrate must be True, False or 'with-cv'"),
     ("n_steps", 0, "n_steps must be a positive integer"),
     ("n_steps", 2.5, "n_steps must be a positive integer"),
     ("ridge", -1.0, "ridge must be a finite number >= 0"),
@@ -99,17 +99,34 @@ def test_every_parameter_is_checked_before_the_cross_validation(monkeypatch, nam
         model.fit(two_agent_demos(8, seed=4), dt=0.01)
 
 
-@pytest.mark.parametrize("name, new, old", [("sigma2", "residual", "auto"), ("phase_method", "cv", "auto")])
-def test_auto_has_a_name_that_says_what_it_does(name, new, old):
-    """sigma2="residual" (the paper's fit residual) and phase_method="cv" (the phase method with the smaller
-    held-out error) are the same models as their old name "auto"."""
+@pytest.mark.parametrize("name, old", [("sigma2", "auto"), ("phase_method", "auto"), ("calibrate", "auto")])
+def test_the_old_value_auto_is_refused_with_its_name_of_today(name, old):
+    """"auto" meant several things; each option now has its own name ("residual", "cv", "with-cv"), and "auto"
+    is refused with a message naming the choices (model files of 0.1.0 are read with the new names)."""
+    with pytest.raises(ValueError, match=name):
+        ip.InteractionPrimitive([0, 1], n_basis=8, **{name: old}).fit(two_agent_demos(8, seed=4), dt=0.01)
+
+
+def test_a_model_file_with_the_old_values_loads_under_the_new_names(tmp_path):
+    import json
+    import zipfile
+
     demos = two_agent_demos(8, seed=4)
-    kw = dict(n_basis=8, calibrate=False, sigma2=1e-3)
-    a = ip.InteractionPrimitive([0, 1], **{**kw, name: new}).fit(demos, dt=0.01)
-    b = ip.InteractionPrimitive([0, 1], **{**kw, name: old}).fit(demos, dt=0.01)
-    assert a.sigma2_ == b.sigma2_ and a.phase_method_used() == b.phase_method_used()
-    part = demos[0][:70, :2]
-    np.testing.assert_array_equal(a.predict(part).trajectory(20), b.predict(part).trajectory(20))
+    m = ip.InteractionPrimitive([0, 1], n_basis=8, sigma2="residual", calibrate=False).fit(demos, dt=0.01)
+    m.save(tmp_path / "new.npz")
+    with zipfile.ZipFile(tmp_path / "new.npz") as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    meta = json.loads(np.load(tmp_path / "new.npz")["metadata"].tobytes())
+    meta["params"].update(sigma2="auto", phase_method="auto")  # as 0.1.0 wrote them
+    import io as _io
+    buf = _io.BytesIO()
+    np.save(buf, np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
+    members["metadata.npy"] = buf.getvalue()
+    with zipfile.ZipFile(tmp_path / "old.npz", "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+    old = ip.InteractionPrimitive.load(tmp_path / "old.npz")
+    assert old.sigma2 == "residual" and old.phase_method == "cv"
 
 
 def test_to_state_from_state_round_trip():

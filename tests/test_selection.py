@@ -72,7 +72,7 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
     assert m.selection_["cv_error"] <= m.selection_["cv_error_prior"] + 1e-12
     # the cross-agent covariance is shrunk (gamma = 1: the controlled agent keeps its prior mean)
     assert m.selection_["cross_shrinkage"] >= 0.5
-    po = 2 * m._q
+    po = 2 * m.params_per_dof_
     if m.selection_["cross_shrinkage"] == 1.0:
         assert np.all(m.prior_.cov[:po, po:] == 0.0)
         # the robot keeps its mean whatever the noise: the observed agent's completion chose sigma2 and the shrinkage

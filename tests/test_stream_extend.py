@@ -88,7 +88,7 @@ def test_extend_equals_predict_on_the_prefix(model, data):
     _, test = data
     frames = test[1][:, :2]
     st = model.stream()
-    tol = 1e-6 if model._phase() == "likelihood" else 1e-12
+    tol = 1e-6 if model.phase_method_used() == "likelihood" else 1e-12
     worst_s = worst_y = 0.0
     for i, j in _chunks(len(frames)):
         p = st.extend(frames[i:j])

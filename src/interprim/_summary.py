@@ -2,7 +2,7 @@
 
 Used by ``repr(model)`` (one line), :meth:`InteractionPrimitive.summary` and ``interprim fit``.  Reads only public
 fitted attributes and ``selection_`` (keys documented in :data:`SELECTION_KEYS`); a key a model does not have
-(``sigma2="auto"``, a model file of an older version) leaves its line out.
+(``sigma2="residual"``, a model file of an older version) leaves its line out.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ SELECTION_KEYS = {
     "cv_error_observed": "held-out error of the observed agent's completion at the choice (same units)",
     "cv_error_observed_prior": "the same for the observed agent's prior mean",
     "phase_error_refined": "held-out phase error of the likelihood phase, refined as predict refines it "
-                           "(fraction of the movement; phase_method='auto' only)",
-    "learned_phase_error": "held-out phase error of the learned phase (phase_method='auto' only)",
-    "clock_phase_error": "held-out phase error of a clock: elapsed time over the mean duration (phase_method='auto')",
+                           "(fraction of the movement; phase_method='cv' only)",
+    "learned_phase_error": "held-out phase error of the learned phase (phase_method='cv' only)",
+    "clock_phase_error": "held-out phase error of a clock: elapsed time over the mean duration (phase_method='cv')",
     "sigma2_grid": "the sigma2 candidates", "shrinkage_grid": "the shrinkage candidates",
     "cross_shrinkage_grid": "the gamma candidates", "phase_sigma2_grid": "the phase noise candidates",
     "phase_log_likelihood": "held-out marginal log-likelihood per phase noise candidate",
@@ -59,13 +59,13 @@ def _choices(model) -> list:
     out = []
     phase = getattr(model, "phase_method_", model.phase_method)
     why = ""
-    if model.phase_method == "auto" and "learned_phase_error" in sel:
+    if model.phase_method == "cv" and "learned_phase_error" in sel:
         errs = {"likelihood": sel.get("phase_error_refined"), "learned": sel.get("learned_phase_error")}
         other = "learned" if phase == "likelihood" else "likelihood"
-        why = (f" (chosen by 'auto': held-out phase error {_g(errs.get(phase), 2)}, {other} "
+        why = (f" (chosen by 'cv': held-out phase error {_g(errs.get(phase), 2)}, {other} "
                f"{_g(errs[other], 2)}, a clock {_g(sel.get('clock_phase_error'), 2)})")
-    elif model.phase_method == "auto":
-        why = " (chosen by 'auto')"
+    elif model.phase_method == "cv":
+        why = " (chosen by 'cv')"
     out.append(("phase", f"{phase}{why}"))
     noise = f"sigma2 {_g(getattr(model, 'sigma2_', None))}"
     if "method" in sel and model.sigma2 == "cv":

@@ -325,12 +325,23 @@ def load_model(path, model_class):
     return model_class.from_state(data, meta, source=path)
 
 
+def _renamed_values(params: dict, old: dict) -> dict:
+    """A model file's parameters with values of older releases under their names of today (``old``:
+    ``{parameter: {old value: new value}}``): a file format migration, not an alias of the API."""
+    out = dict(params)
+    for name, table in old.items():
+        v = out.get(name)
+        if isinstance(v, str) and v in table:
+            out[name] = table[v]
+    return out
+
+
 def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
     """The model of ``(data, meta)`` (a model file's arrays and metadata, format versions 1-3), every array
     checked; problems raise :class:`~interprim.core.errors.ModelFileError` naming ``path``
     (:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.from_state`)."""
     try:
-        model = model_class(**meta["params"])
+        model = model_class(**_renamed_values(meta["params"], getattr(model_class, "OLD_VALUES", {})))
         params = model.json_params()  # the file's parameters, with the defaults of those it predates
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
@@ -399,12 +410,12 @@ def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> d
             st.phase_model_ = LearnedPhase.from_state(
                 {k[len("phase_model_"):]: v for k, v in data.items() if k.startswith("phase_model_")},
                 meta["phase_model"])
-        used = meta.get("phase_method_used")  # absent in files older than phase_method="auto": as set there
+        used = meta.get("phase_method_used")  # absent in files older than phase_method="cv": as set there
         st.phase_method_ = str(used if used is not None else
-                               (phase_method if phase_method not in ("cv", "auto") else "likelihood"))
+                               (phase_method if phase_method != "cv" else "likelihood"))
         _expect(st.phase_method_ in ("dtw", "likelihood", "learned"), path,
                 f"unknown phase method {st.phase_method_!r} in the metadata")
-        used = st.phase_method_ if phase_method in ("cv", "auto") else phase_method
+        used = st.phase_method_ if phase_method == "cv" else phase_method
         _expect(used != "learned" or st.phase_model_ is not None, path,
                 "the phase method is 'learned' but the file holds no phase model")
         st.calibration_ = None

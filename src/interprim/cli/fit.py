@@ -95,9 +95,9 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument(
         "--phase-method",
-        choices=("dtw", "likelihood", "learned", "auto"),
+        choices=("dtw", "likelihood", "learned", "cv"),
         default=None,
-        help="phase estimation: auto (default: whichever of likelihood and learned has the smaller held-out phase "
+        help="phase estimation: cv (default: whichever of likelihood and learned has the smaller held-out phase "
         "error on the demonstrations), likelihood (marginal likelihood of the observed prefix), learned "
         "(regressed on the demonstrations' own prefixes) or dtw (the paper's open-end DTW, Eq. 5-9) (ip)",
     )
@@ -107,7 +107,7 @@ def add_parser(subparsers) -> None:
         default=None,
         metavar="{with-cv,on,off}",
         help="scale the predictive std to held-out errors of the demonstrations: with-cv (default: when sigma2 is "
-        "cross-validated and there are at least 6 demonstrations; 'auto' is its old name), on or off (ip)",
+        "cross-validated and there are at least 6 demonstrations), on or off (ip)",
     )
     p.add_argument(
         "--input-noise",
@@ -149,19 +149,19 @@ IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("s
 
 
 def _sigma2(text):
-    if text in ("auto", "cv"):
+    if text in ("residual", "cv"):
         return text
     try:
         v = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, 'auto' or 'cv', got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a positive number, 'residual' or 'cv', got {text!r}") from None
     if not v > 0:
         raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
     return v
 
 
 def _calibrate(text):
-    choices = {"with-cv": "with-cv", "auto": "auto", "on": True, "off": False}
+    choices = {"with-cv": "with-cv", "on": True, "off": False}
     if text not in choices:
         raise argparse.ArgumentTypeError(f"expected with-cv, on or off, got {text!r}")
     return choices[text]

@@ -96,7 +96,7 @@ def fit_weights_stacked(Y, Yd, Ydd, basis: Basis, alpha_y: float, beta_y: float,
     for all demonstrations and DoFs; the forcing targets (Eq. 3) are formed in
     one preallocated buffer.  ``resid_dofs`` (a slice or index array) limits
     the residuals to those DoFs (the others are NaN), e.g. the observed agent's
-    for ``sigma2="auto"``.
+    for ``sigma2="residual"``.
 
     Returns ``theta`` ``(n, D, n_basis + 1)`` and the mean squared residuals ``(n, D)``.
     """

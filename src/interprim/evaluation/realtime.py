@@ -138,7 +138,7 @@ BASELINES = ("nn", "prior", "clock")
 FIT_COMMANDS = {
     "auto": "interprim fit {data} --observed {observed} -o model.npz",
     "ip": "interprim fit {data} --observed {observed} --model ip -o model.npz",
-    "ip-paper": "interprim fit {data} --observed {observed} --model ip --observation forcing --sigma2 auto "
+    "ip-paper": "interprim fit {data} --observed {observed} --model ip --observation forcing --sigma2 residual "
                 "--phase-method dtw -o model.npz",
     "learned": "interprim fit {data} --observed {observed} --model learned -o model.npz",
     "kernel": "interprim fit {data} --observed {observed} --model kernel -o model.npz",

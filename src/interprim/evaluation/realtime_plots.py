@@ -250,9 +250,9 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
 
 #: The two models of :func:`nuisi_realtime_figure`: the library's defaults and the paper's method exactly
 #: (forcing observation, open-end DTW phase, the noise from the fit residual).  Until 2026-11-26 the second row
-#: was the learned phase, which the defaults' ``phase_method="auto"`` now picks on these recordings.
+#: was the learned phase, which the defaults' ``phase_method="cv"`` now picks on these recordings.
 NUISI_FIGURE_METHODS = {"library defaults": {},
-                        "the paper exactly": {"observation": "forcing", "sigma2": "auto", "phase_method": "dtw"}}
+                        "the paper exactly": {"observation": "forcing", "sigma2": "residual", "phase_method": "dtw"}}
 
 
 def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".", data_path=None, dt: float = 0.05,

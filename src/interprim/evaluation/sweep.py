@@ -22,7 +22,7 @@ Metrics per (task, method, held-out demo, fraction):
 Methods (:data:`METHODS`): ``ip-forcing`` and ``ip-position`` (this library with
 ``sigma2="cv"`` and ``phase_method="likelihood"``, conditioning on forcing
 values, Eq. 15, or on positions), ``ip-paper`` (the paper exactly: forcing,
-DTW phase, ``sigma2="auto"``), ``*-dtw`` variants (same but DTW phase),
+DTW phase, ``sigma2="residual"``), ``*-dtw`` variants (same but DTW phase),
 ``iprompt`` (:class:`~interprim.models.promp.InteractionProMP`), ``nn``
 (:class:`~interprim.models.demonstrations.NearestNeighbour`) and ``prior``
 (:class:`~interprim.models.demonstrations.PriorMean`); a ``+pca`` suffix projects each

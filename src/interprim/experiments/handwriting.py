@@ -226,7 +226,7 @@ def run_handwriting(
     if not observations or any(o not in ("forcing", "position") for o in observations):
         raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
     # the paper's method per observation model: DTW phase, sigma2 from the fit residual
-    variants = {f"ip_{o}": {"sigma2": "auto", **kwargs, "observation": o, "phase_method": "dtw"} for o in observations}
+    variants = {f"ip_{o}": {"sigma2": "residual", **kwargs, "observation": o, "phase_method": "dtw"} for o in observations}
     for name, kw in (extra_variants or {}).items():
         if name in variants or name in ("prior_mean", "nearest_neighbour"):
             raise ValueError(f"extra_variants: the name {name!r} is already used")

@@ -25,7 +25,7 @@ def _mse_ctrl(pred, demo, n_obs_cols):
     return float(np.mean((pred.trajectory(100)[:, n_obs_cols:] - gt[:, n_obs_cols:]) ** 2))
 
 
-PAPER = dict(observation="forcing", sigma2="auto", phase_method="dtw")
+PAPER = dict(observation="forcing", sigma2="residual", phase_method="dtw")
 CONFIGS = {
     "paper, reference=mean": dict(PAPER, reference="mean"),
     "paper, reference=demo 0": dict(PAPER, reference=0),

@@ -24,8 +24,8 @@ class InteractionProMP(Baseline):
     observed_dofs : sequence of int
     n_weights : int
         ProMP basis functions per DoF.
-    sigma2 : "auto" or float
-        Observation noise; ``"auto"`` is the mean squared residual of the
+    sigma2 : "residual" or float
+        Observation noise; ``"residual"`` is the mean squared residual of the
         ProMP fits of the observed DoFs, floored at 1e-6 of their variance.
     ridge : float
         Relative diagonal loading of the weight covariance (the sample
@@ -35,7 +35,7 @@ class InteractionProMP(Baseline):
         [0.02, 1]) for the maximum-likelihood phase.
     """
 
-    def __init__(self, observed_dofs, n_weights: int = 10, sigma2="auto", ridge: float = 1e-6,
+    def __init__(self, observed_dofs, n_weights: int = 10, sigma2="residual", ridge: float = 1e-6,
                  n_phases: int = 40):
         self.observed_dofs = observed_dofs
         self.n_weights = n_weights
@@ -83,7 +83,7 @@ class InteractionProMP(Baseline):
             Y = a[:, self.order_]
             w = self.promp_.weights(t, Y)
             W.append(w)
-            if self.sigma2 == "auto":
+            if self.sigma2 == "residual":
                 res.append(np.mean((self.promp_.trajectory_from_weights(t, w)[:, : len(obs)] - Y[:, : len(obs)]) ** 2))
         W = np.asarray(W)
         self.weights_ = W

@@ -83,7 +83,7 @@ FAMILIES = {f.name: f for f in (
     Family("learned", LearnedInteraction, lambda s: LearnedInteraction(list(s.observed_dofs)),
            "learned timing + phase-robust coupling", candidate=True),
     Family("ip-paper", InteractionPrimitive,
-           lambda s: _ip(s, observation="forcing", sigma2="auto", phase_method="dtw"),
+           lambda s: _ip(s, observation="forcing", sigma2="residual", phase_method="dtw"),
            "the paper exactly: forcing observation (Eq. 15), open-end DTW phase (Eq. 5-9), sigma2 from the residual",
            cli=False),
     Family("kernel", KernelDemonstrations, lambda s: KernelDemonstrations(list(s.observed_dofs), horizon=s.horizon),

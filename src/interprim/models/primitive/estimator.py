@@ -35,9 +35,11 @@ __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
 OBSERVATION_MODELS = ("forcing", "position")
 COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
-PHASE_METHODS = ("dtw", "likelihood", "learned", "cv", "auto")  # "auto": the old name of "cv"
-SIGMA2_RULES = ("cv", "residual", "auto")  # "auto": the old name of "residual"
-CALIBRATE_RULES = ("with-cv", "auto")  # "auto": the old name of "with-cv"
+PHASE_METHODS = ("dtw", "likelihood", "learned", "cv")
+SIGMA2_RULES = ("cv", "residual")
+CALIBRATE_RULES = ("with-cv",)
+#: Values of releases up to 0.1.0 that model files may still hold: read as their names of today (interprim.io)
+OLD_VALUES = {"phase_method": {"auto": "cv"}, "sigma2": {"auto": "residual"}, "calibrate": {"auto": "with-cv"}}
 
 
 class InteractionPrimitive(Predictor):
@@ -72,7 +74,7 @@ class InteractionPrimitive(Predictor):
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).
-        ``"residual"`` (the paper's setting; ``"auto"`` is its old name, still accepted) uses the mean
+        ``"residual"`` (the paper's setting) uses the mean
         squared residual of the observation model on the training
         demonstrations' own fits (observed DoFs), which sets the noise on the
         scale of the chosen observation; on noisy or recorded data it is
@@ -102,7 +104,7 @@ class InteractionPrimitive(Predictor):
         (Advanced.) Fewer observed frames than this give the prior (no conditioning).
     n_steps : int, default 2000
         (Advanced.) Integration steps over the movement (see :class:`interprim.core.dmp.LinearRollout`).
-    phase_method : {"auto", "cv", "likelihood", "learned", "dtw"}, default "auto"
+    phase_method : {"cv", "likelihood", "learned", "dtw"}, default "cv"
         How ``predict`` and ``Stream`` estimate the phase (how far through the movement the partner is):
 
         * ``"likelihood"``: the maximum of the marginal likelihood of the observed positions under the learned
@@ -114,7 +116,7 @@ class InteractionPrimitive(Predictor):
           prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
           recordings of people (NuiSI: 0.71x its error), where the likelihood phase is not; worse on clean
           simulated data.
-        * ``"cv"``, or ``"auto"`` (the default, the same choice under its old name): whichever of the two has
+        * ``"cv"`` (the default): whichever of the two has
           the smaller held-out phase error on the training
           demonstrations (``phase_method_``; both figures in ``selection_``: ``phase_error_refined`` and
           ``learned_phase_error``).  It picks the likelihood on the built-in simulated and synthetic data and
@@ -138,7 +140,7 @@ class InteractionPrimitive(Predictor):
         posterior's, scaled per column, fraction seen and look-ahead so that their 90 % band covers about 90 % of
         held-out movements, timing errors included.  ``"with-cv"``: calibrate when ``sigma2="cv"`` (the
         default; the folds re-use what that cross-validation chose), not with the paper's ``sigma2="residual"``
-        or a fixed ``sigma2``; ``"auto"`` is its old name, still accepted.  ``True`` calibrates whatever
+        or a fixed ``sigma2``.  ``True`` calibrates whatever
         ``sigma2``, ``False`` never.  A calibration needs at least 6 demonstrations (with fewer there is
         none); the fitted scales are ``calibration_`` (``None`` when not calibrated).
 
@@ -185,14 +187,14 @@ class InteractionPrimitive(Predictor):
         prior mean), ``phase_sigma2``, ``observation``, ``method`` and ``n_folds`` (how), ``fractions`` (fractions
         seen in the held-out cases).  Held-out errors at the choice (mean squared error of the whole movement, each
         DoF divided by its variance): ``cv_error`` / ``cv_error_prior`` (``cv_target``, the controlled agent, and
-        its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="auto"``):
+        its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="cv"``):
         ``phase_error_refined`` (likelihood), ``learned_phase_error``, ``clock_phase_error``.  Candidates and
         their scores: ``*_grid``, ``cv_errors``, ``cv_errors_observed``, ``cv_within_se``,
         ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood``; ``representation`` (as
         ``representation_``).  Keys are left out where they do
-        not apply (e.g. ``sigma2="auto"`` has no ``cv_*``).
+        not apply (e.g. ``sigma2="residual"`` has no ``cv_*``).
     phase_method_ : str
-        The phase method ``fit`` chose (``phase_method="auto"``) or was given; ``phase_model_`` is the
+        The phase method ``fit`` chose (``phase_method="cv"``) or was given; ``phase_model_`` is the
         fitted :class:`~interprim.phase.learned.LearnedPhase` or ``None``.
     reference_ : ndarray, shape (N, n_observed_latent_)
         DTW reference of the observed agent (Sec. III-B).
@@ -205,11 +207,12 @@ class InteractionPrimitive(Predictor):
     """
 
     _CHECKS_INPUT = True  # its fitted state and stream compute input_distance / out_of_range themselves
+    OLD_VALUES = OLD_VALUES
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
-                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "auto",
+                 reference="mean", min_observed: int = 3, n_steps: int = 2000, phase_method: str = "cv",
                  input_noise: float | None = None, calibrate="with-cv"):
         self.observed_dofs = observed_dofs
         self.n_basis = n_basis
@@ -294,7 +297,7 @@ class InteractionPrimitive(Predictor):
             raise ValueError(f"n_steps must be a positive integer, got {self.n_steps!r}")
         if not (self.calibrate is True or self.calibrate is False or isinstance(self.calibrate, np.bool_)
                 or (isinstance(self.calibrate, str) and self.calibrate in CALIBRATE_RULES)):
-            raise ValueError(f"calibrate must be True, False or 'with-cv' ('auto', its old name), "
+            raise ValueError(f"calibrate must be True, False or 'with-cv', "
                              f"got {self.calibrate!r}")
         ref = self.reference
         if isinstance(ref, str):
@@ -457,8 +460,8 @@ class InteractionPrimitive(Predictor):
         return self._state().predict_latent(z, n_star, cost, robot_state, need_cov, robot_start, workspace)
 
     def phase_method_used(self) -> str:
-        """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""
-        if self.phase_method in ("cv", "auto"):
+        """The phase method in use: ``phase_method``, or with ``"cv"`` the one ``fit`` chose (``phase_method_``)."""
+        if self.phase_method == "cv":
             return getattr(self, "phase_method_", "likelihood")
         return self.phase_method
 
@@ -564,28 +567,6 @@ class InteractionPrimitive(Predictor):
         from ..._summary import summary
 
         return summary(self, fit_seconds)
-
-    # the names these methods had while they were private (kept for code written against them)
-    _latent_map = latent_map
-    _controlled_map = controlled_map
-    _robot_start = robot_start
-    _condition = condition
-    _predict_latent = predict_latent
-    _phase = phase_method_used
-    _observed_to_latent = observed_to_latent
-
-    def __getattr__(self, name):
-        # private names of the fitted state that code (tests, benchmarks) used on the estimator
-        target = _PRIVATE_VIEWS.get(name)
-        st = self.__dict__.get("fitted_")
-        if target is None or st is None:
-            raise AttributeError(f"{type(self).__name__!s} object has no attribute {name!r}")
-        return getattr(st, target)
-
-
-_PRIVATE_VIEWS = {"_q": "_q", "_stats": "observation_stats", "_observation": "observation_design",
-                  "_phase_info": "_phase_info", "_to_latent": "_to_latent", "_conditioner": "conditioner",
-                  "_setup": "setup_derived"}
 
 
 def _view(name: str) -> property:

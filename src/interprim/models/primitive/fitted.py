@@ -99,7 +99,6 @@ class FittedPrimitive:
         self.rollout_ = cached_rollout(int(self.n_basis), float(self.alpha_x), float(self.alpha_y), self.beta_y_,
                                        int(self.n_steps))
         q = self.n_basis + 1
-        self._q = q
         self.params_per_dof_ = q  # n_basis + 1 entries of theta per DoF (Eq. 2)
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
 
@@ -211,7 +210,7 @@ class FittedPrimitive:
         var_obs = np.empty(S)
         want_resid = isinstance(self.sigma2, str) and self.observation == "forcing"
         for T, idx in groups.items():
-            Zg = self._to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
+            Zg = self.to_latent_stacked([arrays[j] for j in idx])  # (n, T, D')
             # DMP parameters (Eq. 3-4), normalised time s in [0, 1]; derivatives along time (axis 1)
             rdofs = slice(0, n_o) if want_resid else slice(0, 0)
             ftb = kernels.kernel("observation.forcing_targets_batch") if self.smoothing_window is None else None
@@ -267,7 +266,7 @@ class FittedPrimitive:
             raise ValueError(f"choosing the noise and shrinkage by cross-validation (sigma2='cv', the default) needs "
                              f"at least 3 demonstrations, got {len(latent)}: record more, or give sigma2 and "
                              f"covariance explicitly (e.g. sigma2=1e-3, covariance='ridge')")
-        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "cv", "auto")) and len(latent) >= 3:
+        if (self.sigma2 == "cv" or self.phase_method in ("likelihood", "cv")) and len(latent) >= 3:
             from .selection import select_hyperparameters  # sigma2, shrinkage, phase noise from data
             chosen = select_hyperparameters(self, latent, select_sigma2=self.sigma2 == "cv")
             if chosen.sigma2 is not None:
@@ -275,7 +274,7 @@ class FittedPrimitive:
             self.phase_sigma2_, self.selection_ = chosen.phase_sigma2, chosen.record
         with single_thread():  # small matrices: BLAS threads only oversubscribe a loaded machine
             self.phase_model_, self.phase_method_, figures = fit_phase_model(self, [z[:, :n_o] for z in latent], dt)
-        if figures:  # both phase errors of the "auto" choice, for the user
+        if figures:  # both phase errors of the "cv" choice, for the user
             self.selection_.update(figures)
         if hasattr(self, "selection_"):  # how well the DMPs represent the demonstrations (kept in the model file)
             self.selection_["representation"] = self.representation_
@@ -295,12 +294,13 @@ class FittedPrimitive:
         self.input_mean_, self.input_std_, self.input_limit_ = fit_input_range(
             np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
-        if self.calibrate is True or (self.calibrate in ("with-cv", "auto") and self.sigma2 == "cv"):
+        if self.calibrate is True or (self.calibrate == "with-cv" and self.sigma2 == "cv"):
             from .calibration import fit_calibration  # predictive std scaled to held-out errors
             with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
                 self.calibration_ = fit_calibration(self, arrays)
 
-    def _to_latent(self, a):
+    def to_latent(self, a):
+        """A demonstration ``(T, D)`` in the latent columns the DMPs model (PCA scores when fitted with PCA)."""
         o = a[:, self.observed_dofs_]
         c = a[:, self.controlled_dofs_]
         if self.pca_observed_ is not None:
@@ -309,8 +309,8 @@ class FittedPrimitive:
             c = self.pca_controlled_.transform(c)
         return np.hstack([o, c])
 
-    def _to_latent_stacked(self, arrays):
-        """:meth:`_to_latent` of equal-length demonstrations into one ``(n, T, D')`` array."""
+    def to_latent_stacked(self, arrays):
+        """:meth:`to_latent` of equal-length demonstrations into one ``(n, T, D')`` array."""
         n, T = len(arrays), arrays[0].shape[0]
         if self.pca_observed_ is None and self.pca_controlled_ is None:
             perm = np.asarray(list(self.observed_dofs_) + list(self.controlled_dofs_), dtype=np.intp)
@@ -322,7 +322,7 @@ class FittedPrimitive:
                 else:
                     np.take(a, perm, axis=1, out=out[k])
             return out
-        return np.stack([self._to_latent(a) for a in arrays])
+        return np.stack([self.to_latent(a) for a in arrays])
 
     # ------------------------------------------------------------------ maps between data and latent DoFs
     def observed_to_latent(self, o):
@@ -394,8 +394,8 @@ class FittedPrimitive:
 
     # ------------------------------------------------------------------ prediction
     def phase_method_used(self) -> str:
-        """The phase method in use: ``phase_method``, or with ``"auto"`` the one ``fit`` chose (``phase_method_``)."""
-        if self.phase_method in ("cv", "auto"):
+        """The phase method in use: ``phase_method``, or with ``"cv"`` the one ``fit`` chose (``phase_method_``)."""
+        if self.phase_method == "cv":
             return getattr(self, "phase_method_", "likelihood")
         return self.phase_method
 
@@ -434,7 +434,9 @@ class FittedPrimitive:
 
         return Stream(self, robot_state)
 
-    def _phase_info(self, n_star: int, M: int):
+    def phase_info(self, n_star: int, M: int):
+        """``(s_end, duration)``: the fraction seen and the duration (s) from the reference index ``n_star`` matched by
+        the ``M``-th observed frame (Eq. 9)."""
         N = self.reference_.shape[0]
         s_end = n_star / (N - 1)
         elapsed = (M - 1) * self.dt_
@@ -468,7 +470,7 @@ class FittedPrimitive:
         ``n_star`` (Eq. 9: fraction seen ``n_star / (N - 1)``): Eq. 13-18 when at least ``min_observed`` frames
         were seen, else the prior.  The one path of :meth:`predict` and :meth:`Stream.update`."""
         M = z.shape[0]
-        s_end, duration = self._phase_info(n_star, M)
+        s_end, duration = self.phase_info(n_star, M)
         prior = self.prior_
         stats = None
         if M >= self.min_observed and s_end > 0:
@@ -502,13 +504,13 @@ class FittedPrimitive:
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)
                 ws = workspace if workspace is not None else \
-                    StatsWorkspace(M, z.shape[1], self._q, "position")
+                    StatsWorkspace(M, z.shape[1], self.params_per_dof_, "position")
                 y0 = start_position(z, self.smoothing_window)
                 v0 = self.start_velocity_[: self.n_observed_latent_]
                 G, B, yy = ws.position_stats(z, M, s_end, y0, v0, self.rollout_)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), y0
             if self.observation == "forcing" and self.smoothing_window is None:
-                ws = workspace if workspace is not None else StatsWorkspace(M, z.shape[1], self._q)
+                ws = workspace if workspace is not None else StatsWorkspace(M, z.shape[1], self.params_per_dof_)
                 G, B, yy = ws.forcing_stats(z, M, s_end, self)
                 return (G.copy(), B.copy(), yy, M * z.shape[1]), z[0].copy()
         X, Y, y0 = self.observation_design(z, s_end)

@@ -254,7 +254,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         # the noise under which the likelihood phase estimate is most accurate on held-out demos
         # (the held-out marginal likelihood at the true phase favours too small a noise for this)
         bp = int(np.argmin(phase_err + 1e-9 * np.arange(len(phase_err))[::-1]))
-        if model.phase_method in ("cv", "auto"):
+        if model.phase_method == "cv":
             phase_err_refined = _refined_phase_error(model, kept, float(s2_grid["position"][bp]), bp)
     else:
         bp = int(np.argmax(ll[a]))
@@ -387,7 +387,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
 def _refined_phase_error(model, kept, s2, b) -> float:
     """Held-out mean absolute error of the likelihood phase at the chosen noise ``s2`` (column ``b`` of the
     cases' grid curves), each estimate refined as :func:`interprim.phase.likelihood.estimate_phase` refines
-    its grid maximum (Brent between the grid neighbours): the figure ``phase_method="auto"`` compares with the
+    its grid maximum (Brent between the grid neighbours): the figure ``phase_method="cv"`` compares with the
     learned phase's cross-validated error (the grid maximum alone is off by up to half a grid step, ~8 %)."""
     from ...phase.likelihood import brent_min, log_speed_prior
 

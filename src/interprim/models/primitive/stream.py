@@ -29,7 +29,7 @@ class Stream(BaseStream):
     :meth:`extend` adds several frames at once (a caller that fell behind) and conditions once, for
     the last of them.  The frame buffer is preallocated and grows by doubling.
 
-    With the likelihood phase (what ``phase_method="auto"`` picks on most data) the phase is tracked on a lattice of speeds whose
+    With the likelihood phase (what ``phase_method="cv"`` picks on most data) the phase is tracked on a lattice of speeds whose
     scores are extended frame by frame (:class:`interprim.phase.tracking.Tracker`) and then taken
     to the maximum of the log posterior by the batch search's own last step, so that the stream's
     phase, and hence its prediction, is :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict`'s

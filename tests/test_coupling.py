@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from interprim.models.coupling import CouplingModel, CouplingPrediction
+from interprim.models.base import GridPrediction
+from interprim.models.coupling import CouplingModel
 from interprim.core.errors import NotFittedError
 from interprim.core.preprocessing import time_normalise
 
@@ -92,7 +93,7 @@ def test_phase_error_model_is_used_and_prediction_shapes():
     demos = linear_demos(12, 7)
     m = CouplingModel(OBS, phase_std="clock", n_folds=4, methods=("ridge",)).fit(demos)
     p = m.predict(demos[0][:15, OBS], 0.4)
-    assert isinstance(p, CouplingPrediction)
+    assert isinstance(p, GridPrediction)
     assert p.trajectory(30).shape == (30, 4) and p.std(30).shape == (30, 4) and np.all(p.std(30) > 0)
     t, y = p.response(30)  # the contract of interprim.models.base: (t, y) like the Interaction Primitive's
     assert t.shape == (30,) and t[0] == 0.0 and y.shape == (30, 2)
@@ -160,7 +161,7 @@ def test_learned_interaction_std_adds_the_timing_uncertainty():
     u = np.linspace(0.0, 1.0, 11)
     mean = np.stack([2.0 * u, np.sin(np.pi * u), np.ones_like(u)], axis=1)  # slopes 2, pi cos(pi u), 0
     sd = np.full_like(mean, 0.1)
-    cp = CouplingPrediction(u, mean, sd, 0.5, 0.05, [0], [1, 2], "ridge", 0.0)
+    cp = GridPrediction(u, mean, sd, 0.5, 0.05, [0], [1, 2], "ridge", 0.0)
     p = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.05, 1.0))
     got = p.std(11)
     e = 0.05 / 0.5

@@ -201,7 +201,7 @@ class GridPrediction(BasePrediction):
     """A prediction of the whole movement of all DoFs tabulated on normalised time ``0 .. 1``.
 
     Made by :class:`~interprim.models.coupling.CouplingModel`, :class:`~interprim.models.learned.LearnedInteraction` and
-    the baselines (formerly ``CouplingPrediction`` and ``BaselinePrediction``, both still importable).
+    the demonstration families.
 
     Parameters
     ----------

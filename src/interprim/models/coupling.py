@@ -74,7 +74,7 @@ from .base import GridPrediction
 from ..core.cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
 from ..core.errors import NotFittedError
 
-__all__ = ["CouplingModel", "CouplingPrediction", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
+__all__ = ["CouplingModel", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
            "DEFAULT_BANDWIDTH_GRID"]
 
 METHODS = ("mean", "ridge", "ppca", "kernel")
@@ -127,8 +127,6 @@ def _smooth_time(v, w):
     return (c[..., hi, :] - c[..., lo, :]) / (hi - lo)[:, None]
 
 
-#: the prediction of :meth:`CouplingModel.predict` (:class:`interprim.models.base.GridPrediction`; the old name is kept)
-CouplingPrediction = GridPrediction
 
 
 class CouplingModel:
@@ -602,7 +600,7 @@ class CouplingModel:
 
     # ------------------------------------------------------------------ predict
     @one_blas_thread
-    def predict(self, partial, phase, phase_std=None) -> CouplingPrediction:
+    def predict(self, partial, phase, phase_std=None) -> GridPrediction:
         """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
 
         Parameters
@@ -618,7 +616,7 @@ class CouplingModel:
 
         Returns
         -------
-        CouplingPrediction
+        GridPrediction
             Both agents' mean and std on ``n_out`` normalised times.
         """
         if not hasattr(self, "method_"):

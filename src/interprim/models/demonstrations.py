@@ -22,12 +22,10 @@ from ..core.validation import as_2d_finite, as_frame, check_positive
 from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise
 
-__all__ = ["Baseline", "PriorMean", "NearestNeighbour", "BaselinePrediction", "AlignedStream", "AlignedBaseline",
+__all__ = ["Baseline", "PriorMean", "NearestNeighbour", "AlignedStream", "AlignedBaseline",
            "check_demos"]
 
 
-#: the prediction type of every method here (:class:`interprim.models.base.GridPrediction`; the old name is kept)
-BaselinePrediction = GridPrediction
 
 
 class Baseline(Predictor):

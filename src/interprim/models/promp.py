@@ -92,7 +92,7 @@ class InteractionProMP(Baseline):
         cov[np.diag_indices_from(cov)] += self.ridge * max(float(np.mean(np.diag(cov))), 1e-300)
         self.cov_ = cov
         var_o = float(np.mean([np.var(a[:, obs]) for a in arrays]))
-        self.sigma2_ = (max(float(np.mean(res)), 1e-6 * var_o) if self.sigma2 == "auto" else float(self.sigma2))
+        self.sigma2_ = (max(float(np.mean(res)), 1e-6 * var_o) if self.sigma2 == "residual" else float(self.sigma2))
         self.n_obs_ = len(obs)
         return self
 

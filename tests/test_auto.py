@@ -227,3 +227,29 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
         vm = cv.blend_scales(w)
     # the real-time band's weights are those of the 0.25 s protocol (the fit scores further ahead too)
     np.testing.assert_allclose([auto.weights_.get(m, 0.0) for m in cv.names], w, atol=1e-6)
+
+
+@pytest.mark.slow  # starts worker processes
+def test_worker_processes_serve_a_default_model_file(blend, task, tmp_path):
+    """``interprim serve --processes 2`` with the file ``interprim fit`` writes by default: the workers load it with
+    ``load_any`` and every reply equals the blend's own stream, ``out_of_range`` included."""
+    pytest.importorskip("websockets")
+    from interprim.server.app import InterprimServer, ServerConfig, ServerThread
+    from interprim.server.client import Client
+    from interprim.server.models import load_models
+
+    _, hold = task
+    path = tmp_path / "handover.npz"
+    blend.save(path)
+    models = load_models([path])
+    srv = InterprimServer(models, ServerConfig(port=0, processes=2, max_rate_hz=100000, rate_burst=100000))
+    direct = blend.stream()
+    with ServerThread(srv) as st, Client(st.ws_url) as c:
+        assert len(st.server.compute.procs.workers) == 2
+        c.open("handover", points=10, std=True)
+        for f in hold.demos[2][:20, :2]:
+            p, d = c.frame(f), direct.update(f)
+            np.testing.assert_allclose(p["mean"], d.trajectory(10)[:, 2:], rtol=1e-6, atol=1e-9)
+            assert p["out_of_range"] is False
+        far = c.frame(hold.demos[2][20, :2] * 1000.0)
+        assert far["out_of_range"] is True

@@ -65,7 +65,9 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
-    from ..models.ensemble import Blend, CrossValidation, choice
+    import math
+
+    from ..models.ensemble import CrossValidation, blend_from_cv, choice, scoring_config
 
     cfg = RealTimeConfig(point_dim=point_dim)
     make = {m: f for m, f in default_methods(obs).items() if m in methods}
@@ -74,17 +76,18 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     # blend's weights and variance model ("auto", what AutoInteraction.fit(dev) makes; "ip-paper" is not one of
     # its candidates)
     cand = {m: make[m] for m in make if m != "ip-paper"}
-    cv = CrossValidation(cand, Prefixes(dev, obs), obs, dt, RealTimeConfig(point_dim=point_dim, stride=3), 3)
+    train = [np.asarray(x, dtype=np.float64) for x in dev]
+    cv = CrossValidation(cand, Prefixes(dev, obs), obs, dt, scoring_config(cfg.horizon, train, dt, point_dim=point_dim,
+                                                                           stride=3), 3, horizon=cfg.horizon)
     chosen, _ = choice(cv, list(cand))
     inner = dict(cv.errors)
-    w = cv.blend_weights()
-    weights = {m: float(x) for m, x in zip(cv.names, w) if x > 0}
-    scales = cv.blend_scales(w)
-    inner["blend"] = cv.blend_error(w)
+    blend, info = blend_from_cv(cv, cand, train, dt, obs, cfg.horizon)
+    weights = info["weights"]
+    inner["blend"] = info["blend_cv_error"]
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
         f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")
-    train = [np.asarray(x, dtype=np.float64) for x in dev]
+    rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=3)  # every remaining frame
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
@@ -95,7 +98,7 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         for m, factory in make.items():
             fitted[m] = factory().fit(train, dt=dt)
             yield m, fitted[m]
-        yield "auto", Blend.from_fitted(obs, fitted, weights, scales, train, dt, cfg.horizon)
+        yield "auto", blend
 
     for first, (m, est) in enumerate(models()):
         t1 = time.perf_counter()
@@ -107,6 +110,9 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
                 recs += [dict(r, protocol="whole") for r in
                          whole_movement_fold(est, test, obs, fractions, point_dim=point_dim, name=m, prefix=pre,
                                              oracle=orc)]
+                recs += [dict(r, protocol="rest") for r in
+                         realtime_fold(est, train, test, obs, dt, rest_cfg, name=m, fitted=True, prefix=pre,
+                                       oracle=orc)]
                 for r in recs:
                     if r["method"] in ("clock", "oracle-duration", "oracle") and first:
                         continue
@@ -115,7 +121,14 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         log(f"    {m}: fitted and measured in {time.perf_counter() - t1:.0f} s")
     for p in records:
         records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
-    return {"records": records, "summary": {p: summarise_realtime(records[p]) for p in records},
+    summary = {}
+    for p in records:
+        summary[p] = summarise_realtime([r for r in records[p] if r.get("protocol") != "rest"])
+        rest = summarise_realtime([dict(r, protocol=None) for r in records[p] if r.get("protocol") == "rest"])
+        for m, s in rest.items():  # the rest of the movement, in seconds from now: error and band coverage
+            summary[p].setdefault(m, {}).update({f"rest_{k}": v for k, v in s.items()
+                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock")})
+    return {"records": records, "summary": summary,
             "chosen": chosen, "inner": inner, "weights": weights,
             "se": {p: {f"{a}|{b}": standard_error_ratio(records[p], a, b) for a in ("chosen", "auto")
                        for b in ("nn", "clock", "oracle-duration", "prior")}
@@ -124,7 +137,9 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
                    for p in records}}
 
 
-COLUMNS = (("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle", "÷ mean at true duration"),
+COLUMNS = (("rest_rt_ctrl_vs_clock", "robot, rest of the movement in seconds ÷ clock"),
+           ("rest_cov_ctrl", "90 % band over the rest, robot"), ("rest_cov_obs", "90 % band over the rest, human"),
+           ("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle", "÷ mean at true duration"),
            ("rt_ctrl_vs_floor", "÷ oracle (floor)"), ("rt_obs_vs_clock", "human real time ÷ clock"),
            ("phase_err_vs_clock", "phase ÷ clock"), ("wm_ctrl_vs_prior", "robot whole movement (60 %) ÷ mean"),
            ("wm_ctrl_vs_floor", "whole ÷ oracle"), ("cov_ctrl", "90 % band, robot"), ("cov_obs", "90 % band, human"))
@@ -142,12 +157,12 @@ def tables(results, protocol="causal") -> str:
             if not np.any(np.isfinite(vals)):
                 continue
             ok = [v for v in vals if np.isfinite(v) and v > 0]
-            geo = float(np.exp(np.mean(np.log(ok)))) if ok and not key.startswith("cov") else (
+            geo = float(np.exp(np.mean(np.log(ok)))) if ok and "cov" not in key else (
                 float(np.mean(ok)) if ok else np.nan)
             cells = ["—" if not np.isfinite(v) else f"{v:.2f}" for v in vals] + [f"{geo:.2f}"]
             rows.append(f"| {m} | " + " | ".join(cells) + " |")
         if rows:
-            agg = "mean" if key.startswith("cov") else "geo-mean"
+            agg = "mean" if "cov" in key else "geo-mean"
             lines += [f"**{title}** ({protocol} prefixes)", "",
                       "| method | " + " | ".join(names) + f" | {agg} |", "|---" * (len(names) + 2) + "|", *rows, ""]
     chosen = ", ".join(f"{n}: {results[n]['chosen']}" for n in names)

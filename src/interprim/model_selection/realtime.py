@@ -35,7 +35,8 @@ class RealTimeConfig:
     Parameters
     ----------
     horizon : float
-        Seconds ahead that are predicted after each observed frame.
+        Seconds ahead that are predicted after each observed frame (``math.inf``: every remaining frame of the
+        held-out movement, the "rest of the movement" protocol).
     start, stop : float
         Fractions of the held-out movement between which frames are evaluated.
     stride : int
@@ -119,7 +120,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     mean_dur_s = mean_dur * dt
     T = test.shape[0]
     true_dur_s = (T - 1) * dt
-    H = max(1, int(round(cfg.horizon / dt)))
+    to_end = math.isinf(cfg.horizon)
+    H = 0 if to_end else max(1, int(round(cfg.horizon / dt)))
     if frames is None:
         k0 = max(3, int(math.ceil(cfg.start * T)))
         k1 = max(k0, int(math.floor(cfg.stop * T)))
@@ -131,8 +133,9 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     predict = _prefix_predictions(estimator, test, obs, frames, prefix)
     out = []
     for k in frames:
-        idx = np.minimum(np.arange(k, k + H), T - 1)  # frames k .. k+H-1 (0-based), held at the end
-        t_ahead = (np.arange(1, H + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
+        Hk = max(1, T - k) if to_end else H  # horizon=inf: every remaining frame of the held-out movement
+        idx = np.minimum(np.arange(k, k + Hk), T - 1)  # frames k .. k+H-1 (0-based), held at the end
+        t_ahead = (np.arange(1, Hk + 1)) * dt  # seconds after frame k-1 (0-based index k-1)
         truth = test[idx]
         phase_true = (k - 1) / (T - 1)
         elapsed = (k - 1) * dt

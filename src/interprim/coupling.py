@@ -437,26 +437,33 @@ class CouplingModel:
         if "pca" not in ctx:
             P, Ydc = ctx["P"], ctx["Ydc"]
             a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
-            Gy = P @ (Ydc @ Ydc.T) @ P.T  # Gram matrix of the centred target rows
-            b2 = max(float(np.trace(Gy)) / R, 1e-300)
-            # SVD of Z = [Xc / a, Yc / b] through its (R x R) Gram matrix
-            e, U = np.linalg.eigh(Xc @ Xc.T / a2 + Gy / b2)
-            e, U = e[::-1], U[:, ::-1]
+            # Gram matrix of the demonstrations' centred targets (n_u x n_u) and its eigenpairs (the caller may
+            # pass them: they depend on the training demonstrations only)
+            ec, Vc = ctx["ygram"] if "ygram" in ctx else np.linalg.eigh(Ydc @ Ydc.T)
+            b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)  # tr(P C P^T) / R
+            # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
+            # C = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T (U = Z V / S),
+            # the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
+            kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
+            a, b = math.sqrt(a2), math.sqrt(b2)
+            Z = np.concatenate([Xc / a, P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / b))], axis=1)
+            e, V = np.linalg.eigh(Z.T @ Z)
+            e, V = e[::-1], V[:, ::-1]
             keep = e > 1e-12 * max(float(e[0]), 1e-300)
-            U, S = U[:, keep], np.sqrt(e[keep])
-            Vx_all = (U.T @ (Xc / math.sqrt(a2))) / S[:, None]  # x block of the right singular vectors
-            ctx["pca"] = (math.sqrt(a2), U, S, Vx_all, Ydc.shape[1] + p)
-        a, U, S, Vx_all, dim = ctx["pca"]
+            V, S = V[:, keep], np.sqrt(e[keep])
+            # x block of the right singular vectors: V[:p] (Z^T U = V S and the x block of Z^T U S^-1 is Vx^T)
+            ctx["pca"] = (a, Z, V, S, Ydc.shape[1] + p)
+        a, Z, V, S, dim = ctx["pca"]
         r = int(min(rank, max(S.size - 1, 1)))
         lam = S**2 / R
-        Vx = Vx_all[:r]  # (r, p)
+        Vx = V[:p, :r].T  # (r, p)
         sig2 = float(lam[r:].sum()) / max(dim - r, 1)
         scale = np.sqrt(np.maximum(lam[:r] - sig2, 0.0))
         Wx = Vx.T * scale  # (p, r)
         sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
         m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
-        coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
-        return (U[:, :r] @ coef).T
+        coef = (scale / np.maximum(S[:r] ** 2, 1e-300))[:, None] * m  # U_r = Z V_r / S_r folded in
+        return (Z @ (V[:, :r] @ coef)).T
 
     def _predict_rows(self, method, param, ctx):
         """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""
@@ -636,12 +643,54 @@ class CouplingModel:
                     or phase_std < 0:
                 raise ValueError(f"phase_std must be a non-negative number, got {phase_std!r}")
             sig = float(phase_std)
-        n, D = self.n_demos_, self.n_dofs_
+        return self._predict_prefix(v, s, sig)
+
+    def _predict_prefix(self, v, s: float, sig: float) -> CouplingPrediction:
+        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig`` (what the online
+        stream of :class:`~interprim.learned.LearnedInteraction` calls, so that its answer is predict's)."""
+        # the prefix enters only through its resampled points (_resample reads n_in of its frames)
         x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
+        mean, h = self._condition(x, s, sig)
+        return self._grid_prediction(mean, h, s, sig, v.shape[0])
+
+    def _condition(self, x, s: float, sig: float):
+        """Eq. 18 for one query ``x`` (1, p) at phase ``s`` with error ``sig``: mean (n_out, D) and leverage ``h``.
+
+        The training rows ``X(s, sig)`` (:meth:`_rows`) move with the phase, so their factorisation is redone for
+        every ``s``; what does not depend on ``s`` (the group indicator, the demonstrations' centred targets and
+        their Gram matrix's eigenpairs) is computed once per fitted model (:meth:`_static`).
+        """
+        n, D = self.n_demos_, self.n_dofs_
         X, g = self._rows(np.arange(n), s, sig)
-        mean, h = self._predict_rows(self.method_, self.param_, self._context(X, g, self.Y_.reshape(n, -1), x))
-        mean = mean[0].reshape(self.n_out, D)
-        h = float(h[0])
+        st = self._static(X.shape[0])
+        mu = X.mean(axis=0)  # what _context computes, with its query-free part cached
+        ctx = {"R": X.shape[0], "Xc": X - mu, "xc": x - mu, "P": st["P"], "ybar": st["ybar"], "Ydc": st["Ydc"]}
+        if self.method_ in ("ppca",):
+            ctx["ygram"] = st["ygram"]
+        mean, h = self._predict_rows(self.method_, self.param_, ctx)
+        return mean[0].reshape(self.n_out, D), float(h[0])
+
+    def _static(self, R: int) -> dict:
+        """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
+        grouped by demonstration), and the eigenpairs of the centred targets' Gram matrix ``Y_c Y_c^T`` used by
+        ``"ppca"``; cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
+        cached = self.__dict__.get("_static_cache")
+        if cached is None or cached[0] is not self.Y_:
+            cached = (self.Y_, {})
+            self.__dict__["_static_cache"] = cached
+        if R not in cached[1]:
+            n = self.n_demos_
+            ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
+                                np.zeros((1, 1)))
+            st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
+            st["ygram"] = np.linalg.eigh(st["Ydc"] @ st["Ydc"].T)
+            cached[1][R] = st
+        return cached[1][R]
+
+    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> CouplingPrediction:
+        """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
+        variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
+        D = self.n_dofs_
         # residual variance at this phase (linear interpolation over the CV phases, constant outside)
         fr = self.fractions_
         if s <= fr[0] or fr.size == 1:
@@ -658,7 +707,7 @@ class CouplingModel:
         std = c[None, :] * np.sqrt(var * (1.0 + h))
         return GridPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
-                              n_observed=v.shape[0], conditioned=not self.fallback_to_mean_)
+                              n_observed=n_observed, conditioned=not self.fallback_to_mean_)
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")

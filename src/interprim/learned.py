@@ -17,9 +17,11 @@ contract of :mod:`interprim.contract` (``fit``, ``predict``, ``stream``, ``save`
 ``set_params``); its prediction is a :class:`~interprim.contract.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP, no rollout from a
-robot state and no streaming state here (each :meth:`predict` is a pure function of the prefix, so a stream
-of predictions equals the batch ones by construction).
+It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP and no rollout from a
+robot state.  Each :meth:`predict` is a pure function of the prefix; :meth:`LearnedInteraction.stream` returns a
+:class:`LearnedStream` that keeps the frames and computes, per frame, only what the prefix enters through (the
+phase features read a few frames, the coupling's observation ``n_in`` resampled points), so its answer is, bitwise,
+``predict`` of the frames seen.
 """
 
 from __future__ import annotations
@@ -32,7 +34,10 @@ from .contract import GridPrediction, Predictor
 from .coupling import CouplingModel
 from .phase.learned import LearnedPhase
 
-__all__ = ["LearnedInteraction"]
+from ._validation import as_frame  # the stream's names, on lines of their own
+from .contract import BaseStream
+
+__all__ = ["LearnedInteraction", "LearnedStream"]
 
 
 def _Prediction(cp: GridPrediction, est) -> GridPrediction:
@@ -69,6 +74,7 @@ class LearnedInteraction(Predictor):
     """
 
     _FITTED = "coupling_"
+    exact_stream = True  # LearnedStream gives, bitwise, predict's answer
 
     def __init__(self, observed_dofs, phase_kwargs=None, coupling_kwargs=None):
         self.observed_dofs = observed_dofs
@@ -116,6 +122,14 @@ class LearnedInteraction(Predictor):
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
 
+    def stream(self, robot_state=None) -> "LearnedStream":
+        """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it
+        returns, bitwise, :meth:`predict` of those ``M`` frames, without recomputing anything over the prefix."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return LearnedStream(self)
+
     def to_state(self):
         """``(arrays, meta)`` of the fitted model (see :meth:`interprim.contract.Predictor.to_state`)."""
         self._check_fitted("to_state")
@@ -134,3 +148,85 @@ class LearnedInteraction(Predictor):
                                                   else None)
         self.dt_ = float(meta["dt_"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+
+
+class LearnedStream(BaseStream):
+    """Online :class:`LearnedInteraction`: ``update(frame)`` returns ``predict`` of all frames seen, bitwise.
+
+    What a prediction reads of the prefix is small and fixed: the learned phase's features
+    (:meth:`~interprim.phase.learned.LearnedPhase.estimate`: the first and last frames, the frame one velocity
+    window back and two frames per history point; the whole prefix only for the optional ``"path"`` and
+    ``"peak_speed"`` groups) and the coupling's observation, the prefix resampled at ``n_in`` points over
+    ``[0, s]`` (Eq. 17-18 with the prefix observation model of :mod:`interprim.coupling`).  The stream keeps the
+    raw and the scaled frames in growing buffers (amortised ``O(D)`` per frame) and evaluates both on them with the
+    very functions ``predict`` uses, so that it gives the same bits.  What it cannot keep from one frame to the next
+    is the conditioning: the training rows of the coupling are the demonstrations' prefixes cut at the estimated
+    phase (and its jitter), and the phase estimate changes with every frame, so the rows and their factorisation
+    are rebuilt per frame (in the cheapest exact form, see ``CouplingModel._ppca_weights``); the parts that do not
+    depend on the phase are computed once per model.  ``need_cov`` is accepted for the interface of
+    :class:`~interprim.stream.Stream` and has no effect.
+
+    Parameters
+    ----------
+    model : LearnedInteraction
+        A fitted model.
+    """
+
+    def __init__(self, model: LearnedInteraction):
+        self.model = model
+        self._n_cols = len(model.observed_dofs_)
+        self._raw = np.empty((64, self._n_cols))
+        self._scaled = np.empty((64, self._n_cols))
+        self._n = 0
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames received since the stream was created or last :meth:`reset`."""
+        return self._n
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        self._n = 0
+
+    def _append(self, block):
+        need = self._n + block.shape[0]
+        if need > self._raw.shape[0]:
+            cap = self._raw.shape[0]
+            while cap < need:
+                cap *= 2
+            for name in ("_raw", "_scaled"):
+                old = getattr(self, name)
+                buf = np.empty((cap, self._n_cols))
+                buf[: self._n] = old[: self._n]
+                setattr(self, name, buf)
+        self._raw[self._n:need] = block
+        # the scaling LearnedPhase.estimate applies to the whole prefix (an elementwise division: the same bits)
+        np.divide(block, self.model.phase_.scale_, out=self._scaled[self._n:need])
+        self._n = need
+
+    @one_blas_thread
+    def _predict(self) -> GridPrediction:
+        m, n = self.model, self._n
+        ph = m.phase_
+        elapsed = (n - 1) * ph.dt_  # LearnedPhase.estimate at its own sampling interval
+        if ph.method_ == "clock" or n < 2:
+            est = ph._finish(elapsed, None)
+        else:
+            est = ph._finish(elapsed, ph._raw_features(self._scaled[:n]))
+        s = float(np.clip(est.phase, 1e-3, 1.0))
+        cp = m.coupling_._predict_prefix(self._raw[:n], s, float(est.std))
+        return _Prediction(cp, est)
+
+    def update(self, frame, need_cov: bool = False) -> GridPrediction:
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns ``predict`` of all frames
+        seen."""
+        self._append(as_frame(frame, "frame", self._n_cols)[None, :])
+        return self._predict()
+
+    def extend(self, frames, need_cov: bool = False) -> GridPrediction:
+        """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns what :meth:`update`
+        returns for the last of them (one prediction, since it depends on the frames only)."""
+        self._append(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))
+        return self._predict()

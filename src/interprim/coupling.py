@@ -447,13 +447,20 @@ class CouplingModel:
             kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
             a, b = math.sqrt(a2), math.sqrt(b2)
             Z = np.concatenate([Xc / a, P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / b))], axis=1)
-            e, V = np.linalg.eigh(Z.T @ Z)
-            e, V = e[::-1], V[:, ::-1]
-            keep = e > 1e-12 * max(float(e[0]), 1e-300)
-            V, S = V[:, keep], np.sqrt(e[keep])
+            if Z.shape[0] <= Z.shape[1]:  # fewer rows than columns (no jitter): the rows' own Gram matrix
+                e, U = np.linalg.eigh(Z @ Z.T)
+                e, U = e[::-1], U[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                U, S = U[:, keep], np.sqrt(e[keep])
+                V = (Z.T @ U) / S  # right singular vectors
+            else:
+                e, V = np.linalg.eigh(Z.T @ Z)
+                e, V = e[::-1], V[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                V, S, U = V[:, keep], np.sqrt(e[keep]), None  # U = Z V / S, formed for the r columns used
             # x block of the right singular vectors: V[:p] (Z^T U = V S and the x block of Z^T U S^-1 is Vx^T)
-            ctx["pca"] = (a, Z, V, S, Ydc.shape[1] + p)
-        a, Z, V, S, dim = ctx["pca"]
+            ctx["pca"] = (a, Z, V, S, U, Ydc.shape[1] + p)
+        a, Z, V, S, U, dim = ctx["pca"]
         r = int(min(rank, max(S.size - 1, 1)))
         lam = S**2 / R
         Vx = V[:p, :r].T  # (r, p)
@@ -462,8 +469,10 @@ class CouplingModel:
         Wx = Vx.T * scale  # (p, r)
         sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
         m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
-        coef = (scale / np.maximum(S[:r] ** 2, 1e-300))[:, None] * m  # U_r = Z V_r / S_r folded in
-        return (Z @ (V[:, :r] @ coef)).T
+        coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
+        if U is None:  # U_r = Z V_r / S_r folded in
+            return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
+        return (U[:, :r] @ coef).T
 
     def _predict_rows(self, method, param, ctx):
         """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""

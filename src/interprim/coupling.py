@@ -94,8 +94,28 @@ def _normal_quantile(q: float) -> float:
 
 
 def _jitter_nodes(k: int) -> np.ndarray:
-    """``k`` equally weighted standard-normal nodes (quantiles at ``(i + 1/2) / k``), deterministic."""
-    return np.array([NormalDist().inv_cdf((i + 0.5) / k) for i in range(int(k))]) if k > 1 else np.zeros(1)
+    """``k`` equally weighted standard-normal nodes (quantiles at ``(i + 1/2) / k``), deterministic (read-only)."""
+    k = int(k)
+    out = _NODES.get(k)
+    if out is None:
+        out = np.array([NormalDist().inv_cdf((i + 0.5) / k) for i in range(k)]) if k > 1 else np.zeros(1)
+        out.setflags(write=False)
+        _NODES[k] = out
+    return out
+
+
+def _unit_grid(n: int) -> np.ndarray:
+    """``linspace(0, 1, n)``, computed once per ``n`` (read-only)."""
+    out = _GRIDS.get(n)
+    if out is None:
+        out = np.linspace(0.0, 1.0, n)
+        out.setflags(write=False)
+        _GRIDS[n] = out
+    return out
+
+
+_NODES: dict = {}
+_GRIDS: dict = {}
 
 
 def _resample(frames, stop, n):
@@ -106,7 +126,7 @@ def _resample(frames, stop, n):
     T = frames.shape[0]
     scalar = np.ndim(stop) == 0
     stops = np.atleast_1d(np.asarray(stop, dtype=np.float64))
-    pos = np.clip(stops[:, None] * np.linspace(0.0, 1.0, n)[None, :], 0.0, T - 1.0)  # (R, n)
+    pos = np.clip(stops[:, None] * _unit_grid(int(n))[None, :], 0.0, T - 1.0)  # (R, n)
     i0 = np.minimum(np.floor(pos).astype(np.intp), T - 2 if T > 1 else 0)
     w = (pos - i0)[..., None]
     i1 = np.minimum(i0 + 1, T - 1)
@@ -338,14 +358,14 @@ class CouplingModel:
         # _resample of every demonstration at once, on its frames padded to a common length (the same elementwise
         # operations per demonstration, so the same numbers as one _resample per demonstration)
         frames, T = self._padded_obs()
-        T, frames = T[idx], frames[idx]
-        lin = np.linspace(0.0, 1.0, int(self.n_in))
+        T = T[idx]
+        lin = _unit_grid(int(self.n_in))
         stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
         pos = np.clip(stops[:, :, None] * lin[None, None, :], 0.0, (T - 1.0)[:, None, None])  # (J, R, n_in)
         i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
         w = (pos - i0)[..., None]
         i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
-        J = np.arange(idx.size)[:, None, None]
+        J = idx[:, None, None]  # gathered from the padded frames directly (no copy of the selected demonstrations)
         pts = frames[J, i0] * (1.0 - w) + frames[J, i1] * w  # (J, R, n_in, Do)
         X = self._feat(pts)
         return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
@@ -714,7 +734,7 @@ class CouplingModel:
         c[self.observed_dofs_] = self.scale_["observed"]
         c[self.controlled_dofs_] = self.scale_["controlled"]
         std = c[None, :] * np.sqrt(var * (1.0 + h))
-        return GridPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
+        return GridPrediction(_unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
                               n_observed=n_observed, conditioned=not self.fallback_to_mean_)
 

@@ -351,7 +351,7 @@ class CouplingModel:
     def _rows(self, idx, s_hat, sig):
         """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
         z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
-        s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
+        s_true = np.minimum(np.maximum(s_hat + sig * z, 0.02), 1.0)  # np.clip's numbers, without its overhead
         idx = np.asarray(idx, dtype=np.intp)
         if idx.size == 0:
             return np.empty((0, int(self.n_in) * len(self.observed_dofs_))), np.empty(0, dtype=np.intp)
@@ -361,7 +361,7 @@ class CouplingModel:
         T = T[idx]
         lin = _unit_grid(int(self.n_in))
         stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
-        pos = np.clip(stops[:, :, None] * lin[None, None, :], 0.0, (T - 1.0)[:, None, None])  # (J, R, n_in)
+        pos = np.minimum(np.maximum(stops[:, :, None] * lin[None, None, :], 0.0), (T - 1.0)[:, None, None])
         i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
         w = (pos - i0)[..., None]
         i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
@@ -457,16 +457,14 @@ class CouplingModel:
         if "pca" not in ctx:
             P, Ydc = ctx["P"], ctx["Ydc"]
             a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
-            # Gram matrix of the demonstrations' centred targets (n_u x n_u) and its eigenpairs (the caller may
-            # pass them: they depend on the training demonstrations only)
-            ec, Vc = ctx["ygram"] if "ygram" in ctx else np.linalg.eigh(Ydc @ Ydc.T)
-            b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)  # tr(P C P^T) / R
+            # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
+            # and the demonstrations only, not on the phase or the query)
+            PLb = ctx["ylow"] if "ylow" in ctx else CouplingModel._target_block(P, Ydc, R)
             # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
-            # C = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T (U = Z V / S),
-            # the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
-            kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
-            a, b = math.sqrt(a2), math.sqrt(b2)
-            Z = np.concatenate([Xc / a, P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / b))], axis=1)
+            # C = Ydc Ydc^T = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T
+            # (U = Z V / S), the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
+            a = math.sqrt(a2)
+            Z = np.concatenate([Xc / a, PLb], axis=1)
             if Z.shape[0] <= Z.shape[1]:  # fewer rows than columns (no jitter): the rows' own Gram matrix
                 e, U = np.linalg.eigh(Z @ Z.T)
                 e, U = e[::-1], U[:, ::-1]
@@ -493,6 +491,15 @@ class CouplingModel:
         if U is None:  # U_r = Z V_r / S_r folded in
             return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
         return (U[:, :r] @ coef).T
+
+    @staticmethod
+    def _target_block(P, Ydc, R):
+        """``P L / b`` (R x rank C): the target block of ``_ppca_weights``'s ``Z``, with ``C = Ydc Ydc^T = L L^T``
+        (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and ``b^2 = tr(P C P^T) / R``."""
+        ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
+        b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
+        kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
+        return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
 
     def _predict_rows(self, method, param, ctx):
         """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""
@@ -695,14 +702,14 @@ class CouplingModel:
         mu = X.mean(axis=0)  # what _context computes, with its query-free part cached
         ctx = {"R": X.shape[0], "Xc": X - mu, "xc": x - mu, "P": st["P"], "ybar": st["ybar"], "Ydc": st["Ydc"]}
         if self.method_ in ("ppca",):
-            ctx["ygram"] = st["ygram"]
+            ctx["ylow"] = st["ylow"]
         mean, h = self._predict_rows(self.method_, self.param_, ctx)
         return mean[0].reshape(self.n_out, D), float(h[0])
 
     def _static(self, R: int) -> dict:
         """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
-        grouped by demonstration), and the eigenpairs of the centred targets' Gram matrix ``Y_c Y_c^T`` used by
-        ``"ppca"``; cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
+        grouped by demonstration) and the target block of ``"ppca"``'s factorisation (:meth:`_target_block`);
+        cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
         cached = self.__dict__.get("_static_cache")
         if cached is None or cached[0] is not self.Y_:
             cached = (self.Y_, {})
@@ -712,7 +719,7 @@ class CouplingModel:
             ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
                                 np.zeros((1, 1)))
             st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
-            st["ygram"] = np.linalg.eigh(st["Ydc"] @ st["Ydc"].T)
+            st["ylow"] = self._target_block(st["P"], st["Ydc"], R)
             cached[1][R] = st
         return cached[1][R]
 

@@ -118,6 +118,16 @@ _NODES: dict = {}
 _GRIDS: dict = {}
 
 
+def _target_block(P, Ydc, R):
+    """``P L / b`` (R x rank C): the target block of ``CouplingModel._ppca_weights``'s ``Z``, with
+    ``C = Ydc Ydc^T = L L^T`` (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and
+    ``b^2 = tr(P C P^T) / R``."""
+    ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
+    b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
+    kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
+    return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
+
+
 def _resample(frames, stop, n):
     """Values of ``frames`` (T, D) at ``n`` equally spaced fractional frame indices ``0 .. stop``.
 
@@ -459,7 +469,7 @@ class CouplingModel:
             a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
             # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
             # and the demonstrations only, not on the phase or the query)
-            PLb = ctx["ylow"] if "ylow" in ctx else CouplingModel._target_block(P, Ydc, R)
+            PLb = ctx["ylow"] if "ylow" in ctx else _target_block(P, Ydc, R)
             # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
             # C = Ydc Ydc^T = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T
             # (U = Z V / S), the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
@@ -491,15 +501,6 @@ class CouplingModel:
         if U is None:  # U_r = Z V_r / S_r folded in
             return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
         return (U[:, :r] @ coef).T
-
-    @staticmethod
-    def _target_block(P, Ydc, R):
-        """``P L / b`` (R x rank C): the target block of ``_ppca_weights``'s ``Z``, with ``C = Ydc Ydc^T = L L^T``
-        (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and ``b^2 = tr(P C P^T) / R``."""
-        ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
-        b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
-        kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
-        return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
 
     def _predict_rows(self, method, param, ctx):
         """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""
@@ -682,8 +683,7 @@ class CouplingModel:
         return self._predict_prefix(v, s, sig)
 
     def _predict_prefix(self, v, s: float, sig: float) -> CouplingPrediction:
-        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig`` (what the online
-        stream of :class:`~interprim.learned.LearnedInteraction` calls, so that its answer is predict's)."""
+        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
         # the prefix enters only through its resampled points (_resample reads n_in of its frames)
         x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
         mean, h = self._condition(x, s, sig)
@@ -708,7 +708,7 @@ class CouplingModel:
 
     def _static(self, R: int) -> dict:
         """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
-        grouped by demonstration) and the target block of ``"ppca"``'s factorisation (:meth:`_target_block`);
+        grouped by demonstration) and the target block of ``"ppca"``'s factorisation (``_target_block``);
         cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
         cached = self.__dict__.get("_static_cache")
         if cached is None or cached[0] is not self.Y_:
@@ -719,7 +719,7 @@ class CouplingModel:
             ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
                                 np.zeros((1, 1)))
             st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
-            st["ylow"] = self._target_block(st["P"], st["Ydc"], R)
+            st["ylow"] = _target_block(st["P"], st["Ydc"], R)
             cached[1][R] = st
         return cached[1][R]
 

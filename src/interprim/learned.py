@@ -18,10 +18,9 @@ contract of :mod:`interprim.contract` (``fit``, ``predict``, ``stream``, ``save`
 timing uncertainty.
 
 It does not replace :class:`~interprim.primitive.InteractionPrimitive`: there is no DMP and no rollout from a
-robot state.  Each :meth:`predict` is a pure function of the prefix; :meth:`LearnedInteraction.stream` returns a
-:class:`LearnedStream` that keeps the frames and computes, per frame, only what the prefix enters through (the
-phase features read a few frames, the coupling's observation ``n_in`` resampled points), so its answer is, bitwise,
-``predict`` of the frames seen.
+robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
+features) and ``n_in`` resampled points (the coupling's observation); :meth:`LearnedInteraction.stream` returns a
+:class:`LearnedStream` whose answer is, bitwise, ``predict`` of the frames seen.
 """
 
 from __future__ import annotations
@@ -157,14 +156,15 @@ class LearnedStream(BaseStream):
     (:meth:`~interprim.phase.learned.LearnedPhase.estimate`: the first and last frames, the frame one velocity
     window back and two frames per history point; the whole prefix only for the optional ``"path"`` and
     ``"peak_speed"`` groups) and the coupling's observation, the prefix resampled at ``n_in`` points over
-    ``[0, s]`` (Eq. 17-18 with the prefix observation model of :mod:`interprim.coupling`).  The stream keeps the
-    raw and the scaled frames in growing buffers (amortised ``O(D)`` per frame) and evaluates both on them with the
-    very functions ``predict`` uses, so that it gives the same bits.  What it cannot keep from one frame to the next
-    is the conditioning: the training rows of the coupling are the demonstrations' prefixes cut at the estimated
-    phase (and its jitter), and the phase estimate changes with every frame, so the rows and their factorisation
-    are rebuilt per frame (in the cheapest exact form, see ``CouplingModel._ppca_weights``); the parts that do not
-    depend on the phase are computed once per model.  ``need_cov`` is accepted for the interface of
-    :class:`~interprim.stream.Stream` and has no effect.
+    ``[0, s]`` (Eq. 17-18 with the prefix observation model of :mod:`interprim.coupling`).  There is therefore no
+    statistic of the prefix worth accumulating: the stream keeps the frames in a growing buffer (amortised ``O(D)``
+    per frame, no copy of the prefix) and predicts from a view of it with :meth:`LearnedInteraction.predict`
+    itself, so that it gives the same bits.  What cannot be kept from one frame to the next is the conditioning:
+    the coupling's training rows are the demonstrations' prefixes cut at the estimated phase (and its jitter), and
+    the phase estimate changes with every frame, so the rows and their factorisation are rebuilt per frame, in the
+    cheapest exact form (``CouplingModel._ppca_weights``: the ``(p + rank)``-square Gram matrix instead of the
+    rows' own); what does not depend on the phase is computed once per model.  ``need_cov`` is accepted for the
+    interface of :class:`~interprim.stream.Stream` and has no effect.
 
     Parameters
     ----------
@@ -176,7 +176,6 @@ class LearnedStream(BaseStream):
         self.model = model
         self._n_cols = len(model.observed_dofs_)
         self._raw = np.empty((64, self._n_cols))
-        self._scaled = np.empty((64, self._n_cols))
         self._n = 0
 
     @property
@@ -196,37 +195,20 @@ class LearnedStream(BaseStream):
             cap = self._raw.shape[0]
             while cap < need:
                 cap *= 2
-            for name in ("_raw", "_scaled"):
-                old = getattr(self, name)
-                buf = np.empty((cap, self._n_cols))
-                buf[: self._n] = old[: self._n]
-                setattr(self, name, buf)
+            buf = np.empty((cap, self._n_cols))
+            buf[: self._n] = self._raw[: self._n]
+            self._raw = buf
         self._raw[self._n:need] = block
-        # the scaling LearnedPhase.estimate applies to the whole prefix (an elementwise division: the same bits)
-        np.divide(block, self.model.phase_.scale_, out=self._scaled[self._n:need])
         self._n = need
-
-    @one_blas_thread
-    def _predict(self) -> GridPrediction:
-        m, n = self.model, self._n
-        ph = m.phase_
-        elapsed = (n - 1) * ph.dt_  # LearnedPhase.estimate at its own sampling interval
-        if ph.method_ == "clock" or n < 2:
-            est = ph._finish(elapsed, None)
-        else:
-            est = ph._finish(elapsed, ph._raw_features(self._scaled[:n]))
-        s = float(np.clip(est.phase, 1e-3, 1.0))
-        cp = m.coupling_._predict_prefix(self._raw[:n], s, float(est.std))
-        return _Prediction(cp, est)
 
     def update(self, frame, need_cov: bool = False) -> GridPrediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns ``predict`` of all frames
         seen."""
         self._append(as_frame(frame, "frame", self._n_cols)[None, :])
-        return self._predict()
+        return self.model.predict(self._raw[: self._n])
 
     def extend(self, frames, need_cov: bool = False) -> GridPrediction:
         """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns what :meth:`update`
         returns for the last of them (one prediction, since it depends on the frames only)."""
         self._append(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))
-        return self._predict()
+        return self.model.predict(self._raw[: self._n])

@@ -357,6 +357,10 @@ class BaseStream:
     computation of the same answer.
     """
 
+    #: whether the predictions already carry ``input_distance`` / ``out_of_range`` of every frame seen (a stream
+    #: that answers with the model's own ``predict`` of the frames seen)
+    marks_input = False
+
     @property
     def n_frames(self) -> int:  # pragma: no cover - interface
         """Number of frames received since the stream was created or last :meth:`reset`."""
@@ -396,6 +400,8 @@ class PrefixStream(BaseStream):
     :meth:`update` for the last, since the prediction depends on the frames only).  ``need_cov`` is accepted for
     the interface of :class:`~interprim.models.primitive.stream.Stream` and has no effect.
     """
+
+    marks_input = True  # its answer is the model's predict of every frame seen
 
     def __init__(self, model):
         self.model = model
@@ -467,7 +473,7 @@ def _checked_stream(stream):
     @functools.wraps(stream)
     def wrapper(self, *args, **kwargs):
         inner = stream(self, *args, **kwargs)
-        if getattr(self, "input_range_", None) is None or isinstance(inner, CheckedStream):
+        if getattr(self, "input_range_", None) is None or isinstance(inner, CheckedStream) or inner.marks_input:
             return inner
         return CheckedStream(self, inner)
 

@@ -94,8 +94,38 @@ def _normal_quantile(q: float) -> float:
 
 
 def _jitter_nodes(k: int) -> np.ndarray:
-    """``k`` equally weighted standard-normal nodes (quantiles at ``(i + 1/2) / k``), deterministic."""
-    return np.array([NormalDist().inv_cdf((i + 0.5) / k) for i in range(int(k))]) if k > 1 else np.zeros(1)
+    """``k`` equally weighted standard-normal nodes (quantiles at ``(i + 1/2) / k``), deterministic (read-only)."""
+    k = int(k)
+    out = _NODES.get(k)
+    if out is None:
+        out = np.array([NormalDist().inv_cdf((i + 0.5) / k) for i in range(k)]) if k > 1 else np.zeros(1)
+        out.setflags(write=False)
+        _NODES[k] = out
+    return out
+
+
+def _unit_grid(n: int) -> np.ndarray:
+    """``linspace(0, 1, n)``, computed once per ``n`` (read-only)."""
+    out = _GRIDS.get(n)
+    if out is None:
+        out = np.linspace(0.0, 1.0, n)
+        out.setflags(write=False)
+        _GRIDS[n] = out
+    return out
+
+
+_NODES: dict = {}
+_GRIDS: dict = {}
+
+
+def _target_block(P, Ydc, R):
+    """``P L / b`` (R x rank C): the target block of ``CouplingModel._ppca_weights``'s ``Z``, with
+    ``C = Ydc Ydc^T = L L^T`` (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and
+    ``b^2 = tr(P C P^T) / R``."""
+    ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
+    b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
+    kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
+    return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
 
 
 def _resample(frames, stop, n):
@@ -106,7 +136,7 @@ def _resample(frames, stop, n):
     T = frames.shape[0]
     scalar = np.ndim(stop) == 0
     stops = np.atleast_1d(np.asarray(stop, dtype=np.float64))
-    pos = np.clip(stops[:, None] * np.linspace(0.0, 1.0, n)[None, :], 0.0, T - 1.0)  # (R, n)
+    pos = np.clip(stops[:, None] * _unit_grid(int(n))[None, :], 0.0, T - 1.0)  # (R, n)
     i0 = np.minimum(np.floor(pos).astype(np.intp), T - 2 if T > 1 else 0)
     w = (pos - i0)[..., None]
     i1 = np.minimum(i0 + 1, T - 1)
@@ -329,21 +359,21 @@ class CouplingModel:
     def _rows(self, idx, s_hat, sig):
         """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
         z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
-        s_true = np.clip(s_hat + sig * z, 0.02, 1.0)
+        s_true = np.minimum(np.maximum(s_hat + sig * z, 0.02), 1.0)  # np.clip's numbers, without its overhead
         idx = np.asarray(idx, dtype=np.intp)
         if idx.size == 0:
             return np.empty((0, int(self.n_in) * len(self.observed_dofs_))), np.empty(0, dtype=np.intp)
         # _resample of every demonstration at once, on its frames padded to a common length (the same elementwise
         # operations per demonstration, so the same numbers as one _resample per demonstration)
         frames, T = self._padded_obs()
-        T, frames = T[idx], frames[idx]
-        lin = np.linspace(0.0, 1.0, int(self.n_in))
+        T = T[idx]
+        lin = _unit_grid(int(self.n_in))
         stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
-        pos = np.clip(stops[:, :, None] * lin[None, None, :], 0.0, (T - 1.0)[:, None, None])  # (J, R, n_in)
+        pos = np.minimum(np.maximum(stops[:, :, None] * lin[None, None, :], 0.0), (T - 1.0)[:, None, None])
         i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
         w = (pos - i0)[..., None]
         i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
-        J = np.arange(idx.size)[:, None, None]
+        J = idx[:, None, None]  # gathered from the padded frames directly (no copy of the selected demonstrations)
         pts = frames[J, i0] * (1.0 - w) + frames[J, i1] * w  # (J, R, n_in, Do)
         X = self._feat(pts)
         return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
@@ -435,25 +465,39 @@ class CouplingModel:
         if "pca" not in ctx:
             P, Ydc = ctx["P"], ctx["Ydc"]
             a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
-            Gy = P @ (Ydc @ Ydc.T) @ P.T  # Gram matrix of the centred target rows
-            b2 = max(float(np.trace(Gy)) / R, 1e-300)
-            # SVD of Z = [Xc / a, Yc / b] through its (R x R) Gram matrix
-            e, U = np.linalg.eigh(Xc @ Xc.T / a2 + Gy / b2)
-            e, U = e[::-1], U[:, ::-1]
-            keep = e > 1e-12 * max(float(e[0]), 1e-300)
-            U, S = U[:, keep], np.sqrt(e[keep])
-            Vx_all = (U.T @ (Xc / math.sqrt(a2))) / S[:, None]  # x block of the right singular vectors
-            ctx["pca"] = (math.sqrt(a2), U, S, Vx_all, Ydc.shape[1] + p)
-        a, U, S, Vx_all, dim = ctx["pca"]
+            # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
+            # and the demonstrations only, not on the phase or the query)
+            PLb = ctx["ylow"] if "ylow" in ctx else _target_block(P, Ydc, R)
+            # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
+            # C = Ydc Ydc^T = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T
+            # (U = Z V / S), the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
+            a = math.sqrt(a2)
+            Z = np.concatenate([Xc / a, PLb], axis=1)
+            if Z.shape[0] <= Z.shape[1]:  # fewer rows than columns (no jitter): the rows' own Gram matrix
+                e, U = np.linalg.eigh(Z @ Z.T)
+                e, U = e[::-1], U[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                U, S = U[:, keep], np.sqrt(e[keep])
+                V = (Z.T @ U) / S  # right singular vectors
+            else:
+                e, V = np.linalg.eigh(Z.T @ Z)
+                e, V = e[::-1], V[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                V, S, U = V[:, keep], np.sqrt(e[keep]), None  # U = Z V / S, formed for the r columns used
+            # x block of the right singular vectors: V[:p] (Z^T U = V S and the x block of Z^T U S^-1 is Vx^T)
+            ctx["pca"] = (a, Z, V, S, U, Ydc.shape[1] + p)
+        a, Z, V, S, U, dim = ctx["pca"]
         r = int(min(rank, max(S.size - 1, 1)))
         lam = S**2 / R
-        Vx = Vx_all[:r]  # (r, p)
+        Vx = V[:p, :r].T  # (r, p)
         sig2 = float(lam[r:].sum()) / max(dim - r, 1)
         scale = np.sqrt(np.maximum(lam[:r] - sig2, 0.0))
         Wx = Vx.T * scale  # (p, r)
         sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
         m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
         coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
+        if U is None:  # U_r = Z V_r / S_r folded in
+            return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
         return (U[:, :r] @ coef).T
 
     def _predict_rows(self, method, param, ctx):
@@ -634,12 +678,53 @@ class CouplingModel:
                     or phase_std < 0:
                 raise ValueError(f"phase_std must be a non-negative number, got {phase_std!r}")
             sig = float(phase_std)
-        n, D = self.n_demos_, self.n_dofs_
+        return self._predict_prefix(v, s, sig)
+
+    def _predict_prefix(self, v, s: float, sig: float) -> CouplingPrediction:
+        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
+        # the prefix enters only through its resampled points (_resample reads n_in of its frames)
         x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
+        mean, h = self._condition(x, s, sig)
+        return self._grid_prediction(mean, h, s, sig, v.shape[0])
+
+    def _condition(self, x, s: float, sig: float):
+        """Eq. 18 for one query ``x`` (1, p) at phase ``s`` with error ``sig``: mean (n_out, D) and leverage ``h``.
+
+        The training rows ``X(s, sig)`` (:meth:`_rows`) move with the phase, so their factorisation is redone for
+        every ``s``; what does not depend on ``s`` (the group indicator, the demonstrations' centred targets and
+        their Gram matrix's eigenpairs) is computed once per fitted model (:meth:`_static`).
+        """
+        n, D = self.n_demos_, self.n_dofs_
         X, g = self._rows(np.arange(n), s, sig)
-        mean, h = self._predict_rows(self.method_, self.param_, self._context(X, g, self.Y_.reshape(n, -1), x))
-        mean = mean[0].reshape(self.n_out, D)
-        h = float(h[0])
+        st = self._static(X.shape[0])
+        mu = X.mean(axis=0)  # what _context computes, with its query-free part cached
+        ctx = {"R": X.shape[0], "Xc": X - mu, "xc": x - mu, "P": st["P"], "ybar": st["ybar"], "Ydc": st["Ydc"]}
+        if self.method_ in ("ppca",):
+            ctx["ylow"] = st["ylow"]
+        mean, h = self._predict_rows(self.method_, self.param_, ctx)
+        return mean[0].reshape(self.n_out, D), float(h[0])
+
+    def _static(self, R: int) -> dict:
+        """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
+        grouped by demonstration) and the target block of ``"ppca"``'s factorisation (``_target_block``);
+        cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
+        cached = self.__dict__.get("_static_cache")
+        if cached is None or cached[0] is not self.Y_:
+            cached = (self.Y_, {})
+            self.__dict__["_static_cache"] = cached
+        if R not in cached[1]:
+            n = self.n_demos_
+            ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
+                                np.zeros((1, 1)))
+            st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
+            st["ylow"] = _target_block(st["P"], st["Ydc"], R)
+            cached[1][R] = st
+        return cached[1][R]
+
+    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> CouplingPrediction:
+        """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
+        variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
+        D = self.n_dofs_
         # residual variance at this phase (linear interpolation over the CV phases, constant outside)
         fr = self.fractions_
         if s <= fr[0] or fr.size == 1:
@@ -654,9 +739,9 @@ class CouplingModel:
         c[self.observed_dofs_] = self.scale_["observed"]
         c[self.controlled_dofs_] = self.scale_["controlled"]
         std = c[None, :] * np.sqrt(var * (1.0 + h))
-        return GridPrediction(np.linspace(0.0, 1.0, self.n_out), mean, std, s, sig, self.observed_dofs_,
+        return GridPrediction(_unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
-                              n_observed=v.shape[0], conditioned=not self.fallback_to_mean_)
+                              n_observed=n_observed, conditioned=not self.fallback_to_mean_)
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")

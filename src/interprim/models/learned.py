@@ -17,9 +17,10 @@ contract of :mod:`interprim.models.base` (``fit``, ``predict``, ``stream``, ``sa
 ``set_params``); its prediction is a :class:`~interprim.models.base.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP, no rollout from a
-robot state and no streaming state here (each :meth:`predict` is a pure function of the prefix, so a stream
-of predictions equals the batch ones by construction).
+It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout from a
+robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
+features) and ``n_in`` resampled points (the coupling's observation); :meth:`LearnedInteraction.stream` returns a
+:class:`LearnedStream` whose answer is, bitwise, ``predict`` of the frames seen.
 """
 
 from __future__ import annotations
@@ -27,12 +28,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.validation import as_2d_finite
-from .base import GridPrediction, Predictor, uniform_demonstrations
+from ..core.validation import as_2d_finite, as_frame
+from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from .coupling import CouplingModel
 from ..phase.learned import LearnedPhase
 
-__all__ = ["LearnedInteraction"]
+
+__all__ = ["LearnedInteraction", "LearnedStream"]
 
 
 def _Prediction(cp: GridPrediction, est) -> GridPrediction:
@@ -69,6 +71,7 @@ class LearnedInteraction(Predictor):
     """
 
     _FITTED = "coupling_"
+    exact_stream = True  # LearnedStream gives, bitwise, predict's answer
 
     def __init__(self, observed_dofs, phase_kwargs=None, coupling_kwargs=None):
         self.observed_dofs = observed_dofs
@@ -117,6 +120,14 @@ class LearnedInteraction(Predictor):
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
 
+    def stream(self, robot_state=None) -> "LearnedStream":
+        """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it
+        returns, bitwise, :meth:`predict` of those ``M`` frames, without recomputing anything over the prefix."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return LearnedStream(self)
+
     def to_state(self):
         """``(arrays, meta)`` of the fitted model (see :meth:`interprim.models.base.Predictor.to_state`)."""
         self._check_fitted("to_state")
@@ -135,3 +146,70 @@ class LearnedInteraction(Predictor):
                                                   else None)
         self.dt_ = float(meta["dt_"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+
+
+class LearnedStream(BaseStream):
+    """Online :class:`LearnedInteraction`: ``update(frame)`` returns ``predict`` of all frames seen, bitwise.
+
+    What a prediction reads of the prefix is small and fixed: the learned phase's features
+    (:meth:`~interprim.phase.learned.LearnedPhase.estimate`: the first and last frames, the frame one velocity
+    window back and two frames per history point; the whole prefix only for the optional ``"path"`` and
+    ``"peak_speed"`` groups) and the coupling's observation, the prefix resampled at ``n_in`` points over
+    ``[0, s]`` (Eq. 17-18 with the prefix observation model of :mod:`interprim.models.coupling`).  There is therefore no
+    statistic of the prefix worth accumulating: the stream keeps the frames in a growing buffer (amortised ``O(D)``
+    per frame, no copy of the prefix) and predicts from a view of it with :meth:`LearnedInteraction.predict`
+    itself, so that it gives the same bits.  What cannot be kept from one frame to the next is the conditioning:
+    the coupling's training rows are the demonstrations' prefixes cut at the estimated phase (and its jitter), and
+    the phase estimate changes with every frame, so the rows and their factorisation are rebuilt per frame, in the
+    cheapest exact form (``CouplingModel._ppca_weights``: the ``(p + rank)``-square Gram matrix instead of the
+    rows' own); what does not depend on the phase is computed once per model.  ``need_cov`` is accepted for the
+    interface of :class:`~interprim.stream.Stream` and has no effect.
+
+    Parameters
+    ----------
+    model : LearnedInteraction
+        A fitted model.
+    """
+
+    marks_input = True  # its answer is LearnedInteraction.predict of every frame seen
+
+    def __init__(self, model: LearnedInteraction):
+        self.model = model
+        self._n_cols = len(model.observed_dofs_)
+        self._raw = np.empty((64, self._n_cols))
+        self._n = 0
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames received since the stream was created or last :meth:`reset`."""
+        return self._n
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        self._n = 0
+
+    def _append(self, block):
+        need = self._n + block.shape[0]
+        if need > self._raw.shape[0]:
+            cap = self._raw.shape[0]
+            while cap < need:
+                cap *= 2
+            buf = np.empty((cap, self._n_cols))
+            buf[: self._n] = self._raw[: self._n]
+            self._raw = buf
+        self._raw[self._n:need] = block
+        self._n = need
+
+    def update(self, frame, need_cov: bool = False) -> GridPrediction:
+        """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns ``predict`` of all frames
+        seen."""
+        self._append(as_frame(frame, "frame", self._n_cols)[None, :])
+        return self.model.predict(self._raw[: self._n])
+
+    def extend(self, frames, need_cov: bool = False) -> GridPrediction:
+        """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns what :meth:`update`
+        returns for the last of them (one prediction, since it depends on the frames only)."""
+        self._append(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))
+        return self.model.predict(self._raw[: self._n])

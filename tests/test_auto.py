@@ -99,13 +99,16 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
             assert band_error(v) >= best - 1e-7
     per_step = ensemble.weights_at(sub.t_ahead, bands, Wb)
     assert sub.blend_error(per_step) == pytest.approx(s["blend_cv_error"], rel=1e-9)
-    # the variance model matches the mean squared held-out error at every step ahead and column
+    # the variance model's 90 % band covers 90 % of the held-out cases at every step ahead, for each agent
     W = per_step.T[:, None, :, None]
     mix = np.sum(W * sub.mean, axis=0)
     spread = np.sum(W * (sub.mean - mix) ** 2, axis=0)
     vm = sub.blend_scales(per_step)
-    np.testing.assert_allclose((vm["a"] * spread + vm["b"]).mean(axis=0), ((mix - sub.truth) ** 2).mean(axis=0),
-                               rtol=1e-9, atol=1e-15)
+    inside = np.abs(mix - sub.truth) <= 1.6448536269514722 * np.sqrt(vm["a"] * spread + vm["b"]) + 1e-12
+    for cols in (sub.controlled, sub.observed):
+        cover = inside[:, :, cols].mean(axis=(0, 2))  # per step ahead
+        n = inside.shape[0] * len(cols)
+        assert np.all((cover >= 0.9 - 1e-9) & (cover <= 0.9 + 2.0 / n)), cover.round(3)
 
 
 def test_weights_move_smoothly_from_real_time_to_the_whole_movement():
@@ -160,8 +163,7 @@ def test_blend_streams_saves_and_calibrates(blend, task, tmp_path):
     vm = {k: np.asarray(v) for k, v in blend.selection_["variance_model"].items()}
     assert set(vm) == {"a", "b", "t"} and vm["a"].shape == vm["b"].shape == (len(vm["t"]), 4)
     assert vm["t"][0] == pytest.approx(hold.dt) and vm["t"][-1] > 1.0  # every look-ahead, to the end
-    assert np.all(vm["a"] > 0) and np.all(vm["a"] <= 1) and np.all(vm["b"] >= 0)
-    assert np.all((vm["a"] == 1) | (vm["b"] == 0))
+    assert np.all(vm["a"] > 0) and np.all(vm["b"] >= 0)
     assert "blend of" in repr(blend) and "blend:" in blend.summary()
 
 

@@ -228,14 +228,14 @@ def test_learned_phase_loo_regressions_equal_explicit_refits():
     ``|z_i - z_j|^2`` (reference), which differ by ``4 p eps max|z|^2 / p``; a weight ``exp(-d / 2h^2)`` then moves
     by that over ``2 h^2`` relative, and a weighted mean by twice that times the spread of the targets.
     """
-    from interprim.phase._learned_features import _kernel_loo, _ridge_loo
+    from interprim.phase._learned_features import kernel_loo, ridge_loo
 
     rng = np.random.default_rng(3)
     K, n, p = 4, 9, 3
     Z = rng.standard_normal((K, n, p))
     s = rng.uniform(0.0, 1.0, (K, n))
     alphas = np.array([0.1, 3.0, 1e3])
-    got = _ridge_loo(Z, s, alphas)
+    got = ridge_loo(Z, s, alphas)
     spread = float(np.ptp(s))
     for a, lam in enumerate(alphas):
         for k in range(K):
@@ -250,7 +250,7 @@ def test_learned_phase_loo_regressions_equal_explicit_refits():
                 tol = 2.0 * (n + p) * EPS * (1.0 + smax ** 2 / lam) * (spread + abs(ref))
                 assert abs(got[a, k, i] - ref) <= tol, (a, k, i, got[a, k, i] - ref, tol)
     bws = np.array([0.3, 1.0, 5.0])
-    got = _kernel_loo(Z, s, bws)
+    got = kernel_loo(Z, s, bws)
     zmax2 = float(np.max(np.sum(Z * Z, axis=2)))
     for b, h in enumerate(bws):
         for k in range(K):

@@ -8,12 +8,12 @@ import numpy as np
 _GROUP_SIZE = {"position": "D", "displacement": "D", "velocity": "D", "path": 1, "peak_speed": 1, "history": "DH"}
 
 
-def _group_dims(groups, D, H):
+def group_dims(groups, D, H):
     size = {"D": D, "DH": D * H}
     return [size.get(_GROUP_SIZE[g], _GROUP_SIZE[g]) for g in groups]
 
 
-def _prefix_features(Y, dt, w, groups, history=3):
+def prefix_features(Y, dt, w, groups, history=3):
     """Features of every prefix ``Y[:k+1]`` of a uniformly sampled, scaled ``(T, D)`` movement: ``(T, p)``.
 
     The numpy reference of :class:`PhaseTracker`'s incremental update (equal to rounding).
@@ -49,7 +49,7 @@ def _prefix_features(Y, dt, w, groups, history=3):
     return np.concatenate(cols, axis=1) if cols else np.zeros((T, 0))
 
 
-def _ridge_loo(Z, s, alphas):
+def ridge_loo(Z, s, alphas):
     """Closed-form leave-one-out predictions of ridge regression with intercept, batched over times.
 
     ``Z`` (K, n, p) standardised features, ``s`` (K, n) targets; returns ``(len(alphas), K, n)``.
@@ -70,7 +70,7 @@ def _ridge_loo(Z, s, alphas):
     return out
 
 
-def _kernel_loo(Z, s, bandwidths):
+def kernel_loo(Z, s, bandwidths):
     """Leave-one-out Nadaraya-Watson predictions at each time: ``(len(bandwidths), K, n)``."""
     K, n, p = Z.shape
     sq = np.sum(Z * Z, axis=2)
@@ -85,12 +85,12 @@ def _kernel_loo(Z, s, bandwidths):
     return out
 
 
-def _jsonable(v):
+def jsonable(v):
     """``v`` with numpy scalars as Python numbers and tuples as lists (JSON; inf/nan as JSON's Infinity/NaN)."""
     if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     if isinstance(v, np.generic):
         return v.item()
     return v

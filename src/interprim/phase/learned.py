@@ -72,7 +72,7 @@ import numpy as np
 from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
-from ._learned_features import _group_dims, _jsonable, _kernel_loo, _prefix_features, _ridge_loo
+from ._learned_features import group_dims, jsonable, kernel_loo, prefix_features, ridge_loo
 from .estimate import PhaseEstimate
 
 __all__ = ["LearnedPhase", "PhaseEstimate", "PhaseTracker", "FEATURE_GROUPS", "DEFAULT_FEATURES"]
@@ -285,7 +285,7 @@ class LearnedPhase:
         for g in FEATURE_GROUPS:
             arr = None
             for i, y in enumerate(Ys):
-                f = _prefix_features(y / scale, dt, self._w, (g,), self.history)
+                f = prefix_features(y / scale, dt, self._w, (g,), self.history)
                 if arr is None:
                     arr = np.empty((K, n, f.shape[1]))
                 arr[: f.shape[0], i] = f
@@ -312,7 +312,7 @@ class LearnedPhase:
                 y = S if tg == "phase" else logT
                 for m in models:
                     hyp = bw if m == "kernel" else al
-                    P = _kernel_loo(Z, y, hyp) if m == "kernel" else _ridge_loo(Z, y, hyp)
+                    P = kernel_loo(Z, y, hyp) if m == "kernel" else ridge_loo(Z, y, hyp)
                     if tg == "log_duration":
                         P = np.minimum(grid[None, :, None] / np.exp(P), 1.0)
                     P = np.clip(P, 0.0, 1.0)
@@ -439,7 +439,7 @@ class LearnedPhase:
         floor = 1e-6 * gsd + 1e-12
         sd = np.where(sd > floor, sd, np.inf)  # a feature that does not vary at a time carries no information
         # each group weighs the same in the distance, whatever its number of columns
-        wcol = np.concatenate([np.full(k, 1.0 / math.sqrt(k)) for k in _group_dims(groups, D, self.history)]) \
+        wcol = np.concatenate([np.full(k, 1.0 / math.sqrt(k)) for k in group_dims(groups, D, self.history)]) \
             if len(groups) else np.zeros(0)
         sd = sd / wcol
         Z = (X - mu) / sd
@@ -455,7 +455,7 @@ class LearnedPhase:
     def _raw_features(self, Y):
         """Features (p,) of a scaled, uniformly sampled prefix (T, D) for the selected groups."""
         if "path" in self.features_ or "peak_speed" in self.features_:  # these need every frame
-            return _prefix_features(Y, self.dt_, self._w, self.features_, self.history)[-1]
+            return prefix_features(Y, self.dt_, self._w, self.features_, self.history)[-1]
         k = Y.shape[0] - 1
         back = max(k - self._w, 0)
         parts = []
@@ -563,7 +563,7 @@ class LearnedPhase:
             if isinstance(v, np.ndarray):
                 arrays[k] = v
             else:
-                meta[k] = _jsonable(v)
+                meta[k] = jsonable(v)
         return arrays, meta
 
     @classmethod
@@ -608,7 +608,7 @@ class PhaseTracker:
         self._hist = np.zeros((64, model.n_dofs_)) if "history" in model.features_ else None
         self._q = np.arange(1, model.history + 1) / (model.history + 1)
         self._shape = (model.n_dofs_,)
-        dims = _group_dims(model.features_, model.n_dofs_, model.history)
+        dims = group_dims(model.features_, model.n_dofs_, model.history)
         self._slices = dict(zip(model.features_, (slice(a - b, a) for a, b in zip(np.cumsum(dims), dims))))
         self._f = np.zeros(int(sum(dims)))
         self.reset()

@@ -362,14 +362,14 @@ class Ros2Bridge:
         ws = WaitSet(dp)
         readers = []
         for s in self.sources:
-            tp = Topic(dp, dds_topic(s.topic), message_class(s.msgtype), qos=self.partner_qos.dds())
+            tp = Topic(dp, dds_topic(s.topic), message_class(s.msgtype))
             r = DataReader(dp, tp, qos=self.partner_qos.dds())
             rc = ReadCondition(r, mask)
             ws.attach(rc)
             readers.append((r, rc))
         d["readers"], d["waitset"] = readers, ws
-        rt = Topic(dp, dds_topic(self.publish_topic), message_class(self.response_type), qos=self.response_qos.dds())
-        stt = Topic(dp, dds_topic(self.status_topic), message_class("DiagnosticArray"), qos=self.response_qos.dds())
+        rt = Topic(dp, dds_topic(self.publish_topic), message_class(self.response_type))
+        stt = Topic(dp, dds_topic(self.status_topic), message_class("DiagnosticArray"))
         d["response"] = DataWriter(dp, rt, qos=self.response_qos.dds())
         d["status"] = DataWriter(dp, stt, qos=self.response_qos.dds())
         d["pubs"] = BuiltinDataReader(dp, BuiltinTopicDcpsPublication)

@@ -33,7 +33,7 @@ import re
 
 import numpy as np
 
-from .messages import known_type, stamp_seconds
+from .messages import dds_topic, known_type, stamp_seconds
 
 __all__ = ["Source", "parse_observe", "match_columns", "ObservationError"]
 
@@ -95,6 +95,7 @@ class Source:
         if topic == "tf":  # the bag loader's tf:FRAME
             topic = "/tf"
         self.topic = topic if topic.startswith("/") else "/" + topic
+        dds_topic(self.topic)  # a ValueError naming a bad topic name
         if typ.strip():
             self.msgtype = known_type(typ.strip())
         else:

@@ -44,8 +44,11 @@ def _fit(kind, out: Path):
         m = ip.InteractionPrimitive(observed_dofs=[0, 1]).fit(demos, dt=0.01, columns=NAMES)
         size = "20 demos x 150 frames"
     else:
+        from interprim.datasets import Demonstrations
+
         demos = two_agent_demos(12, seed=0, frames=100)
-        m = ip.AutoInteraction(observed_dofs=[0, 1]).fit(demos, dt=0.01, columns=NAMES)
+        ds = Demonstrations(demos=demos, times=None, columns=NAMES, dt=0.01, observed_dofs=[0, 1], name="synthetic")
+        m = ip.AutoInteraction(observed_dofs=[0, 1]).fit(ds)
         size = "12 demos x 100 frames"
     m.save(out)
     return m, size, time.perf_counter() - t

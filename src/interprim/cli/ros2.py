@@ -87,15 +87,16 @@ def run(args) -> int:
           f"{bridge.status_topic} (DiagnosticArray); model {type(model).__name__}, dt {model.dt_:g} s; "
           f"DDS domain {bridge.domain_id}{' (localhost only)' if args.localhost else ''}", flush=True)
     start = time.monotonic()
+    status = 0
     try:
         while args.duration is None or time.monotonic() - start < args.duration:
             bridge.spin_once(0.05)
     except KeyboardInterrupt:
-        pass
+        status = 130  # 128 + SIGINT, as the shell reports Ctrl-C (and as interprim serve exits)
     finally:
         bridge.close()
     c = bridge.counts
     print("received {received} messages, {frames} frames, published {published} responses; dropped: "
           "{duplicate} duplicate, {late} late, {unusable} unusable, {invalid} invalid; {gap} restarts after a gap"
           .format(**c), flush=True)
-    return 0
+    return status

@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from .grid import StampGrid
-from .messages import dds_topic, dds_type_name, known_type, message_class, new_message, stamp_of
+from .messages import dds_topic, dds_type_name, known_type, message_class, new_message, stamp_of, stamp_seconds
 from .observe import ObservationError, frame_order, match_columns, parse_observe
 
 from ..errors import InterprimError
@@ -212,7 +212,8 @@ class Ros2Bridge:
         self._thread = None
         self._wrong_types = set()
         self.last_prediction = None
-        self.last_frame_time = None
+        self.last_frame_time = None  # seconds since 1970 of the last grid frame
+        self.base_sec = None  # whole seconds of the first stamp: the origin of the grid's times
 
     # ---- the logic, independent of the transport ----
     def handle(self, index: int, msg) -> bool:
@@ -220,7 +221,7 @@ class Ros2Bridge:
         self.counts["received"] += 1
         src = self.sources[index]
         try:
-            t, vals = src.values(msg)
+            stamp, vals = src.values(msg)
         except ObservationError as exc:
             self.counts["unusable"] += 1
             self._say(f"unusable:{src.spec}", f"dropped a message: {exc}")
@@ -234,19 +235,23 @@ class Ros2Bridge:
             self._say("waiting", f"waiting for a first message on {', '.join(missing)}", logging.INFO)
             return False
         y = np.concatenate(self._latest)[self._order]
+        if self.base_sec is None and stamp is not None:
+            self.base_sec = int(stamp.sec)  # stamps in seconds after this (float seconds since 1970 lose ~0.2 us)
+        t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec)
         step = self.grid.add(t, y)
         if step.status in ("duplicate", "late", "invalid"):
             self.counts[step.status] += 1
             last = self.grid.last_t
-            what = {"duplicate": f"the same stamp as the last ({t:.9f} s)",
-                    "late": f"stamp {t:.9f} s older than the last ({last:.9f} s)",
+            b = self.base_sec or 0
+            what = {"duplicate": f"the same stamp as the last ({b + t:.9f} s)",
+                    "late": f"stamp {b + t:.9f} s older than the last ({b + last:.9f} s)",
                     "invalid": "a non-finite stamp or value"}[step.status]
             self._say(step.status, f"{src.topic}: dropped a {step.status} message: {what}")
             return False
         if step.status == "gap":
             self.counts["gap"] += 1
             self._say("gap", f"{src.topic}: no message for more than {self.grid.max_gap} s: a new interaction starts "
-                             f"at {t:.3f} s (stream reset)", logging.INFO)
+                             f"at {self.base_sec + t:.3f} s (stream reset)", logging.INFO)
         if step.restarted:
             self.stream.reset()
         if len(step.times) == 0:
@@ -256,18 +261,18 @@ class Ros2Bridge:
         pred = self.stream.update(frames[0]) if len(frames) == 1 else self.stream.extend(frames)
         self.counts["frames"] += len(frames)
         self.last_prediction = pred
-        self.last_frame_time = float(step.times[-1])
-        response, status = self.messages(pred, self.last_frame_time)
+        self.last_frame_time = self.base_sec + float(step.times[-1])
+        response, status = self.messages(pred, float(step.times[-1]), self.base_sec)
         self._emit(response, status)
         self.counts["published"] += 1
         return True
 
-    def messages(self, pred, frame_time: float):
-        """The response and the status message of ``pred`` for the grid frame at ``frame_time`` seconds."""
+    def messages(self, pred, frame_time: float, base_sec: int = 0):
+        """The response and the status message of ``pred`` for the grid frame at ``base_sec + frame_time`` s."""
         t, y = pred.response(self.points)
         t = np.asarray(t, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time), frame_id=self.frame_id)
+        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.frame_id)
         if self.response_type == "JointTrajectory":
             pts = [new_message("trajectory_msgs/msg/JointTrajectoryPoint", positions=[float(v) for v in row],
                                time_from_start=self._duration(dt)) for dt, row in zip(t, y)]
@@ -286,10 +291,10 @@ class Ros2Bridge:
                 response = new_message("geometry_msgs/msg/PoseArray", header=header, poses=poses)
             else:
                 stamped = [new_message("geometry_msgs/msg/PoseStamped", header=new_message(
-                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt)), frame_id=self.frame_id), pose=p)
+                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.frame_id), pose=p)
                     for dt, p in zip(t, poses)]
                 response = new_message("nav_msgs/msg/Path", header=header, poses=stamped)
-        return response, self._status(pred, frame_time, t, header)
+        return response, self._status(pred, base_sec + frame_time, t, header)
 
     @staticmethod
     def _duration(seconds: float):

@@ -15,6 +15,9 @@ turns them into grid frames, causally:
   invent movement, so the grid restarts at this sample (the bridge starts a new interaction: the stream is reset).
 * A sample with a non-finite stamp or value is **invalid** and dropped.
 
+Stamps should be seconds from a recent origin (the bridge subtracts the first message's whole seconds): seconds
+since 1970 as a float carry only about 0.2 us of resolution.  A stamp within 1 us of a grid point is on it.
+
 The frames are at most ``max_gap / dt + 1`` per sample, so the work per message is bounded.
 """
 
@@ -24,7 +27,10 @@ import math
 
 import numpy as np
 
-__all__ = ["StampGrid", "GridStep"]
+__all__ = ["StampGrid", "GridStep", "ON_GRID"]
+
+#: seconds within which a stamp counts as on a grid point (ROS stamps are whole nanoseconds)
+ON_GRID = 1e-6
 
 
 class GridStep:
@@ -92,7 +98,7 @@ class StampGrid:
             status = "start" if self.t0 is None else "gap"
             self.t0, self.k, self.last_t, self.last_y = t, 0, t, y
             return GridStep(status, np.array([t]), y[None, :].copy())
-        eps = 1e-9 * max(1.0, abs(t))  # a stamp on the grid up to float rounding counts as on it
+        eps = ON_GRID  # a stamp on the grid up to rounding counts as on it
         k_hi = int(math.floor((t - self.t0 + eps) / self.dt))
         ks = np.arange(self.k + 1, k_hi + 1)
         times = self.t0 + ks * self.dt

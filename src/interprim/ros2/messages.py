@@ -165,16 +165,18 @@ def new_message(msgtype: str, **fields):
     return cls(**values)
 
 
-def stamp_of(seconds: float):
-    """A ``builtin_interfaces/msg/Time`` for ``seconds`` since the epoch (non-negative)."""
-    ns = int(round(float(seconds) * 1e9))
+def stamp_of(seconds: float, base_sec: int = 0):
+    """A ``builtin_interfaces/msg/Time`` for ``base_sec + seconds`` since the epoch (``base_sec`` whole seconds,
+    kept exact; ``seconds`` a float, rounded to the nanosecond)."""
+    ns = int(base_sec) * 1_000_000_000 + int(round(float(seconds) * 1e9))
     return new_message("builtin_interfaces/msg/Time", sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def stamp_seconds(stamp) -> float:
-    """Seconds of a ``builtin_interfaces/msg/Time`` (NaN for a malformed one)."""
+def stamp_seconds(stamp, base_sec: int = 0) -> float:
+    """Seconds of a ``builtin_interfaces/msg/Time`` after ``base_sec`` (NaN for a malformed one); the whole seconds
+    are subtracted before the conversion to float, so nanoseconds survive."""
     try:
-        s = float(stamp.sec) + float(stamp.nanosec) * 1e-9
+        s = float(int(stamp.sec) - int(base_sec)) + float(stamp.nanosec) * 1e-9
     except (AttributeError, TypeError, ValueError):
         return math.nan
     return s

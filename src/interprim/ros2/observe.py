@@ -33,7 +33,7 @@ import re
 
 import numpy as np
 
-from .messages import dds_topic, known_type, stamp_seconds
+from .messages import dds_topic, known_type
 
 __all__ = ["Source", "parse_observe", "match_columns", "ObservationError"]
 
@@ -81,7 +81,8 @@ def _items(text: str):
 class Source:
     """One observed topic: its message type and the (value, column) pairs it gives.
 
-    ``values(msg)`` returns ``(stamp seconds, values)`` for the selected ``columns`` (after :func:`match_columns`,
+    ``values(msg)`` returns ``(stamp, values)`` (the ``builtin_interfaces/msg/Time``, or ``None`` for a message
+    without a header) for the selected ``columns`` (after :func:`match_columns`,
     the model's), or raises :class:`ObservationError` naming what the message lacks.
     """
 
@@ -177,7 +178,7 @@ class Source:
         self.columns = [c for _, c in pairs]
 
     def values(self, msg):
-        """``(stamp seconds, values)`` of the selected keys in ``msg``."""
+        """``(stamp, values)`` of the selected keys in ``msg``."""
         t = self.msgtype
         if t == TF:
             tr = None
@@ -189,7 +190,7 @@ class Source:
                 raise ObservationError(f"{self.topic}: no transform of child frame {self.frame!r} in this message "
                                        f"(it has {', '.join(got) or 'none'})")
             self._check_frame(tr.header.frame_id, "parent frame")
-            return stamp_seconds(tr.header.stamp), np.array([float(_path_value(tr, k)) for k in self._take])
+            return tr.header.stamp, np.array([float(_path_value(tr, k)) for k in self._take])
         if t == JOINT_STATE:
             names = list(msg.name)
             pos = msg.position
@@ -201,14 +202,14 @@ class Source:
                     raise ObservationError(f"{self.topic}: joint {k!r} has no position in this message "
                                            f"({len(names)} names, {len(pos)} positions)")
                 out.append(float(pos[i]))
-            return stamp_seconds(msg.header.stamp), np.array(out)
+            return msg.header.stamp, np.array(out)
         if t in _POSE_LIKE:
             self._check_frame(msg.header.frame_id, "frame_id")
         try:
             vals = np.array([float(_path_value(msg, k)) for k in self._take])
         except (AttributeError, IndexError, TypeError, ValueError) as exc:
             raise ObservationError(f"{self.topic}: cannot read {self._take} from this message ({exc})") from None
-        return stamp_seconds(msg.header.stamp) if hasattr(msg, "header") else float("nan"), vals
+        return (msg.header.stamp if hasattr(msg, "header") else None), vals
 
     def _check_frame(self, frame_id, what):
         frame_id = str(frame_id)

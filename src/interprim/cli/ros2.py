@@ -60,7 +60,9 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     import logging
+    import signal
     import sys
+    import threading
     import time
 
     from ..io import load_any
@@ -88,8 +90,11 @@ def run(args) -> int:
           f"DDS domain {bridge.domain_id}{' (localhost only)' if args.localhost else ''}", flush=True)
     start = time.monotonic()
     status = 0
+    stop = []
+    if threading.current_thread() is threading.main_thread():  # a service manager's SIGTERM: stop, exit 0
+        signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     try:
-        while args.duration is None or time.monotonic() - start < args.duration:
+        while not stop and (args.duration is None or time.monotonic() - start < args.duration):
             bridge.spin_once(0.05)
     except KeyboardInterrupt:
         status = 130  # 128 + SIGINT, as the shell reports Ctrl-C (and as interprim serve exits)

@@ -61,6 +61,7 @@ class QosSpec:
 
     @classmethod
     def parse(cls, text: str) -> "QosSpec":
+        """``KIND[,DEPTH]``: ``reliable`` (default depth 10) or ``best_effort`` (default depth 1)."""
         kind, _, depth = str(text).strip().partition(",")
         kind = kind.strip().lower().replace("-", "_")
         if kind not in ("reliable", "best_effort"):
@@ -75,6 +76,7 @@ class QosSpec:
         return f"QosSpec({'reliable' if self.reliable else 'best_effort'},{self.depth})"
 
     def dds(self):
+        """The ``cyclonedds`` QoS: this reliability and depth, volatile, classic CDR (as ``rmw_cyclonedds_cpp``)."""
         from cyclonedds.qos import Policy, Qos
         from cyclonedds.util import duration
 
@@ -429,6 +431,7 @@ class Ros2Bridge:
         return self
 
     def stop(self) -> None:
+        """Ask :meth:`spin` to return (the DDS entities stay open until :meth:`close`)."""
         self._stop.set()
 
     def close(self) -> None:

@@ -464,3 +464,24 @@ def test_cli_bad_observe_is_one_line(model, tmp_path):
     assert rc == 1
     assert err.getvalue().startswith("interprim ros2: error: --observe '/h@PointStamped' gives none of the model's")
     assert "Traceback" not in err.getvalue()
+
+
+@pytest.mark.slow  # fits the high-five model, starts the command, simulates 1.9 s with a DDS round trip per frame
+def test_mujoco_example_runs_over_the_bridge(tmp_path):
+    """examples/07_mujoco_arm.py --ros2: the simulated robot gets its reference only from ROS 2 messages."""
+    pytest.importorskip("mujoco")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=os.pathsep.join(
+        [os.path.join(root, "src"), os.environ.get("PYTHONPATH", "")]))
+    r = subprocess.run([sys.executable, os.path.join(root, "examples", "07_mujoco_arm.py"), "--ros2",
+                        str(tmp_path / "f.png")], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = r.stdout
+    assert "bridge: observing /partner/joints (sensor_msgs/msg/JointState): dof_0, dof_1" in out
+    bridge = [line for line in out.splitlines() if "bridge: received" in line][0]
+    n = int(bridge.split("received ")[1].split()[0])
+    assert n >= 100 and f"published {n} responses" in bridge and "0 late" in bridge  # every frame answered
+    met = [line for line in out.splitlines() if line.startswith("hands met at")]
+    assert met, out  # the hands meet, as without the bridge
+    final_cm = float(met[0].split("final ")[1].split(" cm")[0])
+    assert final_cm < 5.0 and (tmp_path / "f.png").is_file()

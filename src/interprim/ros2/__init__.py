@@ -8,5 +8,6 @@ from .bridge import BridgeConfigError, QosSpec, Ros2Bridge, loopback_config
 from .grid import GridStep, StampGrid
 from .observe import ObservationError, Source, parse_observe
 
-__all__ = ["Ros2Bridge", "BridgeConfigError", "QosSpec", "loopback_config", "StampGrid", "GridStep", "Source", "parse_observe",
+__all__ = ["Ros2Bridge", "BridgeConfigError", "QosSpec", "loopback_config", "StampGrid", "GridStep", "Source",
+           "parse_observe",
            "ObservationError"]

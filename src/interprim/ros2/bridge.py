@@ -30,11 +30,10 @@ import time
 
 import numpy as np
 
+from ..errors import InterprimError
 from .grid import StampGrid
 from .messages import dds_topic, dds_type_name, known_type, message_class, new_message, stamp_of, stamp_seconds
 from .observe import ObservationError, frame_order, match_columns, parse_observe
-
-from ..errors import InterprimError
 
 __all__ = ["Ros2Bridge", "QosSpec", "loopback_config", "RESPONSE_TYPES", "BridgeConfigError"]
 
@@ -80,7 +79,8 @@ class QosSpec:
         from cyclonedds.qos import Policy, Qos
         from cyclonedds.util import duration
 
-        rel = Policy.Reliability.Reliable(duration(milliseconds=100)) if self.reliable else Policy.Reliability.BestEffort
+        best_effort = Policy.Reliability.BestEffort
+        rel = Policy.Reliability.Reliable(duration(milliseconds=100)) if self.reliable else best_effort
         # volatile durability and XCDR1 (classic CDR): what rmw_cyclonedds_cpp uses for ROS 2 topics
         return Qos(rel, Policy.History.KeepLast(self.depth), Policy.Durability.Volatile,
                    Policy.DataRepresentation(use_cdrv0_representation=True))
@@ -292,8 +292,8 @@ class Ros2Bridge:
             if self.response_type == "PoseArray":
                 response = new_message("geometry_msgs/msg/PoseArray", header=header, poses=poses)
             else:
-                stamped = [new_message("geometry_msgs/msg/PoseStamped", header=new_message(
-                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.frame_id), pose=p)
+                stamped = [new_message("geometry_msgs/msg/PoseStamped", pose=p, header=new_message(
+                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.frame_id))
                     for dt, p in zip(t, poses)]
                 response = new_message("nav_msgs/msg/Path", header=header, poses=stamped)
         return response, self._status(pred, base_sec + frame_time, t, header)

@@ -110,7 +110,8 @@ def _field_type(types, desc):
         return types.array[_field_type(types, sub), count]
     if kind == "SEQUENCE":
         sub, maxcount = desc[1]
-        return types.sequence[_field_type(types, sub), maxcount] if maxcount else types.sequence[_field_type(types, sub)]
+        inner = _field_type(types, sub)
+        return types.sequence[inner, maxcount] if maxcount else types.sequence[inner]
     raise ValueError(f"unsupported ROS field description {desc!r}")
 
 

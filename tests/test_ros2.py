@@ -159,8 +159,8 @@ def test_replay_over_dds_equals_the_library_stream_frame_by_frame(bridge_of, mod
         np.testing.assert_allclose(secs, t, atol=1e-9)
         assert _secs(msg.header.stamp) == pytest.approx(k * DT, abs=1e-9)
         v = _status_values(status)
-        assert float(v["phase"]) == pred.phase or (np.isnan(pred.phase) and v["phase"] == "nan")
-        assert float(v["speed"]) == pred.speed or np.isnan(pred.speed)
+        assert v["phase"] == repr(float(pred.phase)) and v["speed"] == repr(float(pred.speed))
+        assert v["normalised_time"] == repr(float(pred.normalised_time)) and v["duration"] == repr(float(pred.duration))
         assert v["out_of_range"] == ("true" if pred.out_of_range else "false")
         assert int(v["n_observed"]) == pred.n_observed == k + 1
     assert b.counts["published"] == b.counts["frames"] == len(d)
@@ -390,6 +390,35 @@ def test_selector_renames_and_path_response(demos):
     np.testing.assert_array_equal([[p.pose.position.x, p.pose.position.y] for p in path.poses], y)
     stamps = [_secs(p.header.stamp) for p in path.poses]
     np.testing.assert_allclose(stamps, 2 * DT + t, atol=1e-9)
+
+
+def test_two_topics_first_clocks_the_frames(demos):
+    """x from one topic, y from another: frames wait for both, are clocked by the first, and hold the other's
+    latest value; a PoseArray response carries the task-space points."""
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6).fit(
+        [d[:, :4] for d in demos[0]], dt=DT, columns=["hx", "hy", "tool_x", "tool_y"])
+    b = Ros2Bridge(m, ["/a:x=hx@PointStamped", "/b:y=hy@PointStamped"], "/out", response_type="PoseArray", points=4)
+    out = _sink(b)
+    d = demos[1][0]
+    assert b.handle(0, _point(0.0, d[0, 0], 0.0)) is False and b.counts["waiting"] == 1  # no y yet
+    assert b.handle(1, _point(0.0, 0.0, d[0, 1])) is False  # the second topic does not clock frames
+    for k in range(1, 4):
+        b.handle(1, _point(k * DT, 0.0, d[k, 1]))
+        assert b.handle(0, _point(k * DT, d[k, 0], 0.0)) is True
+    st = m.stream()
+    for k in range(1, 4):
+        t, y = st.update(d[k, :2]).response(4)
+    arr = out[-1][0]
+    assert type(arr).__name__ == "PoseArray_" and len(out) == 3
+    np.testing.assert_array_equal([[p.position.x, p.position.y] for p in arr.poses], y)
+
+
+def test_qos_parse():
+    be, rel = QosSpec.parse("best_effort"), QosSpec.parse("reliable")
+    assert (be.reliable, be.depth, rel.reliable, rel.depth) == (False, 1, True, 10)
+    assert QosSpec.parse("Reliable,3").depth == 3
+    with pytest.raises(ValueError, match="depth must be 1..10000"):
+        QosSpec.parse("reliable,0")
 
 
 def test_stamp_grid_rule():

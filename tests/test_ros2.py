@@ -293,6 +293,21 @@ def test_gap_starts_a_new_interaction(bridge_of, model, demos):
     assert int(_status_values(out[-1][1])["n_observed"]) == 1
 
 
+def test_a_clock_reset_starts_a_new_interaction(bridge_of, model, demos, caplog):
+    """A publisher whose stamps start again from an earlier time (a bag played twice) is answered, not dropped."""
+    b = bridge_of()
+    out = _sink(b)
+    d = demos[1][0]
+    with caplog.at_level(logging.INFO, logger="interprim.ros2"):
+        for start in (0.0, -5.0):  # the second time, stamps from 5 s before the first
+            for k in range(10):
+                assert b.handle(0, _point(start + k * DT, d[k, 0], d[k, 1])) is True
+    assert b.counts["back"] == 1 and b.counts["late"] == 0 and b.counts["published"] == 20
+    np.testing.assert_array_equal([p.positions for p in out[10][0].points],
+                                  model.stream().update(d[0, :2]).response(20)[1])
+    assert any("jumped back" in r.getMessage() for r in caplog.records)
+
+
 def test_stalled_partner_topic_gives_no_stale_response(bridge_of, demos):
     b = bridge_of().open()
     w = Wire(b)
@@ -434,6 +449,9 @@ def test_stamp_grid_rule():
     assert g.add(float("nan"), [1.0]).status == "invalid" and g.add(1.4, [np.inf]).status == "invalid"
     s = g.add(1.7, [5.0])  # 0.4 s after the last: a gap
     assert s.status == "gap" and s.restarted and s.times.tolist() == [1.7]
+    s = g.add(0.5, [1.0])  # 1.2 s before the last: the clock was reset, not a late sample
+    assert s.status == "back" and s.restarted and s.times.tolist() == [0.5]
+    assert g.add(0.45, [1.0]).status == "late"
     with pytest.raises(ValueError, match="max_gap must be at least dt"):
         StampGrid(0.1, max_gap=0.05)
 

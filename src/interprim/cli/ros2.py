@@ -102,6 +102,7 @@ def run(args) -> int:
         bridge.close()
     c = bridge.counts
     print("received {received} messages, {frames} frames, published {published} responses; dropped: "
-          "{duplicate} duplicate, {late} late, {unusable} unusable, {invalid} invalid; {gap} restarts after a gap"
+          "{duplicate} duplicate, {late} late, {unusable} unusable, {invalid} invalid; {gap} restarts after a gap, "
+          "{back} after the clock jumped back"
           .format(**c), flush=True)
     return status

@@ -115,6 +115,14 @@ class _Say:
             self.last[cause], self.pending[cause] = now, 0
 
 
+def _stamp_text(base_sec: int, t: float) -> str:
+    """``base_sec + t`` seconds as ``SEC.NANOSEC`` (a float of seconds since 1970 would print rounding noise)."""
+    if not math.isfinite(t):
+        return "nan"
+    ns = int(base_sec) * 1_000_000_000 + int(round(t * 1e9))
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
 def _controlled_names(model, names):
     return [names[i] for i in model.controlled_dofs_]
 
@@ -202,7 +210,7 @@ class Ros2Bridge:
         self.grid = StampGrid(float(model.dt_), max_gap)
         self.stream = model.stream()
         self._latest = [None] * len(self.sources)
-        self.counts = {"received": 0, "frames": 0, "published": 0, "duplicate": 0, "late": 0, "gap": 0,
+        self.counts = {"received": 0, "frames": 0, "published": 0, "duplicate": 0, "late": 0, "gap": 0, "back": 0,
                        "invalid": 0, "unusable": 0, "waiting": 0, "between": 0}
         self._say = _Say(log_interval)
         self._std_grid = 101
@@ -245,15 +253,19 @@ class Ros2Bridge:
             self.counts[step.status] += 1
             last = self.grid.last_t
             b = self.base_sec or 0
-            what = {"duplicate": f"the same stamp as the last ({b + t:.9f} s)",
-                    "late": f"stamp {b + t:.9f} s older than the last ({b + last:.9f} s)",
+            what = {"duplicate": f"the same stamp as the last ({_stamp_text(b, t)} s)",
+                    "late": f"stamp {_stamp_text(b, t)} s older than the last ({_stamp_text(b, last)} s)",
                     "invalid": "a non-finite stamp or value"}[step.status]
             self._say(step.status, f"{src.topic}: dropped a {step.status} message: {what}")
             return False
         if step.status == "gap":
             self.counts["gap"] += 1
             self._say("gap", f"{src.topic}: no message for more than {self.grid.max_gap} s: a new interaction starts "
-                             f"at {self.base_sec + t:.3f} s (stream reset)", logging.INFO)
+                             f"at {_stamp_text(self.base_sec, t)} s (stream reset)", logging.INFO)
+        elif step.status == "back":
+            self.counts["back"] += 1
+            self._say("back", f"{src.topic}: the stamps jumped back by more than {self.grid.max_gap} s (a restarted "
+                              f"clock?): a new interaction starts at {_stamp_text(self.base_sec, t)} s (stream reset)")
         if step.restarted:
             self.stream.reset()
         if len(step.times) == 0:

@@ -9,8 +9,10 @@ turns them into grid frames, causally:
   ``t0 + k * dt`` that lie after the last emitted one and at or before ``t``, each linearly interpolated between
   the previous accepted sample and this one (the rule of the server's pointer input, docs/server.md).  A sample
   that reaches no new grid point gives no frame (it is kept for the next interpolation).
-* A sample whose stamp equals the last accepted one is a **duplicate** and is dropped; one older than it is
-  **late** and is dropped (the grid never goes back in time).
+* A sample whose stamp equals the last accepted one is a **duplicate** and is dropped; one older than it by at most
+  ``max_gap`` is **late** and is dropped (the grid never goes back in time).  One older by more than ``max_gap``
+  is a **clock jump back** (a restarted publisher, a bag played again, a simulation reset): the grid restarts at
+  it, as after a gap, so that a reset clock does not make every later message "late".
 * A sample more than ``max_gap`` seconds after the last accepted one is a **gap**: interpolating across it would
   invent movement, so the grid restarts at this sample (the bridge starts a new interaction: the stream is reset).
 * A sample with a non-finite stamp or value is **invalid** and dropped.
@@ -34,7 +36,7 @@ ON_GRID = 1e-6
 
 
 class GridStep:
-    """What one sample did: ``status`` (``"start"``, ``"ok"``, ``"duplicate"``, ``"late"``, ``"gap"``,
+    """What one sample did: ``status`` (``"start"``, ``"ok"``, ``"duplicate"``, ``"late"``, ``"gap"``, ``"back"``,
     ``"invalid"``), and the grid ``times`` (s, shape ``(k,)``) and ``frames`` (``(k, n)``) it gave (``k`` may be 0)."""
 
     __slots__ = ("status", "times", "frames")
@@ -45,7 +47,7 @@ class GridStep:
     @property
     def restarted(self) -> bool:
         """Whether this sample started a new grid (the first one, or after a gap)."""
-        return self.status in ("start", "gap")
+        return self.status in ("start", "gap", "back")
 
     def __repr__(self):
         return f"GridStep({self.status!r}, {len(self.times)} frames)"
@@ -92,10 +94,10 @@ class StampGrid:
             return GridStep("invalid", empty_t, np.empty((0, y.size)))
         if self.t0 is not None and t == self.last_t:
             return GridStep("duplicate", empty_t, np.empty((0, y.size)))
-        if self.t0 is not None and t < self.last_t:
+        if self.t0 is not None and self.last_t - self.max_gap <= t < self.last_t:
             return GridStep("late", empty_t, np.empty((0, y.size)))
-        if self.t0 is None or t - self.last_t > self.max_gap or y.size != self.last_y.size:
-            status = "start" if self.t0 is None else "gap"
+        if self.t0 is None or abs(t - self.last_t) > self.max_gap or y.size != self.last_y.size:
+            status = "start" if self.t0 is None else "back" if t < self.last_t else "gap"
             self.t0, self.k, self.last_t, self.last_y = t, 0, t, y
             return GridStep(status, np.array([t]), y[None, :].copy())
         eps = ON_GRID  # a stamp on the grid up to rounding counts as on it

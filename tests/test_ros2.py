@@ -535,3 +535,26 @@ def test_mujoco_example_runs_over_the_bridge(tmp_path):
     assert met, out  # the hands meet, as without the bridge
     final_cm = float(met[0].split("final ")[1].split(" cm")[0])
     assert final_cm < 5.0 and (tmp_path / "f.png").is_file()
+
+
+def test_without_the_extra_the_command_names_the_pip_install(model, tmp_path, monkeypatch, capsys):
+    """No cyclonedds: one line naming the extra, no traceback (the message types are made lazily)."""
+    from interprim.cli import main
+    from interprim.ros2 import messages
+
+    path = tmp_path / "m.npz"
+    model.save(path)
+    for loaded in [m for m in sys.modules if m == "cyclonedds" or m.startswith("cyclonedds.")]:
+        monkeypatch.delitem(sys.modules, loaded)
+    monkeypatch.setitem(sys.modules, "cyclonedds", None)
+    # the caches hold classes made with cyclonedds: empty them for this test, and again after it
+    messages._typestore.cache_clear()
+    messages._message_class.cache_clear()
+    try:
+        rc = main(["ros2", str(path), "--observe", "/human/hand@PointStamped"])
+    finally:
+        messages._typestore.cache_clear()
+        messages._message_class.cache_clear()
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert err.startswith("interprim ros2: error:") and "pip install 'interprim[ros2]'" in err

@@ -30,6 +30,7 @@ EXTRA_OF = {
     "distributed": "dask",
     "c3d": "mocap",
     "rosbags": "ros",
+    "cyclonedds": "ros2",
     "mujoco": "mujoco",
 }
 

@@ -22,10 +22,12 @@ COMMAND_MODULES = [
     "interprim.cli.handwriting",
     "interprim.cli.serve",
     "interprim.cli.evaluate",
+    "interprim.cli.ros2",
 ]
 
 # The extra named when a command misses an optional module that this extra installs (README: *Install*).
-COMMAND_EXTRA = {"demo": "experiments", "evaluate": "experiments", "handwriting": "experiments", "serve": "serve"}
+COMMAND_EXTRA = {"demo": "experiments", "evaluate": "experiments", "handwriting": "experiments", "serve": "serve",
+                 "ros2": "ros2"}
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -65,7 +65,7 @@ def run(args) -> int:
     import threading
     import time
 
-    from ..io import load_any
+    from ..models.files import load_any
     from ..ros2 import Ros2Bridge, loopback_config
     from ..ros2.bridge import BridgeConfigError
 

@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from ..errors import InterprimError
+from ..core.errors import InterprimError
 from .grid import StampGrid
 from .messages import dds_topic, dds_type_name, known_type, message_class, new_message, stamp_of, stamp_seconds
 from .observe import ObservationError, frame_order, match_columns, parse_observe

@@ -16,7 +16,7 @@ import keyword
 import math
 from functools import lru_cache
 
-from ..errors import MissingExtraError
+from ..core.errors import MissingExtraError
 
 __all__ = ["dds_topic", "dds_type_name", "message_class", "new_message", "known_type", "stamp_seconds",
            "stamp_of", "SHORT_TYPES"]

@@ -1,6 +1,6 @@
 """Trimming and splitting one long motion-capture take (C3D, BVH) into demonstrations, and the shared rule.
 
-The takes are written here (C3D with the ``c3d`` package, BVH as text); every piece read back is compared with the
+The takes are written here (C3D with ``ezc3d``, BVH as text); every piece read back is compared with the
 frames that were written for it.
 """
 
@@ -14,35 +14,19 @@ from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
 from interprim.errors import DataFileError
 
-import c3d
+import ezc3d
 
 
 def add_events(path, events, rate):
     """Rewrite the C3D file ``path`` with an EVENT group: ``events`` is a list of (label, time in s)."""
-    with open(path, "rb") as fh, warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # 'no analog data'
-        r = c3d.Reader(fh)
-        frames = [p.copy() for _, p, _ in r.read_frames(copy=True)]
-        labels = [s.strip() for s in r.get("POINT:LABELS").string_array]
-        first = int(r.first_frame)
-    w = c3d.Writer(point_rate=rate, point_units="mm")
-    for p in frames:
-        w.add_frames([(p.astype(np.float32), np.zeros((0, 0)))])
-    w.set_point_labels(labels)
-    w.set_start_frame(first)
-    g = w.add_group(9, "EVENT", "events")
+    c = ezc3d.c3d(str(path))
     n = len(events)
-    g.add("USED", "", 2, "<h", n)
-    times = np.array([[t // 60, t % 60] for _, t in events], np.float32)  # (minutes, seconds), dims [2, n]
-    g.add_param("TIMES", desc="", bytes_per_element=4, bytes=times.tobytes(), dimensions=[2, n])
-    s, size = c3d.Writer.pack_labels([lab for lab, _ in events])
-    g.add_str("LABELS", "", s, size, n)
-    s, size = c3d.Writer.pack_labels(["Right"] * n)
-    g.add_str("CONTEXTS", "", s, size, n)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with open(path, "wb") as fh:
-            w.write(fh)
+    times = np.array([[t // 60 for _, t in events], [t % 60 for _, t in events]])  # (minutes, seconds), dims [2, n]
+    c.add_parameter("EVENT", "USED", [n])
+    c.add_parameter("EVENT", "TIMES", times)
+    c.add_parameter("EVENT", "LABELS", [lab for lab, _ in events])
+    c.add_parameter("EVENT", "CONTEXTS", ["Right"] * n)
+    c.write(str(path))
     return path
 
 

@@ -70,6 +70,13 @@ def add_recording_args(p, what="DEMOS") -> None:
                    help="BVH: the file's length unit (positions are converted to metres); C3D: overrides the file's "
                         "POINT:UNITS (C3D positions are always converted to metres)")
     g.add_argument("--end-sites", action="store_true", help="BVH positions: also the End Site points (<joint>_end_x)")
+    c = p.add_argument_group("CSV files (also rostopic echo -p and ros2 bag / PlotJuggler CSV exports)")
+    c.add_argument("--time-column", metavar="NAME",
+                   help="CSV: the column of time stamps (default 'time', else the first of %%time, __time, timestamp, "
+                        "Time, field.header.stamp, header.stamp)")
+    c.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
+                   help="CSV: the time column's unit (default: seconds for 'time'; for another column nanoseconds "
+                        "when its values are whole numbers more than 1000 apart, as ROS stamps, else seconds)")
 
 
 def recording_options(args) -> dict:
@@ -89,7 +96,15 @@ def recording_options(args) -> dict:
         bvh_mode=args.bvh_mode,
         length_unit=args.length_unit,
         end_sites=bool(args.end_sites),
+        time_column=getattr(args, "time_column", None),
+        time_unit=getattr(args, "time_unit", None),
     )
+
+
+def print_notes(ds) -> None:
+    """What the reader decided for the user to know (``Demonstrations.notes``), one line each."""
+    for note in getattr(ds, "notes", ()) or ():
+        print(f"note: {note}")
 
 
 def expand_columns(columns, names, flag: str) -> list:

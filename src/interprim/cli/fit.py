@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InterprimError
-from ._common import CommandError, _positive, _split_cols, add_recording_args, agent_columns, recording_options
+from ._common import (CommandError, _positive, _split_cols, add_recording_args, agent_columns, print_notes,
+                      recording_options)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -177,6 +178,7 @@ def cmd_fit(args) -> int:
         max_nan_gap=args.max_nan_gap,
         **recording_options(args),
     )
+    print_notes(ds)
     n_read = ds.n_dofs
     ds, obs = agent_columns(ds, _split_cols(args.observed), _split_cols(args.controlled), args.demos)
     if len(ds) < 2:

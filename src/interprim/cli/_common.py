@@ -101,6 +101,43 @@ def recording_options(args) -> dict:
     )
 
 
+#: (attribute, flag, default) of every option that changes which data a command reads or how it is fitted, shared
+#: by ``evaluate`` and ``fit``: :func:`data_flags`.
+DATA_OPTIONS = (
+    ("dt", "--dt", None), ("resample", "--resample", None), ("max_nan_gap", "--max-nan-gap", 0),
+    ("topics", "--topics", None), ("split_topic", "--split-topic", None), ("split_gap", "--split-gap", None),
+    ("split_events", "--split-events", None), ("split_frames", "--split-frames", None), ("trim", "--trim", False),
+    ("orientation", "--orientation", False), ("joints", "--joints", None), ("markers", "--markers", None),
+    ("bvh_mode", "--bvh-mode", None), ("length_unit", "--length-unit", None), ("end_sites", "--end-sites", False),
+    ("time_column", "--time-column", None), ("time_unit", "--time-unit", None),
+    ("split_repetitions", "--split-repetitions", None), ("min_piece", "--min-piece", None),
+    ("smoothing_window", "--smoothing-window", None), ("n_basis", "--n-basis", 20),
+)
+
+
+def data_flags(args) -> list:
+    """The command-line flags (a list of words) that make another command read the data as ``args`` did."""
+    words = []
+    for attr, flag, default in DATA_OPTIONS:
+        value = getattr(args, attr, default)
+        if value is None or value == default:
+            continue
+        if value is True:
+            words.append(flag)
+        elif flag == "--split-events" and value == "*":
+            words.append(flag)  # every event (nargs='?' without a value)
+        else:
+            words += [flag, str(value)]
+    return words
+
+
+def shell_words(words) -> str:
+    """``words`` as one shell command line (each quoted when it needs to be)."""
+    import shlex
+
+    return " ".join(shlex.quote(str(w)) for w in words)
+
+
 def print_notes(ds) -> None:
     """What the reader decided for the user to know (``Demonstrations.notes``), one line each."""
     for note in getattr(ds, "notes", ()) or ():

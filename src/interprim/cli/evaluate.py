@@ -166,6 +166,14 @@ def run_user_data(args) -> int:
                                  f"{','.join(known)}")
     cfg = RealTimeConfig(horizon=float(args.horizon))
     notes = []
+    # the printed 'interprim fit' command reads the data as this evaluation did: the file, every data option, and
+    # the observed (and controlled) columns actually used, also when they came from the file's '# observed:' line
+    from ._common import data_flags, shell_words
+
+    ctrl_flag = ["--controlled", ",".join(ds.columns[i] for i in range(ds.n_dofs) if i not in set(obs))] \
+        if args.controlled else []
+    fit_data = shell_words([args.data] + data_flags(args) + ctrl_flag)
+    fit_observed = shell_words([",".join(ds.columns[i] for i in obs)])
 
     def note(line):
         notes.append(line)
@@ -175,7 +183,7 @@ def run_user_data(args) -> int:
         recs, summary, sentence = evaluate_demonstrations(ds, obs, float(ds.dt), k=args.folds, cfg=cfg,
                                                           smoothing_window=args.smoothing_window,
                                                           n_basis=args.n_basis, methods=methods, progress=True,
-                                                          log=note, data=args.data, observed=args.observed)
+                                                          log=note, data=fit_data, observed=fit_observed)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold

@@ -214,7 +214,8 @@ def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_un
             try:
                 v = float(s)
             except ValueError:
-                hint = "" if columns is not None else "; choose the numeric columns with columns= (--columns)"
+                hint = ("" if columns is not None or not allow_missing  # the time column has no such hint
+                        else "; choose the numeric columns with columns= (--columns)")
                 raise DataFileError(
                     f"{path}, line {line}: non-numeric value {cell[:80]!r} in column {col!r}{hint}") from None
             if math.isinf(v):

@@ -88,3 +88,141 @@ def test_evaluate_prints_a_fit_command_that_reads_the_same_data_c3d(tmp_path, ca
     assert len(fitted) == 6 and fitted.columns == evaluated.columns
     for a, b in zip(evaluated.demos, fitted.demos):
         np.testing.assert_array_equal(a, b)
+
+
+# ----------------------------------------------------------------------------- output only on success
+def _leftovers(folder):
+    """Everything in ``folder`` (recursively), as names relative to it."""
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def _two_agent_csv(path):
+    from interprim.datasets import save_demonstrations
+    from interprim.synthetic import two_agent_demos
+
+    return save_demonstrations(path, two_agent_demos(5, seed=1), dt=0.01, columns=["h1", "h2", "r1", "r2", "r3"],
+                               observed=["h1", "h2"])
+
+
+def test_fit_that_fails_while_saving_leaves_no_file(tmp_path, monkeypatch):
+    import interprim as ip
+
+    data = _two_agent_csv(tmp_path / "demos.csv")
+    out = tmp_path / "models" / "model.npz"
+
+    def broken_save(self, path):
+        with open(path, "wb") as fh:
+            fh.write(b"PK\x03\x04 half a model")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(ip.InteractionPrimitive, "save", broken_save)
+    with pytest.raises(OSError, match="No space left"):
+        main(["fit", str(data), "--model", "ip", "--n-basis", "5", "-o", str(out)])
+    assert _leftovers(tmp_path / "models") == []
+    out.write_bytes(b"the model of yesterday")  # an earlier output is left as it was
+    with pytest.raises(OSError):
+        main(["fit", str(data), "--model", "ip", "--n-basis", "5", "-o", str(out)])
+    assert out.read_bytes() == b"the model of yesterday" and _leftovers(out.parent) == ["model.npz"]
+    monkeypatch.undo()
+    assert main(["fit", str(data), "--model", "ip", "--n-basis", "5", "-o", str(out)]) == 0
+    assert _leftovers(out.parent) == ["model.npz"] and ip.InteractionPrimitive.load(out).n_dofs_ == 5
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_predict_that_fails_while_writing_leaves_no_file(tmp_path, monkeypatch, suffix, capsys):
+    data = _two_agent_csv(tmp_path / "demos.csv")
+    assert main(["fit", str(data), "--model", "ip", "--n-basis", "5", "-o", str(tmp_path / "m.npz")]) == 0
+    from interprim.datasets import save_demonstrations
+    from interprim.synthetic import two_agent_demos
+
+    data = save_demonstrations(tmp_path / "part.csv", [two_agent_demos(1, seed=9)[0][:, :2]], dt=0.01,
+                               columns=["h1", "h2"])
+    out = tmp_path / "pred" / f"p{suffix}"
+    out.parent.mkdir()
+    if suffix == ".npz":
+        def broken(path, **arrays):
+            with open(path, "wb") as fh:
+                fh.write(b"PK half")
+            raise OSError(28, "No space left on device")
+
+        monkeypatch.setattr(np, "savez", broken)
+    else:
+        real_repr = repr
+        calls = {"n": 0}
+
+        def broken_repr(x):  # fails in the middle of the table
+            calls["n"] += 1
+            if calls["n"] > 50:
+                raise OSError(28, "No space left on device")
+            return real_repr(x)
+
+        import builtins
+
+        monkeypatch.setattr(builtins, "repr", broken_repr)
+    with pytest.raises(OSError):
+        main(["predict", str(tmp_path / "m.npz"), str(data), "--observe-fraction", "0.5", "-o", str(out)])
+    monkeypatch.undo()
+    assert _leftovers(out.parent) == []
+    assert main(["predict", str(tmp_path / "m.npz"), str(data), "--observe-fraction", "0.5", "-o", str(out)]) == 0
+    assert _leftovers(out.parent) == [out.name]
+
+
+def test_evaluate_that_fails_while_writing_leaves_no_report(tmp_path, monkeypatch, capsys):
+    import interprim.evaluation.realtime as rt
+
+    data = _two_agent_csv(tmp_path / "demos.csv")
+    real = rt.save_report
+
+    def broken(*a, **kw):
+        real(*a, **kw)  # every file written, then a failure (e.g. the figure's backend)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(rt, "save_report", broken)
+    out = tmp_path / "ev"
+    with pytest.raises(OSError):
+        main(["evaluate", "--data", str(data), "--methods", "nn", "--folds", "3", "--n-basis", "5", "--no-figures",
+              "--out", str(out)])
+    assert not out.exists() and _leftovers(tmp_path) == ["demos.csv"]
+
+
+def test_evaluate_sweep_that_fails_while_writing_leaves_no_results(tmp_path, monkeypatch):
+    import interprim.evaluation as ev
+
+    def broken(res, summary, out):
+        (out / "results.json").write_text("{half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(ev, "run_sweep", lambda *a, **k: {})
+    monkeypatch.setattr(ev, "summarise", lambda res: {})
+    monkeypatch.setattr(ev, "save_results", broken)
+    with pytest.raises(OSError):
+        main(["evaluate", "--data", "synthetic", "--methods", "prior", "--no-figures", "--out", str(tmp_path / "ev")])
+    assert _leftovers(tmp_path) == []
+
+
+def test_handwriting_that_fails_leaves_no_results(tmp_path, monkeypatch):
+    import interprim.experiments.handwriting as hw
+
+    def broken(out, **kw):
+        (out / "results.json").write_text("{half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(hw, "run_handwriting", broken)
+    with pytest.raises(OSError):
+        main(["handwriting", "--shapes", "none", "--no-figures", "--out", str(tmp_path / "hw")])
+    assert _leftovers(tmp_path) == []
+
+
+def test_demo_that_fails_leaves_no_files(tmp_path, monkeypatch):
+    import interprim.experiments.highfive as hf
+
+    def broken(out, cfg, **kw):
+        (out / "fig5_setup.png").write_bytes(b"\x89PNG half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(hf, "run_highfive", broken)
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "notes.txt").write_text("mine")  # a file of the user's in the output folder is kept
+    with pytest.raises(OSError):
+        main(["demo", "--quiet", "--out", str(tmp_path / "demo")])
+    assert _leftovers(tmp_path) == ["demo", "demo/notes.txt"]

@@ -2,13 +2,71 @@
 
 from __future__ import annotations
 
+import contextlib
+
 from ..errors import InterprimError
 
-__all__ = ["CommandError"]
+__all__ = ["CommandError", "output_when_done"]
 
 
 class CommandError(InterprimError, ValueError):
     """A command-line argument is invalid or a step of a command failed (reported in one line)."""
+
+
+@contextlib.contextmanager
+def output_when_done(path, *, folder: bool = False):
+    """Write a command's output only if the command succeeds.
+
+    Yields a temporary path in the same folder as ``path`` (a hidden name, same suffix); the command writes
+    there.  When the block ends without an exception the file is moved onto ``path`` with ``os.replace``
+    (atomic on one file system), or, for ``folder=True``, each file written into the temporary folder is moved
+    into ``path`` (created if needed; files already in it that the command did not write are kept).  When the
+    block raises (an error, Ctrl-C), the temporary file or folder is removed and ``path`` is left as it was.
+    """
+    import os
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    final = Path(path)
+    parent = final.parent if str(final.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    if folder:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=parent))
+    else:
+        fd, name = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=".tmp" + final.suffix, dir=parent)
+        os.close(fd)
+        tmp = Path(name)
+    try:
+        yield tmp
+        if folder:
+            final.mkdir(parents=True, exist_ok=True)
+            for src in sorted(tmp.rglob("*")):
+                if src.is_dir():
+                    continue
+                dst = final / src.relative_to(tmp)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(src, dst)
+        else:
+            os.replace(tmp, final)
+    finally:
+        if folder:
+            shutil.rmtree(tmp, ignore_errors=True)
+        elif tmp.exists():
+            tmp.unlink()
+
+
+def moved(paths, tmp, final) -> list:
+    """``paths`` written under the temporary folder ``tmp`` as they are named once moved into ``final``."""
+    from pathlib import Path
+
+    out = []
+    for p in paths:
+        try:
+            out.append(Path(final) / Path(p).relative_to(tmp))
+        except ValueError:
+            out.append(p)
+    return out
 
 
 def _split_cols(values):

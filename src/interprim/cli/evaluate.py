@@ -188,8 +188,12 @@ def run_user_data(args) -> int:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
         raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
-    paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
-                        horizon=float(args.horizon), notes=notes)
+    from ._common import moved, output_when_done
+
+    with output_when_done(args.out, folder=True) as tmp:  # the report appears whole, or not at all
+        paths = save_report(recs, summary, sentence, tmp, title=f"{args.data}: {len(ds.demos)} demonstrations",
+                            horizon=float(args.horizon), notes=notes)
+    paths = moved(paths, tmp, args.out)
     print(markdown_table(summary))
     print(f"\nverdict: {sentence}")
     for p in paths:
@@ -222,11 +226,15 @@ def run(args) -> int:
                     recognition=not args.no_recognition, max_demos=4 if args.quick else None,
                     scheduler=args.scheduler)
     summary = summarise(res)
-    paths = save_results(res, summary, args.out)
-    if not args.no_figures:
-        from ..evaluation.plots import evaluation_figures
+    from ._common import moved, output_when_done
 
-        paths += evaluation_figures(res, summary, cfg, args.out, datasets)
+    with output_when_done(args.out, folder=True) as tmp:  # the results appear whole, or not at all
+        paths = save_results(res, summary, tmp)
+        if not args.no_figures:
+            from ..evaluation.plots import evaluation_figures
+
+            paths += evaluation_figures(res, summary, cfg, tmp, datasets)
+    paths = moved(paths, tmp, args.out)
     from ..evaluation import markdown_tables
 
     print(markdown_tables(summary))

@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InterprimError
-from ._common import (CommandError, _positive, _split_cols, add_recording_args, agent_columns, print_notes,
-                      recording_options)
+from ._common import (CommandError, _positive, _split_cols, add_recording_args, agent_columns, output_when_done,
+                      print_notes, recording_options)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -264,7 +264,6 @@ def _fit_and_save(model, fit, args):
     except (ValueError, TypeError) as exc:
         raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
     out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out)
+    with output_when_done(out) as tmp:  # a failed save leaves no model file (nor a temporary one)
+        model.save(tmp)
     return fit_seconds, out

@@ -113,6 +113,9 @@ def add_recording_args(p, what="DEMOS") -> None:
     g.add_argument("--split-frames", metavar="A-B,C-D",
                    help="C3D/BVH: the demonstrations as frame ranges (inclusive; C3D frames as the capture numbers "
                         "them, BVH frames from 0)")
+    g.add_argument("--split-repetitions", nargs="?", const="auto", default=None, metavar="PERIOD",
+                   help="C3D/BVH: cut a continuous take (walking, hopping, repeated serves) into the repetitions of "
+                        "its movement; the period is found from the take (or give it in seconds)")
     g.add_argument("--trim", action="store_true",
                    help="C3D/BVH: drop the leading and trailing frames in which a marker is missing (0,0,0) or a "
                         "channel is nan")
@@ -148,6 +151,7 @@ def recording_options(args) -> dict:
         split_events=(True if args.split_events == "*" else _split_cols([args.split_events]))
         if args.split_events is not None else None,
         split_frames=args.split_frames,
+        split_repetitions=_repetitions(getattr(args, "split_repetitions", None)),
         orientation=bool(args.orientation),
         joints=_split_cols([args.joints]) if args.joints else None,
         markers=_split_cols([args.markers]) if args.markers else None,
@@ -168,7 +172,7 @@ DATA_OPTIONS = (
     ("orientation", "--orientation", False), ("joints", "--joints", None), ("markers", "--markers", None),
     ("bvh_mode", "--bvh-mode", None), ("length_unit", "--length-unit", None), ("end_sites", "--end-sites", False),
     ("time_column", "--time-column", None), ("time_unit", "--time-unit", None),
-    ("split_repetitions", "--split-repetitions", None), ("min_piece", "--min-piece", None),
+    ("split_repetitions", "--split-repetitions", None),
     ("smoothing_window", "--smoothing-window", None), ("n_basis", "--n-basis", 20),
 )
 
@@ -194,6 +198,17 @@ def shell_words(words) -> str:
     import shlex
 
     return " ".join(shlex.quote(str(w)) for w in words)
+
+
+def _repetitions(text):
+    if text is None or text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise CommandError(f"--split-repetitions takes a period in seconds or nothing (found from the take), "
+                           f"got {text!r}") from None
+    return _positive(value, "--split-repetitions")
 
 
 def print_notes(ds) -> None:

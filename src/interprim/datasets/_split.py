@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import DataFileError
 
-__all__ = ["spans", "split_take", "parse_ranges", "PAUSE_SPEED"]
+__all__ = ["spans", "split_take", "parse_ranges", "find_repetitions", "PAUSE_SPEED"]
 
 #: In a motion-capture take, a frame is *still* when every column moves slower than this fraction of the
 #: take's 95th-percentile speed (speeds measured over :data:`SPEED_WINDOW` seconds).
@@ -122,7 +122,108 @@ def _pauses(y, rate, gap):
     return runs
 
 
-def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=None, gap=None) -> list:
+#: A repetition is found when the take's autocorrelation at the period is at least this (1: exactly periodic).
+MIN_PERIODICITY = 0.3
+
+
+def _filled(y):
+    """``y`` with missing values interpolated per column (for measuring the take, not for the demonstrations),
+    standardised; columns that are all missing or constant are left out."""
+    z = np.array(y, dtype=np.float64)
+    keep = ~np.all(np.isnan(z), axis=0)
+    z = z[:, keep]
+    idx = np.arange(z.shape[0])
+    for d in range(z.shape[1]):
+        bad = np.isnan(z[:, d])
+        if bad.any():
+            z[bad, d] = np.interp(idx[bad], idx[~bad], z[~bad, d])
+    z -= z.mean(axis=0)
+    sd = z.std(axis=0)
+    return z[:, sd > 0] / sd[sd > 0]
+
+
+def _period(z, rate, where):
+    """The period (frames) of a repeating movement: the highest autocorrelation peak after the first dip below 0."""
+    T = z.shape[0]
+    n = 1 << int(np.ceil(np.log2(2 * T)))
+    f = np.fft.rfft(z, n, axis=0)
+    ac = np.fft.irfft((f * np.conj(f)).real.sum(axis=1), n)[:T]
+    ac = ac / (T - np.arange(T))  # each lag's mean product
+    ac = ac / ac[0]
+    below = np.flatnonzero(ac[: T // 2 + 1] < 0)
+    if not below.size:
+        raise DataFileError(f"{where}: split_repetitions found no repeating movement (the take never moves away "
+                            "from its first poses for long); give the period in seconds, or use split_frames")
+    lo = int(below[0])
+    P = lo + int(np.argmax(ac[lo:T // 2 + 1]))
+    if ac[P] < MIN_PERIODICITY or P < 4:
+        raise DataFileError(
+            f"{where}: split_repetitions found no repeating movement (best period {P / rate:.3g} s, autocorrelation "
+            f"{ac[P]:.2f} < {MIN_PERIODICITY}; at least two repetitions are needed); give the period in seconds, or "
+            "use split_frames or split_gap"
+        )
+    return P, float(ac[P])
+
+
+def find_repetitions(y, rate, *, where: str, period=None):
+    """Row intervals ``(i0, i1)`` of the repetitions of one movement in a continuous take, and a note.
+
+    The period is the highest peak of the take's autocorrelation (all columns, standardised) after it first
+    drops below zero, or ``period`` seconds when given.  The first cut is the slowest frame of the first period
+    (a landing, the pause between two serves); each next cut is the frame, between 0.6 and 1.4 periods after
+    the previous one, whose surroundings (a window of a quarter period) best match those of the first cut
+    (least squares).  The partial movements before the first cut and after the last are left out.
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    z = _filled(y)
+    T = z.shape[0]
+    if z.shape[1] == 0 or T < 8:
+        raise DataFileError(f"{where}: split_repetitions needs a take that moves ({T} frames)")
+    if period is None:
+        P, corr = _period(z, rate, where)
+        how = f"autocorrelation {corr:.2f}"
+    else:
+        if not (np.isfinite(period) and period > 0):
+            raise ValueError(f"split_repetitions must be 'auto' or a positive period in seconds, got {period!r}")
+        P, how = max(4, int(round(period * rate))), "given"
+        if 2 * P > T:
+            raise DataFileError(f"{where}: split_repetitions period {period} s ({P} frames) leaves less than two "
+                                f"repetitions in {T} frames")
+    speed = np.linalg.norm(np.gradient(z, axis=0), axis=1)  # centred differences: no half-frame shift
+    k = max(1, P // 10)
+    speed = np.convolve(speed, np.ones(k) / k, mode="same")
+    w = max(2, P // 8)
+    first = speed[w:min(P + w, T - w)]
+    m = int(np.argmin(first))  # the slowest frame of the first period, then the middle of its slow valley
+    low = first <= first[m] + 0.1 * (first.max() - first[m])
+    a, b = m, m
+    while a > 0 and low[a - 1]:
+        a -= 1
+    while b < len(first) - 1 and low[b + 1]:
+        b += 1
+    c0 = w + (a + b) // 2
+    win = sliding_window_view(z, 2 * w + 1, axis=0)  # (T - 2w, D, 2w + 1): window centred on frame i + w
+    template = win[c0 - w]
+    cuts = [c0]
+    while True:
+        a, b = cuts[-1] + int(0.6 * P), min(cuts[-1] + int(np.ceil(1.4 * P)), T - 1 - w)
+        if a > b:
+            break
+        cost = ((win[a - w:b - w + 1] - template) ** 2).sum(axis=(1, 2))
+        cuts.append(a + int(np.argmin(cost)))
+    segs = [(c, d - 1) for c, d in zip(cuts[:-1], cuts[1:])]
+    if not segs:
+        raise DataFileError(f"{where}: split_repetitions found less than one whole repetition (period "
+                            f"{P / rate:.3g} s)")
+    note = (f"{where}: split_repetitions: period {P / rate:.3g} s ({how}), {len(segs)} repetitions cut at the frames "
+            f"most like the slowest frame of the first; left out: the partial movement before row {segs[0][0]} and "
+            f"after row {segs[-1][1]}")
+    return segs, note
+
+
+def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=None, gap=None,
+               repetitions=None, notes=None) -> list:
     """Row intervals ``(i0, i1)`` (inclusive) of the demonstrations in one motion-capture take.
 
     Parameters
@@ -146,6 +247,11 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
         Seconds: a pause longer than this starts a new demonstration.  A pause is a run of frames in which
         every column moves slower than :data:`PAUSE_SPEED` times the take's 95th-percentile speed, or
         in which a column is missing.
+    repetitions : "auto" or float, optional
+        Cut a continuous take into the repetitions of one movement (:func:`find_repetitions`); a float is
+        the period in seconds.  Applied to each piece left by the other options.
+    notes : list, optional
+        Receives what the repetition finder decided (period, cuts), for the user.
 
     Returns
     -------
@@ -166,6 +272,17 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
     segs = spans(0, T - 1, starts=events or (), cuts=cuts, ranges=rows)
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
+    if repetitions is not None:
+        period = None if repetitions in ("auto", True) else float(repetitions)
+        out = []
+        for a, b in segs:
+            reps, note = find_repetitions(y[a:b + 1], rate, where=where if len(segs) == 1 else
+                                          f"{where}, frames {numbers[a]}-{numbers[b]}", period=period)
+            out += [(a + i, a + j) for i, j in reps]
+            if notes is not None:
+                notes.append(note.replace(f"row {reps[0][0]}", f"frame {numbers[a + reps[0][0]]}")
+                             .replace(f"row {reps[-1][1]}", f"frame {numbers[a + reps[-1][1]]}"))
+        segs = out
     if trim:
         bad = np.isnan(y).any(axis=1)
         out = []
@@ -193,13 +310,26 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     """
     from ._checks import _check_frames, _fill_nans
 
+    from ._checks import _warn
+    from ..errors import DataFileWarning
+
     rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
-    splitting = split.get("events") is not None or split.get("ranges") is not None or split.get("gap") is not None
+    automatic = any(split.get(k) is not None for k in ("events", "gap", "repetitions"))
+    splitting = automatic or split.get("ranges") is not None
+    notes = split.setdefault("notes", [])
     if splitting or split.get("trim"):
         segs = split_take(y, rate, numbers, where=str(path), trim=bool(split.get("trim")), events=split.get("events"),
-                          ranges=split.get("ranges"), gap=split.get("gap"))
+                          ranges=split.get("ranges"), gap=split.get("gap"), repetitions=split.get("repetitions"),
+                          notes=notes)
     else:
         segs = [(0, y.shape[0] - 1)]
+    if automatic and len(segs) > 1:  # pieces too short to learn from, left by pauses, events or repetitions: dropped
+        short = [(a, b) for a, b in segs if b - a + 1 < min_frames]
+        if short and len(short) < len(segs):
+            shown = ", ".join(f"{numbers[a]}-{numbers[b]}" for a, b in short[:10]) + (" ..." if len(short) > 10 else "")
+            _warn(f"{path}: {len(short)} piece(s) shorter than {min_frames} frames left out (frames {shown}); "
+                  f"{len(segs) - len(short)} demonstrations kept", DataFileWarning)
+            segs = [(a, b) for a, b in segs if b - a + 1 >= min_frames]
     demos, times, labels = [], [], []
     for a, b in segs:
         where = str(path) if not splitting else f"{path}, frames {numbers[a]}-{numbers[b]}"

@@ -399,8 +399,9 @@ _FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
 # Which format reads which option (the options not listed for a format must be left at None).
 _OPTIONS = {
     ".csv": ("time_column", "time_unit", "columns"),
-    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap"),
-    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap"),
+    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap", "split_repetitions"),
+    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap",
+             "split_repetitions"),
     "ros": ("topics", "joints", "orientation", "split_topic", "split_gap"),
 }
 
@@ -408,7 +409,7 @@ _OPTIONS = {
 def _take_split(opts) -> dict:
     """The splitting options of a motion-capture take (:func:`._split.cut_take`)."""
     return dict(trim=bool(opts["trim"]), events=opts["split_events"], ranges=opts["split_frames"],
-                gap=opts["split_gap"])
+                gap=opts["split_gap"], repetitions=opts["split_repetitions"])
 
 
 def _check_readable(p: Path) -> None:
@@ -492,6 +493,7 @@ def load_demonstrations(
     split_frames=None,
     time_column: str | None = None,
     time_unit: str | None = None,
+    split_repetitions=None,
 ) -> Demonstrations:
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
@@ -564,6 +566,12 @@ def load_demonstrations(
         CSV: the unit of the time column.  Default: seconds for a ``time`` column; for another
         column, nanoseconds when its values are whole numbers more than 1000 apart (ROS stamps),
         else seconds; the choice is stated in ``Demonstrations.notes``.
+    split_repetitions : "auto" or float, optional
+        C3D, BVH: cut a continuous take (walking, hopping, serves one after the other) into the
+        repetitions of its movement: ``"auto"`` finds the period from the take's autocorrelation, a
+        number gives it in seconds (:func:`interprim.datasets._split.find_repetitions`); what was
+        found is stated in ``Demonstrations.notes``.  Pieces left by ``split_gap``, ``split_events``
+        or ``split_repetitions`` that are shorter than ``min_frames`` are left out with one warning.
     split_frames : str or sequence of (int, int), optional
         C3D, BVH: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive; C3D
         frames numbered as the capture software numbers them, BVH frames from 0).
@@ -605,7 +613,7 @@ def load_demonstrations(
     opts = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
                 topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
                 split_events=split_events or None, split_frames=split_frames, time_column=time_column,
-                time_unit=time_unit, columns=None)
+                time_unit=time_unit, columns=None, split_repetitions=split_repetitions)
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
@@ -623,12 +631,14 @@ def load_demonstrations(
     demos, times, labels = [], [], []
     cols = None
     meta = {}
+    notes = []
     all_bags = True  # bags are interpolated onto the resample_dt grid by their reader
     for f in files:
         is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
         all_bags = all_bags and is_bag
         d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames), opts,
                                      resample_dt=resample_dt if is_bag else None)
+        notes += m.get("notes", [])
         if cols is None:
             cols, first = c, f
             meta = m
@@ -655,7 +665,7 @@ def load_demonstrations(
             observed = select_columns(cols, names, where=f"{files[0]} ('observed')")
     ds = Demonstrations(
         demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
-        name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=list(meta.get("notes", [])),
+        name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=notes,
     )  # fmt: skip
     if columns is not None and opts["columns"] is None:
         ds = ds.select(columns)

@@ -272,7 +272,7 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
     t = np.arange(n_frames) / rate
     demos, times, names = cut_take(path, y, t, first + np.arange(n_frames), split, max_nan_gap=max_nan_gap,
                                    min_frames=min_frames, where_col=where_col, row_of=lambda i: f"frame {first + i}")
-    meta = {"units": ["m"] * len(columns)}
+    meta = {"units": ["m"] * len(columns), "notes": split.get("notes", [])}
     return demos, times, columns, names, meta
 
 

@@ -128,7 +128,7 @@ MIN_PERIODICITY = 0.3
 
 def _filled(y):
     """``y`` with missing values interpolated per column (for measuring the take, not for the demonstrations),
-    standardised; columns that are all missing or constant are left out."""
+    centred and divided by one overall scale; columns that are all missing are left out."""
     z = np.array(y, dtype=np.float64)
     keep = ~np.all(np.isnan(z), axis=0)
     z = z[:, keep]
@@ -138,8 +138,10 @@ def _filled(y):
         if bad.any():
             z[bad, d] = np.interp(idx[bad], idx[~bad], z[~bad, d])
     z -= z.mean(axis=0)
-    sd = z.std(axis=0)
-    return z[:, sd > 0] / sd[sd > 0]
+    # one scale for all columns (not one per column): a marker that barely moves must not weigh its noise as
+    # much as the movement of the others
+    rms = float(np.sqrt(np.mean(z**2))) if z.size else 0.0
+    return z / rms if rms > 0 else z[:, :0]
 
 
 def _period(z, rate, where):
@@ -165,10 +167,30 @@ def _period(z, rate, where):
     return P, float(ac[P])
 
 
+def _slow_moment(speed, P):
+    """The middle of the slowest moment of the first period of ``speed``: of the runs of frames slower than
+    10 % of the range above the minimum, the one with the lowest speed among those that start in the first
+    ``P`` frames and are not cut by either end of ``speed`` (a run cut by an end has an unknown middle)."""
+    low = speed <= speed.min() + 0.1 * (speed.max() - speed.min())
+    runs, i, n = [], 0, len(speed)
+    while i < n:
+        if not low[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and low[j + 1]:
+            j += 1
+        runs.append((i, j))
+        i = j + 1
+    inside = [(a, b) for a, b in runs if a > 0 and b < n - 1 and a < P] or [(a, b) for a, b in runs if a < P] or runs
+    a, b = min(inside, key=lambda r: speed[r[0]:r[1] + 1].min())
+    return (a + b) // 2
+
+
 def find_repetitions(y, rate, *, where: str, period=None):
     """Row intervals ``(i0, i1)`` of the repetitions of one movement in a continuous take, and a note.
 
-    The period is the highest peak of the take's autocorrelation (all columns, standardised) after it first
+    The period is the highest peak of the take's autocorrelation (all columns, centred) after it first
     drops below zero, or ``period`` seconds when given.  The first cut is the slowest frame of the first period
     (a landing, the pause between two serves); each next cut is the frame, between 0.6 and 1.4 periods after
     the previous one, whose surroundings (a window of a quarter period) best match those of the first cut
@@ -194,15 +216,7 @@ def find_repetitions(y, rate, *, where: str, period=None):
     k = max(1, P // 10)
     speed = np.convolve(speed, np.ones(k) / k, mode="same")
     w = max(2, P // 8)
-    first = speed[w:min(P + w, T - w)]
-    m = int(np.argmin(first))  # the slowest frame of the first period, then the middle of its slow valley
-    low = first <= first[m] + 0.1 * (first.max() - first[m])
-    a, b = m, m
-    while a > 0 and low[a - 1]:
-        a -= 1
-    while b < len(first) - 1 and low[b + 1]:
-        b += 1
-    c0 = w + (a + b) // 2
+    c0 = w + _slow_moment(speed[w:min(T - w, w + 2 * P)], P)
     win = sliding_window_view(z, 2 * w + 1, axis=0)  # (T - 2w, D, 2w + 1): window centred on frame i + w
     template = win[c0 - w]
     cuts = [c0]
@@ -211,7 +225,10 @@ def find_repetitions(y, rate, *, where: str, period=None):
         if a > b:
             break
         cost = ((win[a - w:b - w + 1] - template) ** 2).sum(axis=(1, 2))
-        cuts.append(a + int(np.argmin(cost)))
+        best = a + int(np.argmin(cost))
+        if best == b and b < cuts[-1] + int(np.ceil(1.4 * P)):
+            break  # the best match is where the take ends: the true cut may lie beyond it
+        cuts.append(best)
     segs = [(c, d - 1) for c, d in zip(cuts[:-1], cuts[1:])]
     if not segs:
         raise DataFileError(f"{where}: split_repetitions found less than one whole repetition (period "

@@ -638,7 +638,7 @@ def load_demonstrations(
         all_bags = all_bags and is_bag
         d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames), opts,
                                      resample_dt=resample_dt if is_bag else None)
-        notes += m.get("notes", [])
+        notes += [n for n in m.get("notes", []) if n not in notes]  # once per cause, not once per file
         if cols is None:
             cols, first = c, f
             meta = m

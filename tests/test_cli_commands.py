@@ -226,3 +226,24 @@ def test_demo_that_fails_leaves_no_files(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         main(["demo", "--quiet", "--out", str(tmp_path / "demo")])
     assert _leftovers(tmp_path) == ["demo", "demo/notes.txt"]
+
+
+# ----------------------------------------------------------------------------- numbers that cannot be given
+def test_equal_length_demonstrations_give_no_phase_ratio_but_a_reason():
+    """With demonstrations of equal length the clock's phase error is ~1e-17: the ratio to it was printed as
+    1034665772332312.12; now it is left out, and the table and the verdict say why."""
+    from interprim.evaluation.realtime import markdown_table, summarise_realtime, verdict
+
+    recs = []
+    for j in range(4):
+        recs.append({"method": "clock", "phase_err": 1e-17 * (j + 1), "rt_ctrl": 0.2, "rt_obs": 0.1})
+        recs.append({"method": "ip", "phase_err": 0.01, "rt_ctrl": 0.1, "rt_obs": 0.05})
+    summary = summarise_realtime(recs)
+    assert "phase_err_vs_clock" not in summary["ip"]
+    assert summary["ip"]["rt_ctrl_vs_clock"] == pytest.approx(0.5)
+    table = markdown_table(summary)
+    assert "e+" not in table and "1034665772332312" not in table
+    assert "Phase error x clock: not given, the clock's phase error is 2e-17" in table
+    assert "timing cannot be compared with the clock's" in verdict(summary, "ip")
+    recs.append({"method": "clock", "phase_err": 0.02, "rt_ctrl": 0.2, "rt_obs": 0.1})  # unequal: a ratio
+    assert summarise_realtime(recs)["ip"]["phase_err_vs_clock"] == pytest.approx(0.01 / (0.02 / 5), rel=1e-9)

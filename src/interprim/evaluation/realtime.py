@@ -338,6 +338,10 @@ class _Offset:
         return self.prefixes(j - self.n_train, k)
 
 
+#: Below this phase error (a fraction of the movement) the clock is exact: no ratio to it is given (equal lengths).
+PHASE_ERROR_FLOOR = 1e-6
+
+
 def summarise_realtime(records) -> dict:
     """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
     the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
@@ -361,6 +365,11 @@ def summarise_realtime(records) -> dict:
             for key in ("rt_ctrl", "rt_obs", "phase_err"):
                 if key in clock and clock[key] > 0:
                     out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
+            if clock.get("phase_err", np.nan) <= PHASE_ERROR_FLOOR:  # a ratio to ~0 is a meaningless huge number
+                out[m].pop("phase_err_vs_clock", None)
+                out[m]["phase_err_vs_clock_why"] = (
+                    f"the clock's phase error is {clock['phase_err']:.1g}: the demonstrations last (almost) equally "
+                    "long, so elapsed time alone gives the phase and a ratio to it says nothing")
         if oracle and oracle.get("rt_ctrl", 0) > 0:
             out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
     prior = whole.get("prior")
@@ -418,6 +427,8 @@ def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
     ph = m.get("phase_err_vs_clock", float("nan"))
     timing = (f"its timing is {100 * (1 - ph):.0f} % closer to the truth than the clock's" if ph < 1 - threshold
               else "its timing is no better than the clock's")
+    if "phase_err_vs_clock_why" in m:
+        timing = f"its timing cannot be compared with the clock's ({m['phase_err_vs_clock_why']})"
     if r <= 1 - threshold:
         return (f"conditioning on the human improves the robot's real-time prediction by {100 * (1 - r):.0f} % "
                 f"over the clock (RMSE {m['rt_ctrl']:.4g} vs {summary['clock']['rt_ctrl']:.4g}); {timing}.")
@@ -446,6 +457,9 @@ def markdown_table(summary) -> str:
             x = v.get(key, float("nan"))
             cells.append("—" if not np.isfinite(x) else f"{x:.{dg}f}")
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    why = next((v["phase_err_vs_clock_why"] for v in summary.values() if "phase_err_vs_clock_why" in v), None)
+    if why:
+        lines += ["", f"Phase error x clock: not given, {why}."]
     return "\n".join(lines)
 
 

@@ -513,7 +513,8 @@ def load_demonstrations(
         A file, a rosbag2 folder or a folder of files.
     columns : sequence of str or int, or str, optional
         Columns to keep, in this order (names, indices or a comma-separated string);
-        default all data columns.  Unknown names raise ``DataFileError``.
+        default all data columns.  Unknown names raise ``DataFileError``.  In CSV files only
+        these columns are parsed, so the others may hold text.
     dt : float, optional
         Sampling interval in seconds for files without time stamps (a CSV without a
         ``time`` column, an NPZ without ``time_`` keys or ``dt``).  Ignored when the file

@@ -251,7 +251,7 @@ def test_c3d_random_damage_never_escapes_as_another_error(tmp_path):
     good = write_c3d(tmp_path / "g.c3d", handover(20), LABELS).read_bytes()
     rnd = random.Random(7)
     outcomes = set()
-    for k in range(60):
+    for k in range(24):  # each copy is read in a child process (about 0.15 s)
         b = bytearray(good)
         if k % 3 == 0:
             b = b[: rnd.randrange(len(b))]

@@ -27,8 +27,8 @@ __all__ = ["read_c3d", "LENGTH_UNITS"]
 
 #: Seconds the child process may take to read a C3D file, plus 2 s per MB of file.
 READ_TIMEOUT = 20.0
-#: The child reading a C3D file may use at most this many bytes of memory, or 50 times the file's size.
-READ_MEMORY = 2 * 1024**3
+#: The child reading a C3D file may use at most this much address space (bytes), or 50 times the file's size.
+READ_MEMORY = 1024**3
 
 #: Metres per unit, for C3D ``POINT:UNITS`` and BVH ``length_unit`` values (lower case, stripped).
 LENGTH_UNITS = {
@@ -103,8 +103,10 @@ def _run_reader(path: Path, size: int):
     with tempfile.TemporaryDirectory(prefix="interprim-c3d-") as tmp:
         out = os.path.join(tmp, "c3d.npz")
         try:
+            # one BLAS thread: OpenBLAS reserves address space per thread, which the memory cap counts
+            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
             r = subprocess.run([sys.executable, "-I", "-c", _CHILD, str(path), out, str(memory)],
-                               capture_output=True, timeout=timeout, stdin=subprocess.DEVNULL)
+                               capture_output=True, timeout=timeout, stdin=subprocess.DEVNULL, env=env)
         except subprocess.TimeoutExpired:
             raise DataFileError(
                 f"{path}: not a readable C3D file (the reader did not finish within {timeout:.0f} s; a damaged "

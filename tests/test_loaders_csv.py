@@ -48,6 +48,9 @@ def test_rostopic_echo_p_export_loads_directly(tmp_path, capsys):
     np.testing.assert_allclose(np.diff(ds.times[0]), step * 1e-9, rtol=0, atol=1e-6)
     assert ds.dt == pytest.approx(0.02, rel=1e-6)
     assert len(ds.notes) == 1 and "'%time'" in ds.notes[0] and "nanoseconds" in ds.notes[0]
+    # a fallback dt (what predict passes: the model's) does not override the export's own stamps
+    with_dt = load_demonstrations(tmp_path / "human.csv", dt=0.5)
+    np.testing.assert_allclose(with_dt.times[0], ds.times[0])
     # the header stamp instead of the receive time; the unit said explicitly gives the same
     by_stamp = load_demonstrations(tmp_path / "human.csv", time_column="field.header.stamp")
     np.testing.assert_allclose(by_stamp.times[0] - by_stamp.times[0][0], np.arange(30) * 0.02, atol=1e-6)

@@ -179,9 +179,9 @@ def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_un
             tname = time_column
         elif TIME in index:
             tname = TIME
-        elif dt is None:
+        elif dt is None or ros:  # a ROS export's own stamps win over a fallback dt (predict passes the model's)
             tname = next((c for c in TIME_CANDIDATES if c in index), None)
-            if tname is None:
+            if tname is None and dt is None:
                 raise DataFileError(
                     f"{path}: missing column 'time' (seconds); the header has {n_cols} columns: {shown_names(header)}. "
                     "Name the time column with time_column= (--time-column), add a time column, or pass dt for "

@@ -7,10 +7,9 @@ four others from the first half of A's movement.  Needs ``pip install 'interprim
 """
 
 import tempfile
-import warnings
 from pathlib import Path
 
-import c3d
+import ezc3d
 import numpy as np
 
 import interprim as ip
@@ -29,15 +28,15 @@ def write_take(path, rng, rate=100.0):
     a0, b0 = np.array([200.0, 150.0, 900.0]), np.array([1200.0, -150.0, 900.0])
     a = a0 + s[:, None] * (meet - a0)
     b = b0 + s[:, None] * (meet + [80.0, 0, 0] - b0)
-    w = c3d.Writer(point_rate=rate, point_units="mm")
-    for xyz in np.stack([a, a - [0, 0, 80], b, b - [0, 0, 80]], axis=1):
-        pts = np.zeros((4, 5), np.float32)
-        pts[:, :3] = xyz
-        w.add_frames([(pts, np.zeros((0, 0)))])
-    w.set_point_labels(LABELS)
-    with warnings.catch_warnings(), open(path, "wb") as fh:
-        warnings.simplefilter("ignore")  # "no analog data"
-        w.write(fh)
+    xyz = np.stack([a, a - [0, 0, 80], b, b - [0, 0, 80]], axis=1)  # (T, 4 markers, 3)
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [rate]
+    c["parameters"]["POINT"]["LABELS"]["value"] = LABELS
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    pts = np.ones((4, len(LABELS), T))  # x, y, z, 1 per marker and frame
+    pts[:3] = np.transpose(xyz, (2, 1, 0))
+    c["data"]["points"] = pts
+    c.write(str(path))
 
 
 def main():

@@ -8,6 +8,20 @@ from interprim.model_selection.prefixes import Prefixes, causal_prefix
 from interprim.evaluation.realtime import RealTimeConfig, realtime_sweep
 
 
+def _nuisi_file():
+    """The NuiSI file of the shared data folder, or None on a clone without it (as the other data tests)."""
+    from interprim.datasets import data_dir
+
+    try:
+        f = data_dir() / "nuisi_v1" / "nuisi_v1_segmented.npz"
+    except FileNotFoundError:  # DataNotFoundError is a FileNotFoundError
+        return None
+    return f if f.is_file() else None
+
+
+needs_nuisi = pytest.mark.skipif(_nuisi_file() is None, reason="NuiSI data (../shared/data/nuisi_v1) not found")
+
+
 def _raw_set(rng, n=4, dt=0.05):
     """Demonstrations interpolated onto a 20 Hz grid from irregular ~9 Hz raw samples (like NuiSI)."""
     demos, times, raw = [], [], []
@@ -37,6 +51,7 @@ def test_prefix_never_uses_a_sample_after_its_end_time(rng):
             np.testing.assert_allclose(got[inside], ds.demos[j][:k][inside][:, :2], rtol=0, atol=1e-12)
 
 
+@needs_nuisi
 def test_full_recording_interpolation_looks_ahead_on_nuisi():
     """The look-ahead is real on NuiSI: the uncut interpolation's last frame differs from the causal one,
     and perturbing the raw samples after the cut changes the former but not the latter."""
@@ -130,6 +145,7 @@ def test_take_keeps_raw_samples_and_labels_of_the_chosen_recordings(rng):
         ds.take([0, 9])
 
 
+@needs_nuisi
 def test_development_only_sweep_never_loads_the_holdout():
     """``EvalConfig(development_only=True)``: the NuiSI tasks hold the first two thirds of the recordings."""
     from interprim.evaluation.nested import split_holdout

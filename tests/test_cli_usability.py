@@ -170,7 +170,7 @@ def test_fit_prints_what_it_chose(recordings, tmp_path, capsys):
     out = capsys.readouterr().out
     model = ip.InteractionPrimitive.load(path)
     sel = model.selection_
-    assert f"phase:          {model.phase_method_} (chosen by 'auto'" in out
+    assert f"phase:          {model.phase_method_} (chosen by 'cv'" in out
     assert f"sigma2 {sel['sigma2']:.3g} (5-fold cross-validation)" in out
     assert f"shrinkage {sel['shrinkage']:.2g}, cross-agent damping {sel['cross_shrinkage']:.2g}" in out
     assert (f"held-out error: controlled agent {sel['cv_error']:.3g} vs {sel['cv_error_prior']:.3g} for the prior "

@@ -13,43 +13,49 @@ import pytest
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.core.errors import DataFileError, DataFileWarning, MissingExtraError
 
-import c3d  # the [mocap] extra, part of the test extra
+import ezc3d  # the [mocap] extra, part of the test extra
 
 
 # ----------------------------------------------------------------------------- writers
-def write_c3d(path, xyz, labels, *, rate=100.0, units="mm", first_frame=1, lost=None, zeroed=None, angles=()):
-    """Write markers ``xyz`` (T, M, 3) in ``units``; ``lost``/``zeroed`` (T, M) mark missing markers
-    (residual -1, or coordinates written as 0), ``angles`` adds model-output points listed in POINT:ANGLES."""
+def write_c3d(path, xyz, labels, *, rate=100.0, units="mm", first_frame=1, lost=None, zeroed=None, angles=(),
+              analog=0, point_units=None):
+    """Write markers ``xyz`` (T, M, 3) in ``units`` with ezc3d; ``lost``/``zeroed`` (T, M) mark missing markers
+    (residual -1, or coordinates written as 0), ``angles`` adds model-output points listed in POINT:ANGLES,
+    ``analog`` adds that many analog channels (10 samples per frame; with one channel ezc3d stores ANALOG:SCALE
+    and ANALOG:OFFSET as single values without dimensions, as in the kinetics-toolkit sample files), ``point_units`` writes POINT:UNITS as
+    these strings (one per point, as Optotrak exports do) instead of ``units``."""
     T, M, _ = xyz.shape
-    w = c3d.Writer(point_rate=rate, point_units=units)
     n_pts = M + len(angles)
-    for t in range(T):
-        p = np.zeros((n_pts, 5), np.float32)
-        p[:M, :3] = xyz[t]
-        p[M:, :3] = 45.0  # an 'angle' in degrees: must not be read as a marker
-        if lost is not None:
-            p[:M, 3][lost[t]] = -1
-        if zeroed is not None:
-            p[:M, :3][zeroed[t]] = 0.0
-        w.add_frames([(p, np.zeros((0, 0)))])
-    all_labels = list(labels) + list(angles)
-    w.set_point_labels(all_labels)
+    c = ezc3d.c3d()
+    pts = np.zeros((4, n_pts, T))
+    pts[3] = 1.0
+    pts[:3, :M, :] = np.transpose(xyz, (2, 1, 0))
+    pts[:3, M:, :] = 45.0  # an 'angle' in degrees: must not be read as a marker
+    res = np.zeros((1, n_pts, T))
+    if lost is not None:
+        res[0, :M, :][lost.T] = -1.0
+    if zeroed is not None:
+        pts[:3, :M, :][:, zeroed.T] = 0.0
+    c["parameters"]["POINT"]["RATE"]["value"] = [rate]
+    c["parameters"]["POINT"]["LABELS"]["value"] = list(labels) + list(angles)
+    c["parameters"]["POINT"]["UNITS"]["value"] = list(point_units) if point_units is not None else [units]
+    c["data"]["points"] = pts
+    c["data"]["meta_points"] = {"residuals": res, "camera_masks": np.zeros((7, n_pts, T), dtype=bool)}
+    c["header"]["points"]["first_frame"] = first_frame - 1  # ezc3d counts from 0
     if angles:
-        s, size = c3d.Writer.pack_labels(list(angles))
-        w.point_group.add_str("ANGLES", "model outputs", s, size, len(angles))
-    w.set_start_frame(first_frame)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # 'no analog data'
-        with open(path, "wb") as fh:
-            w.write(fh)
+        c.add_parameter("POINT", "ANGLES", list(angles))
+    if analog:
+        c["parameters"]["ANALOG"]["RATE"]["value"] = [rate * 10]
+        c["parameters"]["ANALOG"]["LABELS"]["value"] = [f"F{i}" for i in range(analog)]
+        c["data"]["analogs"] = np.zeros((1, analog, T * 10))
+    c.write(str(path))
     return path
 
 
 def _data_start(path):
-    """The byte at which the file's frames start."""
-    with open(path, "rb") as fh, warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # 'no analog data'
-        return (c3d.Reader(fh).header.data_block - 1) * 512
+    """The byte at which the file's frames start (header word 9: the first block of the data section)."""
+    b = path.read_bytes()
+    return (int.from_bytes(b[16:18], "little") - 1) * 512
 
 
 def handover(T=40, seed=0):
@@ -180,7 +186,8 @@ def test_c3d_header_announcing_more_frames_than_held_keeps_the_complete_ones(tmp
     write_c3d(tmp_path / "good.c3d", xyz, LABELS, first_frame=1)
     good = (tmp_path / "good.c3d").read_bytes()
     data_start = _data_start(tmp_path / "good.c3d")
-    frame_bytes = (len(good) - data_start) // 40
+    frame_bytes = 4 * 4 * len(LABELS)  # x, y, z, residual of each marker, as float32
+    assert len(good) >= data_start + 40 * frame_bytes
     (tmp_path / "optotrak.c3d").write_bytes(good[: data_start + 29 * frame_bytes + extra])
     with pytest.warns(DataFileWarning, match=r"optotrak\.c3d: truncated file: the header announces frames 1-40 "
                                              r"\(40\) .*\(29 complete frames\); keeping frames 1-29, 11 announced "
@@ -191,11 +198,60 @@ def test_c3d_header_announcing_more_frames_than_held_keeps_the_complete_ones(tmp
     np.testing.assert_allclose(ds.times[0], np.arange(29) / 100.0)
 
 
+def test_c3d_analog_scale_without_dimensions_like_kinetics_toolkit_files(tmp_path):
+    """One analog channel: ANALOG:SCALE and ANALOG:OFFSET are stored as single values without dimensions (the
+    kinetics-toolkit sample files); the pure-Python c3d package refused such files ('SCALE: cannot get value as
+    float32 array!'). The markers are read, the analog data ignored."""
+    xyz = handover(30)
+    path = write_c3d(tmp_path / "tennis_serve.c3d", xyz, LABELS, analog=1)
+    b = path.read_bytes()
+    i = b.index(b"SCALE", (b[0] - 1) * 512)
+    assert b[i + 5 + 3] == 0  # after the name and the 2-byte offset: the type, then 0 dimensions
+    ds = load_c3d(path)
+    assert ds.demos[0].shape == (30, 12)
+    np.testing.assert_allclose(ds.demos[0], f32(xyz).reshape(30, 12) * 1e-3)
+    path2 = write_c3d(tmp_path / "two.c3d", xyz, LABELS, analog=2)  # two channels: one value each
+    np.testing.assert_allclose(load_c3d(path2).demos[0], ds.demos[0])
+
+
+def test_c3d_point_units_one_string_per_point_like_optotrak(tmp_path):
+    """POINT:UNITS with one (padded) string per point, in a file whose header announces more frames than it
+    holds: the complete frames are kept, in metres; differing units per point are converted point by point."""
+    xyz = handover(40)
+    path = write_c3d(tmp_path / "full.c3d", xyz, LABELS, point_units=["mm  "] * 4)
+    good = path.read_bytes()
+    (tmp_path / "optotrak.c3d").write_bytes(good[: _data_start(path) + 29 * 4 * 4 * 4 + 5])
+    with pytest.warns(DataFileWarning, match=r"29 complete frames\); keeping frames 1-29"):
+        ds = load_c3d(tmp_path / "optotrak.c3d")
+    np.testing.assert_allclose(ds.demos[0], f32(xyz[:29]).reshape(29, 12) * 1e-3)
+    mixed = write_c3d(tmp_path / "mixed.c3d", xyz, LABELS, point_units=["mm", "mm", "cm", "m"])
+    got = load_c3d(mixed).demos[0].reshape(40, 4, 3)
+    for j, scale in enumerate([1e-3, 1e-3, 1e-2, 1.0]):
+        np.testing.assert_allclose(got[:, j], f32(xyz[:, j]) * scale)
+    bad = write_c3d(tmp_path / "bad.c3d", xyz, LABELS, point_units=["mm", "mm", "furlong", "mm"])
+    with pytest.raises(DataFileError, match=r"bad\.c3d: unknown length unit 'furlong' \(POINT:UNITS of point 3\)"):
+        load_c3d(bad)
+
+
+def test_c3d_reader_that_does_not_finish_is_a_data_error(tmp_path, monkeypatch):
+    """A damaged file on which the reader runs too long (or dies) is reported, not waited for for ever."""
+    import interprim.datasets.mocap_c3d as m
+
+    path = write_c3d(tmp_path / "slow.c3d", handover(10), LABELS)
+    monkeypatch.setattr(m, "_CHILD", "import time; time.sleep(30)")
+    monkeypatch.setattr(m, "READ_TIMEOUT", 0.5)
+    with pytest.raises(DataFileError, match=r"slow\.c3d: not a readable C3D file \(the reader did not finish"):
+        load_c3d(path)
+    monkeypatch.setattr(m, "_CHILD", "import os; os.abort()")
+    with pytest.raises(DataFileError, match=r"slow\.c3d: not a readable C3D file .*signal 6"):
+        load_c3d(path)
+
+
 def test_c3d_random_damage_never_escapes_as_another_error(tmp_path):
     good = write_c3d(tmp_path / "g.c3d", handover(20), LABELS).read_bytes()
     rnd = random.Random(7)
     outcomes = set()
-    for k in range(60):
+    for k in range(24):  # each copy is read in a child process (about 0.15 s)
         b = bytearray(good)
         if k % 3 == 0:
             b = b[: rnd.randrange(len(b))]
@@ -223,8 +279,8 @@ def test_c3d_without_the_extra_names_it(monkeypatch, tmp_path):
     real = builtins.__import__
 
     def fake(name, *args, **kwargs):
-        if name == "c3d":
-            raise ImportError("No module named 'c3d'")
+        if name == "ezc3d":
+            raise ImportError("No module named 'ezc3d'")
         return real(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", fake)

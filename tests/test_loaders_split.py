@@ -1,9 +1,10 @@
 """Trimming and splitting one long motion-capture take (C3D, BVH) into demonstrations, and the shared rule.
 
-The takes are written here (C3D with the ``c3d`` package, BVH as text); every piece read back is compared with the
+The takes are written here (C3D with ``ezc3d``, BVH as text); every piece read back is compared with the
 frames that were written for it.
 """
 
+import re
 import warnings
 
 import numpy as np
@@ -14,35 +15,19 @@ from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
 from interprim.core.errors import DataFileError
 
-import c3d
+import ezc3d
 
 
 def add_events(path, events, rate):
     """Rewrite the C3D file ``path`` with an EVENT group: ``events`` is a list of (label, time in s)."""
-    with open(path, "rb") as fh, warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # 'no analog data'
-        r = c3d.Reader(fh)
-        frames = [p.copy() for _, p, _ in r.read_frames(copy=True)]
-        labels = [s.strip() for s in r.get("POINT:LABELS").string_array]
-        first = int(r.first_frame)
-    w = c3d.Writer(point_rate=rate, point_units="mm")
-    for p in frames:
-        w.add_frames([(p.astype(np.float32), np.zeros((0, 0)))])
-    w.set_point_labels(labels)
-    w.set_start_frame(first)
-    g = w.add_group(9, "EVENT", "events")
+    c = ezc3d.c3d(str(path))
     n = len(events)
-    g.add("USED", "", 2, "<h", n)
-    times = np.array([[t // 60, t % 60] for _, t in events], np.float32)  # (minutes, seconds), dims [2, n]
-    g.add_param("TIMES", desc="", bytes_per_element=4, bytes=times.tobytes(), dimensions=[2, n])
-    s, size = c3d.Writer.pack_labels([lab for lab, _ in events])
-    g.add_str("LABELS", "", s, size, n)
-    s, size = c3d.Writer.pack_labels(["Right"] * n)
-    g.add_str("CONTEXTS", "", s, size, n)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with open(path, "wb") as fh:
-            w.write(fh)
+    times = np.array([[t // 60 for _, t in events], [t % 60 for _, t in events]])  # (minutes, seconds), dims [2, n]
+    c.add_parameter("EVENT", "USED", [n])
+    c.add_parameter("EVENT", "TIMES", times)
+    c.add_parameter("EVENT", "LABELS", [lab for lab, _ in events])
+    c.add_parameter("EVENT", "CONTEXTS", ["Right"] * n)
+    c.write(str(path))
     return path
 
 
@@ -197,3 +182,88 @@ def test_cli_fit_on_one_take_split_by_events_and_predict_a_fraction(tmp_path, ca
                            "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     assert "fitted 3 demonstrations" in out
+
+
+# ----------------------------------------------------------------------------- repetitions in a continuous take
+def periodic_take(n_reps=6, seed=0, rate=100.0):
+    """A continuous take of ``n_reps`` repetitions (hops or steps) of varying length, without pauses: each
+    repetition starts at rest for an instant (a landing: zero speed, no still frames), and those instants are the
+    known cut points (millimetres, 4 markers, 0.5 mm of marker noise)."""
+    rng = np.random.default_rng(seed)
+    lengths = rng.integers(85, 116, n_reps)  # 0.85-1.15 s per repetition
+
+    def rep(n, first=0, last=None):
+        u = np.arange(n) / n
+        return (2 * np.pi * u - np.sin(2 * np.pi * u))[first:last]  # d(phase)/du = 0 at u = 0
+
+    lead = 37  # the take starts inside a repetition ...
+    parts, starts, pos = [rep(100, 100 - lead)], [], lead
+    for n in lengths:
+        starts.append(pos)
+        parts.append(rep(n))
+        pos += n
+    parts.append(rep(100, 0, 30))  # ... and ends inside one
+    ph = np.concatenate(parts)
+    base = np.stack([np.sin(ph) * 120, np.cos(ph) * 60, 40 * np.sin(2 * ph) + 300 * (1 - np.cos(ph))], axis=1)
+    xyz = np.stack([base + [0, 0, 900], base * 0.5 + [200, 0, 500], base * [1, -1, 1] + [0, 300, 900],
+                    base * 0.3 + [400, 300, 100]], axis=1)
+    xyz += rng.normal(0, 0.5, xyz.shape)
+    return xyz, np.array(starts), int(pos)
+
+
+def test_split_repetitions_finds_the_cuts_of_a_continuous_take(tmp_path):
+    """--split-gap finds no pause in a take without pauses; split_repetitions cuts it into its repetitions,
+    within a few frames of the true cut points, and says what it found."""
+    from interprim.datasets._split import find_repetitions
+
+    xyz, starts, end = periodic_take()
+    path = write_c3d(tmp_path / "hops.c3d", xyz, LABELS)
+    whole = load_c3d(path, split_gap=0.3)
+    assert len(whole) == 1  # no pause: no cut (the case that failed)
+    ds = load_c3d(path, split_repetitions="auto")
+    got = np.array([round(float(lab.split("@")[1][:-1]) * 100) for lab in ds.labels])  # '@0.370s' -> frame 37
+    # every whole repetition, cut within 3 frames (30 ms) of its true start
+    assert len(ds) == len(starts), (got, starts)
+    np.testing.assert_allclose(got, starts, atol=3)
+    assert all(abs(len(d) - np.median(np.diff(starts))) < 0.3 * np.median(np.diff(starts)) for d in ds.demos)
+    assert len(ds.notes) == 1 and "split_repetitions: period" in ds.notes[0]
+    period = float(ds.notes[0].split("period ")[1].split(" s")[0])
+    assert 0.9 < period < 1.1
+    # the period given in seconds gives the same cuts
+    given = load_c3d(path, split_repetitions=1.0)
+    assert given.labels == ds.labels
+    # a take without repetitions is a clear error
+    still = np.cumsum(np.random.default_rng(1).normal(0, 1, (300, 4, 3)), axis=0)
+    with pytest.raises(DataFileError, match="split_repetitions found no repeating movement"):
+        find_repetitions(still.reshape(300, 12), 100.0, where="walk.c3d")
+
+
+def test_split_repetitions_on_a_bvh_hop_take(tmp_path):
+    """A BVH take of hops without pauses (every channel a function of the hop's phase): cut at the landings."""
+    from test_loaders_mocap import N_CH
+
+    xyz, starts, end = periodic_take(n_reps=5, seed=2)
+    feats = xyz.reshape(len(xyz), -1)
+    rows = np.stack([feats[:, k % feats.shape[1]] / (10 + k) for k in range(N_CH)], axis=1)  # degrees, cm
+    bvh = write_bvh(tmp_path / "hops.bvh", rows, frame_time=0.01)
+    ds = load_bvh(bvh, mode="angles", split_repetitions="auto")
+    got = np.array([round(float(lab.split("@")[1][:-1]) * 100) for lab in ds.labels])
+    assert len(ds) == len(starts), (got, starts)
+    np.testing.assert_allclose(got, starts, atol=3)
+    assert "split_repetitions: period" in ds.notes[0]
+
+
+def test_pieces_too_short_after_splitting_are_dropped_with_one_warning(tmp_path):
+    """Two events 3 frames apart leave a 3-frame piece: left out with one warning, not a hard error."""
+    from interprim.core.errors import DataFileWarning
+
+    xyz, starts = long_take(reps=2, still=50)
+    path = add_events(write_c3d(tmp_path / "ev.c3d", xyz, LABELS),
+                      [("Foot Strike", 0.5), ("Foot Strike", 1.0), ("Foot Strike", 1.03), ("Foot Strike", 2.0)], 100.0)
+    with pytest.warns(DataFileWarning) as rec:
+        ds = load_c3d(path, split_events=True)
+    msgs = [str(w.message) for w in rec if issubclass(w.category, DataFileWarning)]
+    assert len(msgs) == 1
+    assert re.search(r"ev\.c3d: 1 piece\(s\) shorter than 5 frames left out \(frames 101-103\); "
+                     r"3 demonstrations kept", msgs[0]), msgs
+    assert [len(d) for d in ds.demos] == [50, 97, len(xyz) - 200]

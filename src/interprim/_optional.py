@@ -28,7 +28,7 @@ EXTRA_OF = {
     "gmr": "bench",
     "dask": "dask",
     "distributed": "dask",
-    "c3d": "mocap",
+    "ezc3d": "mocap",
     "rosbags": "ros",
     "cyclonedds": "ros2",
     "mujoco": "mujoco",

@@ -2,13 +2,71 @@
 
 from __future__ import annotations
 
+import contextlib
+
 from ..core.errors import InterprimError
 
-__all__ = ["CommandError"]
+__all__ = ["CommandError", "output_when_done"]
 
 
 class CommandError(InterprimError, ValueError):
     """A command-line argument is invalid or a step of a command failed (reported in one line)."""
+
+
+@contextlib.contextmanager
+def output_when_done(path, *, folder: bool = False):
+    """Write a command's output only if the command succeeds.
+
+    Yields a temporary path in the same folder as ``path`` (a hidden name, same suffix); the command writes
+    there.  When the block ends without an exception the file is moved onto ``path`` with ``os.replace``
+    (atomic on one file system), or, for ``folder=True``, each file written into the temporary folder is moved
+    into ``path`` (created if needed; files already in it that the command did not write are kept).  When the
+    block raises (an error, Ctrl-C), the temporary file or folder is removed and ``path`` is left as it was.
+    """
+    import os
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    final = Path(path)
+    parent = final.parent if str(final.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    if folder:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=parent))
+    else:
+        fd, name = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=".tmp" + final.suffix, dir=parent)
+        os.close(fd)
+        tmp = Path(name)
+    try:
+        yield tmp
+        if folder:
+            final.mkdir(parents=True, exist_ok=True)
+            for src in sorted(tmp.rglob("*")):
+                if src.is_dir():
+                    continue
+                dst = final / src.relative_to(tmp)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(src, dst)
+        else:
+            os.replace(tmp, final)
+    finally:
+        if folder:
+            shutil.rmtree(tmp, ignore_errors=True)
+        elif tmp.exists():
+            tmp.unlink()
+
+
+def moved(paths, tmp, final) -> list:
+    """``paths`` written under the temporary folder ``tmp`` as they are named once moved into ``final``."""
+    from pathlib import Path
+
+    out = []
+    for p in paths:
+        try:
+            out.append(Path(final) / Path(p).relative_to(tmp))
+        except ValueError:
+            out.append(p)
+    return out
 
 
 def _split_cols(values):
@@ -55,6 +113,9 @@ def add_recording_args(p, what="DEMOS") -> None:
     g.add_argument("--split-frames", metavar="A-B,C-D",
                    help="C3D/BVH: the demonstrations as frame ranges (inclusive; C3D frames as the capture numbers "
                         "them, BVH frames from 0)")
+    g.add_argument("--split-repetitions", nargs="?", const="auto", default=None, metavar="PERIOD",
+                   help="C3D/BVH: cut a continuous take (walking, hopping, repeated serves) into the repetitions of "
+                        "its movement; the period is found from the take (or give it in seconds)")
     g.add_argument("--trim", action="store_true",
                    help="C3D/BVH: drop the leading and trailing frames in which a marker is missing (0,0,0) or a "
                         "channel is nan")
@@ -70,6 +131,13 @@ def add_recording_args(p, what="DEMOS") -> None:
                    help="BVH: the file's length unit (positions are converted to metres); C3D: overrides the file's "
                         "POINT:UNITS (C3D positions are always converted to metres)")
     g.add_argument("--end-sites", action="store_true", help="BVH positions: also the End Site points (<joint>_end_x)")
+    c = p.add_argument_group("CSV files (also rostopic echo -p and ros2 bag / PlotJuggler CSV exports)")
+    c.add_argument("--time-column", metavar="NAME",
+                   help="CSV: the column of time stamps (default 'time', else the first of %%time, __time, timestamp, "
+                        "Time, field.header.stamp, header.stamp)")
+    c.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
+                   help="CSV: the time column's unit (default: seconds for 'time'; for another column nanoseconds "
+                        "when its values are whole numbers more than 1000 apart, as ROS stamps, else seconds)")
 
 
 def recording_options(args) -> dict:
@@ -83,13 +151,70 @@ def recording_options(args) -> dict:
         split_events=(True if args.split_events == "*" else _split_cols([args.split_events]))
         if args.split_events is not None else None,
         split_frames=args.split_frames,
+        split_repetitions=_repetitions(getattr(args, "split_repetitions", None)),
         orientation=bool(args.orientation),
         joints=_split_cols([args.joints]) if args.joints else None,
         markers=_split_cols([args.markers]) if args.markers else None,
         bvh_mode=args.bvh_mode,
         length_unit=args.length_unit,
         end_sites=bool(args.end_sites),
+        time_column=getattr(args, "time_column", None),
+        time_unit=getattr(args, "time_unit", None),
     )
+
+
+#: (attribute, flag, default) of every option that changes which data a command reads or how it is fitted, shared
+#: by ``evaluate`` and ``fit``: :func:`data_flags`.
+DATA_OPTIONS = (
+    ("dt", "--dt", None), ("resample", "--resample", None), ("max_nan_gap", "--max-nan-gap", 0),
+    ("topics", "--topics", None), ("split_topic", "--split-topic", None), ("split_gap", "--split-gap", None),
+    ("split_events", "--split-events", None), ("split_frames", "--split-frames", None), ("trim", "--trim", False),
+    ("orientation", "--orientation", False), ("joints", "--joints", None), ("markers", "--markers", None),
+    ("bvh_mode", "--bvh-mode", None), ("length_unit", "--length-unit", None), ("end_sites", "--end-sites", False),
+    ("time_column", "--time-column", None), ("time_unit", "--time-unit", None),
+    ("split_repetitions", "--split-repetitions", None),
+    ("smoothing_window", "--smoothing-window", None), ("n_basis", "--n-basis", 20),
+)
+
+
+def data_flags(args) -> list:
+    """The command-line flags (a list of words) that make another command read the data as ``args`` did."""
+    words = []
+    for attr, flag, default in DATA_OPTIONS:
+        value = getattr(args, attr, default)
+        if value is None or value == default:
+            continue
+        if value is True:
+            words.append(flag)
+        elif flag == "--split-events" and value == "*":
+            words.append(flag)  # every event (nargs='?' without a value)
+        else:
+            words += [flag, str(value)]
+    return words
+
+
+def shell_words(words) -> str:
+    """``words`` as one shell command line (each quoted when it needs to be)."""
+    import shlex
+
+    return " ".join(shlex.quote(str(w)) for w in words)
+
+
+def _repetitions(text):
+    if text is None or text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise CommandError(f"--split-repetitions takes a period in seconds or nothing (found from the take), "
+                           f"got {text!r}") from None
+    return _positive(value, "--split-repetitions")
+
+
+def print_notes(ds) -> None:
+    """What the reader decided for the user to know (``Demonstrations.notes``), one line each."""
+    for note in getattr(ds, "notes", ()) or ():
+        print(f"note: {note}")
 
 
 def expand_columns(columns, names, flag: str) -> list:

@@ -103,11 +103,14 @@ def run(args) -> int:
     log = (lambda *a, **k: None) if args.quiet else print
     t0 = time.perf_counter()
     log(f"interprim demo: simulated high-five -> {out}/")
-    results = run_highfive(out, cfg, progress=not args.quiet, log=log)
-    print(format_summary(results))
-    if args.nuisi is not None:
-        log(f"NuiSI {args.nuisi}: real-time prediction on recording {args.nuisi_demo} held out")
-        results["files"].update(_nuisi_figure(args.nuisi, args.nuisi_demo, out))
+    from ._common import output_when_done
+
+    with output_when_done(out, folder=True) as tmp:  # the files appear when the demo has finished, or not at all
+        results = run_highfive(tmp, cfg, progress=not args.quiet, log=log)
+        print(format_summary(results))
+        if args.nuisi is not None:
+            log(f"NuiSI {args.nuisi}: real-time prediction on recording {args.nuisi_demo} held out")
+            results["files"].update(_nuisi_figure(args.nuisi, args.nuisi_demo, tmp))
     files = ", ".join(results["files"].values())
     print(f"wrote {files} to {out}/ in {time.perf_counter() - t0:.1f} s")
     return 0

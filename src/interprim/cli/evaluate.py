@@ -166,6 +166,14 @@ def run_user_data(args) -> int:
                                  f"{','.join(known)}")
     cfg = RealTimeConfig(horizon=float(args.horizon))
     notes = []
+    # the printed 'interprim fit' command reads the data as this evaluation did: the file, every data option, and
+    # the observed (and controlled) columns actually used, also when they came from the file's '# observed:' line
+    from ._common import data_flags, shell_words
+
+    ctrl_flag = ["--controlled", ",".join(ds.columns[i] for i in range(ds.n_dofs) if i not in set(obs))] \
+        if args.controlled else []
+    fit_data = shell_words([args.data] + data_flags(args) + ctrl_flag)
+    fit_observed = shell_words([",".join(ds.columns[i] for i in obs)])
 
     def note(line):
         notes.append(line)
@@ -175,13 +183,17 @@ def run_user_data(args) -> int:
         recs, summary, sentence = evaluate_demonstrations(ds, obs, float(ds.dt), k=args.folds, cfg=cfg,
                                                           smoothing_window=args.smoothing_window,
                                                           n_basis=args.n_basis, methods=methods, progress=True,
-                                                          log=note, data=args.data, observed=args.observed)
+                                                          log=note, data=fit_data, observed=fit_observed)
     except InterprimError:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
         raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
-    paths = save_report(recs, summary, sentence, args.out, title=f"{args.data}: {len(ds.demos)} demonstrations",
-                        horizon=float(args.horizon), notes=notes)
+    from ._common import moved, output_when_done
+
+    with output_when_done(args.out, folder=True) as tmp:  # the report appears whole, or not at all
+        paths = save_report(recs, summary, sentence, tmp, title=f"{args.data}: {len(ds.demos)} demonstrations",
+                            horizon=float(args.horizon), notes=notes)
+    paths = moved(paths, tmp, args.out)
     print(markdown_table(summary))
     print(f"\nverdict: {sentence}")
     for p in paths:
@@ -214,11 +226,15 @@ def run(args) -> int:
                     recognition=not args.no_recognition, max_demos=4 if args.quick else None,
                     scheduler=args.scheduler)
     summary = summarise(res)
-    paths = save_results(res, summary, args.out)
-    if not args.no_figures:
-        from ..evaluation.plots import evaluation_figures
+    from ._common import moved, output_when_done
 
-        paths += evaluation_figures(res, summary, cfg, args.out, datasets)
+    with output_when_done(args.out, folder=True) as tmp:  # the results appear whole, or not at all
+        paths = save_results(res, summary, tmp)
+        if not args.no_figures:
+            from ..evaluation.plots import evaluation_figures
+
+            paths += evaluation_figures(res, summary, cfg, tmp, datasets)
+    paths = moved(paths, tmp, args.out)
     from ..evaluation import markdown_tables
 
     print(markdown_tables(summary))

@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import InterprimError
-from ._common import CommandError, _positive, _split_cols, add_recording_args, agent_columns, recording_options
+from ._common import (CommandError, _positive, _split_cols, add_recording_args, agent_columns, output_when_done,
+                      print_notes, recording_options)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -183,6 +184,7 @@ def cmd_fit(args) -> int:
         max_nan_gap=args.max_nan_gap,
         **recording_options(args),
     )
+    print_notes(ds)
     n_read = ds.n_dofs
     ds, obs = agent_columns(ds, _split_cols(args.observed), _split_cols(args.controlled), args.demos)
     if len(ds) < 2:
@@ -268,7 +270,6 @@ def _fit_and_save(model, fit, args):
     except (ValueError, TypeError) as exc:
         raise CommandError(f"cannot fit the model to {args.demos}: {exc}") from None
     out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out)
+    with output_when_done(out) as tmp:  # a failed save leaves no model file (nor a temporary one)
+        model.save(tmp)
     return fit_seconds, out

@@ -94,21 +94,24 @@ def cmd_handwriting(args) -> int:
     bad = [o for o in observations if o not in ("forcing", "position")]
     if bad or not observations:
         raise CommandError(f"--observations must list 'forcing' and/or 'position', got {args.observations!r}")
+    from ._common import output_when_done
+
     try:
-        res = run_handwriting(
-            args.out,
-            letters=args.letters,
-            max_per_letter=args.max_per_letter or None,
-            n_folds=args.folds,
-            lasa_shapes=shapes,
-            n_basis=args.n_basis,
-            observations=observations,
-            true_phase=not args.no_true_phase,
-            extra_variants=BEYOND_PAPER if args.beyond_paper else None,
-            seed=args.seed,
-            data_path=args.data,
-            figures=not args.no_figures,
-        )
+        with output_when_done(args.out, folder=True) as tmp:  # the results appear whole, or not at all
+            res = run_handwriting(
+                tmp,
+                letters=args.letters,
+                max_per_letter=args.max_per_letter or None,
+                n_folds=args.folds,
+                lasa_shapes=shapes,
+                n_basis=args.n_basis,
+                observations=observations,
+                true_phase=not args.no_true_phase,
+                extra_variants=BEYOND_PAPER if args.beyond_paper else None,
+                seed=args.seed,
+                data_path=args.data,
+                figures=not args.no_figures,
+            )
     except InterprimError:
         raise
     except ValueError as exc:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import CommandError, _positive, add_recording_args, recording_options
+from ._common import CommandError, _positive, add_recording_args, output_when_done, recording_options
 
 __all__ = ["add_parser"]
 
@@ -141,8 +141,24 @@ def cmd_predict(args) -> int:
         "input_distance": float(getattr(pred, "input_distance", float("nan"))),
         "out_of_range": float(bool(getattr(pred, "out_of_range", False))),
     }
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
+    with output_when_done(out) as tmp:  # written whole, or not at all
+        _write_prediction(tmp, suffix, s, mean, std, columns, obs_names, scalars, samples)
+    print(
+        f"phase {scalars['phase']:.3f} (of the movement seen), speed {scalars['speed']:.3f}, "
+        f"duration {scalars['duration']:.3g} s, {frames.shape[0]} frames observed\nwrote {out}"
+    )
+    if scalars["out_of_range"]:
+        print(f"WARNING: the observed frames are {scalars['input_distance']:.3g} standard deviations from the "
+              "training demonstrations: wrong units, column order or frame of reference? The prediction "
+              "extrapolates.")
+    return 0
+
+
+def _write_prediction(out, suffix, s, mean, std, columns, obs_names, scalars, samples):
+    """The prediction as an ``.npz`` archive or a CSV table (docs/data-formats.md)."""
+    import numpy as np
+
+    n = s.shape[0]
     if suffix == ".npz":
         arrays = dict(
             s=s,
@@ -172,14 +188,5 @@ def cmd_predict(args) -> int:
             fh.write(",".join(header) + "\n")
             for row in table:
                 fh.write(",".join(repr(float(v)) for v in row) + "\n")
-    print(
-        f"phase {scalars['phase']:.3f} (of the movement seen), speed {scalars['speed']:.3f}, "
-        f"duration {scalars['duration']:.3g} s, {frames.shape[0]} frames observed\nwrote {out}"
-    )
-    if scalars["out_of_range"]:
-        print(f"WARNING: the observed frames are {scalars['input_distance']:.3g} standard deviations from the "
-              "training demonstrations: wrong units, column order or frame of reference? The prediction "
-              "extrapolates.")
-    return 0
 
 

@@ -89,6 +89,8 @@ class Demonstrations(Sequence):
         samples themselves.  An evaluation builds a causal prefix from them
         (:func:`interprim.model_selection.prefixes.causal_prefix`): interpolating over the whole
         recording lets a frame near the end of a prefix depend on a raw sample after it.
+    notes : list of str
+        What the reader decided for the user to know (e.g. the unit it took for a time column).
     """
 
     demos: list
@@ -101,6 +103,7 @@ class Demonstrations(Sequence):
     labels: list = field(default_factory=list)
     units: list | None = None
     raw: list | None = None
+    notes: list = field(default_factory=list)
 
     def __post_init__(self):
         if not self.labels:
@@ -197,7 +200,16 @@ class Demonstrations(Sequence):
             labels=list(self.labels),
             units=None if self.units is None else [self.units[i] for i in idx],
             raw=None if self.raw is None else [[r.select(idx) for r in streams] for streams in self.raw],
+            notes=list(self.notes),
         )
+
+
+def shown_names(names, n: int = 12) -> str:
+    """The first ``n`` of ``names`` for a message, with how many there are in all when there are more."""
+    names = [str(x) for x in names]
+    if len(names) <= n:
+        return ", ".join(names)
+    return ", ".join(names[:n]) + f", ... ({len(names)} in all)"
 
 
 def select_columns(columns, names, where: str) -> list:
@@ -205,6 +217,7 @@ def select_columns(columns, names, where: str) -> list:
     if isinstance(names, str):
         names = [n.strip() for n in names.split(",") if n.strip()]
     out = []
+    pos = None  # name -> index, built once (linear in the number of columns)
     for n in names:
         if isinstance(n, (int, np.integer)) and not isinstance(n, bool):
             i = int(n)
@@ -213,14 +226,16 @@ def select_columns(columns, names, where: str) -> list:
             out.append(i % len(columns))
             continue
         s = str(n).strip()
-        if s in columns:
-            out.append(list(columns).index(s))
-        elif s.lstrip("-").isdigit() and s not in columns:
+        if pos is None:
+            pos = {}
+            for k, c in enumerate(columns):
+                pos.setdefault(str(c), k)
+        if s in pos:
+            out.append(pos[s])
+        elif s.lstrip("-").isdigit():
             out.extend(select_columns(columns, [int(s)], where))
         else:
-            raise DataFileError(
-                f"{where}: unknown column {s!r}; the columns are: {', '.join(map(str, columns))}"
-            )
+            raise DataFileError(f"{where}: unknown column {s!r}; the columns are: {shown_names(columns)}")
     if len(set(out)) != len(out):
         raise DataFileError(f"{where}: a column is selected twice in {list(names)!r}")
     return out

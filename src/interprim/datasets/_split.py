@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.errors import DataFileError
 
-__all__ = ["spans", "split_take", "parse_ranges", "PAUSE_SPEED"]
+__all__ = ["spans", "split_take", "parse_ranges", "find_repetitions", "PAUSE_SPEED"]
 
 #: In a motion-capture take, a frame is *still* when every column moves slower than this fraction of the
 #: take's 95th-percentile speed (speeds measured over :data:`SPEED_WINDOW` seconds).
@@ -122,7 +122,125 @@ def _pauses(y, rate, gap):
     return runs
 
 
-def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=None, gap=None) -> list:
+#: A repetition is found when the take's autocorrelation at the period is at least this (1: exactly periodic).
+MIN_PERIODICITY = 0.3
+
+
+def _filled(y):
+    """``y`` with missing values interpolated per column (for measuring the take, not for the demonstrations),
+    centred and divided by one overall scale; columns that are all missing are left out."""
+    z = np.array(y, dtype=np.float64)
+    keep = ~np.all(np.isnan(z), axis=0)
+    z = z[:, keep]
+    idx = np.arange(z.shape[0])
+    for d in range(z.shape[1]):
+        bad = np.isnan(z[:, d])
+        if bad.any():
+            z[bad, d] = np.interp(idx[bad], idx[~bad], z[~bad, d])
+    z -= z.mean(axis=0)
+    # one scale for all columns (not one per column): a marker that barely moves must not weigh its noise as
+    # much as the movement of the others
+    rms = float(np.sqrt(np.mean(z**2))) if z.size else 0.0
+    return z / rms if rms > 0 else z[:, :0]
+
+
+def _period(z, rate, where):
+    """The period (frames) of a repeating movement: the highest autocorrelation peak after the first dip below 0."""
+    T = z.shape[0]
+    n = 1 << int(np.ceil(np.log2(2 * T)))
+    f = np.fft.rfft(z, n, axis=0)
+    ac = np.fft.irfft((f * np.conj(f)).real.sum(axis=1), n)[:T]
+    ac = ac / (T - np.arange(T))  # each lag's mean product
+    ac = ac / ac[0]
+    below = np.flatnonzero(ac[: T // 2 + 1] < 0)
+    if not below.size:
+        raise DataFileError(f"{where}: split_repetitions found no repeating movement (the take never moves away "
+                            "from its first poses for long); give the period in seconds, or use split_frames")
+    lo = int(below[0])
+    P = lo + int(np.argmax(ac[lo:T // 2 + 1]))
+    if ac[P] < MIN_PERIODICITY or P < 4:
+        raise DataFileError(
+            f"{where}: split_repetitions found no repeating movement (best period {P / rate:.3g} s, autocorrelation "
+            f"{ac[P]:.2f} < {MIN_PERIODICITY}; at least two repetitions are needed); give the period in seconds, or "
+            "use split_frames or split_gap"
+        )
+    return P, float(ac[P])
+
+
+def _slow_moment(speed, P):
+    """The middle of the slowest moment of the first period of ``speed``: of the runs of frames slower than
+    10 % of the range above the minimum, the one with the lowest speed among those that start in the first
+    ``P`` frames and are not cut by either end of ``speed`` (a run cut by an end has an unknown middle)."""
+    low = speed <= speed.min() + 0.1 * (speed.max() - speed.min())
+    runs, i, n = [], 0, len(speed)
+    while i < n:
+        if not low[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and low[j + 1]:
+            j += 1
+        runs.append((i, j))
+        i = j + 1
+    inside = [(a, b) for a, b in runs if a > 0 and b < n - 1 and a < P] or [(a, b) for a, b in runs if a < P] or runs
+    a, b = min(inside, key=lambda r: speed[r[0]:r[1] + 1].min())
+    return (a + b) // 2
+
+
+def find_repetitions(y, rate, *, where: str, period=None):
+    """Row intervals ``(i0, i1)`` of the repetitions of one movement in a continuous take, and a note.
+
+    The period is the highest peak of the take's autocorrelation (all columns, centred) after it first
+    drops below zero, or ``period`` seconds when given.  The first cut is the slowest frame of the first period
+    (a landing, the pause between two serves); each next cut is the frame, between 0.6 and 1.4 periods after
+    the previous one, whose surroundings (a window of a quarter period) best match those of the first cut
+    (least squares).  The partial movements before the first cut and after the last are left out.
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    z = _filled(y)
+    T = z.shape[0]
+    if z.shape[1] == 0 or T < 8:
+        raise DataFileError(f"{where}: split_repetitions needs a take that moves ({T} frames)")
+    if period is None:
+        P, corr = _period(z, rate, where)
+        how = f"autocorrelation {corr:.2f}"
+    else:
+        if not (np.isfinite(period) and period > 0):
+            raise ValueError(f"split_repetitions must be 'auto' or a positive period in seconds, got {period!r}")
+        P, how = max(4, int(round(period * rate))), "given"
+        if 2 * P > T:
+            raise DataFileError(f"{where}: split_repetitions period {period} s ({P} frames) leaves less than two "
+                                f"repetitions in {T} frames")
+    speed = np.linalg.norm(np.gradient(z, axis=0), axis=1)  # centred differences: no half-frame shift
+    k = max(1, P // 10)
+    speed = np.convolve(speed, np.ones(k) / k, mode="same")
+    w = max(2, P // 8)
+    c0 = w + _slow_moment(speed[w:min(T - w, w + 2 * P)], P)
+    win = sliding_window_view(z, 2 * w + 1, axis=0)  # (T - 2w, D, 2w + 1): window centred on frame i + w
+    template = win[c0 - w]
+    cuts = [c0]
+    while True:
+        a, b = cuts[-1] + int(0.6 * P), min(cuts[-1] + int(np.ceil(1.4 * P)), T - 1 - w)
+        if a > b:
+            break
+        cost = ((win[a - w:b - w + 1] - template) ** 2).sum(axis=(1, 2))
+        best = a + int(np.argmin(cost))
+        if best == b and b < cuts[-1] + int(np.ceil(1.4 * P)):
+            break  # the best match is where the take ends: the true cut may lie beyond it
+        cuts.append(best)
+    segs = [(c, d - 1) for c, d in zip(cuts[:-1], cuts[1:])]
+    if not segs:
+        raise DataFileError(f"{where}: split_repetitions found less than one whole repetition (period "
+                            f"{P / rate:.3g} s)")
+    note = (f"{where}: split_repetitions: period {P / rate:.3g} s ({how}), {len(segs)} repetitions cut at the frames "
+            f"most like the slowest frame of the first; left out: the partial movement before row {segs[0][0]} and "
+            f"after row {segs[-1][1]}")
+    return segs, note
+
+
+def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=None, gap=None,
+               repetitions=None, notes=None) -> list:
     """Row intervals ``(i0, i1)`` (inclusive) of the demonstrations in one motion-capture take.
 
     Parameters
@@ -146,6 +264,11 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
         Seconds: a pause longer than this starts a new demonstration.  A pause is a run of frames in which
         every column moves slower than :data:`PAUSE_SPEED` times the take's 95th-percentile speed, or
         in which a column is missing.
+    repetitions : "auto" or float, optional
+        Cut a continuous take into the repetitions of one movement (:func:`find_repetitions`); a float is
+        the period in seconds.  Applied to each piece left by the other options.
+    notes : list, optional
+        Receives what the repetition finder decided (period, cuts), for the user.
 
     Returns
     -------
@@ -166,6 +289,17 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
     segs = spans(0, T - 1, starts=events or (), cuts=cuts, ranges=rows)
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
+    if repetitions is not None:
+        period = None if repetitions in ("auto", True) else float(repetitions)
+        out = []
+        for a, b in segs:
+            reps, note = find_repetitions(y[a:b + 1], rate, where=where if len(segs) == 1 else
+                                          f"{where}, frames {numbers[a]}-{numbers[b]}", period=period)
+            out += [(a + i, a + j) for i, j in reps]
+            if notes is not None:
+                notes.append(note.replace(f"row {reps[0][0]}", f"frame {numbers[a + reps[0][0]]}")
+                             .replace(f"row {reps[-1][1]}", f"frame {numbers[a + reps[-1][1]]}"))
+        segs = out
     if trim:
         bad = np.isnan(y).any(axis=1)
         out = []
@@ -193,13 +327,26 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     """
     from ._checks import _check_frames, _fill_nans
 
+    from ._checks import _warn
+    from ..core.errors import DataFileWarning
+
     rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
-    splitting = split.get("events") is not None or split.get("ranges") is not None or split.get("gap") is not None
+    automatic = any(split.get(k) is not None for k in ("events", "gap", "repetitions"))
+    splitting = automatic or split.get("ranges") is not None
+    notes = split.setdefault("notes", [])
     if splitting or split.get("trim"):
         segs = split_take(y, rate, numbers, where=str(path), trim=bool(split.get("trim")), events=split.get("events"),
-                          ranges=split.get("ranges"), gap=split.get("gap"))
+                          ranges=split.get("ranges"), gap=split.get("gap"), repetitions=split.get("repetitions"),
+                          notes=notes)
     else:
         segs = [(0, y.shape[0] - 1)]
+    if automatic and len(segs) > 1:  # pieces too short to learn from, left by pauses, events or repetitions: dropped
+        short = [(a, b) for a, b in segs if b - a + 1 < min_frames]
+        if short and len(short) < len(segs):
+            shown = ", ".join(f"{numbers[a]}-{numbers[b]}" for a, b in short[:10]) + (" ..." if len(short) > 10 else "")
+            _warn(f"{path}: {len(short)} piece(s) shorter than {min_frames} frames left out (frames {shown}); "
+                  f"{len(segs) - len(short)} demonstrations kept", DataFileWarning)
+            segs = [(a, b) for a, b in segs if b - a + 1 >= min_frames]
     demos, times, labels = [], [], []
     for a, b in segs:
         where = str(path) if not splitting else f"{path}, frames {numbers[a]}-{numbers[b]}"

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import re
 from pathlib import Path
 
@@ -49,112 +50,233 @@ def _natural_key(p: Path):
     return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", p.name)]
 
 
-# --------------------------------------------------------------------------- checks
-def _read_csv(path: Path, dt, max_nan_gap, min_frames):
-    """Parse one CSV file into (demos, times, columns, labels, meta)."""
-    try:
-        fh = open(path, newline="", encoding="utf-8-sig")
-    except IsADirectoryError:
-        raise DataFileError(f"{path}: is a folder, expected a CSV file") from None
+# --------------------------------------------------------------------------- CSV limits
+#: Limits of the CSV reader, checked while reading (the file is streamed, never held whole). Raise one with
+#: its environment variable (e.g. ``INTERPRIM_CSV_MAX_COLUMNS=500000``) or by assigning to this dict.
+CSV_LIMITS = {"max_line_chars": 64 * 2**20, "max_columns": 1_000_000, "max_bytes": 8 * 2**30}
+_LIMIT_ENV = {"max_line_chars": "INTERPRIM_CSV_MAX_LINE_CHARS", "max_columns": "INTERPRIM_CSV_MAX_COLUMNS",
+              "max_bytes": "INTERPRIM_CSV_MAX_BYTES"}
+
+
+def _csv_limit(name: str) -> int:
+    env = os.environ.get(_LIMIT_ENV[name])
+    if env:
+        try:
+            value = int(env)
+        except ValueError:
+            raise ValueError(f"{_LIMIT_ENV[name]}={env!r} is not a whole number") from None
+        if value > 0:
+            return value
+    return int(CSV_LIMITS[name])
+
+
+def _over(path, what, value, name):
+    return DataFileError(
+        f"{path}: {what} ({value}) exceeds the CSV reader's limit {name}={_csv_limit(name)}; if the file is "
+        f"right, raise it with the environment variable {_LIMIT_ENV[name]}=N"
+    )
+
+
+def _lines(fh, path, max_chars):
+    """The file's lines, each read with a bounded ``readline``: a too-long line is refused without reading it."""
+    n = 0
+    while True:
+        line = fh.readline(max_chars + 1)
+        if not line:
+            return
+        n += 1
+        if len(line) > max_chars and not line.endswith("\n"):
+            raise _over(f"{path}, line {n}", "a line longer than the limit", f"more than {max_chars} characters",
+                        "max_line_chars")
+        yield line
+
+
+#: Time columns recognised when a CSV file has no ``time`` column, in this order: ``rostopic echo -p``
+#: (``%time``, ns), PlotJuggler and ``ros2 bag`` CSV exports (``__time``, ``timestamp``), bagpy (``Time``).
+TIME_CANDIDATES = ("%time", "__time", "timestamp", "Time", "field.header.stamp", "header.stamp")
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+# A ROS export's bookkeeping fields: not degrees of freedom unless named with columns=.
+_ROS_BOOKKEEPING = re.compile(r"(^|[./])(header[./](seq|frame_id|stamp([./](secs|nsecs|sec|nanosec))?)|child_frame_id)$")
+
+
+def _ros_shaped(header) -> bool:
+    """A ``rostopic echo -p`` (``%time``, ``field.*``) or ``ros2 bag``/PlotJuggler (``__time``, ``/topic/...``)
+    export."""
+    return "%time" in header or "__time" in header or any(h.startswith(("field.", "/")) for h in header[:50])
+
+
+def _time_scale(t_all, name, unit, explicit):
+    """Seconds per unit of the time column, and a note saying which unit was taken and why."""
+    if unit is not None:
+        return TIME_UNITS[unit], None
+    if name == TIME and not explicit:
+        return 1.0, None  # the documented format: seconds
+    steps = np.diff(t_all)
+    steps = steps[steps > 0]
+    whole = bool(np.all(np.mod(t_all, 1.0) == 0))
+    if whole and steps.size and float(np.median(steps)) > 1e3:
+        return 1e-9, (f"time column {name!r}: whole numbers {float(np.median(steps)):.3g} apart, taken as "
+                      "nanoseconds (as ROS stamps are); pass time_unit= (--time-unit) to say otherwise")
+    return 1.0, (f"time column {name!r}: taken as seconds (median step {float(np.median(steps)) if steps.size else 0:.3g}); "
+                 "pass time_unit= (--time-unit) to say otherwise")
+
+
+def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_unit=None, columns=None):
+    """Parse one CSV file into (demos, times, columns, labels, meta), streaming it line by line.
+
+    ``columns`` (names or indices of the data columns) restricts what is parsed: the other columns may
+    hold text.  Checks as it reads: :data:`CSV_LIMITS`.
+    """
+    from collections import Counter
+
+    from ._base import select_columns, shown_names
+
+    size = path.stat().st_size
+    if size > _csv_limit("max_bytes"):
+        raise _over(path, "the file's size", f"{size} bytes", "max_bytes")
+    max_chars = _csv_limit("max_line_chars")
+    max_cols = _csv_limit("max_columns")
+    if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
+        csv.field_size_limit(max_chars)
     meta = {}
     header = None
     header_line = 0
-    rows = []  # (line_no, cells)
-    with fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:
+        reader = csv.reader(_lines(fh, path, max_chars))
         try:
-            reader = csv.reader(fh)
-            for cells in reader:
-                line = reader.line_num
+            for cells in reader:  # the comments and the header
                 if not cells or all(not c.strip() for c in cells):
                     continue
-                first = cells[0].lstrip()
-                if first.startswith("#"):
+                if cells[0].lstrip().startswith("#"):
                     text = ",".join(cells).lstrip()[1:]
                     if ":" in text:
                         k, v = text.split(":", 1)
                         meta[k.strip().lower()] = v.strip()
                     continue
-                if header is None:
-                    header = [c.strip() for c in cells]
-                    header_line = line
-                    continue
-                rows.append((line, cells))
+                header = [c.strip() for c in cells]
+                header_line = reader.line_num
+                break
         except (csv.Error, UnicodeDecodeError) as exc:
             raise DataFileError(f"{path}: not a readable CSV text file ({exc})") from None
-    if header is None:
-        raise DataFileError(f"{path}: empty file, expected a header row of column names")
-    if any(not h for h in header):
-        raise DataFileError(f"{path}, line {header_line}: empty column name in the header {header}")
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise DataFileError(f"{path}, line {header_line}: duplicate column name(s) {dup}")
-    has_time = TIME in header
-    if not has_time and dt is None:
-        raise DataFileError(
-            f"{path}: missing column 'time' (seconds); the header is {header}. "
-            "Add a time column or pass dt for uniformly sampled data"
-        )
-    data_cols = [h for h in header if h not in (TIME, DEMO)]
-    if not data_cols:
-        raise DataFileError(f"{path}: no data columns besides 'time'/'demo' in the header {header}")
-    i_time = header.index(TIME) if has_time else None
-    i_demo = header.index(DEMO) if DEMO in header else None
-    i_data = [header.index(c) for c in data_cols]
-    groups: dict = {}
-    order = []
-    last = None
-    for line, cells in rows:
-        if len(cells) != len(header):
-            raise DataFileError(f"{path}, line {line}: {len(cells)} cells but the header has {len(header)} columns")
-        label = cells[i_demo].strip() if i_demo is not None else "0"
-        if label != last:
-            if label in groups:
+        if header is None:
+            raise DataFileError(f"{path}: empty file, expected a header row of column names")
+        n_cols = len(header)
+        if n_cols > max_cols:
+            raise _over(f"{path}, line {header_line}", "the number of columns", n_cols, "max_columns")
+        if any(not h for h in header):
+            k = next(i for i, h in enumerate(header) if not h)
+            raise DataFileError(f"{path}, line {header_line}: empty column name in the header (column {k + 1} of "
+                                f"{n_cols}: {shown_names(header)})")
+        dup = sorted(h for h, c in Counter(header).items() if c > 1)
+        if dup:
+            raise DataFileError(f"{path}, line {header_line}: duplicate column name(s) {dup[:10]}")
+        index = {h: i for i, h in enumerate(header)}
+        ros = _ros_shaped(header)
+        if time_column is not None:
+            if time_column not in index:
+                raise DataFileError(f"{path}: no column {time_column!r} (time_column); the header has {n_cols} "
+                                    f"columns: {shown_names(header)}")
+            tname = time_column
+        elif TIME in index:
+            tname = TIME
+        elif dt is None or ros:  # a ROS export's own stamps win over a fallback dt (predict passes the model's)
+            tname = next((c for c in TIME_CANDIDATES if c in index), None)
+            if tname is None and dt is None:
                 raise DataFileError(
-                    f"{path}, line {line}: rows of demo {label!r} are not contiguous (it appeared before line {line})"
+                    f"{path}: missing column 'time' (seconds); the header has {n_cols} columns: {shown_names(header)}. "
+                    "Name the time column with time_column= (--time-column), add a time column, or pass dt for "
+                    "uniformly sampled data"
                 )
-            groups[label] = []
-            order.append(label)
-            last = label
-        groups[label].append((line, cells))
+        else:
+            tname = None
+        skip = {TIME, DEMO, tname}
+        if ros:
+            skip.update(h for h in header if h in TIME_CANDIDATES or _ROS_BOOKKEEPING.search(h))
+        data_cols = [h for h in header if h not in skip]
+        if columns is not None:
+            pool = data_cols if not ros else [h for h in header if h not in (TIME, DEMO, tname)]
+            data_cols = [pool[i] for i in select_columns(pool, columns, where=str(path))]
+        if not data_cols:
+            raise DataFileError(f"{path}: no data columns besides the time and demo columns in the header "
+                                f"({shown_names(header)})")
+        i_time = index[tname] if tname is not None else None
+        i_demo = index.get(DEMO)
+        i_data = [index[c] for c in data_cols]
+        order, groups = [], {}  # label -> (lines, rows of floats, times)
+        last = None
+
+        def num(cell, line, col, allow_missing):
+            s = cell.strip()
+            if s in _MISSING:
+                if not allow_missing:
+                    raise DataFileError(f"{path}, line {line}: missing value in column {col!r}")
+                return math.nan
+            try:
+                v = float(s)
+            except ValueError:
+                hint = ("" if columns is not None or not allow_missing  # the time column has no such hint
+                        else "; choose the numeric columns with columns= (--columns)")
+                raise DataFileError(
+                    f"{path}, line {line}: non-numeric value {cell[:80]!r} in column {col!r}{hint}") from None
+            if math.isinf(v):
+                raise DataFileError(f"{path}, line {line}: infinite value {cell[:80]!r} in column {col!r}")
+            return v
+
+        try:
+            for cells in reader:
+                line = reader.line_num
+                if not cells or all(not c.strip() for c in cells):
+                    continue
+                if cells[0].lstrip().startswith("#"):
+                    continue
+                if len(cells) != n_cols:
+                    raise DataFileError(f"{path}, line {line}: {len(cells)} cells but the header has {n_cols} columns")
+                label = cells[i_demo].strip() if i_demo is not None else "0"
+                if label != last:
+                    if label in groups:
+                        raise DataFileError(f"{path}, line {line}: rows of demo {label!r} are not contiguous "
+                                            f"(it appeared before line {line})")
+                    groups[label] = ([], [], [])
+                    order.append(label)
+                    last = label
+                lines, rows, ts = groups[label]
+                lines.append(line)
+                rows.append([num(cells[i], line, header[i], True) for i in i_data])
+                if i_time is not None:
+                    ts.append(num(cells[i_time], line, tname, False))
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise DataFileError(f"{path}, line {reader.line_num}: not a readable CSV text file ({exc})") from None
     if not order:
         raise DataFileError(f"{path}: no data rows after the header (line {header_line})")
-
-    def num(cell, line, col, allow_missing):
-        s = cell.strip()
-        if s in _MISSING:
-            if not allow_missing:
-                raise DataFileError(f"{path}, line {line}: missing value in column {col!r}")
-            return math.nan
-        try:
-            v = float(s)
-        except ValueError:
-            raise DataFileError(f"{path}, line {line}: non-numeric value {cell!r} in column {col!r}") from None
-        if math.isinf(v):
-            raise DataFileError(f"{path}, line {line}: infinite value {cell!r} in column {col!r}")
-        return v
-
+    scale = 1.0
+    if i_time is not None:
+        t_all = np.concatenate([np.asarray(groups[g][2], dtype=np.float64) for g in order])
+        scale, note = _time_scale(t_all, tname, time_unit, explicit=time_column is not None)
+        if note:
+            meta["notes"] = [note]
     demos, times, labels = [], [], []
     for label in order:
-        grp = groups[label]
-        lines = [ln for ln, _ in grp]
+        lines, rows, ts = groups[label]
         where_demo = f"{path}" + (f", demo {label!r}" if i_demo is not None else "")
-        y = np.array(
-            [[num(cells[i], ln, header[i], True) for i in i_data] for ln, cells in grp], dtype=np.float64
-        ).reshape(len(grp), len(i_data))
-        if has_time:
-            t = np.array([num(cells[i_time], ln, TIME, False) for ln, cells in grp], dtype=np.float64)
+        y = np.array(rows, dtype=np.float64).reshape(len(rows), len(i_data))
+        if i_time is not None:
+            t = np.asarray(ts, dtype=np.float64)
+            if scale != 1.0:
+                t = t * scale
         else:
-            t = np.arange(len(grp)) * float(dt)
+            t = np.arange(len(rows)) * float(dt)
 
         def row_of(i, _lines=lines):
             return f"line {_lines[i]}"
 
-        _check_frames(len(grp), min_frames, where_demo)
+        _check_frames(len(rows), min_frames, where_demo)
         _check_times(t, where_demo, row_of)
         y = _fill_nans(y, max_nan_gap, lambda d, _w=where_demo: f"{_w}, column {data_cols[d]!r}", row_of)
         demos.append(y)
         times.append(t)
         labels.append(label if i_demo is not None else path.stem)
+    if columns is not None:
+        meta["selected"] = True
     return demos, times, data_cols, labels, meta
 
 
@@ -276,8 +398,10 @@ RECORDING_SUFFIXES = (".c3d", ".bvh", ".bag", ".db3", ".mcap")
 _FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
 # Which format reads which option (the options not listed for a format must be left at None).
 _OPTIONS = {
-    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap"),
-    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap"),
+    ".csv": ("time_column", "time_unit", "columns"),
+    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap", "split_repetitions"),
+    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap",
+             "split_repetitions"),
     "ros": ("topics", "joints", "orientation", "split_topic", "split_gap"),
 }
 
@@ -285,7 +409,27 @@ _OPTIONS = {
 def _take_split(opts) -> dict:
     """The splitting options of a motion-capture take (:func:`._split.cut_take`)."""
     return dict(trim=bool(opts["trim"]), events=opts["split_events"], ranges=opts["split_frames"],
-                gap=opts["split_gap"])
+                gap=opts["split_gap"], repetitions=opts["split_repetitions"])
+
+
+def _check_readable(p: Path) -> None:
+    """A regular file or a folder, checked before it is opened: a FIFO or a device would block the reader."""
+    import errno
+    import stat
+
+    try:
+        st = os.stat(p)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise DataFileError(f"{p}: symlink loop (a symbolic link that points, through others, to itself)") from None
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            raise DataNotFoundError(f"demonstrations not found: {p}") from None
+        raise DataFileError(f"{p}: cannot be read ({exc.strerror})") from None
+    if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+        kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(st.st_mode) else "a character device" if stat.S_ISCHR(st.st_mode)
+                else "a block device" if stat.S_ISBLK(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode)
+                else "a special file")
+        raise DataFileError(f"{p}: is {kind}, not a regular file; demonstrations are read from files or folders")
 
 
 def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
@@ -300,7 +444,8 @@ def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
             this = "ROS bag" if kind == "ros" else (kind or "extension-less") + " file"
             raise DataFileError(f"{p}: the option {name}= applies to {', '.join(fmts)} files, not to this {this}")
     if kind == ".csv":
-        return _read_csv(p, dt, max_nan_gap, min_frames)
+        return _read_csv(p, dt, max_nan_gap, min_frames, time_column=opts["time_column"], time_unit=opts["time_unit"],
+                         columns=opts["columns"])
     if kind == ".npz":
         return _read_npz(p, dt, max_nan_gap, min_frames)
     if kind == ".c3d":
@@ -346,6 +491,9 @@ def load_demonstrations(
     trim: bool = False,
     split_events=None,
     split_frames=None,
+    time_column: str | None = None,
+    time_unit: str | None = None,
+    split_repetitions=None,
 ) -> Demonstrations:
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
@@ -365,7 +513,8 @@ def load_demonstrations(
         A file, a rosbag2 folder or a folder of files.
     columns : sequence of str or int, or str, optional
         Columns to keep, in this order (names, indices or a comma-separated string);
-        default all data columns.  Unknown names raise ``DataFileError``.
+        default all data columns.  Unknown names raise ``DataFileError``.  In CSV files only
+        these columns are parsed, so the others may hold text.
     dt : float, optional
         Sampling interval in seconds for files without time stamps (a CSV without a
         ``time`` column, an NPZ without ``time_`` keys or ``dt``).  Ignored when the file
@@ -410,6 +559,20 @@ def load_demonstrations(
     split_events : True or str or sequence of str, optional
         C3D: each of the file's events (``True``: every event; else the event labels, or
         ``Context:Label``) starts a demonstration lasting until the next one.
+    time_column : str, optional
+        CSV: the column holding the time stamps (default ``time``; without it, the first of
+        :data:`TIME_CANDIDATES` present: ``%time`` of ``rostopic echo -p``, ``__time``,
+        ``timestamp``, ``Time``, ``field.header.stamp``, ``header.stamp``).
+    time_unit : {"s", "ms", "us", "ns"}, optional
+        CSV: the unit of the time column.  Default: seconds for a ``time`` column; for another
+        column, nanoseconds when its values are whole numbers more than 1000 apart (ROS stamps),
+        else seconds; the choice is stated in ``Demonstrations.notes``.
+    split_repetitions : "auto" or float, optional
+        C3D, BVH: cut a continuous take (walking, hopping, serves one after the other) into the
+        repetitions of its movement: ``"auto"`` finds the period from the take's autocorrelation, a
+        number gives it in seconds (:func:`interprim.datasets._split.find_repetitions`); what was
+        found is stated in ``Demonstrations.notes``.  Pieces left by ``split_gap``, ``split_events``
+        or ``split_repetitions`` that are shorter than ``min_frames`` are left out with one warning.
     split_frames : str or sequence of (int, int), optional
         C3D, BVH: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive; C3D
         frames numbered as the capture software numbers them, BVH frames from 0).
@@ -437,8 +600,9 @@ def load_demonstrations(
     from .ros_bags import is_rosbag2_folder
 
     p = Path(path).expanduser()
-    if not p.exists():
-        raise DataNotFoundError(f"demonstrations not found: {p}")
+    _check_readable(p)
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise ValueError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
     if dt is not None and not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
     if resample_dt is not None and not (np.isfinite(resample_dt) and resample_dt > 0):
@@ -449,7 +613,8 @@ def load_demonstrations(
         raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
     opts = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
                 topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
-                split_events=split_events or None, split_frames=split_frames)
+                split_events=split_events or None, split_frames=split_frames, time_column=time_column,
+                time_unit=time_unit, columns=None, split_repetitions=split_repetitions)
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
@@ -462,15 +627,19 @@ def load_demonstrations(
             )
     else:
         files = [p]
+    if columns is not None and all(f.suffix.lower() == ".csv" and f.is_file() for f in files):
+        opts["columns"] = columns  # parsed by the CSV reader: the columns not named may hold text
     demos, times, labels = [], [], []
     cols = None
     meta = {}
+    notes = []
     all_bags = True  # bags are interpolated onto the resample_dt grid by their reader
     for f in files:
         is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
         all_bags = all_bags and is_bag
         d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames), opts,
                                      resample_dt=resample_dt if is_bag else None)
+        notes += [n for n in m.get("notes", []) if n not in notes]  # once per cause, not once per file
         if cols is None:
             cols, first = c, f
             meta = m
@@ -489,12 +658,17 @@ def load_demonstrations(
         labels.extend(lab if len(files) == 1 else [f"{f.stem}:{x}" if len(d) > 1 else f.stem for x in lab])
     observed = None
     if meta.get("observed"):
-        observed = select_columns(cols, meta["observed"], where=f"{files[0]} ('observed')")
+        names = meta["observed"]
+        if opts["columns"] is not None:  # the columns not selected are not read: the observed ones among those kept
+            kept = set(cols)
+            names = [n for n in (x.strip() for x in names.split(",")) if n in kept]
+        if names:
+            observed = select_columns(cols, names, where=f"{files[0]} ('observed')")
     ds = Demonstrations(
         demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
-        name=p.stem, source=str(p), labels=labels, units=meta.get("units"),
+        name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=notes,
     )  # fmt: skip
-    if columns is not None:
+    if columns is not None and opts["columns"] is None:
         ds = ds.select(columns)
     if resample_dt is not None and not all_bags and sampling(ds.times, dt=resample_dt).uniform:
         ds.dt = float(resample_dt)  # already on that grid up to rounding (the rule of every command): kept as read

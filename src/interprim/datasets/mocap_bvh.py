@@ -319,10 +319,11 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
         y = np.hstack(blocks)
         units = [unit] * len(cols)
     t = np.arange(n_frames) * frame_time
-    demos, times, names = cut_take(path, y, t, np.arange(n_frames), dict(split or {}), max_nan_gap=max_nan_gap,
+    split = dict(split or {})
+    demos, times, names = cut_take(path, y, t, np.arange(n_frames), split, max_nan_gap=max_nan_gap,
                                    min_frames=min_frames, where_col=lambda d: f"{path}, column {cols[d]!r}",
                                    row_of=lambda r: f"line {lineno[r]} (frame {r})")
-    return demos, times, cols, names, {"units": units}
+    return demos, times, cols, names, {"units": units, "notes": split.get("notes", [])}
 
 
 def _is_number(v):

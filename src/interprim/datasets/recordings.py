@@ -12,7 +12,7 @@ __all__ = ["load_c3d", "load_bvh", "load_rosbag"]
 
 
 def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5, trim=False,
-             split_events=None, split_frames=None, split_gap=None):
+             split_events=None, split_frames=None, split_gap=None, split_repetitions=None):
     """Load the marker trajectories of a C3D motion-capture file (or a folder of them).
 
     Each file is one demonstration.  Every marker becomes three columns ``<marker>_x``,
@@ -56,6 +56,9 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
     split_gap : float, optional
         Seconds: a pause longer than this starts a new demonstration (every marker slower than 5 % of
         the take's 95th-percentile speed, or a marker missing).
+    split_repetitions : "auto" or float, optional
+        Cut a continuous take into the repetitions of its movement (period found, or given in
+        seconds); see :func:`~interprim.datasets.load_demonstrations`.
 
     Returns
     -------
@@ -65,12 +68,12 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
 
     return load_demonstrations(
         path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames, trim=trim,
-        split_events=split_events, split_frames=split_frames, split_gap=split_gap,
+        split_events=split_events, split_frames=split_frames, split_gap=split_gap, split_repetitions=split_repetitions,
     )
 
 
 def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites=False, max_nan_gap: int = 0,
-             min_frames: int = 5, trim=False, split_frames=None, split_gap=None):
+             min_frames: int = 5, trim=False, split_frames=None, split_gap=None, split_repetitions=None):
     """Load a BVH skeleton recording (or a folder of them; one demonstration per file).
 
     Parameters
@@ -105,6 +108,9 @@ def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     split_gap : float, optional
         Seconds: a pause longer than this (every column slower than 5 % of the take's
         95th-percentile speed, or a missing value) starts a new demonstration.
+    split_repetitions : "auto" or float, optional
+        Cut a continuous take into the repetitions of its movement (period found, or given in
+        seconds); see :func:`~interprim.datasets.load_demonstrations`.
 
     Returns
     -------
@@ -114,7 +120,7 @@ def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
 
     return load_demonstrations(path, bvh_mode=mode, joints=joints, length_unit=length_unit, end_sites=end_sites,
                                max_nan_gap=max_nan_gap, min_frames=min_frames, trim=trim, split_frames=split_frames,
-                               split_gap=split_gap)
+                               split_gap=split_gap, split_repetitions=split_repetitions)
 
 
 def load_rosbag(path, topics, *, joints=None, orientation=False, split_topic=None, split_gap=None,

@@ -63,6 +63,8 @@ def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
     ph = m.get("phase_err_vs_clock", float("nan"))
     timing = (f"its timing is {100 * (1 - ph):.0f} % closer to the truth than the clock's" if ph < 1 - threshold
               else "its timing is no better than the clock's")
+    if "phase_err_vs_clock_why" in m:
+        timing = f"its timing cannot be compared with the clock's ({m['phase_err_vs_clock_why']})"
     if r <= 1 - threshold:
         return (f"conditioning on the human improves the robot's real-time prediction by {100 * (1 - r):.0f} % "
                 f"over the clock (RMSE {m['rt_ctrl']:.4g} vs {summary['clock']['rt_ctrl']:.4g}); {timing}.")
@@ -91,6 +93,9 @@ def markdown_table(summary) -> str:
             x = v.get(key, float("nan"))
             cells.append("—" if not np.isfinite(x) else f"{x:.{dg}f}")
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    why = next((v["phase_err_vs_clock_why"] for v in summary.values() if "phase_err_vs_clock_why" in v), None)
+    if why:
+        lines += ["", f"Phase error x clock: not given, {why}."]
     return "\n".join(lines)
 
 

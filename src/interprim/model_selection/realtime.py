@@ -312,6 +312,10 @@ class _Offset:
         return self.prefixes(j - self.n_train, k)
 
 
+#: Below this phase error (a fraction of the movement) the clock is exact: no ratio to it is given (equal lengths).
+PHASE_ERROR_FLOOR = 1e-6
+
+
 def summarise_realtime(records) -> dict:
     """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
     the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
@@ -335,6 +339,11 @@ def summarise_realtime(records) -> dict:
             for key in ("rt_ctrl", "rt_obs", "phase_err"):
                 if key in clock and clock[key] > 0:
                     out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
+            if clock.get("phase_err", np.nan) <= PHASE_ERROR_FLOOR:  # a ratio to ~0 is a meaningless huge number
+                out[m].pop("phase_err_vs_clock", None)
+                out[m]["phase_err_vs_clock_why"] = (
+                    f"the clock's phase error is {clock['phase_err']:.1g}: the demonstrations last (almost) equally "
+                    "long, so elapsed time alone gives the phase and a ratio to it says nothing")
         if oracle and oracle.get("rt_ctrl", 0) > 0:
             out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
     prior = whole.get("prior")

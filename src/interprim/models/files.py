@@ -27,7 +27,7 @@ def model_classes() -> dict:
 def load_any(path):
     """Read any interprim model file as the class it names (``interprim fit``'s output, whatever model it chose).
 
-    Raises :class:`~interprim.errors.ModelFileError` for a file that is not a readable interprim model, or that
+    Raises :class:`~interprim.core.errors.ModelFileError` for a file that is not a readable interprim model, or that
     holds a model class this version does not know.
     """
     kind = model_kind(path)

@@ -163,7 +163,7 @@ class LearnedStream(BaseStream):
     the phase estimate changes with every frame, so the rows and their factorisation are rebuilt per frame, in the
     cheapest exact form (``CouplingModel._ppca_weights``: the ``(p + rank)``-square Gram matrix instead of the
     rows' own); what does not depend on the phase is computed once per model.  ``need_cov`` is accepted for the
-    interface of :class:`~interprim.stream.Stream` and has no effect.
+    interface of :class:`~interprim.models.primitive.stream.Stream` and has no effect.
 
     Parameters
     ----------

@@ -19,7 +19,7 @@ from interprim.core.errors import DataFileError, MissingExtraError
 KINDS = ("ros1", "db3", "mcap")
 
 
-def _typestore(kind):
+def ros2_typestore(kind):
     ts = get_typestore(Stores.ROS1_NOETIC if kind == "ros1" else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in ts.types:  # not in rosbags' ROS 1 store: defined as in tf2_msgs
         ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
@@ -30,7 +30,7 @@ class Bag:
     """Collects (time, topic, type, message) and writes them as a ROS 1 .bag or a rosbag2 folder (.db3/.mcap)."""
 
     def __init__(self, kind):
-        self.kind, self.ts, self.items = kind, _typestore(kind), []
+        self.kind, self.ts, self.items = kind, ros2_typestore(kind), []
         self.T = self.ts.types
 
     def header(self, t, frame="world"):

@@ -548,12 +548,12 @@ def test_without_the_extra_the_command_names_the_pip_install(model, tmp_path, mo
         monkeypatch.delitem(sys.modules, loaded)
     monkeypatch.setitem(sys.modules, "cyclonedds", None)
     # the caches hold classes made with cyclonedds: empty them for this test, and again after it
-    messages._typestore.cache_clear()
+    messages.ros2_typestore.cache_clear()
     messages._message_class.cache_clear()
     try:
         rc = main(["ros2", str(path), "--observe", "/human/hand@PointStamped"])
     finally:
-        messages._typestore.cache_clear()
+        messages.ros2_typestore.cache_clear()
         messages._message_class.cache_clear()
     err = capsys.readouterr().err.strip()
     assert rc == 1 and len(err.splitlines()) == 1 and "Traceback" not in err

@@ -69,7 +69,7 @@ def moved(paths, tmp, final) -> list:
     return out
 
 
-def _split_cols(values):
+def split_cols(values):
     out = []
     for v in values or []:
         if v is None:
@@ -78,7 +78,7 @@ def _split_cols(values):
     return out
 
 
-def _positive(value, name):
+def positive_number(value, name):
     if value is not None and not value > 0:
         raise CommandError(f"{name} must be positive, got {value!r}")
     return value
@@ -142,19 +142,19 @@ def add_recording_args(p, what="DEMOS") -> None:
 
 def recording_options(args) -> dict:
     """The keyword arguments of ``load_demonstrations`` given by :func:`add_recording_args` flags."""
-    _positive(args.split_gap, "--split-gap")
+    positive_number(args.split_gap, "--split-gap")
     return dict(
         topics=args.topics or None,  # parsed by the bag reader ('/a/pose:x,y,/b/pose:x,y' has field lists)
         split_topic=args.split_topic,
         split_gap=args.split_gap,
         trim=bool(args.trim),
-        split_events=(True if args.split_events == "*" else _split_cols([args.split_events]))
+        split_events=(True if args.split_events == "*" else split_cols([args.split_events]))
         if args.split_events is not None else None,
         split_frames=args.split_frames,
         split_repetitions=_repetitions(getattr(args, "split_repetitions", None)),
         orientation=bool(args.orientation),
-        joints=_split_cols([args.joints]) if args.joints else None,
-        markers=_split_cols([args.markers]) if args.markers else None,
+        joints=split_cols([args.joints]) if args.joints else None,
+        markers=split_cols([args.markers]) if args.markers else None,
         bvh_mode=args.bvh_mode,
         length_unit=args.length_unit,
         end_sites=bool(args.end_sites),
@@ -208,7 +208,7 @@ def _repetitions(text):
     except ValueError:
         raise CommandError(f"--split-repetitions takes a period in seconds or nothing (found from the take), "
                            f"got {text!r}") from None
-    return _positive(value, "--split-repetitions")
+    return positive_number(value, "--split-repetitions")
 
 
 def print_notes(ds) -> None:

@@ -141,12 +141,12 @@ def run_user_data(args) -> int:
     if getattr(args, "development_only", False):
         raise InterprimError("--development-only holds out the built-in NuiSI hold-out; with --data FILE keep your own "
                              "hold-out recordings out of the file instead")
-    from ._common import _positive, _split_cols, agent_columns, recording_options
+    from ._common import positive_number, split_cols, agent_columns, recording_options
 
-    _positive(args.resample, "--resample")
+    positive_number(args.resample, "--resample")
     ds = load_demonstrations(args.data, dt=args.dt, resample_dt=args.resample, max_nan_gap=args.max_nan_gap,
                              **recording_options(args))
-    ds, obs = agent_columns(ds, _split_cols([args.observed]), _split_cols([args.controlled]), args.data)
+    ds, obs = agent_columns(ds, split_cols([args.observed]), split_cols([args.controlled]), args.data)
     if ds.dt is None:  # the rule of every command: uniform within 1 % of the interval plus the stamps' rounding
         from ..datasets._base import sampling
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import InterprimError
-from ._common import (CommandError, _positive, _split_cols, add_recording_args, agent_columns, output_when_done,
+from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
                       print_notes, recording_options)
 
 __all__ = ["add_parser", "CommandError"]
@@ -173,9 +173,9 @@ def cmd_fit(args) -> int:
     import interprim as ip
     from interprim.datasets import load_demonstrations
 
-    _positive(args.n_basis, "--n-basis")
-    _positive(args.dt, "--dt")
-    _positive(args.resample, "--resample")
+    positive_number(args.n_basis, "--n-basis")
+    positive_number(args.dt, "--dt")
+    positive_number(args.resample, "--resample")
     ds = load_demonstrations(
         args.demos,
         columns=args.columns,
@@ -186,7 +186,7 @@ def cmd_fit(args) -> int:
     )
     print_notes(ds)
     n_read = ds.n_dofs
-    ds, obs = agent_columns(ds, _split_cols(args.observed), _split_cols(args.controlled), args.demos)
+    ds, obs = agent_columns(ds, split_cols(args.observed), split_cols(args.controlled), args.demos)
     if len(ds) < 2:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution")
     if args.model != "ip":

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import CommandError, _positive, add_recording_args, output_when_done, recording_options
+from ._common import CommandError, positive_number, add_recording_args, output_when_done, recording_options
 
 __all__ = ["add_parser"]
 
@@ -82,7 +82,7 @@ def cmd_predict(args) -> int:
         raise CommandError(f"--samples must be >= 0, got {args.samples}")
     if args.n_points < 2:
         raise CommandError(f"--n-points must be >= 2, got {args.n_points}")
-    _positive(args.dt, "--dt")
+    positive_number(args.dt, "--dt")
     if args.observe_fraction is not None and not 0 < args.observe_fraction <= 1:
         raise CommandError(f"--observe-fraction must be in (0, 1], got {args.observe_fraction!r}")
     if not Path(args.model).exists():

@@ -8,7 +8,7 @@ import numpy as np
 from ..core.errors import DataFileError
 
 
-def _fill_nans(y, max_nan_gap, where, row_of):
+def fill_nans(y, max_nan_gap, where, row_of):
     """Interpolate interior NaN runs of at most ``max_nan_gap`` frames; reject any other NaN."""
     bad = np.isnan(y)
     if not bad.any():
@@ -44,7 +44,7 @@ def _fill_nans(y, max_nan_gap, where, row_of):
     return y
 
 
-def _check_times(t, where, row_of):
+def check_stamps(t, where, row_of):
     if not np.all(np.isfinite(t)):
         i = int(np.argmax(~np.isfinite(t)))
         raise DataFileError(f"{where}: missing or non-finite time at {row_of(i)}")
@@ -57,7 +57,7 @@ def _check_times(t, where, row_of):
         )
 
 
-def _warn(message, category):
+def warn(message, category):
     """``warnings.warn`` attributed to the first caller outside interprim (the user's line, not a reader's)."""
     import sys
     import warnings
@@ -68,7 +68,7 @@ def _warn(message, category):
     warnings.warn(message, category, stacklevel=level)
 
 
-def _check_frames(n, min_frames, where):
+def check_frames(n, min_frames, where):
     if n < min_frames:
         raise DataFileError(f"{where}: only {n} frame(s), at least {min_frames} are needed")
 

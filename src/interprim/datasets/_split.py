@@ -325,9 +325,9 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     labels)``: one demonstration per interval, time stamps from 0, labels ``<file>@<start>s`` when the
     take is split (the file's name otherwise).
     """
-    from ._checks import _check_frames, _fill_nans
+    from ._checks import check_frames, fill_nans
 
-    from ._checks import _warn
+    from ._checks import warn
     from ..core.errors import DataFileWarning
 
     rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
@@ -344,15 +344,15 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
         short = [(a, b) for a, b in segs if b - a + 1 < min_frames]
         if short and len(short) < len(segs):
             shown = ", ".join(f"{numbers[a]}-{numbers[b]}" for a, b in short[:10]) + (" ..." if len(short) > 10 else "")
-            _warn(f"{path}: {len(short)} piece(s) shorter than {min_frames} frames left out (frames {shown}); "
+            warn(f"{path}: {len(short)} piece(s) shorter than {min_frames} frames left out (frames {shown}); "
                   f"{len(segs) - len(short)} demonstrations kept", DataFileWarning)
             segs = [(a, b) for a, b in segs if b - a + 1 >= min_frames]
     demos, times, labels = [], [], []
     for a, b in segs:
         where = str(path) if not splitting else f"{path}, frames {numbers[a]}-{numbers[b]}"
         hint = " (a larger split_gap, fewer events or longer split_frames?)" if splitting and len(segs) > 1 else ""
-        _check_frames(b - a + 1, min_frames, where + hint)
-        piece = _fill_nans(y[a:b + 1], max_nan_gap, where_col, lambda i, _a=a: row_of(_a + i))
+        check_frames(b - a + 1, min_frames, where + hint)
+        piece = fill_nans(y[a:b + 1], max_nan_gap, where_col, lambda i, _a=a: row_of(_a + i))
         demos.append(piece)
         times.append(t[a:b + 1] - t[a])
         labels.append(f"{path.stem}@{t[a]:.3f}s" if splitting else path.stem)

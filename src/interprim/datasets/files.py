@@ -34,7 +34,7 @@ import numpy as np
 from ..core.errors import DataFileError
 from ..core.preprocessing import resample_step
 from ._base import DataNotFoundError, Demonstrations, RawStream, sampling, select_columns, uniform_dt
-from ._checks import _check_frames, _check_times, _fill_nans
+from ._checks import check_frames, check_stamps, fill_nans
 
 __all__ = ["load_demonstrations", "save_demonstrations"]
 
@@ -269,9 +269,9 @@ def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_un
         def row_of(i, _lines=lines):
             return f"line {_lines[i]}"
 
-        _check_frames(len(rows), min_frames, where_demo)
-        _check_times(t, where_demo, row_of)
-        y = _fill_nans(y, max_nan_gap, lambda d, _w=where_demo: f"{_w}, column {data_cols[d]!r}", row_of)
+        check_frames(len(rows), min_frames, where_demo)
+        check_stamps(t, where_demo, row_of)
+        y = fill_nans(y, max_nan_gap, lambda d, _w=where_demo: f"{_w}, column {data_cols[d]!r}", row_of)
         demos.append(y)
         times.append(t)
         labels.append(label if i_demo is not None else path.stem)
@@ -365,7 +365,7 @@ def _read_npz(path: Path, dt, max_nan_gap, min_frames):
             elif y.shape[1] != n_cols:
                 raise DataFileError(f"{path}: {k!r} has {y.shape[1]} columns, the first demonstration has {n_cols}")
             where = f"{path}, {k}"
-            _check_frames(y.shape[0], min_frames, where)
+            check_frames(y.shape[0], min_frames, where)
             if np.isinf(y).any():
                 r, c = np.argwhere(np.isinf(y))[0]
                 raise DataFileError(f"{where}: infinite value at row {r}, column {c}")
@@ -382,9 +382,9 @@ def _read_npz(path: Path, dt, max_nan_gap, min_frames):
             def row_of(r):
                 return f"row {r}"
 
-            _check_times(t, f"{path}, {time_keys.get(i, k)}", row_of)
+            check_stamps(t, f"{path}, {time_keys.get(i, k)}", row_of)
             cols_now = columns or [f"dof_{j}" for j in range(n_cols)]
-            y = _fill_nans(y, max_nan_gap, lambda d, _w=where, _c=cols_now: f"{_w}, column {_c[d]!r}", row_of)
+            y = fill_nans(y, max_nan_gap, lambda d, _w=where, _c=cols_now: f"{_w}, column {_c[d]!r}", row_of)
             demos.append(y)
             times.append(t)
             labels.append(k)

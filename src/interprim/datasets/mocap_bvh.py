@@ -225,7 +225,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     See :func:`load_bvh` for the parameters; ``split`` holds ``trim``, ``ranges`` and ``gap``
     (:func:`._split.cut_take`).
     """
-    from ._checks import _check_frames
+    from ._checks import check_frames
     from ._split import cut_take
     from .mocap_c3d import metres_per_unit
 
@@ -274,7 +274,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
         raise DataFileError(
             f"{path}: truncated file: 'Frames: {n_frames}' but the file ends at line {len(lines)} after {k} frames"
         )
-    _check_frames(n_frames, min_frames, str(path))
+    check_frames(n_frames, min_frames, str(path))
     names = [j.name for j in skel]
     if isinstance(joints, str):
         joints = [x.strip() for x in joints.split(",") if x.strip()]

@@ -181,7 +181,7 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
     See :func:`load_c3d` for the parameters and what is read; ``split`` holds ``trim``, ``events``
     (True or event labels), ``ranges`` and ``gap`` (:func:`._split.cut_take`).
     """
-    from ._checks import _warn
+    from ._checks import warn
     from ._split import cut_take  # the rules of every reader for splitting, gaps and lengths
 
     _import_ezc3d()
@@ -227,7 +227,7 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
                 f"but the data ends at byte {size} of {size}, in frame {first + k} ({k} complete frames)")
         if k == 0:
             raise DataFileError(what)
-        _warn(f"{what}; keeping frames {first}-{first + k - 1}, {n_frames - k} announced frames are missing",
+        warn(f"{what}; keeping frames {first}-{first + k - 1}, {n_frames - k} announced frames are missing",
               DataFileWarning)
         n_frames = k
     xyz = np.transpose(pts[:, :n_points, :n_frames], (2, 1, 0))  # (T, M, 3)

@@ -539,7 +539,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
 
     See the module docstring and :func:`load_rosbag` for the parameters.
     """
-    from ._checks import _check_frames, _fill_nans
+    from ._checks import check_frames, fill_nans
 
     path = Path(path)
     if topics is None:
@@ -607,13 +607,13 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
                 q = y[:, j:j + 4]
                 y[:, j:j + 4] = q / np.linalg.norm(q, axis=1, keepdims=True)
         hint = " (a larger split_gap or fewer split_topic markers?)" if len(segs) > 1 else ""
-        _check_frames(len(t_ns), min_frames, where + hint)
+        check_frames(len(t_ns), min_frames, where + hint)
         t_rel = (t_ns - t_ns[0]) * 1e-9
 
         def row_of(i, _t=t_ns):
             return f"{(_t[i] - start) * 1e-9:.3f} s after the bag start"
 
-        y = _fill_nans(y, max_nan_gap, lambda d, _w=where: f"{_w}, column {columns[d]!r}", row_of)
+        y = fill_nans(y, max_nan_gap, lambda d, _w=where: f"{_w}, column {columns[d]!r}", row_of)
         demos.append(y)
         times.append(t_rel)
         labels.append(f"{path.stem}@{(t_ns[0] - start) * 1e-9:.3f}s")

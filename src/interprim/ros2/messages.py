@@ -48,7 +48,7 @@ def _imports():
 
 
 @lru_cache(maxsize=1)
-def _typestore():
+def ros2_typestore():
     _imports()
     from rosbags.typesys import Stores, get_typestore
 
@@ -62,7 +62,7 @@ def known_type(name: str) -> str:
     parts = full.split("/")
     if len(parts) == 2:
         full = f"{parts[0]}/msg/{parts[1]}"
-    if full not in _typestore().fielddefs:
+    if full not in ros2_typestore().fielddefs:
         raise ValueError(f"unknown ROS 2 message type {name!r} (give pkg/msg/Type, e.g. geometry_msgs/msg/PointStamped,"
                          f" or one of {', '.join(SHORT_TYPES)})")
     return full
@@ -127,7 +127,7 @@ def _message_class(full: str):
     from cyclonedds.idl import types
 
     fields = {}
-    for name, desc in _typestore().fielddefs[full][1]:
+    for name, desc in ros2_typestore().fielddefs[full][1]:
         fields[name + "_" if keyword.iskeyword(name) else name] = _field_type(types, desc)
     if not fields:  # an empty ROS message carries one uint8 on the wire (rosidl's structure_needs_at_least_one_member)
         fields["structure_needs_at_least_one_member"] = types.uint8
@@ -156,10 +156,10 @@ def new_message(msgtype: str, **fields):
     full = known_type(msgtype)
     cls = message_class(full)
     values = {}
-    for name, desc in _typestore().fielddefs[full][1]:
+    for name, desc in ros2_typestore().fielddefs[full][1]:
         key = name + "_" if keyword.iskeyword(name) else name
         values[key] = fields.pop(key) if key in fields else _default(types, desc)
-    if not _typestore().fielddefs[full][1]:
+    if not ros2_typestore().fielddefs[full][1]:
         values["structure_needs_at_least_one_member"] = 0
     if fields:
         raise TypeError(f"{full} has no field(s) {sorted(fields)}")

@@ -126,10 +126,10 @@ class Source:
         else:
             if not self.explicit:
                 raise ValueError(f"--observe {spec!r}: a {t} topic needs field paths: {self.topic}:FIELD,FIELD")
-            from .messages import _typestore
+            from .messages import ros2_typestore
 
             for path, col in _items(selector):
-                self._check_path(_typestore(), t, path)
+                self._check_path(ros2_typestore(), t, path)
                 self.offers.append((path, f"{self.prefix}_{path}"))
                 if col:
                     self.renames[path] = col

@@ -81,8 +81,8 @@ def blend_from_cv(cv: "CrossValidation", make: dict, train, dt: float, observed_
     ``band_weights``, ``bands``, ``blend_cv_error`` (real-time band, in-sample for the weights) and
     ``variance_model``."""
     edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
-    steps = cv.band_steps(edges)
-    edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the non-empty bands, up to their last step
+    steps = [s for i, s in enumerate(cv.band_steps(edges)) if i == 0 or cv.valid[:, s].any()]
+    edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the bands with held-out frames, up to their last step
     W = np.array([cv.blend_weights(s) for s in steps])  # (bands, families)
     # a member that never carries MIN_WEIGHT of any band costs a stream per frame for almost nothing: the
     # weights are fitted again without it
@@ -214,6 +214,10 @@ class CrossValidation:
         H = self.truth.shape[1] if self.truth.ndim == 3 else 0
         #: seconds ahead of every step of the arrays
         self.t_ahead = np.arange(1, H + 1) * self.dt
+        #: ``(cases, H)``: whether the step is a frame of the held-out movement (not past its end, where the
+        #: protocol holds the last frame); the weights and the band beyond the real-time horizon are fitted on these
+        n_left = np.array([int(round(c[1] / first[c]["fraction"])) - c[1] for c in cases], dtype=np.int64)
+        self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
 
     def _rt_error(self, mean, truth):
         """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
@@ -249,31 +253,40 @@ class CrossValidation:
         return out
 
     def blend_weights(self, steps=None) -> np.ndarray:
-        """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean real-time
-        error of the controlled agent over the cases, the very figure :attr:`errors` reports (stacking, Breiman
-        1996, on the protocol's own loss: a convex problem whose solution is a convex combination, so the blend can
-        always fall back on a single family).  Squared-error stacking was tried first: a few large errors decided
-        the weights and the blend came out worse than its best member on the protocol's loss."""
+        """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean error of the
+        controlled agent over the cases at the look-ahead ``steps`` (default: every step): the RMS over the case's
+        steps inside its held-out movement (:attr:`valid`; the real-time band counts every step, as the protocol
+        does), averaged over cases -- for the real-time band the very figure :attr:`errors` reports (stacking,
+        Breiman 1996, on the protocol's own loss: a convex problem whose solution is a convex combination, so the
+        blend can always fall back on a single family).  Squared-error stacking was tried first: a few large errors
+        decided the weights and the blend came out worse than its best member on the protocol's loss."""
         from scipy.optimize import minimize
 
         M = len(self.names)
         if M == 1:
             return np.ones(1)
         c = self.controlled or self.observed
-        sel = slice(None) if steps is None else steps
-        P = self.mean[:, :, sel][..., c].reshape(M, self.mean.shape[1], -1)  # (M, cases, H * C)
-        T = self.truth[:, sel][..., c].reshape(self.truth.shape[0], -1)
+        sel = np.arange(self.truth.shape[1]) if steps is None else np.asarray(steps)
+        n_rt = max(1, int(round(self.horizon / self.dt)))
+        mask = self.valid[:, sel] | (sel < n_rt)[None, :]  # (cases, S)
+        keep = mask.any(axis=1)
+        mask = mask[keep]
+        C = len(c)
+        P = self.mean[:, keep][:, :, sel][..., c]  # (M, cases, S, C)
+        T = self.truth[keep][:, sel][..., c]
         scale = max(float(np.sqrt(np.mean(T * T))), 1e-300)
         P, T = P / scale, T / scale
+        W = mask[:, :, None].astype(np.float64)  # (cases, S, 1)
+        count = W.sum(axis=(1, 2)) * C
 
         def loss(w):
-            e = np.tensordot(w, P, axes=1) - T
-            r = np.sqrt(np.mean(e * e, axis=1)) + 1e-12
-            grad = np.einsum("mcj,cj->m", P, e / r[:, None]) / (e.shape[1] * len(r))
+            e = (np.tensordot(w, P, axes=1) - T) * W
+            r = np.sqrt(np.sum(e * e, axis=(1, 2)) / count) + 1e-12
+            grad = np.einsum("mcsj,csj->m", P, e / (r * count)[:, None, None]) / len(r)
             return float(np.mean(r)), grad
 
         start = np.full(M, 1.0 / M)
-        best = min(range(M), key=lambda m: float(np.mean(np.sqrt(np.mean((P[m] - T) ** 2, axis=1)))))
+        best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
         res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
                        constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
                        options={"ftol": 1e-10, "maxiter": 300})
@@ -303,19 +316,34 @@ class CrossValidation:
         w = np.asarray(w, dtype=np.float64)
         w = (w[:, None] if w.ndim == 1 else w.T)[:, None, :, None]  # (M, 1, H or 1, 1)
         mix = np.sum(w * self.mean, axis=0)
-        spread = np.sum(w * (self.mean - mix) ** 2, axis=0).mean(axis=0)  # (H, D)
-        err2 = ((mix - self.truth) ** 2).mean(axis=0)
+        n_rt = max(1, int(round(self.horizon / self.dt)))
+        valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
+        n_valid = valid.sum(axis=0)
+        has = n_valid > 0
+        last = int(np.flatnonzero(has)[-1]) if has.any() else 0
+        vw = valid[:, :, None].astype(np.float64)
+
+        def step_mean(x):  # mean over the valid cases of every step, held from the last step that has any
+            m = np.sum(x * vw, axis=0) / np.maximum(n_valid, 1)[:, None]
+            m[~has] = m[last]
+            return m
+
+        case_spread = np.sum(w * (self.mean - mix) ** 2, axis=0)  # (cases, H, D)
+        spread = step_mean(case_spread)
+        err2 = step_mean((mix - self.truth) ** 2)
         wide = spread > err2
         a = np.where(wide, err2 / np.where(spread > 0, spread, 1.0), 1.0)
         b = np.where(wide, 0.0, err2 - spread)
         from ..model_selection.metrics import Z90
 
-        case_spread = np.sum(w * (self.mean - mix) ** 2, axis=0)  # (cases, H, D)
         sd = np.sqrt(np.maximum(a * case_spread + b, 1e-300))
         z = np.abs(mix - self.truth) / sd
         for cols in (self.controlled, self.observed):
             if cols and z.shape[0]:
-                q = np.quantile(z[:, :, cols].transpose(1, 0, 2).reshape(z.shape[1], -1), 0.9, axis=1)  # (H,)
+                q = np.ones(z.shape[1]) * Z90
+                for h in np.flatnonzero(has):
+                    q[h] = np.quantile(z[valid[:, h]][:, h][:, cols], 0.9, method="higher")
+                q[~has] = q[last]
                 r2 = (np.maximum(q, 1e-6) / Z90)[:, None] ** 2
                 a[:, cols] *= r2
                 b[:, cols] *= r2

@@ -60,7 +60,7 @@ def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):
 
 
 def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS, lookahead=False,
-             fractions=(0.6,), log=print):
+             fractions=(0.6,), log=print, folds: int = 3):
     """Fit every method on ``dev``, choose one by inner CV on ``dev``, measure all on ``hold``.
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
@@ -78,7 +78,7 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     cand = {m: make[m] for m in make if m != "ip-paper"}
     train = [np.asarray(x, dtype=np.float64) for x in dev]
     cv = CrossValidation(cand, Prefixes(dev, obs), obs, dt, scoring_config(cfg.horizon, train, dt, point_dim=point_dim,
-                                                                           stride=3), 3, horizon=cfg.horizon)
+                                                                           stride=3), folds, horizon=cfg.horizon)
     chosen, _ = choice(cv, list(cand))
     inner = dict(cv.errors)
     blend, info = blend_from_cv(cv, cand, train, dt, obs, cfg.horizon)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.validation import as_2d_finite, as_frame, check_positive
+from ..core.input_range import mark
 from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise
 
@@ -82,8 +83,11 @@ class AlignedStream(BaseStream):
     (one new column of Eq. 7) instead of re-aligning the whole prefix, and gives exactly the batch alignment;
     the model then predicts from the alignments (``model.predict_from_alignment``), so :meth:`update` returns exactly
     what ``model.predict`` returns for all frames seen, and :meth:`extend` advances the alignments by several
-    frames and predicts once.  ``need_cov`` is accepted for the interface and has no effect.
+    frames and predicts once.  ``need_cov`` is accepted for the interface and has no effect.  Every prediction
+    carries the largest ``input_distance`` of the frames seen (:mod:`interprim.core.input_range`), warned once.
     """
+
+    marks_input = True
 
     def __init__(self, model):
         from ..phase.dtw import IncrementalDTW
@@ -92,6 +96,8 @@ class AlignedStream(BaseStream):
         self._n_cols = len(model.observed_dofs_)
         self._dtw = [IncrementalDTW(o) for o in model.observed_]
         self._n = 0
+        self._max = 0.0
+        self._warned = False
 
     @property
     def n_frames(self) -> int:
@@ -103,6 +109,8 @@ class AlignedStream(BaseStream):
         for d in self._dtw:
             d.reset()
         self._n = 0
+        self._max = 0.0
+        self._warned = False
 
     def _advance(self, block):
         for f in block:
@@ -112,7 +120,12 @@ class AlignedStream(BaseStream):
         n_star = np.array([d.n_star for d in self._dtw], dtype=np.int64)
         # the batch's normalisation D(n*, M) / (n* + 1 + M), with the same scalar operations
         cost = np.array([d.cost / (d.n_star + 1 + self._n) for d in self._dtw])
-        return self.model.predict_from_alignment(self._n, n_star, cost)
+        pred = self.model.predict_from_alignment(self._n, n_star, cost)
+        if self.model.input_range_ is not None:
+            self._max = max(self._max, self.model.input_distance(block))
+            mark(self.model, pred, self._max, warn=not self._warned)
+            self._warned = self._warned or pred.out_of_range
+        return pred
 
     def update(self, frame, need_cov: bool = False):
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns its prediction."""

@@ -675,7 +675,7 @@ class Blend(Predictor):
     #: 2: weights per look-ahead band, the variance model's own time axis
     STATE_VERSION = 2
     #: points of the normalised-time grid on which the members' predictions are read
-    N_GRID = 101
+    N_GRID = 201
 
     def __init__(self, observed_dofs, weights, scales=None, horizon: float = registry.DEFAULT_HORIZON,
                  n_basis: int = 20, smoothing_window=None, bands=None):

@@ -228,7 +228,7 @@ _FIELD = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")  # one step of a field pa
 _INDEX = re.compile(r"\[(\d+)\]")
 
 
-def _field_value(msg, path):
+def field_value(msg, path):
     """The value at ``path`` (``a.b``, ``c[2]``) of a decoded message."""
     v = msg
     for part in path.split("."):
@@ -281,7 +281,7 @@ def _take(stream, msg, orientation, where):
     if stream.fields is not None:
         vals = []
         for f in stream.fields:
-            v = _field_value(msg, f)
+            v = field_value(msg, f)
             arr = np.asarray(v, dtype=np.float64).ravel()
             if arr.size != 1:
                 raise DataFileError(f"{where}: field {f!r} holds {arr.size} values; name one, e.g. {f}[0]")
@@ -363,7 +363,7 @@ def _read_streams(path, streams, split_topic, orientation):
                 s.frame = None
                 for f in s.fields:
                     try:
-                        _check_path(reader.typestore, s.msgtype, f)
+                        check_field_path(reader.typestore, s.msgtype, f)
                     except KeyError as exc:
                         fields = _numeric_fields(reader.typestore, s.msgtype)
                         raise DataFileError(
@@ -424,8 +424,9 @@ def _read_streams(path, streams, split_topic, orientation):
     return start, sorted(markers)
 
 
-def _check_path(typestore, msgtype, path):
-    """Raise ``KeyError`` (with a message) unless ``path`` names a field of ``msgtype``."""
+def check_field_path(typestore, msgtype, path):
+    """Raise ``KeyError`` (with a message) unless ``path`` (``a.b``, ``c[2]``) names a field of ``msgtype`` in
+    ``typestore`` (rosbags' message definitions); used by the bag loader and the ROS 2 bridge."""
     typ = msgtype
     for part in path.split("."):
         m = _FIELD.match(part)

@@ -29,16 +29,14 @@ records its columns' names, not their units or frames, so the bridge checks name
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 
+from ..datasets.ros_bags import field_value
 from .messages import dds_topic, known_type
 
 __all__ = ["Source", "parse_observe", "match_columns", "ObservationError"]
 
-_FIELD = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")
-_INDEX = re.compile(r"\[(\d+)\]")
 _XYZ = ("x", "y", "z")
 _Q = ("qx", "qy", "qz", "qw")
 _POSE_LIKE = {  # type -> (position path, orientation path or None)
@@ -55,16 +53,6 @@ MAX_SPEC = 1000  # characters of one spec (read from outside: bounded)
 
 class ObservationError(ValueError):
     """A message that does not give the selected values (a missing TF frame or joint, a changed frame_id)."""
-
-
-def _path_value(msg, path: str):
-    v = msg
-    for part in path.split("."):
-        m = _FIELD.match(part)
-        v = getattr(v, m.group(1))
-        for idx in _INDEX.findall(m.group(2)):
-            v = v[int(idx)]
-    return v
 
 
 def _items(text: str):
@@ -153,20 +141,12 @@ class Source:
 
     @staticmethod
     def _check_path(typestore, msgtype, path):
-        typ = msgtype
-        for part in path.split("."):
-            m = _FIELD.match(part)
-            if not m:
-                raise ValueError(f"{path!r} is not a field path (name.name[index])")
-            if typ is None or typ not in typestore.fielddefs:
-                raise ValueError(f"{path!r}: {part!r} is not inside a message")
-            fields = dict(typestore.fielddefs[typ][1])
-            if m.group(1) not in fields:
-                raise ValueError(f"{msgtype} has no field {m.group(1)!r} (in {path!r})")
-            desc = fields[m.group(1)]
-            while getattr(desc[0], "name", "") in ("ARRAY", "SEQUENCE"):
-                desc = desc[1][0]
-            typ = desc[1] if getattr(desc[0], "name", "") == "NAME" else None
+        from ..datasets.ros_bags import check_field_path
+
+        try:
+            check_field_path(typestore, msgtype, path)
+        except KeyError as exc:
+            raise ValueError(exc.args[0]) from None
 
     def offered(self):
         """``[(key, column)]``: every value the spec can give, under the column name it gives it."""
@@ -190,7 +170,7 @@ class Source:
                 raise ObservationError(f"{self.topic}: no transform of child frame {self.frame!r} in this message "
                                        f"(it has {', '.join(got) or 'none'})")
             self._check_frame(tr.header.frame_id, "parent frame")
-            return tr.header.stamp, np.array([float(_path_value(tr, k)) for k in self._take])
+            return tr.header.stamp, np.array([float(field_value(tr, k)) for k in self._take])
         if t == JOINT_STATE:
             names = list(msg.name)
             pos = msg.position
@@ -206,7 +186,7 @@ class Source:
         if t in _POSE_LIKE:
             self._check_frame(msg.header.frame_id, "frame_id")
         try:
-            vals = np.array([float(_path_value(msg, k)) for k in self._take])
+            vals = np.array([float(field_value(msg, k)) for k in self._take])
         except (AttributeError, IndexError, TypeError, ValueError) as exc:
             raise ObservationError(f"{self.topic}: cannot read {self._take} from this message ({exc})") from None
         return (msg.header.stamp if hasattr(msg, "header") else None), vals

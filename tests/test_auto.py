@@ -197,7 +197,9 @@ def test_the_server_serves_a_saved_blend_like_its_stream(blend, task, tmp_path):
             d = direct.update(f)
             np.testing.assert_allclose(p["mean"], d.trajectory(20)[:, 2:], rtol=1e-6, atol=1e-9)  # JSON: 7 digits
             np.testing.assert_allclose(p["std"], d.std(20)[:, 2:], rtol=1e-6, atol=1e-9)
-            assert p["frames"] == k
+            assert p["frames"] == k and p["out_of_range"] is False
+        far = c.frame(hold.demos[2][25, :2] * 1000.0)  # millimetres to a model fitted in metres: flagged on the wire
+        assert far["out_of_range"] is True
 
 
 def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
@@ -263,3 +265,40 @@ def test_worker_processes_serve_a_default_model_file(blend, task, tmp_path):
             assert p["out_of_range"] is False
         far = c.frame(hold.demos[2][20, :2] * 1000.0)
         assert far["out_of_range"] is True
+
+
+def test_settings_flow_down_to_every_member(task):
+    """``AutoInteraction(horizon=0.5, n_basis=8)``: the kernel member is tuned for 0.5 s and the IP member has 8
+    basis functions (a setting is given once, at the top)."""
+    dev, _ = task
+    auto = ip.AutoInteraction([0, 1], candidates=("ip", "kernel"), horizon=0.5, n_basis=8, folds=2).fit(
+        dev.demos, dt=dev.dt)
+    members = auto.model_.members_ if hasattr(auto.model_, "members_") else {auto.chosen_: auto.model_}
+    for name, est in members.items():
+        if name == "kernel":
+            assert est.horizon == 0.5
+        if name == "ip":
+            assert est.n_basis == 8
+    made = auto.factories()
+    assert made["kernel"]().horizon == 0.5 and made["ip"]().n_basis == 8
+    assert 0.5 - dev.dt < auto.selection_.get("bands", [0.5])[0] <= 0.5
+
+
+def test_fit_shows_its_progress_when_asked(task, capsys, monkeypatch):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_tqdm(name, *args, **kwargs):  # the [experiments] extra absent: one line per step on stderr
+        if name == "tqdm":
+            raise ImportError("no tqdm")
+        return real_import(name, *args, **kwargs)
+
+    dev, _ = task
+    monkeypatch.setattr(builtins, "__import__", no_tqdm)
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True).fit(dev.demos, dt=dev.dt)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("fit: step 1/2 compared kernel") and "fitted" in err[-1]
+    assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]  # the last step is the last
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2).fit(dev.demos, dt=dev.dt)
+    assert capsys.readouterr().err == ""

@@ -264,3 +264,40 @@ def test_fit_chooses_the_model_on_the_data_by_default(files, tmp_path, capsys):
                  "-o", str(tmp_path / "nn.npz")]) == 0
     assert "model: nn alone (NearestNeighbour)" in capsys.readouterr().out
     assert type(ip.load_any(tmp_path / "nn.npz").model_).__name__ == "NearestNeighbour"
+
+
+def test_default_fit_on_jittery_ros_stamps_writes_a_working_model(tmp_path, capsys):
+    """The default model (the blend) on recordings whose stamps jitter like a ROS export's: fitted at the recorded
+    durations, saved, predicted from; millimetres given to it are flagged by ``interprim predict``."""
+    import interprim as ip
+
+    demos, _ = _demos(n=8, seed=3)
+    rng = np.random.default_rng(5)
+    times = [np.concatenate([[0.0], np.cumsum(0.02 * (1 + 0.3 * rng.uniform(-1, 1, len(d) - 1)))]) for d in demos]
+    save_demonstrations(tmp_path / "ros.npz", demos, times, columns=COLS)
+    assert load_demonstrations(tmp_path / "ros.npz").dt is None
+    model = tmp_path / "m.npz"
+    assert main(["fit", str(tmp_path / "ros.npz"), "--observed", "human_x,human_y", "-o", str(model)]) == 0
+    auto = ip.load_any(model)
+    assert type(auto) is ip.AutoInteraction
+    assert auto.mean_duration_ == pytest.approx(np.mean([t[-1] for t in times]), rel=0.02)
+    test, _ = _demos(n=1, seed=7)
+    k = 30
+    t = np.cumsum(0.02 * (1 + 0.3 * rng.uniform(-1, 1, k)))
+    save_demonstrations(tmp_path / "p.csv", [test[0][:k, :2]], [t], columns=COLS[:2])
+    save_demonstrations(tmp_path / "mm.csv", [test[0][:k, :2] * 1000.0], [t], columns=COLS[:2])
+    capsys.readouterr()
+    assert main(["predict", str(model), str(tmp_path / "p.csv"), "-o", str(tmp_path / "o.npz")]) == 0
+    assert "WARNING" not in capsys.readouterr().out
+    assert main(["predict", str(model), str(tmp_path / "mm.csv"), "-o", str(tmp_path / "mm_out.npz")]) == 0
+    assert capsys.readouterr().out.count("WARNING: the observed frames are") == 1
+    with np.load(tmp_path / "mm_out.npz", allow_pickle=False) as f:
+        assert float(f["out_of_range"]) == 1.0 and float(f["input_distance"]) > 8
+
+
+def test_a_failed_default_fit_leaves_no_model_file(tmp_path, capsys):
+    demos, _ = _demos(n=2, seed=3)  # too few demonstrations to compare families
+    save_demonstrations(tmp_path / "two.npz", demos, [np.arange(len(d)) * 0.02 for d in demos], columns=COLS)
+    model = tmp_path / "m.npz"
+    assert main(["fit", str(tmp_path / "two.npz"), "--observed", "human_x,human_y", "-o", str(model)]) != 0
+    assert not model.exists() and not list(tmp_path.glob("m.npz*"))

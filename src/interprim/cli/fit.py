@@ -242,10 +242,11 @@ def _fit_other(args, ds, obs, n_read) -> int:
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]
-    mean_dur = float(np.mean([len(d) - 1 for d in ds])) * ds.dt
     what = model.summary()
+    resampled = "" if ds.dt is not None else " (irregular time stamps resampled at their median interval)"
     print(
-        f"fitted {len(ds)} demonstrations, {ds.n_dofs} columns, dt={ds.dt:.4g} s, mean duration {mean_dur:.3g} s\n"
+        f"fitted {len(ds)} demonstrations, {ds.n_dofs} columns, dt={model.dt_:.4g} s{resampled}, mean duration "
+        f"{model.mean_duration_:.3g} s\n"
         f"  observed:   {', '.join(ds.columns[i] for i in obs)}\n"
         f"  controlled: {', '.join(ds.columns[i] for i in ctrl) or '(none: single-agent model)'}\n"
         + (f"  dropped:    {n_read - ds.n_dofs} columns named in neither --observed nor --controlled\n"

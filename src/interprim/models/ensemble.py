@@ -97,6 +97,8 @@ def blend_from_cv(cv: "CrossValidation", make: dict, train, dt: float, observed_
     scales["t"] = cv.t_ahead
     band_weights = {m: [float(x) for x in W[:, i]] for i, m in enumerate(names)}
     members = {}
+    if progress is not None:
+        progress.grow(len(names))
     for m in names:
         members[m] = make[m]().fit(train, dt=dt)
         if progress is not None:
@@ -120,6 +122,11 @@ class _Progress:
             except ImportError:  # the [experiments] extra; without it, one line per step on stderr
                 tqdm = None
             self.bar = tqdm(total=total, desc="fit", unit="step", leave=False) if tqdm else _Lines(total)
+
+    def grow(self, n: int):
+        """``n`` more steps than announced (the members to fit, known once the weights are)."""
+        if self.bar is not None:
+            self.bar.total += int(n)
 
     def step(self, what: str = ""):
         if self.bar is not None:
@@ -493,7 +500,7 @@ class AutoInteraction(Predictor):
         cv_demos = source if getattr(source, "dt", None) is not None and hasattr(source, "times") else train
         make = self.factories()
         cfg = scoring_config(float(self.horizon), train, dt, stride=int(self.stride), point_dim=int(self.point_dim))
-        progress = _Progress(self.progress, len(make) + 1)
+        progress = _Progress(self.progress, len(make))
         if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
             cv = None
             chosen = next(iter(make))
@@ -513,7 +520,9 @@ class AutoInteraction(Predictor):
             best = selection["cv_errors"][chosen]
             selection["blend_vs_best"] = selection["blend_cv_error"] / best if best > 0 else float("nan")
         else:
+            progress.grow(1)
             self.model_ = make[chosen]().fit(train, dt=dt)
+            progress.step(f"fitted {chosen}")
             weights = {chosen: 1.0}
             selection.update(combine="best", weights=weights)
         progress.close()

@@ -69,7 +69,7 @@ class HighFiveConfig:
     n_basis : int
         Basis functions per DoF of the IP.
     sigma2_grid : tuple
-        Candidate observation-noise variances (Eq. 16), ``"auto"`` allowed; the
+        Candidate observation-noise variances (Eq. 16), ``"residual"`` (the fit residual) allowed; the
         one with the lowest validation MSE of the controlled agent is used.
     percents : tuple of int
         Fractions of the observed agent's movement that are observed.
@@ -90,7 +90,7 @@ class HighFiveConfig:
     n_val: int = 20
     seed: int = 0
     n_basis: int = 10
-    sigma2_grid: tuple = ("auto", 10.0, 100.0, 1000.0, 10000.0)
+    sigma2_grid: tuple = ("residual", 10.0, 100.0, 1000.0, 10000.0)
     percents: tuple = DEFAULT_PERCENTS
     n_points: int = 100
     n_samples: int = 30

@@ -280,7 +280,11 @@ class InteractionPrimitive(Predictor):
         if self.input_noise is not None:
             check_positive(self.input_noise, "input_noise")
         if isinstance(self.sigma2, str) and self.sigma2 not in SIGMA2_RULES:
-            raise ValueError(f"sigma2 must be one of {SIGMA2_RULES} or a positive number, got {self.sigma2!r}")
+            try:
+                float(self.sigma2)
+            except ValueError:
+                raise ValueError(f"sigma2 must be one of {SIGMA2_RULES} or a positive number, "
+                                 f"got {self.sigma2!r}") from None
         if not (isinstance(self.sigma2, str) and self.sigma2 in SIGMA2_RULES):
             check_positive(self.sigma2, "sigma2")
         if self.phase_method not in PHASE_METHODS:

@@ -13,7 +13,7 @@ and writes ``benchmarks/RESULTS.md`` with that table, the scaling sweeps
 Fairness: BLAS is capped at one thread for everything (ours and peers) with
 threadpoolctl -- on a 2-core machine OpenBLAS threads only add spinning and
 jitter at these sizes -- and the compiled kernels are loaded before timing
-(``interprim._compiled.loader.warmup``).  Peers: dtaidistance, dtw-python,
+(``interprim.core._compiled.loader.warmup``).  Peers: dtaidistance, dtw-python,
 movement-primitives (``pip install -e .[bench]``); a peer that is missing is
 reported as such, the rest still runs.
 """
@@ -40,7 +40,7 @@ if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
 import interprim as ip  # noqa: E402
-from interprim._compiled import loader  # noqa: E402
+from interprim.core._compiled import loader  # noqa: E402
 from interprim.core.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
 from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
 
@@ -451,7 +451,7 @@ def bench_cold_start(quick, tmp):
     code = ("import time; t0 = time.perf_counter(); import numpy as np; import interprim as ip; "
             f"m = ip.InteractionPrimitive.load(r'{path}'); p = m.predict(np.load(r'{Path(tmp) / 'partial.npy'}')); "
             "p.response(100); print(time.perf_counter() - t0, flush=True); "
-            "from interprim._compiled import loader; loader.warmup()")  # a background compilation ends in the run
+            "from interprim.core._compiled import loader; loader.warmup()")  # a background compilation ends in the run
     env = dict(os.environ)
     env.pop("INTERPRIM_JIT", None)
     res = {}

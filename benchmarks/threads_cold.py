@@ -137,7 +137,7 @@ for f in test[:60, :2]:
 t_, r = q.response(50)
 wall = time.perf_counter() - t0
 cpu = time.process_time()
-from interprim._compiled import loader
+from interprim.core._compiled import loader
 compiled = bool(loader._READY)
 print(json.dumps({"wall": wall, "cpu": cpu, "compiled": compiled, "out": [tr.tolist(), sd.tolist(), r.tolist(),
                   [p.phase, q.phase]]}), flush=True)

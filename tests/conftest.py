@@ -14,7 +14,7 @@ def _compiled_kernels():
     install has them: results then never depend on how far a background compilation has got, and numba's cache
     is filled for the tests that start fresh interpreters.  The first run after an install, on numpy while the
     kernels compile, is tested in tests/test_cold_start.py."""
-    from interprim._compiled import loader
+    from interprim.core._compiled import loader
 
     loader.warmup()
 

@@ -132,7 +132,7 @@ def test_weights_move_smoothly_from_real_time_to_the_whole_movement():
 def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     """Ahead of now, the blend at the instant t seconds ahead is the weighted mean of every member's prediction at
     that same instant (each member placed in time by its own phase and duration)."""
-    from interprim.models.base import place_in_time
+    from interprim.model_selection.realtime import place_in_time
 
     _, hold = task
     x = hold.demos[1][:35, :2]

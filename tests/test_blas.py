@@ -9,7 +9,7 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 import interprim as ip
 from interprim.core import blas as _blas
-from interprim._compiled import loader
+from interprim.core._compiled import loader
 from interprim.models.primitive.prediction import Prediction
 from interprim.synthetic import two_agent_demos
 

@@ -1,4 +1,4 @@
-"""A first run without numba's cache gives the warm run's answers (interprim._compiled.loader).
+"""A first run without numba's cache gives the warm run's answers (interprim.core._compiled.loader).
 
 With a cold cache the calling process computes with the numpy equivalents while a background process
 compiles the kernels; both paths must agree to the stated tolerance (the conditioning floor of these
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim._compiled import loader, registry
+from interprim.core._compiled import loader, registry
 from interprim.synthetic import two_agent_demos
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -69,7 +69,7 @@ COLD_SCRIPT = textwrap.dedent("""
     import numpy as np
     sys.path.insert(0, sys.argv[1])
     import interprim as ip
-    from interprim._compiled import loader
+    from interprim.core._compiled import loader
     from interprim.synthetic import two_agent_demos
 
     demos = two_agent_demos(8, seed=0, frames=120)
@@ -104,6 +104,6 @@ def test_cold_cache_first_run_equals_warm_run(tmp_path):
     assert out["pending"] and not out["first"]["compiled"] and out["after"]["compiled"]
     for k in ("phase", "traj", "std", "sphase", "resp"):
         _close(out["first"][k], out["after"][k], k)
-    check = subprocess.run([sys.executable, "-c", "from interprim._compiled import loader; "
+    check = subprocess.run([sys.executable, "-c", "from interprim.core._compiled import loader; "
                             "print(loader.cache_is_warm())"], env=env, capture_output=True, text=True, timeout=600)
     assert check.stdout.strip() == "True", check.stderr[-2000:]

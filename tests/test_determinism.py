@@ -18,7 +18,7 @@ SCRIPT = textwrap.dedent(
     import json, sys
     import numpy as np
     import interprim as ip
-    from interprim._compiled import loader as _fast
+    from interprim.core._compiled import loader as _fast
     from interprim.synthetic import two_agent_demos
 
     if sys.argv[2] == "warm":

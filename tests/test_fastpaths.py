@@ -7,8 +7,8 @@ import pytest
 from scipy.linalg import expm
 
 import interprim as ip
-from interprim._compiled import loader, registry
-from interprim._compiled.observation import StatsWorkspace, start_position
+from interprim.core._compiled import loader, registry
+from interprim.core._compiled.observation import StatsWorkspace, start_position
 from interprim.core.basis import Basis
 from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
 from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
@@ -113,7 +113,7 @@ def test_shrinkage_intensity_equals_matrix_formula(S, P):
 
 
 def test_vectorised_exp():
-    from interprim._compiled.observation import vexp_nonpos
+    from interprim.core._compiled.observation import vexp_nonpos
 
     t = np.concatenate([-np.geomspace(1e-12, 700, 5000), [0.0, -1e-300, -707.9]])
     out = np.empty_like(t)
@@ -256,7 +256,7 @@ def test_fit_fast_path_equals_per_demo_reference(synthetic):
 
 
 def test_forcing_targets_kernel():
-    from interprim._compiled.observation import forcing_targets_batch
+    from interprim.core._compiled.observation import forcing_targets_batch
 
     rng = np.random.default_rng(2)
     Z = np.cumsum(rng.normal(size=(3, 50, 4)), axis=1)

@@ -116,7 +116,7 @@ def test_aligned_stream_equals_predict_on_every_frame(reach, cls, path):
     """The stream advances one incremental open-end DTW per demonstration instead of re-aligning the prefix, and
     gives exactly (bitwise) what predict gives on every prefix, on either path of the DTW kernels; extend in
     uneven blocks gives the same; reset starts again."""
-    from interprim._compiled import loader, registry
+    from interprim.core._compiled import loader, registry
     from interprim.models.demonstrations import AlignedStream
 
     if path == "compiled" and not loader.warmup():

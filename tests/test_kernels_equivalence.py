@@ -1,4 +1,4 @@
-"""Every compiled kernel equals its numpy reference, in one process (interprim._compiled.registry).
+"""Every compiled kernel equals its numpy reference, in one process (interprim.core._compiled.registry).
 
 Each test asks the registry for both implementations explicitly (``implementation(name, "compiled")`` /
 ``"numpy"``, or the ``forced`` path for the kernels whose reference is a whole numpy path) and compares them
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim._compiled import registry
+from interprim.core._compiled import registry
 from interprim.core.dmp import forcing_targets
 from interprim.core.gaussian import LowRankConditioner
 from interprim.phase import likelihood as PL

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim._compiled import loader as _fast
+from interprim.core._compiled import loader as _fast
 from interprim import io as ipio
 from interprim.synthetic import two_agent_demos
 

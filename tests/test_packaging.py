@@ -116,7 +116,7 @@ def test_wheel_builds_and_installs_clean(tmp_path):
         license_text = z.read(f"{info}/licenses/LICENSE").decode()
     for needed in ("interprim/py.typed", "interprim/server/static/index.html", "interprim/server/static/app.js",
                    "interprim/server/static/ipclient.js", "interprim/server/static/protocol.schema.json",
-                   "interprim/phase/__init__.py", "interprim/_compiled/loader.py"):
+                   "interprim/phase/__init__.py", "interprim/core/_compiled/loader.py"):
         assert needed in names, needed
     assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
     assert metadata["Version"] == version

@@ -5,7 +5,7 @@ import pytest
 
 import interprim as ip
 from interprim.phase.dtw import open_end_dtw
-from interprim._compiled import registry as kernels
+from interprim.core._compiled import registry as kernels
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
 
 
@@ -304,7 +304,7 @@ def _slot_errors(tr, z):
     """Largest relative differences between the tracker's slots (extended frame by frame) and a recomputation
     from scratch at the same lattice speeds: statistics, log-likelihood (same rows), log-likelihood of the
     batch kernel at ``s = v (M - 1)``."""
-    from interprim._compiled import phase_likelihood as PK
+    from interprim.core._compiled import phase_likelihood as PK
 
     M = z.shape[0]
     fs, b = tr._fs, tr._buf

@@ -33,7 +33,7 @@ __all__ = ["single_thread", "one_blas_thread"]
 
 _LOCK = threading.Lock()
 _STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1}
-_HOOK = [None]  # called at the entry of an outermost call (interprim._compiled.loader switches paths there)
+_HOOK = [None]  # called at the entry of an outermost call (interprim.core._compiled.loader switches paths there)
 
 
 def _controllers():
@@ -109,5 +109,5 @@ def depth() -> int:
 
 def on_outer_entry(fn) -> None:
     """Call ``fn()`` at the start of every outermost library call (``None``: nothing); see
-    :mod:`interprim._compiled.loader`: the kernels a call uses are chosen before it starts, never inside it."""
+    :mod:`interprim.core._compiled.loader`: the kernels a call uses are chosen before it starts, never inside it."""
     _HOOK[0] = fn

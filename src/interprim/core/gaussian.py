@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._compiled import registry as _kernels  # light: the kernels themselves load on first use
+from ._compiled import registry as _kernels  # light: the kernels themselves load on first use
 
 __all__ = ["GaussianPrior", "LowRankConditioner", "fit_prior", "shrinkage_intensity", "condition", "condition_literal",
            "Posterior", "sample"]
@@ -531,7 +531,7 @@ class LowRankConditioner:
 
     def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
         """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
-        kernels are in use (:func:`interprim._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
+        kernels are in use (:func:`interprim.core._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
         numbers to rounding); ``None`` if a factorisation failed."""
         return self.mean_compiled(G, B, sigma2, yy, n_obs) if _kernels.in_use() else \
             self.mean_numpy(G, B, sigma2, yy, n_obs)

@@ -15,17 +15,41 @@ import numpy as np
 
 from ..core.cv import folds as cv_folds
 from ..core.preprocessing import interp_columns, time_normalise
-from ..models.base import place_in_time
 from .metrics import Z90, coverage, point_rms, z_ratio
 from .prefixes import Prefixes, observed_frames
 
-__all__ = ["RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold", "folds",
+__all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold", "folds",
            "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
 
 #: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at least 2)
 MIN_DEMONSTRATIONS = 3
 #: from this many demonstrations (leave-one-out), every default method can be fitted on every training fold
 ALL_METHODS_FROM = 5
+
+
+def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
+    """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
+
+    The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
+    :func:`realtime_fold` and the blend of :mod:`interprim.models.ensemble` use it): the position ``t`` seconds
+    after the last of ``n_frames`` observed frames is the prediction at normalised time ``s + t / D``.
+
+    * ``s`` is ``pred.normalised_time``; a prediction without one (NaN, e.g. the prior mean) is played by the
+      clock: ``s = elapsed / mean_duration`` (at most 1) and ``D = mean_duration``.
+    * ``D`` is ``pred.duration``; a prediction with a phase but no duration (e.g. the nearest demonstration) moves
+      at the speed its phase implies: ``D = elapsed / s`` (``mean_duration`` when ``s`` is 0).
+
+    ``elapsed = (n_frames - 1) * dt`` seconds; ``mean_duration`` is the demonstrations' mean duration in seconds.
+    """
+    elapsed = (int(n_frames) - 1) * float(dt)
+    s = float(pred.normalised_time)
+    dur = float(pred.duration)
+    if not math.isfinite(s):
+        return min(elapsed / mean_duration, 1.0), float(mean_duration)
+    if not math.isfinite(dur) or dur <= 0:
+        dur = elapsed / s if s > 0 else float(mean_duration)
+    return s, float(dur)
+
 
 
 @dataclass(frozen=True)
@@ -72,7 +96,7 @@ def _interp_rows(u, grid, Y):
 
 
 def _timing(pred, k, dt, mean_dur_s):
-    """``(phase s at frame k, duration in s)`` of a prediction (:func:`interprim.models.base.place_in_time`)."""
+    """``(phase s at frame k, duration in s)`` of a prediction (:func:`place_in_time`)."""
     return place_in_time(pred, k, dt, mean_dur_s)
 
 

@@ -52,7 +52,7 @@ from ..core.preprocessing import interp_columns
 from ..core.errors import NotFittedError, OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
 
-__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream", "place_in_time",
+__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream",
            "uniform_demonstrations", "DEFAULT_DT", "CheckedStream"]
 
 #: Sampling interval (s) assumed for plain arrays given without ``dt``.
@@ -171,30 +171,6 @@ class TrajectoryColumns:
 
     def __call__(self, pred) -> np.ndarray:
         return np.asarray(pred.trajectory(self.n))[:, self.columns]
-
-
-def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
-    """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
-
-    The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
-    :mod:`interprim.evaluation.realtime` and the blend of :mod:`interprim.models.ensemble` use it): the position ``t`` seconds
-    after the last of ``n_frames`` observed frames is the prediction at normalised time ``s + t / D``.
-
-    * ``s`` is ``pred.normalised_time``; a prediction without one (NaN, e.g. the prior mean) is played by the
-      clock: ``s = elapsed / mean_duration`` (at most 1) and ``D = mean_duration``.
-    * ``D`` is ``pred.duration``; a prediction with a phase but no duration (e.g. the nearest demonstration) moves
-      at the speed its phase implies: ``D = elapsed / s`` (``mean_duration`` when ``s`` is 0).
-
-    ``elapsed = (n_frames - 1) * dt`` seconds; ``mean_duration`` is the demonstrations' mean duration in seconds.
-    """
-    elapsed = (int(n_frames) - 1) * float(dt)
-    s = float(pred.normalised_time)
-    dur = float(pred.duration)
-    if not math.isfinite(s):
-        return min(elapsed / mean_duration, 1.0), float(mean_duration)
-    if not math.isfinite(dur) or dur <= 0:
-        dur = elapsed / s if s > 0 else float(mean_duration)
-    return s, float(dur)
 
 
 class GridPrediction(BasePrediction):

@@ -21,11 +21,11 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..model_selection.realtime import RealTimeConfig, realtime_sweep, summarise_realtime
+from ..model_selection.realtime import RealTimeConfig, place_in_time, realtime_sweep
 from . import registry
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
-from .base import BaseStream, CheckedStream, GridPrediction, Predictor, place_in_time, uniform_demonstrations
+from .base import BaseStream, CheckedStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import interp_columns
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
@@ -165,7 +165,7 @@ class CrossValidation:
 
     One case is one evaluated frame of one held-out training demonstration; for every family that could be
     fitted on every inner fold, the prediction of the next ``horizon`` seconds placed in time by the family's own
-    timing (:func:`interprim.models.base.place_in_time`), and the truth.
+    timing (:func:`interprim.model_selection.realtime.place_in_time`), and the truth.
 
     Attributes
     ----------
@@ -652,7 +652,7 @@ class Blend(Predictor):
     depend on how far ahead the prediction is.
 
     After ``k`` observed frames each member ``m`` says where "now" is in its normalised time (``s_m``) and how long
-    the movement lasts (``D_m``; :func:`interprim.models.base.place_in_time`).  The blend's own timing is the
+    the movement lasts (``D_m``; :func:`interprim.model_selection.realtime.place_in_time`).  The blend's own timing is the
     weighted mean ``s = sum w_m(0) s_m``, ``D = sum w_m(0) D_m`` with the real-time weights; its mean at normalised
     time ``u``, ``a = (u - s) D`` seconds ahead of now, is ``sum w_m(a) y_m(u_m)`` with ``u_m = s_m + a / D_m`` (the
     same instant in seconds for every member) and ``u_m = u s_m / s`` before now (where ``a = 0``).  The weights

@@ -16,7 +16,7 @@ movement seen and ``x = exp(-alpha_x (n*/N) tau)`` the phase (Eq. 9).
 Code uses 0-based indices: ``n_star`` in ``0..N-1``; the paper's fraction
 ``n*/N`` is ``(n_star + 1) / N``.  Ties in Eq. 8 go to the smallest ``n``.
 
-The recursion is compiled with numba (cached on disk; :mod:`interprim._compiled.dtw`),
+The recursion is compiled with numba (cached on disk; :mod:`interprim.core._compiled.dtw`),
 with bitwise-equal numpy equivalents used until the kernels are loaded.  :class:`IncrementalDTW`
 adds one query frame at a time in ``O(N D)`` by computing one new column of
 ``D`` and gives exactly the batch result.
@@ -28,14 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._compiled import registry as kernels
+from ..core._compiled import registry as kernels
 from ..core.validation import as_2d_finite, as_frame
 
 __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
 
 
 # ----------------------------------------------------------------------------- numpy equivalents
-# Used until the compiled kernels (interprim._compiled.dtw) are loaded (see interprim._compiled.loader), e.g. for the
+# Used until the compiled kernels (interprim.core._compiled.dtw) are loaded (see interprim.core._compiled.loader), e.g. for the
 # first prediction of a fresh process.  They perform exactly the operations of the compiled recursion
 # (the same cost summation order, min, then one addition per cell), so results are bitwise equal.
 

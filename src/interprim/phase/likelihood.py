@@ -34,7 +34,7 @@ All candidates of a search are evaluated in one batched computation
 (:func:`phase_log_likelihoods`): since the design of every observed DoF is the
 same ``H(s)``, each candidate needs only ``H^T H``, ``H^T r`` and ``|r|^2``
 (``O(M q (q + D_o))``) and factorisations independent of ``M``
-(:mod:`interprim._compiled.phase_likelihood`, compiled; a numpy equivalent serves until it
+(:mod:`interprim.core._compiled.phase_likelihood`, compiled; a numpy equivalent serves until it
 is loaded).  :func:`_phase_log_likelihood_reference` is the per-candidate
 evaluation it is tested against.
 """
@@ -46,7 +46,7 @@ import math
 import numpy as np
 
 from ..core.blas import single_thread
-from .._compiled import registry as kernels
+from ..core._compiled import registry as kernels
 from ..core.dmp import forcing_values
 from ..core.gaussian import LOG2PI, GaussianPrior, condition
 from ..core.preprocessing import derivatives
@@ -141,7 +141,7 @@ def phase_log_likelihoods(model, z, s_values, sigma2: float | None = None) -> np
     """:func:`phase_log_likelihood` at every phase in ``s_values`` (one batched evaluation).
 
     With the diagonal-plus-low-rank prior of :func:`~interprim.core.gaussian.fit_prior` (the usual case) all
-    candidates go through one compiled kernel (:mod:`interprim._compiled.phase_likelihood`; its numpy equivalent
+    candidates go through one compiled kernel (:mod:`interprim.core._compiled.phase_likelihood`; its numpy equivalent
     until the kernel is loaded): per candidate only ``G = H^T H``, ``H^T r`` and ``|r|^2`` of the
     ``M`` frames are formed, ``O(M q (q + D_o))``, plus ``O(D_o (q^3 + q^2 n + q n^2))`` for the
     factorisations (``n`` demonstrations).  Otherwise (dense prior) each candidate uses the reference
@@ -226,7 +226,7 @@ def fast_state(model):
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
-    """Numpy equivalent of :func:`interprim._compiled.phase_likelihood.phase_loglik_batch` (all candidates at once)."""
+    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_batch` (all candidates at once)."""
     M, n_o = z.shape
     n_steps = Zh.shape[0] - 1
     q = Zh.shape[1]

@@ -2,7 +2,7 @@
 
 :class:`Tracker` (used by :class:`~interprim.models.primitive.stream.Stream`) scores candidates around the previous
 estimate on a fixed lattice of speeds, so the compiled step
-(:func:`interprim._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
+(:func:`interprim.core._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
 frame instead of recomputing them; it scores with :mod:`interprim.phase.likelihood` and ends where the batch
 search ends.
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.blas import single_thread
-from .._compiled import registry as kernels
+from ..core._compiled import registry as kernels
 from .likelihood import S_MIN, search_bounds, finish, fast_state, make_scorer, speed_prior_params, estimate_phase, phase_noise
 
 __all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
@@ -21,12 +21,12 @@ __all__: list[str] = []  # used through Stream (the one-shot track_phase was rem
 # ---------------------------------------------------------------------------------------------------------------
 # online tracking on a lattice of speeds (used by Stream)
 
-_SLOT_FREE = -(1 << 62)  # = interprim._compiled.phase_likelihood.SLOT_FREE (a free slot; no numba import here)
+_SLOT_FREE = -(1 << 62)  # = interprim.core._compiled.phase_likelihood.SLOT_FREE (a free slot; no numba import here)
 _MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step costs ~1/12 of a full one)
 
 
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
-    """Candidates of :func:`interprim._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the clipped
+    """Candidates of :func:`interprim.core._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the clipped
     ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
     js, ss = [], []
     for j in range(kc - nh, kc + nh + 1):
@@ -52,7 +52,7 @@ class Tracker:
     (n_candidates - 1)`` (default: 3 candidates 1 % apart), anchored at the first estimate (the batch search's,
     ``v0 = s / (M - 1)`` at ``M = 2``), centred on the previously chosen ``j``: ``s_j = v_j (M - 1)``, clipped
     to ``[S_MIN, 1]`` (clipped candidates merged).  Frame ``m`` of lattice point ``j`` always sits at phase
-    ``v_j m``, so the compiled step (:func:`interprim._compiled.phase_likelihood.track_step`) extends each
+    ``v_j m``, so the compiled step (:func:`interprim.core._compiled.phase_likelihood.track_step`) extends each
     point's statistics and factors by the new frame (``O(D_o (q^2 + q n) + n^3)``) instead of recomputing them
     (``O(M q (q + D_o) + D_o q^2 n + ...)``).  While the best candidate is at an unclipped edge the window is
     re-centred on it (:meth:`_lattice_step`); the phase returned is then taken off the lattice to the maximum
@@ -145,7 +145,7 @@ class Tracker:
             return cand, lp, i
         if fs is not self._fs or self._buf is None:
             self._fs = fs
-            from .._compiled.phase_likelihood import track_buffers
+            from ..core._compiled.phase_likelihood import track_buffers
 
             self._buf = track_buffers(fs.q, fs.n_o, fs.Uh.shape[2])
             self._n_out = 2 * self.nh + 1

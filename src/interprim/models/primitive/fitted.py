@@ -26,7 +26,7 @@ import copy
 import numpy as np
 
 from ...core.blas import one_blas_thread, single_thread
-from ..._compiled import registry as kernels
+from ...core._compiled import registry as kernels
 from ...core.validation import as_2d_finite, check_positive, check_times
 from ...core.basis import Basis
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
@@ -499,7 +499,7 @@ class FittedPrimitive:
         """
         M = z.shape[0]
         if M >= 3 and kernels.in_use():
-            from ..._compiled.observation import StatsWorkspace, start_position
+            from ...core._compiled.observation import StatsWorkspace, start_position
 
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ...core.blas import one_blas_thread
-from ..._compiled import registry as kernels
+from ...core._compiled import registry as kernels
 from ..base import BasePrediction
 from ...core.gaussian import Posterior, sample
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.blas import one_blas_thread
-from ..._compiled import registry as kernels
+from ...core._compiled import registry as kernels
 from ..base import BaseStream
 from ...core.validation import as_2d_finite, as_frame
 from ...core.input_range import mark
@@ -44,10 +44,10 @@ class Stream(BaseStream):
         self._dtw = IncrementalDTW(model.reference_)
         cap = max(2 * model.reference_.shape[0], 16)
         self._buf = np.empty((cap, model.n_observed_latent_))
-        # the compiled per-frame step when the kernels are in use (see interprim._compiled.loader)
+        # the compiled per-frame step when the kernels are in use (see interprim.core._compiled.loader)
         self._ws = None
         if kernels.in_use():
-            from ..._compiled.observation import StatsWorkspace
+            from ...core._compiled.observation import StatsWorkspace
 
             self._ws = StatsWorkspace(cap, model.n_observed_latent_, model.params_per_dof_, model.observation)
         self._n = 0

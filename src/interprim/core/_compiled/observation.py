@@ -369,7 +369,7 @@ def start_position(z, window, polyorder: int = 3) -> np.ndarray:
     (shrunk to the largest odd number not above ``len(z)``); the raw first
     frame when ``window`` is None or too short to smooth.  A new array.
     """
-    from ..core.preprocessing import savgol_window
+    from ..preprocessing import savgol_window
 
     wp = savgol_window(z.shape[0], window, polyorder)
     if wp is not None:

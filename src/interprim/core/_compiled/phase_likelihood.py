@@ -595,7 +595,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# workspaces of track_step, and the warm-up calls of the loader (interprim._compiled.loader)
+# workspaces of track_step, and the warm-up calls of the loader (interprim.core._compiled.loader)
 
 N_SLOTS = 12
 MAX_CANDIDATES = 63  # candidates per track_step call (its s_out, lp_out)

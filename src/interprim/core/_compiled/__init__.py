@@ -1,7 +1,7 @@
 """Compiled kernels (numba, cached on disk), one module per stage of the paper, and their one loader.
 
-:mod:`~interprim._compiled.registry` lists each kernel with its numpy reference and
-hands them to callers by name; :mod:`~interprim._compiled.loader` decides whether the
+:mod:`~interprim.core._compiled.registry` lists each kernel with its numpy reference and
+hands them to callers by name; :mod:`~interprim.core._compiled.loader` decides whether the
 kernels or their numpy equivalents run (``ready``, ``warmup``); the kernels are :mod:`.dtw` (Eq. 5-8),
 :mod:`.observation` (Eq. 3, 13-15), :mod:`.conditioning` (Eq. 16-18),
 :mod:`.linalg` (small dense factorisations), :mod:`.rollout` (Eq. 1) and

@@ -1,8 +1,8 @@
-"""The one loader of the compiled kernels (:mod:`interprim._compiled`).
+"""The one loader of the compiled kernels (:mod:`interprim.core._compiled`).
 
 Every compiled kernel has a plain numpy equivalent that gives the same
 numbers (bitwise for DTW, to ~1e-13 for the rest; both are listed side by side in
-:mod:`interprim._compiled.registry`, which callers ask for a kernel, and are compared
+:mod:`interprim.core._compiled.registry`, which callers ask for a kernel, and are compared
 in ``tests/test_kernels_equivalence.py``;
 a whole fit + predict + stream agrees to ~2e-8 relative, the conditioning
 floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
@@ -18,7 +18,7 @@ which one runs:
   index files, without compiling), the kernels are loaded on the first call that
   needs one (~0.3-1 s), as with ``1``.  If it does not (a fresh install, an
   upgraded numba), the kernels are compiled by a separate background process
-  (``python -m interprim._compiled.loader``, which fills the cache for every later
+  (``python -m interprim.core._compiled.loader``, which fills the cache for every later
   process too), the calling process computes with the numpy equivalents
   meanwhile, and switches to the compiled kernels once they are loaded -- only
   between two public calls (:func:`interprim.core.blas.one_blas_thread` marks them),
@@ -140,7 +140,7 @@ def _strict() -> bool:
 
 def cache_is_warm() -> bool:
     """Whether numba's on-disk cache holds a current entry for every kernel of the registry
-    (:data:`interprim._compiled.registry.KERNELS`).
+    (:data:`interprim.core._compiled.registry.KERNELS`).
 
     Reads the cache index files (numba checks their source stamps), compiles nothing.  If numba's cache
     layout cannot be read, answers True (the kernels are then loaded, or compiled, in the calling thread).
@@ -161,9 +161,9 @@ def cache_is_warm() -> bool:
 
 def _child_command() -> list[str]:
     """The command of the background compilation: this package, found where the parent found it."""
-    pkg_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    pkg_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     code = (f"import sys; sys.path.insert(0, {pkg_root!r}); "
-            "from interprim._compiled.loader import _compile_main; sys.exit(_compile_main())")
+            "from interprim.core._compiled.loader import _compile_main; sys.exit(_compile_main())")
     return [sys.executable, "-c", code]
 
 
@@ -231,19 +231,19 @@ def _switch() -> bool:
 
 
 def _outside_calls() -> bool:
-    from ..core import blas as _blas
+    from .. import blas as _blas
 
     return _blas.depth() == 0
 
 
 def _arm_switch():
-    from ..core import blas as _blas
+    from .. import blas as _blas
 
     _blas.on_outer_entry(_switch)
 
 
 def _disarm_switch():
-    from ..core import blas as _blas
+    from .. import blas as _blas
 
     _blas.on_outer_entry(None)
 

@@ -1,14 +1,14 @@
 """The one dispatch of the compiled kernels: each kernel registered with its numpy reference.
 
 Every kernel called from Python is one row of :data:`KERNELS`: where the compiled kernel lives (a
-module of :mod:`interprim._compiled`, which imports numba) and where its numpy reference lives (a
+module of :mod:`interprim.core._compiled`, which imports numba) and where its numpy reference lives (a
 module that does not import numba, so that the reference runs with ``INTERPRIM_JIT=0``, without numba,
 and while a cold cache compiles in the background).  Kernel and reference sit side by side in one row
 (the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other, kernel by kernel, in one process (``tests/test_kernels_equivalence.py``,
 which also runs with ``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
 
 Callers ask for a kernel by name; whether the compiled kernels are in use is decided once, by
-:func:`interprim._compiled.loader.ready` (its environment switches and cold-start behaviour):
+:func:`interprim.core._compiled.loader.ready` (its environment switches and cold-start behaviour):
 
 * :func:`kernel` -- the compiled kernel when the compiled kernels are in use, else ``None`` (the caller
   then runs the registered reference, or the numpy path of which it is a part);
@@ -34,8 +34,8 @@ _FORCED: list = [None]  # None: loader.ready() decides; "numpy" / "compiled": fo
 
 
 def in_use() -> bool:
-    """Whether the compiled kernels are in use now (:func:`interprim._compiled.loader.ready`), for callers that
-    prepare the compiled path's workspaces (:class:`interprim._compiled.observation.StatsWorkspace`)."""
+    """Whether the compiled kernels are in use now (:func:`interprim.core._compiled.loader.ready`), for callers that
+    prepare the compiled path's workspaces (:class:`interprim.core._compiled.observation.StatsWorkspace`)."""
     forced_path = _FORCED[0]
     return loader.ready() if forced_path is None else forced_path == "compiled"
 

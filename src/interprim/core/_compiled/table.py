@@ -1,4 +1,4 @@
-"""The table of the compiled kernels: each with its numpy reference (see :mod:`interprim._compiled.registry`).
+"""The table of the compiled kernels: each with its numpy reference (see :mod:`interprim.core._compiled.registry`).
 
 Importing this module does not import numba; :func:`compiled` imports a kernel's module (and numba) on demand.
 """
@@ -20,7 +20,7 @@ class Kernel:
     name : str
         ``"<module>.<short name>"``, the key callers use.
     compiled : str
-        ``"<module of interprim._compiled>:<function>"``.
+        ``"<module of interprim.core._compiled>:<function>"``.
     reference : str
         ``"<module>:<qualified name>"`` of the numpy reference (a module that does not import numba).
     drop_in : bool

@@ -1,7 +1,7 @@
 """Compiled kernels of the open-end DTW (paper Eq. 5-8); see :mod:`interprim.phase.dtw` for the maths.
 
 Kept apart from :mod:`interprim.phase.dtw` so that importing the package and the
-first prediction do not need numba (see :mod:`interprim._compiled.loader`).
+first prediction do not need numba (see :mod:`interprim.core._compiled.loader`).
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ def _backtrack(Dm, n_end):
 
 def warm_up(u, v) -> None:
     """Compile (or load from the cache) every kernel of this module with tiny inputs ``u (N, D)``, ``v (M, D)``
-    of the real types (called by :func:`interprim._compiled.loader.warmup`)."""
+    of the real types (called by :func:`interprim.core._compiled.loader.warmup`)."""
     uT = np.ascontiguousarray(u.T)
     N = u.shape[0]
     _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))

@@ -53,6 +53,7 @@ class _StubPrediction:
 
         self.phase, self.x, self.speed, self.duration, self.log_likelihood = 0.5, 0.2, 1.0, 1.5, -1.0
         self.goal = np.zeros(5)
+        self.conditioned, self.n_observed, self.input_distance, self.out_of_range = True, 1, 0.0, False
         self._traj = np.linspace(0, 1, 5 * 500).reshape(500, 5)
 
     def trajectory(self, n):
@@ -60,6 +61,11 @@ class _StubPrediction:
 
     def std(self, n):
         return self._traj[:n]
+
+    def mean_rollout(self, n, columns=None):
+        from interprim.contract import TrajectoryColumns
+
+        return TrajectoryColumns(n, columns)
 
 
 class _StubModel:

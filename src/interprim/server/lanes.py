@@ -201,8 +201,9 @@ class Compute:
     joins the threads or processes.
     """
 
-    def __init__(self, models: dict, workers: int = 0, processes: int = 0):
+    def __init__(self, models: dict, workers: int = 0, processes: int = 0, cost_per_second: float | None = None):
         self.models = models
+        self.cost_per_second = cost_per_second
         self.workers = int(workers)
         self.processes = int(processes)
         self.pool = ThreadPoolExecutor(self.workers, thread_name_prefix="ip-worker") if (

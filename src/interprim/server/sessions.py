@@ -51,8 +51,9 @@ class Sessions:
         ``info()`` -> the ``/api/info`` JSON, whose ``server``, ``models`` and ``limits`` the ``welcome`` repeats.
     """
 
-    def __init__(self, config, models: dict, compute, sessions: dict, stats: dict, info):
+    def __init__(self, config, models: dict, compute, sessions: dict, stats: dict, info, gate=None):
         self.config = config
+        self.gate = gate  # the unauthenticated connections (interprim.server.gate.ConnectionGate)
         self.models = models
         self.compute = compute
         self.sessions = sessions
@@ -61,10 +62,91 @@ class Sessions:
         self._ids = itertools.count(1)
         self.stopping = False  # shutting down: new connections are closed with 1001, messages no longer read
 
-    async def handler(self, ws):
-        """Serve one WebSocket connection (the WebSocket library's connection handler) until it closes."""
+    async def _refuse_full(self, ws, peer: str) -> None:
+        self.stats["rejected"] += 1
+        log.warning("connection from %s refused: server full (%d sessions)", peer, self.config.max_sessions)
+        await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {self.config.max_sessions} sessions; try again later")
+
+    async def _await_hello(self, ws, peer: str, t0: float):
+        """Read messages until an accepted ``hello`` (returns ``(hello, frames_seen)``) or the end: a wrong token
+        (``unauthorized``, close 1008), the hello deadline (close 1008), too many other messages (close 1008) or
+        the connection going away (returns ``None``).  Nothing of a session exists yet: replies go straight to the
+        socket.  Messages before hello get the usual errors (``not_ready``, ``bad_json``, ...)."""
+        from websockets.exceptions import ConnectionClosed
+
         c = self.config
-        sid = next(self._ids)
+        loop = asyncio.get_running_loop()
+        errors = frames = 0
+        limit = min(c.max_errors, 16)
+        try:
+            while True:
+                left = c.hello_timeout - (loop.time() - t0)
+                try:
+                    if left <= 0:
+                        raise asyncio.TimeoutError
+                    data = await asyncio.wait_for(ws.recv(), left)  # (3.10: no asyncio.timeout)
+                except (TimeoutError, asyncio.TimeoutError):
+                    log.warning("connection from %s closed: no hello within %g s", peer, c.hello_timeout)
+                    await ws.close(P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
+                    return None
+                except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
+                    await ws.close(P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
+                    return None
+                if self.stopping:
+                    await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
+                    return None
+                seq = t = None
+                try:
+                    if not isinstance(data, str):
+                        frames += 1
+                        seq = frames
+                        raise P.ProtocolError("not_ready", "send hello first (got a frame)")
+                    try:
+                        msg = P.parse_text(data)
+                    except P.ProtocolError as exc:
+                        if exc.code == "bad_json":
+                            looks_like_frame, t = P.scan_unparsed(data)
+                            if looks_like_frame:
+                                frames += 1
+                                seq = frames
+                        raise
+                    if msg["type"] == "frame":
+                        frames += 1
+                        seq, t = frames, P.frame_stamp(msg)
+                    if msg["type"] != "hello":
+                        what = "a frame" if msg["type"] == "frame" else repr(msg["type"])
+                        raise P.ProtocolError("not_ready", f"send hello first (got {what})")
+                    h = P.check_hello(msg)
+                    if not token_ok(c.token, h["token"]):
+                        log.warning("connection from %s closed: missing or wrong token in hello", peer)
+                        await ws.send(P.dumps(P.error("unauthorized", "missing or wrong token in hello")))
+                        await ws.close(P.CLOSE_POLICY, "missing or wrong token in hello")
+                        return None
+                    return h, frames
+                except P.ProtocolError as exc:
+                    errors += 1
+                    self.stats["errors"] += 1
+                    await ws.send(P.dumps(P.error(exc.code, exc.message, seq=seq, t=t)))
+                    if exc.fatal:
+                        log.warning("connection from %s closed before hello: %s", peer, exc.message)
+                        await ws.close(P.CLOSE_POLICY, exc.message[:120])
+                        return None
+                    if errors >= limit:
+                        log.warning("connection from %s closed: %d messages before hello", peer, errors)
+                        await ws.close(P.CLOSE_POLICY, f"too many protocol errors ({errors} in a row) before hello")
+                        return None
+        except ConnectionClosed:
+            return None
+
+    async def handler(self, ws):
+        """Serve one WebSocket connection (the WebSocket library's connection handler) until it closes.
+
+        Authenticate before allocating: until its ``hello`` is accepted (with the token, when the server has
+        one) a connection holds no session slot, queue, writer or stream; it is only counted by the server's
+        :class:`~interprim.server.gate.ConnectionGate`."""
+        c = self.config
+        loop = asyncio.get_running_loop()
+        t0 = getattr(ws, "_gate_t0", None) or loop.time()
         try:
             peer = "%s:%s" % tuple(ws.remote_address[:2])
         except Exception:
@@ -72,31 +154,34 @@ class Sessions:
         if self.stopping:  # accepted while shutting down
             await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
             return
-        if len(self.sessions) >= c.max_sessions:
-            self.stats["rejected"] += 1
-            log.warning("session %d from %s refused: server full (%d sessions)", sid, peer, c.max_sessions)
-            await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {c.max_sessions} sessions; try again later")
+        if len(self.sessions) >= c.max_sessions:  # no use reading a hello
+            await self._refuse_full(ws, peer)
             return
+        got = await self._await_hello(ws, peer, t0)
+        if got is None:
+            return
+        if len(self.sessions) >= c.max_sessions:
+            await self._refuse_full(ws, peer)
+            return
+        if self.gate is not None:
+            self.gate.authenticated(ws)
+        sid = next(self._ids)
         s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
-        if isinstance(ws, FastFrames) and wsfast.supported(ws):
+        s.seq = got[1]
+        if c.fast_path and isinstance(ws, FastFrames) and wsfast.supported(ws):
             s.direct = True
             ws.fast_frame = lambda data: self._fast_frame(s, data)
         self.sessions[sid] = s
         self.stats["sessions"] += 1
-        s.writer = asyncio.get_running_loop().create_task(self._writer(s))
+        s.writer = loop.create_task(self._writer(s))
         log.info("session %d: connected from %s (%d active)", sid, peer, len(self.sessions))
         from websockets.exceptions import ConnectionClosed
 
         try:
+            self._welcome(s)
             while not s.closing:
                 try:
-                    if not s.ready:
-                        data = await asyncio.wait_for(ws.recv(), c.hello_timeout)  # (3.10: no asyncio.timeout)
-                    else:
-                        data = await ws.recv()
-                except (TimeoutError, asyncio.TimeoutError):
-                    self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
-                    break
+                    data = await ws.recv()
                 except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
                     self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
                     break
@@ -327,6 +412,13 @@ class Sessions:
             s.waiters.append(fut)
             await fut
 
+    def _welcome(self, s: _Session) -> None:
+        s.ready = True
+        s.consecutive_errors = 0
+        reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
+        reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
+        self._send(s, P.dumps(reply))
+
     async def _on_control(self, s: _Session, msg: dict) -> None:
         c = self.config
         mtype = msg["type"]
@@ -334,11 +426,7 @@ class Sessions:
             h = P.check_hello(msg)
             if not token_ok(c.token, h["token"]):
                 raise P.ProtocolError("unauthorized", "missing or wrong token in hello", fatal=True)
-            s.ready = True
-            s.consecutive_errors = 0
-            reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
-            reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
-            self._send(s, P.dumps(reply))
+            self._welcome(s)
             return
         if not s.ready:
             raise P.ProtocolError("not_ready", f"send hello first (got {mtype!r})")

@@ -20,6 +20,7 @@ import logging
 from . import protocol as P
 from . import wsfast
 from .compute import _Open, _Recognition
+from .gate import RateLimitedLog
 from .http_api import token_ok
 from .lanes import _Bucket, _Session
 from .wsfast import FastFrames
@@ -60,6 +61,7 @@ class Sessions:
         self.stats = stats
         self._info = info
         self._ids = itertools.count(1)
+        self._fail_log = RateLimitedLog(log, burst=10, period=10.0)  # prediction failures (tracebacks)
         self.stopping = False  # shutting down: new connections are closed with 1001, messages no longer read
 
     async def _refuse_full(self, ws, peer: str) -> None:
@@ -521,7 +523,17 @@ class Sessions:
             texts, failures = result
         for seq, detail in failures:
             self.stats["errors"] += 1
-            log.error("session %d: prediction failed at seq %d:\n%s", s.id, seq, detail.rstrip())
+            s.errors += 1
+            if detail is None:  # a frame refused by the model's guard (bad_frame), answered on its own
+                s.error_counts["bad_frame"] = s.error_counts.get("bad_frame", 0) + 1
+                self._fail_log.log(logging.WARNING, "session %d: frame seq %d refused: out of the model's numeric "
+                                   "range", s.id, seq)
+                continue
+            s.error_counts["internal"] = s.error_counts.get("internal", 0) + 1
+            first = s.error_counts["internal"] == 1
+            # a full traceback for a session's first failure, one line after; at most 10 lines per 10 s in all
+            self._fail_log.log(logging.ERROR, "session %d: prediction failed at seq %d%s", s.id, seq,
+                               ":\n" + detail.rstrip() if first else f": {detail.rstrip().splitlines()[-1]}")
         if s.ended or s.open is not op:  # gone, or closed while computing
             return
         n_pred = len(texts) - len(failures)

@@ -92,6 +92,10 @@ class HttpApi:
         self.extra_info = {} if extra_info is None else extra_info  # the server's own dict (read at each request)
         self._static = self._load_static()
         self.hosts = allowed_host_names(config)
+        # /api/replay/MODEL encoded once, here: encoding megabytes of JSON per request blocked the event loop
+        # (every session's frames waited for it)
+        self._replay = {name: json.dumps(e.meta["replay"]).encode() for name, e in models.items()
+                        if "replay" in e.meta}
 
     @staticmethod
     def _load_static() -> dict:
@@ -236,8 +240,8 @@ class HttpApi:
                 return self._json(conn, 200, self.info())
             if path.startswith("/api/replay/"):
                 name = path[len("/api/replay/"):]
-                entry = self.models.get(name)
-                if entry is None or "replay" not in entry.meta:
+                body = self._replay.get(name)
+                if body is None:
                     return self._json(conn, 404, {"error": f"no replay data for model {name!r}"})
-                return self._json(conn, 200, entry.meta["replay"])
+                return self._http(conn, 200, body, "application/json; charset=utf-8")
         return self._json(conn, 404, {"error": f"not found: {path}"})

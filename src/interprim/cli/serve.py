@@ -90,9 +90,6 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-unauthenticated-per-address", type=int, default=8,
                    help="connections without an accepted hello from one IP address; a new one aborts the oldest "
                         "(default 8; raise it behind a reverse proxy)")
-    p.add_argument("--max-cost", type=float, default=0.5,
-                   help="compute budget of one session: CPU seconds per second; a session over it is answered "
-                        "less often (its frames coalesced), never dropped (default 0.5)")
     p.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
                    help="event loop: auto (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
@@ -166,7 +163,6 @@ def _run(args) -> int:
         hello_timeout=args.hello_timeout,
         max_unauthenticated=args.max_unauthenticated,
         max_unauthenticated_per_address=args.max_unauthenticated_per_address,
-        max_cost_per_second=args.max_cost,
         loop=args.loop,
     )
     try:

@@ -76,7 +76,6 @@ class ServerConfig:
     allowed_origins: tuple = ()  # browser Origins allowed besides those of the allowed hosts ("*": any)
     allowed_hosts: tuple = ()  # Host header names allowed besides the loopback names and the bound address
     fast_path: bool = True  # the server's own frame path (interprim.server.wsfast); False: the library does all
-    max_cost_per_second: float = 0.5  # a session's compute budget: CPU seconds per second of wall time (see lanes)
     log_errors_per_session: int = 10
     loop: str = "auto"  # event loop: "auto" (uvloop if installed), "uvloop", "asyncio" (see new_event_loop)
 
@@ -207,8 +206,7 @@ class InterprimServer:
         self.gate = ConnectionGate(c.max_unauthenticated, c.max_unauthenticated_per_address,
                                    c.hello_timeout + c.close_timeout + 1.0, self.stats)
         self.http = HttpApi(c, self.models, self.stats, self.extra_info)
-        self.compute = Compute(self.models, workers=c.workers, processes=c.processes,
-                               cost_per_second=c.max_cost_per_second)
+        self.compute = Compute(self.models, workers=c.workers, processes=c.processes)
         self.ws = Sessions(c, self.models, self.compute, self.sessions, self.stats, self.http.info, self.gate)
         self._server = None
         self.port = None

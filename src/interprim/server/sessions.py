@@ -328,7 +328,11 @@ class Sessions:
                 return False
         except P.ProtocolError:
             return False
-        if not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
+        # The rate limit counts the frames the server is keeping up with.  A frame that arrives while the session
+        # waits for its turn is coalesced (answered by the turn's one reply), not charged: when the server is
+        # behind it stops reading the session (max_pending) and TCP then delivers a well-behaved client's frames in
+        # bursts that are the server's doing, not the client's.
+        if not s.queued and not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
             return False
         s.seq += 1
         s.pending.append((frame, s.seq, t))

@@ -384,3 +384,16 @@ def test_lane_fair_queuing_makes_an_expensive_session_pay_with_its_own_turns():
 
     asyncio.run(go())
     assert turns[1] * 4 <= turns[2] and abs(turns[2] - turns[3]) <= 2, turns
+
+
+def test_rate_limit_is_credited_for_the_time_the_server_did_not_read():
+    """Issue 30, finding 4: when the server stops reading a session that is behind (max_pending), the client's frames
+    pile up in TCP and arrive as one burst over the rate limit's burst: they were dropped as rate_limited.  The
+    pause is now credited to the bucket (beyond its burst), so a client within the rate loses none of them."""
+    from interprim.server.lanes import _Bucket
+
+    b = _Bucket(rate=100.0, burst=5)
+    assert sum(b.take() for _ in range(50)) == 5  # a burst of 50: 5 pass (what a flooding client gets)
+    b.credit(0.4)  # the server did not read the client for 0.4 s: 40 frames at 100 Hz
+    assert sum(b.take() for _ in range(40)) == 40
+    assert not b.take()

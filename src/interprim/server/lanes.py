@@ -40,12 +40,18 @@ class _Bucket:
 
     def take(self) -> bool:
         now = time.monotonic()
-        self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        # (tokens over the burst come from credit(): kept until spent)
+        self.tokens = max(self.tokens, min(self.burst, self.tokens + (now - self.last) * self.rate))
         self.last = now
         if self.tokens >= 1.0:
             self.tokens -= 1.0
             return True
         return False
+
+    def credit(self, seconds: float) -> None:
+        """Add what ``seconds`` of the rate allow, beyond the burst: the server did not read the client for that
+        long, and its frames of that time arrive together."""
+        self.tokens = max(self.tokens, 0.0) + max(0.0, seconds) * self.rate
 
 
 @dataclass

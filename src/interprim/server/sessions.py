@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+import time
 
 from . import protocol as P
 from . import wsfast
@@ -328,11 +329,7 @@ class Sessions:
                 return False
         except P.ProtocolError:
             return False
-        # The rate limit counts the frames the server is keeping up with.  A frame that arrives while the session
-        # waits for its turn is coalesced (answered by the turn's one reply), not charged: when the server is
-        # behind it stops reading the session (max_pending) and TCP then delivers a well-behaved client's frames in
-        # bursts that are the server's doing, not the client's.
-        if not s.queued and not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
+        if not s.bucket.take():  # (an empty bucket stays empty for _on_message's own try)
             return False
         s.seq += 1
         s.pending.append((frame, s.seq, t))
@@ -354,8 +351,13 @@ class Sessions:
         frames to its streams as fast as they come), so that TCP flow control slows the client down."""
         limit = self.config.max_pending
         s.busy = True
+        t0 = time.monotonic()
         try:
             await self._until(s, lambda: len(s.pending) < limit or not s.queued)
+            # The frames the client sent meanwhile wait in TCP and arrive as one burst when reading resumes: the
+            # server's doing, not the client's.  Credit the pause to its rate limit (beyond the burst), so that a
+            # client within the rate never gets rate_limited for them; they are coalesced into the next turn.
+            s.bucket.credit(time.monotonic() - t0)
         finally:
             s.busy = False
             s.wake()

@@ -253,7 +253,7 @@ class InterprimServer:
 
         c = self.config
         if not c.fast_path:
-            LoggedConnection._fast_state = -1  # the library parses every byte
+            LoggedConnection.fast_path = False  # the library parses every byte
         sessions, unauth, msg = fd_budget(c.max_sessions, c.max_unauthenticated,
                                           extra=4 * (c.processes or 0) + (c.workers or 0))
         if msg:

@@ -105,11 +105,11 @@ class ConnectionGate:
         timer = loop.call_later(self.timeout, self._expire, conn)
         self.by_address.setdefault(addr, OrderedDict())[conn] = (transport, timer, addr)
         self.count += 1
-        conn._gate_address = addr
-        conn._gate_t0 = loop.time()
+        conn.gate_address = addr
+        conn.gate_t0 = loop.time()
 
     def _remove(self, conn):
-        addr = getattr(conn, "_gate_address", None)
+        addr = getattr(conn, "gate_address", None)
         held = self.by_address.get(addr)
         if held is None or conn not in held:
             return None

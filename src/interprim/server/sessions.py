@@ -149,7 +149,7 @@ class Sessions:
         :class:`~interprim.server.gate.ConnectionGate`."""
         c = self.config
         loop = asyncio.get_running_loop()
-        t0 = getattr(ws, "_gate_t0", None) or loop.time()
+        t0 = getattr(ws, "gate_t0", None) or loop.time()
         try:
             peer = "%s:%s" % tuple(ws.remote_address[:2])
         except Exception:

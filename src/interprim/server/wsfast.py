@@ -90,6 +90,7 @@ class FastFrames:
     """Mixin for a :class:`websockets.asyncio.server.ServerConnection` subclass: see the module's docstring."""
 
     fast_frame = None  # set by the session: callable(str | bytes) -> bool
+    fast_path = True  # False (ServerConfig.fast_path): the library gets every byte
     _fast_state = 0  # 0: not decided yet (handshake), 1: on, -1: off for good
     _fast_buf = b""
 
@@ -102,7 +103,7 @@ class FastFrames:
             if proto.state is not OPEN:  # the handshake: the library's
                 return super().data_received(data)
             # the first bytes after the handshake: the library's parser is at a frame boundary iff it holds none
-            if proto.reader.buffer or not supported(self):
+            if not self.fast_path or proto.reader.buffer or not supported(self):
                 self._fast_state = -1
                 return super().data_received(data)
             self._fast_state = 1

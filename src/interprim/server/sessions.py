@@ -63,6 +63,7 @@ class Sessions:
         self._info = info
         self._ids = itertools.count(1)
         self._fail_log = RateLimitedLog(log, burst=10, period=10.0)  # prediction failures (tracebacks)
+        self._conn_log = RateLimitedLog(log, burst=10, period=10.0)  # connections gone before hello
         self.stopping = False  # shutting down: new connections are closed with 1001, messages no longer read
 
     async def _refuse_full(self, ws, peer: str) -> None:
@@ -139,6 +140,7 @@ class Sessions:
                         await ws.close(P.CLOSE_POLICY, f"too many protocol errors ({errors} in a row) before hello")
                         return None
         except ConnectionClosed:
+            self._conn_log.log(logging.INFO, "connection from %s: ended before an accepted hello", peer)
             return None
 
     async def handler(self, ws):

@@ -53,6 +53,7 @@ class _StubPrediction:
 
         self.phase, self.x, self.speed, self.duration, self.log_likelihood = 0.5, 0.2, 1.0, 1.5, -1.0
         self.goal = np.zeros(5)
+        self.conditioned, self.n_observed, self.input_distance, self.out_of_range = True, 1, 0.0, False
         self._traj = np.linspace(0, 1, 5 * 500).reshape(500, 5)
 
     def trajectory(self, n):
@@ -60,6 +61,11 @@ class _StubPrediction:
 
     def std(self, n):
         return self._traj[:n]
+
+    def mean_rollout(self, n, columns=None):
+        from interprim.models.base import TrajectoryColumns
+
+        return TrajectoryColumns(n, columns)
 
 
 class _StubModel:
@@ -94,6 +100,9 @@ def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="auto"):
         models = load_models([model_path])
     workers, processes = mode
     kw = {"loop": loop} if "loop" in ServerConfig.__dataclass_fields__ else {}  # (an older server: asyncio)
+    if "max_unauthenticated_per_address" in ServerConfig.__dataclass_fields__:
+        # every session of the load client connects at once from 127.0.0.1, before any hello
+        kw.update(max_unauthenticated=2000, max_unauthenticated_per_address=2000)
     cfg = ServerConfig(port=0, max_sessions=1000, workers=workers, processes=processes, max_rate_hz=1000,
                        rate_burst=100, **kw)
 
@@ -198,13 +207,15 @@ def _error(st, msg):
             st["sent_at"].pop(q, None)
         st["next"] = seq + 1
         st["errors"] += covers
+        if msg.get("code") == "rate_limited":
+            st["rate_limited"] += covers
     else:
         st["errors"] += 1
 
 
 def _new_state():
     return {"lat": [], "recv": [], "sent_at": {}, "got": 0, "errors": 0, "coalesced": 0, "replies": 0, "next": 1,
-            "bad": 0}
+            "bad": 0, "rate_limited": 0}
 
 
 def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0, client="raw", loop="auto"):
@@ -427,6 +438,7 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, c
     sent = sum(r["sent"] for r in res)
     errors = sum(r["errors"] for r in res)
     lost = sum(r["missing"] + r["bad"] for r in res)
+    rate_limited = sum(r.get("rate_limited", 0) for r in res)
 
     def pct(v):
         return lat[min(len(lat) - 1, int(round(v / 100 * (len(lat) - 1))))] * 1e3 if lat else float("nan")
@@ -441,6 +453,7 @@ def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, c
         "coalesced": sum(r["coalesced"] for r in res),
         "lost": lost,
         "errors": errors,
+        "rate_limited": rate_limited,  # of the well-behaved sessions (the heavy ones are left out above)
         "dropped": lost + errors,
         "server_cpu_pct": 100.0 * (cpu1 - cpu0) / (t1 - t0),
         # the client's whole run (connect, stream, wait for the last replies) over the streaming time
@@ -524,7 +537,7 @@ def main(argv=None):
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
                     f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, {r['replies']} replies, "
-                    f"coalesced {r['coalesced']}, lost {r['lost']}, errors {r['errors']}, "
+                    f"coalesced {r['coalesced']}, lost {r['lost']}, rate-limited {r['rate_limited']}, errors {r['errors']}, "
                     f"server CPU {r['server_cpu_pct']:.0f} % ({r['cpu_ms_per_frame']:.3f} ms/frame), "
                     f"client CPU {r['client_cpu_pct']:.0f} %, others' CPU {r['others_cpu_pct']:.0f} %, "
                     f"load {r['loadavg_before']:.1f} -> {r['loadavg']:.1f}",

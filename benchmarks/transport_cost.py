@@ -34,7 +34,8 @@ def _server_main(port_q, ready, stop):
     from interprim.server.app import InterprimServer, ServerConfig, run
     from interprim.server.models import entry_for
 
-    cfg = ServerConfig(port=0, max_sessions=1000, max_rate_hz=1e9, rate_burst=1 << 30, max_pending=1 << 20)
+    cfg = ServerConfig(port=0, max_sessions=1000, max_rate_hz=1e9, rate_burst=1 << 30, max_pending=1 << 20,
+                       max_unauthenticated=2000, max_unauthenticated_per_address=2000)  # all sessions connect at once
 
     async def main():
         srv = InterprimServer({"highfive": entry_for("highfive", _StubModel())}, cfg)

@@ -249,8 +249,58 @@ def _parse_npy(raw: bytes, path, name: str) -> np.ndarray:
     return arr.reshape(shape, order="F" if fortran else "C").copy(order="K")
 
 
+MAX_ARCHIVE_BYTES = 1 << 30  # the sum of a model file's members once decompressed (1 GiB)
+MAX_METADATA_BYTES = 16 << 20  # its metadata member (JSON) once decompressed
+_NPY_HEADER_SLACK = 1 << 16  # bytes a .npy member may hold besides its data (magic + header)
+
+
+def _read_member(zf, info, path, name: str, budget: int, want=None) -> np.ndarray:
+    """One ``.npy`` member, read through a bounded reader: its header first (dtype and shape, no data), then
+    exactly the data bytes it declares.  Refused before anything is decompressed when the member's declared
+    (uncompressed) size is over ``budget`` or does not match ``want`` (``{"dtype", "shape"}`` from the
+    metadata's checksums table); the reader never returns more than the declared size (zipfile stops there and
+    checks the CRC-32), and the header must account for exactly that size."""
+    declared = int(info.file_size)
+    _expect(declared <= budget, path,
+            f"array '{name}' declares {declared} bytes uncompressed, over the limit of {budget} bytes for a model "
+            f"file (compressed {int(info.compress_size)} bytes): refusing to decompress it")
+    if isinstance(want, dict):
+        try:
+            n = math.prod(int(d) for d in want.get("shape", ())) * np.dtype(want.get("dtype")).itemsize
+        except (TypeError, ValueError):
+            n = None
+        _expect(n is not None and n <= declared <= n + _NPY_HEADER_SLACK, path,
+                f"array '{name}' declares {declared} bytes uncompressed, but the metadata gives it shape "
+                f"{want.get('shape')} and dtype {want.get('dtype')}: refusing to decompress it")
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f".npy version {version} is not supported")
+        _expect(not dtype.hasobject and dtype.fields is None and dtype.kind in _DTYPE_KINDS, path,
+                f"not a readable interprim model file: array '{name}' has dtype {dtype}, "
+                "but model files hold only numeric arrays")
+        count = math.prod(shape)
+        nbytes = count * dtype.itemsize
+        offset = fh.tell()
+        _expect(offset + nbytes == declared, path,
+                f"array '{name}' is truncated or corrupt ({declared - offset} bytes of data for shape {shape}, "
+                f"{dtype})")
+        raw = fh.read(nbytes)
+        _expect(len(raw) == nbytes, path, f"array '{name}' is truncated or corrupt ({len(raw)} bytes of data for "
+                                          f"shape {shape}, {dtype})")
+    arr = np.frombuffer(raw, dtype=dtype, count=count)
+    return arr.reshape(shape, order="F" if fortran else "C").copy(order="K")
+
+
 def _read_archive(path: Path):
-    """``(meta, arrays)`` of a model file, every member's CRC-32 and (version 2) SHA-256 checked."""
+    """``(meta, arrays)`` of a model file, every member's CRC-32 and (version 2) SHA-256 checked.
+
+    Bounded before expanded: the members' declared sizes are checked (against the metadata's shapes and dtypes
+    from version 2 on, and against :data:`MAX_ARCHIVE_BYTES` in all) before any member is decompressed."""
     if not path.exists():
         raise ModelFileError(f"{path}: no such model file")
     if path.is_dir():
@@ -279,7 +329,11 @@ def _read_archive(path: Path):
             if "metadata" not in members:
                 raise ModelFileError(f"{path}: not an interprim model file (a .npz archive without interprim "
                                      f"model metadata; it holds {sorted(members) or 'no arrays'})")
-            meta_arr = _parse_npy(zf.read(members["metadata"]), path, "metadata")
+            total = sum(int(i.file_size) for i in members.values())
+            _expect(total <= MAX_ARCHIVE_BYTES, path,
+                    f"its arrays declare {total} bytes uncompressed, over the limit of {MAX_ARCHIVE_BYTES} bytes for "
+                    "a model file: refusing to decompress them (a damaged file, or a zip bomb)")
+            meta_arr = _read_member(zf, members["metadata"], path, "metadata", MAX_METADATA_BYTES)
             try:
                 meta = json.loads(meta_arr.astype(np.uint8).tobytes().decode("utf-8"))
             except (ValueError, UnicodeDecodeError) as exc:
@@ -291,10 +345,16 @@ def _read_archive(path: Path):
             _expect(type(version) is int and version in READ_VERSIONS, path,
                     f"format_version {version!r} is not supported by this interprim (reads versions "
                     f"{', '.join(map(str, READ_VERSIONS))}); a newer interprim wrote it?")
+            sums = meta.get("checksums") if version >= 2 else None
+            if version >= 2:
+                _expect(isinstance(sums, dict), path, "corrupt metadata: no 'checksums' table")
+                extra = sorted(set(members) - set(sums) - {"metadata"})
+                _expect(not extra, path, f"array(s) {extra} are not listed in the metadata's checksums")
             data = {}
             for name, info in members.items():
                 if name != "metadata":
-                    data[name] = _parse_npy(zf.read(info), path, name)
+                    data[name] = _read_member(zf, info, path, name, MAX_ARCHIVE_BYTES,
+                                              want=sums.get(name) if sums else None)
     except ModelFileError:
         raise
     except _READ_ERRORS as exc:

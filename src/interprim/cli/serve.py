@@ -78,7 +78,18 @@ def add_parser(subparsers) -> None:
                    help="frames of one session waiting for their turn (answered together by one reply) before "
                         "the server stops reading that session until its turn (default 64)")
     p.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
-                   help="extra browser Origin allowed to open WebSockets (default: same host only)")
+                   help="extra browser Origin allowed to open WebSockets and call /api (default: the origins of "
+                        "the allowed hosts only)")
+    p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="extra Host name the server answers to (default: localhost, 127.0.0.1, ::1 and the "
+                        "--host address; any other Host is refused with 403 against DNS rebinding)")
+    p.add_argument("--hello-timeout", type=float, default=5.0,
+                   help="seconds from connecting to an accepted hello (default 5)")
+    p.add_argument("--max-unauthenticated", type=int, default=64,
+                   help="connections without an accepted hello, in all (default 64)")
+    p.add_argument("--max-unauthenticated-per-address", type=int, default=8,
+                   help="connections without an accepted hello from one IP address; a new one aborts the oldest "
+                        "(default 8; raise it behind a reverse proxy)")
     p.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
                    help="event loop: auto (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
@@ -148,6 +159,10 @@ def _run(args) -> int:
         send_queue=args.send_queue,
         max_pending=args.max_pending,
         allowed_origins=tuple(args.allow_origin),
+        allowed_hosts=tuple(args.allow_host),
+        hello_timeout=args.hello_timeout,
+        max_unauthenticated=args.max_unauthenticated,
+        max_unauthenticated_per_address=args.max_unauthenticated_per_address,
         loop=args.loop,
     )
     try:

@@ -281,6 +281,41 @@ def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_un
 
 
 # --------------------------------------------------------------------------- NPZ
+MAX_NPZ_ARRAY_BYTES = 4 << 30  # one array of a data .npz once read (4 GiB)
+
+
+def _check_npz_member(npz, key: str, path: Path) -> None:
+    """Refuse an array of a data ``.npz`` from its ``.npy`` header (shape and dtype; no data read) when it declares
+    more than :data:`MAX_NPZ_ARRAY_BYTES`, or more than the member holds."""
+    zf = getattr(npz, "zip", None)
+    if zf is None:
+        return
+    try:
+        info = zf.getinfo(key + ".npy")
+        with zf.open(info) as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                return  # np.load reports it
+            offset = fh.tell()
+    except (KeyError, ValueError, OSError, EOFError):
+        return  # np.load reports it
+    count = 1
+    for d in shape:
+        count *= int(d)
+    nbytes = count * dtype.itemsize
+    if nbytes > MAX_NPZ_ARRAY_BYTES:
+        raise DataFileError(f"{path}: key {key!r} declares shape {shape} of {dtype} ({count:.3g} values, "
+                            f"{nbytes / 2**30:.3g} GiB), over the limit of {MAX_NPZ_ARRAY_BYTES / 2**30:g} GiB "
+                            "for one array: a damaged file?")
+    if not dtype.hasobject and offset + nbytes > int(info.file_size):
+        raise DataFileError(f"{path}: key {key!r} declares shape {shape} of {dtype} ({nbytes} bytes) but holds "
+                            f"only {int(info.file_size) - offset} bytes: the file is truncated or damaged")
+
+
 def _read_npz(path: Path, dt, max_nan_gap, min_frames):
     try:
         npz = np.load(path, allow_pickle=False)
@@ -314,10 +349,13 @@ def _read_npz(path: Path, dt, max_nan_gap, min_frames):
             raise DataFileError(f"{path}: {time_keys[extra[0]]!r} has no matching demo_ key")
 
         def load(k):
+            _check_npz_member(npz, k, path)  # from its header, before any data is read
             try:
                 return npz[k]
             except ValueError as exc:  # object arrays would need pickle
                 raise DataFileError(f"{path}: key {k!r} cannot be read without pickle ({exc})") from None
+            except MemoryError:
+                raise DataFileError(f"{path}: key {k!r} does not fit in memory") from None
 
         file_dt = None
         if "dt" in npz.files:

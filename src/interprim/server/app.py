@@ -38,6 +38,7 @@ import threading
 from dataclasses import dataclass
 
 from . import protocol as P
+from .gate import ConnectionGate, fd_budget
 from .http_api import HttpApi
 from .lanes import Compute, _Session
 from .models import ModelEntry
@@ -67,10 +68,14 @@ class ServerConfig:
     max_points: int = 500
     default_points: int = 50
     max_errors: int = 200  # consecutive protocol errors before the session is closed
-    hello_timeout: float = 10.0
+    hello_timeout: float = 5.0  # seconds from TCP accept to an accepted hello
+    max_unauthenticated: int = 64  # connections without an accepted hello, in all ...
+    max_unauthenticated_per_address: int = 8  # ... and from one IP address (the oldest is aborted for a new one)
     close_timeout: float = 2.0
     ping_interval: float | None = 20.0
-    allowed_origins: tuple = ()
+    allowed_origins: tuple = ()  # browser Origins allowed besides those of the allowed hosts ("*": any)
+    allowed_hosts: tuple = ()  # Host header names allowed besides the loopback names and the bound address
+    fast_path: bool = True  # the server's own frame path (interprim.server.wsfast); False: the library does all
     log_errors_per_session: int = 10
     loop: str = "auto"  # event loop: "auto" (uvloop if installed), "uvloop", "asyncio" (see new_event_loop)
 
@@ -87,7 +92,7 @@ class ServerConfig:
                 "server. Pass --token (or set INTERPRIM_TOKEN), or keep the default --host 127.0.0.1"
             )
         for name in ("max_sessions", "max_message_bytes", "send_queue", "max_points", "rate_burst", "max_errors",
-                     "max_pending"):
+                     "max_pending", "max_unauthenticated", "max_unauthenticated_per_address"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if not self.max_rate_hz > 0:
@@ -100,6 +105,11 @@ class ServerConfig:
             raise ValueError(f"default_points must be in [2, max_points={self.max_points}]")
         if self.loop not in LOOP_KINDS:
             raise ValueError(f"loop must be one of {LOOP_KINDS}, got {self.loop!r}")
+        if not self.hello_timeout > 0:
+            raise ValueError(f"hello_timeout must be positive, got {self.hello_timeout}")
+        for h in self.allowed_hosts:
+            if not isinstance(h, str) or not h or "/" in h:
+                raise ValueError(f"allowed host {h!r} is not a host name or address")
         if self.max_message_bytes < 256:
             raise ValueError("max_message_bytes must be at least 256 (a frame message needs room)")
 
@@ -192,9 +202,12 @@ class InterprimServer:
         self.sessions: dict[int, _Session] = {}
         self.stats = {"sessions": 0, "predictions": 0, "coalesced": 0, "errors": 0, "rejected": 0}
         c = self.config
+        # (the gate's deadline is a backstop: the session handler closes a connection without hello politely first)
+        self.gate = ConnectionGate(c.max_unauthenticated, c.max_unauthenticated_per_address,
+                                   c.hello_timeout + c.close_timeout + 1.0, self.stats)
         self.http = HttpApi(c, self.models, self.stats, self.extra_info)
         self.compute = Compute(self.models, workers=c.workers, processes=c.processes)
-        self.ws = Sessions(c, self.models, self.compute, self.sessions, self.stats, self.http.info)
+        self.ws = Sessions(c, self.models, self.compute, self.sessions, self.stats, self.http.info, self.gate)
         self._server = None
         self.port = None
 
@@ -214,9 +227,20 @@ class InterprimServer:
 
         from .wsfast import FastFrames
 
+        gate = self.gate
+
         class LoggedConnection(FastFrames, ServerConnection):
-            """Logs connections that never complete an HTTP/WebSocket handshake (the library only debug-logs them);
-            frames take the fast path of :mod:`interprim.server.wsfast`."""
+            """Counted by the server's :class:`~interprim.server.gate.ConnectionGate` from ``accept`` until its hello
+            is accepted; logs connections that never complete an HTTP/WebSocket handshake (the library only
+            debug-logs them); frames take the fast path of :mod:`interprim.server.wsfast`."""
+
+            def connection_made(self, transport):
+                super().connection_made(transport)
+                gate.admit(self, transport, asyncio.get_running_loop())
+
+            def connection_lost(self, exc):
+                gate.lost(self)
+                super().connection_lost(exc)
 
             async def handshake(self, *args, **kwargs):
                 try:
@@ -228,6 +252,14 @@ class InterprimServer:
                     log.warning("connection from %s: bad HTTP request: %s", _peer(self), self.protocol.handshake_exc)
 
         c = self.config
+        if not c.fast_path:
+            LoggedConnection.fast_path = False  # the library parses every byte
+        sessions, unauth, msg = fd_budget(c.max_sessions, c.max_unauthenticated,
+                                          extra=4 * (c.processes or 0) + (c.workers or 0))
+        if msg:
+            log.warning("%s", msg)
+            c.max_sessions, c.max_unauthenticated = sessions, unauth
+            self.gate.total = unauth
         await self.compute.start(self.ws.deliver)
         self._server = await serve(
             self.ws.handler,
@@ -239,6 +271,7 @@ class InterprimServer:
             write_limit=c.write_limit,
             compression=None,
             close_timeout=c.close_timeout,
+            open_timeout=c.hello_timeout,
             ping_interval=c.ping_interval,
             ping_timeout=c.ping_interval,
             logger=logging.getLogger("interprim.server.websockets"),

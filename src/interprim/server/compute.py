@@ -33,14 +33,58 @@ class _Open:
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
     recognition: "_Recognition | None" = None  # with several candidates: which one (created on first use)
+    history: list = field(default_factory=list)  # blocks of frames in the streams since the last reset (rollback)
 
     def reset(self, robot_state=None) -> None:
         """A new interaction: reset every stream (with ``robot_state``) and forget the frames seen."""
         for st in self.streams:
             st.reset(robot_state=robot_state)
         self.frames = 0
+        self.history = []
         if self.recognition is not None:
             self.recognition.reset()
+
+    def rollback(self) -> None:
+        """Put the streams back in the state they had before the frames that made the model fail: reset them
+        (same robot state) and feed them again the frames they had taken before."""
+        history = self.history
+        for st in self.streams:
+            st.reset()
+        self.frames = 0
+        if self.recognition is not None:
+            self.recognition.reset()
+        self.history = []
+        if history:
+            block = np.concatenate(history)
+            for st in self.streams:
+                st.extend(block, **self.update_kw)
+            if self.recognition is not None:
+                self.recognition.add(block)
+            self.frames = block.shape[0]
+            self.history = [block]
+
+
+MAX_INPUT_DISTANCE = 1e6  # standard deviations from the training frames: a frame further away is refused
+MAX_ABS_VALUE = 1e12  # the same for a model that does not know its training range
+
+
+def frame_problem(op: _Open, frame: np.ndarray) -> str | None:
+    """Why ``frame`` must not enter ``op``'s streams (``None``: it may): a value so far outside every candidate's
+    training frames (over :data:`MAX_INPUT_DISTANCE` standard deviations, or over :data:`MAX_ABS_VALUE` when the
+    model does not know its range) that the numerics would overflow.  Frames that are merely out of range
+    (``out_of_range`` in the reply) are not refused."""
+    for e in op.entries:
+        m = e.model
+        mean, std = getattr(m, "input_mean_", None), getattr(m, "input_std_", None)
+        if mean is not None and std is not None:
+            with np.errstate(all="ignore"):
+                d = float(np.max(np.abs(frame - mean) / std))
+            if not d <= MAX_INPUT_DISTANCE:
+                return (f"frame value {float(np.max(np.abs(frame))):.3g} is {d:.3g} standard deviations from model "
+                        f"{e.name!r}'s training frames (limit {MAX_INPUT_DISTANCE:g}): refused, the session goes on")
+    if not float(np.max(np.abs(frame))) <= MAX_ABS_VALUE:
+        return f"frame value {float(np.max(np.abs(frame))):.3g} is over {MAX_ABS_VALUE:g}: refused, the session goes on"
+    return None
 
 
 class _Recognition:
@@ -286,15 +330,53 @@ def compute_batch(op: _Open, batch) -> tuple[list, list]:
     ``seq`` and ``t`` answers the whole batch (``covers`` all its frames).  Returns ``(texts, failures)``:
     the reply texts in ``seq`` order (one), and ``(seq, traceback text)`` per failure (for the server's log).
     """
+    t0 = time.perf_counter()
+    problems = [frame_problem(op, f) for f, _, _ in batch]
+    if not any(problems):
+        return _compute_run(op, batch, t0)
+    # A frame that would break the numerics is answered with bad_frame and never enters the streams; the runs of
+    # good frames around it get their own replies (the replies stay in seq order, each covering its run).
+    texts, failures, run = [], [], []
+    for item, problem in zip(batch, problems):
+        if problem is None:
+            run.append(item)
+            continue
+        if run:
+            tx, fl = _compute_run(op, run, t0)
+            texts += tx
+            failures += fl
+            run = []
+        texts.append(P.dumps(P.error("bad_frame", problem, seq=item[1], t=item[2])))
+        failures.append((item[1], None))  # None: an answer of its own, not a failure to log with a traceback
+    if run:
+        tx, fl = _compute_run(op, run, t0)
+        texts += tx
+        failures += fl
+    return texts, failures
+
+
+def _compute_run(op: _Open, batch, t0) -> tuple[list, list]:
+    """One reply for the frames of ``batch``; if the model fails, an ``internal`` error for them and the streams
+    rolled back to before them (:meth:`_Open.rollback`), so that the next frames are answered normally."""
     import traceback
 
-    t0 = time.perf_counter()
     frame, seq, t = batch[-1]
     n = len(batch)
     try:
         block = np.stack([f for f, _, _ in batch]) if n > 1 else None
-        return [compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block)], []
+        text = compute_prediction(op, frame, seq, t, covers=n, t0=t0, block=block)
+        op.history.append(block if block is not None else frame[None])
+        if len(op.history) > 256:  # one array, not thousands of small ones
+            op.history = [np.concatenate(op.history)]
+        return [text], []
     except Exception as exc:
+        detail = traceback.format_exc()
+        try:
+            op.rollback()
+        except Exception:  # the model fails on frames it took before: start the interaction afresh
+            detail += "\n(rollback failed: the session's streams were reset)\n" + traceback.format_exc()
+            op.reset()
         extra = {"covers": n, "first_seq": seq - n + 1} if n > 1 else {}
-        text = P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}", seq=seq, t=t, **extra))
-        return [text], [(seq, traceback.format_exc())]
+        text = P.dumps(P.error("internal", f"prediction failed: {type(exc).__name__}: {exc}; these frames were "
+                                           "left out, the session goes on", seq=seq, t=t, **extra))
+        return [text], [(seq, detail)]

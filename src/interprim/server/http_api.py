@@ -22,6 +22,46 @@ log = logging.getLogger("interprim.server")
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 
+LOOPBACK_HOSTS = ("localhost", "127.0.0.1", "::1")
+_WILDCARD = ("", "0.0.0.0", "::")
+
+
+def split_host(value) -> str | None:
+    """The host name of a ``Host`` header value (``name``, ``name:port``, ``[v6]`` or ``[v6]:port``), lower case
+    and without a trailing dot; ``None`` when it is not of that form."""
+    if not isinstance(value, str) or not value or len(value) > 300:
+        return None
+    v = value.strip().lower()
+    if v.startswith("["):
+        end = v.find("]")
+        if end < 0 or (v[end + 1:] and not (v[end + 1] == ":" and v[end + 2:].isdigit())):
+            return None
+        return v[1:end]
+    if v.count(":") == 1:
+        v, port = v.split(":")
+        if not port.isdigit():
+            return None
+    elif ":" in v:
+        return None
+    v = v.rstrip(".")
+    if not v or any(ch in v for ch in "/@?#\\ "):
+        return None
+    return v
+
+
+def allowed_host_names(config) -> frozenset:
+    """The ``Host`` names the server answers to: the loopback names, the address it is bound to (unless that
+    is a wildcard such as ``0.0.0.0``) and ``config.allowed_hosts`` (``--allow-host``), any port."""
+    names = set(LOOPBACK_HOSTS)
+    bound = (config.host or "").strip("[]").lower()
+    if bound not in _WILDCARD:
+        names.add(bound)
+    for h in config.allowed_hosts:
+        n = h.strip("[]").lower() if h.count(":") > 1 else split_host(h)  # a bare IPv6 address, or name[:port]
+        if n:
+            names.add(n)
+    return frozenset(names)
+
 
 def token_ok(want: str | None, given) -> bool:
     """Whether ``given`` is the server's token ``want`` (any value when the server has none); constant time."""
@@ -51,6 +91,11 @@ class HttpApi:
         self.stats = stats
         self.extra_info = {} if extra_info is None else extra_info  # the server's own dict (read at each request)
         self._static = self._load_static()
+        self.hosts = allowed_host_names(config)
+        # /api/replay/MODEL encoded once, here: encoding megabytes of JSON per request blocked the event loop
+        # (every session's frames waited for it)
+        self._replay = {name: json.dumps(e.meta["replay"]).encode() for name, e in models.items()
+                        if "replay" in e.meta}
 
     @staticmethod
     def _load_static() -> dict:
@@ -117,15 +162,37 @@ class HttpApi:
         """Whether ``given`` is the server's token (:func:`token_ok`)."""
         return token_ok(self.config.token, given)
 
+    def _host_ok(self, request) -> bool:
+        """Whether the request's ``Host`` is one of :func:`allowed_host_names` (DNS rebinding: a page of
+        ``evil.example`` whose name now resolves to this machine sends ``Host: evil.example``)."""
+        values = request.headers.get_all("Host") if hasattr(request.headers, "get_all") else [
+            request.headers.get("Host")]
+        if len(values) != 1:
+            return False
+        return split_host(values[0]) in self.hosts
+
     def _origin_ok(self, request) -> bool:
-        origin = request.headers.get("Origin")
-        if origin is None or origin in self.config.allowed_origins or "*" in self.config.allowed_origins:
+        """Whether the browser ``Origin`` (absent for other clients) is allowed: ``http(s)://`` and one of the allowed
+        host names (any port), or listed in ``allowed_origins`` (``--allow-origin``; ``*`` allows any).  Never
+        compared with ``Host``, which a rebinding page controls as well."""
+        values = request.headers.get_all("Origin") if hasattr(request.headers, "get_all") else [
+            request.headers.get("Origin")]
+        values = [v for v in values if v is not None]
+        if not values:
             return True  # non-browser clients send no Origin
+        if len(values) > 1:
+            return False
+        origin = values[0]
+        allowed = self.config.allowed_origins
+        if "*" in allowed or origin in allowed or origin.rstrip("/") in allowed:
+            return True
         try:
-            netloc = urlsplit(origin).netloc
+            parts = urlsplit(origin)
+            host = parts.hostname
+            parts.port  # noqa: B018 - raises ValueError for a bad port
         except ValueError:
             return False
-        return netloc == request.headers.get("Host")
+        return parts.scheme in ("http", "https") and host is not None and host.rstrip(".") in self.hosts
 
     def process_request(self, conn, request):
         """The WebSocket library's ``process_request`` hook: answer a plain HTTP request (page, static file, API,
@@ -135,6 +202,17 @@ class HttpApi:
         except ValueError:
             return self._json(conn, 400, {"error": "bad request path"})
         path, query = parts.path, parse_qs(parts.query)
+        if not self._host_ok(request):
+            log.warning("refused %s for Host %r: not an allowed host name", path[:100],
+                        str(request.headers.get("Host"))[:100])
+            self.stats["rejected"] += 1
+            return self._json(conn, 403, {"error": "host not allowed (a DNS-rebinding page?); start the server with "
+                                                   "--allow-host NAME to serve this name"})
+        if (path == "/ws" or path.startswith("/api/")) and not self._origin_ok(request):
+            log.warning("refused %s from origin %r: not an allowed origin", path[:100],
+                        str(request.headers.get("Origin"))[:100])
+            self.stats["rejected"] += 1
+            return self._json(conn, 403, {"error": "cross-origin request refused; start the server with --allow-origin"})
         if path == "/ws":
             if not self._origin_ok(request):
                 log.warning("rejected WebSocket from origin %r (host %r): cross-site request",
@@ -162,8 +240,8 @@ class HttpApi:
                 return self._json(conn, 200, self.info())
             if path.startswith("/api/replay/"):
                 name = path[len("/api/replay/"):]
-                entry = self.models.get(name)
-                if entry is None or "replay" not in entry.meta:
+                body = self._replay.get(name)
+                if body is None:
                     return self._json(conn, 404, {"error": f"no replay data for model {name!r}"})
-                return self._json(conn, 200, entry.meta["replay"])
+                return self._http(conn, 200, body, "application/json; charset=utf-8")
         return self._json(conn, 404, {"error": f"not found: {path}"})

@@ -16,9 +16,10 @@ for the newest, that says how many frames it covers (:func:`interprim.server.com
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import logging
 import time
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -39,12 +40,18 @@ class _Bucket:
 
     def take(self) -> bool:
         now = time.monotonic()
-        self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        # (tokens over the burst come from credit(): kept until spent)
+        self.tokens = max(self.tokens, min(self.burst, self.tokens + (now - self.last) * self.rate))
         self.last = now
         if self.tokens >= 1.0:
             self.tokens -= 1.0
             return True
         return False
+
+    def credit(self, seconds: float) -> None:
+        """Add what ``seconds`` of the rate allow, beyond the burst: the server did not read the client for that
+        long, and its frames of that time arrive together."""
+        self.tokens = max(self.tokens, 0.0) + max(0.0, seconds) * self.rate
 
 
 @dataclass
@@ -72,6 +79,7 @@ class _Session:
     ended: bool = False  # the connection's handler has finished
     waiters: list = field(default_factory=list)  # futures woken when the above change (see Sessions._until)
     direct: bool = False  # replies may be written to the socket at once (interprim.server.wsfast.write_now)
+    vtime: float = 0.0  # compute seconds used, in its lane's virtual time (fair queuing: see _Lane)
 
     def wake(self) -> None:
         """Wake the coroutines waiting for a change of ``pending``/``queued``/``busy``/``ended``."""
@@ -105,14 +113,23 @@ class _Lane:
         self.deliver = deliver
         self.sync = sync
         self.depth = max(1, int(depth))
-        self.queue: deque = deque()
+        self.queue: list = []  # heap of (virtual start time, arrival order, session)
+        self._order = itertools.count()
+        self.vnow = 0.0  # virtual time: the start time of the turn being served
         self.inflight = 0
         self._scheduled = False
+
+    def _enqueue(self, s: _Session) -> None:
+        # Fair queuing by compute time: a session's turn starts at the virtual time it has used so far (never
+        # before the lane's present), so a session whose turns cost ten times more gets a turn a tenth as
+        # often and pays for its cost with its own latency, not the others'.  Equal costs: round-robin.
+        s.vtime = max(s.vtime, self.vnow)
+        heapq.heappush(self.queue, (s.vtime, next(self._order), s))
 
     def push(self, s: _Session) -> None:
         """Queue ``s`` (which has pending frames and is not queued) for its turn."""
         s.queued = True
-        self.queue.append(s)
+        self._enqueue(s)
         if self.sync:
             if not self._scheduled:
                 self._scheduled = True
@@ -123,7 +140,8 @@ class _Lane:
     def _take(self):
         """The next session's batch: ``(session, open model, frames)``, or ``None`` for a session that has
         ended or has nothing to compute (then it leaves the queue)."""
-        s = self.queue.popleft()
+        vt, _, s = heapq.heappop(self.queue)
+        self.vnow = max(self.vnow, vt)
         batch, s.pending = s.pending, []
         op = s.open
         if s.ended or op is None or not batch:
@@ -132,9 +150,10 @@ class _Lane:
             return None
         return s, op, batch
 
-    def _done(self, s: _Session) -> None:
+    def _done(self, s: _Session, cost: float = 0.0) -> None:
+        s.vtime += cost
         if s.pending and not s.ended:
-            self.queue.append(s)  # frames arrived during its turn: back to the end of the round
+            self._enqueue(s)  # frames arrived during its turn: back in the queue, after what it used
         else:
             s.queued = False
             s.wake()
@@ -147,14 +166,16 @@ class _Lane:
             if job is None:
                 continue
             s, op, batch = job
+            t0 = time.perf_counter()
             try:
                 result = self.run(s, op, batch)
             except Exception as exc:  # run() reports model failures itself; this is a bug
                 result = exc
+            cost = time.perf_counter() - t0
             try:
                 self.deliver(s, op, batch, result)
             finally:
-                self._done(s)
+                self._done(s, cost)
             break
         if self.queue:
             self._scheduled = True
@@ -170,16 +191,18 @@ class _Lane:
             asyncio.get_running_loop().create_task(self._serve(*job))
 
     async def _serve(self, s: _Session, op, batch) -> None:
+        t0 = time.perf_counter()
         try:
             result = await self.run(s, op, batch)
         except Exception as exc:  # a dead worker process, a bug
             result = exc
         finally:
             self.inflight -= 1
+        cost = time.perf_counter() - t0  # (wall time of the turn in its thread or process)
         try:
             self.deliver(s, op, batch, result)
         finally:
-            self._done(s)
+            self._done(s, cost)
             self._pump()
 
 

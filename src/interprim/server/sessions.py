@@ -16,10 +16,12 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+import time
 
 from . import protocol as P
 from . import wsfast
 from .compute import _Open, _Recognition
+from .gate import RateLimitedLog
 from .http_api import token_ok
 from .lanes import _Bucket, _Session
 from .wsfast import FastFrames
@@ -51,20 +53,105 @@ class Sessions:
         ``info()`` -> the ``/api/info`` JSON, whose ``server``, ``models`` and ``limits`` the ``welcome`` repeats.
     """
 
-    def __init__(self, config, models: dict, compute, sessions: dict, stats: dict, info):
+    def __init__(self, config, models: dict, compute, sessions: dict, stats: dict, info, gate=None):
         self.config = config
+        self.gate = gate  # the unauthenticated connections (interprim.server.gate.ConnectionGate)
         self.models = models
         self.compute = compute
         self.sessions = sessions
         self.stats = stats
         self._info = info
         self._ids = itertools.count(1)
+        self._fail_log = RateLimitedLog(log, burst=10, period=10.0)  # prediction failures (tracebacks)
+        self._conn_log = RateLimitedLog(log, burst=10, period=10.0)  # connections gone before hello
         self.stopping = False  # shutting down: new connections are closed with 1001, messages no longer read
 
-    async def handler(self, ws):
-        """Serve one WebSocket connection (the WebSocket library's connection handler) until it closes."""
+    async def _refuse_full(self, ws, peer: str) -> None:
+        self.stats["rejected"] += 1
+        log.warning("connection from %s refused: server full (%d sessions)", peer, self.config.max_sessions)
+        await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {self.config.max_sessions} sessions; try again later")
+
+    async def _await_hello(self, ws, peer: str, t0: float):
+        """Read messages until an accepted ``hello`` (returns ``(hello, frames_seen)``) or the end: a wrong token
+        (``unauthorized``, close 1008), the hello deadline (close 1008), too many other messages (close 1008) or
+        the connection going away (returns ``None``).  Nothing of a session exists yet: replies go straight to the
+        socket.  Messages before hello get the usual errors (``not_ready``, ``bad_json``, ...)."""
+        from websockets.exceptions import ConnectionClosed
+
         c = self.config
-        sid = next(self._ids)
+        loop = asyncio.get_running_loop()
+        errors = frames = 0
+        limit = min(c.max_errors, 16)
+        try:
+            while True:
+                left = c.hello_timeout - (loop.time() - t0)
+                try:
+                    if left <= 0:
+                        raise asyncio.TimeoutError
+                    data = await asyncio.wait_for(ws.recv(), left)  # (3.10: no asyncio.timeout)
+                except (TimeoutError, asyncio.TimeoutError):
+                    log.warning("connection from %s closed: no hello within %g s", peer, c.hello_timeout)
+                    await ws.close(P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
+                    return None
+                except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
+                    await ws.close(P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
+                    return None
+                if self.stopping:
+                    await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
+                    return None
+                seq = t = None
+                try:
+                    if not isinstance(data, str):
+                        frames += 1
+                        seq = frames
+                        raise P.ProtocolError("not_ready", "send hello first (got a frame)")
+                    try:
+                        msg = P.parse_text(data)
+                    except P.ProtocolError as exc:
+                        if exc.code == "bad_json":
+                            looks_like_frame, t = P.scan_unparsed(data)
+                            if looks_like_frame:
+                                frames += 1
+                                seq = frames
+                        raise
+                    if msg["type"] == "frame":
+                        frames += 1
+                        seq, t = frames, P.frame_stamp(msg)
+                    if msg["type"] != "hello":
+                        what = "a frame" if msg["type"] == "frame" else repr(msg["type"])
+                        raise P.ProtocolError("not_ready", f"send hello first (got {what})")
+                    h = P.check_hello(msg)
+                    if not token_ok(c.token, h["token"]):
+                        log.warning("connection from %s closed: missing or wrong token in hello", peer)
+                        await ws.send(P.dumps(P.error("unauthorized", "missing or wrong token in hello")))
+                        await ws.close(P.CLOSE_POLICY, "missing or wrong token in hello")
+                        return None
+                    return h, frames
+                except P.ProtocolError as exc:
+                    errors += 1
+                    self.stats["errors"] += 1
+                    await ws.send(P.dumps(P.error(exc.code, exc.message, seq=seq, t=t)))
+                    if exc.fatal:
+                        log.warning("connection from %s closed before hello: %s", peer, exc.message)
+                        await ws.close(P.CLOSE_POLICY, exc.message[:120])
+                        return None
+                    if errors >= limit:
+                        log.warning("connection from %s closed: %d messages before hello", peer, errors)
+                        await ws.close(P.CLOSE_POLICY, f"too many protocol errors ({errors} in a row) before hello")
+                        return None
+        except ConnectionClosed:
+            self._conn_log.log(logging.INFO, "connection from %s: ended before an accepted hello", peer)
+            return None
+
+    async def handler(self, ws):
+        """Serve one WebSocket connection (the WebSocket library's connection handler) until it closes.
+
+        Authenticate before allocating: until its ``hello`` is accepted (with the token, when the server has
+        one) a connection holds no session slot, queue, writer or stream; it is only counted by the server's
+        :class:`~interprim.server.gate.ConnectionGate`."""
+        c = self.config
+        loop = asyncio.get_running_loop()
+        t0 = getattr(ws, "gate_t0", None) or loop.time()
         try:
             peer = "%s:%s" % tuple(ws.remote_address[:2])
         except Exception:
@@ -72,31 +159,34 @@ class Sessions:
         if self.stopping:  # accepted while shutting down
             await ws.close(P.CLOSE_GOING_AWAY, SHUTDOWN_REASON)
             return
-        if len(self.sessions) >= c.max_sessions:
-            self.stats["rejected"] += 1
-            log.warning("session %d from %s refused: server full (%d sessions)", sid, peer, c.max_sessions)
-            await ws.close(P.CLOSE_TRY_AGAIN, f"server full: at most {c.max_sessions} sessions; try again later")
+        if len(self.sessions) >= c.max_sessions:  # no use reading a hello
+            await self._refuse_full(ws, peer)
             return
+        got = await self._await_hello(ws, peer, t0)
+        if got is None:
+            return
+        if len(self.sessions) >= c.max_sessions:
+            await self._refuse_full(ws, peer)
+            return
+        if self.gate is not None:
+            self.gate.authenticated(ws)
+        sid = next(self._ids)
         s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
-        if isinstance(ws, FastFrames) and wsfast.supported(ws):
+        s.seq = got[1]
+        if c.fast_path and isinstance(ws, FastFrames) and wsfast.supported(ws):
             s.direct = True
             ws.fast_frame = lambda data: self._fast_frame(s, data)
         self.sessions[sid] = s
         self.stats["sessions"] += 1
-        s.writer = asyncio.get_running_loop().create_task(self._writer(s))
+        s.writer = loop.create_task(self._writer(s))
         log.info("session %d: connected from %s (%d active)", sid, peer, len(self.sessions))
         from websockets.exceptions import ConnectionClosed
 
         try:
+            self._welcome(s)
             while not s.closing:
                 try:
-                    if not s.ready:
-                        data = await asyncio.wait_for(ws.recv(), c.hello_timeout)  # (3.10: no asyncio.timeout)
-                    else:
-                        data = await ws.recv()
-                except (TimeoutError, asyncio.TimeoutError):
-                    self._fatal(s, P.CLOSE_POLICY, f"no hello within {c.hello_timeout:g} s")
-                    break
+                    data = await ws.recv()
                 except UnicodeDecodeError as exc:  # websockets < 14 raises instead of closing with 1007
                     self._fatal(s, P.CLOSE_INVALID_DATA, f"text message is not valid UTF-8: {exc.reason}")
                     break
@@ -263,8 +353,13 @@ class Sessions:
         frames to its streams as fast as they come), so that TCP flow control slows the client down."""
         limit = self.config.max_pending
         s.busy = True
+        t0 = time.monotonic()
         try:
             await self._until(s, lambda: len(s.pending) < limit or not s.queued)
+            # The frames the client sent meanwhile wait in TCP and arrive as one burst when reading resumes: the
+            # server's doing, not the client's.  Credit the pause to its rate limit (beyond the burst), so that a
+            # client within the rate never gets rate_limited for them; they are coalesced into the next turn.
+            s.bucket.credit(time.monotonic() - t0)
         finally:
             s.busy = False
             s.wake()
@@ -327,6 +422,13 @@ class Sessions:
             s.waiters.append(fut)
             await fut
 
+    def _welcome(self, s: _Session) -> None:
+        s.ready = True
+        s.consecutive_errors = 0
+        reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
+        reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
+        self._send(s, P.dumps(reply))
+
     async def _on_control(self, s: _Session, msg: dict) -> None:
         c = self.config
         mtype = msg["type"]
@@ -334,11 +436,7 @@ class Sessions:
             h = P.check_hello(msg)
             if not token_ok(c.token, h["token"]):
                 raise P.ProtocolError("unauthorized", "missing or wrong token in hello", fatal=True)
-            s.ready = True
-            s.consecutive_errors = 0
-            reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
-            reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
-            self._send(s, P.dumps(reply))
+            self._welcome(s)
             return
         if not s.ready:
             raise P.ProtocolError("not_ready", f"send hello first (got {mtype!r})")
@@ -433,7 +531,17 @@ class Sessions:
             texts, failures = result
         for seq, detail in failures:
             self.stats["errors"] += 1
-            log.error("session %d: prediction failed at seq %d:\n%s", s.id, seq, detail.rstrip())
+            s.errors += 1
+            if detail is None:  # a frame refused by the model's guard (bad_frame), answered on its own
+                s.error_counts["bad_frame"] = s.error_counts.get("bad_frame", 0) + 1
+                self._fail_log.log(logging.WARNING, "session %d: frame seq %d refused: out of the model's numeric "
+                                   "range", s.id, seq)
+                continue
+            s.error_counts["internal"] = s.error_counts.get("internal", 0) + 1
+            first = s.error_counts["internal"] == 1
+            # a full traceback for a session's first failure, one line after; at most 10 lines per 10 s in all
+            self._fail_log.log(logging.ERROR, "session %d: prediction failed at seq %d%s", s.id, seq,
+                               ":\n" + detail.rstrip() if first else f": {detail.rstrip().splitlines()[-1]}")
         if s.ended or s.open is not op:  # gone, or closed while computing
             return
         n_pred = len(texts) - len(failures)

@@ -11,7 +11,12 @@ asynchronous context manager.  At 10,000 frames/s that is most of the server's o
   frame (control frames, fragments, anything unusual or invalid, and messages the session does not take)
   goes to the library, one whole frame at a time and in order, so its checks, errors and close codes are
   unchanged.  A message is only offered while no earlier message waits for the handler, so the session
-  sees its messages in the order they came.  The fast path switches itself off for good (the library
+  sees its messages in the order they came, and while the library is not in the middle of a fragmented
+  message (its ``protocol.current_size`` is ``None``): a whole text or binary frame inside a fragmented
+  message is a protocol error (RFC 6455 Sec. 5.4) that the library answers with 1002, so it goes there.
+  ``tests/test_server_conformance.py`` sends the same malformed sequences (those of the library's own test
+  suite: fragmentation, control frames, masking, reserved bits, UTF-8, sizes, close frames) to a server
+  with and without this path and requires the same answers and close codes.  The fast path switches itself off for good (the library
   then gets every byte) when the connection leaves the OPEN state, when a frame announces more than
   ``max_size`` bytes, and when it cannot know that the library's parser is at a frame boundary (bytes
   left over from the handshake).
@@ -44,7 +49,8 @@ def supported(conn) -> bool:
     try:
         return (apply_mask is not None and hasattr(conn.protocol.reader, "buffer")
                 and hasattr(conn.recv_messages, "frames") and hasattr(conn, "paused")
-                and hasattr(conn, "send_in_progress") and hasattr(conn.protocol, "max_message_size"))
+                and hasattr(conn, "send_in_progress") and hasattr(conn.protocol, "max_message_size")
+                and hasattr(conn.protocol, "current_size"))
     except AttributeError:
         return False
 
@@ -84,6 +90,7 @@ class FastFrames:
     """Mixin for a :class:`websockets.asyncio.server.ServerConnection` subclass: see the module's docstring."""
 
     fast_frame = None  # set by the session: callable(str | bytes) -> bool
+    fast_path = True  # False (ServerConfig.fast_path): the library gets every byte
     _fast_state = 0  # 0: not decided yet (handshake), 1: on, -1: off for good
     _fast_buf = b""
 
@@ -96,7 +103,7 @@ class FastFrames:
             if proto.state is not OPEN:  # the handshake: the library's
                 return super().data_received(data)
             # the first bytes after the handshake: the library's parser is at a frame boundary iff it holds none
-            if proto.reader.buffer or not supported(self):
+            if not self.fast_path or proto.reader.buffer or not supported(self):
                 self._fast_state = -1
                 return super().data_received(data)
             self._fast_state = 1
@@ -128,8 +135,11 @@ class FastFrames:
                 break
             op = b0 & 0x0F
             hook = self.fast_frame
+            # Only a whole message (FIN, no RSV bit, masked) that does not start while the library is in the
+            # middle of a fragmented one (RFC 6455 Sec. 5.4: the library closes with 1002 "expected a
+            # continuation frame"), and only while no earlier message waits for the handler.
             if (hook is not None and (b0 & 0xF0) == 0x80 and masked and (op == _TEXT or op == _BINARY)
-                    and not len(queued)):
+                    and proto.current_size is None and not len(queued)):
                 payload = apply_mask(buf[pos + h:end], buf[pos + h - 4:pos + h])
                 msg = None
                 if op == _BINARY:

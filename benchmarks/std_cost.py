@@ -73,14 +73,14 @@ def _cpu_ms(entry, tests, points, std, repeats):
     """CPU time (ms) of each frame's reply, computed as the server computes it (inline lane)."""
     import time
 
-    from interprim.server.compute import _accepts_need_cov, _Open, compute_prediction
+    from interprim.server.compute import _accepts_need_cov, OpenModel, compute_prediction
 
     cols = entry.controlled_dofs or list(range(entry.n_dofs))
     out = []
     for _ in range(repeats):
         for obs in tests:
             st = entry.model.stream()
-            op = _Open(entry.name, [entry], [st], [cols], points, std)
+            op = OpenModel(entry.name, [entry], [st], [cols], points, std)
             if _accepts_need_cov(st):
                 op.update_kw = {"need_cov": std}
             for k, f in enumerate(np.asarray(obs, dtype=np.float64), start=1):

@@ -81,11 +81,11 @@ def test_async_client_pipelines_frames(server, models, test_demo):
 def _sessions(n):
     import asyncio
 
-    from interprim.server.lanes import _Session
+    from interprim.server.lanes import Session
 
     out = []
     for i in range(n):
-        s = _Session(i + 1, None, "?", asyncio.Queue(), None)
+        s = Session(i + 1, None, "?", asyncio.Queue(), None)
         s.open = object()  # stands for an opened model
         out.append(s)
     return out
@@ -232,7 +232,7 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     e = models["pair"]
     cols = e.controlled_dofs if dofs == "controlled" else list(range(e.n_dofs))
     frames = test_demo[:25, :2]
-    op = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+    op = compute.OpenModel("pair", [e], [e.model.stream()], [cols], 17, std)
     fast = [json.loads(t) for t in _reply_text(op, frames)]
     from interprim.models.primitive.prediction import MeanRollout
 
@@ -260,7 +260,7 @@ def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, d
     old = compute._FORCE_PRINTF
     compute._FORCE_PRINTF = True  # the encoder used without orjson
     try:
-        op2 = compute._Open("pair", [e], [e.model.stream()], [cols], 17, std)
+        op2 = compute.OpenModel("pair", [e], [e.model.stream()], [cols], 17, std)
         slow = [json.loads(t) for t in _reply_text(op2, frames)]
     finally:
         compute._FORCE_PRINTF = old
@@ -274,7 +274,7 @@ def test_reply_marks_out_of_range_input(models, test_demo):
     from interprim.server import compute
 
     e = models["pair"]
-    op = compute._Open("pair", [e], [e.model.stream()], [e.controlled_dofs], 17, False)
+    op = compute.OpenModel("pair", [e], [e.model.stream()], [e.controlled_dofs], 17, False)
     with pytest.warns(UserWarning, match="standard deviations"):
         msgs = [json.loads(t) for t in _reply_text(op, test_demo[:10, :2] * 1000.0)]
     assert msgs[-1]["out_of_range"] is True and msgs[-1]["input_distance"] > 8
@@ -391,9 +391,9 @@ def test_rate_limit_is_credited_for_the_time_the_server_did_not_read():
     """Issue 30, finding 4: when the server stops reading a session that is behind (max_pending), the client's frames
     pile up in TCP and arrive as one burst over the rate limit's burst: they were dropped as rate_limited.  The
     pause is now credited to the bucket (beyond its burst), so a client within the rate loses none of them."""
-    from interprim.server.lanes import _Bucket
+    from interprim.server.lanes import TokenBucket
 
-    b = _Bucket(rate=100.0, burst=5)
+    b = TokenBucket(rate=100.0, burst=5)
     assert sum(b.take() for _ in range(50)) == 5  # a burst of 50: 5 pass (what a flooding client gets)
     b.credit(0.4)  # the server did not read the client for 0.4 s: 40 frames at 100 Hz
     assert sum(b.take() for _ in range(40)) == 40

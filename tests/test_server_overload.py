@@ -61,7 +61,7 @@ def _assert_close(a, b, where="reply"):
 def _open(models, names, std, points=12):
     entries = [models[n] for n in names]
     streams = [e.model.stream() for e in entries]
-    op = compute._Open(names[0] if len(names) == 1 else "auto", entries, streams,
+    op = compute.OpenModel(names[0] if len(names) == 1 else "auto", entries, streams,
                        [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries], points, std)
     op.update_kw = {"need_cov": std}
     return op
@@ -124,7 +124,7 @@ def test_a_failing_frame_fails_its_batch_with_one_error_that_covers_it():
     and the next batch goes on."""
     model = _Boom()
     e = entry_for("boom", model)
-    op = compute._Open("boom", [e], [model], [[2]], 4, False)
+    op = compute.OpenModel("boom", [e], [model], [[2]], 4, False)
     frames = [[1.0, 0.0], [2.0, 0.0], [200.0, 0.0], [3.0, 0.0], [4.0, 0.0], [5.0, 0.0]]
     texts, failures = compute.compute_batch(op, [(np.array(f), k + 1, None) for k, f in enumerate(frames)])
     assert len(texts) == 1
@@ -160,7 +160,7 @@ def test_a_batch_enters_with_one_extend_and_a_failure_answers_all_its_frames():
     (its seq is the newest frame's, with covers/first_seq and the newest frame's t), and the session goes on."""
     model = _BoomExtend()
     e = entry_for("boom", model)
-    op = compute._Open("boom", [e], [model], [[2]], 4, False)
+    op = compute.OpenModel("boom", [e], [model], [[2]], 4, False)
     ok = [(np.array([1.0, 0.0]), 1, None), (np.array([2.0, 0.0]), 2, 0.5)]
     texts, failures = compute.compute_batch(op, ok)
     assert failures == [] and model.calls == [2]

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from . import protocol as P
 from .gate import ConnectionGate, fd_budget
 from .http_api import HttpApi
-from .lanes import Compute, _Session
+from .lanes import Compute, Session
 from .models import ModelEntry
 from .sessions import SHUTDOWN_REASON, Sessions
 
@@ -199,7 +199,7 @@ class InterprimServer:
             raise ValueError("the server needs at least one model (model files, or --demo)")
         self.models: dict[str, ModelEntry] = dict(models)
         self.extra_info = dict(extra_info or {})
-        self.sessions: dict[int, _Session] = {}
+        self.sessions: dict[int, Session] = {}
         self.stats = {"sessions": 0, "predictions": 0, "coalesced": 0, "errors": 0, "rejected": 0}
         c = self.config
         # (the gate's deadline is a backstop: the session handler closes a connection without hello politely first)

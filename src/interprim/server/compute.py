@@ -20,7 +20,7 @@ log = logging.getLogger("interprim.server")
 
 
 @dataclass
-class _Open:
+class OpenModel:
     """An opened model (or set of candidates) inside a session."""
 
     name: str  # requested: a model name or "auto"
@@ -32,7 +32,7 @@ class _Open:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
-    recognition: "_Recognition | None" = None  # with several candidates: which one (created on first use)
+    recognition: "Recognition | None" = None  # with several candidates: which one (created on first use)
     history: list = field(default_factory=list)  # blocks of frames in the streams since the last reset (rollback)
 
     def reset(self, robot_state=None) -> None:
@@ -68,7 +68,7 @@ MAX_INPUT_DISTANCE = 1e6  # standard deviations from the training frames: a fram
 MAX_ABS_VALUE = 1e12  # the same for a model that does not know its training range
 
 
-def frame_problem(op: _Open, frame: np.ndarray) -> str | None:
+def frame_problem(op: OpenModel, frame: np.ndarray) -> str | None:
     """Why ``frame`` must not enter ``op``'s streams (``None``: it may): a value so far outside every candidate's
     training frames (over :data:`MAX_INPUT_DISTANCE` standard deviations, or over :data:`MAX_ABS_VALUE` when the
     model does not know its range) that the numerics would overflow.  Frames that are merely out of range
@@ -87,7 +87,7 @@ def frame_problem(op: _Open, frame: np.ndarray) -> str | None:
     return None
 
 
-class _Recognition:
+class Recognition:
     """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
     the frames of the current interaction.
 
@@ -207,7 +207,7 @@ def _num(v: float) -> str:
     return "null" if v != v else repr(v)
 
 
-def _head_parts(op: _Open) -> list:
+def _head_parts(op: OpenModel) -> list:
     """Per candidate: the constant JSON of a prediction's head (model name, columns), encoded once per open."""
     parts = op.heads
     if parts is None:
@@ -244,7 +244,7 @@ class _MeanRollout:
         return fn(pred)
 
 
-def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None,
+def compute_prediction(op: OpenModel, frame: np.ndarray, seq: int, t, covers: int = 1, t0: float | None = None,
                        block: np.ndarray | None = None) -> str:
     """Advance every stream of ``op`` by ``frame`` and encode the ``prediction`` reply (CPU-bound).
 
@@ -310,14 +310,14 @@ def compute_prediction(op: _Open, frame: np.ndarray, seq: int, t, covers: int = 
     return "".join(parts)
 
 
-def _recognition(op: _Open) -> _Recognition:
+def _recognition(op: OpenModel) -> Recognition:
     rec = op.recognition
     if rec is None:
-        rec = op.recognition = _Recognition(op.entries)
+        rec = op.recognition = Recognition(op.entries)
     return rec
 
 
-def compute_batch(op: _Open, batch) -> tuple[list, list]:
+def compute_batch(op: OpenModel, batch) -> tuple[list, list]:
     """Feed a session's pending frames ``batch`` (a list of ``(frame, seq, t)``, seqs consecutive) to its
     streams in order and encode **one** reply for the newest: a ``prediction`` with ``covers = len(batch)``.
 
@@ -355,9 +355,9 @@ def compute_batch(op: _Open, batch) -> tuple[list, list]:
     return texts, failures
 
 
-def _compute_run(op: _Open, batch, t0) -> tuple[list, list]:
+def _compute_run(op: OpenModel, batch, t0) -> tuple[list, list]:
     """One reply for the frames of ``batch``; if the model fails, an ``internal`` error for them and the streams
-    rolled back to before them (:meth:`_Open.rollback`), so that the next frames are answered normally."""
+    rolled back to before them (:meth:`OpenModel.rollback`), so that the next frames are answered normally."""
     import traceback
 
     frame, seq, t = batch[-1]

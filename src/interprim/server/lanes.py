@@ -1,8 +1,8 @@
 """Sessions and where their frames are computed: per-session rate limits and round-robin compute lanes.
 
-A :class:`_Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
+A :class:`Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
 are computed (the event loop, a thread or a worker process), shared by several sessions in
-round-robin order; :class:`_Bucket` limits a session's message rate.  :class:`Compute` owns the
+round-robin order; :class:`TokenBucket` limits a session's message rate.  :class:`Compute` owns the
 lanes and what runs them (the thread pool or the worker processes): the server creates it from its
 configuration and models, and the sessions (:class:`~interprim.server.sessions.Sessions`) hand it
 their frames with :meth:`Compute.push`.
@@ -25,12 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .compute import _Open, compute_batch, warm_up
+from .compute import OpenModel, compute_batch, warm_up
 
 log = logging.getLogger("interprim.server")
 
 
-class _Bucket:
+class TokenBucket:
     """Token bucket: ``rate`` messages per second, ``burst`` at most in one go."""
 
     def __init__(self, rate: float, burst: int):
@@ -55,14 +55,14 @@ class _Bucket:
 
 
 @dataclass
-class _Session:
+class Session:
     id: int
     ws: object
     peer: str
     out: asyncio.Queue
-    bucket: _Bucket
+    bucket: TokenBucket
     ready: bool = False
-    open: _Open | None = None
+    open: OpenModel | None = None
     seq: int = 0
     errors: int = 0
     consecutive_errors: int = 0
@@ -119,14 +119,14 @@ class _Lane:
         self.inflight = 0
         self._scheduled = False
 
-    def _enqueue(self, s: _Session) -> None:
+    def _enqueue(self, s: Session) -> None:
         # Fair queuing by compute time: a session's turn starts at the virtual time it has used so far (never
         # before the lane's present), so a session whose turns cost ten times more gets a turn a tenth as
         # often and pays for its cost with its own latency, not the others'.  Equal costs: round-robin.
         s.vtime = max(s.vtime, self.vnow)
         heapq.heappush(self.queue, (s.vtime, next(self._order), s))
 
-    def push(self, s: _Session) -> None:
+    def push(self, s: Session) -> None:
         """Queue ``s`` (which has pending frames and is not queued) for its turn."""
         s.queued = True
         self._enqueue(s)
@@ -150,7 +150,7 @@ class _Lane:
             return None
         return s, op, batch
 
-    def _done(self, s: _Session, cost: float = 0.0) -> None:
+    def _done(self, s: Session, cost: float = 0.0) -> None:
         s.vtime += cost
         if s.pending and not s.ended:
             self._enqueue(s)  # frames arrived during its turn: back in the queue, after what it used
@@ -190,7 +190,7 @@ class _Lane:
             self.inflight += 1
             asyncio.get_running_loop().create_task(self._serve(*job))
 
-    async def _serve(self, s: _Session, op, batch) -> None:
+    async def _serve(self, s: Session, op, batch) -> None:
         t0 = time.perf_counter()
         try:
             result = await self.run(s, op, batch)
@@ -290,7 +290,7 @@ class Compute:
 
         return [_Lane(run_inline, deliver, sync=True)]
 
-    def push(self, s: _Session) -> None:
+    def push(self, s: Session) -> None:
         """Queue session ``s`` (pending frames, not queued) on its lane: lane ``s.id % len(lanes)``."""
         self.lanes[s.id % len(self.lanes)].push(s)
 

@@ -20,10 +20,10 @@ import time
 
 from . import protocol as P
 from . import wsfast
-from .compute import _Open, _Recognition
+from .compute import OpenModel, Recognition
 from .gate import RateLimitedLog
 from .http_api import token_ok
-from .lanes import _Bucket, _Session
+from .lanes import TokenBucket, Session
 from .wsfast import FastFrames
 
 SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001) sent to every session at shutdown
@@ -171,7 +171,7 @@ class Sessions:
         if self.gate is not None:
             self.gate.authenticated(ws)
         sid = next(self._ids)
-        s = _Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), _Bucket(c.max_rate_hz, c.rate_burst))
+        s = Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), TokenBucket(c.max_rate_hz, c.rate_burst))
         s.seq = got[1]
         if c.fast_path and isinstance(ws, FastFrames) and wsfast.supported(ws):
             s.direct = True
@@ -242,7 +242,7 @@ class Sessions:
             log.info("session %d: ended (%d frames, %d predictions, %d frames coalesced%s)", sid, s.seq, s.predictions,
                      s.coalesced, extra)
 
-    async def _writer(self, s: _Session):
+    async def _writer(self, s: Session):
         from websockets.exceptions import ConnectionClosed
 
         try:
@@ -256,7 +256,7 @@ class Sessions:
         except ConnectionClosed:
             return
 
-    def _send(self, s: _Session, text) -> None:
+    def _send(self, s: Session, text) -> None:
         """Send a reply (``str``, or ``bytes`` of UTF-8 JSON): written at once when the session's writer has nothing
         queued and the socket takes it (:func:`~interprim.server.wsfast.write_now`), else queued for the writer
         (order kept: the writer sends what was queued before)."""
@@ -276,7 +276,7 @@ class Sessions:
             s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
 
-    def _fatal(self, s: _Session, code: int, reason: str, message: dict | None = None, level=logging.WARNING) -> None:
+    def _fatal(self, s: Session, code: int, reason: str, message: dict | None = None, level=logging.WARNING) -> None:
         if s.closing:
             return
         log.log(level, "session %d: closing %d: %s", s.id, code, reason)
@@ -292,7 +292,7 @@ class Sessions:
             s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
 
-    def _error(self, s: _Session, exc: P.ProtocolError, seq=None, t=None) -> None:
+    def _error(self, s: Session, exc: P.ProtocolError, seq=None, t=None) -> None:
         s.errors += 1
         if exc.code != "rate_limited":  # dropping is the limit's own answer; not a protocol violation
             s.consecutive_errors += 1
@@ -311,7 +311,7 @@ class Sessions:
         else:
             self._send(s, P.dumps(msg))
 
-    def _frame_at_once(self, s: _Session, data) -> bool:
+    def _frame_at_once(self, s: Session, data) -> bool:
         """A valid frame of a session with an open model, within the rate limit: put it in the session's pending
         frames without a coroutine (the common case, per frame).  ``False`` (nothing done) for anything else,
         which :meth:`_on_message` then handles, errors included."""
@@ -339,7 +339,7 @@ class Sessions:
             self.compute.push(s)
         return True
 
-    def _fast_frame(self, s: _Session, data) -> bool:
+    def _fast_frame(self, s: Session, data) -> bool:
         """A message straight from the connection's bytes (:class:`~interprim.server.wsfast.FastFrames`, offered
         only while no earlier message waits for the handler): taken if it is a valid frame that
         :meth:`_frame_at_once` takes and the handler is between two messages (not waiting for an earlier one's
@@ -348,7 +348,7 @@ class Sessions:
             return False
         return self._frame_at_once(s, data)
 
-    async def _far_behind(self, s: _Session) -> None:
+    async def _far_behind(self, s: Session) -> None:
         """``max_pending`` frames waiting: stop reading the session until its turn (the server cannot even feed its
         frames to its streams as fast as they come), so that TCP flow control slows the client down."""
         limit = self.config.max_pending
@@ -364,7 +364,7 @@ class Sessions:
             s.busy = False
             s.wake()
 
-    async def _on_message(self, s: _Session, data) -> bool:
+    async def _on_message(self, s: Session, data) -> bool:
         """Handle one message; ``True`` when it was a frame put in the session's pending frames."""
         c = self.config
         is_frame = isinstance(data, (bytes, bytearray, memoryview))
@@ -407,13 +407,13 @@ class Sessions:
             await self._reply_error(s, exc, seq, t)
         return False
 
-    async def _reply_error(self, s: _Session, exc: P.ProtocolError, seq=None, t=None) -> None:
+    async def _reply_error(self, s: Session, exc: P.ProtocolError, seq=None, t=None) -> None:
         """:meth:`_error`, after the replies to the frames received before (replies stay in ``seq`` order)."""
         if s.queued:
             await self._until(s, lambda: not s.queued)
         self._error(s, exc, seq, t)
 
-    async def _until(self, s: _Session, cond) -> None:
+    async def _until(self, s: Session, cond) -> None:
         """Wait until ``cond()`` holds; it is checked whenever the session's lane or handler changes its state."""
         loop = None
         while not cond():
@@ -422,14 +422,14 @@ class Sessions:
             s.waiters.append(fut)
             await fut
 
-    def _welcome(self, s: _Session) -> None:
+    def _welcome(self, s: Session) -> None:
         s.ready = True
         s.consecutive_errors = 0
         reply = {"type": "welcome", "version": P.PROTOCOL_VERSION, "session": s.id}
         reply.update({k: v for k, v in self._info().items() if k in ("server", "models", "limits")})
         self._send(s, P.dumps(reply))
 
-    async def _on_control(self, s: _Session, msg: dict) -> None:
+    async def _on_control(self, s: Session, msg: dict) -> None:
         c = self.config
         mtype = msg["type"]
         if mtype == "hello":
@@ -448,7 +448,7 @@ class Sessions:
             rec = None
             if len(entries) > 1:  # "auto": the Recogniser must take the candidates (made here, used in this process)
                 try:
-                    rec = _Recognition(entries)
+                    rec = Recognition(entries)
                 except (TypeError, ValueError, AttributeError) as exc:
                     raise P.ProtocolError("bad_message", f"'auto' cannot recognise among {o['candidates']}: {exc}") \
                         from None
@@ -468,7 +468,7 @@ class Sessions:
                                            points=o["points"], std=o["std"], robot_state=o["robot_state"])
                 except RuntimeError as exc:
                     raise P.ProtocolError("bad_message", f"open failed: {exc}") from None
-            s.open = _Open(o["model"], entries, streams, cols, o["points"], o["std"],
+            s.open = OpenModel(o["model"], entries, streams, cols, o["points"], o["std"],
                            recognition=None if self.compute.remote else rec)
             if streams:  # mean-only updates are much cheaper without a band (every stream takes need_cov)
                 s.open.update_kw = {"need_cov": o["std"]}
@@ -501,7 +501,7 @@ class Sessions:
             s.consecutive_errors = 0
             self._send(s, P.dumps({"type": "closed", "seq": s.seq}))
 
-    async def _on_frame(self, s: _Session, data, msg, seq: int) -> None:
+    async def _on_frame(self, s: Session, data, msg, seq: int) -> None:
         if not s.ready:
             raise P.ProtocolError("not_ready", "send hello first (got a frame)")
         op = s.open
@@ -518,7 +518,7 @@ class Sessions:
         elif len(s.pending) >= self.config.max_pending:
             await self._until(s, lambda: len(s.pending) < self.config.max_pending or not s.queued)
 
-    def deliver(self, s: _Session, op: _Open, batch: list, result) -> None:
+    def deliver(self, s: Session, op: OpenModel, batch: list, result) -> None:
         """Send the replies of a computed batch (called by the lanes): ``result`` is ``(texts, failures)`` from
         :func:`~interprim.server.compute.compute_batch`, or the exception that stopped the computation."""
         if isinstance(result, BaseException):
@@ -554,7 +554,7 @@ class Sessions:
         for text in texts:
             self._send(s, text)
 
-    async def _going_away(self, s: _Session, code: int, reason: str) -> None:
+    async def _going_away(self, s: Session, code: int, reason: str) -> None:
         """Shutdown of one session: once the frames it sent are answered (and the handler is between two
         messages), close it with ``code`` and a reason that names the last frame answered."""
         await self._until(s, lambda: s.ended or not (s.busy or s.queued))

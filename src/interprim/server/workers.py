@@ -40,7 +40,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
     import numpy as np
 
     from ..models.files import load_any
-    from .compute import _Open, compute_batch, warm_up
+    from .compute import OpenModel, compute_batch, warm_up
     from .models import entry_for
 
     entries = {n: entry_for(n, load_any(p), source=p, kind=kinds.get(n)) for n, p in paths.items()}
@@ -71,7 +71,7 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
             elif op == "open":
                 es = [entries[n] for n in req["candidates"]]
                 streams = [e.model.stream(robot_state=req.get("robot_state")) for e in es]
-                o = _Open(req["model"], es, streams, req["cols"], req["points"], req["std"])
+                o = OpenModel(req["model"], es, streams, req["cols"], req["points"], req["std"])
                 if streams:  # every stream takes need_cov (interprim.models.base)
                     o.update_kw = {"need_cov": req["std"]}
                 sessions[req["sid"]] = o

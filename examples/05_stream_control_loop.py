@@ -8,7 +8,7 @@ simulated 3-joint arm) moves towards the predicted posture *now*.  When the esti
 movement is over and the loop stops updating (frames of a partner standing still would stretch it).  The predicted std of the final posture
 slows the robot while the prediction is uncertain; an out-of-range frame stops it.  Every tick starts by waiting
 for its time, so that every branch (also the out-of-range one, which skips the rest of the tick) keeps the rate
-(``tests/test_control_loops.py`` counts the ticks on a fake clock).
+(``tests/sim/test_control_loops.py`` counts the ticks on a fake clock).
 """
 import time
 

@@ -21,7 +21,7 @@ export MPLBACKEND=Agg
 if [ "${#args[@]}" = 0 ]; then
   # The compiled kernels' bodies run as Python (with NUMBA_DISABLE_JIT numba's njit returns the plain function)
   # against their numpy references, so the kernel code itself is covered; about half a minute.
-  NUMBA_DISABLE_JIT=1 .venv/bin/python -m pytest -q tests/test_kernels_equivalence.py
+  NUMBA_DISABLE_JIT=1 .venv/bin/python -m pytest -q tests/compiled/test_kernels_equivalence.py
 fi
 if [ "$fast" = 1 ]; then
   exec .venv/bin/python -m pytest -q -m "not slow" ${args[@]+"${args[@]}"}

@@ -13,7 +13,7 @@ def _compiled_kernels():
     """Load (on a fresh clone: compile) the compiled kernels before the first test, as every run after an
     install has them: results then never depend on how far a background compilation has got, and numba's cache
     is filled for the tests that start fresh interpreters.  The first run after an install, on numpy while the
-    kernels compile, is tested in tests/test_cold_start.py."""
+    kernels compile, is tested in tests/compiled/test_cold_start.py."""
     from interprim.core._compiled import loader
 
     loader.warmup()

@@ -5,7 +5,7 @@ core.  In both, every command either works or stops with one line naming the ``p
 method whose peer package is missing (the Interaction ProMP of ``[bench]``) is skipped with a note.
 
 Builds a venv and installs from PyPI (several minutes; marked ``slow``, and run in CI like every test).  The
-same behaviour is tested in this process, with the modules hidden, by ``tests/test_cli_usability.py``.
+same behaviour is tested in this process, with the modules hidden, by ``tests/cli/test_cli_usability.py``.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ code may use ``with single_thread():``.  Both share one process-wide limiter:
   threads' BLAS calls also run on one thread while a library call is running.
 
 Results therefore do not depend on the caller's BLAS setting: the library's
-calls always run on one thread (tested bit for bit: ``tests/test_blas.py``).
+calls always run on one thread (tested bit for bit: ``tests/core/test_blas.py``).
 """
 
 from __future__ import annotations

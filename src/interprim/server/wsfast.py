@@ -14,7 +14,7 @@ asynchronous context manager.  At 10,000 frames/s that is most of the server's o
   sees its messages in the order they came, and while the library is not in the middle of a fragmented
   message (its ``protocol.current_size`` is ``None``): a whole text or binary frame inside a fragmented
   message is a protocol error (RFC 6455 Sec. 5.4) that the library answers with 1002, so it goes there.
-  ``tests/test_server_conformance.py`` sends the same malformed sequences (those of the library's own test
+  ``tests/server/test_server_conformance.py`` sends the same malformed sequences (those of the library's own test
   suite: fragmentation, control frames, masking, reserved bits, UTF-8, sizes, close frames) to a server
   with and without this path and requires the same answers and close codes.  The fast path switches itself off for good (the library
   then gets every byte) when the connection leaves the OPEN state, when a frame announces more than

@@ -3,7 +3,7 @@
 Cholesky factorisation in place, triangular solves by rows, a rank-1 update of an
 upper Cholesky factor and a symmetric rank-k subtraction, on preallocated
 buffers (no BLAS call, so no thread pool to limit).  Tested through the kernels
-that use them (``tests/test_fastpaths.py``, ``tests/test_phase_likelihood.py``).
+that use them (``tests/compiled/test_fastpaths.py``, ``tests/phase/test_phase_likelihood.py``).
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@
 Every compiled kernel has a plain numpy equivalent that gives the same
 numbers (bitwise for DTW, to ~1e-13 for the rest; both are listed side by side in
 :mod:`interprim.core._compiled.registry`, which callers ask for a kernel, and are compared
-in ``tests/test_kernels_equivalence.py``;
+in ``tests/compiled/test_kernels_equivalence.py``;
 a whole fit + predict + stream agrees to ~2e-8 relative, the conditioning
-floor of these problems; ``tests/test_cold_start.py``).  ``ready()`` says
+floor of these problems; ``tests/compiled/test_cold_start.py``).  ``ready()`` says
 which one runs:
 
 * ``INTERPRIM_JIT=0``: numpy only;

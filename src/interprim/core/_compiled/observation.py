@@ -1,7 +1,7 @@
 """Compiled observation statistics (paper Eq. 3, 13-15): forcing values and ``X^T X``, ``X^T Y``, ``|Y|^2``.
 
 Each kernel has a plain numpy reference elsewhere in the package that it is
-tested against (``tests/test_fastpaths.py``):
+tested against (``tests/compiled/test_fastpaths.py``):
 
 * :func:`forcing_values_into` / :func:`design_stats` -- sufficient statistics ``G = X^T X``, ``B = X^T Y``
   and ``|Y|^2`` of the paper's forcing observation (Eq. 13-15) at ``M``

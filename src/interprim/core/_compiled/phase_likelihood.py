@@ -6,7 +6,7 @@ several candidate phases in one call.  Reference:
 ``interprim.phase.likelihood._phase_log_likelihood_reference`` (the
 per-candidate design matrix and :func:`interprim.core.gaussian.lowrank_case`);
 plain numpy equivalent: ``interprim.phase.likelihood._loglik_batch_numpy``
-(``tests/test_phase_likelihood.py`` checks all three agree).
+(``tests/phase/test_phase_likelihood.py`` checks all three agree).
 
 Per candidate ``s`` the ``M`` observed frames sit at ``s_m = s m / (M - 1)``.
 The position design of every observed DoF is the same ``H(s)`` (``M x q``,

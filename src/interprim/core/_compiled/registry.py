@@ -4,7 +4,7 @@ Every kernel called from Python is one row of :data:`KERNELS`: where the compile
 module of :mod:`interprim.core._compiled`, which imports numba) and where its numpy reference lives (a
 module that does not import numba, so that the reference runs with ``INTERPRIM_JIT=0``, without numba,
 and while a cold cache compiles in the background).  Kernel and reference sit side by side in one row
-(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other, kernel by kernel, in one process (``tests/test_kernels_equivalence.py``,
+(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other, kernel by kernel, in one process (``tests/compiled/test_kernels_equivalence.py``,
 which also runs with ``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
 
 Callers ask for a kernel by name; whether the compiled kernels are in use is decided once, by
@@ -44,7 +44,7 @@ def in_use() -> bool:
 def forced(which: str):
     """Run the block on one path, ``"numpy"`` or ``"compiled"``, whatever :func:`loader.ready` decided.
 
-    For tests that compare the two paths in one process (``tests/test_kernels_equivalence.py``); not
+    For tests that compare the two paths in one process (``tests/compiled/test_kernels_equivalence.py``); not
     thread-safe (it applies to every thread while the block runs) and not for applications, whose path the
     loader's environment switches choose.
     """

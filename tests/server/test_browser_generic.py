@@ -173,6 +173,6 @@ def test_generic_view_drag_one_dof(user_server, driver):  # noqa: F811
 def _artifacts():
     from pathlib import Path
 
-    out = Path(__file__).resolve().parents[1] / "test-artifacts"
+    out = Path(__file__).resolve().parents[2] / "test-artifacts"
     out.mkdir(exist_ok=True)
     return out

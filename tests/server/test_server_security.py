@@ -29,7 +29,7 @@ from interprim.server.http_api import split_host  # noqa: E402
 
 from _server_support import closed_with, connect, hello, models, n_sessions, wait_until  # noqa: E402,F401
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
+SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,7 @@ pytestmark = [pytest.mark.skipif(
     reason="needs Chromium and its driver: apt-get install -y chromium chromium-driver",
 ), pytest.mark.slow]  # a browser driving the live page
 
-ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
 
 @pytest.fixture(scope="module")

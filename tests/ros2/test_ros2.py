@@ -520,7 +520,7 @@ def test_cli_bad_observe_is_one_line(model, tmp_path):
 def test_mujoco_example_runs_over_the_bridge(tmp_path):
     """examples/07_mujoco_arm.py --ros2: the simulated robot gets its reference only from ROS 2 messages."""
     pytest.importorskip("mujoco")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=os.pathsep.join(
         [os.path.join(root, "src"), os.environ.get("PYTHONPATH", "")]))
     r = subprocess.run([sys.executable, os.path.join(root, "examples", "07_mujoco_arm.py"), "--ros2",

@@ -26,7 +26,7 @@ from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # 
 from interprim.server.models import entry_for  # noqa: E402
 from interprim.synthetic import two_agent_demos  # noqa: E402
 
-SCHEMA = json.loads((Path(__file__).resolve().parents[1] / "src" / "interprim" / "server" / "static"
+SCHEMA = json.loads((Path(__file__).resolve().parents[2] / "src" / "interprim" / "server" / "static"
                      / "protocol.schema.json").read_text())
 ALLOWED_CLOSE = {1000, 1007, 1008, 1009}
 

@@ -48,7 +48,7 @@ MEASURED = {
     "rollout.response_positions": (2.3e-15, 8.6e-16, 1e-13),
     "phase_likelihood.phase_loglik_batch": (1.9e-13, 1.5e-13, 2e-12),
     # whole stream (phase + trajectory per frame); the phase ends with a parabolic step through the best three
-    # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/test_fastpaths.py)
+    # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/compiled/test_fastpaths.py)
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}

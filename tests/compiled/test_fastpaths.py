@@ -394,7 +394,7 @@ def stream_models(synthetic, fitted):
 # (issue 20; measured phase / trajectory / response): default 1.6e-7 / 5.9e-7 / 4.8e-7, smooth 2.7e-7 / 1.4e-6 /
 # 1.1e-6, pca 2.2e-7 / 1.2e-6 / 1.2e-6, forcing 5.6e-6 / 4.8e-5 / 5.6e-5 (the forcing observation a few frames
 # in: its log posterior is steep, so score rounding moves the vertex most), benchmark size 1.4e-6 / 1.5e-5 /
-# 1.6e-5.  The prediction contract asserts 1e-5 for every model (tests/test_contract.py).
+# 1.6e-5.  The prediction contract asserts 1e-5 for every model (tests/models/test_contract.py).
 STREAM_TOL = {"default": (2e-6, 1e-5), "smooth": (2e-6, 1e-5), "pca": (2e-6, 1e-5), "forcing": (1e-5, 1e-4),
               "benchmark": (5e-6, 5e-5)}
 
@@ -449,7 +449,7 @@ def test_stream_equals_predict_at_benchmark_size():
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     from benchmarks.run import fitted_model
 
     m, test = fitted_model()

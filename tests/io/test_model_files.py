@@ -438,7 +438,7 @@ def test_cli_serve_with_bad_model_file_prints_one_line(bad_models, bad):
 
 # ----------------------------------------------------------------------------- other CLI errors (item 5)
 def test_cli_evaluate_with_a_user_file_is_one_line(tmp_path):
-    # a user's file is evaluated (tests/test_realtime.py); a bad one is one line naming it, before any work
+    # a user's file is evaluated (tests/model_selection/test_realtime.py); a bad one is one line naming it, before any work
     (tmp_path / "demos.csv").write_text("time,x,y\n0,1,2\n0.1,1,2\n")
     r = _cli("evaluate", "--data", str(tmp_path / "demos.csv"), "--out", str(tmp_path / "ev"))
     assert r.returncode == 1 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr

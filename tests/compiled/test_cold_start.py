@@ -19,7 +19,7 @@ import interprim as ip
 from interprim.core._compiled import loader, registry
 from interprim.synthetic import two_agent_demos
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
+SRC = str(Path(__file__).resolve().parents[2] / "src")
 #: relative to the largest magnitude of each output; measured (numpy vs compiled path, the same with a cold and a
 #: warm cache): phase 1e-10, trajectory 1.5e-10, std 5.2e-9, samples 1.3e-9, stream 1.6e-9.  (The calibrated std
 #: had differed by 1.8e-5 on a cold cache: numba's freshly compiled kernels and those loaded from its cache differ

@@ -44,7 +44,7 @@ def _same(reply: dict) -> dict:
 
 def _assert_close(a, b, where="reply"):
     """Same keys, same strings/booleans/None, the same numbers: a coalesced batch enters the streams with one
-    Stream.extend, whose answer is update's for the last frame exactly (tests/test_stream_extend.py)."""
+    Stream.extend, whose answer is update's for the last frame exactly (tests/models/test_stream_extend.py)."""
     if isinstance(a, dict):
         assert isinstance(b, dict) and sorted(a) == sorted(b), where
         for k in a:

@@ -66,7 +66,7 @@ def _rel(a, b):
 def test_result_does_not_depend_on_when_the_kernels_loaded(runs):
     """With numba's cache filled, the first call after import (which waits for the kernels to load) and a call
     after an explicit warm-up give the same bits: there is no window in which numpy serves while they load.
-    (An empty cache, the first run after an install: ``tests/test_cold_start.py``.)"""
+    (An empty cache, the first run after an install: ``tests/compiled/test_cold_start.py``.)"""
     a, b = runs["auto"], runs["auto_warm"]
     assert a["compiled"] and b["compiled"]
     assert a == b

@@ -158,14 +158,14 @@ def test_calibrated_band_holds_on_new_demonstrations_and_the_check_bites(noisy):
 
 
 def _arrays_of(path):
-    meta, arrays = ipio._read_archive(path)
+    meta, arrays = ipio.read_archive(path)
     return meta, dict(arrays)
 
 
 def _write_arrays(path, meta, arrays):
     meta = dict(meta)
-    meta["checksums"] = {k: ipio._checksum(v) for k, v in arrays.items()}
-    ipio._write(path, meta, arrays)
+    meta["checksums"] = {k: ipio.checksum(v) for k, v in arrays.items()}
+    ipio.write_archive(path, meta, arrays)
 
 
 def test_model_file_round_trip_keeps_the_calibration(noisy, tmp_path):

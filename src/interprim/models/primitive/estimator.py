@@ -527,7 +527,7 @@ class InteractionPrimitive(Predictor):
     def save(self, path):
         """Save to a safe ``.npz`` model file (arrays + JSON metadata, no pickle); see :mod:`interprim.io`."""
         self._check_fitted("save")
-        from ...io import save_model
+        from .state_io import save_model
 
         save_model(self, path)
 
@@ -541,14 +541,14 @@ class InteractionPrimitive(Predictor):
     def from_state(cls, arrays: dict, meta: dict, source="<state>") -> "InteractionPrimitive":
         """The model of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's); raises
         :class:`~interprim.ModelFileError` naming ``source`` when they are inconsistent."""
-        from ...io import model_from_state
+        from .state_io import model_from_state
 
         return model_from_state(arrays, meta, cls, source)
 
     @classmethod
     def load(cls, path) -> "InteractionPrimitive":
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
-        from ...io import load_model
+        from .state_io import load_model
 
         return load_model(path, cls)
 

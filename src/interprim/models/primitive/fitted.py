@@ -148,17 +148,17 @@ class FittedPrimitive:
     # ------------------------------------------------------------------ persistence
     def to_state(self):
         """``(arrays, meta)``: this state as a model file holds it (numeric arrays and JSON metadata;
-        :func:`interprim.io.model_state`); :meth:`from_state` restores it."""
-        from ...io import model_state
+        :func:`interprim.models.primitive.state_io.model_state`); :meth:`from_state` restores it."""
+        from .state_io import model_state
 
         return model_state(self)
 
     @classmethod
     def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> "FittedPrimitive":
         """The state of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's), every array checked
-        (:func:`interprim.io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
+        (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
         ``meta["params"]`` with the defaults filled in)."""
-        from ...io import fitted_from_state
+        from .state_io import fitted_from_state
 
         return cls(params, fitted_from_state(arrays, meta, params, source))
 

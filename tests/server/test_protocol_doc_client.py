@@ -159,11 +159,11 @@ def test_hello_welcome_open_and_labels(server):
         # dofs "all": every column
         o2 = c.rpc({"type": "open", "model": "pair", "dofs": "all", "points": 5})
         assert o2["columns"] == [0, 1, 2, 3, 4] and o2["column_names"] == NAMES
-        # "auto" with one candidate: lists, as for one model
-        o3 = c.rpc({"type": "open", "model": "auto", "candidates": ["pair"]})
-        assert o3["model"] == "auto" and o3["columns"] == [2, 3, 4] and o3["column_names"] == ["arm_a", "arm_b", "arm_c"]
+        # "recognise" with one candidate: lists, as for one model
+        o3 = c.rpc({"type": "open", "model": "recognise", "candidates": ["pair"]})
+        assert o3["model"] == "recognise" and o3["columns"] == [2, 3, 4] and o3["column_names"] == ["arm_a", "arm_b", "arm_c"]
         # several candidates: per-candidate objects; probabilities uniform until conditioned
-        o4 = c.rpc({"type": "open", "model": "auto", "candidates": ["pair", "pair_b"], "points": 5})
+        o4 = c.rpc({"type": "open", "model": "recognise", "candidates": ["pair", "pair_b"], "points": 5})
         assert o4["columns"] == {"pair": [2, 3, 4], "pair_b": [2, 3, 4]}
         assert o4["column_names"] == {"pair": ["arm_a", "arm_b", "arm_c"], "pair_b": ["dof_2", "dof_3", "dof_4"]}
         assert o4["observed_units"] == {"pair": ["m", "m"], "pair_b": [None, None]}
@@ -174,7 +174,7 @@ def test_hello_welcome_open_and_labels(server):
             if not p["conditioned"]:
                 assert p["probabilities"] == {"pair": 0.5, "pair_b": 0.5} and p["model"] == "pair"
         assert p["conditioned"] is True
-        e = c.rpc({"type": "open", "model": "auto"})  # all loaded models: they observe 2 and 1 DoFs
+        e = c.rpc({"type": "open", "model": "recognise"})  # all loaded models: they observe 2 and 1 DoFs
         assert e["code"] == "bad_message" and "same number" in e["message"]
         err = c.rpc({"type": "open", "model": "nope"})
         assert err["type"] == "error" and err["code"] == "unknown_model" and "pair" in err["message"]

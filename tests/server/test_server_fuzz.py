@@ -62,7 +62,7 @@ json_values = st.recursive(scalars, lambda c: st.one_of(st.lists(c, max_size=4),
                                                         st.dictionaries(st.text(max_size=8), c, max_size=4)),
                            max_leaves=12)
 field_values = st.one_of(json_values, st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=5),
-                         st.sampled_from(["pair", "auto", "nope", "all", "controlled"]))
+                         st.sampled_from(["pair", "recognise", "auto", "nope", "all", "controlled"]))
 client_like = st.fixed_dictionaries(
     {"type": st.sampled_from(["hello", "open", "frame", "reset", "close", "bogus", 3, None])},
     optional={k: field_values for k in ("model", "frame", "points", "std", "dofs", "candidates", "t", "version",

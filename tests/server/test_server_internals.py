@@ -295,7 +295,7 @@ def test_nonfinite_predictions_are_never_encoded():
             compute._FORCE_PRINTF = old
 
 
-@pytest.mark.parametrize("kind", ["asyncio", "auto"])
+@pytest.mark.parametrize("kind", ["asyncio", "best"])
 def test_event_loop_choice(models, test_demo, kind):
     from interprim.server.app import new_event_loop
 
@@ -307,9 +307,9 @@ def test_event_loop_choice(models, test_demo, kind):
         assert c.frame(test_demo[0, :2])["type"] == "prediction"
         if kind == "asyncio":
             assert type(st.loop).__module__.startswith("asyncio")
-    ev = new_event_loop("auto")
+    ev = new_event_loop("best")
     try:
-        uv = pytest.importorskip("uvloop") if kind == "auto" else None
+        uv = pytest.importorskip("uvloop") if kind == "best" else None
         if uv is not None:
             assert type(ev).__module__.startswith("uvloop")
     finally:

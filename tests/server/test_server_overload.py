@@ -61,7 +61,7 @@ def _assert_close(a, b, where="reply"):
 def _open(models, names, std, points=12):
     entries = [models[n] for n in names]
     streams = [e.model.stream() for e in entries]
-    op = compute.OpenModel(names[0] if len(names) == 1 else "auto", entries, streams,
+    op = compute.OpenModel(names[0] if len(names) == 1 else "recognise", entries, streams,
                        [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries], points, std)
     op.update_kw = {"need_cov": std}
     return op
@@ -245,7 +245,7 @@ def _gated_server(models, gate, **cfg):
 SESSIONS = [
     ({"model": "pair", "points": 10}, 0.0),
     ({"model": "pair", "points": 10, "std": True}, 0.01),
-    ({"model": "auto", "candidates": ["pair", "letter_c"], "points": 8}, 0.02),
+    ({"model": "recognise", "candidates": ["pair", "letter_c"], "points": 8}, 0.02),
     ({"model": "pair", "points": 10}, -0.01),
 ]
 N_FRAMES = 40

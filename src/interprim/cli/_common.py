@@ -113,7 +113,7 @@ def add_recording_args(p, what="DEMOS") -> None:
     g.add_argument("--split-frames", metavar="A-B,C-D",
                    help="C3D/BVH: the demonstrations as frame ranges (inclusive; C3D frames as the capture numbers "
                         "them, BVH frames from 0)")
-    g.add_argument("--split-repetitions", nargs="?", const="auto", default=None, metavar="PERIOD",
+    g.add_argument("--split-repetitions", nargs="?", const=True, default=None, metavar="PERIOD",
                    help="C3D/BVH: cut a continuous take (walking, hopping, repeated serves) into the repetitions of "
                         "its movement; the period is found from the take (or give it in seconds)")
     g.add_argument("--trim", action="store_true",
@@ -201,7 +201,7 @@ def shell_words(words) -> str:
 
 
 def _repetitions(text):
-    if text is None or text == "auto":
+    if text is None or text is True:
         return text
     try:
         value = float(text)

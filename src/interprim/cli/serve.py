@@ -8,7 +8,7 @@ DESCRIPTION = """\
 Serve fitted models over WebSocket (protocol: docs/protocol.md) and a live page in the browser.
 
 A client (a robot controller, the page, interprim.server.Client) opens a session on one model,
-or on "auto" to let the server recognise the interaction among the loaded models, streams the
+or on "recognise" to let the server recognise the interaction among the loaded models, streams the
 observed agent's frames and gets after each frame the phase, the recognised model and the
 controlled agent's predicted trajectory (mean, optionally a std band).
 
@@ -90,8 +90,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-unauthenticated-per-address", type=int, default=8,
                    help="connections without an accepted hello from one IP address; a new one aborts the oldest "
                         "(default 8; raise it behind a reverse proxy)")
-    p.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
-                   help="event loop: auto (default) = uvloop if installed (about a third less CPU per frame), "
+    p.add_argument("--loop", default="best", choices=["best", "uvloop", "asyncio"],
+                   help="event loop: best (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     p.add_argument("--max-nan-gap", type=int, default=0,

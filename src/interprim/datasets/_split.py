@@ -207,7 +207,7 @@ def find_repetitions(y, rate, *, where: str, period=None):
         how = f"autocorrelation {corr:.2f}"
     else:
         if not (np.isfinite(period) and period > 0):
-            raise ValueError(f"split_repetitions must be 'auto' or a positive period in seconds, got {period!r}")
+            raise ValueError(f"split_repetitions must be True or a positive period in seconds, got {period!r}")
         P, how = max(4, int(round(period * rate))), "given"
         if 2 * P > T:
             raise DataFileError(f"{where}: split_repetitions period {period} s ({P} frames) leaves less than two "
@@ -264,7 +264,7 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
         Seconds: a pause longer than this starts a new demonstration.  A pause is a run of frames in which
         every column moves slower than :data:`PAUSE_SPEED` times the take's 95th-percentile speed, or
         in which a column is missing.
-    repetitions : "auto" or float, optional
+    repetitions : True or float, optional
         Cut a continuous take into the repetitions of one movement (:func:`find_repetitions`); a float is
         the period in seconds.  Applied to each piece left by the other options.
     notes : list, optional
@@ -290,7 +290,10 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
     if repetitions is not None:
-        period = None if repetitions in ("auto", True) else float(repetitions)
+        if isinstance(repetitions, str) or isinstance(repetitions, (bool, np.bool_)) and not repetitions:
+            raise ValueError(f"split_repetitions must be True (the period found from the take) or a positive period "
+                             f"in seconds, got {repetitions!r}")
+        period = None if repetitions is True else float(repetitions)
         out = []
         for a, b in segs:
             reps, note = find_repetitions(y[a:b + 1], rate, where=where if len(segs) == 1 else

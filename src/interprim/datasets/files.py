@@ -605,9 +605,9 @@ def load_demonstrations(
         CSV: the unit of the time column.  Default: seconds for a ``time`` column; for another
         column, nanoseconds when its values are whole numbers more than 1000 apart (ROS stamps),
         else seconds; the choice is stated in ``Demonstrations.notes``.
-    split_repetitions : "auto" or float, optional
+    split_repetitions : True or float, optional
         C3D, BVH: cut a continuous take (walking, hopping, serves one after the other) into the
-        repetitions of its movement: ``"auto"`` finds the period from the take's autocorrelation, a
+        repetitions of its movement: ``True`` finds the period from the take's autocorrelation, a
         number gives it in seconds (:func:`interprim.datasets._split.find_repetitions`); what was
         found is stated in ``Demonstrations.notes``.  Pieces left by ``split_gap``, ``split_events``
         or ``split_repetitions`` that are shorter than ``min_frames`` are left out with one warning.

@@ -56,7 +56,7 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
     split_gap : float, optional
         Seconds: a pause longer than this starts a new demonstration (every marker slower than 5 % of
         the take's 95th-percentile speed, or a marker missing).
-    split_repetitions : "auto" or float, optional
+    split_repetitions : True or float, optional
         Cut a continuous take into the repetitions of its movement (period found, or given in
         seconds); see :func:`~interprim.datasets.load_demonstrations`.
 
@@ -108,7 +108,7 @@ def load_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     split_gap : float, optional
         Seconds: a pause longer than this (every column slower than 5 % of the take's
         95th-percentile speed, or a missing value) starts a new demonstration.
-    split_repetitions : "auto" or float, optional
+    split_repetitions : True or float, optional
         Cut a continuous take into the repetitions of its movement (period found, or given in
         seconds); see :func:`~interprim.datasets.load_demonstrations`.
 

@@ -77,7 +77,7 @@ class ServerConfig:
     allowed_hosts: tuple = ()  # Host header names allowed besides the loopback names and the bound address
     fast_path: bool = True  # the server's own frame path (interprim.server.wsfast); False: the library does all
     log_errors_per_session: int = 10
-    loop: str = "auto"  # event loop: "auto" (uvloop if installed), "uvloop", "asyncio" (see new_event_loop)
+    loop: str = "best"  # event loop: "best" (uvloop if installed), "uvloop", "asyncio" (see new_event_loop)
 
     def validate(self) -> None:
         """Check the limits and options; raises ``ValueError`` naming the first one that is wrong.
@@ -114,12 +114,12 @@ class ServerConfig:
             raise ValueError("max_message_bytes must be at least 256 (a frame message needs room)")
 
 
-LOOP_KINDS = ("auto", "uvloop", "asyncio")
+LOOP_KINDS = ("best", "uvloop", "asyncio")
 
 
-def new_event_loop(kind: str = "auto") -> asyncio.AbstractEventLoop:
+def new_event_loop(kind: str = "best") -> asyncio.AbstractEventLoop:
     """A new event loop: uvloop's (libuv, socket I/O and callbacks in C: about a third less CPU per
-    frame for the server) when ``kind`` is "uvloop", or "auto" and uvloop is installed; else asyncio's."""
+    frame for the server) when ``kind`` is "uvloop", or "best" and uvloop is installed; else asyncio's."""
     if kind not in LOOP_KINDS:
         raise ValueError(f"loop must be one of {LOOP_KINDS}, got {kind!r}")
     if kind != "asyncio":
@@ -133,7 +133,7 @@ def new_event_loop(kind: str = "auto") -> asyncio.AbstractEventLoop:
     return asyncio.new_event_loop()
 
 
-def run(main, loop: str = "auto"):
+def run(main, loop: str = "best"):
     """``asyncio.run(main)`` on :func:`new_event_loop`'s loop."""
     ev = new_event_loop(loop)
     try:

@@ -114,9 +114,9 @@ class Client:
         """Next reply; raises :class:`ServerError` on an error reply."""
         return _check(json.loads(self.ws.recv(timeout=self.timeout if timeout is None else timeout)))
 
-    def open(self, model: str = "auto", *, candidates=None, points: int | None = None, std: bool = False,
+    def open(self, model: str = "recognise", *, candidates=None, points: int | None = None, std: bool = False,
              dofs: str | None = None, robot_state=None) -> dict:
-        """Open a model (or ``"auto"``: recognise among ``candidates``, default all). Returns ``opened``."""
+        """Open a model (or ``"recognise"``: recognise among ``candidates``, default all). Returns ``opened``."""
         self.ws.send(_open_msg(model, candidates, points, std, dofs, robot_state))
         self.opened = self.recv()
         return self.opened
@@ -201,9 +201,9 @@ class AsyncClient:
         """Next reply without raising on errors."""
         return json.loads(await self.ws.recv())
 
-    async def open(self, model: str = "auto", *, candidates=None, points: int | None = None, std: bool = False,
+    async def open(self, model: str = "recognise", *, candidates=None, points: int | None = None, std: bool = False,
                    dofs: str | None = None, robot_state=None) -> dict:
-        """Open a model (or ``"auto"``: recognise among ``candidates``, default all). Returns ``opened``.
+        """Open a model (or ``"recognise"``: recognise among ``candidates``, default all). Returns ``opened``.
 
         The keyword arguments are the fields of the protocol's ``open`` message (``points``, ``std``,
         ``dofs``, ``robot_state``), as for :meth:`Client.open`.

@@ -23,7 +23,7 @@ log = logging.getLogger("interprim.server")
 class OpenModel:
     """An opened model (or set of candidates) inside a session."""
 
-    name: str  # requested: a model name or "auto"
+    name: str  # requested: a model name or "recognise"
     entries: list
     streams: list
     cols: list  # per candidate: data columns returned in mean/std/goal
@@ -88,7 +88,7 @@ def frame_problem(op: OpenModel, frame: np.ndarray) -> str | None:
 
 
 class Recognition:
-    """Which of an ``"auto"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
+    """Which of a ``"recognise"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
     the frames of the current interaction.
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
@@ -99,7 +99,7 @@ class Recognition:
     ------
     TypeError, ValueError, AttributeError
         The Recogniser does not take the candidates (e.g. a model that is not a fitted InteractionPrimitive);
-        the server checks this when the session opens ``"auto"``.
+        the server checks this when the session opens ``"recognise"``.
     """
 
     def __init__(self, entries):

@@ -6,7 +6,7 @@
 * ``letter_c``, ``letter_s``, ``letter_u``: single-agent handwriting models on
   synthetic pen strokes (each demonstration is a randomly scaled, rotated,
   shifted and time-warped letter), for the page's handwriting tab, where the
-  server recognises which letter is being drawn (``open`` with ``"auto"``).
+  server recognises which letter is being drawn (``open`` with ``"recognise"``).
 """
 
 from __future__ import annotations

@@ -101,10 +101,10 @@ class ModelEntry:
 
 
 def check_name(name: str, source: str) -> str:
-    if not _NAME.match(name) or name == "auto":
+    if not _NAME.match(name) or name in ("recognise", "auto"):
         raise ModelFileError(
             f"model name {name!r} (from {source}) must be 1-64 characters of letters, digits, '_', '.', '-' "
-            "and not 'auto'; rename the file"
+            "and not 'recognise' (the request to recognise among models) or 'auto'; rename the file"
         )
     return name
 

@@ -119,13 +119,21 @@ def check_hello(msg: dict) -> dict:
     return {"version": version, "token": token, "client": client}
 
 
+#: The model name of an ``open`` that recognises the interaction among candidates (not a loaded model's name).
+RECOGNISE = "recognise"
+
+
 def check_open(msg: dict, models: dict, *, default_points: int, max_points: int) -> dict:
     """Validate an ``open`` against the loaded ``models`` (name -> entry with ``n_observed``)."""
-    name = msg.get("model", "auto")
+    name = msg.get("model", RECOGNISE)
     if not isinstance(name, str):
-        raise ProtocolError("bad_message", f"open.model must be a string (a model name or 'auto'), got {_describe(name)}")
-    cands = msg.get("candidates")
+        raise ProtocolError("bad_message",
+                            f"open.model must be a string (a model name or {RECOGNISE!r}), got {_describe(name)}")
     if name == "auto":
+        raise ProtocolError("bad_message", f"open.model 'auto' is now {RECOGNISE!r}: recognise the interaction among "
+                            "open.candidates (default: every loaded model)")
+    cands = msg.get("candidates")
+    if name == RECOGNISE:
         if cands is None:
             cands = list(models)
         if not isinstance(cands, list) or not cands or not all(isinstance(c, str) for c in cands):
@@ -142,15 +150,15 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
         if len(set(dims.values())) != 1:
             raise ProtocolError(
                 "bad_message",
-                "'auto' needs candidates that observe the same number of DoFs; got "
+                "'recognise' needs candidates that observe the same number of DoFs; got "
                 + ", ".join(f"{c}: {d}" for c, d in dims.items())
                 + " (choose them with open.candidates)",
             )
     else:
         if cands is not None:
-            raise ProtocolError("bad_message", "open.candidates is only allowed with model 'auto'")
+            raise ProtocolError("bad_message", "open.candidates is only allowed with model 'recognise'")
         if name not in models:
-            raise ProtocolError("unknown_model", f"unknown model {name!r}; loaded: {sorted(models)} or 'auto'")
+            raise ProtocolError("unknown_model", f"unknown model {name!r}; loaded: {sorted(models)} or 'recognise'")
         cands = [name]
     points = msg.get("points", default_points)
     if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= max_points:

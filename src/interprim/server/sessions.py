@@ -446,11 +446,11 @@ class Sessions:
             for e in entries:
                 P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
             rec = None
-            if len(entries) > 1:  # "auto": the Recogniser must take the candidates (made here, used in this process)
+            if len(entries) > 1:  # "recognise": the Recogniser must take the candidates (made here, used in this process)
                 try:
                     rec = Recognition(entries)
                 except (TypeError, ValueError, AttributeError) as exc:
-                    raise P.ProtocolError("bad_message", f"'auto' cannot recognise among {o['candidates']}: {exc}") \
+                    raise P.ProtocolError("bad_message", f"'recognise' cannot recognise among {o['candidates']}: {exc}") \
                         from None
             streams, cols = [], []
             for e in entries:
@@ -474,7 +474,7 @@ class Sessions:
                 s.open.update_kw = {"need_cov": o["std"]}
             s.consecutive_errors = 0
             log.info("session %d: opened %s%s", s.id, o["model"],
-                     f" among {o['candidates']}" if o["model"] == "auto" else "")
+                     f" among {o['candidates']}" if o["model"] == "recognise" else "")
             self._send(s, P.dumps(_opened(o, entries, cols)))
             return
         if s.open is None:
@@ -588,7 +588,7 @@ class Sessions:
 
 def _opened(o: dict, entries: list, cols: list) -> dict:
     """The ``opened`` reply: what was opened and how to label it (names and units of the returned columns
-    and of the frame's values); one list per candidate (an object keyed by name) with ``"auto"``."""
+    and of the frame's values); one list per candidate (an object keyed by name) with ``"recognise"``."""
     def per(fn):
         vals = [fn(e, cl) for e, cl in zip(entries, cols)]
         return vals[0] if len(vals) == 1 else {e.name: v for e, v in zip(entries, vals)}

@@ -479,7 +479,7 @@ async function hwInit(info) {
   hw.client.onPrediction = hwApplyPrediction;
   hw.client.onError = (e) => { state.hw.error = e.message; $("hw-error").textContent = e.message; };
   const names = hw.models.map((m) => m.name);
-  await hw.client.open(names.length > 1 ? "auto" : names[0],
+  await hw.client.open(names.length > 1 ? "recognise" : names[0],
                        { points: 80, std: true, candidates: names.length > 1 ? names : undefined, dofs: "all" });
   hw.canvas.addEventListener("pointerdown", (ev) => {
     hw.canvas.setPointerCapture(ev.pointerId);

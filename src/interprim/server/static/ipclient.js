@@ -82,7 +82,7 @@ export class InterprimClient {
     }
   }
 
-  open(model = "auto", { points, std = false, candidates, dofs, robotState } = {}) {
+  open(model = "recognise", { points, std = false, candidates, dofs, robotState } = {}) {
     const msg = { type: "open", model, std };
     if (points !== undefined) msg.points = points;
     if (candidates !== undefined) msg.candidates = candidates;

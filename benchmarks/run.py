@@ -637,7 +637,24 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "is computed lazily, O(P^2 r).",
            "- **fit** O(S T D (q + 1)) for the least squares plus O(S P (S + P)) for the prior (S demonstrations).",
            "- **Open-end DTW** O(N M D); four query columns per sweep break the min-plus dependency chain.", ""]
+    md += _sections_of_other_commands(path)
     Path(path).write_text("\n".join(md))
+
+
+def _sections_of_other_commands(path) -> list:
+    """The sections of the existing file that another benchmark command wrote (a ``## `` title naming its
+    ``python -m benchmarks.<name>`` command, e.g. the ROS 2 bridge's latency): kept, not lost to this run."""
+    try:
+        old = Path(path).read_text().split("\n")
+    except OSError:
+        return []
+    out, keep = [], False
+    for line in old:
+        if line.startswith("## "):
+            keep = "`python -m benchmarks." in line and "benchmarks.run" not in line
+        if keep:
+            out.append(line)
+    return ([""] + out) if out else []
 
 
 def main(argv=None):

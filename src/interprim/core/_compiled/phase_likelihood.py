@@ -116,6 +116,20 @@ def _gram_block(ET, nb, q4, P, G):
             G[j + 2, l] += s20; G[j + 2, l + 1] += s21
             G[j + 3, l] += s30; G[j + 3, l + 1] += s31
 
+@njit(cache=True, fastmath=_FM, inline="always")
+def _grid_cell(u, n_steps):
+    """``(k, a)``: the cell ``[k, k + 1]`` of the rollout grid ``0 .. n_steps`` holding position ``u`` (clipped to the
+    grid) and ``u``'s fraction ``a`` in it: the one linear interpolation of the tabulated rollout."""
+    if u < 0.0:
+        u = 0.0
+    elif u > n_steps:
+        u = float(n_steps)
+    kf = int(np.floor(u))
+    if kf > n_steps - 1:
+        kf = n_steps - 1
+    return kf, u - kf
+
+
 @njit(cache=True, fastmath=_FM)
 def _stats(Zh, Rg, z, M, s, q4, ET, G):
     """Statistics of the first ``M`` frames of ``z`` at phase ``s``; returns ``|r|^2``.
@@ -142,15 +156,7 @@ def _stats(Zh, Rg, z, M, s, q4, ET, G):
             sm = m * step
             if M > 1 and m == M - 1:
                 sm = s
-            u = sm * n_steps
-            if u < 0.0:
-                u = 0.0
-            elif u > n_steps:
-                u = float(n_steps)
-            kf = int(np.floor(u))
-            if kf > n_steps - 1:
-                kf = n_steps - 1
-            a = u - kf
+            kf, a = _grid_cell(sm * n_steps, n_steps)
             wa = 1.0 - a
             Z0 = Zh[kf]
             Z1 = Zh[kf + 1]
@@ -285,15 +291,7 @@ def _row(Zh, Rg, z, m, vn, h, rv):
     K1, q = Zh.shape
     n_steps = K1 - 1
     n_o = Rg.shape[1]
-    u = m * vn
-    if u < 0.0:
-        u = 0.0
-    elif u > n_steps:
-        u = float(n_steps)
-    kf = int(np.floor(u))
-    if kf > n_steps - 1:
-        kf = n_steps - 1
-    a = u - kf
+    kf, a = _grid_cell(m * vn, n_steps)
     wa = 1.0 - a
     Z0 = Zh[kf]
     Z1 = Zh[kf + 1]

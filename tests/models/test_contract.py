@@ -9,6 +9,7 @@ from interprim.models.demonstrations import NearestNeighbour, PriorMean
 from interprim.models.promp import InteractionProMP
 from interprim.models.kernel import KernelDemonstrations
 from interprim.models.learned import LearnedInteraction
+from interprim.models import registry
 from interprim.synthetic import two_agent_demos
 
 OBS = [0, 1]
@@ -34,10 +35,21 @@ def _ip_phase(method):
     return lambda: ip.InteractionPrimitive(OBS, n_basis=8, sigma2=1e-3, phase_method=method, calibrate=False)
 
 
-MODELS = {"ip": _ip, "ip-likelihood": _ip_phase("likelihood"), "ip-learned": _ip_phase("learned"),
-          "learned": _learned, "prior-mean": lambda: PriorMean(OBS, n=60),
-          "nearest-neighbour": lambda: NearestNeighbour(OBS, n=60), "promp": _promp,
-          "kernel": lambda: KernelDemonstrations(OBS, n=60),
+def _family(name):
+    """The registry's family ``name`` with its defaults (the peers' packages skipped when absent)."""
+    def make():
+        for module in registry.family(name).needs:
+            pytest.importorskip(module)
+        return registry.factories([name], registry.Settings(tuple(OBS), n_basis=8))[name]()
+    return make
+
+
+#: every family of the registry with its defaults, faster variants of two, and the default model
+MODELS = {**{name: _family(name) for name in registry.FAMILIES},
+          "ip-dtw-fixed": _ip, "ip-likelihood": _ip_phase("likelihood"), "ip-learned": _ip_phase("learned"),
+          "learned-ridge": _learned, "prior-mean-60": lambda: PriorMean(OBS, n=60),
+          "nearest-neighbour-60": lambda: NearestNeighbour(OBS, n=60), "promp-small": _promp,
+          "kernel-60": lambda: KernelDemonstrations(OBS, n=60),
           "auto": lambda: ip.AutoInteraction(OBS, candidates=("kernel", "prior"))}
 
 
@@ -76,7 +88,7 @@ def test_one_prediction_type_with_the_same_shapes(name, fitted, demos):
     assert isinstance(pred, BasePrediction)
     assert pred.trajectory(n).shape == (n, D)
     sd = pred.std(n)
-    assert (sd is None and name == "nearest-neighbour") or (sd.shape == (n, D) and np.all(sd >= 0))
+    assert (sd is None and type(model) is NearestNeighbour) or (sd.shape == (n, D) and np.all(sd >= 0))
     smp = pred.samples(4, n, random_state=0)
     assert smp.shape == (4, n, D)
     np.testing.assert_array_equal(smp, pred.samples(4, n, random_state=0))
@@ -88,7 +100,7 @@ def test_one_prediction_type_with_the_same_shapes(name, fitted, demos):
     assert pred.n_observed == M and isinstance(pred.conditioned, bool)
     for attr in ("phase", "normalised_time", "duration", "speed", "log_likelihood", "input_distance"):
         assert isinstance(getattr(pred, attr), float), attr
-    if name != "prior-mean":  # the prior mean estimates no timing
+    if type(model) is not PriorMean:  # the prior mean estimates no timing
         assert 0.0 < pred.normalised_time <= 1.0 and pred.duration > 0 and pred.speed > 0
 
 
@@ -176,7 +188,7 @@ def test_a_model_file_of_another_kind_is_refused(name, fitted, tmp_path):
     model = fitted(name)
     path = tmp_path / "m.npz"
     model.save(path)
-    other = PriorMean if name != "prior-mean" else ip.InteractionPrimitive
+    other = PriorMean if type(model) is not PriorMean else ip.InteractionPrimitive
     with pytest.raises(ip.ModelFileError, match=f"holds a {type(model).__name__} model"):
         other.load(path)
 
@@ -195,3 +207,7 @@ def test_clone_and_params(name, fitted, demos):
     twin.fit(demos[:-1], dt=0.01)
     part = demos[-1][:50, :2]
     np.testing.assert_array_equal(twin.predict(part).trajectory(20), model.predict(part).trajectory(20))
+
+
+def test_every_registered_family_is_in_the_contract_test():
+    assert set(registry.FAMILIES) <= set(MODELS)

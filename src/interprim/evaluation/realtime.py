@@ -140,16 +140,19 @@ def choose_method(make_estimators, demos, observed_dofs, dt: float, cfg=None, k:
 BASELINES = ("nn", "prior", "clock")
 
 #: How each method of :func:`default_methods` is fitted outside the evaluation.
-FIT_COMMANDS = {
-    "auto": "interprim fit {data} --observed {observed} -o model.npz",
-    "ip": "interprim fit {data} --observed {observed} --model ip -o model.npz",
-    "ip-paper": "interprim fit {data} --observed {observed} --model ip --observation forcing --sigma2 residual "
-                "--phase-method dtw -o model.npz",
-    "learned": "interprim fit {data} --observed {observed} --model learned -o model.npz",
-    "kernel": "interprim fit {data} --observed {observed} --model kernel -o model.npz",
-    "nn": "interprim fit {data} --observed {observed} --model nn -o model.npz (replays the nearest demonstration)",
-    "prior": "interprim fit {data} --observed {observed} --model prior -o model.npz (replays the mean demonstration)",
-}
+def _fit_commands() -> dict:
+    """``{method: the interprim fit command that fits it}`` (``auto``: the blend; a family: the registry's options)."""
+    from ..models.registry import FAMILIES
+
+    out = {"auto": "interprim fit {data} --observed {observed} -o model.npz"}
+    for name, fam in FAMILIES.items():
+        if fam.fit_args:
+            note = f" ({fam.fit_note})" if fam.fit_note else ""
+            out[name] = f"interprim fit {{data}} --observed {{observed}} {fam.fit_args} -o model.npz{note}"
+    return out
+
+
+FIT_COMMANDS = _fit_commands()
 
 
 def nested_verdict(summary, records, method: str = "chosen", threshold: float = 0.03, data: str = "DEMOS",

@@ -25,13 +25,15 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
+from ..models.registry import FAMILIES
 from ..model_selection.prefixes import Prefixes
 from ..evaluation.realtime import RealTimeConfig, default_methods, realtime_fold, summarise_realtime, whole_movement_fold
 
 __all__ = ["holdout_tasks", "run_task", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
-METHODS = ("ip", "learned", "ip-paper", "kernel", "nn", "prior")
+#: every family of the registry but the peer (Interaction ProMP, which needs the [bench] extra)
+METHODS = tuple(n for n, f in FAMILIES.items() if not f.needs)
 
 
 def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):

@@ -75,23 +75,30 @@ class Family:
     cli: bool = True
     candidate: bool = False
     needs: tuple = field(default_factory=tuple)
+    #: the ``interprim fit`` options that fit this family alone (None: not available from the command line)
+    fit_args: str | None = None
+    #: what a user should know of that fit (printed after the command)
+    fit_note: str = ""
 
 
 #: Every model family, by name.  ``candidate``: compared by the default model (``interprim fit``).
 FAMILIES = {f.name: f for f in (
-    Family("ip", InteractionPrimitive, _ip, "the Interaction Primitive with the library's defaults", candidate=True),
+    Family("ip", InteractionPrimitive, _ip, "the Interaction Primitive with the library's defaults", candidate=True,
+           fit_args="--model ip"),
     Family("learned", LearnedInteraction, lambda s: LearnedInteraction(list(s.observed_dofs)),
-           "learned timing + phase-robust coupling", candidate=True),
+           "learned timing + phase-robust coupling", candidate=True, fit_args="--model learned"),
     Family("ip-paper", InteractionPrimitive,
            lambda s: _ip(s, observation="forcing", sigma2="residual", phase_method="dtw"),
            "the paper exactly: forcing observation (Eq. 15), open-end DTW phase (Eq. 5-9), sigma2 from the residual",
-           cli=False),
+           cli=False, fit_args="--model ip --observation forcing --sigma2 residual --phase-method dtw"),
     Family("kernel", KernelDemonstrations, lambda s: KernelDemonstrations(list(s.observed_dofs), horizon=s.horizon),
-           "the demonstrations weighted by a kernel on the aligned prefix", candidate=True),
+           "the demonstrations weighted by a kernel on the aligned prefix", candidate=True, fit_args="--model kernel"),
     Family("nn", NearestNeighbour, lambda s: NearestNeighbour(list(s.observed_dofs)),
-           "the nearest demonstration under open-end DTW", candidate=True),
+           "the nearest demonstration under open-end DTW (replays it)", candidate=True, fit_args="--model nn",
+           fit_note="replays the nearest demonstration"),
     Family("prior", PriorMean, lambda s: PriorMean(list(s.observed_dofs)),
-           "the mean demonstration at the mean speed", candidate=True),
+           "the mean demonstration at the mean speed (replays it)", candidate=True, fit_args="--model prior",
+           fit_note="replays the mean demonstration"),
     Family("iprompt", InteractionProMP, lambda s: InteractionProMP(list(s.observed_dofs)),
            "Interaction ProMP (peer baseline, needs movement-primitives and gmr)", cli=False,
            needs=("movement_primitives", "gmr")),

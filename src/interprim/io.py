@@ -55,6 +55,7 @@ import io
 import json
 import math
 import struct
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -77,7 +78,7 @@ _DTYPE_KINDS = "biufcU"
 # exceptions that zipfile / zlib / the .npy header parser raise on damaged bytes
 _READ_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
                 IndexError, NotImplementedError, RuntimeError, struct.error, OverflowError, MemoryError,
-                SyntaxError, TypeError)
+                SyntaxError, TypeError, tokenize.TokenError)  # a .npy header is parsed as a Python literal
 
 
 def checksum(arr: np.ndarray) -> dict:

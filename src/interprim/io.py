@@ -51,7 +51,6 @@ load with those unset.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import math
 import struct

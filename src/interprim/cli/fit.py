@@ -230,8 +230,6 @@ def cmd_fit(args) -> int:
 
 def _fit_other(args, ds, obs, n_read) -> int:
     """``--model auto`` (the model chosen on the data) or one of the other families alone."""
-    import numpy as np
-
     from interprim.models.ensemble import AutoInteraction
 
     if args.model == "auto" and len(ds) < 3:

@@ -34,9 +34,6 @@ clock.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..model_selection.metrics import Z90

@@ -680,7 +680,7 @@ class CouplingModel:
             sig = float(phase_std)
         return self._predict_prefix(v, s, sig)
 
-    def _predict_prefix(self, v, s: float, sig: float) -> CouplingPrediction:
+    def _predict_prefix(self, v, s: float, sig: float) -> GridPrediction:
         """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
         # the prefix enters only through its resampled points (_resample reads n_in of its frames)
         x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
@@ -721,7 +721,7 @@ class CouplingModel:
             cached[1][R] = st
         return cached[1][R]
 
-    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> CouplingPrediction:
+    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
         D = self.n_dofs_

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame, check_positive
+from ..core.validation import as_2d_finite, as_frame
 from ..core.input_range import mark
 from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise

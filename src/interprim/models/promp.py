@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame, check_positive
-from ..core.preprocessing import time_normalise
 from .base import GridPrediction
 from .demonstrations import Baseline
 

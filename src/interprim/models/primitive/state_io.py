@@ -8,8 +8,6 @@ reads the files of older format versions (1-3) and the option values of older re
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,7 +16,7 @@ import numpy as np
 from ...core.errors import ModelFileError
 from ...core.gaussian import GaussianPrior
 from ...core.preprocessing import PCA
-from ...io import FORMAT, FORMAT_VERSION, READ_VERSIONS, checksum, expect, read_archive, write_archive
+from ...io import FORMAT, FORMAT_VERSION, checksum, expect, read_archive, write_archive
 
 __all__ = ["save_model", "model_state", "load_model", "model_from_state", "fitted_from_state"]
 

@@ -48,10 +48,12 @@ def _page(site, path):
     ("reference/client", ["interprim.server.client.Client.reset", "interprim.server.client.AsyncClient.frame"]),
     ("reference/server", ["interprim.server.app.InterprimServer.start", "interprim.server.app.ServerThread.stop"]),
     ("reference/errors", ["interprim.core.errors.ModelFileError", "interprim.core.errors.OutOfRangeWarning"]),
-    ("reference/auto", ["interprim.models.ensemble.AutoInteraction", "interprim.models.ensemble.Blend"]),
+    ("reference/auto", ["interprim.models.ensemble.AutoInteraction", "interprim.models.ensemble.Blend",
+                        "interprim.model_selection.realtime.realtime_fold"]),
+    ("reference/contract", ["interprim.models.base.Predictor", "interprim.models.registry.Family",
+                            "interprim.models.demonstrations.PriorMean.fit", "interprim.testing.check_predictor"]),
     ("reference/cv", ["interprim.core.cv.folds", "interprim.core.cv.within_one_se", "interprim.core.cv.observed_frames"]),
-    ("reference/evaluation", ["interprim.evaluation.sweep.run_sweep",
-                              "interprim.models.demonstrations.PriorMean.fit"]),
+    ("reference/evaluation", ["interprim.evaluation.sweep.run_sweep"]),
 ])
 def test_reference_pages_render_the_api(site, page, symbols):
     html = _page(site, page)

@@ -44,6 +44,13 @@ def _state_text(model) -> str:
 def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> dict:
     """Check that a model family honours the prediction contract; returns what was measured.
 
+    Checks, in order: ``predict`` before ``fit`` raises ``NotFittedError``; ``fit`` returns the model; ``predict``
+    leaves the fitted state unchanged; irregular time stamps give the recorded durations; ``save`` ->
+    :func:`interprim.load_any` gives the same predictions; ``clone`` (``type(m)(**m.get_params())``) fits to the same
+    predictions; the stream equals ``predict`` frame by frame; ``input_distance`` is finite and ``out_of_range``
+    False on held-out frames, True (with one ``OutOfRangeWarning``) on frames in millimetres.  (That the
+    server's worker processes serve every model file is tested with ``interprim serve --processes``.)
+
     Parameters
     ----------
     make : callable
@@ -54,13 +61,6 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
         held out.
     rtol : float
         Relative tolerance of "the same prediction" (stream against predict, loaded against saved).
-
-    Checks, in order: ``predict`` before ``fit`` raises ``NotFittedError``; ``fit`` returns the model; ``predict``
-    leaves the fitted state unchanged; irregular time stamps give the recorded durations; ``save`` ->
-    :func:`interprim.load_any` gives the same predictions; ``clone`` (``type(m)(**m.get_params())``) fits to the same
-    predictions; the stream equals ``predict`` frame by frame; ``input_distance`` is finite and ``out_of_range``
-    False on held-out frames, True (with one ``OutOfRangeWarning``) on frames in millimetres.  (That the
-    server's worker processes serve every model file is tested with ``interprim serve --processes``.)
     """
     from .core.errors import NotFittedError, OutOfRangeWarning
     from .models.files import load_any

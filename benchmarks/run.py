@@ -692,6 +692,8 @@ def main(argv=None):
         bench_first_run(args.quick, tmp, row, rel, ROOT)
         bench_threads(args.quick, fitted_model, make_demos, row, rel)
         bench_memory(tmp)
+        from benchmarks.csv_columns import bench_csv_columns
+        bench_csv_columns(args.quick, tmp, timed, row)
     scal = {"dof": [], "basis": [], "length": []} if args.no_scaling else scaling(args.quick)
     elapsed = time.perf_counter() - t_start
     load_end = os.getloadavg() if hasattr(os, "getloadavg") else None

@@ -6,7 +6,6 @@ names), wide files, long lines, a FIFO and a symlink loop.
 """
 
 import os
-import time
 import tracemalloc
 
 import numpy as np
@@ -107,7 +106,9 @@ def test_unknown_time_column_names_the_option(tmp_path):
         load_demonstrations(tmp_path / "h.csv", time_column="stamp")
 
 
-def test_a_hundred_thousand_columns_is_linear_and_fast(tmp_path):
+def test_a_hundred_thousand_columns_are_read(tmp_path):
+    """10^5 columns, whole and selected by name (the quadratic reader took minutes here; its speed is measured in
+    benchmarks/csv_columns.py)."""
     n = 100_000
     rng = np.random.default_rng(0)
     vals = np.round(rng.normal(size=(6, n)), 3)
@@ -115,14 +116,11 @@ def test_a_hundred_thousand_columns_is_linear_and_fast(tmp_path):
         fh.write("time," + ",".join(f"c{i}" for i in range(n)) + "\n")
         for r in range(6):
             fh.write(f"{0.01 * r}," + ",".join(map(repr, vals[r].tolist())) + "\n")
-    t0 = time.perf_counter()
     ds = load_demonstrations(tmp_path / "wide.csv")
     sub = load_demonstrations(tmp_path / "wide.csv", columns=[f"c{i}" for i in range(n - 1, -1, -1)])
-    took = time.perf_counter() - t0
     assert ds.demos[0].shape == (6, n)
     np.testing.assert_array_equal(ds.demos[0], vals)
     np.testing.assert_array_equal(sub.demos[0], vals[:, ::-1])
-    assert took < 6.0, f"{took:.1f} s for two reads of 10^5 columns (the quadratic reader took minutes)"
 
 
 def test_limits_refuse_a_long_line_without_reading_it_whole(tmp_path, monkeypatch):
@@ -158,13 +156,20 @@ def test_limits_on_columns_and_size_name_the_variable(tmp_path, monkeypatch):
 
 
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes need a POSIX system")
-def test_a_fifo_is_refused_at_once(tmp_path):
+def test_a_fifo_is_refused_at_once(tmp_path, monkeypatch):
+    import builtins
+
     fifo = tmp_path / "demos.csv"
     os.mkfifo(fifo)
-    t0 = time.perf_counter()
+    real_open = builtins.open
+
+    def never_the_fifo(file, *args, **kwargs):  # opening a FIFO without a writer is what hung
+        assert os.fspath(file) != os.fspath(fifo), "the FIFO was opened"
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", never_the_fifo)
     with pytest.raises(DataFileError, match=r"demos\.csv: is a named pipe \(FIFO\), not a regular file"):
         load_demonstrations(fifo)
-    assert time.perf_counter() - t0 < 2.0
 
 
 def test_a_symlink_loop_is_named(tmp_path):

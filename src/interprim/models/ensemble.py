@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
+from ..model_selection.metrics import Z90, point_rms
 from ..model_selection.realtime import RealTimeConfig, place_in_time, realtime_sweep
 from . import registry
 from ..core.errors import OutOfRangeWarning
@@ -228,8 +229,6 @@ class CrossValidation:
 
     def _rt_error(self, mean, truth):
         """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
-        from ..model_selection.metrics import point_rms
-
         n = max(1, int(round(self.horizon / self.dt)))
         cols = self.controlled_cols(np.asarray(truth).shape[-1])
         return point_rms((np.asarray(mean) - np.asarray(truth))[:n][:, cols], self.point_dim)
@@ -341,7 +340,6 @@ class CrossValidation:
         wide = spread > err2
         a = np.where(wide, err2 / np.where(spread > 0, spread, 1.0), 1.0)
         b = np.where(wide, 0.0, err2 - spread)
-        from ..model_selection.metrics import Z90
 
         sd = np.sqrt(np.maximum(a * case_spread + b, 1e-300))
         z = np.abs(mix - self.truth) / sd

@@ -87,7 +87,7 @@ class _StubModel:
         pass
 
 
-def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="auto"):
+def _server_main(model_path, port_q, mode, ready_evt, stop_evt, loop="best"):
     import logging
 
     logging.basicConfig(level=logging.WARNING)
@@ -146,10 +146,11 @@ def _cpu_seconds(pid: int) -> float:
     return total / os.sysconf("SC_CLK_TCK")
 
 
-async def _open_session(url, points, std):
+async def _open_session(url, points, std, local=None):
     from websockets.asyncio.client import connect
 
-    ws = await connect(url, max_size=2**22, compression=None)
+    kw = {"local_addr": (local, 0)} if local else {}
+    ws = await connect(url, max_size=2**22, compression=None, **kw)
     await ws.send(json.dumps({"type": "hello", "version": 1}))
     json.loads(await ws.recv())
     await ws.send(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std}))
@@ -218,9 +219,14 @@ def _new_state():
             "bad": 0, "rate_limited": 0}
 
 
-def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0, client="raw", loop="auto"):
+def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy=0, client="raw", loop="best",
+                 addresses="each"):
     """All sessions in one asyncio process: connect them all first, then one scheduler sends each
-    session's frame every 1/rate_hz s, sessions staggered evenly over the period."""
+    session's frame every 1/rate_hz s, sessions staggered evenly over the period.
+
+    ``addresses="each"``: every well-behaved session connects from its own loopback address (127.0.1.1, 127.0.1.2,
+    ...: one robot each), and the ``heavy`` sessions all from 127.0.2.1 (one client holding them all); ``"one"``:
+    every session from 127.0.0.1."""
     import heapq
 
     from interprim.server.protocol import encode_binary_frame
@@ -234,6 +240,9 @@ def _client_main(url, n, seconds, rate_hz, binary, frames, points, std, q, heavy
         states = [_new_state() for _ in range(n)]
         # the first `heavy` sessions ask for 500 points with the std band: much more work per frame
         opts = [(500 if i < heavy else points, True if i < heavy else std) for i in range(n)]
+        if addresses == "each":
+            opts = [o + ("127.0.2.1" if i < heavy else f"127.0.{1 + i // 250}.{1 + i % 250}",)
+                    for i, o in enumerate(opts)]
         if client == "raw":
             conns = await asyncio.gather(*[_RawSession.open(url, st, n_total, *o) for st, o in zip(states, opts)])
             readers = [c.done for c in conns]
@@ -333,13 +342,14 @@ class _RawSession(asyncio.Protocol):
         return head + m + bytes(b ^ m[i % 4] for i, b in enumerate(data))
 
     @classmethod
-    async def open(cls, url, st, n_total, points, std):
+    async def open(cls, url, st, n_total, points, std, local=None):
         import base64
         from urllib.parse import urlsplit
 
         u = urlsplit(url)
         loop = asyncio.get_running_loop()
-        _, self = await loop.create_connection(lambda: cls(st, n_total), u.hostname, u.port)
+        kw = {"local_addr": (local, 0)} if local else {}
+        _, self = await loop.create_connection(lambda: cls(st, n_total), u.hostname, u.port, **kw)
         key = base64.b64encode(os.urandom(16)).decode()
         self.transport.write(
             f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
@@ -418,10 +428,11 @@ class _RawSession(asyncio.Protocol):
         self.transport.close()
 
 
-def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, client="raw", loop="auto"):
+def run_one(url, server_pid, n, seconds, binary, frames, points, std, heavy=0, client="raw", loop="best",
+            addresses="each"):
     q = mp.Queue()
     p = mp.Process(target=_client_main,
-                   args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy, client, loop))
+                   args=(url, n, seconds, 100.0, binary, frames, points, std, q, heavy, client, loop, addresses))
     p.start()
     assert q.get(timeout=120) == "start"
     load_before = os.getloadavg()[0]
@@ -491,10 +502,18 @@ def main(argv=None):
     ap.add_argument("--heavy", type=int, default=0,
                     help="this many of the N sessions ask for 500 points + std band (noisy neighbours); "
                          "latencies are then reported for the other sessions")
+    ap.add_argument("--beside", type=int, default=0, metavar="K",
+                    help="run each N twice, back to back: N well-behaved sessions alone, then with K heavy sessions of "
+                         "one client beside them (N + K in all), and print the ratio of their p99 latencies")
+    ap.add_argument("--addresses", default="each", choices=["each", "one"],
+                    help="each: every well-behaved session from its own loopback address, the heavy ones all from "
+                         "one (one robot each, one hostile client); one: every session from 127.0.0.1")
+    ap.add_argument("--warmup", type=float, default=2.0, metavar="SECONDS",
+                    help="stream this long to each new server before the measured rows (0: no warm-up)")
     ap.add_argument("--append", action="store_true", help="append rows to the existing table")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
-    ap.add_argument("--loop", default="auto", choices=["auto", "uvloop", "asyncio"],
-                    help="event loop of the server and of the client (auto: uvloop if installed)")
+    ap.add_argument("--loop", default="best", choices=["best", "uvloop", "asyncio"],
+                    help="event loop of the server and of the client (best: uvloop if installed)")
     ap.add_argument("--client", default="raw", choices=["raw", "websockets"],
                     help="load client: raw = minimal WebSocket protocol (cheap, leaves the CPU to the server); "
                          "websockets = the websockets library's client")
@@ -523,11 +542,18 @@ def main(argv=None):
         ready.wait(180)
         url = f"ws://127.0.0.1:{port_q.get(timeout=10)}/ws"
         try:
-            for n in args.sessions:
-                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std, args.heavy,
-                            args.client, args.loop)
+            if args.warmup > 0:  # the server's first use (caches, worker processes' first turns) in no row
+                run_one(url, srv.pid, min(args.sessions), args.warmup, args.binary, frames, args.points, args.std,
+                        0, args.client, args.loop, args.addresses)
+            runs = [(n, args.heavy) for n in args.sessions]
+            if args.beside:
+                runs = [x for n in args.sessions for x in ((n, 0), (n + args.beside, args.beside))]
+            for n, heavy in runs:
+                r = run_one(url, srv.pid, n, args.seconds, args.binary, frames, args.points, args.std, heavy,
+                            args.client, args.loop, args.addresses)
                 r["mode"] = label + (" (stub model)" if args.stub else "") + (
-                    f" + {args.heavy} heavy session(s)" if args.heavy else "") + (
+                    f" + {heavy} heavy session(s) of one client" if heavy else "") + (
+                    ", all from one address" if args.addresses == "one" else "") + (
                     f", {args.phase_method} phase" if args.phase_method else "") + (
                     ", binary frames" if args.binary else "") + (
                     f", {args.points} points" if args.points != 50 else "") + (", std band" if args.std else "")
@@ -543,6 +569,11 @@ def main(argv=None):
                     f"load {r['loadavg_before']:.1f} -> {r['loadavg']:.1f}",
                     flush=True,
                 )
+            if args.beside:
+                for a, b in zip(rows[-len(runs)::2], rows[-len(runs) + 1::2]):
+                    print(f"{label:>9} N={a['N']:4d}: p99 with {args.beside} heavy sessions of one client beside them "
+                          f"{b['p99_ms']:.2f} ms / alone {a['p99_ms']:.2f} ms = {b['p99_ms'] / a['p99_ms']:.2f}x",
+                          flush=True)
         finally:
             stop.set()
             srv.join(20)

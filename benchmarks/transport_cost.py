@@ -46,7 +46,7 @@ def _server_main(port_q, ready, stop):
             await asyncio.sleep(0.1)
         await srv.stop()
 
-    run(main(), "auto")
+    run(main(), "best")
 
 
 class _Client(asyncio.Protocol):

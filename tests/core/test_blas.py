@@ -169,3 +169,69 @@ def test_loader_switches_only_between_public_calls(monkeypatch):
         assert _blas._HOOK[0] is None
     finally:
         _blas.on_outer_entry(None)
+
+
+def _local_counts():
+    """The calling thread's OpenBLAS count as ``openblas_set_num_threads_local`` reports it (read by setting it to
+    the value it returns, i.e. left unchanged)."""
+    out = []
+    for fn in _blas._local_setters():
+        prev = fn(1)
+        fn(prev)
+        out.append(prev)
+    return out
+
+
+def test_one_thread_in_a_thread_that_does_not_own_the_count(model, human, monkeypatch):
+    """OpenBLAS ignores ``openblas_set_num_threads`` from any thread but the first to set it (the server's event loop
+    after a warm-up in an executor thread): the library's calls there still run on one thread, through OpenBLAS's
+    thread-local count, and leave it unset afterwards."""
+    if not _blas._local_setters():
+        pytest.skip("no OpenBLAS with openblas_set_num_threads_local is loaded")  # e.g. an MKL build of numpy
+    with threadpool_limits(2, user_api="blas"):  # this (pytest's) thread now owns the global count
+        seen, after, errors = [], [], []
+        inner = Prediction._posterior_std
+
+        def spy(self, n):
+            seen.append(_local_counts())
+            return inner(self, n)
+
+        monkeypatch.setattr(Prediction, "_posterior_std", spy)
+
+        def work():
+            try:
+                _blas._THREAD.__dict__.clear()
+                model.predict(human[:60]).std(20)
+                after.append(_blas._THREAD.depth)
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+
+        t = threading.Thread(target=work)
+        t.start()
+        t.join()
+        assert not errors, errors
+        assert seen and all(c == 1 for c in seen[-1]), seen
+        assert after == [0]
+
+
+@pytest.mark.parametrize("family", sorted(__import__("interprim.models.registry", fromlist=["FAMILIES"]).FAMILIES))
+def test_every_family_limits_its_numeric_calls(family):
+    """The contract wraps every family's fit/predict, its stream's update/extend and its prediction's accessors
+    (interprim.models.base: limit_methods), so a family cannot forget one (a server turn's extend did)."""
+    from interprim.models import base, registry
+
+    cls = registry.FAMILIES[family].cls
+    for name in ("fit", "predict"):
+        assert getattr(getattr(cls, name), "__interprim_one_blas__", False), (family, name)
+    def walk(c):
+        for sub in c.__subclasses__():
+            yield sub
+            yield from walk(sub)
+
+    for root, names in ((base.BaseStream, ("update", "extend")), (base.BasePrediction, base._PREDICTION_CALLS)):
+        subs = list(walk(root))
+        assert subs
+        for sub in subs:
+            for name in names:
+                if name in sub.__dict__ and not isinstance(sub.__dict__[name], property):
+                    assert getattr(sub.__dict__[name], "__interprim_one_blas__", False), (sub, name)

@@ -114,7 +114,7 @@ def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
         async def run(s, op, batch):
             served.append((s.id, [q for _, q, _ in batch]))
             await gate.wait()
-            return ["reply"], []
+            return (["reply"], []), 0.001
 
         lane = _Lane(run, lambda s, op, batch, result: delivered.append((s.id, result)), depth=1)
         a, b, c = _sessions(3)
@@ -125,7 +125,8 @@ def test_lane_serves_sessions_round_robin_with_their_whole_backlog():
         _add(lane, b, 1)
         _add(lane, c, 1, 2, 3, 4)
         _add(lane, a, 4)
-        assert [e[2].id for e in sorted(lane.queue)] == [2, 3] and len(a.pending) == 3  # ... it is not queued twice
+        (client,) = lane.clients.values()  # (all from one address)
+        assert [e[2].id for e in sorted(client.ready)] == [2, 3] and len(a.pending) == 3  # ... it is not queued twice
         gate.set()
         while a.queued or b.queued or c.queued:
             await asyncio.sleep(0)
@@ -153,7 +154,7 @@ def test_lane_keeps_depth_batches_of_different_sessions_in_flight():
             await asyncio.sleep(0)
             await asyncio.sleep(0)
             running.discard(s.id)
-            return ["reply"], []
+            return (["reply"], []), 0.001
 
         lane = _Lane(run, lambda *args: None, depth=2)
         a, b, c = _sessions(3)
@@ -385,6 +386,91 @@ def test_lane_fair_queuing_makes_an_expensive_session_pay_with_its_own_turns():
     asyncio.run(go())
     # (sleep() overshoots under load: the two cheap sessions are equal up to that noise)
     assert turns[1] * 4 <= min(turns[2], turns[3]) and abs(turns[2] - turns[3]) <= max(3, turns[2] // 4), turns
+
+
+def _share_of_compute(lane_kind, cost, client, total=300):
+    """Run sessions that always have a frame waiting through a lane; the compute seconds each session got."""
+    import asyncio
+    import time as _time
+
+    from interprim.server.lanes import _Lane
+
+    used = {sid: 0.0 for sid in cost}
+
+    async def go():
+        done = asyncio.Event()
+        sessions = _sessions(len(cost))
+        for s in sessions:
+            s.client = client[s.id]
+        turns = [0]
+
+        def work(s):
+            t0 = _time.perf_counter()
+            while _time.perf_counter() - t0 < cost[s.id]:  # busy, so that the measured cost is the real one
+                pass
+            used[s.id] += cost[s.id]
+            turns[0] += 1
+            return ["reply"], []
+
+        async def run_async(s, op, batch):
+            await asyncio.sleep(0)
+            t0 = _time.perf_counter()
+            result = work(s)
+            return result, _time.perf_counter() - t0
+
+        def deliver(s, op, batch, result):
+            if turns[0] < total:
+                s.pending.append((None, 0, None))  # every session always has a frame waiting
+            else:
+                done.set()
+
+        if lane_kind == "inline":
+            lane = _Lane(lambda s, op, batch: work(s), deliver, sync=True)
+        else:
+            lane = _Lane(run_async, deliver, depth=2)
+        for s in sessions:
+            _add(lane, s, 1)
+        await asyncio.wait_for(done.wait(), 60)
+
+    asyncio.run(go())
+    return used
+
+
+@pytest.mark.parametrize("lane_kind", ["inline", "async"])
+def test_lane_shares_compute_between_clients_not_sessions(lane_kind):
+    """Issue 30, finding 4: one client holding 14 expensive sessions took the other clients' time.  Compute is now
+    shared out between clients (addresses) first: a client with 5 sessions whose turns cost 4 ms gets about the
+    compute of a client with two sessions whose turns cost 1 ms (half each), not 10 times more.  (Two light
+    sessions, so that they can fill the async lane's two places in flight, as the heavy client does.)"""
+    cost = {1: 0.004, 2: 0.004, 3: 0.004, 4: 0.004, 5: 0.004, 6: 0.001, 7: 0.001}
+    client = {1: "10.0.0.9", 2: "10.0.0.9", 3: "10.0.0.9", 4: "10.0.0.9", 5: "10.0.0.9", 6: "10.0.0.2",
+              7: "10.0.0.2"}
+    used = _share_of_compute(lane_kind, cost, client, total=400)
+    heavy = sum(used[i] for i in range(1, 6))
+    share = (used[6] + used[7]) / (used[6] + used[7] + heavy)
+    assert 0.35 <= share <= 0.65, (share, used)  # per session it would be 2/22 (2 ms of 22 per round)
+    # inside the heavy client, its sessions share its time equally
+    per = [used[i] for i in range(1, 6)]
+    assert max(per) - min(per) <= 0.0081, per
+
+
+def test_lane_with_one_client_is_round_robin_by_compute():
+    """All sessions from one address (one client): the sessions share the compute as before, by the time they use."""
+    cost = {1: 0.004, 2: 0.001, 3: 0.001}
+    used = _share_of_compute("inline", cost, {1: "127.0.0.1", 2: "127.0.0.1", 3: "127.0.0.1"}, total=200)
+    total = sum(used.values())
+    assert all(0.22 <= used[i] / total <= 0.45 for i in cost), used
+
+
+def test_client_key_groups_an_ipv6_prefix():
+    """One host can hold a whole IPv6 /64: its addresses count as one client (else its share could be multiplied)."""
+    from interprim.server.lanes import client_key
+
+    assert client_key("2001:db8:1:2::5") == client_key("2001:db8:1:2:ffff::1") == "2001:db8:1:2::/64"
+    assert client_key("2001:db8:1:3::5") != client_key("2001:db8:1:2::5")
+    assert client_key("::ffff:10.1.2.3") == client_key("10.1.2.3") == "10.1.2.3"
+    assert client_key("10.1.2.3") != client_key("10.1.2.4")
+    assert client_key("?") == "?"
 
 
 def test_rate_limit_is_credited_for_the_time_the_server_did_not_read():

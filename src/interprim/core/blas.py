@@ -21,10 +21,21 @@ code may use ``with single_thread():``.  Both share one process-wide limiter:
 
 Results therefore do not depend on the caller's BLAS setting: the library's
 calls always run on one thread (tested bit for bit: ``tests/core/test_blas.py``).
+
+**Calls from other threads.**  OpenBLAS (0.3.2x, the numpy and scipy wheels'
+build) honours ``openblas_set_num_threads`` only from the thread that set it
+first while that thread lives: from any other thread (a server's event loop
+after a warm-up in an executor, a ROS 2 executor's callback) the call is
+silently ignored, the product runs on two threads and the second one spins
+between calls, taking a whole core (measured: a server at 185 % CPU instead
+of 100 %).  Every thread's outermost call therefore also sets OpenBLAS's
+*thread-local* count, ``openblas_set_num_threads_local(1)``, which works
+from any thread, and restores it on exit.
 """
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import sys
 import threading
@@ -32,7 +43,8 @@ import threading
 __all__ = ["single_thread", "one_blas_thread"]
 
 _LOCK = threading.Lock()
-_STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1}
+_STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1, "local": None}
+_THREAD = threading.local()  # per thread: depth of library calls and the thread-local counts to restore
 _HOOK = [None]  # called at the entry of an outermost call (interprim.core._compiled.loader switches paths there)
 
 
@@ -44,7 +56,21 @@ def _controllers():
 
         _STATE["ctrl"] = ThreadpoolController().lib_controllers
         _STATE["key"] = key
+        _STATE["local"] = None
     return _STATE["ctrl"]
+
+
+def _local_setters() -> list:
+    """``openblas_set_num_threads_local`` of every loaded OpenBLAS that has it (see the module docstring)."""
+    if _STATE["local"] is None:
+        fns = []
+        for lc in _controllers():
+            fn = getattr(getattr(lc, "dynlib", None), "openblas_set_num_threads_local", None)
+            if fn is not None and getattr(lc, "internal_api", "") == "openblas":
+                fn.argtypes, fn.restype = [ctypes.c_int], ctypes.c_int
+                fns.append(fn)
+        _STATE["local"] = fns
+    return _STATE["local"]
 
 
 class _OneThread:
@@ -53,6 +79,15 @@ class _OneThread:
     __slots__ = ()
 
     def __enter__(self):
+        t = _THREAD
+        d = getattr(t, "depth", 0)
+        if d == 0:  # this thread's outermost call: OpenBLAS's thread-local count, which any thread may set
+            with _LOCK:
+                setters = _local_setters()
+            for fn in setters:
+                fn(1)
+            t.local = setters
+        t.depth = d + 1
         with _LOCK:
             if _STATE["depth"] == 0:
                 hook = _HOOK[0]
@@ -75,6 +110,12 @@ class _OneThread:
                 for lc, n in _STATE["saved"]:
                     lc.set_num_threads(n)
                 _STATE["saved"] = None
+        t = _THREAD
+        t.depth -= 1
+        if t.depth == 0:
+            for fn in t.local:
+                fn(0)  # 0: no thread-local count, the thread follows the global one again
+            t.local = ()
         return False
 
 
@@ -94,12 +135,26 @@ def single_thread() -> _OneThread:
 def one_blas_thread(fn):
     """Decorator: run ``fn`` inside :func:`single_thread` (the library's public numeric entry points)."""
 
+    if getattr(fn, "__interprim_one_blas__", False):
+        return fn  # already limited: once is enough
+
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         with _ONE:
             return fn(*args, **kwargs)
 
+    wrapper.__interprim_one_blas__ = True
     return wrapper
+
+
+def limit_methods(cls, names) -> None:
+    """Wrap the methods ``names`` that ``cls`` itself defines with :func:`one_blas_thread` (the model contract's
+    numeric entry points: every family's ``fit``/``predict``, its stream's ``update``/``extend``, its prediction's
+    accessors), so that no family can forget one.  Properties and inherited methods are left as they are."""
+    for name in names:
+        f = cls.__dict__.get(name)
+        if callable(f) and not isinstance(f, (staticmethod, classmethod)):
+            setattr(cls, name, one_blas_thread(f))
 
 
 def depth() -> int:

@@ -45,7 +45,7 @@ import warnings
 
 import numpy as np
 
-from ..core.blas import one_blas_thread
+from ..core.blas import limit_methods, one_blas_thread
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from ..core.preprocessing import interp_columns
@@ -97,8 +97,20 @@ def uniform_demonstrations(demos, dt=None):
     return arrays, float(dt), None if columns is None else [str(c) for c in columns]
 
 
+#: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
+_PREDICTION_CALLS = ("trajectory", "std", "samples", "response", "completion", "completion_std", "band")
+
+
 class BasePrediction:
-    """What every model's prediction offers (see the module docstring); subclasses implement the methods."""
+    """What every model's prediction offers (see the module docstring); subclasses implement the methods.
+
+    Every accessor a subclass defines runs on one BLAS thread (:func:`interprim.core.blas.limit_methods`), as the
+    predictors' ``fit``/``predict`` and the streams' ``update``/``extend`` do.
+    """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        limit_methods(cls, _PREDICTION_CALLS)
 
     #: fraction of the movement seen (NaN when the model does not estimate it)
     phase: float = float("nan")
@@ -337,6 +349,10 @@ class BaseStream:
     #: that answers with the model's own ``predict`` of the frames seen)
     marks_input = False
 
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        limit_methods(cls, ("update", "extend"))  # one BLAS thread (see BasePrediction)
+
     @property
     def n_frames(self) -> int:  # pragma: no cover - interface
         """Number of frames received since the stream was created or last :meth:`reset`."""
@@ -477,13 +493,14 @@ class Predictor(Params):
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        if cls.__dict__.get("_CHECKS_INPUT", False):
-            return
-        for name, wrap in (("fit", _fit_then_range), ("predict", _predict_then_mark), ("stream", _checked_stream)):
-            if name in cls.__dict__ and not getattr(cls.__dict__[name], "__interprim_checked__", False):
-                f = wrap(cls.__dict__[name])
-                f.__interprim_checked__ = True
-                setattr(cls, name, f)
+        if not cls.__dict__.get("_CHECKS_INPUT", False):
+            for name, wrap in (("fit", _fit_then_range), ("predict", _predict_then_mark),
+                               ("stream", _checked_stream)):
+                if name in cls.__dict__ and not getattr(cls.__dict__[name], "__interprim_checked__", False):
+                    f = wrap(cls.__dict__[name])
+                    f.__interprim_checked__ = True
+                    setattr(cls, name, f)
+        limit_methods(cls, ("fit", "predict"))  # one BLAS thread, the range check included (see BasePrediction)
 
     def set_input_range(self, input_range):
         """Set ``input_range_`` (``(mean, std, limit)`` or None), e.g. from a model file."""

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.blas import single_thread
 from . import protocol as P
 
 log = logging.getLogger("interprim.server")
@@ -329,7 +330,16 @@ def compute_batch(op: OpenModel, batch) -> tuple[list, list]:
     had each frame been answered.  If the model fails, one ``internal`` error with the newest frame's
     ``seq`` and ``t`` answers the whole batch (``covers`` all its frames).  Returns ``(texts, failures)``:
     the reply texts in ``seq`` order (one), and ``(seq, traceback text)`` per failure (for the server's log).
+
+    The whole turn runs on one BLAS thread (:func:`interprim.core.blas.single_thread`): the reply's rollout and
+    band included, so that no BLAS pool wakes a second thread (whose spinning would take the other core from the
+    rest of the machine) and the turn enters the limiter once.
     """
+    with single_thread():
+        return _compute_batch(op, batch)
+
+
+def _compute_batch(op: OpenModel, batch) -> tuple[list, list]:
     t0 = time.perf_counter()
     problems = [frame_problem(op, f) for f, _, _ in batch]
     if not any(problems):

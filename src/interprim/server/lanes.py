@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import heapq
+import ipaddress
 import itertools
 import logging
 import time
@@ -79,7 +80,8 @@ class Session:
     ended: bool = False  # the connection's handler has finished
     waiters: list = field(default_factory=list)  # futures woken when the above change (see Sessions._until)
     direct: bool = False  # replies may be written to the socket at once (interprim.server.wsfast.write_now)
-    vtime: float = 0.0  # compute seconds used, in its lane's virtual time (fair queuing: see _Lane)
+    client: str = ""  # who the session belongs to, for fair queuing (client_key(peer address)): see _Lane
+    vtime: float = 0.0  # compute seconds used, in its client's virtual time (fair queuing: see _Lane)
 
     def wake(self) -> None:
         """Wake the coroutines waiting for a change of ``pending``/``queued``/``busy``/``ended``."""
@@ -90,22 +92,62 @@ class Session:
                     fut.set_result(None)
 
 
+def client_key(host: str) -> str:
+    """The client a connection from address ``host`` (no port) belongs to, for fair queuing: the IPv4 address, or the
+    /64 prefix of an IPv6 one (one host may hold a whole /64, so a share per IPv6 address could be multiplied at
+    will)."""
+    host = str(host).strip("[]")
+    try:
+        ip = ipaddress.ip_address(host)
+    except ValueError:
+        return host
+    if isinstance(ip, ipaddress.IPv6Address):
+        if ip.ipv4_mapped is not None:
+            return str(ip.ipv4_mapped)
+        return str(ipaddress.ip_network(f"{ip}/64", strict=False))
+    return str(ip)
+
+
+class _Client:
+    """A client's place in a lane: its sessions waiting for a turn (a heap by the compute time each has used, in the
+    client's own virtual time ``vnow``), and the compute time its turns have used (in the lane's virtual time)."""
+
+    __slots__ = ("key", "ready", "vtime", "vnow", "queued")
+
+    def __init__(self, key: str):
+        self.key = key
+        self.ready: list = []  # heap of (session's virtual start time, arrival order, session)
+        self.vtime = 0.0
+        self.vnow = 0.0
+        self.queued = False  # in the lane's heap
+
+
 class _Lane:
     """One place where predictions are computed (the event loop, a thread, or a worker process),
-    shared by several sessions in **round-robin** order.
+    shared by several sessions in **fair** order.
 
-    A session with pending frames is in the lane's queue at most once.  When its turn comes the lane
-    takes *all* its pending frames (one batch), computes them with ``run(session, op, batch)`` and hands
-    the result to ``deliver(session, op, batch, result)``; frames that arrived meanwhile put the session
-    back at the end of the queue.  So every session with pending work gets one turn per round (none
-    starves, whatever its rate or cost), and a session that is behind gets one reply for all the frames
-    it sent during the round instead of one late reply per frame.
+    A session with pending frames waits for a turn at most once.  When its turn comes the lane takes *all* its
+    pending frames (one batch), computes them with ``run(session, op, batch)`` and hands the result to
+    ``deliver(session, op, batch, result)``; frames that arrived meanwhile put the session back in line.  So a
+    session that is behind gets one reply for all the frames it sent while it waited, instead of one late
+    reply per frame, and none starves.
+
+    **Fair queuing by client, then by session.**  Turns are shared out by compute time between *clients*
+    (:func:`client_key`: one per address), then in the same way between the sessions of one client.  A client's
+    next turn starts at the virtual time its turns have used so far, never before the lane's present: every client
+    with work gets an equal share of the lane's compute, whatever its number of sessions and whatever they ask for
+    (points, the std band).  One client that opens 14 sessions asking for 500 points with the band therefore gets
+    the share of one client, and pays for the rest with its own latency, not the others'; inside a client, a
+    session whose turns cost ten times more gets a tenth of the turns.  Equal costs: plain round-robin.
 
     ``sync=True`` (inline compute): ``run`` is a plain callable, and one session is served per
     iteration of the event loop, so that between two batches the loop reads the sockets and frames that
-    arrived meanwhile join their sessions' batches.  Else ``run`` is a coroutine function, and up to
-    ``depth`` batches (of different sessions) are in flight at once, so that a worker process has the
-    next batch in its pipe when it finishes one instead of waiting for the event loop's round trip.
+    arrived meanwhile join their sessions' batches; a turn costs the time ``run`` took.  Else ``run`` is a
+    coroutine function returning ``(result, cost)``, with ``cost`` the seconds the batch's computation took where
+    it ran (a thread, a worker process), and up to ``depth`` batches (of different sessions) are in flight at
+    once, so that a worker process has the next batch in its pipe when it finishes one instead of waiting for the
+    event loop's round trip.  (The wall time of an awaited turn would include the batch in front of it in the
+    worker's pipe: a cheap session behind an expensive one would pay for it.)
     """
 
     def __init__(self, run, deliver, sync: bool = False, depth: int = 2):
@@ -113,18 +155,36 @@ class _Lane:
         self.deliver = deliver
         self.sync = sync
         self.depth = max(1, int(depth))
-        self.queue: list = []  # heap of (virtual start time, arrival order, session)
+        self.queue: list = []  # heap of (virtual start time, arrival order, client); an entry may be stale (below)
+        self.clients: dict = {}  # key -> _Client
         self._order = itertools.count()
         self.vnow = 0.0  # virtual time: the start time of the turn being served
         self.inflight = 0
         self._scheduled = False
 
+    def _client(self, s: Session) -> _Client:
+        c = self.clients.get(s.client)
+        if c is None:
+            if len(self.clients) > 64 and len(self.clients) > 4 * len(self.queue):
+                self._prune()
+            c = self.clients[s.client] = _Client(s.client)
+        return c
+
+    def _prune(self) -> None:
+        # a client with nothing waiting and no time used beyond the present would start at the present anyway
+        self.clients = {k: c for k, c in self.clients.items() if c.queued or c.ready or c.vtime > self.vnow}
+
+    def _queue_client(self, c: _Client) -> None:
+        c.vtime = max(c.vtime, self.vnow)
+        c.queued = True
+        heapq.heappush(self.queue, (c.vtime, next(self._order), c))
+
     def _enqueue(self, s: Session) -> None:
-        # Fair queuing by compute time: a session's turn starts at the virtual time it has used so far (never
-        # before the lane's present), so a session whose turns cost ten times more gets a turn a tenth as
-        # often and pays for its cost with its own latency, not the others'.  Equal costs: round-robin.
-        s.vtime = max(s.vtime, self.vnow)
-        heapq.heappush(self.queue, (s.vtime, next(self._order), s))
+        c = self._client(s)
+        s.vtime = max(s.vtime, c.vnow)
+        heapq.heappush(c.ready, (s.vtime, next(self._order), s))
+        if not c.queued:
+            self._queue_client(c)
 
     def push(self, s: Session) -> None:
         """Queue ``s`` (which has pending frames and is not queued) for its turn."""
@@ -139,9 +199,18 @@ class _Lane:
 
     def _take(self):
         """The next session's batch: ``(session, open model, frames)``, or ``None`` for a session that has
-        ended or has nothing to compute (then it leaves the queue)."""
-        vt, _, s = heapq.heappop(self.queue)
+        ended or has nothing to compute (then it leaves the queue), or when the entry popped was stale."""
+        vt, _, c = heapq.heappop(self.queue)
+        if vt < c.vtime:  # the client was charged for a turn since it was queued: back in line at its time
+            self._queue_client(c)
+            return None
         self.vnow = max(self.vnow, vt)
+        svt, _, s = heapq.heappop(c.ready)
+        c.vnow = max(c.vnow, svt)
+        if c.ready:  # its other sessions keep the client's place (a turn in flight is charged when it ends)
+            heapq.heappush(self.queue, (c.vtime, next(self._order), c))
+        else:
+            c.queued = False
         batch, s.pending = s.pending, []
         op = s.open
         if s.ended or op is None or not batch:
@@ -151,9 +220,11 @@ class _Lane:
         return s, op, batch
 
     def _done(self, s: Session, cost: float = 0.0) -> None:
+        c = self._client(s)
+        c.vtime += cost
         s.vtime += cost
         if s.pending and not s.ended:
-            self._enqueue(s)  # frames arrived during its turn: back in the queue, after what it used
+            self._enqueue(s)  # frames arrived during its turn: back in line, after what its client used
         else:
             s.queued = False
             s.wake()
@@ -193,17 +264,23 @@ class _Lane:
     async def _serve(self, s: Session, op, batch) -> None:
         t0 = time.perf_counter()
         try:
-            result = await self.run(s, op, batch)
+            result, cost = await self.run(s, op, batch)
         except Exception as exc:  # a dead worker process, a bug
-            result = exc
+            result, cost = exc, time.perf_counter() - t0
         finally:
             self.inflight -= 1
-        cost = time.perf_counter() - t0  # (wall time of the turn in its thread or process)
         try:
             self.deliver(s, op, batch, result)
         finally:
             self._done(s, cost)
             self._pump()
+
+
+def _timed(op, batch):
+    """``(compute_batch(op, batch), seconds it took)``, measured in the thread that runs it."""
+    t0 = time.perf_counter()
+    result = compute_batch(op, batch)
+    return result, time.perf_counter() - t0
 
 
 class Compute:
@@ -274,14 +351,14 @@ class Compute:
                 head, body = await procs.request(s.id, "frames", payload=block.tobytes(), n=block.shape[0],
                                                  d=block.shape[1], seq=batch[0][1], **kw)
                 texts = body.split(b"\n") if body else []  # UTF-8 JSON texts, sent as they are
-                return texts, [tuple(f) for f in head.get("failures", ())]
+                return (texts, [tuple(f) for f in head.get("failures", ())]), float(head.get("cost", 0.0))
 
             return [_Lane(run_proc, deliver) for _ in range(procs.n)]  # session i runs on worker i % n
         if self.pool is not None:
             pool = self.pool
 
             async def run_thread(s, op, batch):
-                return await asyncio.get_running_loop().run_in_executor(pool, compute_batch, op, batch)
+                return await asyncio.get_running_loop().run_in_executor(pool, _timed, op, batch)
 
             return [_Lane(run_thread, deliver) for _ in range(self.workers)]
 

@@ -23,12 +23,20 @@ from . import wsfast
 from .compute import OpenModel, Recognition
 from .gate import RateLimitedLog
 from .http_api import token_ok
-from .lanes import TokenBucket, Session
+from .lanes import Session, TokenBucket, client_key
 from .wsfast import FastFrames
 
 SHUTDOWN_REASON = "server shutting down"  # start of the close reason (code 1001) sent to every session at shutdown
 
 log = logging.getLogger("interprim.server")
+
+
+def _host(ws) -> str:
+    """The peer's address without the port (``?`` when unknown)."""
+    try:
+        return str(ws.remote_address[0])
+    except Exception:
+        return "?"
 
 _CLOSE = object()
 
@@ -171,7 +179,8 @@ class Sessions:
         if self.gate is not None:
             self.gate.authenticated(ws)
         sid = next(self._ids)
-        s = Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), TokenBucket(c.max_rate_hz, c.rate_burst))
+        s = Session(sid, ws, peer, asyncio.Queue(maxsize=c.send_queue), TokenBucket(c.max_rate_hz, c.rate_burst),
+                    client=client_key(_host(ws)))
         s.seq = got[1]
         if c.fast_path and isinstance(ws, FastFrames) and wsfast.supported(ws):
             s.direct = True

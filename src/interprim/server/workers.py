@@ -26,6 +26,7 @@ import multiprocessing as mp
 import os
 import signal
 import tempfile
+import time
 from pathlib import Path
 
 log = logging.getLogger("interprim.server")
@@ -64,7 +65,9 @@ def _worker_main(conn, paths: dict, kinds: dict) -> None:  # runs in the worker 
                 block = np.frombuffer(payload, dtype="<f8").reshape(n, int(req["d"]))
                 ts = req.get("ts") or [None] * n
                 batch = [(block[i], seq0 + i, ts[i]) for i in range(n)]
+                t0 = time.perf_counter()
                 texts, failures = compute_batch(o, batch)
+                head["cost"] = time.perf_counter() - t0  # the lane's fair queuing charges the session this
                 body = "\n".join(texts).encode()
                 if failures:
                     head["failures"] = failures

@@ -148,10 +148,12 @@ def closed_with(ws, timeout=10):
 class RawWS:
     """A hand-made WebSocket client over a plain socket: sends anything, reads only when asked."""
 
-    def __init__(self, port, rcvbuf=None, path="/ws"):
+    def __init__(self, port, rcvbuf=None, path="/ws", source=None):
         s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         if rcvbuf:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        if source:  # another loopback address (127.0.0.0/8): another client for the server's fair queuing
+            s.bind((source, 0))
         s.settimeout(10)
         s.connect(("127.0.0.1", port))
         key = base64.b64encode(os.urandom(16)).decode()

@@ -454,6 +454,28 @@ def test_lane_shares_compute_between_clients_not_sessions(lane_kind):
     assert max(per) - min(per) <= 0.0081, per
 
 
+def test_sessions_from_two_addresses_are_two_clients(server, test_demo):
+    """On loopback, end to end: each session's client for the fair queuing is its connection's address (two loopback
+    addresses: two clients; two sessions from one address: one client)."""
+    from _server_support import RawWS
+
+    conns = [RawWS(server.server.port, source=a) for a in ("127.0.0.7", "127.0.0.8", "127.0.0.8")]
+    for raw in conns:
+        raw.send(json.dumps({"type": "hello"}))
+        raw.send(json.dumps({"type": "open", "model": "pair"}))
+        raw.send(json.dumps({"type": "frame", "frame": list(map(float, test_demo[0, :2]))}))
+    try:
+        assert wait_until(lambda: sorted(server.call(lambda: [s.client for s in server.server.sessions.values()
+                                                              if s.client in ("127.0.0.7", "127.0.0.8")]))
+                          == ["127.0.0.7", "127.0.0.8", "127.0.0.8"])
+        lanes = server.call(lambda: server.server.compute.lanes)
+        assert wait_until(lambda: {"127.0.0.7", "127.0.0.8"} <= set(server.call(
+            lambda: [k for lane in lanes for k in lane.clients])))
+    finally:
+        for raw in conns:
+            raw.close()
+
+
 def test_lane_with_one_client_is_round_robin_by_compute():
     """All sessions from one address (one client): the sessions share the compute as before, by the time they use."""
     cost = {1: 0.004, 2: 0.001, 3: 0.001}

@@ -11,8 +11,8 @@ except the read-only fitted models.
 Concurrency: the asyncio event loop does all the I/O; the CPU-bound
 ``stream.update`` + trajectory + JSON encoding runs inline on the loop
 (``workers=0``), in a thread pool (``workers=N``) or in worker processes
-(``processes=N``), in round-robin turns over the sessions with pending frames
-(:mod:`interprim.server.lanes`).  Replies go through a bounded per-session queue
+(``processes=N``), in fair turns over the sessions with pending frames (by client address,
+then by session: :mod:`interprim.server.lanes`).  Replies go through a bounded per-session queue
 drained by a writer task, so a client that never reads is detected (queue full)
 and closed with code 1008 instead of growing the server's memory.
 

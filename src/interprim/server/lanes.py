@@ -1,9 +1,9 @@
-"""Sessions and where their frames are computed: per-session rate limits and round-robin compute lanes.
+"""Sessions and where their frames are computed: per-session rate limits and fair compute lanes.
 
 A :class:`Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
-are computed (the event loop, a thread or a worker process), shared by several sessions in
-round-robin order; :class:`TokenBucket` limits a session's message rate.  :class:`Compute` owns the
-lanes and what runs them (the thread pool or the worker processes): the server creates it from its
+are computed (the event loop, a thread or a worker process), shared by several sessions in fair
+order (by client address, then by session); :class:`TokenBucket` limits a session's message rate.
+:class:`Compute` owns the lanes and what runs them (the thread pool or the worker processes): the server creates it from its
 configuration and models, and the sessions (:class:`~interprim.server.sessions.Sessions`) hand it
 their frames with :meth:`Compute.push`.
 
@@ -75,7 +75,7 @@ class Session:
     error_counts: dict = field(default_factory=dict)
     unsent: int = 0  # items put in ``out`` that the writer has not finished sending
     pending: list = field(default_factory=list)  # (frame, seq, t) received, not yet fed to the streams
-    queued: bool = False  # in its lane's round-robin queue or being computed (then ``pending`` may grow)
+    queued: bool = False  # waiting for its turn in its lane or being computed (then ``pending`` may grow)
     busy: bool = False  # the handler is inside a message (a control message may await a worker)
     ended: bool = False  # the connection's handler has finished
     waiters: list = field(default_factory=list)  # futures woken when the above change (see Sessions._until)

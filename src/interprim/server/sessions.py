@@ -6,7 +6,7 @@ and the ``/api/info`` JSON that ``welcome`` repeats; :class:`~interprim.server.a
 owns them and passes :meth:`Sessions.handler` to the WebSocket library.
 
 A session's handler reads its messages as they come.  A valid frame joins the session's pending
-frames and its lane computes them in round-robin turns (:mod:`interprim.server.lanes`: one reply per
+frames and its lane computes them in fair turns (:mod:`interprim.server.lanes`: one reply per
 turn, which ``covers`` every frame of the turn).  Anything else (a control message, an error reply)
 first waits until the session's pending frames are answered, so replies keep the order of ``seq``.
 """

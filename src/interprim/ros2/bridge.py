@@ -6,7 +6,8 @@ into ``model.stream()`` and publishes, for each message that gave at least one f
 
 * the response (``pred.response(points)``) as ``trajectory_msgs/msg/JointTrajectory`` (joint names: the model's
   controlled columns; ``time_from_start``: the prediction's seconds ahead; ``header.stamp``: the time of the grid
-  frame it answers), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model whose
+  frame it answers; each point's velocities and accelerations from the spline through the points:
+  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model whose
   controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
 * on ``<publish>/status`` a ``diagnostic_msgs/msg/DiagnosticArray`` with one status: level OK (WARN when the
   partner is out of the training range), and the values ``phase``, ``normalised_time``, ``speed``,
@@ -137,6 +138,25 @@ def _xyz_group(cols):
             if y is not None:
                 return i, y, z
     return None
+
+
+def response_derivatives(t, y):
+    """Velocities and accelerations of the response ``y`` (points, columns) at its times ``t`` (seconds ahead): the
+    first and second derivatives of the cubic spline through the points (not-a-knot ends).
+
+    A ``JointTrajectory`` with positions only is followed by linear interpolation (ros2_controllers'
+    joint_trajectory_controller: linear with positions, cubic with velocities, quintic with accelerations too), whose
+    velocity jumps at every point and whose acceleration is zero between them; the robot then tracks a polyline.  With
+    both, it follows the smooth predicted movement.  Fewer than two distinct times (the movement's end): zeros."""
+    t = np.asarray(t, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    zeros = np.zeros_like(y)
+    if t.size < 2 or not np.all(np.diff(t) > 0) or not np.all(np.isfinite(y)):
+        return zeros, zeros.copy()
+    from scipy.interpolate import make_interp_spline  # (the same spline as CubicSpline's, at a sixth of its cost)
+
+    spline = make_interp_spline(t, y, k=min(3, t.size - 1), axis=0)
+    return spline(t, 1), spline(t, 2) if t.size > 2 else zeros.copy()
 
 
 class Ros2Bridge:
@@ -288,8 +308,10 @@ class Ros2Bridge:
         y = np.asarray(y, dtype=np.float64)
         header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.frame_id)
         if self.response_type == "JointTrajectory":
+            vel, acc = response_derivatives(t, y)
             pts = [new_message("trajectory_msgs/msg/JointTrajectoryPoint", positions=[float(v) for v in row],
-                               time_from_start=self._duration(dt)) for dt, row in zip(t, y)]
+                               velocities=[float(v) for v in vr], accelerations=[float(v) for v in ar],
+                               time_from_start=self._duration(dt)) for dt, row, vr, ar in zip(t, y, vel, acc)]
             response = new_message("trajectory_msgs/msg/JointTrajectory", header=header,
                                    joint_names=list(self.controlled), points=pts)
         else:

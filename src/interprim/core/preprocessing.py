@@ -38,7 +38,18 @@ def interp_columns(x_new, x, y) -> np.ndarray:
     y = np.asarray(y, dtype=np.float64)
     if y.shape[1] == 0:
         return np.empty(np.shape(x_new) + (0,))
-    return np.stack([np.interp(x_new, x, y[:, d]) for d in range(y.shape[1])], axis=-1)
+    # numpy.interp's own C routine, called once per column on arrays converted once (numpy.interp's Python
+    # wrapper converts x_new and x again for every column and checks for complex values): the same numbers
+    x_new = np.asarray(x_new, dtype=np.float64)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    cols = np.ascontiguousarray(y.T)
+    return np.stack([_interp_1d(x_new, x, c, None, None) for c in cols], axis=-1)
+
+
+try:  # numpy >= 2
+    from numpy._core.multiarray import interp as _interp_1d
+except ImportError:  # numpy 1.x
+    from numpy.core.multiarray import interp as _interp_1d
 
 
 def step_count(duration: float, dt: float) -> int:

@@ -50,6 +50,7 @@ MEASURED = {
     # whole stream (phase + trajectory per frame); the phase ends with a parabolic step through the best three
     # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/compiled/test_fastpaths.py)
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
+    "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
 
@@ -259,6 +260,44 @@ def check_rollout_response_positions(models, demos):
     return worst
 
 
+# ------------------------------------------------------------------------------------------ resampling
+
+def check_resample_interp_columns():
+    """The kernel against numpy.interp per column (what the reference, interp_columns on numpy, computes), bit for
+    bit: inside, outside and on the sample positions, NaN points, infinite values (numpy's fallbacks), read-only
+    grids; and the reference under ``forced("numpy")`` against the one under ``forced("compiled")``."""
+    rng = np.random.default_rng(7)
+    comp = registry.compiled("resample.interp_columns")
+    ref = registry.reference("resample.interp_columns")
+    worst = 0.0
+    for trial in range(300):
+        n, D = int(rng.integers(2, 80)), int(rng.integers(1, 9))
+        x = np.unique(rng.uniform(-1.0, 2.0, n)) if trial % 2 else np.linspace(0.0, 1.0, n)
+        if x.size < 2:
+            continue
+        y = rng.normal(size=(x.size, D)) * 10.0 ** rng.integers(-5, 5)
+        if trial % 7 == 0:
+            y[rng.integers(x.size), 0] = np.inf
+        x_new = rng.uniform(-1.5, 2.5, int(rng.integers(1, 150)))
+        x_new[::3] = rng.choice(x, x_new[::3].size)
+        if trial % 11 == 0:
+            x_new[0] = np.nan
+        if trial % 5 == 0:
+            x.setflags(write=False)
+        out = np.empty((x_new.size, D))
+        assert comp(x_new, x, y, out)
+        want = np.stack([np.interp(x_new, x, y[:, d]) for d in range(D)], axis=-1)
+        with registry.forced("numpy"):
+            got_numpy = ref(x_new, x, y)
+        with registry.forced("compiled"):
+            got_compiled = ref(x_new, x, y)
+        for got in (out, got_numpy, got_compiled):
+            if not (np.array_equal(got, want, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(want))):
+                worst = max(worst, float(np.nanmax(np.abs(got - want))) or np.inf)
+    assert not comp(np.zeros(2), np.array([0.0, 0.0, 1.0]), np.zeros((3, 2)), np.empty((2, 2)))  # numpy's case
+    return worst
+
+
 # ------------------------------------------------------------------------------------------ the likelihood phase
 
 def check_phase_likelihood_phase_loglik_batch(models, demos):
@@ -308,6 +347,7 @@ CHECKS = {
     "rollout.response_positions": check_rollout_response_positions,
     "phase_likelihood.phase_loglik_batch": check_phase_likelihood_phase_loglik_batch,
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
+    "resample.interp_columns": check_resample_interp_columns,
 }
 
 

@@ -130,3 +130,15 @@ def test_representation_report_is_zero_for_exact_dmp_movements():
     latent = [free @ np.stack(st) + H @ th.T for st, th in zip(starts, theta)]
     rep = representation_report(latent, starts, theta, ro)["all"]
     assert rep["reconstruction"] < 1e-3 and rep["spread"] > 0.1
+
+
+def test_grid_design_is_the_design_on_the_uniform_grid_computed_once():
+    """``grid_design(n)`` (cached per ``n``: every trajectory of a prediction asks for it) is, bit for bit,
+    ``design(0, linspace(0, 1, n))``, and read-only so that no caller can change what the next one gets."""
+    r = LinearRollout(Basis(8), 25.0, 6.25, n_steps=500)
+    for n in (2, 37, 201):
+        free, H = r.grid_design(n)
+        want_free, want_H = r.design(0.0, np.linspace(0.0, 1.0, n))
+        assert np.array_equal(free, want_free) and np.array_equal(H, want_H)
+        assert r.grid_design(n)[1] is H
+        assert not free.flags.writeable and not H.flags.writeable

@@ -153,6 +153,16 @@ def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-3 * np.abs(want).max())
 
 
+def test_blend_real_time_weights_are_computed_once(blend):
+    """The weights at look-ahead 0 that place the blend in time after every frame are those of ``weights_at(0)``,
+    kept from the fit (and from a load) instead of interpolated again per frame."""
+    model = blend.model_
+    assert np.array_equal(model._w_now, model.weights_at(0.0)[0])
+    again = type(model)(**model.get_params(deep=False))
+    again.load_state(*model.to_state())
+    assert np.array_equal(again._w_now, model._w_now)
+
+
 def test_blend_streams_saves_and_calibrates(blend, task, tmp_path):
     _, hold = task
     x = hold.demos[0][:40, :2]

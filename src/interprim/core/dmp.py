@@ -265,6 +265,22 @@ class LinearRollout:
             H += wgt * (self._Z[k, row, :] - P @ self._Z[k0])
         return free, H
 
+    def grid_design(self, n: int):
+        """:meth:`design` ``(0, linspace(0, 1, n))``, the map of every whole-movement trajectory on ``n`` points,
+        computed once per ``n`` (read-only arrays: it depends on the rollout only, and a streamed frame asks for
+        it again with every prediction's trajectory)."""
+        n = int(n)
+        cache = self.__dict__.setdefault("_grid_designs", {})
+        out = cache.get(n)
+        if out is None:
+            out = self.design(0.0, np.linspace(0.0, 1.0, n))
+            for a in out:
+                a.setflags(write=False)
+            if len(cache) >= 8:  # a few grid sizes in use at a time
+                cache.clear()
+            cache[n] = out
+        return out
+
     def rollout(self, theta, y0, yd0, s0: float = 0.0, s_out=None, n: int = 100):
         """Positions of several DoFs from a start state (Eq. 1 integrated).
 

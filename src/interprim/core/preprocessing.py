@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._compiled import registry as _registry
 from .validation import as_2d_finite, check_times
 
 __all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "derivatives", "PCA",
@@ -38,7 +39,25 @@ def interp_columns(x_new, x, y) -> np.ndarray:
     y = np.asarray(y, dtype=np.float64)
     if y.shape[1] == 0:
         return np.empty(np.shape(x_new) + (0,))
-    return np.stack([np.interp(x_new, x, y[:, d]) for d in range(y.shape[1])], axis=-1)
+    x_new = np.asarray(x_new, dtype=np.float64)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    if x_new.ndim == 1 and x.ndim == 1 and y.shape[0] == x.shape[0] and y.shape[1] > 1:
+        # the compiled kernel when the kernels are loaded already (the same bits as numpy.interp; never loads them)
+        kernel = _registry.loaded_kernel("resample.interp_columns")
+        if kernel is not None:
+            out = np.empty((x_new.shape[0], y.shape[1]))
+            if kernel(np.ascontiguousarray(x_new), x, np.ascontiguousarray(y), out):
+                return out
+    # numpy.interp's own C routine, called once per column on arrays converted once (numpy.interp's Python
+    # wrapper converts x_new and x again for every column and checks for complex values): the same numbers
+    cols = np.ascontiguousarray(y.T)
+    return np.stack([_interp_1d(x_new, x, c, None, None) for c in cols], axis=-1)
+
+
+try:  # numpy >= 2
+    from numpy._core.multiarray import interp as _interp_1d
+except ImportError:  # numpy 1.x
+    from numpy.core.multiarray import interp as _interp_1d
 
 
 def step_count(duration: float, dt: float) -> int:

@@ -373,8 +373,15 @@ class CouplingModel:
         i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
         w = (pos - i0)[..., None]
         i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
-        J = idx[:, None, None]  # gathered from the padded frames directly (no copy of the selected demonstrations)
-        pts = frames[J, i0] * (1.0 - w) + frames[J, i1] * w  # (J, R, n_in, Do)
+        # gathered from the padded frames directly (no copy of the selected demonstrations), by flat row index
+        # (np.take on the (n T_max, Do) rows: the values of frames[J, i0], in a fraction of the time)
+        rows = frames.reshape(-1, frames.shape[2])
+        start = (idx * frames.shape[1])[:, None, None]
+        pts = np.take(rows, start + i0, axis=0)
+        pts *= 1.0 - w
+        right = np.take(rows, start + i1, axis=0)
+        right *= w
+        pts += right  # frames[J, i0] (1 - w) + frames[J, i1] w, (J, R, n_in, Do)
         X = self._feat(pts)
         return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
 

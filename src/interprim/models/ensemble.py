@@ -723,6 +723,8 @@ class Blend(Predictor):
             raise ValueError("weights must be finite, non-negative and not all zero in any band")
         self.members_ = {m: members[m] for m in names}
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
+        #: the real-time weights (look-ahead 0), which place the blend in time after every frame
+        self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
@@ -762,11 +764,11 @@ class Blend(Predictor):
         (a :class:`~interprim.models.base.GridPrediction` whose std is computed when first asked for)."""
         n_grid = self.N_GRID if n_grid is None else int(n_grid)
         names = self._names
-        w0 = weights_at(np.zeros(1), self._edges, self._W)[0]
+        w0 = self._w_now
         timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
         s = float(np.dot(w0, [t[0] for t in timing]))
         D = float(np.dot(w0, [t[1] for t in timing]))
-        u = np.linspace(0.0, 1.0, n_grid)
+        u = _unit_grid(n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
         W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)
         Y = np.empty((len(names), n_grid, self.n_dofs_))
@@ -871,6 +873,19 @@ class BlendStream(BaseStream):
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
+
+
+def _unit_grid(n: int) -> np.ndarray:
+    """``linspace(0, 1, n)``, the blend's normalised-time grid, computed once per ``n`` (read-only)."""
+    out = _GRIDS.get(n)
+    if out is None:
+        out = np.linspace(0.0, 1.0, n)
+        out.setflags(write=False)
+        _GRIDS[n] = out
+    return out
+
+
+_GRIDS: dict = {}
 
 
 def _record(chosen, errors) -> dict:

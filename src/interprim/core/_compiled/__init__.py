@@ -4,7 +4,8 @@
 hands them to callers by name; :mod:`~interprim.core._compiled.loader` decides whether the
 kernels or their numpy equivalents run (``ready``, ``warmup``); the kernels are :mod:`.dtw` (Eq. 5-8),
 :mod:`.observation` (Eq. 3, 13-15), :mod:`.conditioning` (Eq. 16-18),
-:mod:`.linalg` (small dense factorisations), :mod:`.rollout` (Eq. 1) and
+:mod:`.linalg` (small dense factorisations), :mod:`.rollout` (Eq. 1), :mod:`.resample` (linear
+interpolation of many columns, bit for bit numpy.interp) and
 :mod:`.phase_likelihood` (the likelihood phase).  Importing this package does
 not import numba.
 """

@@ -60,6 +60,7 @@ def _compile_all():
     from . import dtw as dk
     from . import observation as ko
     from . import phase_likelihood as kp
+    from . import resample as ks
     from . import rollout as kr
 
     rng = np.random.default_rng(0)
@@ -89,6 +90,7 @@ def _compile_all():
                          np.zeros((2, Do)), False, np.empty((3, Do)), 1.0, np.empty(3))
     Zs = np.cumsum(rng.normal(size=(2, M, Do)), axis=1)
     ko.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
+    ks.interp_columns_into(np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 4), u[:4], np.empty((3, 2)))
     kp.warm_batch(kp.phase_loglik_batch)
     kp.warm_track(kp.track_step)
 
@@ -259,6 +261,13 @@ def ready() -> bool:
     if _READY is not None:
         return _READY
     return _decide()
+
+
+def loaded() -> bool:
+    """True when the compiled kernels are in use already; unlike :func:`ready`, never decides (nor loads, nor
+    starts a compilation): for the kernels that give numpy's numbers bit for bit and serve callers outside the
+    public numeric calls too (e.g. the resampling of a data file's rows), which then stay on numpy."""
+    return _READY is True
 
 
 def prefetch() -> None:

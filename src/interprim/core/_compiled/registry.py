@@ -12,6 +12,8 @@ Callers ask for a kernel by name; whether the compiled kernels are in use is dec
 
 * :func:`kernel` -- the compiled kernel when the compiled kernels are in use, else ``None`` (the caller
   then runs the registered reference, or the numpy path of which it is a part);
+* :func:`loaded_kernel` -- the compiled kernel if the kernels are in use already, else ``None``, without
+  deciding (for kernels equal to their reference bit for bit, called outside the public numeric calls too);
 * :func:`in_use` -- whether the compiled kernels are in use (for callers that allocate their workspaces);
 * :func:`implementation` -- the compiled kernel or its numpy reference, for the kernels whose reference
   takes the same arguments (``drop_in``); tests name the implementation explicitly
@@ -27,7 +29,7 @@ from contextlib import contextmanager
 from . import loader
 from .table import KERNELS, Kernel, compiled, names, reference, spec
 
-__all__ = ["Kernel", "KERNELS", "kernel", "implementation", "reference", "compiled", "names", "in_use", "forced"]
+__all__ = ["Kernel", "KERNELS", "kernel", "loaded_kernel", "implementation", "reference", "compiled", "names", "in_use", "forced"]
 
 
 _FORCED: list = [None]  # None: loader.ready() decides; "numpy" / "compiled": forced (tests, see forced)
@@ -64,6 +66,15 @@ def kernel(name: str):
     if loader.ready() if forced_path is None else forced_path == "compiled":
         return compiled(name)
     spec(name)
+    return None
+
+
+def loaded_kernel(name: str):
+    """The compiled kernel ``name`` if the compiled kernels are in use already (:func:`loader.loaded`: this call
+    never decides, loads or compiles), else ``None``; for kernels equal to their reference bit for bit."""
+    forced_path = _FORCED[0]
+    if loader.loaded() if forced_path is None else forced_path == "compiled":
+        return compiled(name)
     return None
 
 

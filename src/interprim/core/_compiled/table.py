@@ -72,6 +72,9 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "log-likelihood of the observation at many candidate phases (the likelihood phase); the reference "
            "takes the same arrays without M and out"),
+    Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
+           False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
+           "the array the kernel writes into out; bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

@@ -124,9 +124,10 @@ class Prediction(BasePrediction):
         v0 = np.concatenate([m.start_velocity_[:n_o], self._robot_start[1]])
         return y0, v0
 
-    def _latent_traj(self, Th, s_out, y0, v0, s0=0.0):
-        """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``."""
-        free, H = self._m.rollout_.design(s0, s_out)
+    def _latent_traj(self, Th, s_out, y0, v0, s0=0.0, design=None):
+        """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``
+        (``design``: ``rollout_.design(s0, s_out)`` when the caller has it)."""
+        free, H = self._m.rollout_.design(s0, s_out) if design is None else design
         return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
 
     def theta(self, flat=None):
@@ -144,9 +145,8 @@ class Prediction(BasePrediction):
         its first observed frame, the controlled agent at ``robot_state``.
         """
         m = self._m
-        s = np.linspace(0.0, 1.0, int(n))
         y0, v0 = self.start_states()
-        lat = self._latent_traj(self.theta(), s, y0, v0)
+        lat = self._latent_traj(self.theta(), None, y0, v0, design=m.rollout_.grid_design(n))
         M, off = m.latent_map()
         return lat @ M.T + off
 

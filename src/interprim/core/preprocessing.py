@@ -54,10 +54,15 @@ def interp_columns(x_new, x, y) -> np.ndarray:
     return np.stack([_interp_1d(x_new, x, c, None, None) for c in cols], axis=-1)
 
 
-try:  # numpy >= 2
+try:  # numpy >= 2 (numpy.interp's C routine; a private name, hence the fallbacks)
     from numpy._core.multiarray import interp as _interp_1d
-except ImportError:  # numpy 1.x
-    from numpy.core.multiarray import interp as _interp_1d
+except ImportError:
+    try:  # numpy 1.x
+        from numpy.core.multiarray import interp as _interp_1d
+    except ImportError:  # a numpy that moved it: numpy.interp itself (the same numbers, a little slower)
+
+        def _interp_1d(x_new, x, y, left, right):
+            return np.interp(x_new, x, y, left, right)
 
 
 def step_count(duration: float, dt: float) -> int:

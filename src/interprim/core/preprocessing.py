@@ -15,7 +15,7 @@ import numpy as np
 from ._compiled import registry as _registry
 from .validation import as_2d_finite, check_times
 
-__all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "derivatives", "PCA",
+__all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "unit_grid", "derivatives", "PCA",
            "time_normalise"]
 
 
@@ -63,6 +63,22 @@ except ImportError:
 
         def _interp_1d(x_new, x, y, left, right):
             return np.interp(x_new, x, y, left, right)
+
+
+def unit_grid(n: int) -> np.ndarray:
+    """``linspace(0, 1, n)``, the normalised-time grid, computed once per ``n`` (read-only: shared by every caller)."""
+    n = int(n)
+    out = _UNIT_GRIDS.get(n)
+    if out is None:
+        out = np.linspace(0.0, 1.0, n)
+        out.setflags(write=False)
+        if len(_UNIT_GRIDS) >= 64:  # a few sizes in use at a time
+            _UNIT_GRIDS.clear()
+        _UNIT_GRIDS[n] = out
+    return out
+
+
+_UNIT_GRIDS: dict = {}
 
 
 def step_count(duration: float, dt: float) -> int:

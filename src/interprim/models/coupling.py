@@ -69,6 +69,7 @@ from statistics import NormalDist
 import numpy as np
 
 from ..core.blas import one_blas_thread
+from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite
 from .base import GridPrediction
 from ..core.cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
@@ -104,18 +105,7 @@ def _jitter_nodes(k: int) -> np.ndarray:
     return out
 
 
-def _unit_grid(n: int) -> np.ndarray:
-    """``linspace(0, 1, n)``, computed once per ``n`` (read-only)."""
-    out = _GRIDS.get(n)
-    if out is None:
-        out = np.linspace(0.0, 1.0, n)
-        out.setflags(write=False)
-        _GRIDS[n] = out
-    return out
-
-
 _NODES: dict = {}
-_GRIDS: dict = {}
 
 
 def _target_block(P, Ydc, R):
@@ -136,7 +126,7 @@ def _resample(frames, stop, n):
     T = frames.shape[0]
     scalar = np.ndim(stop) == 0
     stops = np.atleast_1d(np.asarray(stop, dtype=np.float64))
-    pos = np.clip(stops[:, None] * _unit_grid(int(n))[None, :], 0.0, T - 1.0)  # (R, n)
+    pos = np.clip(stops[:, None] * unit_grid(int(n))[None, :], 0.0, T - 1.0)  # (R, n)
     i0 = np.minimum(np.floor(pos).astype(np.intp), T - 2 if T > 1 else 0)
     w = (pos - i0)[..., None]
     i1 = np.minimum(i0 + 1, T - 1)
@@ -367,7 +357,7 @@ class CouplingModel:
         # operations per demonstration, so the same numbers as one _resample per demonstration)
         frames, T = self._padded_obs()
         T = T[idx]
-        lin = _unit_grid(int(self.n_in))
+        lin = unit_grid(int(self.n_in))
         stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
         pos = np.minimum(np.maximum(stops[:, :, None] * lin[None, None, :], 0.0), (T - 1.0)[:, None, None])
         i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
@@ -746,7 +736,7 @@ class CouplingModel:
         c[self.observed_dofs_] = self.scale_["observed"]
         c[self.controlled_dofs_] = self.scale_["controlled"]
         std = c[None, :] * np.sqrt(var * (1.0 + h))
-        return GridPrediction(_unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
                               n_observed=n_observed, conditioned=not self.fallback_to_mean_)
 

@@ -27,7 +27,7 @@ from . import registry
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
 from .base import BaseStream, CheckedStream, GridPrediction, Predictor, uniform_demonstrations
-from ..core.preprocessing import interp_columns
+from ..core.preprocessing import interp_columns, unit_grid
 
 __all__ = ["AutoInteraction", "Blend", "CrossValidation", "CANDIDATES", "COMBINE"]
 
@@ -768,7 +768,7 @@ class Blend(Predictor):
         timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
         s = float(np.dot(w0, [t[0] for t in timing]))
         D = float(np.dot(w0, [t[1] for t in timing]))
-        u = _unit_grid(n_grid)
+        u = unit_grid(n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
         W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)
         Y = np.empty((len(names), n_grid, self.n_dofs_))
@@ -873,19 +873,6 @@ class BlendStream(BaseStream):
         preds = {m: st.update(frame) for m, st in self.streams.items()}
         self._n += 1
         return self.blend.combine(preds, self._n)
-
-
-def _unit_grid(n: int) -> np.ndarray:
-    """``linspace(0, 1, n)``, the blend's normalised-time grid, computed once per ``n`` (read-only)."""
-    out = _GRIDS.get(n)
-    if out is None:
-        out = np.linspace(0.0, 1.0, n)
-        out.setflags(write=False)
-        _GRIDS[n] = out
-    return out
-
-
-_GRIDS: dict = {}
 
 
 def _record(chosen, errors) -> dict:

@@ -8,7 +8,8 @@ from scipy.linalg import expm
 
 import interprim as ip
 from interprim.core._compiled import loader, registry
-from interprim.core._compiled.observation import StatsWorkspace, start_position
+from interprim.core._compiled.observation import StatsWorkspace
+from interprim.core.preprocessing import start_position
 from interprim.core.basis import Basis
 from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
 from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,

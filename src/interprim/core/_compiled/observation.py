@@ -21,8 +21,6 @@ Nothing here allocates memory proportional to the number of observed frames.
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 from numba import njit
 
@@ -343,39 +341,7 @@ def forcing_targets_batch(Z, ds, alpha_y, beta_y, yd_work, F, yd0):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# buffers of the statistics kernels, and the smoothed start of an observation
-
-@lru_cache(maxsize=64)
-def _savgol_start_coeffs(w: int, p: int) -> np.ndarray:
-    """Weights ``c`` (w,) with ``c @ y[:w]`` = the Savitzky-Golay (``mode="interp"``) smoothed first frame.
-
-    That frame is the value at the first sample of the degree-``p`` least-squares
-    polynomial through the first ``w`` samples, i.e. row 0 of the hat matrix
-    ``Q Q^T`` (``Q`` an orthonormal basis of the polynomials on the window,
-    from a QR of the Vandermonde matrix on ``[-1, 1]``: accurate to ~1e-16,
-    where ``scipy.signal.savgol_coeffs(w, p, pos=0)`` loses ~1e-12 at ``w = 31``).
-    """
-    x = np.linspace(-1.0, 1.0, w)
-    Q, _ = np.linalg.qr(np.vander(x, p + 1))
-    c = Q @ Q[0]
-    c.setflags(write=False)
-    return c
-
-
-def start_position(z, window, polyorder: int = 3) -> np.ndarray:
-    """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`interprim.core.preprocessing.derivatives`) in ``O(window D)``.
-
-    The first frame of the smoothed observation, with the same window rule
-    (shrunk to the largest odd number not above ``len(z)``); the raw first
-    frame when ``window`` is None or too short to smooth.  A new array.
-    """
-    from ..preprocessing import savgol_window
-
-    wp = savgol_window(z.shape[0], window, polyorder)
-    if wp is not None:
-        return _savgol_start_coeffs(*wp) @ z[:wp[0]]
-    return z[0].copy()
-
+# buffers of the statistics kernels
 
 class StatsWorkspace:
     """Preallocated buffers for the observation statistics of up to ``cap`` frames (grown by doubling).

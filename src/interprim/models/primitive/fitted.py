@@ -499,7 +499,8 @@ class FittedPrimitive:
         """
         M = z.shape[0]
         if M >= 3 and kernels.in_use():
-            from ...core._compiled.observation import StatsWorkspace, start_position
+            from ...core._compiled.observation import StatsWorkspace
+            from ...core.preprocessing import start_position
 
             if self.observation == "position":
                 z = np.ascontiguousarray(z, dtype=np.float64)

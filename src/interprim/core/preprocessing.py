@@ -17,8 +17,8 @@ import numpy as np
 from ._compiled import registry as _registry
 from .validation import as_2d_finite, check_times
 
-__all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "unit_grid", "start_position", "derivatives", "PCA",
-           "time_normalise"]
+__all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "unit_grid",
+           "start_position", "derivatives", "PCA", "time_normalise"]
 
 
 def interp_columns(x_new, x, y) -> np.ndarray:

@@ -3,8 +3,8 @@
 A :class:`Session` is one WebSocket connection; a :class:`_Lane` is one place where predictions
 are computed (the event loop, a thread or a worker process), shared by several sessions in fair
 order (by client address, then by session); :class:`TokenBucket` limits a session's message rate.
-:class:`Compute` owns the lanes and what runs them (the thread pool or the worker processes): the server creates it from its
-configuration and models, and the sessions (:class:`~interprim.server.sessions.Sessions`) hand it
+:class:`Compute` owns the lanes and what runs them (the thread pool or the worker processes): the server creates
+it from its configuration and models, and the sessions (:class:`~interprim.server.sessions.Sessions`) hand it
 their frames with :meth:`Compute.push`.
 
 Frames are *coalesced* under overload: a session's handler puts every frame it receives into the

@@ -29,7 +29,8 @@ from contextlib import contextmanager
 from . import loader
 from .table import KERNELS, Kernel, compiled, names, reference, spec
 
-__all__ = ["Kernel", "KERNELS", "kernel", "loaded_kernel", "implementation", "reference", "compiled", "names", "in_use", "forced"]
+__all__ = ["Kernel", "KERNELS", "kernel", "loaded_kernel", "implementation", "reference", "compiled", "names", "in_use",
+           "forced"]
 
 
 _FORCED: list = [None]  # None: loader.ready() decides; "numpy" / "compiled": forced (tests, see forced)

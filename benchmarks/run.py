@@ -242,7 +242,6 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
 def bench_likelihood_phase(quick):
     """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
-    from interprim.phase import likelihood as PL
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")

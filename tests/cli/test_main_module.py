@@ -6,8 +6,6 @@ import subprocess
 import sys
 
 
-
-
 def test_python_m_interprim():
     r = subprocess.run([sys.executable, "-m", "interprim", "--version"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.startswith("interprim ")

@@ -2,7 +2,6 @@
 a BVH folder in centimetres, and a ROS bag with its topics."""
 
 import numpy as np
-import pytest
 from test_loaders_mocap import SKELETON, _cli, write_bvh
 from test_loaders_ros import bag_path, two_agent_bag
 

@@ -7,13 +7,12 @@ Every file is small and written by the test; the values read back are compared w
 import random
 import warnings
 
+import ezc3d  # the [mocap] extra, part of the test extra
 import numpy as np
 import pytest
 
-from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.core.errors import DataFileError, DataFileWarning, MissingExtraError
-
-import ezc3d  # the [mocap] extra, part of the test extra
+from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 
 
 # ----------------------------------------------------------------------------- writers

@@ -11,10 +11,10 @@ import pytest
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interprim.datasets import load_demonstrations, load_rosbag
 from interprim.core.errors import DataFileError, MissingExtraError
+from interprim.datasets import load_demonstrations, load_rosbag
 
 KINDS = ("ros1", "db3", "mcap")
 

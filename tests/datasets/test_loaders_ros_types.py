@@ -11,8 +11,8 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interprim.datasets import load_rosbag
 from interprim.core.errors import DataFileError
+from interprim.datasets import load_rosbag
 
 TURTLE_POSE = "float32 x\nfloat32 y\nfloat32 theta\nfloat32 linear_velocity\nfloat32 angular_velocity\n"
 

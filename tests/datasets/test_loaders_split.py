@@ -5,17 +5,15 @@ frames that were written for it.
 """
 
 import re
-import warnings
 
+import ezc3d
 import numpy as np
 import pytest
 from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
 
+from interprim.core.errors import DataFileError
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
-from interprim.core.errors import DataFileError
-
-import ezc3d
 
 
 def add_events(path, events, rate):

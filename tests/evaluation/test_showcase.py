@@ -190,8 +190,8 @@ def test_realtime_figure_writes_gif_and_png_with_the_protocol_numbers(realtime_c
 def test_realtime_trace_matches_a_direct_prediction(realtime_case):
     """The error drawn for a frame is the point RMS, over the next 0.25 s, of predict() placed in time by its own
     phase and duration; the clock's is the training mean played at the mean duration (computed here by hand)."""
-    from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
     from interprim.core.preprocessing import time_normalise
+    from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
 
     models, train, test, obs = realtime_case
     dt, k = 0.05, 14

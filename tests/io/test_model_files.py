@@ -3,7 +3,6 @@ files of format version 1, files that are not models at all, and the CLI's one-l
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import io
 import json
@@ -17,8 +16,8 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.core._compiled import loader as _fast
 from interprim import io as ipio
+from interprim.core._compiled import loader as _fast
 from interprim.synthetic import two_agent_demos
 
 CONFIGS = {

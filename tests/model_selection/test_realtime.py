@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from interprim.models.demonstrations import PriorMean
 from interprim.core.preprocessing import time_normalise
 from interprim.evaluation.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
+from interprim.models.demonstrations import PriorMean
 
 
 def _demos(n=6, seed=0):

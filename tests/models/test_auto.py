@@ -218,8 +218,8 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
     weights and variance model are those the plain protocol gives."""
     from interprim.core.blas import single_thread
-    from interprim.models.ensemble import CrossValidation
     from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
+    from interprim.models.ensemble import CrossValidation
 
     dev, _ = task
     fams = ("kernel", "nn", "prior")

@@ -10,8 +10,8 @@ import pytest
 
 import interprim as ip
 from interprim import io as ipio
-from interprim.models.primitive.calibration import Calibration, _shrink
 from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
+from interprim.models.primitive.calibration import Calibration, _shrink
 from interprim.synthetic import two_agent_demos
 
 NOISE = 0.05  # i.i.d. per frame and column: larger than the model's own errors on this data

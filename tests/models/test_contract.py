@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 import interprim as ip
+from interprim.models import registry
 from interprim.models.base import BasePrediction, BaseStream, Predictor
 from interprim.models.demonstrations import NearestNeighbour, PriorMean
-from interprim.models.promp import InteractionProMP
 from interprim.models.kernel import KernelDemonstrations
 from interprim.models.learned import LearnedInteraction
-from interprim.models import registry
+from interprim.models.promp import InteractionProMP
 from interprim.synthetic import two_agent_demos
 
 OBS = [0, 1]

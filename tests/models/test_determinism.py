@@ -99,8 +99,8 @@ def test_numpy_and_compiled_paths_agree(runs):
 
 
 def test_same_call_same_bits_within_a_process():
-    from interprim.synthetic import two_agent_demos
     import interprim as ip
+    from interprim.synthetic import two_agent_demos
 
     train = two_agent_demos(12, seed=2)
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2=1e-3).fit(train, dt=0.01)

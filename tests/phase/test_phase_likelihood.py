@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.phase.dtw import open_end_dtw
 from interprim.core._compiled import registry as kernels
+from interprim.phase.dtw import open_end_dtw
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
 
 

@@ -183,8 +183,9 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     assert d_rest > 1.0  # the robot really had to move
     driver.find_element("id", "tab-writing").click()
     # write an "s" with the mouse: the server must recognise it among c, s, u
-    from interprim.server.demo import synthetic_letters
     from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    from interprim.server.demo import synthetic_letters
 
     stroke = synthetic_letters("s", 1, seed=7)[0]
     pts = driver.execute_script("return arguments[0].map(p => window.ipView.letterToClient(p[0], p[1]))",

@@ -13,7 +13,6 @@ Skipped only when Chromium (or its driver) is not installed: ``apt-get install -
 from __future__ import annotations
 
 import pytest
-
 from test_browser import CHROMIUM, DRIVER, driver, wait_for  # noqa: F401  (the driver fixture)
 
 pytestmark = [

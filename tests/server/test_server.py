@@ -24,6 +24,24 @@ from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
+from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
+    RawWS,
+    closed_with,
+    connect,
+    covered,
+    frame_msg,
+    hello,
+    models,
+    n_sessions,
+    opened,
+    replies_until,
+    rpc,
+    server,
+    strict,
+    test_demo,
+    validator,
+    wait_until,
+)
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
 
 from interprim.core.errors import ModelFileError  # noqa: E402
@@ -32,26 +50,6 @@ from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # 
 from interprim.server.client import Client, ServerError  # noqa: E402
 from interprim.server.demo import synthetic_letters  # noqa: E402
 from interprim.server.models import entry_for, load_models  # noqa: E402
-
-
-from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
-    connect,
-    models,
-    test_demo,
-    server,
-    strict,
-    validator,
-    hello,
-    opened,
-    rpc,
-    frame_msg,
-    wait_until,
-    n_sessions,
-    closed_with,
-    covered,
-    replies_until,
-    RawWS,
-)
 
 
 # ---------------------------------------------------------------------------- happy path
@@ -580,8 +578,8 @@ def test_cli_replay_and_units_for_a_model_file(tmp_path):
     """``interprim serve m.npz --replay m=demos.csv --units m=...``: the page's replay data and labels."""
     import interprim as ip
     from interprim.cli.serve import _attach_replays, _attach_units
-    from interprim.datasets import save_demonstrations
     from interprim.core.errors import InterprimError
+    from interprim.datasets import save_demonstrations
     from interprim.synthetic import two_agent_demos
 
     names = ["a", "b", "c", "d", "e"]

@@ -12,10 +12,10 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
+
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.client import Client, ServerError  # noqa: E402
-
-from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
 
 
 @pytest.mark.slow  # starts worker processes

@@ -22,12 +22,12 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from _server_support import closed_with, connect, hello, models, n_sessions, wait_until  # noqa: E402,F401
+
 from interprim.server import protocol as P  # noqa: E402
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.gate import ConnectionGate, fd_budget  # noqa: E402
 from interprim.server.http_api import split_host  # noqa: E402
-
-from _server_support import closed_with, connect, hello, models, n_sessions, wait_until  # noqa: E402,F401
 
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 

@@ -15,8 +15,16 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import InterprimError
-from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
-                      print_notes, recording_options)
+from ._common import (
+    CommandError,
+    add_recording_args,
+    agent_columns,
+    output_when_done,
+    positive_number,
+    print_notes,
+    recording_options,
+    split_cols,
+)
 
 __all__ = ["add_parser", "CommandError"]
 

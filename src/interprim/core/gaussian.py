@@ -76,7 +76,7 @@ class GaussianPrior:
         self.factor = factor
 
     @classmethod
-    def factored(cls, thetas, method: str, ridge: float, lam) -> "GaussianPrior":
+    def factored(cls, thetas, method: str, ridge: float, lam) -> GaussianPrior:
         """The prior of :func:`fit_prior` in factored form only, ``N(mean, diag(d) + W^T W)``, without the
         ``P x P`` matrix: what the folds of cross-validation condition on (:func:`lowrank_case`).
 
@@ -117,7 +117,7 @@ class GaussianPrior:
         """The low-rank part ``W`` (``r x P``, ``factor.T``) of ``cov = diag(d) + W^T W``."""
         return self.factor.T
 
-    def marginal(self, n: int) -> "GaussianPrior":
+    def marginal(self, n: int) -> GaussianPrior:
         """The prior of the first ``n`` parameters (the observed agent's block when ``n = D_o q``), in the forms
         this one has (views, no copies)."""
         cut = (lambda a: None if a is None else a[:n])
@@ -125,13 +125,13 @@ class GaussianPrior:
         return GaussianPrior(self.mean[:n], None if cov is None else cov[:n, :n], self.method,
                              self.shrinkage, cut(self.diag), cut(self.factor))
 
-    def conditioner(self, obs_index, thetas=None, ridge: float | None = None) -> "LowRankConditioner | None":
+    def conditioner(self, obs_index, thetas=None, ridge: float | None = None) -> LowRankConditioner | None:
         """Eq. 16-18 precomputed for this prior and the observed parameters ``obs_index`` (``(D_o, q)``):
         :meth:`LowRankConditioner.from_prior`, or ``None`` when the covariance has no low-rank form."""
         return LowRankConditioner.from_prior(self, obs_index, thetas, ridge)
 
     def condition(self, obs_index, G, B, sigma2: float, yy: float | None = None, n_obs: int | None = None,
-                  need_cov: bool = True) -> "Posterior":
+                  need_cov: bool = True) -> Posterior:
         """Eq. 16-18 in the structured dense form (:func:`condition`) from the statistics ``G = X^T X``,
         ``B = X^T F`` of an observation of the parameters ``obs_index``."""
         return condition(self.mean, self.cov, obs_index, G, B, sigma2, yy=yy, n_obs=n_obs, need_cov=need_cov)

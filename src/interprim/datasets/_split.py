@@ -328,10 +328,8 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     labels)``: one demonstration per interval, time stamps from 0, labels ``<file>@<start>s`` when the
     take is split (the file's name otherwise).
     """
-    from ._checks import check_frames, fill_nans
-
-    from ._checks import warn
     from ..core.errors import DataFileWarning
+    from ._checks import check_frames, fill_nans, warn
 
     rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
     automatic = any(split.get(k) is not None for k in ("events", "gap", "repetitions"))

@@ -9,8 +9,20 @@
 The sweep's public names are importable from here.
 """
 
-from .sweep import (METHODS, EvalConfig, evaluate_fold, make_estimator, markdown_tables, recognition_fold,
-                    recognition_table, run_sweep, save_results, summarise, task_names, load_task)
+from .sweep import (
+                    METHODS,
+                    EvalConfig,
+                    evaluate_fold,
+                    load_task,
+                    make_estimator,
+                    markdown_tables,
+                    recognition_fold,
+                    recognition_table,
+                    run_sweep,
+                    save_results,
+                    summarise,
+                    task_names,
+)
 
 __all__ = ["METHODS", "EvalConfig", "evaluate_fold", "make_estimator", "markdown_tables", "recognition_fold",
            "recognition_table", "run_sweep", "save_results", "summarise", "task_names", "load_task"]

@@ -37,9 +37,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..model_selection.metrics import Z90
-from ..model_selection.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, folds, mean_demo,
-                                        mean_duration, realtime_fold, realtime_sweep, summarise_realtime,
-                                        whole_movement_fold)
+from ..model_selection.realtime import (
+    ALL_METHODS_FROM,
+    MIN_DEMONSTRATIONS,
+    RealTimeConfig,
+    folds,
+    mean_demo,
+    realtime_fold,
+    realtime_sweep,
+    summarise_realtime,
+    whole_movement_fold,
+)
 from ..models.registry import default_methods
 from .nested import standard_error_ratio
 

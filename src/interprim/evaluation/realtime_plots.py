@@ -272,10 +272,9 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     returns the figure's numbers (metres) with ``action``, ``demo`` and ``n_train``.
     """
     from ..datasets import load_nuisi
-    from ..models.primitive.estimator import InteractionPrimitive
-
-    from .nested import split_holdout
     from ..model_selection.prefixes import Prefixes
+    from ..models.primitive.estimator import InteractionPrimitive
+    from .nested import split_holdout
 
     ds = load_nuisi(data_path, action=action, observed="right_arm", controlled="right_hand", dt=dt)
     if development_only:

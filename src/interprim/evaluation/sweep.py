@@ -46,7 +46,6 @@ from functools import lru_cache
 import numpy as np
 
 from ..core.preprocessing import time_normalise
-
 from ..model_selection.metrics import Z90, point_rms
 from ..model_selection.prefixes import observed_frames
 
@@ -126,7 +125,6 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     causal prefixes; the built-in synthetic and simulated sets; the handwritten characters)."""
     if dataset == "nuisi":
         from ..datasets import load_nuisi
-
         from ..model_selection.prefixes import Prefixes
 
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)

@@ -60,10 +60,10 @@ def _fmt_param(p):
 def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", "prior", "nn"), coupling_kw=None):
     """Fit every method without demonstration ``j``; records for every fraction and phase source."""
     import interprim
-    from interprim.models.demonstrations import NearestNeighbour, PriorMean
-    from interprim.models.coupling import CouplingModel
-    from interprim.model_selection.prefixes import observed_frames
     from interprim.core.preprocessing import time_normalise
+    from interprim.model_selection.prefixes import observed_frames
+    from interprim.models.coupling import CouplingModel
+    from interprim.models.demonstrations import NearestNeighbour, PriorMean
 
     train = [d for i, d in enumerate(demos) if i != j]
     test = demos[j]
@@ -213,8 +213,8 @@ def main(argv=None):
     ap.add_argument("--from-results", default=None, nargs="+",
                     help="only summarise these results.json files (of earlier runs) into --out")
     args = ap.parse_args(argv)
-    from interprim.datasets import load_nuisi
     from interprim.core.blas import single_thread
+    from interprim.datasets import load_nuisi
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

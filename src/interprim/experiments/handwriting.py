@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.cv import folds
-from ..model_selection.prefixes import observed_frames
 from ..core.preprocessing import resample_step, time_normalise
+from ..model_selection.prefixes import observed_frames
 
 __all__ = [
     "run_handwriting",

@@ -41,7 +41,6 @@ from pathlib import Path
 import numpy as np
 
 from ..core.preprocessing import time_normalise
-
 from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 from .highfive_figures import animate, plot_fig6, plot_fig7, plot_fig8, plot_setup
 
@@ -102,7 +101,7 @@ class HighFiveConfig:
     extra: dict = field(default_factory=dict)
 
     @classmethod
-    def quick(cls, **kw) -> "HighFiveConfig":
+    def quick(cls, **kw) -> HighFiveConfig:
         """A smaller run for tests and smoke checks (about a quarter of the work)."""
         base = dict(n_train=30, n_test=8, n_val=6, sigma2_grid=(100.0, 1000.0), n_samples=20, gif_frames=16)
         base.update(kw)

@@ -10,6 +10,7 @@ import numpy as np
 from ..core.preprocessing import interp_columns
 from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 
+
 def _draw_arm(ax, arm, q, **kw):
     pts = arm.forward_kinematics(q)
     (line,) = ax.plot(pts[:, 0], pts[:, 1], "-o", lw=kw.pop("lw", 3), ms=kw.pop("ms", 5), **kw)

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model_selection.prefixes import observed_frames
 from .base import GridPrediction
 from .demonstrations import AlignedBaseline
-from ..model_selection.prefixes import observed_frames
 
 __all__ = ["KernelDemonstrations"]
 

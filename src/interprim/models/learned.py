@@ -29,10 +29,9 @@ import numpy as np
 
 from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite, as_frame
+from ..phase.learned import LearnedPhase
 from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from .coupling import CouplingModel
-from ..phase.learned import LearnedPhase
-
 
 __all__ = ["LearnedInteraction", "LearnedStream"]
 
@@ -120,7 +119,7 @@ class LearnedInteraction(Predictor):
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
 
-    def stream(self, robot_state=None) -> "LearnedStream":
+    def stream(self, robot_state=None) -> LearnedStream:
         """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it
         returns, bitwise, :meth:`predict` of those ``M`` frames, without recomputing anything over the prefix."""
         self._check_fitted("stream")

@@ -12,8 +12,8 @@ To add a family: write its class in ``interprim/models/`` against :class:`interp
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from .demonstrations import NearestNeighbour, PriorMean
 from .kernel import KernelDemonstrations

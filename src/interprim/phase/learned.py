@@ -69,9 +69,9 @@ import math
 
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
+from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
 from ._learned_features import group_dims, jsonable, kernel_loo, prefix_features, ridge_loo
 from .estimate import PhaseEstimate
 
@@ -224,7 +224,7 @@ class LearnedPhase:
         return feats, bw, al, (lo, hi)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, demos, dt: float | None = None, times=None) -> "LearnedPhase":
+    def fit(self, demos, dt: float | None = None, times=None) -> LearnedPhase:
         """Learn the phase map from demonstrations of the observed agent.
 
         Parameters
@@ -567,7 +567,7 @@ class LearnedPhase:
         return arrays, meta
 
     @classmethod
-    def from_state(cls, arrays, meta) -> "LearnedPhase":
+    def from_state(cls, arrays, meta) -> LearnedPhase:
         """The estimator saved by :meth:`to_state`."""
         obj = cls.__new__(cls)
         for k, v in meta.items():
@@ -577,7 +577,7 @@ class LearnedPhase:
         cls._check_fitted(obj)
         return obj
 
-    def tracker(self) -> "PhaseTracker":
+    def tracker(self) -> PhaseTracker:
         """An online estimator fed one frame at a time (features updated in ``O(D)`` per frame)."""
         self._check_fitted()
         return PhaseTracker(self)

@@ -45,8 +45,8 @@ import math
 
 import numpy as np
 
-from ..core.blas import single_thread
 from ..core._compiled import registry as kernels
+from ..core.blas import single_thread
 from ..core.dmp import forcing_values
 from ..core.gaussian import LOG2PI, GaussianPrior, condition
 from ..core.preprocessing import derivatives

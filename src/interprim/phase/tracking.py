@@ -11,9 +11,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.blas import single_thread
 from ..core._compiled import registry as kernels
-from .likelihood import S_MIN, search_bounds, finish, fast_state, make_scorer, speed_prior_params, estimate_phase, phase_noise
+from ..core.blas import single_thread
+from .likelihood import (
+    S_MIN,
+    estimate_phase,
+    fast_state,
+    finish,
+    make_scorer,
+    phase_noise,
+    search_bounds,
+    speed_prior_params,
+)
 
 __all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
 

@@ -60,7 +60,7 @@ class QosSpec:
         self.reliable, self.depth = bool(reliable), depth
 
     @classmethod
-    def parse(cls, text: str) -> "QosSpec":
+    def parse(cls, text: str) -> QosSpec:
         """``KIND[,DEPTH]``: ``reliable`` (default depth 10) or ``best_effort`` (default depth 1)."""
         kind, _, depth = str(text).strip().partition(",")
         kind = kind.strip().lower().replace("-", "_")
@@ -383,7 +383,7 @@ class Ros2Bridge:
         import os
 
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
-        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
@@ -456,7 +456,7 @@ class Ros2Bridge:
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             self.spin_once(0.05)
 
-    def start(self) -> "Ros2Bridge":
+    def start(self) -> Ros2Bridge:
         """Open and spin in a background thread (until :meth:`close`)."""
         if self._dds is None:
             self.open()

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import keyword
 import math
-from functools import lru_cache
+from functools import cache, lru_cache
 
 from ..core.errors import MissingExtraError
 
@@ -120,11 +120,10 @@ def message_class(msgtype: str):
     return _message_class(known_type(msgtype))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _message_class(full: str):
     _imports()
-    from cyclonedds.idl import make_idl_struct
-    from cyclonedds.idl import types
+    from cyclonedds.idl import make_idl_struct, types
 
     fields = {}
     for name, desc in ros2_typestore().fielddefs[full][1]:

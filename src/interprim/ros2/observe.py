@@ -29,7 +29,6 @@ records its columns' names, not their units or frames, so the bridge checks name
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..datasets.ros_bags import field_value

@@ -352,7 +352,7 @@ class ServerThread:
         self._ready = threading.Event()
         self._error = None
 
-    def start(self) -> "ServerThread":
+    def start(self) -> ServerThread:
         """Start the server in a daemon thread; returns ``self`` once it listens (waits up to 30 s).
 
         An error while starting (e.g. the port is taken) is raised here, in the caller's thread.

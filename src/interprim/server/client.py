@@ -169,7 +169,7 @@ class AsyncClient:
         self.opened = None
 
     @classmethod
-    async def connect(cls, url: str, token: str | None = None, **connect_kwargs) -> "AsyncClient":
+    async def connect(cls, url: str, token: str | None = None, **connect_kwargs) -> AsyncClient:
         """Connect to ``url`` (``ws://host:port/ws``) and say ``hello``; returns the client once welcomed.
 
         Parameters

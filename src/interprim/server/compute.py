@@ -33,7 +33,7 @@ class OpenModel:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
-    recognition: "Recognition | None" = None  # with several candidates: which one (created on first use)
+    recognition: Recognition | None = None  # with several candidates: which one (created on first use)
     history: list = field(default_factory=list)  # blocks of frames in the streams since the last reset (rollback)
 
     def reset(self, robot_state=None) -> None:

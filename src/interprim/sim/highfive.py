@@ -152,7 +152,7 @@ class HighFiveData:
         """Task-space hand trajectories ``(T_i, 2)`` of both arms (observed, controlled)."""
         return self.observed_arm.hand(self.observed(i)), self.controlled_arm.hand(self.controlled(i))
 
-    def subset(self, idx) -> "HighFiveData":
+    def subset(self, idx) -> HighFiveData:
         """A new :class:`HighFiveData` with the interactions ``idx``."""
         idx = np.asarray(idx, dtype=int)
         return HighFiveData(

@@ -138,7 +138,7 @@ class Calibration:
         return out
 
     @classmethod
-    def from_arrays(cls, d) -> "Calibration":
+    def from_arrays(cls, d) -> Calibration:
         """Rebuild a calibration from the arrays written by :meth:`to_arrays` (a mapping of the names;
         ``lookaheads`` and ``column_scale`` may be absent: a calibration written before they existed)."""
         opt = {k: (np.asarray(d[k], dtype=np.float64) if k in d else None) for k in ("lookaheads", "column_scale")}

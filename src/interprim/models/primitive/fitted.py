@@ -25,16 +25,16 @@ import copy
 
 import numpy as np
 
-from ...core.blas import one_blas_thread, single_thread
 from ...core._compiled import registry as kernels
-from ...core.validation import as_2d_finite, check_positive, check_times
 from ...core.basis import Basis
+from ...core.blas import one_blas_thread, single_thread
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from ...core.gaussian import Posterior, fit_prior
 from ...core.input_range import fit_input_range, input_distance, mark
+from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
+from ...core.validation import as_2d_finite, check_positive, check_times
 from ...phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
-from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
 
 __all__ = ["FittedPrimitive", "PARAM_NAMES", "FITTED_NAMES"]
 
@@ -102,7 +102,7 @@ class FittedPrimitive:
         self.params_per_dof_ = q  # n_basis + 1 entries of theta per DoF (Eq. 2)
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
 
-    def with_fitted(self, **fitted) -> "FittedPrimitive":
+    def with_fitted(self, **fitted) -> FittedPrimitive:
         """A copy with some fitted attributes (names ending in ``_``) replaced, e.g. the prior re-estimated on a
         subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the other
         fitted arrays and has its own store of derived values; ``self`` is unchanged."""
@@ -113,7 +113,7 @@ class FittedPrimitive:
         new.__dict__.update(fitted, _derived={})
         return new
 
-    def with_params(self, **params) -> "FittedPrimitive":
+    def with_params(self, **params) -> FittedPrimitive:
         """A copy that predicts with some parameters changed after the fit (``phase_method``: the estimator's
         parameter set after ``fit``).  It shares the store of derived values, which depend on the fitted
         arrays only."""
@@ -154,7 +154,7 @@ class FittedPrimitive:
         return model_state(self)
 
     @classmethod
-    def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> "FittedPrimitive":
+    def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> FittedPrimitive:
         """The state of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's), every array checked
         (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
         ``meta["params"]`` with the defaults filled in)."""
@@ -164,7 +164,7 @@ class FittedPrimitive:
 
     # ------------------------------------------------------------------ fitting
     @classmethod
-    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> "FittedPrimitive":
+    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> FittedPrimitive:
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
         with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec. III-B), the

@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 
-from ...core.blas import one_blas_thread
 from ...core._compiled import registry as kernels
-from ..base import BasePrediction
+from ...core.blas import one_blas_thread
 from ...core.gaussian import Posterior, sample
+from ..base import BasePrediction
 
 __all__ = ["Prediction", "MeanRollout"]
 
@@ -291,7 +291,7 @@ class Prediction(BasePrediction):
         obs = m.observed_dofs_
         return s, lat @ M[obs, :n_o].T + off[obs]
 
-    def mean_rollout(self, n: int = 100, columns=None) -> "MeanRollout":
+    def mean_rollout(self, n: int = 100, columns=None) -> MeanRollout:
         """A :class:`MeanRollout`: ``trajectory(n)[:, columns]`` for this and every later prediction of the same
         model, with the design of the grid built once."""
         return MeanRollout(self._m, n, columns)

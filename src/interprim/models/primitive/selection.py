@@ -61,12 +61,19 @@ from typing import NamedTuple
 import numpy as np
 
 from ...core.blas import single_thread
-from ...core.cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
-from ...core.gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
-                       shrinkage_intensity)
+from ...core.cv import fold_labels, observed_frames, within_one_se
+from ...core.cv import n_folds as _n_folds
+from ...core.gaussian import (
+    GaussianPrior,
+    compress_observation,
+    fit_prior,
+    lowrank_case,
+    shrink_cross,
+    shrinkage_intensity,
+)
+from ...core.preprocessing import time_normalise
 from ...phase.dtw import open_end_dtw
 from ...phase.likelihood import observation_design
-from ...core.preprocessing import time_normalise
 
 __all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.blas import one_blas_thread
 from ...core._compiled import registry as kernels
-from ..base import BaseStream
-from ...core.validation import as_2d_finite, as_frame
+from ...core.blas import one_blas_thread
 from ...core.input_range import mark
+from ...core.validation import as_2d_finite, as_frame
 from ...phase import IncrementalDTW, estimate_phase, movement_prefix
+from ..base import BaseStream
 from .prediction import Prediction
 
 __all__ = ["Stream"]

@@ -392,7 +392,6 @@ def bench_promp(model, test, quick):
     partial = test[:M, :7]
     s_end = 0.5
     X, Y, _ = model.fitted_.observation_design(partial, s_end)
-    G, B = X.T @ X, X.T @ Y
     cond = LowRankConditioner.from_prior(model.prior_, model.obs_index_)
     s2 = model.sigma2_
 

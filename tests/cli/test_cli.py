@@ -87,15 +87,15 @@ def test_predict_csv_output_columns(files, tmp_path, capsys):
     assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out), "--samples", "3"]) == 0
     assert "phase" in capsys.readouterr().out
     lines = out.read_text().splitlines()
-    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in lines if l.startswith("#") and ":" in l}
+    comments = {ln.split(":")[0][2:]: ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("#") and ":" in ln}
     phase = float(comments["phase"])
     assert 0.3 < phase < 0.7  # half of a movement of typical speed was observed
-    header = next(l for l in lines if not l.startswith("#")).split(",")
+    header = next(ln for ln in lines if not ln.startswith("#")).split(",")
     assert header[:3] == ["phase", "s", "time"]
     assert header[3:6] == [f"mean_{c}" for c in COLS] and header[6:9] == [f"std_{c}" for c in COLS]
     assert header[9:12] == [f"sample0_{c}" for c in COLS] and len(header) == 9 + 3 * 3
-    data = [l for l in lines if not l.startswith("#")][1:]
-    rows = np.array([[float(v) for v in l.split(",")] for l in data])
+    data = [ln for ln in lines if not ln.startswith("#")][1:]
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in data])
     assert rows.shape == (100, len(header))
     np.testing.assert_allclose(rows[:, 0], phase)
     np.testing.assert_allclose(rows[:, 1], np.linspace(0, 1, 100))
@@ -234,8 +234,8 @@ def test_predict_says_when_the_input_is_out_of_range(files, tmp_path, capsys):
         warnings.simplefilter("error")
         assert main(["predict", str(files / "model.npz"), str(path), "-o", str(out), "--dt", "0.02"]) == 0
     assert capsys.readouterr().out.count("WARNING: the observed frames are") == 1
-    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in out.read_text().splitlines()
-                if l.startswith("#") and ":" in l}
+    comments = {ln.split(":")[0][2:]: ln.split(":", 1)[1].strip() for ln in out.read_text().splitlines()
+                if ln.startswith("#") and ":" in ln}
     assert float(comments["out_of_range"]) == 1.0 and float(comments["input_distance"]) > 8
 
 

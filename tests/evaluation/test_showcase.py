@@ -138,7 +138,7 @@ def _two_people(n=10, seed=3):
     own frame (x forward, z up), reaching up together with random amplitude and duration."""
     rng = np.random.default_rng(seed)
     demos = []
-    for i in range(n):
+    for _ in range(n):
         T = int(rng.integers(26, 36))
         s = np.linspace(0, 1, T)
         amp = rng.uniform(0.3, 0.5)

@@ -280,7 +280,9 @@ def test_finish_finds_the_maximum_and_does_not_depend_on_the_starting_candidates
 
     for _ in range(40):
         c, k = rng.uniform(0.1, 0.95), rng.uniform(1e2, 1e5)
-        f = (lambda s, c=c, k=k: -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3)
+        def f(s, c=c, k=k):
+            return -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3
+
         sc = scorer(f)
         fine = np.exp(np.linspace(np.log(c) - 0.4, min(np.log(c) + 0.4, 0.0), 400001))
         s_max = fine[np.argmax(f(fine))]

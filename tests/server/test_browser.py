@@ -141,7 +141,7 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
     d_meet = math.dist(meet, goal)
     driver.save_screenshot(str(ARTIFACTS / "browser_highfive_drag.png"))
     print(f"goal {goal}, human hand {human_end}, robot hand {robot}, meeting point {meet}: "
-          f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
+          f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m), meeting point-goal {d_meet:.3f} m")
     assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
     # The frames are those of the path on the virtual clock, so the result is fixed (0.065 m here, with the
     # demo model's input_noise=0.01 rad for pointer input; 1.5 m before input_noise existed): the bound

@@ -17,6 +17,7 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from websockets.exceptions import ConnectionClosed  # noqa: E402
 from websockets.sync.client import connect as _connect  # noqa: E402
 
 NAMES = ["hand_x", "hand_y", "arm_a", "arm_b", "arm_c"]
@@ -278,7 +279,7 @@ def test_second_hello_changes_nothing(server):
         assert p["type"] == "prediction" and p["seq"] == 5 and p["frames"] == 5  # same interaction, same count
         bad = c.rpc({"type": "hello", "version": 99})  # checked like the first: fatal
         assert bad["type"] == "error" and bad["code"] == "bad_version"
-        with pytest.raises(Exception):
+        with pytest.raises(ConnectionClosed):
             c.ws.recv(timeout=10)  # closed by the server (1008)
         assert c.ws.close_code == 1008
     finally:

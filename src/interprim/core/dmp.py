@@ -80,7 +80,7 @@ def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y:
     groups: dict[int, list[int]] = {}
     for j, Y in enumerate(Y_list):
         groups.setdefault(Y.shape[0], []).append(j)
-    for T, idx in groups.items():
+    for idx in groups.values():
         th, r = fit_weights_stacked(np.stack([Y_list[j] for j in idx]), np.stack([Yd_list[j] for j in idx]),
                                     np.stack([Ydd_list[j] for j in idx]), basis, alpha_y, beta_y, ridge)
         theta[idx] = th

@@ -120,7 +120,9 @@ class GaussianPrior:
     def marginal(self, n: int) -> GaussianPrior:
         """The prior of the first ``n`` parameters (the observed agent's block when ``n = D_o q``), in the forms
         this one has (views, no copies)."""
-        cut = (lambda a: None if a is None else a[:n])
+        def cut(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[:n]
+
         cov = self.__dict__.get("cov")
         return GaussianPrior(self.mean[:n], None if cov is None else cov[:n, :n], self.method,
                              self.shrinkage, cut(self.diag), cut(self.factor))
@@ -349,7 +351,6 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
     obs_index = np.asarray(obs_index)
     D_o, q = obs_index.shape
     flat = obs_index.reshape(-1)
-    P = mean.shape[0]
     Po = flat.size
     G = 0.5 * (np.asarray(G, dtype=np.float64) + np.asarray(G, dtype=np.float64).T)
     # Whitened by the prior of the observed parameters, Sigma_oo = Lp Lp^T:

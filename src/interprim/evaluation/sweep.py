@@ -385,7 +385,7 @@ def summarise(results) -> dict:
     rec_s = {t: {f: _agg(v) for f, v in sorted(fr.items())} for t, fr in rec.items()}
     if rec:
         allf: dict = {}
-        for t, fr in rec.items():
+        for fr in rec.values():
             for f, v in fr.items():
                 allf.setdefault(f, []).extend(v)
         rec_s["all"] = {f: _agg(v) for f, v in sorted(allf.items())}

@@ -248,7 +248,7 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
 
     P = list(cfg.percents)
     n_te, n_p = len(test), len(P)
-    oa, ca = test.observed_arm, test.controlled_arm
+    ca = test.controlled_arm
     train_norm = np.stack([time_normalise(d, cfg.n_points) for d in train.demos])  # (J, n, 5)
     prior = train_norm.mean(axis=0)
     train_goal_pts = ca.hand(np.stack([d[-1, 2:] for d in train.demos]))
@@ -271,7 +271,7 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
         ks = [n_observed(T, p) for p in P]
         nn = nearest_neighbours(d[:, :2], train_obs, ks)
         out["nn_index"][i] = nn
-        for j, (p, k) in enumerate(zip(P, ks)):
+        for j, k in enumerate(ks):
             partial = d[:k, :2]
             true_phase = (k - 1) / (T - 1)
             preds = {}

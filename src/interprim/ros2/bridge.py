@@ -317,7 +317,7 @@ class Ros2Bridge:
         else:
             ix, iy, iz = self._xyz
             poses = []
-            for dt, row in zip(t, y):
+            for row in y:
                 pos = new_message("geometry_msgs/msg/Point", x=float(row[ix]), y=float(row[iy]),
                                   z=float(row[iz]) if iz is not None else 0.0)
                 pose = new_message("geometry_msgs/msg/Pose", position=pos,

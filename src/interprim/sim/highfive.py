@@ -283,7 +283,8 @@ def generate_highfive(
     if n_fail:
         import warnings
 
-        warnings.warn(f"{n_fail} of {n} optimal-control problems did not report convergence", RuntimeWarning)
+        warnings.warn(f"{n_fail} of {n} optimal-control problems did not report convergence", RuntimeWarning,
+                      stacklevel=2)
     return HighFiveData(
         demos=[r[0] for r in results],
         goals=np.array([r[1] for r in results]),

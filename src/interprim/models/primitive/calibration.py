@@ -355,7 +355,7 @@ def _estimate(sums, hsum, agents, clip):
     col = np.ones((F, B, D))
     with np.errstate(invalid="ignore", divide="ignore"):
         own, own_var = _log_ratio(E, V, axis=())  # (F, B, D): every column on its own
-    for a, cols in enumerate(agents):
+    for cols in agents:
         if not cols:
             scales.append(np.ones((F, B)))
             continue

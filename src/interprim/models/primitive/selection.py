@@ -229,7 +229,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                         if kind0 == "position":
                             ll[a] += outs[b][1]
             if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
-                for j, designs, base, comp in held:
+                for _j, designs, _base, comp in held:
                     X, Y = designs["position"]
                     ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
                                            need_ll=True, compressed=comp["position"])[1]
@@ -402,7 +402,7 @@ def _refined_phase_error(model, kept, s2, b) -> float:
     s2a = np.array([s2])
     errs = []
     for prior, zo, M, s_true, grid, curves in kept:
-        def f(s):
+        def f(s, prior=prior, zo=zo, M=M):  # this case's arrays (f is minimised within the iteration)
             X, Y = observation_design(model, zo, float(s), "position")
             return -float(lowrank_case(prior, n_o, q, X, Y, s2a, need_mean=False, need_ll=True)[1][0]
                           + log_speed_prior(model, M, s))

@@ -14,8 +14,8 @@ Versions (``format_version``):
 
 * **3** (written now): version 2 with a look-ahead-aware calibration of the predictive std: the arrays
   ``calibration_lookaheads (H,)`` and ``calibration_column_scale (F, H, D)``, and ``calibration_scale_{observed,
-  controlled}`` of shape ``(F, H)`` (:class:`~interprim.models.primitive.calibration.Calibration`).  An older interprim refuses
-  the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
+  controlled}`` of shape ``(F, H)`` (:class:`~interprim.models.primitive.calibration.Calibration`).  An older interprim
+  refuses the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
   calibration, ``(F,)`` scales, acts at every look-ahead as it did).
 * **2**: ``metadata`` also holds
   ``checksums``, ``{name: {"dtype", "shape", "sha256"}}`` for every other array
@@ -23,8 +23,9 @@ Versions (``format_version``):
   the hyper-parameter selection record of ``fit``, or ``null``); and the
   arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
   prior covariance), ``pca_*_explained_variance_ratio`` and ``calibration_{fractions,scale_observed,
-  scale_controlled,n_cases}`` (:class:`~interprim.models.primitive.calibration.Calibration`) and ``input_mean``/``input_std``
-  (with ``input_limit`` in the metadata: the out-of-range check of the observed frames) when the model has them.
+  scale_controlled,n_cases}`` (:class:`~interprim.models.primitive.calibration.Calibration`) and
+  ``input_mean``/``input_std`` (with ``input_limit`` in the metadata: the out-of-range check of the observed frames)
+  when the model has them.
 * **1**: the same without ``checksums``, ``selection`` and those arrays;
   still read (every array's shape is checked, the rest is unset or rebuilt).
 

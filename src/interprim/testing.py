@@ -101,7 +101,8 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
             "save -> load_any changed the prediction"
 
     clone = type(model)(**model.get_params(deep=False)).fit(train, dt=dt)
-    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol, atol=rtol * max(1.0, float(np.abs(Y).max()))), \
+    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol,
+                       atol=rtol * max(1.0, float(np.abs(Y).max()))), \
         "a clone fitted on the same demonstrations predicts differently"
 
     stream = model.stream()

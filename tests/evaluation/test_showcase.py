@@ -304,7 +304,8 @@ def test_demo_nuisi_section(monkeypatch, tmp_path, capsys):
     m = r["models"]["fast"]
     report = (tmp_path / "report.md").read_text()
     assert report.startswith("# earlier part\n")
-    line = f"fast: {100 * m['rt_ctrl']:.1f} cm vs clock {100 * m['clock_rt_ctrl']:.1f} cm ({m['rt_ctrl_vs_clock']:.2f}x)"
+    line = (f"fast: {100 * m['rt_ctrl']:.1f} cm vs clock {100 * m['clock_rt_ctrl']:.1f} cm "
+            f"({m['rt_ctrl_vs_clock']:.2f}x)")
     assert line in report and line in capsys.readouterr().out
     assert "![gif](nuisi_wave1_01_realtime.gif)" in report
     n, _ = _gif_frames(tmp_path / "nuisi_wave1_01_realtime.gif")

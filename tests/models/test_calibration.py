@@ -1,5 +1,5 @@
-"""Calibrated predictive std (interprim.models.primitive.calibration): look-ahead-aware factors, held-out coverage on data with
-known noise, shrinkage, model files with and without the look-ahead arrays."""
+"""Calibrated predictive std (interprim.models.primitive.calibration): look-ahead-aware factors, held-out coverage on
+data with known noise, shrinkage, model files with and without the look-ahead arrays."""
 
 from __future__ import annotations
 

@@ -36,7 +36,8 @@ SCRIPT = textwrap.dedent(
                                  "samples": p.samples(30, 40, random_state=0).tolist(),
                                  "ll": p.log_likelihood})
     s = m.stream()
-    out["stream"] = [[float(q.phase), *q.response(20)[1][-1].tolist()] for q in (s.update(f) for f in test[0][:120, :2])]
+    out["stream"] = [[float(q.phase), *q.response(20)[1][-1].tolist()]
+                     for q in (s.update(f) for f in test[0][:120, :2])]
     json.dump(out, open(sys.argv[1], "w"))
     """
 )

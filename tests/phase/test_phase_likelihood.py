@@ -1,4 +1,5 @@
-"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood, interprim.phase.tracking)."""
+"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood,
+interprim.phase.tracking)."""
 
 import numpy as np
 import pytest

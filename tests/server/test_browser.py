@@ -72,7 +72,8 @@ def wait_for(drv, script, timeout=30.0):
         if value:
             return value
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for: {script}\nstate: {drv.execute_script('return JSON.stringify(window.ipState)')[:2000]}")
+    state = drv.execute_script("return JSON.stringify(window.ipState)")[:2000]
+    raise AssertionError(f"timed out waiting for: {script}\nstate: {state}")
 
 
 def path_end_world(drv, q):

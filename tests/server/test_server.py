@@ -84,7 +84,8 @@ def test_happy_path_matches_direct_stream(server, models, test_demo, validator):
         server_v.validate(r)
         assert r == {"type": "reset_done", "seq": len(test_demo)}
         p = c.frame(test_demo[0, :2])
-        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:, 2:],
+        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:,
+                                                                                                                    2:],
                                    atol=2e-6)
         assert c.close_session() == {"type": "closed", "seq": len(test_demo) + 1}
         with pytest.raises(ServerError) as e:
@@ -121,8 +122,8 @@ def test_auto_recognises_the_letter(server, validator):
 
 
 def test_auto_probabilities_are_the_recognisers(server, models):
-    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the observed
-    positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
+    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the
+    observed positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
     own-noise log-likelihood; coalesced frames (one reply for several) count as well, and reset starts over."""
     from interprim.models.recognition import Recogniser
 

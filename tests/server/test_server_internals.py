@@ -227,7 +227,8 @@ def _reply_text(op, frames):
 @pytest.mark.parametrize("std,dofs", [(False, "controlled"), (True, "all")])
 def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, dofs):
     """compute_prediction's cached rollout (mean) and its text head give the message that
-    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their precision."""
+    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their
+    precision."""
     from interprim.server import compute
 
     e = models["pair"]

@@ -61,8 +61,8 @@ def _assert_close(a, b, where="reply"):
 def _open(models, names, std, points=12):
     entries = [models[n] for n in names]
     streams = [e.model.stream() for e in entries]
-    op = compute.OpenModel(names[0] if len(names) == 1 else "recognise", entries, streams,
-                       [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries], points, std)
+    cols = [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries]
+    op = compute.OpenModel(names[0] if len(names) == 1 else "recognise", entries, streams, cols, points, std)
     op.update_kw = {"need_cov": std}
     return op
 

@@ -48,7 +48,8 @@ def _upgrade(port, host=None, origin=None, path="/ws", timeout=10):
     key = base64.b64encode(os.urandom(16)).decode()
     head = f"GET {path} HTTP/1.1\r\nHost: {host or f'127.0.0.1:{port}'}\r\n"
     if path == "/ws":
-        head += f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+        head += (f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                 "Sec-WebSocket-Version: 13\r\n")
     if origin:
         head += f"Origin: {origin}\r\n"
     s.sendall((head + "\r\n").encode())

@@ -129,7 +129,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
     )
-    p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components (ip)")
+    p.add_argument("--pca", type=int, default=None, metavar="K",
+                   help="project each agent onto K principal components (ip)")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) for files without time stamps")
     p.add_argument(
         "--resample", type=float, default=None, metavar="DT",

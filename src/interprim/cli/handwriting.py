@@ -117,5 +117,6 @@ def cmd_handwriting(args) -> int:
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     print("\n".join(summary_lines(res)))
-    print(f"wrote {args.out}/report.md, results.json" + (", figures" if not args.no_figures else "") + f" ({res['seconds']} s)")
+    figures = ", figures" if not args.no_figures else ""
+    print(f"wrote {args.out}/report.md, results.json{figures} ({res['seconds']} s)")
     return 0

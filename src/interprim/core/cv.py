@@ -2,8 +2,8 @@
 
 Several parts of the library choose something on held-out parts of the *training* demonstrations:
 ``sigma^2`` and the shrinkage (:mod:`interprim.models.primitive.selection`), the calibration of the predictive std
-(:mod:`interprim.models.primitive.calibration`), the coupling model (:mod:`interprim.models.coupling`), the learned phase
-(:mod:`interprim.phase.learned`), the kernel baseline's bandwidth and the evaluation's folds
+(:mod:`interprim.models.primitive.calibration`), the coupling model (:mod:`interprim.models.coupling`), the learned
+phase (:mod:`interprim.phase.learned`), the kernel baseline's bandwidth and the evaluation's folds
 (:mod:`interprim.evaluation`).  They share four rules, which live here:
 
 * **Folds** (:func:`folds`, :func:`fold_labels`, :func:`n_folds`): which demonstrations are held out
@@ -21,8 +21,8 @@ Several parts of the library choose something on held-out parts of the *training
   phase, a speed and the derivatives of Eq. 15) and at most ``T`` (or ``T - keep`` when ``keep`` frames must
   remain to be predicted).  :mod:`interprim.model_selection.prefixes` states the evaluation's protocol with it.
 
-Resampling, the fourth shared rule, lives with the other preprocessing (:func:`interprim.core.preprocessing.interp_columns`,
-:func:`interprim.core.preprocessing.resample_step`).
+Resampling, the fourth shared rule, lives with the other preprocessing
+(:func:`interprim.core.preprocessing.interp_columns`, :func:`interprim.core.preprocessing.resample_step`).
 
 Pure numpy, no I/O; part of the core (it imports nothing from :mod:`interprim.evaluation`).
 """

@@ -111,7 +111,8 @@ def fit_weights_stacked(Y, Yd, Ydd, basis: Basis, alpha_y: float, beta_y: float,
 
 
 def fit_weights_targets(F, g, basis: Basis, ridge: float = 1e-10, resid_dofs=None):
-    """Eq. 4 for forcing targets ``F`` ``(n, T, D)`` (Eq. 3) and goals ``g`` ``(n, D)``; see :func:`fit_weights_stacked`."""
+    """Eq. 4 for forcing targets ``F`` ``(n, T, D)`` (Eq. 3) and goals ``g`` ``(n, D)``; see
+    :func:`fit_weights_stacked`."""
     n, T, D = F.shape
     m = basis.n_basis
     Phi = basis.phi(np.linspace(0.0, 1.0, T))  # (T, m)
@@ -337,7 +338,8 @@ class LinearRollout:
 
 @lru_cache(maxsize=8)
 def cached_rollout(n_basis: int, alpha_x: float, alpha_y: float, beta_y: float, n_steps: int) -> LinearRollout:
-    """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as read-only)."""
+    """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as
+    read-only)."""
     return LinearRollout(Basis(int(n_basis), float(alpha_x)), float(alpha_y), float(beta_y), int(n_steps))
 
 

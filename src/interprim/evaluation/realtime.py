@@ -51,8 +51,8 @@ from ..model_selection.realtime import (
 from ..models.registry import default_methods
 from .nested import standard_error_ratio
 
-__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
-           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
+__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep",
+           "summarise_realtime", "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
            "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
 
 def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:

@@ -3,8 +3,8 @@
 Protocol: for every task (one NuiSI
 interaction, the synthetic set, ...) and every demonstration ``j``: fit each
 method on the other demonstrations, observe the first ``p`` % of demonstration
-``j``'s observed agent (:func:`~interprim.model_selection.prefixes.observed_frames`) (``p`` = 10, 20, ..., 100), predict the whole
-interaction and compare it with the truth on a common normalised-time grid.
+``j``'s observed agent (:func:`~interprim.model_selection.prefixes.observed_frames`) (``p`` = 10, 20, ..., 100), predict
+the whole interaction and compare it with the truth on a common normalised-time grid.
 
 Metrics per (task, method, held-out demo, fraction):
 
@@ -49,8 +49,8 @@ from ..core.preprocessing import time_normalise
 from ..model_selection.metrics import Z90, point_rms
 from ..model_selection.prefixes import observed_frames
 
-__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
-           "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
+__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table",
+           "make_estimator", "evaluate_fold", "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
 
 FRACTIONS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 METHODS = ("ip-forcing", "ip-position", "ip-paper", "iprompt", "nn", "prior")
@@ -153,7 +153,8 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
 
         d = load_character_trajectories(None, letters=name, max_per_letter=30)[name]
         return Task(f"characters/{name}", [np.asarray(x)[:, :2] for x in d.demos], [0, 1], float(d.dt or 0.005), 2)
-    raise ValueError(f"unknown data set {dataset!r}; expected nuisi, synthetic, synthetic-noisy, highfive-sim, characters")
+    raise ValueError(f"unknown data set {dataset!r}; expected nuisi, synthetic, synthetic-noisy, highfive-sim, "
+                     "characters")
 
 
 def task_names(dataset: str) -> list:
@@ -256,7 +257,8 @@ def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
     # recognition uses the prior and the phase noise only (chosen in fit), not the conditioning sigma2
     return InteractionPrimitive(observed_dofs=t.observed_dofs, n_basis=cfg.n_basis,
-                                smoothing_window=cfg.smoothing_window, sigma2=1.0, covariance=cfg.recognition_covariance,
+                                smoothing_window=cfg.smoothing_window, sigma2=1.0,
+                                covariance=cfg.recognition_covariance,
                                 phase_method="likelihood").fit(demos, dt=t.dt)
 
 

@@ -15,7 +15,8 @@ Methods:
 
 - ``coupling`` - :class:`interprim.models.coupling.CouplingModel` with its defaults;
 - ``ip`` - :class:`interprim.InteractionPrimitive` with its defaults;
-- ``prior`` - :class:`interprim.models.demonstrations.PriorMean`; ``nn`` - :class:`interprim.models.demonstrations.NearestNeighbour`.
+- ``prior`` - :class:`interprim.models.demonstrations.PriorMean`; ``nn`` -
+  :class:`interprim.models.demonstrations.NearestNeighbour`.
 
 ``coupling`` and ``ip`` are given the phase in two ways: ``true`` (the true fraction seen; the
 coupling is told its std is 0) and ``clock`` (elapsed time / mean training duration, clipped to 1;
@@ -149,7 +150,8 @@ def summarise(records):
 def tables(summary, fractions):
     labels = ["coupling-true", "coupling-clock", "ip-true", "ip-clock", "nn"]
     lines = ["## agent 2 whole-movement RMSE, ratio to the prior mean (prior RMSE in m in the last column)", ""]
-    head = "| interaction | method | " + " | ".join(f"{int(round(f * 100))} %" for f in fractions) + " | mean 40/60/80 |"
+    head = ("| interaction | method | " + " | ".join(f"{int(round(f * 100))} %" for f in fractions)
+            + " | mean 40/60/80 |")
     lines += [head, "|" + "---|" * (len(fractions) + 3)]
     agg = {lab: [] for lab in labels}
     for a, am in summary.items():
@@ -196,7 +198,8 @@ def tables(summary, fractions):
                 if ideal:
                     lines.append(f"| {lab} | {name} | same for a calibrated Gaussian | "
                                  + " | ".join(f"{x:.2f}" for x in ideal) + " |")
-                    lines.append(f"| {lab} | {name} | RMS of error/std | " + " | ".join(f"{x:.2f}" for x in zrms) + " |")
+                    lines.append(f"| {lab} | {name} | RMS of error/std | "
+                                 + " | ".join(f"{x:.2f}" for x in zrms) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -237,7 +240,8 @@ def _run(args, methods, out, load_nuisi, single_thread, t_start):
             d = load_nuisi(args.data, action=a, observed=args.observed, controlled=args.controlled)
             demos, obs = list(d.demos), list(d.observed_dofs)
             n = len(demos)
-            idx = range(n) if args.max_demos is None else np.unique(np.linspace(0, n - 1, min(args.max_demos, n)).astype(int))
+            idx = (range(n) if args.max_demos is None
+                   else np.unique(np.linspace(0, n - 1, min(args.max_demos, n)).astype(int)))
             for j in idx:
                 for r in run_fold(demos, obs, float(d.dt), int(j), methods=methods,
                                   coupling_kw=json.loads(args.coupling_kw)):

@@ -359,7 +359,8 @@ def _run_highfive(out_dir, config, progress, log):
     val = generate_highfive(cfg.n_val, seed=cfg.seed + 2_000_003, region="train", **gen_kw)
     timing["data_s"] = time.perf_counter() - t0
     log(f"data: {cfg.n_train} train / {cfg.n_test} test / {cfg.n_val} validation interactions "
-        f"in {timing['data_s']:.1f} s (max hand error {1000 * max(train.hand_errors.max(), test.hand_errors.max()):.2g} mm)")
+        f"in {timing['data_s']:.1f} s "
+        f"(max hand error {1000 * max(train.hand_errors.max(), test.hand_errors.max()):.2g} mm)")
 
     t0 = time.perf_counter()
     model, sigma2, scores = _select_sigma2(train, val, cfg, progress)
@@ -497,7 +498,8 @@ def format_summary(results) -> str:
         return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.1f} cm"
 
     lines.append(
-        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {cm(md['ip'])}, IP-lik {cm(md.get('ip_likelihood'))}, "
+        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {cm(md['ip'])}, "
+        f"IP-lik {cm(md.get('ip_likelihood'))}, "
         f"IP-def {cm(md.get('ip_default'))}, "
         f"prior {cm(md['prior'])}, NN {cm(md['nn'])}"
     )
@@ -577,8 +579,10 @@ def write_report(results) -> str:
           f"Goal spread (RMS distance of the {f6['n_samples']} sampled end points from their mean): example "
           f"(test interaction {f6['example_test_index']}) {100 * f6['goal_spread_m_example'][0]:.1f} cm at 40 %, "
           f"{100 * f6['goal_spread_m_example'][1]:.1f} cm at 60 %; mean over all test interactions "
-          f"{100 * f6['goal_spread_m_mean_over_test'][0]:.1f} cm and {100 * f6['goal_spread_m_mean_over_test'][1]:.1f} cm "
-          f"(spread shrinks in {100 * f6['fraction_of_test_where_spread_shrinks_40_to_60']:.0f} % of test interactions).",
+          f"{100 * f6['goal_spread_m_mean_over_test'][0]:.1f} cm and "
+          f"{100 * f6['goal_spread_m_mean_over_test'][1]:.1f} cm "
+          f"(spread shrinks in {100 * f6['fraction_of_test_where_spread_shrinks_40_to_60']:.0f} % "
+          "of test interactions).",
           "", "![fig6](fig6_samples.png)", ""]
     if "animation" in results["files"]:
         a = results.get("animation") or {}

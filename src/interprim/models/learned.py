@@ -17,8 +17,8 @@ contract of :mod:`interprim.models.base` (``fit``, ``predict``, ``stream``, ``sa
 ``set_params``); its prediction is a :class:`~interprim.models.base.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout from a
-robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
+It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout
+from a robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
 features) and ``n_in`` resampled points (the coupling's observation); :meth:`LearnedInteraction.stream` returns a
 :class:`LearnedStream` whose answer is, bitwise, ``predict`` of the frames seen.
 """

@@ -226,7 +226,8 @@ def fast_state(model):
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
-    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_batch` (all candidates at once)."""
+    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_batch` (all candidates at
+    once)."""
     M, n_o = z.shape
     n_steps = Zh.shape[0] - 1
     q = Zh.shape[1]

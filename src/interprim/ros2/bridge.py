@@ -7,8 +7,8 @@ into ``model.stream()`` and publishes, for each message that gave at least one f
 * the response (``pred.response(points)``) as ``trajectory_msgs/msg/JointTrajectory`` (joint names: the model's
   controlled columns; ``time_from_start``: the prediction's seconds ahead; ``header.stamp``: the time of the grid
   frame it answers; each point's velocities and accelerations from the spline through the points:
-  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model whose
-  controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
+  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model
+  whose controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
 * on ``<publish>/status`` a ``diagnostic_msgs/msg/DiagnosticArray`` with one status: level OK (WARN when the
   partner is out of the training range), and the values ``phase``, ``normalised_time``, ``speed``,
   ``duration``, ``out_of_range``, ``input_distance``, ``n_observed``, ``frame_time`` and, per controlled column,

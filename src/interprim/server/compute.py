@@ -89,8 +89,8 @@ def frame_problem(op: OpenModel, frame: np.ndarray) -> str | None:
 
 
 class Recognition:
-    """Which of a ``"recognise"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
-    the frames of the current interaction.
+    """Which of a ``"recognise"`` session's candidates is being observed:
+    :class:`interprim.models.recognition.Recogniser` on the frames of the current interaction.
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
     all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
@@ -166,8 +166,8 @@ def _json_array(a) -> str:
     """A 1-D or 2-D float array as JSON text, about 7 significant digits.
 
     With :mod:`orjson` installed: the array rounded to float32 and written with the shortest text
-    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).  Without:
-    ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
+    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).
+    Without: ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
     fast as ``json.dumps(a.tolist())``).  Raises ``FloatingPointError`` on NaN/inf, which are not
     JSON (and on values beyond the float32 range with orjson).
     """
@@ -230,7 +230,8 @@ def _column_slice(cols, n_dofs):
 class _MeanRollout:
     """``pred.trajectory(n)[:, cols]`` for the predictions of one model: the prediction contract's
     :meth:`~interprim.models.base.BasePrediction.mean_rollout`, made from the first prediction (for an
-    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design built once).
+    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design
+    built once).
     """
 
     __slots__ = ("n", "sel", "fn")

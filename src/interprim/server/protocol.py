@@ -96,7 +96,8 @@ def _reject_constant(name: str):
     raise ProtocolError("bad_json", f"message is not valid JSON: non-standard constant {name} (use finite numbers)")
 
 
-_DECODER = json.JSONDecoder(parse_constant=_reject_constant)  # one decoder: json.loads(...) with options builds one per call
+# one decoder: json.loads(...) with options builds one per call
+_DECODER = json.JSONDecoder(parse_constant=_reject_constant)
 
 
 def check_hello(msg: dict) -> dict:
@@ -162,7 +163,8 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
         cands = [name]
     points = msg.get("points", default_points)
     if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= max_points:
-        raise ProtocolError("bad_message", f"open.points must be an integer in [2, {max_points}], got {_describe(points)}")
+        raise ProtocolError("bad_message",
+                            f"open.points must be an integer in [2, {max_points}], got {_describe(points)}")
     std = msg.get("std", False)
     if not isinstance(std, bool):
         raise ProtocolError("bad_message", f"open.std must be true or false, got {_describe(std)}")

@@ -402,8 +402,8 @@ class Sessions:
             t = P.frame_stamp(msg)
         if not s.bucket.take():
             await self._reply_error(
-                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"),
-                seq, t)
+                s, P.ProtocolError("rate_limited",
+                                   f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"), seq, t)
             return False
         try:
             if is_frame:
@@ -455,12 +455,13 @@ class Sessions:
             for e in entries:
                 P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
             rec = None
-            if len(entries) > 1:  # "recognise": the Recogniser must take the candidates (made here, used in this process)
+            # "recognise": the Recogniser must take the candidates (made here, used in this process)
+            if len(entries) > 1:
                 try:
                     rec = Recognition(entries)
                 except (TypeError, ValueError, AttributeError) as exc:
-                    raise P.ProtocolError("bad_message", f"'recognise' cannot recognise among {o['candidates']}: {exc}") \
-                        from None
+                    raise P.ProtocolError(
+                        "bad_message", f"'recognise' cannot recognise among {o['candidates']}: {exc}") from None
             streams, cols = [], []
             for e in entries:
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")

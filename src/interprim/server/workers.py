@@ -5,8 +5,8 @@ arrays, so threads do not run it in parallel (the GIL).  With ``--processes N`` 
 pinned to one of N worker processes, which owns that session's ``model.stream()``; the event loop
 only does the network I/O.  A slow session then only delays the sessions of its own worker.
 
-Models reach the workers as safe ``.npz`` model files (``model.save`` / :func:`interprim.load_any`, whatever model a file holds);
-requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
+Models reach the workers as safe ``.npz`` model files (``model.save`` / :func:`interprim.load_any`, whatever model a
+file holds); requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
 pickle).  A request is one JSON header line, then (for frames) the frames as raw little-endian float64
 values; a reply is one JSON header line, then (for predictions) the finished JSON texts for the
 client, one per line, so they are not encoded twice.  A session's pending frames go to its worker in

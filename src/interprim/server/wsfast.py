@@ -16,8 +16,8 @@ asynchronous context manager.  At 10,000 frames/s that is most of the server's o
   message is a protocol error (RFC 6455 Sec. 5.4) that the library answers with 1002, so it goes there.
   ``tests/server/test_server_conformance.py`` sends the same malformed sequences (those of the library's own test
   suite: fragmentation, control frames, masking, reserved bits, UTF-8, sizes, close frames) to a server
-  with and without this path and requires the same answers and close codes.  The fast path switches itself off for good (the library
-  then gets every byte) when the connection leaves the OPEN state, when a frame announces more than
+  with and without this path and requires the same answers and close codes.  The fast path switches itself off for good
+  (the library then gets every byte) when the connection leaves the OPEN state, when a frame announces more than
   ``max_size`` bytes, and when it cannot know that the library's parser is at a frame boundary (bytes
   left over from the handshake).
 * :func:`write_now` writes a reply's text frame to the transport at once when nothing else is being

@@ -553,7 +553,8 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
 
 @njit(cache=True, fastmath=_FM)
 def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, logel, mu, sd, max_gap,
-               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js, s_out, lp_out):
+               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js,
+               s_out, lp_out):
     """One online phase update on the speed lattice; returns ``(j, s)``: the chosen lattice index and phase.
 
     Candidates: ``j = kc - nh .. kc + nh`` at ``s_j = v0 exp(dlog j) (M - 1)``; those above 1 are scored once at

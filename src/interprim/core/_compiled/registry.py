@@ -4,8 +4,9 @@ Every kernel called from Python is one row of :data:`KERNELS`: where the compile
 module of :mod:`interprim.core._compiled`, which imports numba) and where its numpy reference lives (a
 module that does not import numba, so that the reference runs with ``INTERPRIM_JIT=0``, without numba,
 and while a cold cache compiles in the background).  Kernel and reference sit side by side in one row
-(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other, kernel by kernel, in one process (``tests/compiled/test_kernels_equivalence.py``,
-which also runs with ``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
+(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other,
+kernel by kernel, in one process (``tests/compiled/test_kernels_equivalence.py``, which also runs with
+``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
 
 Callers ask for a kernel by name; whether the compiled kernels are in use is decided once, by
 :func:`interprim.core._compiled.loader.ready` (its environment switches and cold-start behaviour):

@@ -1,7 +1,7 @@
 """What an Interaction Primitive learned, and the one path of its predictions (paper Sec. III, Eq. 1-18).
 
-:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: the
-hyper-parameters it was fitted with, the DMP basis and rollout (Eq. 1-2), the per-agent PCA and latent maps
+:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.models.primitive.estimator.InteractionPrimitive`:
+the hyper-parameters it was fitted with, the DMP basis and rollout (Eq. 1-2), the per-agent PCA and latent maps
 (Sec. IV), the demonstrations' parameters and the prior ``p(theta)`` (Eq. 10) with its conditioner
 (Eq. 16-18), the observation noise, the phase model and its reference (Sec. III-B), the observation
 statistics (Eq. 13-15), the calibration and the input range.  Every ``fit`` builds a new one
@@ -13,10 +13,11 @@ in its own store (:meth:`FittedPrimitive.cached`), so a refit, which makes a new
 derived from the previous fit.
 
 Its attribute names are the estimator's fitted attributes (names ending in ``_``, documented in
-:class:`~interprim.models.primitive.estimator.InteractionPrimitive`) and constructor parameters, so that a reader finds one
-name for one thing; the estimator shows them as read-only views.  :class:`~interprim.models.primitive.prediction.Prediction`,
-:class:`~interprim.models.primitive.stream.Stream`, :mod:`interprim.phase`, :mod:`interprim.models.primitive.selection`,
-:mod:`interprim.models.primitive.calibration` and :mod:`interprim.models.recognition` work on this object, not on the estimator.
+:class:`~interprim.models.primitive.estimator.InteractionPrimitive`) and constructor parameters, so that a reader finds
+one name for one thing; the estimator shows them as read-only views.
+:class:`~interprim.models.primitive.prediction.Prediction`, :class:`~interprim.models.primitive.stream.Stream`,
+:mod:`interprim.phase`, :mod:`interprim.models.primitive.selection`, :mod:`interprim.models.primitive.calibration` and
+:mod:`interprim.models.recognition` work on this object, not on the estimator.
 """
 
 from __future__ import annotations
@@ -104,8 +105,8 @@ class FittedPrimitive:
 
     def with_fitted(self, **fitted) -> FittedPrimitive:
         """A copy with some fitted attributes (names ending in ``_``) replaced, e.g. the prior re-estimated on a
-        subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the other
-        fitted arrays and has its own store of derived values; ``self`` is unchanged."""
+        subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the
+        other fitted arrays and has its own store of derived values; ``self`` is unchanged."""
         bad = [k for k in fitted if not k.endswith("_") or k.startswith("_") or not hasattr(self, k)]
         if bad:
             raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
@@ -156,8 +157,8 @@ class FittedPrimitive:
     @classmethod
     def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> FittedPrimitive:
         """The state of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's), every array checked
-        (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
-        ``meta["params"]`` with the defaults filled in)."""
+        (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters
+        (a file's ``meta["params"]`` with the defaults filled in)."""
         from .state_io import fitted_from_state
 
         return cls(params, fitted_from_state(arrays, meta, params, source))
@@ -167,9 +168,10 @@ class FittedPrimitive:
     def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> FittedPrimitive:
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
-        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec. III-B), the
-        input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``, ``ctrl``: the agents'
-        columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter check returns)."""
+        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec.
+        III-B), the input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``, ``ctrl``:
+        the agents' columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter check
+        returns)."""
         st = cls(params)
         cls._learn(st, arrays, dt, columns, obs, ctrl, kk)
         return st
@@ -407,8 +409,8 @@ class FittedPrimitive:
     @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> Prediction:
-        """:meth:`InteractionPrimitive.predict <interprim.models.primitive.estimator.InteractionPrimitive.predict>` (the same
-        arguments): validate and resample the partial observation, estimate its phase, condition (Eq. 13-18)."""
+        """:meth:`InteractionPrimitive.predict <interprim.models.primitive.estimator.InteractionPrimitive.predict>` (the
+        same arguments): validate and resample the partial observation, estimate its phase, condition (Eq. 13-18)."""
         n_cols = len(self.observed_dofs_)
         o = as_2d_finite(partial, "partial", n_cols=n_cols, min_rows=1)
         if times is not None:
@@ -429,7 +431,8 @@ class FittedPrimitive:
         return mark(self, p, dist)
 
     def stream(self, robot_state=None):
-        """Online predictor that takes one observed frame at a time (:class:`~interprim.models.primitive.stream.Stream`)."""
+        """Online predictor that takes one observed frame at a time
+        (:class:`~interprim.models.primitive.stream.Stream`)."""
         from .stream import Stream
 
         return Stream(self, robot_state)
@@ -518,8 +521,8 @@ class FittedPrimitive:
         return (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size), y0
 
     def conditioner(self):
-        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.core.gaussian.LowRankConditioner`),
-        or ``None`` when the prior has no such form."""
+        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior
+        (:class:`~interprim.core.gaussian.LowRankConditioner`), or ``None`` when the prior has no such form."""
         return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: self.prior_.conditioner(
             self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 

@@ -152,8 +152,8 @@ class Prediction(BasePrediction):
 
     def _calibration_scale(self, n: int):
         """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``
-        (:mod:`interprim.models.primitive.calibration`: per column, at this prediction's phase and each point's look-ahead
-        ``u - phase``), or ``None``."""
+        (:mod:`interprim.models.primitive.calibration`: per column, at this prediction's phase and each point's
+        look-ahead ``u - phase``), or ``None``."""
         m = self._m
         cal = getattr(m, "calibration_", None)
         if cal is None:
@@ -166,8 +166,8 @@ class Prediction(BasePrediction):
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
         ``calibrated=True`` (default): the posterior std (Eq. 18) scaled by the model's
-        :class:`~interprim.models.primitive.calibration.Calibration` (held-out errors on the training demonstrations), per
-        column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
+        :class:`~interprim.models.primitive.calibration.Calibration` (held-out errors on the training demonstrations),
+        per column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
         included), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what happens;
         ``False``, or a model without calibration: the posterior std itself.
         """

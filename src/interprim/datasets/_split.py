@@ -74,9 +74,9 @@ def parse_ranges(text, where: str, first: int, last: int) -> list:
     out = []
     for item in items:
         if isinstance(item, str):
-            a, sep, b = item.partition("-")
+            first_text, sep, last_text = item.partition("-")
             try:
-                a, b = int(a), int(b)
+                a, b = int(first_text), int(last_text)
             except ValueError:
                 raise DataFileError(f"{where}: split_frames {item!r} is not a frame range FIRST-LAST") from None
             if not sep:

@@ -291,6 +291,7 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     test = ds.demos[int(demo)]
     prefixes = Prefixes(ds, ds.observed_dofs)
     train = [d for i, d in enumerate(ds.demos) if i != int(demo)]
+    assert ds.observed_dofs is not None and ds.dt is not None  # load_nuisi sets both
     obs = list(ds.observed_dofs)
     models = {label: InteractionPrimitive(observed_dofs=obs, **kw).fit(train, dt=ds.dt)
               for label, kw in (methods or NUISI_FIGURE_METHODS).items()}

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 
@@ -110,7 +111,8 @@ class Task:
     dt: float
     point_dim: int = 1
     columns: list = field(default_factory=list)
-    prefixes: object = None  # Prefixes: causal observed prefixes (None: the first frames of the arrays)
+    # Prefixes: causal observed prefixes (None: the first frames of the arrays)
+    prefixes: Callable[[int, int], np.ndarray] | None = None
 
     def prefix(self, j: int, k: int):
         """The first ``k`` observed frames of demonstration ``j`` as a robot had them (causal)."""
@@ -132,6 +134,7 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
             from .nested import split_holdout
 
             d = d.take(split_holdout(len(d))[0])
+        assert d.observed_dofs is not None and d.dt is not None  # load_nuisi sets both
         return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns),
                     Prefixes(d, d.observed_dofs))
     if dataset == "synthetic":
@@ -205,7 +208,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
     n = cfg.n_out
     truth = time_normalise(test, n)
     base, plus, suffix = method.partition("+")
-    variants = [(method, None)]
+    variants: list[tuple[str, str | None]] = [(method, None)]
     if base in ("ip-forcing", "ip-position"):
         # one fit, three ways to get the phase: likelihood (the method), the paper's DTW, the true phase
         variants = [(f"{base}{'' if v == 'likelihood' else '-' + v}{plus}{suffix}", v) for v in PHASE_VARIANTS]
@@ -347,7 +350,8 @@ def run_sweep(datasets=("nuisi",), methods=METHODS, cfg: EvalConfig = EvalConfig
         cluster = None if scheduler else LocalCluster(n_workers=max(1, n_jobs if n_jobs > 0 else 2),
                                                       threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(scheduler or cluster)
-    folds, recog = [], []
+    folds: list = []
+    recog: list = []
     try:
         with parallel_config(backend=backend, n_jobs=n_jobs, inner_max_num_threads=1 if backend == "loky" else None):
             gen = Parallel(return_as="generator_unordered")(delayed(_run_job)(jb, cfg) for jb in jobs)

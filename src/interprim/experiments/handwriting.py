@@ -249,11 +249,12 @@ def run_handwriting(
 
         bar = tqdm(total=total, desc="handwriting folds", unit="fold", leave=False)
     per_item = {}
-    examples = {}
+    examples: dict = {}
     for it in items:
         D = it.demos[0].shape[1]
-        err = {m: {"rmse": [[] for _ in percents], "rmse_unseen": [[] for _ in percents]} for m in methods}
-        phase_err = [[] for _ in percents]
+        err: dict[str, dict[str, list[list]]] = {
+            m: {"rmse": [[] for _ in percents], "rmse_unseen": [[] for _ in percents]} for m in methods}
+        phase_err: list[list] = [[] for _ in percents]
         for fi, test_idx in enumerate(folds_of[it.name]):
             train = [it.demos[i] for i in range(len(it.demos)) if i not in set(test_idx.tolist())]
             models = {

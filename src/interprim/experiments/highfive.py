@@ -103,7 +103,7 @@ class HighFiveConfig:
     @classmethod
     def quick(cls, **kw) -> HighFiveConfig:
         """A smaller run for tests and smoke checks (about a quarter of the work)."""
-        base = dict(n_train=30, n_test=8, n_val=6, sigma2_grid=(100.0, 1000.0), n_samples=20, gif_frames=16)
+        base: dict = dict(n_train=30, n_test=8, n_val=6, sigma2_grid=(100.0, 1000.0), n_samples=20, gif_frames=16)
         base.update(kw)
         return cls(**base)
 
@@ -255,7 +255,7 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
     prior_goal = ca.hand(prior[-1, 2:])
     train_obs = [d[:, :2] for d in train.demos]
 
-    out = {
+    out: dict = {
         "mse_obs": {m: np.full((n_te, n_p), np.nan) for m in METHODS},
         "mse_ctrl": {m: np.full((n_te, n_p), np.nan) for m in METHODS},
         "goal_err": {m: np.full((n_te, n_p), np.nan) for m in METHODS},

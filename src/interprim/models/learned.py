@@ -43,7 +43,7 @@ def _Prediction(cp: GridPrediction, est) -> GridPrediction:
                          cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
                          conditioned=cp.conditioned)
     out.speed = float(est.speed)
-    out.phase_estimate = est
+    out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
     return out
 
 

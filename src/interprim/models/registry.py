@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from .demonstrations import NearestNeighbour, PriorMean
 from .kernel import KernelDemonstrations
@@ -57,7 +58,8 @@ class Settings:
 
 
 def _ip(s: Settings, **extra):
-    kw = dict(observed_dofs=list(s.observed_dofs), n_basis=s.n_basis, smoothing_window=s.smoothing_window)
+    kw: dict[str, Any] = dict(observed_dofs=list(s.observed_dofs), n_basis=s.n_basis,
+                             smoothing_window=s.smoothing_window)
     if s.phase_method is not None:
         kw["phase_method"] = s.phase_method
     kw.update(extra)

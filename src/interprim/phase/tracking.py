@@ -37,7 +37,8 @@ _MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
     """Candidates of :func:`interprim.core._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the
     clipped ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
-    js, ss = [], []
+    js: list = []
+    ss: list = []
     for j in range(kc - nh, kc + nh + 1):
         s = float(v0 * np.exp(dlog * j)) * (M - 1)
         if s < S_MIN:

@@ -131,7 +131,7 @@ def _message_class(full: str):
     if not fields:  # an empty ROS message carries one uint8 on the wire (rosidl's structure_needs_at_least_one_member)
         fields["structure_needs_at_least_one_member"] = types.uint8
     cls = make_idl_struct(full.split("/")[-1] + "_", dds_type_name(full), fields)
-    cls.__ros_type__ = full
+    cls.__ros_type__ = full  # type: ignore[attr-defined]  # the ROS name, read back by the bridge
     return cls
 
 

@@ -348,7 +348,7 @@ class ServerThread:
     def __init__(self, server: InterprimServer):
         self.server = server
         self.loop = None
-        self._thread = None
+        self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error = None
 

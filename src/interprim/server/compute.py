@@ -159,7 +159,7 @@ _NONFINITE = "the model produced non-finite values for this frame"
 try:  # optional accelerator: numpy arrays to JSON in compiled code
     import orjson as _orjson
 except ImportError:  # pragma: no cover - depends on the installation
-    _orjson = None
+    _orjson = None  # type: ignore[assignment]  # the module or None, tested before each use
 
 
 def _json_array(a) -> str:

@@ -282,7 +282,8 @@ class Sessions:
             s.closing = True
             s.close_reason = reason
             # Bypass the full queue: close now (the library aborts the TCP connection after close_timeout).
-            s.writer.cancel()
+            if s.writer is not None:
+                s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
 
     def _fatal(self, s: Session, code: int, reason: str, message: dict | None = None, level=logging.WARNING) -> None:
@@ -298,7 +299,8 @@ class Sessions:
         try:
             s.out.put_nowait((_CLOSE, code, reason[:120]))
         except asyncio.QueueFull:
-            s.writer.cancel()
+            if s.writer is not None:
+                s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
 
     def _error(self, s: Session, exc: P.ProtocolError, seq=None, t=None) -> None:
@@ -407,10 +409,12 @@ class Sessions:
             return False
         try:
             if is_frame:
+                assert seq is not None  # counted above
                 await self._on_frame(s, data, msg, seq)
                 return True
             if s.queued:  # answer the frames received before this message first
                 await self._until(s, lambda: not s.queued)
+            assert msg is not None  # a control message is parsed text
             await self._on_control(s, msg)
         except P.ProtocolError as exc:
             await self._reply_error(s, exc, seq, t)

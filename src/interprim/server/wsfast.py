@@ -32,12 +32,18 @@ connection, and without them the library does everything, as before.
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING
 
 try:
     from websockets.frames import apply_mask  # the library's C speedup when built, else its Python version
     from websockets.protocol import OPEN
 except ImportError:  # pragma: no cover - websockets is a dependency of the server
-    apply_mask = OPEN = None
+    apply_mask = OPEN = None  # type: ignore[assignment]  # the server's extra is missing: nothing here runs
+
+if TYPE_CHECKING:  # the mixin's methods call and read the connection class it is mixed into
+    from websockets.asyncio.server import ServerConnection as _Connection
+else:
+    _Connection = object
 
 _TEXT, _BINARY = 0x1, 0x2
 
@@ -86,7 +92,7 @@ def write_now(conn, data) -> bool:
         return False
 
 
-class FastFrames:
+class FastFrames(_Connection):
     """Mixin for a :class:`websockets.asyncio.server.ServerConnection` subclass: see the module's docstring."""
 
     fast_frame = None  # set by the session: callable(str | bytes) -> bool

@@ -276,7 +276,7 @@ def generate_highfive(
     else:
         from joblib import Parallel, delayed
 
-        tasks = [t[:-1] + (None,) for t in tasks]
+        tasks = [t[:-1] + ({},) for t in tasks]  # no cache shared across processes
         results = Parallel(n_jobs=n_jobs, return_as="generator")(delayed(_solve_one)(t) for t in tasks)
         results = list(tqdm(results, total=n, desc=desc, disable=not progress, leave=False))
     n_fail = sum(not r[6] for r in results)

@@ -400,7 +400,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
     t_all = np.arange(n) * physics_dt
     frame_time, phase, latency = [], [], []
     out_of_range = False
-    Y = dY = ddY = None
+    Y = dY = ddY = np.empty((0, 3))  # set at the partner's first frame
     s_k = D_k = t_k = 0.0
     grid = np.linspace(0.0, 1.0, n_grid)
     i = 0
@@ -426,7 +426,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
             sim.set_human(qh, qhd)
             s = s_k + (t - t_k) / D_k
             if s >= 1.0:
-                ref = (Y[-1], np.zeros(3), np.zeros(3))
+                ref: tuple = (Y[-1], np.zeros(3), np.zeros(3))
             else:
                 sc = max(s, 0.0)
                 ref = tuple(interp_columns(sc, grid, A[:, :3]) * f

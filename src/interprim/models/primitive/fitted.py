@@ -75,13 +75,17 @@ class FittedPrimitive:
     :meth:`with_fitted`, :meth:`with_params`, :meth:`to_state` / :meth:`from_state`.
     """
 
+    # constructor parameters, installed from ``params`` (PARAM_NAMES) by __init__ and read as attributes
+    phase_method: str
+    min_observed: int
+
     def __init__(self, params: dict, fitted: dict | None = None):
         missing = [k for k in PARAM_NAMES if k not in params]
         if missing:
             raise ValueError(f"FittedPrimitive: parameters {missing} missing")
         self.params = {k: params[k] for k in PARAM_NAMES}
         self.__dict__.update(self.params)
-        self._derived = {}
+        self._derived: dict = {}
         if fitted:
             bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
             if bad:

@@ -76,7 +76,7 @@ class Prediction(BasePrediction):
         self.out_of_range = False
 
     @property
-    def conditioned(self) -> bool:
+    def conditioned(self) -> bool:  # type: ignore[override]  # an attribute of GridPrediction, computed here
         """Whether the posterior is conditioned on the observed frames.  ``False`` while fewer than the
         model's ``min_observed`` frames (or only a phase of 0) were seen: the prediction is then the prior
         (the mean interaction from the first frame), ``log_likelihood`` is 0 and ``phase``/``speed``/``duration``
@@ -104,6 +104,7 @@ class Prediction(BasePrediction):
         access after a mean-only (streaming) update."""
         if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
             self._post = self._m.condition(self._stats, need_cov=True)
+        assert self._post.cov is not None  # asked for above
         return self._post.cov
 
     @property

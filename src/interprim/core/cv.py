@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["FOLD_ORDERS", "MIN_OBSERVED_FRAMES", "n_folds", "fold_labels", "folds", "paired_gain", "within_one_se",
            "observed_frames"]
@@ -66,7 +67,8 @@ def n_folds(requested: int | None, n: int) -> int:
     return int(min(max(int(requested), 2), n))
 
 
-def fold_labels(n: int, k: int | None, order: str = "interleaved", rng=None) -> np.ndarray:
+def fold_labels(n: int, k: int | None, order: str = "interleaved",
+                rng: np.random.Generator | None = None) -> np.ndarray:
     """The fold of each of ``n`` demonstrations, shape ``(n,)``, values ``0 .. k' - 1``.
 
     Parameters
@@ -91,7 +93,8 @@ def fold_labels(n: int, k: int | None, order: str = "interleaved", rng=None) -> 
     return labels
 
 
-def folds(n: int, k: int | None, order: str = "interleaved", rng=None) -> list:
+def folds(n: int, k: int | None, order: str = "interleaved",
+          rng: np.random.Generator | None = None) -> list[np.ndarray]:
     """Held-out index sets of a ``k``-fold cross-validation over ``n`` demonstrations.
 
     Every index ``0 .. n - 1`` is in exactly one set; the sets are sorted and the result is deterministic
@@ -139,7 +142,8 @@ def folds(n: int, k: int | None, order: str = "interleaved", rng=None) -> list:
 
 
 # --------------------------------------------------------------------------------- one-standard-error rule
-def paired_gain(reference, candidate, axis: int = 0):
+def paired_gain(reference: ArrayLike, candidate: ArrayLike,
+                axis: int = 0) -> tuple[float | np.ndarray, float | np.ndarray]:
     """How much ``candidate`` improves on ``reference`` over paired held-out cases, and its standard error.
 
     Parameters
@@ -165,7 +169,7 @@ def paired_gain(reference, candidate, axis: int = 0):
     return gain, d.std(axis=axis, ddof=1) / math.sqrt(m)
 
 
-def within_one_se(errors) -> np.ndarray:
+def within_one_se(errors: ArrayLike) -> np.ndarray:
     """Candidates whose mean error exceeds the best's by at most one paired standard error.
 
     Parameters
@@ -190,7 +194,7 @@ def within_one_se(errors) -> np.ndarray:
         excess, se = paired_gain(flat, flat[:, best][:, None], axis=0)
         ok = (excess <= se) & np.isfinite(flat.mean(axis=0))
     ok[best] = True
-    return ok.reshape(E.shape[1:])
+    return np.asarray(ok.reshape(E.shape[1:]))
 
 
 # ------------------------------------------------------------------------------------------- the prefix rule

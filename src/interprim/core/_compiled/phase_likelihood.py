@@ -35,6 +35,9 @@ factorisation; no BLAS call (so no thread pool to limit).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numba import njit
 
@@ -634,7 +637,7 @@ def track_buffers(q: int, n_o: int, n: int, n_slots: int = N_SLOTS):
             np.zeros(MAX_CANDIDATES))
 
 
-def warm_batch(fn):
+def warm_batch(fn: Callable[..., Any]) -> None:
     """Compile (or load from numba's cache) :func:`phase_loglik_batch` with tiny inputs of the real types."""
     rng = np.random.default_rng(0)
     K, q, n_o, n, M = 8, 3, 2, 2, 4
@@ -645,7 +648,7 @@ def warm_batch(fn):
        np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
 
 
-def warm_track(fn, s_min=0.02):
+def warm_track(fn: Callable[..., Any], s_min: float = 0.02) -> None:
     """Compile (or load from numba's cache) :func:`track_step` with tiny inputs of the real types."""
     rng = np.random.default_rng(0)
     K, q, n_o, n, M = 8, 3, 2, 2, 6

@@ -37,7 +37,7 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         two frames the DTW phase).
     dtw : (int, float), optional
         ``(n_star, cost)`` of the open-end DTW of ``z``, when already known (an incremental DTW).
-    tracker : interprim.phase.tracking._Tracker, optional
+    tracker : interprim.phase.tracking.Tracker, optional
         Online likelihood phase (a stream's): one local search step on ``z`` instead of a full search.
 
     Returns

@@ -293,7 +293,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# online tracking on a lattice of speeds (interprim.phase.tracking._Tracker)
+# online tracking on a lattice of speeds (interprim.phase.tracking.Tracker)
 #
 # A stream's candidates are speeds ``v_j = v0 exp(dlog j)`` (integer ``j``): frame ``m`` of candidate ``j`` sits
 # at phase ``v_j m`` whatever the number of frames seen, so each lattice point keeps its statistics ``G``,
@@ -566,7 +566,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
     plus, with ``prior``, the log-normal duration prior (``logel`` = log elapsed time).  Ties: the smallest ``s``.
     Every scored candidate's phase and score are written to ``s_out[j - kc + nh]``, ``lp_out[j - kc + nh]``
     (``-inf`` where a candidate was merged into a clipped one), for the refinement of
-    :class:`interprim.phase.tracking._Tracker`.
+    :class:`interprim.phase.tracking.Tracker`.
     """
     for t in range(2 * nh + 1):
         s_out[t] = -1.0

@@ -101,11 +101,12 @@ class GaussianPrior:
 
     def __getattr__(self, name: str) -> np.ndarray:
         # ``cov`` of a factored prior: diag(diag) + factor factor^T, built on first use and then kept
-        if name != "cov" or self.__dict__.get("factor") is None or self.__dict__.get("diag") is None:
+        diag, factor = self.__dict__.get("diag"), self.__dict__.get("factor")  # (not through __getattr__ again)
+        if name != "cov" or factor is None or diag is None:
             raise AttributeError(f"GaussianPrior has no attribute {name!r}")
-        U = np.asarray(self.factor, dtype=np.float64)
+        U = np.asarray(factor, dtype=np.float64)
         cov = U @ U.T
-        cov[np.diag_indices(cov.shape[0])] += self.diag
+        cov[np.diag_indices(cov.shape[0])] += diag
         self.cov = cov
         return cov
 

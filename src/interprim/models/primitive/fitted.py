@@ -172,10 +172,10 @@ class FittedPrimitive:
     def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> FittedPrimitive:
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
-        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec.
-        III-B), the input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``, ``ctrl``:
-        the agents' columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter check
-        returns)."""
+        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference
+        (Sec. III-B), the input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``,
+        ``ctrl``: the agents' columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter
+        check returns)."""
         st = cls(params)
         cls._learn(st, arrays, dt, columns, obs, ctrl, kk)
         return st

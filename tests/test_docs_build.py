@@ -96,6 +96,8 @@ def test_generated_pages_and_links(site):
     assert 'href="equations/"' in home  # README's docs/equations.md, rewritten for the site
     assert "Keep a Changelog" in _page(site, "changelog") or "Unreleased" in _page(site, "changelog")
     assert "MIT License" in _page(site, "license")
+    assert "scripts/lint.sh" in _page(site, "contributing")  # CONTRIBUTING.md, its link to the architecture page
+    assert 'href="../architecture/"' in _page(site, "contributing")
     assert (site / "protocol.schema.json").is_file()
     cli = _page(site, "reference/cli")
     assert "interprim evaluate" in cli and "--scheduler" in cli

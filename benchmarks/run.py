@@ -61,7 +61,8 @@ def make_demos(S=30, Do=7, Dc=7, T=500, seed=0, stretch=(0.9, 1.1), noise=0.0):
         Tj = max(int(round(T * rng.uniform(*stretch))), 10)
         s = np.linspace(0, 1, Tj)[:, None]
         sm = 10 * s**3 - 15 * s**4 + 6 * s**5
-        y = (z @ mix)[None, :] * sm + 0.3 * np.sin(np.pi * f * s * 0.5 + z[0]) + 0.1 * z[1] * np.sin(2 * np.pi * s * f / 3)
+        y = ((z @ mix)[None, :] * sm + 0.3 * np.sin(np.pi * f * s * 0.5 + z[0])
+             + 0.1 * z[1] * np.sin(2 * np.pi * s * f / 3))
         if noise:
             y = y + noise * rng.standard_normal(y.shape)
         demos.append(y)
@@ -242,7 +243,6 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
 def bench_likelihood_phase(quick):
     """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
-    from interprim.phase import likelihood as PL
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")
@@ -393,7 +393,6 @@ def bench_promp(model, test, quick):
     partial = test[:M, :7]
     s_end = 0.5
     X, Y, _ = model.fitted_.observation_design(partial, s_end)
-    G, B = X.T @ X, X.T @ Y
     cond = LowRankConditioner.from_prior(model.prior_, model.obs_index_)
     s2 = model.sigma2_
 
@@ -436,7 +435,8 @@ def bench_promp(model, test, quick):
         Omega[i * M:(i + 1) * M, model.obs_index_[i]] = X
     lit = condition_literal(model.prior_.mean, model.prior_.cov, Omega, Y.T.reshape(-1), s2)
     e_ol = max(rel(mean, lit.mean), float(np.max(np.abs(cov - lit.cov)) / cs))
-    e_pl = max(rel(pm.weight_mean[inv], lit.mean), float(np.max(np.abs(pm.weight_cov[np.ix_(inv, inv)] - lit.cov)) / cs))
+    e_pl = max(rel(pm.weight_mean[inv], lit.mean),
+               float(np.max(np.abs(pm.weight_cov[np.ix_(inv, inv)] - lit.cov)) / cs))
     row("conditioning, mean + covariance", f"{M} frames x 7 obs DoF, P=364", ours,
         "movement-primitives ProMP.condition_position/frame", peer, agree_str(max(e_mean, e_cov)),
         note=f"cov error relative to max|prior cov|; vs literal Eq.18: ours {e_ol:.1e}, ProMP {e_pl:.1e}")
@@ -607,7 +607,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "Models of the scaling sweeps: library defaults (positions, likelihood phase) with sigma2='residual' "
            "(the CV does not change the per-frame cost).", "",
            "### With the number of DoF (half observed, half controlled; 25 basis, 500 frames, 30 demos; "
-           "fit on 100 demos)", "", "| DoF | online median | online, last 10 % | predict (250 frames) | fit (100 demos) |",
+           "fit on 100 demos)", "",
+           "| DoF | online median | online, last 10 % | predict (250 frames) | fit (100 demos) |",
            "|---|---|---|---|---|"]
     md += [f"| {D} | {fmt_t(a)} | {fmt_t(b)} | {fmt_t(c)} | {fmt_t(d)} |" for D, a, b, c, d in scal["dof"]]
     md += ["", "### With the number of basis functions (7 + 7 DoF, 500 frames)", "",
@@ -618,7 +619,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
     md += [f"| {T} | {fmt_t(a)} | {fmt_t(b)} | {fmt_t(c)} |" for T, a, b, c in scal["length"]]
     md += ["", "## How cost grows", "",
            "- **Phase** per online frame: the likelihood phase (default) scores 3 candidate speeds 1 % apart on "
-           "a fixed log-lattice (more when the best one is at an edge of them); a lattice point seen at the previous frame keeps its statistics and dense factors "
+           "a fixed log-lattice (more when the best one is at an edge of them); a lattice point seen at the "
+           "previous frame keeps its statistics and dense factors "
            "and adds the new frame by rank-1 updates, O(D_o (q^2 + q r) + r^3) per candidate, independent of M "
            "(a point entering the window, or clipped at s = 1, is scored from scratch: O(M q (q + D_o)) for the "
            "statistics in 64-frame blocks plus O(D_o (q^3 + q^2 r + q r^2))); then the batch search's last step "

@@ -47,8 +47,8 @@ def test_the_counter_sees_private_accesses(tmp_path):
 
 
 def test_no_module_sets_attributes_on_the_estimator():
-    """Outside the primitive estimator (models/primitive/estimator.py) nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
-    constructor parameters may be set): selection and calibration return
+    """Outside the primitive estimator (models/primitive/estimator.py) nothing assigns a fitted or private attribute
+    ``model.<name>_ = ...`` (or ``m.``, ...; constructor parameters may be set): selection and calibration return
     their choices, the phase likelihood keeps derived arrays in the fitted state's store
     (``FittedPrimitive.cached``), io hands the fitted attributes to ``load_fitted``; the fitted state
     (``fitted``, ``state``) is written only by its own module."""
@@ -62,7 +62,8 @@ def test_no_module_sets_attributes_on_the_estimator():
             for t in targets:
                 for el in (t.elts if isinstance(t, ast.Tuple) else [t]):
                     if (isinstance(el, ast.Attribute) and isinstance(el.value, ast.Name) and el.value.id in (
-                            "model", "m", "ip", "est", "estimator", "fitted", "state") and (el.attr.endswith("_") or el.attr[0] == "_")):
+                            "model", "m", "ip", "est", "estimator", "fitted", "state")
+                            and (el.attr.endswith("_") or el.attr[0] == "_")):
                         bad.append(f"{path.relative_to(SRC)}:{el.lineno} {ast.unparse(el)}")
     assert not bad, "\n".join(bad)
 
@@ -118,8 +119,8 @@ def _entries_into(path_end: str, call):
 
 
 def test_one_predict_enters_primitive_py_once():
-    """The estimator hands a prediction to its fitted state (``interprim.models.primitive.fitted``): a ``predict`` call enters
-    models/primitive/estimator.py once (the call itself), the prediction's methods and a stream never."""
+    """The estimator hands a prediction to its fitted state (``interprim.models.primitive.fitted``): a ``predict`` call
+    enters models/primitive/estimator.py once (the call itself), the prediction's methods and a stream never."""
     import os
 
     from interprim.synthetic import two_agent_demos

@@ -68,7 +68,7 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
 
     demos = two_agent_demos(8, seed=3) if demos is None else demos
     train, held = list(demos[:-1]), np.asarray(demos[-1], dtype=np.float64)
-    out = {}
+    out: dict = {}
     model = make()
     try:
         model.predict(held[:10, :2])
@@ -101,7 +101,8 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
             "save -> load_any changed the prediction"
 
     clone = type(model)(**model.get_params(deep=False)).fit(train, dt=dt)
-    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol, atol=rtol * max(1.0, float(np.abs(Y).max()))), \
+    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol,
+                       atol=rtol * max(1.0, float(np.abs(Y).max()))), \
         "a clone fitted on the same demonstrations predicts differently"
 
     stream = model.stream()

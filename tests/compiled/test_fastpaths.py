@@ -9,13 +9,25 @@ from scipy.linalg import expm
 import interprim as ip
 from interprim.core._compiled import loader, registry
 from interprim.core._compiled.observation import StatsWorkspace
-from interprim.core.preprocessing import start_position
 from interprim.core.basis import Basis
-from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
-from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
-                                shrinkage_intensity)
+from interprim.core.dmp import (
+    LinearRollout,
+    _discretisation,
+    _expm_small,
+    fit_weights,
+    fit_weights_targets,
+    forcing_targets,
+)
+from interprim.core.gaussian import (
+    LowRankConditioner,
+    condition,
+    condition_literal,
+    fit_prior,
+    lowrank_parts,
+    shrinkage_intensity,
+)
+from interprim.core.preprocessing import derivatives, start_position
 from interprim.phase.dtw import IncrementalDTW, accumulate_np, accumulated_cost, open_end_dtw
-from interprim.core.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 

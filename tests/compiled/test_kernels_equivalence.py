@@ -20,11 +20,10 @@ import pytest
 
 import interprim as ip
 from interprim.core._compiled import registry
-from interprim.core.dmp import forcing_targets
 from interprim.core.gaussian import LowRankConditioner
+from interprim.core.preprocessing import derivatives
 from interprim.phase import likelihood as PL
 from interprim.phase.dtw import IncrementalDTW
-from interprim.core.preprocessing import derivatives
 from interprim.synthetic import two_agent_demos
 
 JIT_DISABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")

@@ -11,9 +11,9 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from interprim.datasets import load_demonstrations
-from interprim.datasets import files as csv_files
 from interprim.core.errors import DataFileError
+from interprim.datasets import files as csv_files
+from interprim.datasets import load_demonstrations
 
 T0_NS = 1_700_000_000_123_456_789  # an absolute ROS stamp (ns since 1970)
 

@@ -11,10 +11,10 @@ import pytest
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interprim.datasets import load_demonstrations, load_rosbag
 from interprim.core.errors import DataFileError, MissingExtraError
+from interprim.datasets import load_demonstrations, load_rosbag
 
 KINDS = ("ros1", "db3", "mcap")
 
@@ -374,7 +374,8 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
             b.joints("/robot/joint_states", t + 0.004, ["j1", "j2"], [amp * s**2, -0.5 * amp * s])
     path = b.write(tmp_path / "rec")
     model = tmp_path / "m.npz"
-    argv = ["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic", "/demo_start",
+    argv = ["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
+            "/demo_start",
             "--n-basis", "5", "-o", str(model)]
     assert main(argv) == 0
     out = capsys.readouterr().out
@@ -391,7 +392,8 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
     assert main(["fit", "--model", "ip", str(path), "-o", str(model)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "a ROS bag needs --topics=OBSERVED,CONTROLLED" in err
-    assert main(["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic", "/nope",
+    assert main(["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
+                 "/nope",
                  "-o", str(model)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no topic '/nope' (--split-topic=/nope)" in err

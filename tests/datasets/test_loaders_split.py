@@ -5,17 +5,15 @@ frames that were written for it.
 """
 
 import re
-import warnings
 
+import ezc3d
 import numpy as np
 import pytest
 from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
 
+from interprim.core.errors import DataFileError
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
-from interprim.core.errors import DataFileError
-
-import ezc3d
 
 
 def add_events(path, events, rate):
@@ -169,7 +167,8 @@ def test_cli_fit_on_one_take_split_by_events_and_predict_a_fraction(tmp_path, ca
     path = write_c3d(tmp_path / "long.c3d", xyz, LABELS)
     add_events(path, [("Start", s / 100.0) for s in starts], rate=100.0)
     model = tmp_path / "m.npz"
-    code, out, err = _cli(["fit", "--model", "ip", path, "--split-events", "--observed", "A:*", "--n-basis", "5", "-o", model], capsys)
+    code, out, err = _cli(["fit", "--model", "ip", path, "--split-events", "--observed", "A:*", "--n-basis", "5", "-o",
+                           model], capsys)
     assert code == 0, err
     assert "fitted 4 demonstrations" in out
     one = write_c3d(tmp_path / "one.c3d", handover(40, seed=1), LABELS)
@@ -178,7 +177,8 @@ def test_cli_fit_on_one_take_split_by_events_and_predict_a_fraction(tmp_path, ca
     assert "24 frames observed" in out  # ceil(0.6 * 40)
     code, out, err = _cli(["predict", model, one, "--observe-fraction", "0", "-o", tmp_path / "p.csv"], capsys)
     assert code == 1 and "--observe-fraction must be in (0, 1], got 0.0" in err
-    code, out, err = _cli(["fit", "--model", "ip", path, "--trim", "--split-frames", "51-90,141-180,231-270", "--observed", "A:*",
+    code, out, err = _cli(["fit", "--model", "ip", path, "--trim", "--split-frames", "51-90,141-180,231-270",
+                           "--observed", "A:*",
                            "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     assert "fitted 3 demonstrations" in out

@@ -32,7 +32,8 @@ def write_rounded(path, ys, decimals, rate=30.0):
         fh.write("# observed: h_x, h_y\ndemo,time,h_x,h_y,r_x,r_y\n")
         for i, y in enumerate(ys):
             for k, row in enumerate(y):
-                fh.write(f"{i},{round(k / rate, decimals):.{decimals}f}," + ",".join(repr(float(v)) for v in row) + "\n")
+                fh.write(f"{i},{round(k / rate, decimals):.{decimals}f},"
+                         + ",".join(repr(float(v)) for v in row) + "\n")
     return path
 
 

@@ -144,7 +144,7 @@ def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     got = np.stack([np.interp(s_b + t / D_b, p.times, p.mean[:, d]) for d in range(4)], axis=1)
     want = 0
     wt = model.weights_at(t)  # (instants, members): the weights fitted for each look-ahead
-    for i, (m, pm) in enumerate(preds.items()):
+    for i, pm in enumerate(preds.values()):
         sm, Dm = place_in_time(pm, len(x), hold.dt, model.mean_duration_)
         Y = pm.trajectory(model.N_GRID)
         grid = np.linspace(0, 1, model.N_GRID)
@@ -218,8 +218,8 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
     weights and variance model are those the plain protocol gives."""
     from interprim.core.blas import single_thread
-    from interprim.model_selection.stacking import CrossValidation
     from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
+    from interprim.model_selection.stacking import CrossValidation
 
     dev, _ = task
     fams = ("kernel", "nn", "prior")
@@ -246,7 +246,6 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     auto = ip.AutoInteraction([0, 1], candidates=fams).fit(dev.demos, dt=dev.dt)
     with single_thread():  # as fit computes them (a BLAS thread count changes the last bits of the weights)
         w = cv.blend_weights()
-        vm = cv.blend_scales(w)
     # the real-time band's weights are those of the 0.25 s protocol (the fit scores further ahead too)
     np.testing.assert_allclose([auto.weights_.get(m, 0.0) for m in cv.names], w, atol=1e-6)
 

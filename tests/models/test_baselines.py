@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from interprim.core.preprocessing import time_normalise
 from interprim.models.demonstrations import NearestNeighbour, PriorMean
 from interprim.models.promp import InteractionProMP
-from interprim.core.preprocessing import time_normalise
 from interprim.synthetic import two_agent_demos
 
 

@@ -183,7 +183,10 @@ def test_protocol_predicts_anew_when_the_prefixes_are_not_nested(reach):
     dev, hold = reach
     m = KernelDemonstrations([0, 1]).fit(dev.demos, dt=dev.dt)
     d = hold.demos[0]
-    shifted = lambda k: d[:k, :2] + 1e-3 * k  # every prefix differs from the start of the next
+
+    def shifted(k):  # every prefix differs from the start of the next
+        return d[:k, :2] + 1e-3 * k
+
     recs = realtime_fold(m, dev.demos, d, [0, 1], dev.dt, RealTimeConfig(stride=4), fitted=True, trace=True,
                          prefix=shifted, references=False)
     for r in recs:

@@ -145,7 +145,8 @@ def test_to_state_from_state_round_trip():
         ip.InteractionPrimitive.from_state(bad, meta)
 
 
-# ----------------------------------------------------------------------------- the fitted state (interprim.models.primitive.fitted)
+# ----------------------------------------------------------------------------- the fitted state
+# (interprim.models.primitive.fitted)
 def test_fit_builds_a_new_fitted_state_and_the_attributes_are_its_read_only_views():
     from interprim.models.primitive.fitted import FITTED_NAMES, FittedPrimitive
 

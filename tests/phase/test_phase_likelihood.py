@@ -1,11 +1,12 @@
-"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood, interprim.phase.tracking)."""
+"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood,
+interprim.phase.tracking)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.phase.dtw import open_end_dtw
 from interprim.core._compiled import registry as kernels
+from interprim.phase.dtw import open_end_dtw
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
 
 
@@ -280,7 +281,9 @@ def test_finish_finds_the_maximum_and_does_not_depend_on_the_starting_candidates
 
     for _ in range(40):
         c, k = rng.uniform(0.1, 0.95), rng.uniform(1e2, 1e5)
-        f = (lambda s, c=c, k=k: -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3)
+        def f(s, c=c, k=k):
+            return -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3
+
         sc = scorer(f)
         fine = np.exp(np.linspace(np.log(c) - 0.4, min(np.log(c) + 0.4, 0.0), 400001))
         s_max = fine[np.argmax(f(fine))]

@@ -71,11 +71,10 @@ class Wire:
     bridge's two topics (raw samples kept, so the bytes on the wire can be checked)."""
 
     def __init__(self, bridge, partner_type="PointStamped", partner_topic=None):
+        from cyclonedds.domain import DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
-
-        from cyclonedds.domain import DomainParticipant
 
         dp = self.participant = DomainParticipant(bridge.domain_id)  # another participant of the bridge's domain
         q = QosSpec.parse("best_effort,1").dds()
@@ -506,10 +505,10 @@ def test_cli_bridges_between_processes(model, demos, tmp_path):
 def test_cli_bad_observe_is_one_line(model, tmp_path):
     path = tmp_path / "m.npz"
     model.save(path)
-    from interprim.cli import main
-
     import contextlib
     import io
+
+    from interprim.cli import main
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err):

@@ -24,6 +24,24 @@ from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
+from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
+    RawWS,
+    closed_with,
+    connect,
+    covered,
+    frame_msg,
+    hello,
+    models,
+    n_sessions,
+    opened,
+    replies_until,
+    rpc,
+    server,
+    strict,
+    test_demo,
+    validator,
+    wait_until,
+)
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
 
 from interprim.core.errors import ModelFileError  # noqa: E402
@@ -32,26 +50,6 @@ from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # 
 from interprim.server.client import Client, ServerError  # noqa: E402
 from interprim.server.demo import synthetic_letters  # noqa: E402
 from interprim.server.models import entry_for, load_models  # noqa: E402
-
-
-from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
-    connect,
-    models,
-    test_demo,
-    server,
-    strict,
-    validator,
-    hello,
-    opened,
-    rpc,
-    frame_msg,
-    wait_until,
-    n_sessions,
-    closed_with,
-    covered,
-    replies_until,
-    RawWS,
-)
 
 
 # ---------------------------------------------------------------------------- happy path
@@ -86,7 +84,8 @@ def test_happy_path_matches_direct_stream(server, models, test_demo, validator):
         server_v.validate(r)
         assert r == {"type": "reset_done", "seq": len(test_demo)}
         p = c.frame(test_demo[0, :2])
-        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:, 2:],
+        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:,
+                                                                                                                    2:],
                                    atol=2e-6)
         assert c.close_session() == {"type": "closed", "seq": len(test_demo) + 1}
         with pytest.raises(ServerError) as e:
@@ -123,8 +122,8 @@ def test_auto_recognises_the_letter(server, validator):
 
 
 def test_auto_probabilities_are_the_recognisers(server, models):
-    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the observed
-    positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
+    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the
+    observed positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
     own-noise log-likelihood; coalesced frames (one reply for several) count as well, and reset starts over."""
     from interprim.models.recognition import Recogniser
 
@@ -580,8 +579,8 @@ def test_cli_replay_and_units_for_a_model_file(tmp_path):
     """``interprim serve m.npz --replay m=demos.csv --units m=...``: the page's replay data and labels."""
     import interprim as ip
     from interprim.cli.serve import _attach_replays, _attach_units
-    from interprim.datasets import save_demonstrations
     from interprim.core.errors import InterprimError
+    from interprim.datasets import save_demonstrations
     from interprim.synthetic import two_agent_demos
 
     names = ["a", "b", "c", "d", "e"]

@@ -22,12 +22,12 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from _server_support import closed_with, connect, hello, models, n_sessions, wait_until  # noqa: E402,F401
+
 from interprim.server import protocol as P  # noqa: E402
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.gate import ConnectionGate, fd_budget  # noqa: E402
 from interprim.server.http_api import split_host  # noqa: E402
-
-from _server_support import closed_with, connect, hello, models, n_sessions, wait_until  # noqa: E402,F401
 
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 
@@ -48,7 +48,8 @@ def _upgrade(port, host=None, origin=None, path="/ws", timeout=10):
     key = base64.b64encode(os.urandom(16)).decode()
     head = f"GET {path} HTTP/1.1\r\nHost: {host or f'127.0.0.1:{port}'}\r\n"
     if path == "/ws":
-        head += f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+        head += (f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                 "Sec-WebSocket-Version: 13\r\n")
     if origin:
         head += f"Origin: {origin}\r\n"
     s.sendall((head + "\r\n").encode())

@@ -129,22 +129,27 @@ def _is_user_data(data: str) -> bool:
 
 def run_user_data(args) -> int:
     """``--data FILE``: every protocol of :mod:`interprim.evaluation.realtime` on the user's own demonstrations."""
+    import sys
     from pathlib import Path
 
-    from ..datasets import load_demonstrations
-    from ..core.errors import InterprimError
-    import sys
-
     from ..assessment import evaluate_demonstrations
-    from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, default_methods,
-                                       markdown_table, save_report)
+    from ..core.errors import InterprimError
+    from ..datasets import load_demonstrations
+    from ..evaluation.realtime import (
+        ALL_METHODS_FROM,
+        MIN_DEMONSTRATIONS,
+        RealTimeConfig,
+        default_methods,
+        markdown_table,
+        save_report,
+    )
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
     if getattr(args, "development_only", False):
         raise InterprimError("--development-only holds out the built-in NuiSI hold-out; with --data FILE keep your own "
                              "hold-out recordings out of the file instead")
-    from ._common import positive_number, split_cols, agent_columns, recording_options
+    from ._common import agent_columns, positive_number, recording_options, split_cols
 
     positive_number(args.resample, "--resample")
     ds = load_demonstrations(args.data, dt=args.dt, resample_dt=args.resample, max_nan_gap=args.max_nan_gap,

@@ -16,8 +16,16 @@ import argparse
 
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import InterprimError
-from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
-                      print_notes, recording_options)
+from ._common import (
+    CommandError,
+    add_recording_args,
+    agent_columns,
+    output_when_done,
+    positive_number,
+    print_notes,
+    recording_options,
+    split_cols,
+)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -128,7 +136,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
     )
-    p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components (ip)")
+    p.add_argument("--pca", type=int, default=None, metavar="K",
+                   help="project each agent onto K principal components (ip)")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) for files without time stamps")
     p.add_argument(
         "--resample", type=float, default=None, metavar="DT",

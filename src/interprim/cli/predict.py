@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import CommandError, positive_number, add_recording_args, output_when_done, recording_options
+from ._common import CommandError, add_recording_args, output_when_done, positive_number, recording_options
 
 __all__ = ["add_parser"]
 
@@ -71,8 +71,8 @@ def cmd_predict(args) -> int:
     import numpy as np
 
     import interprim as ip
-    from interprim.datasets import load_demonstrations
     from interprim.core.errors import OutOfRangeWarning
+    from interprim.datasets import load_demonstrations
 
     out = Path(args.output)
     suffix = out.suffix.lower()

@@ -131,7 +131,8 @@ def _run(args) -> int:
 
     from ..core.errors import InterprimError, ModelFileError
 
-    logging.basicConfig(level=getattr(logging, args.log_level), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=getattr(logging, args.log_level),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log = logging.getLogger("interprim.server")
     if args.log_level != "DEBUG":  # the websockets library logs every HTTP request at INFO
         logging.getLogger("interprim.server.websockets").setLevel(logging.WARNING)

@@ -16,15 +16,28 @@ them, so the check does not claim to catch a column order.
 from __future__ import annotations
 
 import warnings
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .errors import OutOfRangeWarning
 
 __all__ = ["fit_input_range", "input_distance", "mark"]
 
 
-def fit_input_range(frames):
+
+class _Marked(Protocol):
+    """What :func:`mark` sets on a prediction of any family."""
+
+    input_distance: float
+    out_of_range: bool
+
+
+_P = TypeVar("_P", bound=_Marked)
+
+
+def fit_input_range(frames: ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
     """``(mean, std, limit)`` of the observed agent's training frames ``(n, D_o)`` (data columns)."""
     f = np.asarray(frames, dtype=np.float64)
     mean = f.mean(axis=0)
@@ -34,7 +47,7 @@ def fit_input_range(frames):
     return mean, std, max(3.0 * train, 8.0)
 
 
-def input_distance(model, frames) -> float:
+def input_distance(model: Any, frames: ArrayLike) -> float:
     """Largest standardised distance of frames ``(t, D_o)`` from ``model``'s training frames; NaN for a model
     (file) without the statistics."""
     mean = getattr(model, "input_mean_", None)
@@ -44,7 +57,7 @@ def input_distance(model, frames) -> float:
     return float(np.max(np.abs(f - mean) / model.input_std_)) if f.size else 0.0
 
 
-def mark(model, prediction, dist, warn: bool = True):
+def mark(model: Any, prediction: _P, dist: float, warn: bool = True) -> _P:
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist

@@ -32,7 +32,8 @@ def fill_nans(y, max_nan_gap, where, row_of):
                 why = (
                     "missing value(s)"
                     if max_nan_gap == 0
-                    else ("a run of missing values at the start or end" if (i == 0 or j == T) else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
+                    else ("a run of missing values at the start or end" if (i == 0 or j == T)
+                          else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
                 )
                 edge = i == 0 or j == T  # interpolation cannot fill a run at the start or end
                 raise DataFileError(

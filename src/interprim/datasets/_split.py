@@ -74,9 +74,9 @@ def parse_ranges(text, where: str, first: int, last: int) -> list:
     out = []
     for item in items:
         if isinstance(item, str):
-            a, sep, b = item.partition("-")
+            first_text, sep, last_text = item.partition("-")
             try:
-                a, b = int(a), int(b)
+                a, b = int(first_text), int(last_text)
             except ValueError:
                 raise DataFileError(f"{where}: split_frames {item!r} is not a frame range FIRST-LAST") from None
             if not sep:
@@ -328,10 +328,8 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     labels)``: one demonstration per interval, time stamps from 0, labels ``<file>@<start>s`` when the
     take is split (the file's name otherwise).
     """
-    from ._checks import check_frames, fill_nans
-
-    from ._checks import warn
     from ..core.errors import DataFileWarning
+    from ._checks import check_frames, fill_nans, warn
 
     rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
     automatic = any(split.get(k) is not None for k in ("events", "gap", "repetitions"))

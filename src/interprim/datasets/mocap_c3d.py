@@ -113,8 +113,8 @@ def _run_reader(path: Path, size: int):
                 "header or parameter section?)"
             ) from None
         if r.returncode != 0 or not os.path.exists(out):
-            why = r.stderr.decode("utf-8", "replace").strip().splitlines()
-            why = why[-1][:300] if why else (f"the reader stopped with signal {-r.returncode}" if r.returncode < 0
+            said = r.stderr.decode("utf-8", "replace").strip().splitlines()
+            why = said[-1][:300] if said else (f"the reader stopped with signal {-r.returncode}" if r.returncode < 0
                                              else f"the reader stopped with exit status {r.returncode}")
             if "MemoryError" in why or "bad_alloc" in why:
                 why = f"the reader needed more than {memory / 1024**3:.1f} GB of memory"

@@ -55,7 +55,7 @@ def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl") -> tuple
     The standard error is the delta-method one of the ratio of two paired means; with fewer than two
     demonstrations it is NaN.
     """
-    per = {}
+    per: dict = {}
     for r in records:
         if r.get("protocol") == "whole" and not key.startswith("wm"):
             continue

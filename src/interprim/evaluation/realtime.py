@@ -38,14 +38,22 @@ import numpy as np
 
 from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.metrics import Z90
-from ..model_selection.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, folds, mean_demo,
-                                        mean_duration, realtime_fold, realtime_sweep, summarise_realtime,
-                                        whole_movement_fold)
+from ..model_selection.realtime import (
+    ALL_METHODS_FROM,
+    MIN_DEMONSTRATIONS,
+    RealTimeConfig,
+    folds,
+    mean_demo,
+    realtime_fold,
+    realtime_sweep,
+    summarise_realtime,
+    whole_movement_fold,
+)
 from ..models.registry import default_methods
 from .nested import standard_error_ratio
 
-__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
-           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
+__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep",
+           "summarise_realtime", "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
            "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
 
 def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
@@ -165,7 +173,7 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     m = summary.get(method)
     if m is None or "rt_ctrl_vs_clock" not in m:
         return verdict(summary, next((x for x in ("ip", "learned") if x in summary), "ip"), threshold)
-    picks = {}
+    picks: dict = {}
     for r in records:
         if r["method"] == method and r.get("protocol") != "whole":
             picks.setdefault(r["chosen"], set()).add(r["demo"])
@@ -253,12 +261,12 @@ def save_report(records, summary, sentence, out_dir, title: str = "", horizon: f
         e = np.array([r["rt_ctrl"] for r in rs])
         idx = np.clip(np.digitize(f, bins) - 1, 0, len(bins) - 2)
         curves[m] = np.array([e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(mids))])
-    drawn = []
+    drawn: list = []
     for m, y in curves.items():
         # a curve equal (to 0.1 %) to one drawn before (the prior mean is played by the clock) would hide under it:
         # say so in its label and draw it dotted with open markers, so that both stay visible
         same = next((o for o in drawn if np.allclose(y, curves[o], rtol=1e-3, atol=1e-12, equal_nan=True)), None)
-        style = dict(marker="o", ms=3, ls="--" if m in ("clock", "oracle-duration") else "-")
+        style: dict = dict(marker="o", ms=3, ls="--" if m in ("clock", "oracle-duration") else "-")
         if same is not None:
             style = dict(marker="s", ms=6, mfc="none", ls=":", lw=2.5)
         ax.plot(mids, y, label=m if same is None else f"{m} (= {same})", zorder=3 if same is None else 2, **style)

@@ -151,7 +151,7 @@ class AutoInteraction(Predictor):
         named.candidates = [c if isinstance(c, str) else c[0] for c in self.candidates]
         return Predictor.json_params(named)
 
-    def settings(self) -> "registry.Settings":
+    def settings(self) -> registry.Settings:
         """The settings every member is built with (given once here and passed down to each family)."""
         return registry.Settings(tuple(self.observed_dofs), n_basis=self.n_basis,
                                  smoothing_window=self.smoothing_window, horizon=float(self.horizon))

@@ -83,7 +83,7 @@ class Blend(Predictor):
     @classmethod
     def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
                     horizon: float = DEFAULT_HORIZON, bands=None, n_basis: int = 20,
-                    smoothing_window=None) -> "Blend":
+                    smoothing_window=None) -> Blend:
         """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
         sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
         blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,

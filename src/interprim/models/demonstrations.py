@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame
 from ..core.input_range import mark
-from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise
+from ..core.validation import as_2d_finite, as_frame
+from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 
 __all__ = ["Baseline", "PriorMean", "NearestNeighbour", "AlignedStream", "AlignedBaseline",
            "check_demos"]

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import GridPrediction
-from .demonstrations import AlignedBaseline
 from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.prefixes import observed_frames
+from .base import GridPrediction
+from .demonstrations import AlignedBaseline
 
 __all__ = ["KernelDemonstrations"]
 

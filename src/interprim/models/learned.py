@@ -17,8 +17,8 @@ contract of :mod:`interprim.models.base` (``fit``, ``predict``, ``stream``, ``sa
 ``set_params``); its prediction is a :class:`~interprim.models.base.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout from a
-robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
+It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout
+from a robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
 features) and ``n_in`` resampled points (the coupling's observation); :meth:`LearnedInteraction.stream` returns a
 :class:`LearnedStream` whose answer is, bitwise, ``predict`` of the frames seen.
 """
@@ -29,10 +29,9 @@ import numpy as np
 
 from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite, as_frame
+from ..phase.learned import LearnedPhase
 from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from .coupling import CouplingModel
-from ..phase.learned import LearnedPhase
-
 
 __all__ = ["LearnedInteraction", "LearnedStream"]
 
@@ -44,7 +43,7 @@ def _Prediction(cp: GridPrediction, est) -> GridPrediction:
                          cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
                          conditioned=cp.conditioned)
     out.speed = float(est.speed)
-    out.phase_estimate = est
+    out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
     return out
 
 
@@ -120,7 +119,7 @@ class LearnedInteraction(Predictor):
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
 
-    def stream(self, robot_state=None) -> "LearnedStream":
+    def stream(self, robot_state=None) -> LearnedStream:
         """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it
         returns, bitwise, :meth:`predict` of those ``M`` frames, without recomputing anything over the prefix."""
         self._check_fitted("stream")

@@ -12,10 +12,12 @@ To add a family: write its class in ``interprim/models/`` against :class:`interp
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any
 
 from ..core.cv import DEFAULT_HORIZON
+from .base import Predictor
 from .demonstrations import NearestNeighbour, PriorMean
 from .kernel import KernelDemonstrations
 from .learned import LearnedInteraction
@@ -56,7 +58,8 @@ class Settings:
 
 
 def _ip(s: Settings, **extra):
-    kw = dict(observed_dofs=list(s.observed_dofs), n_basis=s.n_basis, smoothing_window=s.smoothing_window)
+    kw: dict[str, Any] = dict(observed_dofs=list(s.observed_dofs), n_basis=s.n_basis,
+                             smoothing_window=s.smoothing_window)
     if s.phase_method is not None:
         kw["phase_method"] = s.phase_method
     kw.update(extra)
@@ -69,7 +72,7 @@ class Family:
 
     name: str
     cls: type
-    build: Callable[[Settings], object]
+    build: Callable[[Settings], Predictor]
     summary: str
     cli: bool = True
     candidate: bool = False

@@ -7,8 +7,8 @@ into ``model.stream()`` and publishes, for each message that gave at least one f
 * the response (``pred.response(points)``) as ``trajectory_msgs/msg/JointTrajectory`` (joint names: the model's
   controlled columns; ``time_from_start``: the prediction's seconds ahead; ``header.stamp``: the time of the grid
   frame it answers; each point's velocities and accelerations from the spline through the points:
-  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model whose
-  controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
+  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model
+  whose controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
 * on ``<publish>/status`` a ``diagnostic_msgs/msg/DiagnosticArray`` with one status: level OK (WARN when the
   partner is out of the training range), and the values ``phase``, ``normalised_time``, ``speed``,
   ``duration``, ``out_of_range``, ``input_distance``, ``n_observed``, ``frame_time`` and, per controlled column,
@@ -60,7 +60,7 @@ class QosSpec:
         self.reliable, self.depth = bool(reliable), depth
 
     @classmethod
-    def parse(cls, text: str) -> "QosSpec":
+    def parse(cls, text: str) -> QosSpec:
         """``KIND[,DEPTH]``: ``reliable`` (default depth 10) or ``best_effort`` (default depth 1)."""
         kind, _, depth = str(text).strip().partition(",")
         kind = kind.strip().lower().replace("-", "_")
@@ -101,8 +101,8 @@ class _Say:
 
     def __init__(self, interval: float):
         self.interval = float(interval)
-        self.last = {}
-        self.pending = {}
+        self.last: dict = {}
+        self.pending: dict = {}
 
     def __call__(self, cause: str, message: str, level=logging.WARNING) -> None:
         now = time.monotonic()
@@ -215,7 +215,7 @@ class Ros2Bridge:
         self.response_type = known_type(response_type).split("/")[-1]
         if self.response_type not in RESPONSE_TYPES:
             raise ValueError(f"response_type must be one of {', '.join(RESPONSE_TYPES)}, got {response_type!r}")
-        self._xyz = None
+        self._xyz: tuple | None = None
         if self.response_type != "JointTrajectory":
             self._xyz = _xyz_group(self.controlled)
             if self._xyz is None:
@@ -229,21 +229,21 @@ class Ros2Bridge:
         self.frame_id = str(frame_id)
         self.grid = StampGrid(float(model.dt_), max_gap)
         self.stream = model.stream()
-        self._latest = [None] * len(self.sources)
+        self._latest: list[np.ndarray | None] = [None] * len(self.sources)
         self.counts = {"received": 0, "frames": 0, "published": 0, "duplicate": 0, "late": 0, "gap": 0, "back": 0,
                        "invalid": 0, "unusable": 0, "waiting": 0, "between": 0}
         self._say = _Say(log_interval)
         self._std_grid = 101
         self._domain_id = domain_id
         self._config = config
-        self._dds = None
+        self._dds: dict | None = None
         self._sink = None  # callable(response, status) instead of DDS writers (tests of the logic)
         self._stop = threading.Event()
-        self._thread = None
-        self._wrong_types = set()
+        self._thread: threading.Thread | None = None
+        self._wrong_types: set = set()
         self.last_prediction = None
-        self.last_frame_time = None  # seconds since 1970 of the last grid frame
-        self.base_sec = None  # whole seconds of the first stamp: the origin of the grid's times
+        self.last_frame_time: float | None = None  # seconds since 1970 of the last grid frame
+        self.base_sec: int | None = None  # whole seconds of the first stamp: the origin of the grid's times
 
     # ---- the logic, independent of the transport ----
     def handle(self, index: int, msg) -> bool:
@@ -264,10 +264,10 @@ class Ros2Bridge:
             missing = [s.topic for s, v in zip(self.sources, self._latest) if v is None]
             self._say("waiting", f"waiting for a first message on {', '.join(missing)}", logging.INFO)
             return False
-        y = np.concatenate(self._latest)[self._order]
+        y = np.concatenate([v for v in self._latest if v is not None])[self._order]  # none is None here
         if self.base_sec is None and stamp is not None:
             self.base_sec = int(stamp.sec)  # stamps in seconds after this (float seconds since 1970 lose ~0.2 us)
-        t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec)
+        t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec or 0)
         step = self.grid.add(t, y)
         if step.status in ("duplicate", "late", "invalid"):
             self.counts[step.status] += 1
@@ -281,11 +281,12 @@ class Ros2Bridge:
         if step.status == "gap":
             self.counts["gap"] += 1
             self._say("gap", f"{src.topic}: no message for more than {self.grid.max_gap} s: a new interaction starts "
-                             f"at {_stamp_text(self.base_sec, t)} s (stream reset)", logging.INFO)
+                             f"at {_stamp_text(self.base_sec or 0, t)} s (stream reset)", logging.INFO)
         elif step.status == "back":
             self.counts["back"] += 1
             self._say("back", f"{src.topic}: the stamps jumped back by more than {self.grid.max_gap} s (a restarted "
-                              f"clock?): a new interaction starts at {_stamp_text(self.base_sec, t)} s (stream reset)")
+                              f"clock?): a new interaction starts at {_stamp_text(self.base_sec or 0, t)} s "
+                              "(stream reset)")
         if step.restarted:
             self.stream.reset()
         if len(step.times) == 0:
@@ -295,8 +296,9 @@ class Ros2Bridge:
         pred = self.stream.update(frames[0]) if len(frames) == 1 else self.stream.extend(frames)
         self.counts["frames"] += len(frames)
         self.last_prediction = pred
-        self.last_frame_time = self.base_sec + float(step.times[-1])
-        response, status = self.messages(pred, float(step.times[-1]), self.base_sec)
+        base = self.base_sec or 0  # a frame on the grid has a stamp, so base_sec is set
+        self.last_frame_time = base + float(step.times[-1])
+        response, status = self.messages(pred, float(step.times[-1]), base)
         self._emit(response, status)
         self.counts["published"] += 1
         return True
@@ -315,9 +317,10 @@ class Ros2Bridge:
             response = new_message("trajectory_msgs/msg/JointTrajectory", header=header,
                                    joint_names=list(self.controlled), points=pts)
         else:
+            assert self._xyz is not None  # checked by __init__ for these response types
             ix, iy, iz = self._xyz
             poses = []
-            for dt, row in zip(t, y):
+            for row in y:
                 pos = new_message("geometry_msgs/msg/Point", x=float(row[ix]), y=float(row[iy]),
                                   z=float(row[iz]) if iz is not None else 0.0)
                 pose = new_message("geometry_msgs/msg/Pose", position=pos,
@@ -383,7 +386,7 @@ class Ros2Bridge:
         import os
 
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
-        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
@@ -435,6 +438,7 @@ class Ros2Bridge:
 
         if self._dds is None:
             self.open()
+        assert self._dds is not None  # set by open
         self._dds["waitset"].wait(duration(seconds=float(timeout)))
         n = 0
         for i, (r, _) in enumerate(self._dds["readers"]):
@@ -456,7 +460,7 @@ class Ros2Bridge:
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             self.spin_once(0.05)
 
-    def start(self) -> "Ros2Bridge":
+    def start(self) -> Ros2Bridge:
         """Open and spin in a background thread (until :meth:`close`)."""
         if self._dds is None:
             self.open()

@@ -33,7 +33,7 @@ class OpenModel:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
-    recognition: "Recognition | None" = None  # with several candidates: which one (created on first use)
+    recognition: Recognition | None = None  # with several candidates: which one (created on first use)
     history: list = field(default_factory=list)  # blocks of frames in the streams since the last reset (rollback)
 
     def reset(self, robot_state=None) -> None:
@@ -89,8 +89,8 @@ def frame_problem(op: OpenModel, frame: np.ndarray) -> str | None:
 
 
 class Recognition:
-    """Which of a ``"recognise"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
-    the frames of the current interaction.
+    """Which of a ``"recognise"`` session's candidates is being observed:
+    :class:`interprim.models.recognition.Recogniser` on the frames of the current interaction.
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
     all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
@@ -159,15 +159,15 @@ _NONFINITE = "the model produced non-finite values for this frame"
 try:  # optional accelerator: numpy arrays to JSON in compiled code
     import orjson as _orjson
 except ImportError:  # pragma: no cover - depends on the installation
-    _orjson = None
+    _orjson = None  # type: ignore[assignment]  # the module or None, tested before each use
 
 
 def _json_array(a) -> str:
     """A 1-D or 2-D float array as JSON text, about 7 significant digits.
 
     With :mod:`orjson` installed: the array rounded to float32 and written with the shortest text
-    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).  Without:
-    ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
+    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).
+    Without: ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
     fast as ``json.dumps(a.tolist())``).  Raises ``FloatingPointError`` on NaN/inf, which are not
     JSON (and on values beyond the float32 range with orjson).
     """
@@ -230,7 +230,8 @@ def _column_slice(cols, n_dofs):
 class _MeanRollout:
     """``pred.trajectory(n)[:, cols]`` for the predictions of one model: the prediction contract's
     :meth:`~interprim.models.base.BasePrediction.mean_rollout`, made from the first prediction (for an
-    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design built once).
+    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design
+    built once).
     """
 
     __slots__ = ("n", "sel", "fn")

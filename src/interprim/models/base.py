@@ -220,7 +220,19 @@ class GridPrediction(BasePrediction):
         Whether :meth:`std` adds the uncertainty of the timing (``phase_std``) to ``std``.
     conditioned : bool
         Whether the prediction depends on the observed frames.
+
+    Attributes
+    ----------
+    neighbour : int or None
+        The training demonstration the prediction replays (:class:`~interprim.models.demonstrations.NearestNeighbour`;
+        ``None`` for the other models).
+    weights : dict or None
+        ``{training demonstration: weight}`` of a weighted mix of demonstrations
+        (:class:`~interprim.models.kernel.KernelDemonstrations`; ``None`` for the other models).
     """
+
+    neighbour: int | None = None
+    weights: dict | None = None
 
     def __init__(self, times, mean, std=None, phase=float("nan"), phase_std=0.0, observed_dofs=None,
                  controlled_dofs=None, method=None, leverage=float("nan"), log_likelihood=float("nan"),

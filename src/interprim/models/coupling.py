@@ -69,6 +69,7 @@ from statistics import NormalDist
 import numpy as np
 
 from ..core.blas import one_blas_thread
+from ..core.cache import DerivedCache
 from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite
 from .base import GridPrediction
@@ -306,6 +307,7 @@ class CouplingModel:
         obs, methods, fr = self._check_params(D)
         ctrl = [i for i in range(D) if i not in set(obs)]
         self.observed_dofs_, self.controlled_dofs_, self.n_dofs_ = obs, ctrl, D
+        self._derived = DerivedCache()  # values derived from this fit, filled on first use
         self.methods_ = methods
         self.fractions_ = fr
         n = len(arrays)
@@ -378,15 +380,14 @@ class CouplingModel:
     def _padded_obs(self):
         """``(frames (n, T_max, Do), lengths (n,))``: the observed frames of the demonstrations, zero-padded
         (rebuilt when ``obs_frames_`` is replaced, by a fit or a load)."""
-        cached = self.__dict__.get("_padded")
-        if cached is None or cached[0] is not self.obs_frames_:
+        def build():
             T = np.array([f.shape[0] for f in self.obs_frames_], dtype=np.intp)
             frames = np.zeros((len(T), int(T.max()), self.obs_frames_[0].shape[1]))
             for j, f in enumerate(self.obs_frames_):
                 frames[j, : f.shape[0]] = f
-            cached = (self.obs_frames_, frames, T)
-            self.__dict__["_padded"] = cached
-        return cached[1], cached[2]
+            return frames, T
+
+        return self._derived.get_or_build("padded", (self.obs_frames_,), build)
 
     # ------------------------------------------------------------------ the smoothers
     @staticmethod
@@ -704,19 +705,16 @@ class CouplingModel:
     def _static(self, R: int) -> dict:
         """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
         grouped by demonstration) and the target block of ``"ppca"``'s factorisation (``_target_block``);
-        cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
-        cached = self.__dict__.get("_static_cache")
-        if cached is None or cached[0] is not self.Y_:
-            cached = (self.Y_, {})
-            self.__dict__["_static_cache"] = cached
-        if R not in cached[1]:
+        kept per ``R`` in the model's :class:`~interprim.core.cache.DerivedCache` (a new one per fit or load)."""
+        def build():
             n = self.n_demos_
             ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
                                 np.zeros((1, 1)))
             st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
             st["ylow"] = _target_block(st["P"], st["Ydc"], R)
-            cached[1][R] = st
-        return cached[1][R]
+            return st
+
+        return self._derived.get_or_build(("static", R), (self.Y_,), build)
 
     def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
@@ -767,6 +765,7 @@ class CouplingModel:
         if phase_std is not None:
             params["phase_std"] = phase_std
         obj = cls(**params)
+        obj._derived = DerivedCache()
         for k in cls._ARRAYS:
             setattr(obj, k, np.asarray(arrays[k]))
         fitted = meta["fitted"]

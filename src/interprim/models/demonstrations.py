@@ -310,8 +310,8 @@ class NearestNeighbour(AlignedBaseline):
     def predict(self, partial) -> GridPrediction:
         """The nearest demonstration to ``partial`` (``(M, len(observed_dofs))`` frames from the start).
 
-        Sets ``neighbour_`` to its index; the prediction's phase is its matched fraction ``(n*+1)/N_j``
-        and its ``std`` is ``None``.
+        The prediction's ``neighbour`` is its index, its phase the matched fraction ``(n*+1)/N_j`` and its
+        ``std`` is ``None`` (the model is left unchanged).
         """
         v = self._partial(partial)
         _, n_star, cost = self._alignments(v)
@@ -324,6 +324,7 @@ class NearestNeighbour(AlignedBaseline):
         for j, u in enumerate(self.observed_):
             if cost[j] < best_c:
                 best, best_c, frac = j, cost[j], (int(n_star[j]) + 1) / u.shape[0]
-        self.neighbour_ = best
-        return self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, M, phase=frac,
+        pred = self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, M, phase=frac,
                                 method=f"demonstration {best}")
+        pred.neighbour = best
+        return pred

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.cache import DerivedCache
 from .base import GridPrediction
 from .demonstrations import AlignedBaseline
 from ..model_selection.prefixes import observed_frames
@@ -51,8 +52,6 @@ class KernelDemonstrations(AlignedBaseline):
         The bandwidth used.
     cv_errors_ : dict
         ``{h: mean held-out error}`` of the cross-validation (empty when ``bandwidth`` is given).
-    weights_ : dict
-        ``{training demonstration: weight}`` of the last prediction.
     std_scale_, std_floor_ : ndarray, shape (D,)
         Calibration of the weighted spread: ``std = sqrt((std_scale_ spread)^2 + std_floor_^2)``, per agent fitted
         to the leave-one-out errors over ``horizon`` (``bandwidth="cv"``; the raw spread otherwise).
@@ -92,6 +91,7 @@ class KernelDemonstrations(AlignedBaseline):
         self.obs_ = obs
         self.ctrl_ = [i for i in range(D) if i not in set(obs)] or obs
         self.demos_ = arrays
+        self._derived = DerivedCache()  # the demonstrations zero-padded (_frames_at), filled on first use
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
         self.cv_errors_ = {}
         D = arrays[0].shape[1]
@@ -114,15 +114,14 @@ class KernelDemonstrations(AlignedBaseline):
         unit grid (``y[k]`` at an integer ``f = k``, else ``(y[k+1] - y[k]) * (f - k) + y[k]``), so the numbers
         are those of one ``interp_columns`` per demonstration.
         """
-        cached = self.__dict__.get("_padded")
-        if cached is None or cached[0] is not self.demos_:
+        def build():
             lengths = np.array([len(a) for a in self.demos_], dtype=np.intp)
             padded = np.zeros((len(lengths), int(lengths.max()) + 1, self.demos_[0].shape[1]))
             for j, a in enumerate(self.demos_):
                 padded[j, : len(a)] = a
-            cached = (self.demos_, padded, lengths)
-            self.__dict__["_padded"] = cached
-        _, padded, lengths = cached
+            return padded, lengths
+
+        padded, lengths = self._derived.get_or_build("padded", (self.demos_,), build)
         idx = np.asarray(idx, dtype=np.intp)
         A = padded[idx][..., cols]
         k = np.floor(f).astype(np.intp)
@@ -221,6 +220,7 @@ class KernelDemonstrations(AlignedBaseline):
         self._set_common(meta)
         ends = np.cumsum(arrays["lengths"])
         self.demos_ = [np.ascontiguousarray(a) for a in np.split(arrays["demos"], ends[:-1])]
+        self._derived = DerivedCache()
         self.obs_ = list(self.observed_dofs_)
         self.ctrl_ = [i for i in range(self.n_dofs_) if i not in set(self.obs_)] or self.obs_
         self.observed_ = [np.ascontiguousarray(a[:, self.obs_]) for a in self.demos_]
@@ -235,7 +235,8 @@ class KernelDemonstrations(AlignedBaseline):
 
         The prediction's ``phase`` is the fraction of the movement seen and ``duration`` the predicted total
         duration in seconds; ``trajectory(n)`` and ``std(n)`` are the weighted mean and spread of the aligned
-        demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
+        demonstrations on normalised time; its ``weights`` holds each training demonstration's weight (the model is
+        left unchanged).
         """
         v = self._partial(partial)
         _, n_star, cost = self._alignments(v)
@@ -243,7 +244,7 @@ class KernelDemonstrations(AlignedBaseline):
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
         """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
-        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; sets ``weights_``)."""
+        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; the prediction's ``weights``: ``{demonstration: weight}``)."""
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_
@@ -260,6 +261,7 @@ class KernelDemonstrations(AlignedBaseline):
         mean = np.einsum("j,jkd->kd", w, Y)
         spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
-        self.weights_ = dict(zip(idx, w))
-        return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
+        pred = GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
                               duration=dur, mean_duration=self.mean_duration_, n_observed=M)
+        pred.weights = dict(zip(idx, (float(x) for x in w)))
+        return pred

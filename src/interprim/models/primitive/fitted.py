@@ -25,6 +25,7 @@ import copy
 
 import numpy as np
 
+from ...core.cache import DerivedCache
 from ...core.blas import one_blas_thread, single_thread
 from ...core._compiled import registry as kernels
 from ...core.validation import as_2d_finite, check_positive, check_times
@@ -80,7 +81,7 @@ class FittedPrimitive:
             raise ValueError(f"FittedPrimitive: parameters {missing} missing")
         self.params = {k: params[k] for k in PARAM_NAMES}
         self.__dict__.update(self.params)
-        self._derived = {}
+        self._derived = DerivedCache()
         if fitted:
             bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
             if bad:
@@ -110,7 +111,7 @@ class FittedPrimitive:
         if bad:
             raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
         new = copy.copy(self)
-        new.__dict__.update(fitted, _derived={})
+        new.__dict__.update(fitted, _derived=DerivedCache())
         return new
 
     def with_params(self, **params) -> "FittedPrimitive":
@@ -133,17 +134,7 @@ class FittedPrimitive:
         so a refit never sees a value derived from the previous fit.  Modules that need derived arrays of the
         model (the phase likelihood's factored prior, for example) keep them here.
         """
-        store = self._derived
-        hit = store.get(name)
-        if hit is not None and len(hit[0]) == len(key):
-            for a, b in zip(hit[0], key):  # per frame of a stream: a plain loop, no generator
-                if a is not b:
-                    break
-            else:
-                return hit[1]
-        value = build()
-        store[name] = (tuple(key), value)
-        return value
+        return self._derived.get_or_build(name, key, build)
 
     # ------------------------------------------------------------------ persistence
     def to_state(self):

@@ -183,3 +183,21 @@ def test_models_never_import_the_layers_above_them():
     from interprim.models import registry
 
     assert set(registry.CANDIDATES) <= set(registry.FAMILIES)
+
+
+def test_the_estimators_fitted_attributes_are_written_in_its_class_body():
+    """Every fitted attribute of the Interaction Primitive is a read-only view declared (and typed) in the class
+    body, not installed from outside it: a linter and a type checker see them, and the list cannot drift from the
+    fitted state's."""
+    from interprim.models.primitive.estimator import FittedView, InteractionPrimitive
+    from interprim.models.primitive.fitted import FITTED_NAMES
+
+    body = {k for k, v in vars(InteractionPrimitive).items() if isinstance(v, FittedView)}
+    assert body == set(FITTED_NAMES)
+    tree = ast.parse((SRC / "models" / "primitive" / "estimator.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "InteractionPrimitive")
+    annotated = {n.target.id for n in cls.body if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)}
+    assert set(FITTED_NAMES) <= annotated
+    setattrs = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+                and n.func.id == "setattr"]
+    assert not setattrs

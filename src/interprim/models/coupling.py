@@ -234,6 +234,7 @@ class CouplingModel:
         self.blend_weights = blend_weights
         self.smooth_window = smooth_window
         self.score = score
+        self._derived = DerivedCache()  # values derived from the fitted state (renewed by every fit)
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, D):
@@ -765,7 +766,6 @@ class CouplingModel:
         if phase_std is not None:
             params["phase_std"] = phase_std
         obj = cls(**params)
-        obj._derived = DerivedCache()
         for k in cls._ARRAYS:
             setattr(obj, k, np.asarray(arrays[k]))
         fitted = meta["fitted"]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import numbers
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,10 +27,18 @@ from ...core.blas import one_blas_thread
 from ...core.validation import as_2d_finite, check_positive, check_times
 from ...core.dmp import warn_representation
 from ...core.errors import NotFittedError
-from .fitted import FITTED_NAMES, FittedPrimitive
+from .fitted import FittedPrimitive
 from .prediction import Prediction
 from ...core.preprocessing import resample_uniform
 from .stream import Stream
+
+if TYPE_CHECKING:
+    from ...core.basis import Basis
+    from ...core.dmp import LinearRollout
+    from ...core.gaussian import GaussianPrior
+    from ...core.preprocessing import PCA
+    from ...phase.learned import LearnedPhase
+    from .calibration import Calibration
 
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
@@ -40,6 +49,32 @@ SIGMA2_RULES = ("cv", "residual")
 CALIBRATE_RULES = ("with-cv",)
 #: Values of releases up to 0.1.0 that model files may still hold: read as their names of today (interprim.io)
 OLD_VALUES = {"phase_method": {"auto": "cv"}, "sigma2": {"auto": "residual"}, "calibrate": {"auto": "with-cv"}}
+
+
+class FittedView:
+    """A read-only attribute of the estimator that shows the fitted state's attribute of the same name
+    (``InteractionPrimitive.prior_`` is ``InteractionPrimitive.fitted_.prior_``); like a ``property`` without a
+    setter, and ``AttributeError`` before ``fit``."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.__doc__ = f"``fitted_.{name}``: a read-only view of the fitted state (see the class docstring)."
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        st = obj.__dict__.get("fitted_")
+        if st is None:
+            raise AttributeError(f"{self.name} (this InteractionPrimitive is not fitted yet)")
+        return getattr(st, self.name)
+
+    def __set__(self, obj, value):
+        raise AttributeError(f"{self.name} is a read-only view of the fitted state; use with_fitted({self.name}=...)")
+
+
+def fitted_view(name: str) -> Any:
+    """A :class:`FittedView` of ``name`` (typed ``Any``, so the class body can annotate each view's type)."""
+    return FittedView(name)
 
 
 class InteractionPrimitive(Predictor):
@@ -208,6 +243,40 @@ class InteractionPrimitive(Predictor):
 
     _CHECKS_INPUT = True  # its fitted state and stream compute input_distance / out_of_range themselves
     OLD_VALUES = OLD_VALUES
+
+    # the fitted attributes: read-only views of the fitted state (``fitted_``; the Attributes section above)
+    observed_dofs_: list[int] = fitted_view("observed_dofs_")
+    controlled_dofs_: list[int] = fitted_view("controlled_dofs_")
+    n_dofs_: int = fitted_view("n_dofs_")
+    columns_: list[str] | None = fitted_view("columns_")
+    dt_: float = fitted_view("dt_")
+    n_demos_: int = fitted_view("n_demos_")
+    durations_: np.ndarray = fitted_view("durations_")
+    mean_duration_: float = fitted_view("mean_duration_")
+    beta_y_: float = fitted_view("beta_y_")
+    pca_observed_: PCA | None = fitted_view("pca_observed_")
+    pca_controlled_: PCA | None = fitted_view("pca_controlled_")
+    n_observed_latent_: int = fitted_view("n_observed_latent_")
+    n_latent_: int = fitted_view("n_latent_")
+    basis_: Basis = fitted_view("basis_")
+    rollout_: LinearRollout = fitted_view("rollout_")
+    params_per_dof_: int = fitted_view("params_per_dof_")
+    obs_index_: np.ndarray = fitted_view("obs_index_")
+    thetas_: np.ndarray = fitted_view("thetas_")
+    start_position_: np.ndarray = fitted_view("start_position_")
+    start_velocity_: np.ndarray = fitted_view("start_velocity_")
+    prior_: GaussianPrior = fitted_view("prior_")
+    representation_: dict = fitted_view("representation_")
+    sigma2_: float = fitted_view("sigma2_")
+    phase_sigma2_: float | None = fitted_view("phase_sigma2_")
+    selection_: dict = fitted_view("selection_")
+    phase_model_: LearnedPhase | None = fitted_view("phase_model_")
+    phase_method_: str = fitted_view("phase_method_")
+    reference_: np.ndarray = fitted_view("reference_")
+    input_mean_: np.ndarray = fitted_view("input_mean_")
+    input_std_: np.ndarray = fitted_view("input_std_")
+    input_limit_: float = fitted_view("input_limit_")
+    calibration_: Calibration | None = fitted_view("calibration_")
 
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
@@ -438,33 +507,6 @@ class InteractionPrimitive(Predictor):
         new.fitted_ = self.fitted_.with_fitted(**fitted)
         return new
 
-    # the estimator's methods of the fitted state before it had its own object (kept for code written against
-    # them; the library itself uses the state's)
-    def latent_map(self):
-        """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
-        return self._fitted("latent_map").latent_map()
-
-    def controlled_map(self):
-        """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
-        return self._fitted("controlled_map").controlled_map()
-
-    def observed_to_latent(self, o):
-        """Frames ``(t, len(observed_dofs))`` of the observed agent in the model's latent DoFs (PCA, Sec. IV)."""
-        return self._fitted("observed_to_latent").observed_to_latent(o)
-
-    def robot_start(self, robot_state):
-        """Start ``(y0, v0)`` of the controlled agent's latent DoFs from ``robot_state`` (see :meth:`predict`)."""
-        return self._fitted("robot_start").robot_start(robot_state)
-
-    def condition(self, stats, need_cov: bool):
-        """Eq. 16-18 from sufficient statistics (:meth:`FittedPrimitive.condition
-        <interprim.models.primitive.fitted.FittedPrimitive.condition>`)."""
-        return self._fitted("condition").condition(stats, need_cov)
-
-    def predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None, workspace=None):
-        """:meth:`FittedPrimitive.predict_latent <interprim.models.primitive.fitted.FittedPrimitive.predict_latent>`."""
-        return self._state().predict_latent(z, n_star, cost, robot_state, need_cov, robot_start, workspace)
-
     def phase_method_used(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"cv"`` the one ``fit`` chose (``phase_method_``)."""
         if self.phase_method == "cv":
@@ -473,17 +515,10 @@ class InteractionPrimitive(Predictor):
 
     def input_distance(self, frames) -> float:
         """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
-        (:mod:`interprim.core.input_range`); NaN for a model file without those statistics."""
-        return self._fitted("input_distance").input_distance(frames)
-
-    def cached(self, name: str, key: tuple, build):
-        """The fitted state's store of derived values (:meth:`FittedPrimitive.cached
-        <interprim.models.primitive.fitted.FittedPrimitive.cached>`)."""
-        return self._fitted("cached").cached(name, key, build)
-
-    def _fitted(self, what: str) -> FittedPrimitive:
-        self._check_fitted(what)
-        return self.fitted_
+        (:mod:`interprim.core.input_range`, the contract of :class:`~interprim.models.base.Predictor`); NaN for a
+        model file without those statistics."""
+        self._check_fitted("input_distance")
+        return self.fitted_.input_distance(frames)
 
     # ------------------------------------------------------------------ prediction
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
@@ -573,22 +608,6 @@ class InteractionPrimitive(Predictor):
         from ..._summary import summary
 
         return summary(self, fit_seconds)
-
-
-def _view(name: str) -> property:
-    def get(self):
-        st = self.__dict__.get("fitted_")
-        if st is None:
-            raise AttributeError(f"{name} (this InteractionPrimitive is not fitted yet)")
-        return getattr(st, name)
-
-    get.__doc__ = f"``fitted_.{name}``: a read-only view of the fitted state (see the class docstring's Attributes)."
-    return property(get)
-
-
-for _name in FITTED_NAMES:  # the fitted attributes, read-only views of the fitted state
-    setattr(InteractionPrimitive, _name, _view(_name))
-del _name
 
 
 #: The numbers of basis functions per DoF that ``n_basis="cv"`` compares (capped by the demonstrations' length).

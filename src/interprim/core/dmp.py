@@ -399,8 +399,9 @@ def representation_report(latent, starts, theta, rollout, n: int = 101, groups=N
 REPRESENTATION_LIMIT = 0.5
 
 
-def warn_representation(report: dict, n_basis: int):
-    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
+def warn_representation(report: dict, n_basis: int, stacklevel: int = 4):
+    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations
+    (``stacklevel``: of :func:`warnings.warn`, counted from here, so that it names the user's line)."""
     import warnings
 
     from .errors import RepresentationWarning
@@ -414,4 +415,4 @@ def warn_representation(report: dict, n_basis: int):
                   f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
                   f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
                   f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
-                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=4)
+                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=stacklevel)

@@ -22,8 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.cache import DerivedCache
-from .base import GridPrediction
 from .demonstrations import AlignedBaseline
+from .grid import GridPrediction
+from .training import TrainingSet
 from ..model_selection.prefixes import observed_frames
 
 __all__ = ["KernelDemonstrations"]
@@ -66,26 +67,13 @@ class KernelDemonstrations(AlignedBaseline):
         self.n = n
 
     # -- fitting ---------------------------------------------------------------------------------
-    def fit(self, demos, dt=None):
-        """Keep the demonstrations and choose the bandwidth.
-
-        Parameters
-        ----------
-        demos : list of ndarray, shape (T_j, D)
-            At least 2 finite demonstrations with the same columns (3 for ``bandwidth="cv"``).
-        dt : float, optional
-            Sampling interval in seconds (default 0.01).
-
-        Returns
-        -------
-        KernelDemonstrations
-            ``self``.
-        """
+    def _fit(self, data: TrainingSet) -> None:
+        """Keep the demonstrations (at least 2; 3 for ``bandwidth="cv"``) and choose the bandwidth."""
         if not (self.bandwidth == "cv" or (isinstance(self.bandwidth, (int, float)) and self.bandwidth > 0)):
             raise ValueError(f"bandwidth must be a positive number or 'cv', got {self.bandwidth!r}")
         if not (isinstance(self.horizon, (int, float)) and self.horizon > 0):
             raise ValueError(f"horizon must be a positive number of seconds, got {self.horizon!r}")
-        arrays = self._fit_common(demos, dt)
+        arrays = self._fit_common(data)
         obs = self.observed_dofs_
         D = arrays[0].shape[1]
         self.obs_ = obs
@@ -99,12 +87,11 @@ class KernelDemonstrations(AlignedBaseline):
         if self.bandwidth != "cv":
             self.cost_scale_ = self._cost_scale()
             self.bandwidth_ = float(self.bandwidth)
-            return self
+            return
         if len(arrays) < 3:
             raise ValueError(f"bandwidth='cv' needs at least 3 demonstrations, got {len(arrays)}")
         self.cost_scale_ = self._cost_scale()
         self.bandwidth_ = self._choose_bandwidth()
-        return self
 
     def _frames_at(self, idx, f, cols):
         """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
@@ -230,7 +217,7 @@ class KernelDemonstrations(AlignedBaseline):
         self.cost_scale_ = float(meta["cost_scale_"])
         self.cv_errors_ = {float(h): float(e) for h, e in meta["cv_errors_"]}
 
-    def predict(self, partial) -> GridPrediction:
+    def _predict(self, partial) -> GridPrediction:
         """Predict the whole movement of both agents from the observed prefix ``partial`` (``(M, n_obs)``).
 
         The prediction's ``phase`` is the fraction of the movement seen and ``duration`` the predicted total
@@ -244,7 +231,8 @@ class KernelDemonstrations(AlignedBaseline):
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
         """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
-        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; the prediction's ``weights``: ``{demonstration: weight}``)."""
+        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; the prediction's
+        ``weights``: ``{demonstration: weight}``)."""
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_

@@ -23,13 +23,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..base import Predictor
+from ..training import TrainingSet
 from ...core.blas import one_blas_thread
-from ...core.validation import as_2d_finite, check_positive, check_times
+from ...core.validation import check_positive
 from ...core.dmp import warn_representation
 from ...core.errors import NotFittedError
 from .fitted import FittedPrimitive
 from .prediction import Prediction
-from ...core.preprocessing import resample_uniform
 from .stream import Stream
 
 if TYPE_CHECKING:
@@ -394,66 +394,20 @@ class InteractionPrimitive(Predictor):
         return obs, ctrl, kk
 
     # ------------------------------------------------------------------ fitting
-    @one_blas_thread
-    def fit(self, demos, dt: float | None = None, times=None, columns=None):
-        """Learn the Interaction Primitive from demonstrations of both agents.
-
-        Parameters
-        ----------
-        demos : list of array_like, shape (T_j, D)
-            One array per demonstration, time on axis 0, the columns of both
-            agents (``observed_dofs`` for the human).  Lengths may differ.
-        dt : float, optional
-            Sampling interval in seconds of uniformly sampled demos (default 0.01 if
-            neither ``dt`` nor ``times`` is given).
-            An :class:`interprim.datasets.Demonstrations` (any loader's result) is
-            taken as it is: its ``dt`` (or ``times``) and column names are used
-            unless given here.
-        times : list of array_like, shape (T_j,), optional
-            Time stamps in seconds per demonstration; irregular sampling is
-            resampled onto a uniform grid at the median interval.
-        columns : list of str, optional
-            Names of the ``D`` columns; kept as ``columns_`` and in the model file.
-
-        Returns
-        -------
-        self
-        """
-        if hasattr(demos, "demos") and hasattr(demos, "times"):  # interprim.datasets.Demonstrations
-            if dt is None and times is None:
-                if getattr(demos, "dt", None) is not None:
-                    dt = demos.dt
-                else:
-                    times = list(demos.times)
-            if columns is None:
-                columns = getattr(demos, "columns", None)
-            demos = list(demos.demos)
-        if isinstance(demos, np.ndarray) and demos.ndim == 3:
-            demos = list(demos)
-        if not isinstance(demos, (list, tuple)):
-            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
-        if len(demos) < 2:
-            raise ValueError(f"at least 2 demonstrations are needed to learn a distribution, got {len(demos)}")
-        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
-        D = arrays[0].shape[1]
-        for j, a in enumerate(arrays):
-            if a.shape[1] != D:
-                raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
-        if columns is not None:
-            columns = [str(c) for c in columns]
-            if len(columns) != D:
-                raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
+    def _fit(self, data: TrainingSet) -> None:
+        """Learn the Interaction Primitive from the validated training set (:meth:`fit` of
+        :class:`~interprim.models.base.Predictor`: a list of ``(T_j, D)`` arrays with ``dt`` or ``times``, a
+        :class:`~interprim.datasets.Demonstrations` or a :class:`~interprim.models.training.TrainingSet`): at
+        least 2 demonstrations of at least 5 frames (``smoothing_window`` when larger); the column names are
+        kept as ``columns_`` and in the model file."""
+        if len(data) < 2:
+            raise ValueError(f"at least 2 demonstrations are needed to learn a distribution, got {len(data)}")
+        arrays = list(data.arrays)
+        D = data.n_dofs
+        columns = None if data.columns is None else list(data.columns)
+        dt = data.dt
         obs, ctrl, kk = self._check_params(D, len(arrays))
         min_frames = max(5, self.smoothing_window or 0)
-        if times is not None:
-            if dt is not None:
-                raise ValueError("give either dt or times, not both")
-            if len(times) != len(arrays):
-                raise ValueError(f"times has {len(times)} entries but there are {len(arrays)} demos")
-            ts = [check_times(t, a.shape[0], f"times[{j}]") for j, (t, a) in enumerate(zip(times, arrays))]
-            dt = float(np.median(np.concatenate([np.diff(t) for t in ts])))
-            arrays = [resample_uniform(a, t, dt=dt)[0] for a, t in zip(arrays, ts)]
-        dt = 0.01 if dt is None else check_positive(dt, "dt")
         for j, a in enumerate(arrays):
             if a.shape[0] < min_frames:
                 raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
@@ -466,8 +420,8 @@ class InteractionPrimitive(Predictor):
         self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk)
         if chosen is not None:
             self.fitted_.selection_["n_basis"] = chosen  # fit assigns what the choice returned
-        warn_representation(self.fitted_.representation_, int(params["n_basis"]))  # at the caller's line
-        return self
+        # at the caller's line: here, Predictor.fit, its one-BLAS-thread wrapper, the caller
+        warn_representation(self.fitted_.representation_, int(params["n_basis"]), stacklevel=5)
 
     # ------------------------------------------------------------------ the fitted state
     def _state(self) -> FittedPrimitive:
@@ -521,6 +475,7 @@ class InteractionPrimitive(Predictor):
         return self.fitted_.input_distance(frames)
 
     # ------------------------------------------------------------------ prediction
+    @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> Prediction:
         """Predict the interaction from a partial observation of the observed agent.

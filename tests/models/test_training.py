@@ -99,3 +99,27 @@ def test_the_adapter_names_what_is_wrong():
     with pytest.raises(ValueError, match="empty"):
         training_set([])
     assert training.uniform_demonstrations(demos, 0.05)[1] == 0.05
+
+
+def test_a_training_set_keeps_the_raw_samples_for_causal_prefixes():
+    """A Demonstrations interpolated from raw samples (a slow sensor) keeps them in its TrainingSet, so the causal
+    prefixes of a cross-validation (model_selection.prefixes.Prefixes) come from the set itself, folds included."""
+    from interprim.datasets import Demonstrations, RawStream
+    from interprim.model_selection.prefixes import Prefixes
+
+    demos, times, raw = [], [], []
+    for d in two_agent_demos(4, seed=6):
+        t = np.arange(len(d)) * 0.01
+        slow = np.arange(0, len(d), 7)  # the observed agent recorded every 7th frame
+        raw.append([RawStream(t[slow], (0, 1), d[slow, :2]), RawStream(t, (2, 3, 4), d[:, 2:])])
+        demos.append(np.column_stack([np.column_stack([np.interp(t, t[slow], d[slow, c]) for c in (0, 1)]),
+                                      d[:, 2:]]))
+        times.append(t)
+    ds = Demonstrations(demos, times, [f"c{i}" for i in range(5)], dt=0.01, observed_dofs=[0, 1], raw=raw)
+    data = training_set(ds)
+    assert data.raw is not None and not data.resampled and data.dt == 0.01
+    ours, theirs = Prefixes(data.take([2, 3]), [0, 1]), Prefixes(ds, [0, 1]).subset([2, 3])
+    assert ours.causal
+    for j, k in ((0, 10), (1, 23), (1, 40)):
+        np.testing.assert_array_equal(ours(j, k), theirs(j, k))
+    assert not np.array_equal(ours(1, 23), data.arrays[3][:23, :2])  # causal: not the interpolated frames

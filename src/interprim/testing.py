@@ -129,7 +129,7 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
 
     demos = two_agent_demos(8, seed=3) if demos is None else demos
     train, held = list(demos[:-1]), np.asarray(demos[-1], dtype=np.float64)
-    out = {}
+    out: dict = {}
     model = make()
     try:
         model.predict(held[:10, :2])

@@ -193,8 +193,8 @@ class BaseStream:
             frame's :meth:`update`).
         """
         block = as_2d_finite(frames, "frames", min_rows=1)
-        pred = None
-        for f in block:
+        pred = self.update(block[0], need_cov=need_cov)
+        for f in block[1:]:
             pred = self.update(f, need_cov=need_cov)
         return pred
 

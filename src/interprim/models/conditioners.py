@@ -38,7 +38,8 @@ def target_block(P, Ydc, R):
 
 
 class Context:
-    """What every conditioner of one training set and one batch of queries shares.
+    """What every conditioner of one training set and one batch of queries shares; the base fields can also be
+    read as a mapping (``ctx["Xc"]``, ``dict(ctx)``).
 
     Parameters
     ----------
@@ -54,8 +55,6 @@ class Context:
         The demonstrations' centred targets.
     ylow : ndarray, optional
         :func:`target_block` of ``P`` and ``Ydc`` when the caller has it (it does not depend on the phase).
-
-    The base fields can also be read as a mapping (``ctx["Xc"]``, ``dict(ctx)``).
     """
 
     FIELDS: ClassVar[tuple[str, ...]] = ("R", "Xc", "xc", "P", "ybar", "Ydc")

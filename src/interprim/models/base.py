@@ -3,7 +3,9 @@
 Every model -- :class:`~interprim.models.primitive.estimator.InteractionPrimitive`, :class:`~interprim.models.learned.LearnedInteraction`
 and the peer methods of :mod:`interprim.models.demonstrations` -- is a :class:`Predictor`:
 
-* ``fit(demos, dt=None)`` returns the model; ``predict(partial)`` and ``stream()`` raise
+* ``fit(demos, dt=None, times=None, columns=None)`` returns the model (``demos``: a list of arrays, a
+  :class:`~interprim.datasets.Demonstrations` or a :class:`~interprim.models.training.TrainingSet`);
+  ``predict(partial)`` and ``stream()`` raise
   :class:`~interprim.core.errors.NotFittedError` before it;
 * ``predict(partial)`` takes the observed agent's frames from the start of the movement, shape
   ``(M, len(observed_dofs))``, and returns a :class:`BasePrediction`;
@@ -32,9 +34,9 @@ Every prediction is a :class:`BasePrediction`: the same attributes (``phase``, `
 ``goal``                           ``(D,)`` the predicted end point (the DMP goal for an IP)
 =================================  ===========================================================
 
-:class:`~interprim.models.grid.GridPrediction` is the prediction of the models that tabulate their mean and standard deviation on a
-normalised-time grid (the coupling, the learned interaction and the baselines); the Interaction Primitive's
-:class:`~interprim.models.primitive.prediction.Prediction` integrates its DMPs instead.
+:class:`~interprim.models.grid.GridPrediction` is the prediction of the models that tabulate their mean and
+standard deviation on a normalised-time grid (the coupling, the learned interaction and the baselines); the
+Interaction Primitive's :class:`~interprim.models.primitive.prediction.Prediction` integrates its DMPs instead.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ def __getattr__(name: str):
 
         return GridPrediction
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
 _PREDICTION_CALLS = ("trajectory", "std", "samples", "response", "completion", "completion_std", "band")

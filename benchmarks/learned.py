@@ -94,4 +94,4 @@ def bench_learned_stream(quick, make_demos, row):
 def estimate_phase_only(model, partial):
     from interprim.phase.likelihood import estimate_phase
 
-    return estimate_phase(model, model.observed_to_latent(partial))
+    return estimate_phase(model.fitted_, model.fitted_.observed_to_latent(partial))

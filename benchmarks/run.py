@@ -141,8 +141,8 @@ def ref_online_step(model, z, n_star, cost):
     G, B = X.T @ X, X.T @ Y
     post = condition(model.prior_.mean, model.prior_.cov, model.obs_index_, G, B, model.sigma2_,
                      yy=float(np.sum(Y * Y)), n_obs=Y.size, need_cov=False)
-    pred = ip.Prediction(model, post, (G, B, float(np.sum(Y * Y)), Y.size), s_end, duration, n_star, cost, M, y0,
-                         model.robot_start(None), z[-1])
+    pred = ip.Prediction(model.fitted_, post, (G, B, float(np.sum(Y * Y)), Y.size), s_end, duration, n_star, cost,
+                         M, y0, model.fitted_.robot_start(None), z[-1])
     return pred._response_reference(100)
 
 
@@ -251,7 +251,7 @@ def bench_likelihood_phase(quick):
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1
     s_ours = model.predict(partial).normalised_time
-    s_dtw = open_end_dtw(model.reference_, model.observed_to_latent(partial), return_path=False).n_star / N1
+    s_dtw = open_end_dtw(model.reference_, model.fitted_.observed_to_latent(partial), return_path=False).n_star / N1
     t_ref = timed(lambda: ref_likelihood_phase(model, partial, s_dtw), n=1 if quick else 3, warm=0)
     s_ref = ref_likelihood_phase(model, partial, s_dtw)
     row("predict, phase_method='likelihood'", "250 frames, 7+7 DoF", ours, "per-candidate reference phase only",

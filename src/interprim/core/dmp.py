@@ -411,8 +411,9 @@ def representation_report(latent: Sequence[np.ndarray], starts: Sequence[tuple[n
 REPRESENTATION_LIMIT = 0.5
 
 
-def warn_representation(report: dict[str, dict[str, float]], n_basis: int) -> None:
-    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
+def warn_representation(report: dict[str, dict[str, float]], n_basis: int, stacklevel: int = 4) -> None:
+    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations
+    (``stacklevel``: of :func:`warnings.warn`, counted from here, so that it names the user's line)."""
     import warnings
 
     from .errors import RepresentationWarning
@@ -426,4 +427,4 @@ def warn_representation(report: dict[str, dict[str, float]], n_basis: int) -> No
                   f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
                   f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
                   f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
-                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=4)
+                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=stacklevel)

@@ -29,6 +29,7 @@ import numpy as np
 from ...core._compiled import registry as kernels
 from ...core.basis import Basis
 from ...core.blas import one_blas_thread, single_thread
+from ...core.cache import DerivedCache
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from ...core.gaussian import Posterior, fit_prior
 from ...core.input_range import fit_input_range, input_distance, mark
@@ -85,7 +86,7 @@ class FittedPrimitive:
             raise ValueError(f"FittedPrimitive: parameters {missing} missing")
         self.params = {k: params[k] for k in PARAM_NAMES}
         self.__dict__.update(self.params)
-        self._derived: dict = {}
+        self._derived = DerivedCache()
         if fitted:
             bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
             if bad:
@@ -115,7 +116,7 @@ class FittedPrimitive:
         if bad:
             raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
         new = copy.copy(self)
-        new.__dict__.update(fitted, _derived={})
+        new.__dict__.update(fitted, _derived=DerivedCache())
         return new
 
     def with_params(self, **params) -> FittedPrimitive:
@@ -138,17 +139,7 @@ class FittedPrimitive:
         so a refit never sees a value derived from the previous fit.  Modules that need derived arrays of the
         model (the phase likelihood's factored prior, for example) keep them here.
         """
-        store = self._derived
-        hit = store.get(name)
-        if hit is not None and len(hit[0]) == len(key):
-            for a, b in zip(hit[0], key):  # per frame of a stream: a plain loop, no generator
-                if a is not b:
-                    break
-            else:
-                return hit[1]
-        value = build()
-        store[name] = (tuple(key), value)
-        return value
+        return self._derived.get_or_build(name, key, build)
 
     # ------------------------------------------------------------------ persistence
     def to_state(self):

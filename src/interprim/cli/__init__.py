@@ -50,20 +50,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _flag_names(parser, command, exc) -> str:
-    """The message of ``exc`` in one line, with the command's Python argument names (``max_nan_gap``) as flags."""
-    msg = " ".join(str(exc).split("\n"))
+    """The message of ``exc`` with the command's Python argument names as flags: ``max_nan_gap=30`` as
+    ``--max-nan-gap 30``, ``trim=True`` as ``--trim``, ``time_column=`` (no value) as ``--time-column``.
+
+    One line, unless the error holds a table (``exc.multiline``), which is printed as it is."""
+    msg = str(exc) if getattr(exc, "multiline", False) else " ".join(str(exc).split("\n"))
     try:
         sub = parser._subparsers._group_actions[0].choices[command]
     except (AttributeError, IndexError, KeyError, TypeError):  # pragma: no cover
         return msg
+    import argparse
     import re
 
     for action in sub._actions:
         flags = [o for o in action.option_strings if o.startswith("--")]
-        if flags and "_" in action.dest:  # a whole word, not part of a file name
-            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}(?![\w/\\-]|\.\w)", flags[0], msg)
-        elif flags:  # a one-word option only where a message writes it as a keyword argument: 'markers=...'
-            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}=", flags[0] + "=", msg)
+        if not flags:
+            continue
+        flag, name = flags[0], re.escape(action.dest)
+        lead = r"(?<![\w./\\-])"
+        if isinstance(action, (argparse._StoreTrueAction,)):
+            msg = re.sub(lead + name + r"=True\b", flag, msg)
+        msg = re.sub(lead + name + r"=(?=[\s,;:)]|$)", flag, msg)  # 'name=' without a value: the flag alone
+        msg = re.sub(lead + name + r"=(?=\S)", flag + " ", msg)  # 'name=value': the flag and the value
+        if "_" in action.dest:  # a whole word, not part of a file name
+            msg = re.sub(lead + name + r"(?![\w/\\-]|\.\w)", flag, msg)
     return msg
 
 

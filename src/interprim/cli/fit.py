@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import InterprimError
-from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
-                      print_notes, recording_options)
+from ._common import (MAX_NAN_GAP_HELP, SPLIT_HINT, CommandError, add_recording_args, agent_columns, output_when_done,
+                      positive_number, print_notes, read_demonstrations, split_cols)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -129,8 +129,7 @@ def add_parser(subparsers) -> None:
         "interpolated onto"
     )
     p.add_argument(
-        "--max-nan-gap", type=int, default=0,
-        help="fill interior gaps of up to this many missing frames (missing values, lost mocap markers)",
+        "--max-nan-gap", type=int, default=None, help=MAX_NAN_GAP_HELP,
     )
     add_recording_args(p)
     p.set_defaults(func=cmd_fit)
@@ -171,24 +170,15 @@ def _calibrate(text):
 def cmd_fit(args) -> int:
     """``interprim fit``: load demonstrations, fit the model (chosen on them by default), save it."""
     import interprim as ip
-    from interprim.datasets import load_demonstrations
 
     positive_number(args.n_basis, "--n-basis")
-    positive_number(args.dt, "--dt")
-    positive_number(args.resample, "--resample")
-    ds = load_demonstrations(
-        args.demos,
-        columns=args.columns,
-        dt=args.dt,
-        resample_dt=args.resample,
-        max_nan_gap=args.max_nan_gap,
-        **recording_options(args),
-    )
-    print_notes(ds)
+    ds = read_demonstrations(args.demos, args, columns=args.columns)  # as 'interprim evaluate --data' reads it
+    print_notes(ds, "fit")
     n_read = ds.n_dofs
     ds, obs = agent_columns(ds, split_cols(args.observed), split_cols(args.controlled), args.demos)
     if len(ds) < 2:
-        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution")
+        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution. "
+                           + SPLIT_HINT)
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -234,7 +224,7 @@ def _fit_other(args, ds, obs, n_read) -> int:
 
     if args.model == "auto" and len(ds) < 3:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "
-                           "folds and needs at least 3 (or use --model ip)")
+                           "folds and needs at least 3 (or use --model ip). " + SPLIT_HINT)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True)
     model = auto

@@ -77,12 +77,51 @@ def _flag_names(parser, command, exc) -> str:
     return msg
 
 
+class _OncePerCause:
+    """Warnings of a command: each cause printed once, as one line ``warning: ...`` (no Python source line), and
+    at the end how many times each cause repeated."""
+
+    def __init__(self, parser, command):
+        self.parser, self.command = parser, command
+        self.seen: dict = {}
+
+    def show(self, message, category, filename, lineno, file=None, line=None):
+        key = (category.__name__, str(message))
+        if key in self.seen:
+            self.seen[key] += 1
+            return
+        self.seen[key] = 1
+        text = _flag_names(self.parser, self.command, message if isinstance(message, Exception) else Exception(message))
+        print(f"warning: {text} ({category.__name__})", file=sys.stderr)
+
+    def summary(self):
+        for (name, msg), n in self.seen.items():
+            if n > 1:
+                short = msg if len(msg) <= 70 else msg[:67] + "..."
+                print(f"warning: the {name} above ({short!r}) was raised {n} times in all", file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    once = _OncePerCause(parser, args.command)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")  # counted here, printed once per cause
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+        warnings.showwarning = once.show
+        try:
+            return _run(parser, args)
+        finally:
+            once.summary()
+
+
+def _run(parser, args) -> int:
     try:
         return int(args.func(args) or 0)
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:

@@ -21,7 +21,12 @@ import numpy as np
 
 from .errors import OutOfRangeWarning
 
-__all__ = ["fit_input_range", "input_distance", "mark"]
+__all__ = ["fit_input_range", "input_distance", "mark", "duration_range", "DURATION_FACTOR"]
+
+#: A predicted duration longer than this many times the longest demonstration, or shorter than the shortest
+#: divided by it, is out of range (``Prediction.duration_out_of_range``): demonstrations of one interaction at
+#: natural speeds differ by less (NuiSI: 1.7-2.7 s, 1.6x), a prediction 2.4x the longest does not follow them.
+DURATION_FACTOR = 1.5
 
 
 def fit_input_range(frames):
@@ -44,12 +49,40 @@ def input_distance(model, frames) -> float:
     return float(np.max(np.abs(f - mean) / model.input_std_)) if f.size else 0.0
 
 
+def duration_range(model):
+    """``(shortest, longest)`` demonstrated duration (s) of ``model`` (its own ``durations_``, those of the model
+    it wraps or of its members), ``(mean, mean)`` when only the mean is known, ``None`` when nothing is."""
+    seen, todo = set(), [model]
+    while todo:
+        obj = todo.pop(0)
+        if obj is None or id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        d = getattr(obj, "durations_", None)
+        if d is not None and np.size(d):
+            d = np.asarray(d, dtype=np.float64)
+            return float(d.min()), float(d.max())
+        todo.append(getattr(obj, "model_", None))
+        members = getattr(obj, "members_", None)
+        if isinstance(members, dict):
+            todo.extend(members.values())
+    mean = getattr(model, "mean_duration_", None)
+    if mean is not None and np.isfinite(mean) and mean > 0:
+        return float(mean), float(mean)
+    return None
+
+
 def mark(model, prediction, dist, warn: bool = True):
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
+    # a predicted duration far outside the demonstrated ones (DURATION_FACTOR), flagged as the input is
+    span = duration_range(model)
+    duration = float(getattr(prediction, "duration", float("nan")))
+    prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
+        duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
     if prediction.out_of_range and warn:
         import inspect
 

@@ -1,0 +1,123 @@
+"""Messages a person reads: one line per warning cause, flags without stray '=', the predict header, the serve
+warm-up inside the training range, fit and evaluate reading a file the same way."""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim.cli import build_parser, main
+from interprim.datasets import save_demonstrations
+from interprim.synthetic import two_agent_demos
+
+
+def _irregular(tmp_path, n=6, seed=0):
+    rng = np.random.default_rng(seed)
+    demos = two_agent_demos(n, seed=seed, frames=50)
+    times = [np.cumsum(np.r_[0.0, 0.03 + 0.006 * rng.random(len(d) - 1)]) for d in demos]
+    return save_demonstrations(tmp_path / "irr.csv", demos, times, columns=["hx", "hy", "j1", "j2", "j3"],
+                               observed=["hx", "hy"])
+
+
+def test_help_has_no_stray_equals_or_double_percent(capsys):
+    parser = build_parser()
+    sub = parser._subparsers._group_actions[0].choices
+    for name in ("fit", "evaluate", "predict", "serve"):
+        text = sub[name].format_help()
+        assert "%%" not in text, name
+        assert not re.search(r"--[a-z-]+= ", text), name
+    assert "observe 10-100 % of the observed agent" in " ".join(sub["evaluate"].format_help().split())
+
+
+def test_a_warning_cause_is_one_line_once_with_a_count(capsys):
+    from interprim.cli import _OncePerCause
+
+    once = _OncePerCause(build_parser(), "fit")
+    for _ in range(17):
+        once.show(ip.RepresentationWarning("the DMPs with n_basis=5 cannot represent these movements"),
+                  ip.RepresentationWarning, "/x/ensemble.py", 104)
+    once.summary()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 2 and "ensemble.py" not in err
+    assert err.startswith("warning: the DMPs with --n-basis 5 cannot represent these movements (RepresentationWarning)")
+    assert "was raised 17 times in all" in err
+
+
+def test_fit_prints_a_data_warning_once_without_the_source_line(tmp_path, capsys):
+    path = _irregular(tmp_path)
+    code = main(["fit", str(path), "--model", "ip", "--n-basis", "3", "-o", str(tmp_path / "m.npz")])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    lines = [x for x in cap.err.splitlines() if x.startswith("warning:")]
+    assert len(lines) == len(set(lines)) and not any(re.search(r"\.py:\d+", x) for x in cap.err.splitlines())
+
+
+def test_fit_and_evaluate_read_irregular_stamps_the_same_way(tmp_path, capsys):
+    path = _irregular(tmp_path)
+    code = main(["fit", str(path), "--model", "ip", "--n-basis", "5", "-o", str(tmp_path / "m.npz")])
+    out = capsys.readouterr().out
+    assert code == 0
+    note = re.search(r"resampled at their median interval ([\d.]+) s \(as --resample ([\d.]+)\)", out)
+    assert note, out
+    dt = float(note.group(1))
+    assert f"dt={dt:.4g} s" in out
+    code = main(["evaluate", "--data", str(path), "--methods", "prior", "--no-figures", "--out",
+                 str(tmp_path / "ev")])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    assert f"resampled at their median interval {note.group(1)} s" in cap.err
+
+
+def test_predict_header_says_true_false_and_leaves_out_unknown_values(tmp_path, capsys):
+    demos = two_agent_demos(6, seed=2, frames=40)
+    path = save_demonstrations(tmp_path / "d.csv", demos, dt=0.02, columns=["hx", "hy", "j1", "j2", "j3"],
+                               observed=["hx", "hy"])
+    assert main(["fit", str(path), "--model", "nn", "-o", str(tmp_path / "m.npz")]) == 0
+    part = save_demonstrations(tmp_path / "p.csv", [demos[0][:20, :2]], dt=0.02, columns=["hx", "hy"])
+    assert main(["predict", str(tmp_path / "m.npz"), str(part), "-o", str(tmp_path / "out.csv")]) == 0
+    head = [x for x in (tmp_path / "out.csv").read_text().splitlines() if x.startswith("#")]
+    assert "# out_of_range: false" in head and "# duration_out_of_range: false" in head
+    assert not any("nan" in x for x in head), head
+
+
+def test_duration_far_outside_the_demonstrated_ones_is_flagged():
+    from interprim.core.input_range import DURATION_FACTOR, duration_range, mark
+
+    demos = two_agent_demos(6, seed=3, frames=50)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=5).fit(demos, dt=0.02)
+    lo, hi = duration_range(m)
+    assert (lo, hi) == (float(m.durations_.min()), float(m.durations_.max()))
+    pred = m.predict(demos[0][:25, :2])
+    assert not pred.duration_out_of_range
+    for d, flagged in ((hi * DURATION_FACTOR * 1.01, True), (hi * DURATION_FACTOR * 0.99, False),
+                       (lo / DURATION_FACTOR * 0.99, True)):
+        pred.duration = d
+        mark(m, pred, pred.input_distance, warn=False)
+        assert pred.duration_out_of_range is flagged
+
+
+def test_server_reply_carries_the_duration_flag_and_warm_up_stays_in_range():
+    import json
+
+    from interprim.server import compute
+
+    demos = two_agent_demos(6, seed=4, frames=50)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=5).fit(demos, dt=0.02)
+    frames = compute.warm_up_frames(m, 2)
+    assert frames.shape == (20, 2) and m.input_distance(frames) < m.input_limit_
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ip.OutOfRangeWarning)
+        st = m.stream()
+        for f in frames:
+            p = st.update(f)
+    assert not p.out_of_range
+    from interprim.server.models import entry_for
+
+    e = entry_for("m", m)
+    op = compute.OpenModel("m", [e], [m.stream()], [list(range(5))], 5, False)
+    reply = json.loads(compute.compute_prediction(op, demos[0][0, :2], 1, None))
+    assert reply["duration_out_of_range"] is False and reply["out_of_range"] is False

@@ -7,7 +7,6 @@ import re
 import warnings
 
 import numpy as np
-import pytest
 
 import interprim as ip
 from interprim.cli import build_parser, main
@@ -121,3 +120,55 @@ def test_server_reply_carries_the_duration_flag_and_warm_up_stays_in_range():
     op = compute.OpenModel("m", [e], [m.stream()], [list(range(5))], 5, False)
     reply = json.loads(compute.compute_prediction(op, demos[0][0, :2], 1, None))
     assert reply["duration_out_of_range"] is False and reply["out_of_range"] is False
+
+
+def _slow_partner(demos, factor=3.0, share=0.6, dt=0.02):
+    """The first ``share`` of a demonstration's observed agent performed ``factor`` times slower."""
+    from interprim.core.preprocessing import resample_uniform
+
+    d = demos[0]
+    slow = resample_uniform(d, np.arange(len(d)) * factor * dt, dt=dt)[0]
+    return slow[: int(len(d) * factor * share), :2]
+
+
+def test_a_partner_three_times_slower_is_flagged_in_python_predict_and_the_server(tmp_path, capsys):
+    import json
+
+    from interprim.server import compute
+    from interprim.server.models import entry_for
+
+    demos = two_agent_demos(8, seed=3, frames=60)
+    m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=6, phase_method="dtw").fit(
+        demos, dt=0.02, columns=["hx", "hy", "j1", "j2", "j3"])
+    slow = _slow_partner(demos)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pred = m.predict(slow)
+        usual = m.predict(demos[1][:36, :2])
+    assert pred.duration > 1.5 * m.durations_.max() and pred.duration_out_of_range and not pred.out_of_range
+    assert not usual.duration_out_of_range
+    # the command line
+    m.save(tmp_path / "m.npz")
+    part = save_demonstrations(tmp_path / "slow.csv", [slow], dt=0.02, columns=["hx", "hy"])
+    assert main(["predict", str(tmp_path / "m.npz"), str(part), "-o", str(tmp_path / "out.csv")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"WARNING: the predicted duration [\d.]+ s is far outside the demonstrated ones \(0\.94-1\.36 s; "
+                     r"flagged beyond 1\.5x\)", out), out
+    assert "# duration_out_of_range: true" in (tmp_path / "out.csv").read_text()
+    # the server's replies
+    op = compute.OpenModel("m", [entry_for("m", m)], [m.stream()], [list(range(5))], 5, False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        replies = [json.loads(compute.compute_prediction(op, f, k + 1, None)) for k, f in enumerate(slow)]
+    assert replies[-1]["duration_out_of_range"] is True and replies[-1]["out_of_range"] is False
+
+
+def test_fit_error_table_states_the_files_unit(tmp_path, capsys):
+    demos = two_agent_demos(5, seed=5, frames=40)
+    path = save_demonstrations(tmp_path / "d.csv", demos, dt=0.02, columns=["hx", "hy", "j1", "j2", "j3"],
+                               observed=["hx", "hy"])
+    path.write_text("# units: m\n" + path.read_text())
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "held-out real-time error of the controlled agent" in out
+    assert "(errors in m: the unit of the controlled columns, as the file states it)" in out

@@ -4,7 +4,6 @@ and NPZ takes: files shaped like the ones a lab's recordings are (issue: a lab's
 from __future__ import annotations
 
 import re
-import warnings
 
 import numpy as np
 import pytest
@@ -61,7 +60,7 @@ def test_gap_longer_than_the_default_is_refused_with_a_table_and_the_fixes(tmp_p
         load_c3d(path)
     msg = str(err.value)
     assert msg.startswith(f"{path}: 2 of 4 markers still miss frames after filling gaps of up to 10 frames (0.1 s at "
-                          "100 Hz; the default, 0.1 s) by linear interpolation:\n")
+                          "100 Hz; the default) by linear interpolation:\n")
     assert "  marker  missing  longest gap\n" in msg
     assert re.search(r"\n  HEDO +10 % +30 frames \(0\.3 s\), frames 148-177\n", msg), msg
     assert re.search(r"\n  LASI +1\.33 % +4 frames \(0\.04 s\), frames 1-4 \(at the start or end: not filled\)\n", msg)

@@ -623,17 +623,18 @@ def test_published_frame_id_defaults_to_the_partners(bridge_of, demos):
     assert out2[-1][0].header.frame_id == "base_link"
 
 
-def test_status_carries_the_duration_flag(bridge_of, model, demos):
-    from interprim.core.input_range import mark
+def test_status_flags_a_partner_three_times_slower_than_the_demonstrations(bridge_of, model, demos):
+    from interprim.core.preprocessing import resample_uniform
 
     b = bridge_of()
     out = _sink(b)
     d = demos[1][0]
-    b.handle(0, _point(0.0, d[0, 0], d[0, 1]))
-    assert _status_values(out[-1][1])["duration_out_of_range"] == "false"
-    pred = b.last_prediction
-    pred.duration = 3.0 * float(model.durations_.max())  # 3x the longest demonstration
-    mark(model, pred, pred.input_distance, warn=False)
-    assert pred.duration_out_of_range
-    _, status = b.messages(pred, 0.0, b.base_sec)
-    assert _status_values(status)["duration_out_of_range"] == "true"
+    slow = resample_uniform(d, np.arange(len(d)) * 3 * DT, dt=DT)[0][: int(len(d) * 3 * 0.6)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for k, f in enumerate(slow):
+            b.handle(0, _point(k * DT, f[0], f[1]))
+    first, last = _status_values(out[5][1]), _status_values(out[-1][1])
+    assert first["duration_out_of_range"] == "false"
+    assert last["duration_out_of_range"] == "true" and last["out_of_range"] == "false"
+    assert float(last["duration"]) > 1.5 * float(model.durations_.max())

@@ -49,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _flag_names(parser, command, exc) -> str:
+def flag_names(parser, command, exc) -> str:
     """The message of ``exc`` with the command's Python argument names as flags: ``max_nan_gap=30`` as
     ``--max-nan-gap 30``, ``trim=True`` as ``--trim``, ``time_column=`` (no value) as ``--time-column``.
 
@@ -59,7 +59,6 @@ def _flag_names(parser, command, exc) -> str:
         sub = parser._subparsers._group_actions[0].choices[command]
     except (AttributeError, IndexError, KeyError, TypeError):  # pragma: no cover
         return msg
-    import argparse
     import re
 
     for action in sub._actions:
@@ -68,7 +67,7 @@ def _flag_names(parser, command, exc) -> str:
             continue
         flag, name = flags[0], re.escape(action.dest)
         lead = r"(?<![\w./\\-])"
-        if isinstance(action, (argparse._StoreTrueAction,)):
+        if action.nargs == 0 and action.const is True:  # a store_true flag
             msg = re.sub(lead + name + r"=True\b", flag, msg)
         msg = re.sub(lead + name + r"=(?=[\s,;:)]|$)", flag, msg)  # 'name=' without a value: the flag alone
         msg = re.sub(lead + name + r"=(?=\S)", flag + " ", msg)  # 'name=value': the flag and the value
@@ -91,7 +90,7 @@ class _OncePerCause:
             self.seen[key] += 1
             return
         self.seen[key] = 1
-        text = _flag_names(self.parser, self.command, message if isinstance(message, Exception) else Exception(message))
+        text = flag_names(self.parser, self.command, message if isinstance(message, Exception) else Exception(message))
         print(f"warning: {text} ({category.__name__})", file=sys.stderr)
 
     def summary(self):
@@ -125,7 +124,7 @@ def _run(parser, args) -> int:
     try:
         return int(args.func(args) or 0)
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"interprim {args.command}: error: {_flag_names(parser, args.command, exc)}", file=sys.stderr)
+        print(f"interprim {args.command}: error: {flag_names(parser, args.command, exc)}", file=sys.stderr)
         return 2 if isinstance(exc, ModelFileError) else 1  # a corrupt or non-model file given as MODEL
     except ImportError as exc:  # an optional extra that is not installed: one line naming the pip install
         from .._optional import extra_for_import_error

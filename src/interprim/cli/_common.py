@@ -256,9 +256,9 @@ def as_flags(text: str, command: str | None) -> str:
     ``--keep-partial``), as its errors are printed."""
     if not command:
         return text
-    from . import _flag_names, build_parser
+    from . import build_parser, flag_names
 
-    return _flag_names(build_parser(), command, _Text(text))
+    return flag_names(build_parser(), command, _Text(text))
 
 
 class _Text(Exception):

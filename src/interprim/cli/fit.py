@@ -177,8 +177,8 @@ def cmd_fit(args) -> int:
     n_read = ds.n_dofs
     ds, obs = agent_columns(ds, split_cols(args.observed), split_cols(args.controlled), args.demos)
     if len(ds) < 2:
-        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution. "
-                           + SPLIT_HINT)
+        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
+                           "distribution. " + SPLIT_HINT)
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -231,6 +231,9 @@ def _fit_other(args, ds, obs, n_read) -> int:
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]
     what = model.summary()
+    unit = _unit(ds, ctrl)
+    if unit and "error" in what:
+        what += f"\n  (errors in {unit}: the unit of the controlled columns, as the file states it)"
     resampled = "" if ds.dt is not None else " (irregular time stamps resampled at their median interval)"
     print(
         f"fitted {len(ds)} demonstrations, {ds.n_dofs} columns, dt={model.dt_:.4g} s{resampled}, mean duration "
@@ -243,6 +246,15 @@ def _fit_other(args, ds, obs, n_read) -> int:
         + f"fit in {fit_seconds:.1f} s; saved {out}"
     )
     return 0
+
+
+def _unit(ds, cols) -> str:
+    """The one unit the file states for the columns ``cols`` (empty when it states none, or several)."""
+    units = getattr(ds, "units", None)
+    if not units or not cols:
+        return ""
+    got = {units[i] for i in cols}
+    return got.pop() if len(got) == 1 and None not in got and "" not in got else ""
 
 
 def _fit_and_save(model, fit, args):

@@ -149,7 +149,7 @@ def cmd_predict(args) -> int:
         f"phase {scalars['phase']:.3f} (of the movement seen), speed {scalars['speed']:.3f}, "
         f"duration {scalars['duration']:.3g} s, {frames.shape[0]} frames observed\nwrote {out}"
     )
-    if scalars["duration_out_of_range"]:
+    if scalars["duration_out_of_range"] and not scalars["out_of_range"]:  # else the input warning below says it
         from interprim.core.input_range import DURATION_FACTOR, duration_range
 
         lo, hi = duration_range(model) or (float("nan"), float("nan"))

@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import OutOfRangeWarning
 
-__all__ = ["fit_input_range", "input_distance", "mark", "duration_range", "DURATION_FACTOR"]
+__all__ = ["fit_input_range", "input_distance", "mark", "mark_duration", "duration_range", "DURATION_FACTOR"]
 
 #: A predicted duration longer than this many times the longest demonstration, or shorter than the shortest
 #: divided by it, is out of range (``Prediction.duration_out_of_range``): demonstrations of one interaction at
@@ -72,17 +72,23 @@ def duration_range(model):
     return None
 
 
+def mark_duration(model, prediction):
+    """Set ``prediction.duration_out_of_range``: its duration is more than :data:`DURATION_FACTOR` times the
+    longest demonstration, or less than the shortest divided by it (flagged as the input range is)."""
+    span = duration_range(model)
+    duration = float(getattr(prediction, "duration", float("nan")))
+    prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
+        duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
+    return prediction
+
+
 def mark(model, prediction, dist, warn: bool = True):
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
-    # a predicted duration far outside the demonstrated ones (DURATION_FACTOR), flagged as the input is
-    span = duration_range(model)
-    duration = float(getattr(prediction, "duration", float("nan")))
-    prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
-        duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
+    mark_duration(model, prediction)
     if prediction.out_of_range and warn:
         import inspect
 

@@ -302,9 +302,9 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
             a, b = tail[0]
             segs = [s_ for s_ in segs if s_[0] < last]
             if notes is not None:
-                notes.append(f"{where}: split_events: the piece after the last event (frames {numbers[a]}-{numbers[b]}, "
-                             f"{(b - a + 1) / rate:.3g} s) runs to the end of the recording, not to a next event, so it "
-                             "is not a whole cycle: left out (keep it with keep_partial=True)")
+                notes.append(f"{where}: split_events: the piece after the last event (frames "
+                             f"{numbers[a]}-{numbers[b]}, {(b - a + 1) / rate:.3g} s) runs to the end of the recording, "
+                             "not to a next event, so it is not a whole cycle: left out (keep it with keep_partial=True)")
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
     if repetitions is not None:
@@ -398,7 +398,7 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     if report is not None and report.bad:
         if gap:
             how = (f"filling gaps of up to {gap} frames ({gap / rate:.3g} s at {rate:.4g} Hz"
-                   + ("; the default, 0.1 s" if max_nan_gap is None else f"; max_nan_gap={gap}")
+                   + ("; the default" if max_nan_gap is None else f"; max_nan_gap={gap}")
                    + ") by linear interpolation")
         else:
             how = "filling no gap (max_nan_gap=0)"

@@ -188,7 +188,8 @@ def load_demonstrations(
         column, nanoseconds when its values are whole numbers more than 1000 apart (ROS stamps),
         else seconds; the choice is stated in ``Demonstrations.notes``.
     split_repetitions : True or float, optional
-        CSV, NPZ, C3D, BVH, Qualisys TSV, Motive CSV: cut a continuous take (walking, hopping, serves one after the other) into the
+        CSV, NPZ, C3D, BVH, Qualisys TSV, Motive CSV: cut a continuous take (walking, hopping,
+        serves one after the other) into the
         repetitions of its movement: ``True`` finds the period from the take's autocorrelation, a
         number gives it in seconds (:func:`interprim.datasets._split.find_repetitions`); what was
         found is stated in ``Demonstrations.notes``.  Pieces left by ``split_gap``, ``split_events``

@@ -157,7 +157,8 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     """The verdict of an evaluation whose choice was made inside the training folds (nested).
 
     Says which method the inner cross-validation chose (per outer fold), how the chosen model compares with the
-    clock and with the mean stretched to the true duration (a reference that knows the true duration; not a lower bound), names the best method
+    clock and with the mean stretched to the true duration (a reference that knows the
+    true duration; not a lower bound), names the best method
     among all rows and says plainly when a baseline beats the chosen model by more than one standard error, and
     gives the command that fits the chosen method.
     """

@@ -32,7 +32,7 @@ MODULES = ("csvfile", "npzfile", "c3dfile", "qualisys", "motive", "bvhfile", "ro
 _loaded = False
 
 
-def _load_all() -> None:
+def load_all() -> None:
     global _loaded
     if not _loaded:
         for m in MODULES:

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
-import numpy as np
 
 __all__ = ["Common", "TakeOptions", "CsvOptions", "MarkerOptions", "BvhOptions", "RosOptions", "Table", "Reader",
            "register", "READERS", "reader_for", "OPTION_TYPES"]
@@ -177,9 +176,9 @@ def _head(path: Path) -> bytes:
 
 def reader_for(path: Path):
     """The reader class of ``path`` (by suffix, then by content among readers of one suffix), or ``None``."""
-    from . import _load_all
+    from . import load_all
 
-    _load_all()
+    load_all()
     p = Path(path)
     if p.is_dir():
         for cls in READERS:

@@ -76,7 +76,8 @@ def _lines(fh, path, max_chars):
 TIME_CANDIDATES = ("%time", "__time", "timestamp", "Time", "field.header.stamp", "header.stamp")
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 # A ROS export's bookkeeping fields: not degrees of freedom unless named with columns=.
-_ROS_BOOKKEEPING = re.compile(r"(^|[./])(header[./](seq|frame_id|stamp([./](secs|nsecs|sec|nanosec))?)|child_frame_id)$")
+_ROS_BOOKKEEPING = re.compile(
+    r"(^|[./])(header[./](seq|frame_id|stamp([./](secs|nsecs|sec|nanosec))?)|child_frame_id)$")
 
 
 def _ros_shaped(header) -> bool:
@@ -97,7 +98,8 @@ def _time_scale(t_all, name, unit, explicit):
     if whole and steps.size and float(np.median(steps)) > 1e3:
         return 1e-9, (f"time column {name!r}: whole numbers {float(np.median(steps)):.3g} apart, taken as "
                       "nanoseconds (as ROS stamps are); pass time_unit= to say otherwise")
-    return 1.0, (f"time column {name!r}: taken as seconds (median step {float(np.median(steps)) if steps.size else 0:.3g}); "
+    median = float(np.median(steps)) if steps.size else 0.0
+    return 1.0, (f"time column {name!r}: taken as seconds (median step {median:.3g}); "
                  "pass time_unit= to say otherwise")
 
 

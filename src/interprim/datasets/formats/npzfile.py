@@ -98,7 +98,8 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
         if "columns" in npz.files:
             a = load("columns")
             if a.dtype.kind not in "US" or a.ndim != 1:
-                raise DataFileError(f"{path}: 'columns' must be a 1-D string array, got dtype {a.dtype} shape {a.shape}")
+                raise DataFileError(f"{path}: 'columns' must be a 1-D string array, got dtype {a.dtype} "
+                                    f"shape {a.shape}")
             columns = [str(c) for c in a.astype(str)]
             dup = sorted({c for c in columns if columns.count(c) > 1})
             if dup:

@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 import interprim as ip
+from interprim.core.errors import DataFileWarning
 from interprim.cli import build_parser, main
 from interprim.datasets import save_demonstrations
 from interprim.synthetic import two_agent_demos
@@ -36,14 +37,18 @@ def test_a_warning_cause_is_one_line_once_with_a_count(capsys):
     from interprim.cli import _OncePerCause
 
     once = _OncePerCause(build_parser(), "fit")
-    for _ in range(17):
-        once.show(ip.RepresentationWarning("the DMPs with n_basis=5 cannot represent these movements"),
-                  ip.RepresentationWarning, "/x/ensemble.py", 104)
+    for k in range(17):  # one cause, its numbers differing from fold to fold
+        once.show(ip.RepresentationWarning(f"the DMPs with n_basis=5 cannot represent these movements ({0.6 + k / 100}x"
+                                           " the spread)"), ip.RepresentationWarning, "/x/ensemble.py", 104)
+    once.show(DataFileWarning("a.c3d: 1 of 4 markers left out"), DataFileWarning, "/x/y.py", 1)
+    once.show(DataFileWarning("b.c3d: 1 of 4 markers left out"), DataFileWarning, "/x/y.py", 1)
     once.summary()
     err = capsys.readouterr().err
-    assert err.count("\n") == 2 and "ensemble.py" not in err
-    assert err.startswith("warning: the DMPs with --n-basis 5 cannot represent these movements (RepresentationWarning)")
-    assert "was raised 17 times in all" in err
+    assert err.count("\n") == 4 and "ensemble.py" not in err, err  # 1 + 2 files + the count
+    assert err.startswith("warning: the DMPs with --n-basis 5 cannot represent these movements (0.6x the spread) "
+                          "(RepresentationWarning)")
+    assert "a.c3d: 1 of 4" in err and "b.c3d: 1 of 4" in err
+    assert "was raised 17 times in all (its numbers may differ)" in err
 
 
 def test_fit_prints_a_data_warning_once_without_the_source_line(tmp_path, capsys):

@@ -252,3 +252,20 @@ def test_a_one_demonstration_file_points_at_the_split_options(tmp_path, capsys):
                  "-o", str(tmp_path / "m.npz")])
     out = capsys.readouterr().out
     assert code == 0 and "fitted 4 demonstrations" in out
+
+
+def test_typed_options_are_the_keyword_arguments(tmp_path):
+    from interprim.datasets.formats import CsvOptions, MarkerOptions, TakeOptions
+
+    y, t = continuous_take()
+    path = save_demonstrations(tmp_path / "take.csv", [y], [t], columns=["hx", "hy", "hz", "rx", "ry", "rz"])
+    a = load_demonstrations(path, options=[TakeOptions(split_gap=0.2), CsvOptions(columns=["hx", "rx"])])
+    b = load_demonstrations(path, split_gap=0.2, columns=["hx", "rx"])
+    assert a.columns == b.columns == ["hx", "rx"] and len(a) == len(b) == 4
+    for x, z in zip(a.demos, b.demos):
+        np.testing.assert_array_equal(x, z)
+    with pytest.raises(DataFileError, match=r"the option markers= applies to C3D, Qualisys TSV, Motive CSV files, "
+                                            r"not to this CSV file"):
+        load_demonstrations(path, options=MarkerOptions(markers="a"))
+    with pytest.raises(ValueError, match=r"split_gap is given twice: 0\.5 and 0\.2"):
+        load_demonstrations(path, split_gap=0.5, options=TakeOptions(split_gap=0.2))

@@ -85,19 +85,27 @@ class _OncePerCause:
         self.seen: dict = {}
 
     def show(self, message, category, filename, lineno, file=None, line=None):
-        key = (category.__name__, str(message))
+        import re
+
+        from ..core.errors import DataFileWarning
+
+        text = str(message)
+        # one cause: a warning about a file is its own (file names differ); another warning of one category whose
+        # numbers differ (a fold's ratios) is one cause
+        key = (category.__name__, text if issubclass(category, DataFileWarning) else re.sub(r"\d+(\.\d+)?", "#", text))
         if key in self.seen:
-            self.seen[key] += 1
+            self.seen[key][0] += 1
             return
-        self.seen[key] = 1
+        self.seen[key] = [1, text]
         text = flag_names(self.parser, self.command, message if isinstance(message, Exception) else Exception(message))
         print(f"warning: {text} ({category.__name__})", file=sys.stderr)
 
     def summary(self):
-        for (name, msg), n in self.seen.items():
+        for (name, _), (n, msg) in self.seen.items():
             if n > 1:
-                short = msg if len(msg) <= 70 else msg[:67] + "..."
-                print(f"warning: the {name} above ({short!r}) was raised {n} times in all", file=sys.stderr)
+                short = msg if len(msg) <= 60 else msg[:57] + "..."
+                print(f"warning: the {name} above ({short!r}) was raised {n} times in all (its numbers may differ)",
+                      file=sys.stderr)
 
 
 def main(argv=None) -> int:

@@ -110,6 +110,7 @@ def load_demonstrations(
     split_repetitions=None,
     min_marker_coverage: float | None = None,
     keep_partial: bool = False,
+    options=(),
 ) -> Demonstrations:
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
@@ -201,6 +202,10 @@ def load_demonstrations(
     keep_partial : bool
         With ``split_events``: also keep the piece after the last event, which runs to the end
         of the recording and is not a whole cycle (left out by default, said in ``notes``).
+    options : option instance or sequence of them, optional
+        The format options as the readers take them (:mod:`interprim.datasets.formats`):
+        ``TakeOptions(split_gap=1.0)``, ``MarkerOptions(markers=["A:RHand"])``, ``CsvOptions``,
+        ``BvhOptions``, ``RosOptions``; the same as the keyword arguments of their fields.
     split_frames : str or sequence of (int, int), optional
         Every take format: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive;
         C3D, TSV and Motive frames numbered as the capture software numbers them, BVH frames and the
@@ -247,6 +252,19 @@ def load_demonstrations(
                   split_events=split_events or None, split_frames=split_frames, time_column=time_column,
                   time_unit=time_unit, split_repetitions=split_repetitions, min_marker_coverage=min_marker_coverage,
                   keep_partial=keep_partial)
+    for o in (options,) if not isinstance(options, (list, tuple)) else options:  # typed options, as the readers take
+        if type(o) not in OPTION_TYPES:
+            raise TypeError(f"options: expected instances of {', '.join(t.__name__ for t in OPTION_TYPES)}, got {o!r}")
+        for f in fields(o):
+            value = getattr(o, f.name)
+            if value == f.default:
+                continue
+            if f.name == "columns":
+                columns = value if columns is None else columns
+                continue
+            if kwargs.get(f.name) not in (None, False, value):
+                raise ValueError(f"{f.name} is given twice: {kwargs[f.name]!r} and {value!r} ({type(o).__name__})")
+            kwargs[f.name] = value
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),

@@ -303,8 +303,9 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
             segs = [s_ for s_ in segs if s_[0] < last]
             if notes is not None:
                 notes.append(f"{where}: split_events: the piece after the last event (frames "
-                             f"{numbers[a]}-{numbers[b]}, {(b - a + 1) / rate:.3g} s) runs to the end of the recording, "
-                             "not to a next event, so it is not a whole cycle: left out (keep it with keep_partial=True)")
+                             f"{numbers[a]}-{numbers[b]}, {(b - a + 1) / rate:.3g} s) runs to the end of the "
+                             "recording, not to a next event, so it is not a whole cycle: left out (keep it with "
+                             "keep_partial=True)")
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
     if repetitions is not None:

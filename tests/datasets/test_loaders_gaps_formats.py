@@ -93,6 +93,7 @@ def test_arm_markers_empty_in_every_frame_are_never_said_to_be_at_the_start_or_e
     msg = str(err.value)
     assert re.search(r"\n  LELB +100 % +all 438 frames \(never seen\)\n", msg), msg
     assert "start or end" not in msg
+    assert msg.endswith("what fixes it:\n  markers=...: leave out LELB (never seen); complete markers: LSHO"), msg
     with pytest.warns(DataFileWarning, match=r"4 of 6 markers left out.*LELB \(never seen\)"):
         ds = load_c3d(path, trim=True)
     assert ds.columns[:3] == ["LSHO_x", "LSHO_y", "LSHO_z"] and ds.demos[0].shape == (T, 6)

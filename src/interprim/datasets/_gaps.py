@@ -85,9 +85,11 @@ def drop_sparse(path, y, columns, markers: MarkerSet, min_coverage, named: bool,
     if len(low) == len(markers.names):
         rep = GapReport(path, markers, T)
         rep.add(markers.missing(y), np.arange(T), edges=True)
-        raise DataFileError(
+        exc = DataFileError(
             f"{path}: every marker is seen in fewer than {_pct(min_coverage)} of the {T} {frames} "
-            f"(min_marker_coverage={min_coverage:g}):\n{rep.table()}\n" + rep.fixes(min_coverage=True), )
+            f"(min_marker_coverage={min_coverage:g}):\n{rep.table()}\n" + rep.fixes())
+        exc.multiline = True
+        raise exc
     shown = ", ".join(f"{markers.names[m]} ({'never seen' if seen[m] == 0 else 'seen in ' + _pct(seen[m])})"
                       for m in low[:30]) + (f", ... ({len(low)} in all)" if len(low) > 30 else "")
     warn(f"{path}: {len(low)} of {len(markers.names)} markers left out, seen in fewer than {_pct(min_coverage)} "
@@ -124,8 +126,9 @@ class GapReport:
     """Per marker, the frames still missing after filling, over every demonstration of a take."""
 
     def __init__(self, path, markers: MarkerSet, n_frames: int, rate: float | None = None, max_gap: int = 0,
-                 numbers=None):
+                 numbers=None, named: bool = False):
         self.path, self.markers, self.T = path, markers, int(n_frames)
+        self.named = bool(named)  # the user named the markers: none is left out by coverage
         self.rate, self.max_gap = rate, int(max_gap)
         self.numbers = numbers
         M = len(markers.names)
@@ -170,27 +173,32 @@ class GapReport:
             lines.append(f"  ... and {len(order) - limit} more markers")
         return "\n".join(lines)
 
-    def fixes(self, min_coverage: bool = False) -> str:
-        """The options that fix the gaps of the table, one per line."""
+    def fixes(self) -> str:
+        """The options that fix the gaps of the table, one per line (only those that would)."""
         bad = self.bad
-        interior = [self.longest[m][0] for m in bad if not self.longest[m][3] and self.count[m] < self.T]
+        never = [m for m in bad if self.count[m] >= self.T]
+        some = [m for m in bad if m not in set(never)]
+        interior = [self.longest[m][0] for m in some if not self.longest[m][3]]
         complete = [n for m, n in enumerate(self.markers.names) if m not in set(bad)]
+        shown = ",".join(complete[:12]) + ("..." if len(complete) > 12 else "")
         lines = ["what fixes it:"]
+        if never:
+            lines.append(f"  markers=...: leave out {', '.join(self.markers.names[m] for m in never[:12])} (never seen)"
+                         + (f"; complete markers: {shown}" if complete else ""))
         if interior:
             need = max(interior)
             lines.append(f"  max_nan_gap={need}: fill gaps of up to {need} frames{self._secs(need)} by linear "
                          "interpolation")
-        if any(self.longest[m][3] for m in bad):
+        if any(self.longest[m][3] for m in some):
             lines.append("  trim=True: cut the frames at the start and end of each demonstration in which a marker "
                          "is missing")
-        if complete:
-            shown = ",".join(complete[:12]) + ("..." if len(complete) > 12 else "")
-            lines.append(f"  markers=...: keep only the markers you need (complete ones: {shown})")
-        else:
-            lines.append("  markers=...: keep only the markers you need")
-        share = max(self.count[m] for m in bad) / max(self.T, 1)
-        lines.append(f"  min_marker_coverage=...: leave out the markers missing in more than that share of the "
-                     f"frames (e.g. min_marker_coverage={min(0.99, max(0.5, 1 - share / 2)):.2g})")
+        if some and not never:
+            lines.append("  markers=...: keep only the markers you need" + (f" (complete ones: {shown})" if complete
+                                                                              else ""))
+        if some and not self.named:
+            share = max(self.count[m] for m in some) / max(self.T, 1)
+            lines.append(f"  min_marker_coverage=...: leave out the markers missing in more than that share of the "
+                         f"frames (e.g. min_marker_coverage={min(0.99, max(0.5, 1 - share / 2)):.2g})")
         return "\n".join(lines)
 
     def error(self, where_fill: str) -> DataFileError:

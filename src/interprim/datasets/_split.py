@@ -345,7 +345,7 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
 
 
 def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, row_of, markers=None,
-             names=None):
+             names=None, named=False):
     """One take as demonstrations: split (:func:`split_take`), gaps filled, lengths checked.
 
     ``split`` holds ``trim``, ``events`` (row indices or None), ``ranges``, ``gap``, ``repetitions`` and
@@ -382,7 +382,7 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
     if markers is not None and gap is None:
         gap = default_max_gap(rate)
     gap = int(gap or 0)
-    report = GapReport(path, markers, y.shape[0], rate, gap) if markers is not None else None
+    report = GapReport(path, markers, y.shape[0], rate, gap, named=named) if markers is not None else None
     demos, times, labels = [], [], []
     for a, b in segs:
         where = str(path) if not splitting else f"{path}, frames {numbers[a]}-{numbers[b]}"

@@ -299,7 +299,7 @@ def marker_take(path, y, columns, rate, first, *, named, max_nan_gap, min_frames
     t = np.arange(n_frames) / rate
     demos, times, names = cut_take(path, y, t, first + np.arange(n_frames), split, max_nan_gap=max_nan_gap,
                                    min_frames=min_frames, where_col=where_col, row_of=lambda i: f"frame {first + i}",
-                                   markers=marker_set, names=columns)
+                                   markers=marker_set, names=columns, named=named)
     meta = {"units": ["m"] * len(columns), "notes": split.get("notes", [])}
     return demos, times, columns, names, meta
 

@@ -177,3 +177,24 @@ def test_fit_error_table_states_the_files_unit(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "held-out real-time error of the controlled agent" in out
     assert "(errors in m: the unit of the controlled columns, as the file states it)" in out
+
+
+def test_demo_without_the_promp_baseline_prints_no_empty_slice_warning(tmp_path, monkeypatch, capsys):
+    """The optional Interaction ProMP baseline skipped: its row is 'n/a', not a numpy 'Mean of empty slice'."""
+    import interprim.models.promp as promp
+
+    class Missing:
+        def __init__(self, *a, **k):
+            raise ImportError("No module named 'movement_primitives' (made missing by the test)")
+
+    monkeypatch.setattr(promp, "InteractionProMP", Missing)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        code = main(["demo", "--quick", "--no-gif", "--quiet", "--jobs", "1", "--out", str(tmp_path / "demo")])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    assert "Mean of empty slice" not in cap.err + cap.out and "RuntimeWarning" not in cap.err
+    import json
+
+    res = json.loads((tmp_path / "demo" / "results.json").read_text())
+    assert res["fig8"]["mean_distance_m"]["promp"] is None

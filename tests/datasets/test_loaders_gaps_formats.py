@@ -270,3 +270,11 @@ def test_typed_options_are_the_keyword_arguments(tmp_path):
         load_demonstrations(path, options=MarkerOptions(markers="a"))
     with pytest.raises(ValueError, match=r"split_gap is given twice: 0\.5 and 0\.2"):
         load_demonstrations(path, split_gap=0.5, options=TakeOptions(split_gap=0.2))
+
+
+def test_a_csv_column_empty_everywhere_is_not_said_to_be_at_the_start_or_end(tmp_path):
+    (tmp_path / "e.csv").write_text("time,x,y\n" + "".join(f"{k / 10},{k},\n" for k in range(8)))
+    with pytest.raises(DataFileError) as err:
+        load_demonstrations(tmp_path / "e.csv", max_nan_gap=3)
+    assert "e.csv, column 'y': no value in any of its 8 frames; leave it out (columns=" in str(err.value)
+    assert "start or end" not in str(err.value)

@@ -108,9 +108,7 @@ def fill_runs(y, max_gap: int):
     y = y.copy()
     T = y.shape[0]
     for d in np.flatnonzero(bad.any(axis=0)):
-        col = bad[:, d]
-        edges = np.flatnonzero(np.diff(np.concatenate(([0], col.astype(np.int8), [0]))))
-        for i, j in zip(edges[::2], edges[1::2]):
+        for i, j in _runs(bad[:, d]):
             if i > 0 and j < T and j - i <= max_gap:
                 y[i:j, d] = np.interp(np.arange(i, j), [i - 1, j], [y[i - 1, d], y[j, d]])
     return y
@@ -119,7 +117,7 @@ def fill_runs(y, max_gap: int):
 def _runs(col):
     """``[(start, stop)]`` (stop excluded) of the True runs of a boolean vector."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], col.astype(np.int8), [0]))))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    return [(int(a), int(b)) for a, b in edges.reshape(-1, 2)]  # each run: where it starts, where it stops
 
 
 class GapReport:

@@ -66,11 +66,19 @@ def _given(kwargs: dict) -> list:
     return [k for k, v in kwargs.items() if v is not None and v is not False]
 
 
+def _module_order(reader) -> int:
+    """A reader's place in :data:`~.formats.MODULES` (messages list the formats in one order)."""
+    from .formats import MODULES
+
+    name = reader.__module__.rsplit(".", 1)[-1]
+    return MODULES.index(name) if name in MODULES else len(MODULES)
+
+
 def _read_file(p: Path, common: Common, kwargs: dict) -> Table:
     """``p`` read by its format's reader, after refusing the options that reader does not take."""
     cls = reader_for(p)
     if cls is None:
-        known = sorted({s for r in READERS for s in r.suffixes})
+        known = list(dict.fromkeys(s for r in sorted(READERS, key=_module_order) for s in r.suffixes))
         raise DataFileError(
             f"{p}: unsupported file type {p.suffix!r}; expected {', '.join(known)}, a rosbag2 folder or a folder of "
             "such files (other formats: convert them to CSV, see docs/data-formats.md)"
@@ -78,7 +86,7 @@ def _read_file(p: Path, common: Common, kwargs: dict) -> Table:
     accepted = cls.accepts()
     for name in _given(kwargs):
         if name not in accepted:
-            fmts = [r.name for r in READERS if name in r.accepts()]
+            fmts = [r.name for r in sorted(READERS, key=_module_order) if name in r.accepts()]
             raise DataFileError(f"{p}: the option {name}= applies to {', '.join(dict.fromkeys(fmts))} files, not to "
                                 f"this {cls.name} file")
     opts = _options(kwargs)

@@ -20,6 +20,7 @@ class BvhReader(Reader):
     takes = (BvhOptions, TakeOptions)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         from ..mocap_bvh import read_bvh
 
         o, take = options[BvhOptions], options[TakeOptions]

@@ -19,6 +19,7 @@ class C3dReader(Reader):
     takes = (MarkerOptions, TakeOptions)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         from ..mocap_c3d import read_c3d
 
         o = options[MarkerOptions]

@@ -284,6 +284,7 @@ class CsvReader(Reader):
     takes = (CsvOptions, TakeOptions)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         o, take = options[CsvOptions], options[TakeOptions]
         splitting = take != TakeOptions()
         demos, times, cols, labels, meta = read_csv(path, common.dt, int(common.max_nan_gap or 0), common.min_frames,

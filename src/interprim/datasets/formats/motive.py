@@ -140,9 +140,11 @@ class MotiveCsvReader(Reader):
 
     @classmethod
     def sniff(cls, path: Path, head: bytes) -> bool:
+        """Whether ``path`` is of this format (see :meth:`Reader.sniff`)."""
         return head.lstrip(b"\xef\xbb\xbf").startswith(b"Format Version,")
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         o = options[MarkerOptions]
         return Table(*read_motive_csv(path, markers=o.markers, length_unit=o.length_unit,
                                       max_nan_gap=common.max_nan_gap, min_frames=common.min_frames,

@@ -45,6 +45,8 @@ def _check_npz_member(npz, key: str, path: Path) -> None:
 
 
 def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
+    """Read one NPZ archive; ``(demos, times, columns, labels, meta)``; ``fill=False`` leaves missing values
+    (``nan``) for the take splitter to fill after cutting."""
     try:
         npz = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001
@@ -170,6 +172,7 @@ class NpzReader(Reader):
     takes = (TakeOptions,)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         take = options[TakeOptions]
         splitting = take != TakeOptions()
         table = Table(*read_npz(path, common.dt, int(common.max_nan_gap or 0), common.min_frames, fill=not splitting))

@@ -143,6 +143,7 @@ class QualisysTsvReader(Reader):
     takes = (MarkerOptions, TakeOptions)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         o = options[MarkerOptions]
         return Table(*read_qualisys_tsv(path, markers=o.markers, length_unit=o.length_unit,
                                         max_nan_gap=common.max_nan_gap, min_frames=common.min_frames,

@@ -20,11 +20,13 @@ class RosbagReader(Reader):
 
     @classmethod
     def sniff(cls, path: Path, head: bytes) -> bool:
+        """Whether ``path`` is of this format (see :meth:`Reader.sniff`)."""
         from ..ros_bags import is_rosbag2_folder
 
         return path.suffix.lower() in cls.suffixes or is_rosbag2_folder(path)
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
+        """Read ``path`` (see :meth:`Reader.read`)."""
         from ..ros_bags import read_rosbag
 
         o = options[RosOptions]

@@ -121,6 +121,13 @@ def test_server_reply_carries_the_duration_flag_and_warm_up_stays_in_range():
     assert not p.out_of_range
     from interprim.server.models import entry_for
 
+    # the server's own warm-up on a model trained far from 0 (real mocap in mm, say): no OutOfRangeWarning on start
+    far = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=5).fit([d + 500.0 for d in demos], dt=0.02)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        compute.warm_up([entry_for("far", far)])
+    assert not [w for w in rec if issubclass(w.category, ip.OutOfRangeWarning)], [str(w.message) for w in rec]
+
     e = entry_for("m", m)
     op = compute.OpenModel("m", [e], [m.stream()], [list(range(5))], 5, False)
     reply = json.loads(compute.compute_prediction(op, demos[0][0, :2], 1, None))

@@ -88,8 +88,8 @@ def positive_number(value, name):
 MAX_NAN_GAP_HELP = ("fill interior gaps of up to this many missing frames by linear interpolation (default: none for "
                     "CSV, NPZ, BVH and ROS bags; 0.1 s of frames for marker files: C3D, TSV, Motive CSV)")
 RECORDING_HELP = (
-    "recordings: motion capture (.c3d, .bvh) and ROS bags (.bag, .db3, .mcap, rosbag2 folder); "
-    "see docs/data-formats.md"
+    "recordings and takes: motion capture (.c3d, Qualisys .tsv, OptiTrack Motive .csv, .bvh), ROS bags (.bag, "
+    ".db3, .mcap, rosbag2 folder), and CSV/NPZ takes to split; see docs/data-formats.md"
 )
 
 
@@ -138,8 +138,8 @@ def add_recording_args(p, what="DEMOS") -> None:
                    help="BVH: joint world positions <joint>_x/_y/_z by forward kinematics (default) or joint angles "
                         "<joint>_<channel> in radians")
     g.add_argument("--length-unit", metavar="UNIT", choices=("mm", "cm", "m", "in", "ft"),
-                   help="BVH: the file's length unit (positions are converted to metres); C3D: overrides the file's "
-                        "POINT:UNITS (C3D positions are always converted to metres)")
+                   help="BVH: the file's length unit (positions are converted to metres); C3D, TSV, Motive CSV: "
+                        "overrides the file's unit (marker positions are always converted to metres)")
     g.add_argument("--end-sites", action="store_true", help="BVH positions: also the End Site points (<joint>_end_x)")
     c = p.add_argument_group("CSV files (also rostopic echo -p and ros2 bag / PlotJuggler CSV exports)")
     c.add_argument("--time-column", metavar="NAME",

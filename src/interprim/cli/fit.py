@@ -25,8 +25,11 @@ DEMOS is a CSV file (header of column names, a 'time' column in seconds, optiona
 column splitting several demonstrations), a folder of such files, or an NPZ archive with
 demo_000, demo_001, ... (T, D) arrays, time_000, ... and 'columns' (see docs/data-formats.md).
 It may also be a recording: a folder of C3D files (markers <marker>_x/_y/_z in metres; needs
-pip install 'interprim[mocap]') or BVH files (one demonstration per file), or a ROS bag (.bag,
-.db3, .mcap or a rosbag2 folder; needs pip install 'interprim[ros]') with --topics.
+pip install 'interprim[mocap]'), Qualisys TSV or OptiTrack Motive CSV exports, or BVH files (one
+demonstration per file), or a ROS bag (.bag, .db3, .mcap or a rosbag2 folder; needs
+pip install 'interprim[ros]') with --topics. One continuous take (any of these, CSV and NPZ too) is
+cut into demonstrations with --split-gap, --split-repetitions, --split-frames (C3D/TSV: --split-events).
+Marker gaps up to 0.1 s are filled; markers seen in under half the frames are left out (one warning).
 --observed and --controlled take names, 0-based indices or shell patterns ('A:*', 'RHand_?').
 
 examples:

@@ -192,14 +192,10 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, name: s
         expect(n is not None and n <= declared <= n + _NPY_HEADER_SLACK, path,
                 f"array '{name}' declares {declared} bytes uncompressed, but the metadata gives it shape "
                 f"{want.get('shape')} and dtype {want.get('dtype')}: refusing to decompress it")
+    from ._npz import read_npy_header  # the one .npy header guard (also of data files)
+
     with zf.open(info) as fh:
-        version = np.lib.format.read_magic(fh)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-        else:
-            raise ValueError(f".npy version {version} is not supported")
+        shape, fortran, dtype = read_npy_header(fh)
         expect(not dtype.hasobject and dtype.fields is None and dtype.kind in _DTYPE_KINDS, path,
                 f"not a readable interprim model file: array '{name}' has dtype {dtype}, "
                 "but model files hold only numeric arrays")

@@ -68,7 +68,7 @@ def test_serve_replays_a_bag_with_its_topics(tmp_path, capsys):
                           capsys)
     assert code == 0, err
     code, _, err = _cli(["serve", model, "--replay", f"b={path}"], capsys)
-    assert code == 1 and "a ROS bag needs topics=OBSERVED,CONTROLLED" in err.replace("--topics", "topics")
+    assert code == 1 and "a ROS bag needs topics OBSERVED,CONTROLLED" in err.replace("--topics", "topics")
     models = _serve_replays([model, "--replay", f"b={path}", "--topics", topics, "--split-topic", "/start"])
     replay = models["b"].meta["replay"]
     # both streams on the model's grid (dt 0.02 s from where both have started), as 'fit --resample 0.02' reads them

@@ -286,7 +286,7 @@ GOOD_ROWS = "".join(f"{0.1 * i:.1f},{i},{i}\n" for i in range(6))
         ),
         (
             "demo,time,x,y\n" + "".join(f"a,{i},1,2\n" for i in range(5)) + "".join(f"b,{i},1,nan\n" for i in range(5)),
-            r"demo 'b', column 'y': missing value\(s\) starting at line 7",
+            r"demo 'b', column 'y': no value in any of its 5 frames",
         ),
     ],
 )

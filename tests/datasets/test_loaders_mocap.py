@@ -5,6 +5,7 @@ Every file is small and written by the test; the values read back are compared w
 """
 
 import random
+import re
 import warnings
 
 import ezc3d  # the [mocap] extra, part of the test extra
@@ -112,10 +113,15 @@ def test_c3d_missing_markers_gap_rules(tmp_path):
     zeroed = np.zeros((30, 4), bool)
     zeroed[20, 1] = True  # A:RWrist written as (0, 0, 0) in frame 21
     path = write_c3d(tmp_path / "gap.c3d", xyz, LABELS, lost=lost, zeroed=zeroed)
-    with pytest.raises(DataFileError, match=r"gap\.c3d, marker 'A:RWrist' \(column 'A:RWrist_x'\).*frame 21"):
-        load_c3d(path)
-    with pytest.raises(DataFileError, match=r"marker 'B:RHand'.*3 missing values \(max_nan_gap=2\).*frame 11"):
+    with pytest.raises(DataFileError) as err:
+        load_c3d(path, max_nan_gap=0)
+    assert "gap.c3d: 2 of 4 markers still miss frames after filling no gap (max_nan_gap=0)" in str(err.value)
+    assert re.search(r"B:RHand +10 % +3 frames \(0\.03 s\), frames 11-13\n", str(err.value)), str(err.value)
+    assert re.search(r"A:RWrist +3\.33 % +1 frame, frame 21\n", str(err.value)), str(err.value)
+    assert "max_nan_gap=3: fill gaps of up to 3 frames (0.03 s)" in str(err.value)
+    with pytest.raises(DataFileError, match=r"B:RHand +10 % +3 frames .*frames 11-13"):
         load_c3d(path, max_nan_gap=2)
+    assert load_c3d(path).demos[0].shape == (30, 12)  # the default fills 0.1 s (10 frames at 100 Hz)
     ds = load_c3d(path, max_nan_gap=3)
     y = ds.demos[0].reshape(30, 4, 3)
     ref = f32(xyz) * 1e-3
@@ -131,8 +137,10 @@ def test_c3d_marker_missing_at_the_start_is_an_error(tmp_path):
     lost = np.zeros((20, 4), bool)
     lost[:2, 0] = True
     path = write_c3d(tmp_path / "s.c3d", handover(20), LABELS, lost=lost, first_frame=100)
-    with pytest.raises(DataFileError, match=r"marker 'A:RHand'.*at the start or end starting at frame 100"):
+    with pytest.raises(DataFileError, match=r"A:RHand +10 % +2 frames \(0\.02 s\), frames 100-101 \(at the start "
+                                            r"or end: not filled\)\nwhat fixes it:\n  trim=True"):
         load_c3d(path, max_nan_gap=10)
+    assert load_c3d(path, trim=True).demos[0].shape == (18, 12)
 
 
 def test_c3d_marker_selection_and_model_outputs(tmp_path):
@@ -441,7 +449,8 @@ def test_bvh_binary_garbage_and_unknown_joint(tmp_path):
     path = write_bvh(tmp_path / "j.bvh", _rows(6))
     with pytest.raises(DataFileError, match=r"j\.bvh: unknown joint 'Leg' \(joints=Leg\); the joints are: Hips, Arm"):
         load_bvh(path, joints="Leg")
-    with pytest.raises(DataFileError, match=r"the option markers= applies to \.c3d files, not to this \.bvh file"):
+    with pytest.raises(DataFileError, match=r"the option markers= applies to C3D, Qualisys TSV, Motive CSV files, "
+                                            r"not to this BVH file"):
         load_demonstrations(path, markers="x")
 
 
@@ -492,7 +501,7 @@ def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
     assert "one.c3d holds 1 demonstration; at least 2 are needed" in err
     code, _, err = _cli(["fit", "--model", "ip", path, "--markers", "Nose", "--observed", "0", "-o",
                          tmp_path / "m.npz"], capsys)
-    assert code == 1 and err.count("\n") == 1 and "unknown marker 'Nose' (--markers=Nose)" in err
+    assert code == 1 and err.count("\n") == 1 and "unknown marker 'Nose' (--markers Nose)" in err
     code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "C:*", "-o", tmp_path / "m.npz"], capsys)
     assert code == 1 and "--observed: the pattern 'C:*' matches no column" in err
     code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o",
@@ -506,7 +515,7 @@ def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
     assert code == 1 and err.count("\n") == 1 and "cut.c3d: truncated file" in err and "frame" in err
     code, _, err = _cli(["fit", "--model", "ip", path, "--split-topic", "/x", "--observed", "0", "-o",
                          tmp_path / "m.npz"], capsys)
-    assert code == 1 and "the option --split-topic= applies to ROS bag files, not to this .c3d file" in err
+    assert code == 1 and "the option --split-topic applies to ROS bag files, not to this C3D file" in err
 
 
 SKELETON = """HIERARCHY

@@ -294,7 +294,8 @@ def test_missing_topic_wrong_type_and_bad_options(tmp_path):
         load_demonstrations(path)
     with pytest.raises(DataFileError, match=r"the observed and controlled agents are the same stream"):
         load_rosbag(path, ["/human/wrist", "human/wrist"])
-    with pytest.raises(DataFileError, match=r"the option markers= applies to \.c3d files, not to this ROS bag"):
+    with pytest.raises(DataFileError, match=r"the option markers= applies to C3D, Qualisys TSV, Motive CSV files, "
+                                            r"not to this ROS bag file"):
         load_demonstrations(path, topics="/human/wrist", markers="x")
     single = load_rosbag(path, "/human/wrist")  # one agent
     assert single.columns == ["human/wrist_x", "human/wrist_y", "human/wrist_z"] and single.observed_dofs is None
@@ -391,9 +392,9 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit", "--model", "ip", str(path), "-o", str(model)]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "a ROS bag needs --topics=OBSERVED,CONTROLLED" in err
+    assert err.count("\n") == 1 and "a ROS bag needs --topics OBSERVED,CONTROLLED" in err
     assert main(["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
                  "/nope",
                  "-o", str(model)]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "no topic '/nope' (--split-topic=/nope)" in err
+    assert err.count("\n") == 1 and "no topic '/nope' (--split-topic /nope)" in err

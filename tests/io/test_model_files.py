@@ -466,8 +466,8 @@ def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
                  "1"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "max_nan_gap" not in err, err
-    assert "a run of 2 missing values (--max-nan-gap=1) starting at line 5" in err
-    assert err.rstrip().endswith("or interpolate interior gaps of up to 2 frames with --max-nan-gap=2"), err
+    assert "a run of 2 missing values (--max-nan-gap 1) starting at line 5" in err
+    assert err.rstrip().endswith("or interpolate interior gaps of up to 2 frames with --max-nan-gap 2"), err
     # a run at the start cannot be interpolated: no advice to pass an option that cannot help
     rows = [f"{0.1 * i:.1f},{i},{2 * i}" for i in range(8)]
     rows[0] = "0.0,,0"

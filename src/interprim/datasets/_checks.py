@@ -28,6 +28,9 @@ def fill_nans(y, max_nan_gap, where, row_of):
             while j < T and col[j]:
                 j += 1
             run = j - i
+            if run == T:  # empty everywhere: not a gap at the start or end
+                raise DataFileError(f"{where(d)}: no value in any of its {T} frames; leave it out (columns=, "
+                                    "markers=, joints=)")
             if run > max_nan_gap or i == 0 or j == T:
                 why = (
                     "missing value(s)"

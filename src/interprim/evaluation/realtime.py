@@ -25,7 +25,7 @@ Baselines, always on the same splits:
 * ``clock``: the mean of the time-normalised training demonstrations, played from the first frame at the
   mean training duration (what a robot without any perception of timing would do);
 * ``oracle-duration``: the same mean stretched to the true duration of the held-out demonstration (not
-  available online: a floor that shows how much of the error is timing).
+  available online: a reference that shows how much of the error is timing, not a lower bound).
 
 A method without a ``duration`` but with a ``phase`` (e.g. nearest neighbour) is placed in time at the
 speed implied by its phase (elapsed time / phase); a method with neither (the prior mean) is played by the
@@ -166,7 +166,8 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     """The verdict of an evaluation whose choice was made inside the training folds (nested).
 
     Says which method the inner cross-validation chose (per outer fold), how the chosen model compares with the
-    clock and with the mean stretched to the true duration (a floor no online method has), names the best method
+    clock and with the mean stretched to the true duration (a reference that knows the
+    true duration; not a lower bound), names the best method
     among all rows and says plainly when a baseline beats the chosen model by more than one standard error, and
     gives the command that fits the chosen method.
     """
@@ -184,7 +185,8 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     parts = [f"chosen inside the training folds: {chosen}."]
     ro = m.get("rt_ctrl_vs_oracle", float("nan"))
     parts.append(f"Real time: {r:.2f}x the clock's error and {ro:.2f}x the mean stretched to the true duration "
-                 f"(a floor that needs the future).")
+                 f"(a reference that knows the true duration, which no online method does; not a lower bound: it can "
+                 f"be worse than the clock).")
     online = [x for x in summary if x not in ("oracle-duration", "oracle", method) and "rt_ctrl" in summary[x]]
     best = min(online, key=lambda x: summary[x]["rt_ctrl"]) if online else None
     if best is not None:

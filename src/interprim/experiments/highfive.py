@@ -428,7 +428,9 @@ def _run_highfive(out_dir, config, progress, log):
         "goal_distance_m": {m: _summary_stats(ev["goal_err"][m]) for m in METHODS},
         "fig8": {
             "percent": p8,
-            "mean_distance_m": {m: float(np.nanmean(ev["goal_err"][m][:, j8])) for m in METHODS},
+            # a method that did not run (the optional ProMP baseline skipped) has no value: None, not a warning
+            "mean_distance_m": {m: (float(np.nanmean(ev["goal_err"][m][:, j8]))
+                                    if np.isfinite(ev["goal_err"][m][:, j8]).any() else None) for m in METHODS},
             "true_goals": test.goals.tolist(),
             "predicted_goals": ev["pred_goals"]["ip"][:, j8].tolist(),
         },

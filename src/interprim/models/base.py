@@ -101,6 +101,9 @@ class BasePrediction:
     input_distance: float = float("nan")
     #: whether that distance passed the model's limit
     out_of_range: bool = False
+    #: whether the predicted duration is far outside the demonstrated ones
+    #: (:data:`interprim.core.input_range.DURATION_FACTOR`)
+    duration_out_of_range: bool = False
 
     def trajectory(self, n: int = 100) -> np.ndarray:  # pragma: no cover - interface
         """Mean of every data column on ``linspace(0, 1, n)`` (normalised time), shape ``(n, D)``."""

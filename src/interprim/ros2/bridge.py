@@ -11,7 +11,8 @@ into ``model.stream()`` and publishes, for each message that gave at least one f
   whose controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
 * on ``<publish>/status`` a ``diagnostic_msgs/msg/DiagnosticArray`` with one status: level OK (WARN when the
   partner is out of the training range), and the values ``phase``, ``normalised_time``, ``speed``,
-  ``duration``, ``out_of_range``, ``input_distance``, ``n_observed``, ``frame_time`` and, per controlled column,
+  ``duration``, ``out_of_range``, ``duration_out_of_range``, ``input_distance``, ``n_observed``, ``frame_time``
+  and, per controlled column,
   ``std.<column>``: the prediction's standard deviation at the response's points (a JSON list; the band is
   ``mean +- z * std``).
 
@@ -116,6 +117,24 @@ class _Say:
             self.last[cause], self.pending[cause] = now, 0
 
 
+#: A partner frame further than this many standard deviations from the training frames, or (for a model that does
+#: not know its training range) a value larger than ``MAX_ABS_VALUE``, is absurd: refused before the model with
+#: the non-finite ones (the rule of the server's ``bad_frame``: ``interprim.server.compute``).
+MAX_INPUT_DISTANCE = 1e6
+MAX_ABS_VALUE = 1e12
+
+
+def _bad_values(vals):
+    """Why the partner's values cannot go to the model (non-finite or absurd), or ``None``."""
+    v = np.asarray(vals, dtype=np.float64)
+    if not np.all(np.isfinite(v)):
+        return "a non-finite value (nan or inf)"
+    big = np.abs(v) > MAX_ABS_VALUE
+    if big.any():
+        return f"an absurd value {float(v[big][0]):.3g} (beyond +-{MAX_ABS_VALUE:g})"
+    return None
+
+
 def _stamp_text(base_sec: int, t: float) -> str:
     """``base_sec + t`` seconds as ``SEC.NANOSEC`` (a float of seconds since 1970 would print rounding noise)."""
     if not math.isfinite(t):
@@ -184,7 +203,7 @@ class Ros2Bridge:
         Cyclone DDS XML configuration of the domain (e.g. :func:`loopback_config`); default: Cyclone's own
         (``CYCLONEDDS_URI``).
     frame_id : str
-        ``header.frame_id`` of the published messages.
+        ``header.frame_id`` of the published messages (default: the partner's, from its messages' headers).
     """
 
     def __init__(self, model, observe, publish="/interprim/response", **options):
@@ -227,6 +246,7 @@ class Ros2Bridge:
         self.partner_qos = partner_qos if isinstance(partner_qos, QosSpec) else QosSpec.parse(partner_qos)
         self.response_qos = response_qos if isinstance(response_qos, QosSpec) else QosSpec.parse(response_qos)
         self.frame_id = str(frame_id)
+        self.partner_frame = ""  # header.frame_id of the partner's last message (the default of the response's)
         self.grid = StampGrid(float(model.dt_), max_gap)
         self.stream = model.stream()
         self._latest: list[np.ndarray | None] = [None] * len(self.sources)
@@ -256,6 +276,15 @@ class Ros2Bridge:
             self.counts["unusable"] += 1
             self._say(f"unusable:{src.spec}", f"dropped a message: {exc}")
             return False
+        bad = _bad_values(vals)
+        if bad is not None:  # refused before the model, counted with the other invalid messages
+            self.counts["invalid"] += 1
+            self._say("invalid", f"{src.topic}: dropped an invalid message: {bad}")
+            return False
+        if index == 0:
+            frame = getattr(getattr(msg, "header", None), "frame_id", "")
+            if isinstance(frame, str) and frame:
+                self.partner_frame = frame
         self._latest[index] = vals
         if index != 0:
             return False
@@ -265,6 +294,12 @@ class Ros2Bridge:
             self._say("waiting", f"waiting for a first message on {', '.join(missing)}", logging.INFO)
             return False
         y = np.concatenate([v for v in self._latest if v is not None])[self._order]  # none is None here
+        dist = self.model.input_distance(y) if hasattr(self.model, "input_distance") else float("nan")
+        if math.isfinite(dist) and dist > MAX_INPUT_DISTANCE:
+            self.counts["invalid"] += 1
+            self._say("invalid", f"{src.topic}: dropped an invalid message: a frame {dist:.3g} standard deviations "
+                                 f"from the training demonstrations (beyond {MAX_INPUT_DISTANCE:g})")
+            return False
         if self.base_sec is None and stamp is not None:
             self.base_sec = int(stamp.sec)  # stamps in seconds after this (float seconds since 1970 lose ~0.2 us)
         t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec or 0)
@@ -303,12 +338,17 @@ class Ros2Bridge:
         self.counts["published"] += 1
         return True
 
+    @property
+    def out_frame(self) -> str:
+        """``header.frame_id`` of the published messages: ``frame_id`` when given, else the partner's frame."""
+        return self.frame_id or self.partner_frame
+
     def messages(self, pred, frame_time: float, base_sec: int = 0):
         """The response and the status message of ``pred`` for the grid frame at ``base_sec + frame_time`` s."""
         t, y = pred.response(self.points)
         t = np.asarray(t, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.frame_id)
+        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.out_frame)
         if self.response_type == "JointTrajectory":
             vel, acc = response_derivatives(t, y)
             pts = [new_message("trajectory_msgs/msg/JointTrajectoryPoint", positions=[float(v) for v in row],
@@ -330,7 +370,7 @@ class Ros2Bridge:
                 response = new_message("geometry_msgs/msg/PoseArray", header=header, poses=poses)
             else:
                 stamped = [new_message("geometry_msgs/msg/PoseStamped", pose=p, header=new_message(
-                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.frame_id))
+                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.out_frame))
                     for dt, p in zip(t, poses)]
                 response = new_message("nav_msgs/msg/Path", header=header, poses=stamped)
         return response, self._status(pred, base_sec + frame_time, t, header)
@@ -363,6 +403,7 @@ class Ros2Bridge:
         values = [kv("phase", repr(float(pred.phase))), kv("normalised_time", repr(float(pred.normalised_time))),
                   kv("speed", repr(float(pred.speed))), kv("duration", repr(float(pred.duration))),
                   kv("out_of_range", "true" if oor else "false"),
+                  kv("duration_out_of_range", "true" if getattr(pred, "duration_out_of_range", False) else "false"),
                   kv("input_distance", repr(float(pred.input_distance))), kv("n_observed", str(int(pred.n_observed))),
                   kv("frame_time", repr(float(frame_time)))]
         for c, sd in self.band(pred, t).items():

@@ -10,11 +10,13 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..core.blas import single_thread
+from ..core.errors import OutOfRangeWarning
 from . import protocol as P
 
 log = logging.getLogger("interprim.server")
@@ -138,14 +140,26 @@ class Recognition:
 
 
 
+def warm_up_frames(model, n_observed: int, n: int = 20):
+    """``n`` frames inside the model's training range: from its training frames' mean, half a standard deviation
+    down to half up per column (zeros around 0.05 for a model file without the range)."""
+    rng = getattr(model, "input_range_", None)
+    s = np.linspace(-0.5, 0.5, n)[:, None]
+    if rng is not None and np.shape(rng[0]) == (n_observed,):
+        return np.asarray(rng[0], dtype=np.float64) + s * np.asarray(rng[1], dtype=np.float64)
+    return (s + 0.5) * 0.1 * np.ones(n_observed)
+
+
 def warm_up(entries) -> None:
     """Run one prediction per model so that JIT compilation (numba) happens before the first client."""
     for e in entries:
         try:
             st = e.model.stream()
-            ramp = np.linspace(0.0, 0.1, 20)[:, None] * np.ones(e.n_observed)
-            for k, f in enumerate(ramp):
-                p = st.update(f, need_cov=k % 2 == 1)
+            ramp = warm_up_frames(e.model, e.n_observed)
+            with warnings.catch_warnings():  # no OutOfRangeWarning from the warm-up itself
+                warnings.simplefilter("ignore", OutOfRangeWarning)
+                for k, f in enumerate(ramp):
+                    p = st.update(f, need_cov=k % 2 == 1)
             p.trajectory(5)
             p.std(5)
         except Exception:  # a model that cannot predict from zeros will say so to its first client
@@ -305,9 +319,10 @@ def compute_prediction(op: OpenModel, frame: np.ndarray, seq: int, t, covers: in
     # input far outside the training demonstrations (wrong units, columns, frame of reference): the flag and
     # the largest standardised distance seen since the session's last reset (null for an old model file)
     dist = float(pred.input_distance)
-    parts.append(',"out_of_range":%s,"input_distance":%s' % (
+    parts.append(',"out_of_range":%s,"input_distance":%s,"duration_out_of_range":%s' % (
         "true" if pred.out_of_range else "false",
-        ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null")))
+        ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null"),
+        "true" if getattr(pred, "duration_out_of_range", False) else "false"))
     parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
     return "".join(parts)
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...core._compiled import registry as kernels
 from ...core.blas import one_blas_thread
-from ...core.input_range import mark
+from ...core.input_range import mark, mark_duration
 from ...core.validation import as_2d_finite, as_frame
 from ...phase import IncrementalDTW, estimate_phase, movement_prefix
 from ..base import BaseStream
@@ -102,6 +102,7 @@ class Stream(BaseStream):
             if p.out_of_range and not self._warned:
                 self._warned = True
                 mark(m, p, self._max_dist)
+        mark_duration(m, p)  # a predicted duration far outside the demonstrated ones
         return p
 
     def _update(self, frame, need_cov: bool = False) -> Prediction:

@@ -165,14 +165,18 @@ class Blend(Predictor):
         W = self._weights_on(ahead)  # (n_grid, M)
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        active = [i for i in range(len(names)) if W[:, i].any()]
+        on = W.any(axis=0)
+        active = np.flatnonzero(on)
         if len(active) < len(names):
             W = W[:, active]
+        # every active member's normalised time at each grid point, all at once: ``s_m + a / D_m`` ahead of now,
+        # ``u s_m / s`` before it
+        sm = np.array([timing[i][0] for i in active])[:, None]
+        Dm = np.array([timing[i][1] for i in active])[:, None]
+        um = np.clip(np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
         Y = np.empty((len(active), n_grid, self.n_dofs_))
         for j, i in enumerate(active):
-            sm, Dm = timing[i]
-            um = np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0))
-            Y[j] = interp_columns(np.clip(um, 0.0, 1.0), u, preds[names[i]].trajectory(n_grid))
+            Y[j] = interp_columns(um[j], u, preds[names[i]].trajectory(n_grid))
         mean = np.einsum("gm,mgd->gd", W, Y)
         return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
 

@@ -186,6 +186,11 @@ def calibrate(log=print) -> None:
                 alone[m] = min(_frame(members[m], partial, 3, clock=time.process_time) for _ in range(2))
                 feats[m].append(registry._cost_features(registry.FAMILIES[m].cost_model, z))
                 ys[m].append(alone[m] * 1e6)
+            for ph, key in (("likelihood", "ip"), ("learned", "ip-learned")):  # one formula per phase of the IP
+                one = registry.family("ip").build(registry.Settings(tuple(obs), phase_method=ph)).fit(demos, dt=0.01)
+                feats.setdefault(key + " (phase fixed)", []).append(registry._cost_features(key, z))
+                ys.setdefault(key + " (phase fixed)", []).append(
+                    min(_frame(one, partial, 3, clock=time.process_time) for _ in range(2)) * 1e6)
             for names in (["ip", "nn"], fams):
                 W = {n: [1.0 / len(names)] * 2 for n in names}
                 b = Blend.from_fitted(obs, {n: members[n] for n in names}, W, None, demos, 0.01, 0.25,

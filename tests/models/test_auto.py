@@ -306,10 +306,16 @@ def test_fit_shows_its_progress_when_asked(task, capsys, monkeypatch):
 
     dev, _ = task
     monkeypatch.setattr(builtins, "__import__", no_tqdm)
-    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True).fit(dev.demos, dt=dev.dt)
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True, frame_budget=None).fit(
+        dev.demos, dt=dev.dt)
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("fit: step 1/2 compared kernel") and "fitted" in err[-1]
     assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]  # the last step is the last
+    # with a frame budget, the Interaction Primitive that sets it is fitted first, and the count still adds up
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True).fit(dev.demos, dt=dev.dt)
+    err = capsys.readouterr().err.splitlines()
+    assert "fitted ip (the frame budget's yardstick)" in err[0]
+    assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]
     ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2).fit(dev.demos, dt=dev.dt)
     assert capsys.readouterr().err == ""
 

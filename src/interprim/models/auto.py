@@ -16,6 +16,7 @@ family with the smallest held-out error alone.  Predictions, streams and model f
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -223,8 +224,24 @@ class AutoInteraction(Predictor):
         def cost(names) -> float:  # the modelled frame of a blend of ``names`` (or of one family alone)
             return float(sum(costs[m] or 0.0 for m in names)) + Blend.frame_overhead(len(names), n_dofs)
 
+        progress = Progress(self.progress, len(make))
+        ref = None
+        if self.frame_budget is not None and len(make) > 1:
+            # the Interaction Primitive of these data, fitted once: the budget's yardstick (its phase, chosen by its
+            # own cross-validation, moves its frame by up to 2.5x) and, when the blend keeps it, its ip member
+            ref = registry.family("ip").build(self.settings()).fit(train, dt=dt)
+            progress.grow(1)
+            progress.step("fitted ip (the frame budget's yardstick)")
+            sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
+            costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
         ip_frame = registry.frame_cost("ip", sizes)
         budget = None if self.frame_budget is None else float(self.frame_budget) * ip_frame
+
+        def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
+            if m == "ip" and ref is not None and "ip" in self.candidates:
+                return ref
+            return make[m]().fit(train, dt=dt)
+
         left_out = {}
         if budget is not None and len(make) > 1:
             # a family whose frame alone exceeds the budget cannot be in any blend within it: it is neither
@@ -234,9 +251,9 @@ class AutoInteraction(Predictor):
                 over.pop(min(over, key=lambda m: (over[m], list(make).index(m))))
             left_out = {m: float(c) for m, c in over.items()}
             make = {m: f for m, f in make.items() if m not in over}
+            progress.grow(-len(over))  # not compared: fewer steps than announced
         cfg = stacking.scoring_config(float(self.horizon), train, dt, stride=int(self.stride),
                                       point_dim=int(self.point_dim))
-        progress = Progress(self.progress, len(make))
         if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
             cv = None
             chosen = next(iter(make))
@@ -254,7 +271,7 @@ class AutoInteraction(Predictor):
             progress.grow(len(fitted.names))
             members = {}
             for m in fitted.names:
-                members[m] = make[m]().fit(train, dt=dt)
+                members[m] = final(m)
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,
@@ -265,7 +282,7 @@ class AutoInteraction(Predictor):
             selection["blend_vs_best"] = selection["blend_cv_error"] / best if best > 0 else float("nan")
         else:
             progress.grow(1)
-            self.model_ = make[chosen]().fit(train, dt=dt)
+            self.model_ = final(chosen)
             progress.step(f"fitted {chosen}")
             weights = {chosen: 1.0}
             selection.update(combine="best", weights=weights)

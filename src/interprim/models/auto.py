@@ -9,9 +9,11 @@ the nearest demonstration (``nn``) and the mean demonstration at the mean speed 
 as a ``(name, factory)`` pair.  From the held-out predictions it fits a :class:`~interprim.models.blend.Blend`: the
 convex weights that minimise the protocol's own error per look-ahead band (stacking; a choice of one family made on
 12-20 demonstrations proved noisy: on the project's hold-out it picked a worse family on one NuiSI interaction of
-six), and a variance fitted to the held-out errors step by step over the look-ahead.  ``combine="best"`` keeps the
-family with the smallest held-out error alone.  Predictions, streams and model files follow
-:mod:`interprim.models.base`; ``selection_`` says what was compared and chosen, and by how much.
+six), and a variance fitted to the held-out errors step by step over the look-ahead, within a frame budget (a
+multiple of the Interaction Primitive's streamed frame on the same data, by a deterministic cost model: see
+``frame_budget``).  ``combine="best"`` keeps the family with the smallest held-out error alone.  Predictions,
+streams and model files follow :mod:`interprim.models.base`; ``selection_`` says what was compared and chosen, and by
+how much.
 """
 
 from __future__ import annotations

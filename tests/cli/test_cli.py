@@ -255,11 +255,15 @@ def test_fit_chooses_the_model_on_the_data_by_default(files, tmp_path, capsys):
     assert main(["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]) == 0
     out = capsys.readouterr().out
     assert "held-out real-time error of the controlled agent, by family" in out
-    for family in ("ip", "learned", "kernel", "nn", "prior"):
-        assert f"  {family} " in out
     model = ip.load_any(m)
     assert type(model) is ip.AutoInteraction and model.columns_ == COLS
-    assert set(model.selection_["cv_errors"]) == {"ip", "learned", "kernel", "nn", "prior"}
+    # every family is compared, or left out (and said so) because its frame alone exceeds the frame budget
+    left_out = model.selection_["cost"]["left_out"]
+    assert set(model.selection_["cv_errors"]) | set(left_out) == {"ip", "learned", "kernel", "nn", "prior"}
+    for family in model.selection_["cv_errors"]:
+        assert f"  {family} " in out
+    for family in left_out:
+        assert f"{family} (" in out.split("left out for the budget:")[1]
     assert main(["predict", str(m), str(files / "partial.csv"), "-o", str(tmp_path / "p.npz")]) == 0
     with np.load(tmp_path / "p.npz", allow_pickle=False) as f:
         assert 0 < float(f["phase"]) < 1 and np.all(np.isfinite(f["mean"])) and f["mean"].shape == (100, 3)

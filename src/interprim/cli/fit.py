@@ -98,6 +98,12 @@ def add_parser(subparsers) -> None:
         f"for it, the kernel model is tuned for it (default {DEFAULT_HORIZON}; --model ip predicts the whole "
         f"movement and has no horizon)",
     )
+    p.add_argument(
+        "--frame-budget", type=_frame_budget, default=None, metavar="X",
+        help="--model auto: the most a streamed frame may cost, as a multiple of the Interaction Primitive's on "
+        "the same data (default 3; 'none': no bound); families that do not fit are left out, and the summary "
+        "says which",
+    )
     p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
     p.add_argument(
         "--observation",
@@ -169,6 +175,18 @@ IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("s
            ("calibrate", "--calibrate"))
 
 
+def _frame_budget(text):
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}") from None
+    if not value > 0 or value != value or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}")
+    return value
+
+
 def _sigma2(text):
     if text in ("residual", "cv"):
         return text
@@ -201,6 +219,9 @@ def cmd_fit(args) -> int:
     if len(ds) < 2:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
                            "distribution. " + SPLIT_HINT)
+    if args.model != "auto" and args.frame_budget is not None:
+        raise CommandError(f"--frame-budget bounds the blend of --model auto; --model {args.model} is one family "
+                           "alone (drop --frame-budget, or use --model auto)")
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -249,7 +270,9 @@ def _fit_other(args, ds, obs, n_read) -> int:
                            "folds and needs at least 3 (or use --model ip). " + SPLIT_HINT)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
-                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon))
+                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon),
+                           **({} if args.frame_budget is None else {
+                               "frame_budget": None if args.frame_budget == "none" else args.frame_budget}))
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]

@@ -32,9 +32,9 @@ SIZES = ((30, 7, 7, 200), (20, 2, 3, 150))
 
 
 def shared_factors(S, Do, Dc, T, seed=0):
-    """The suite's own synthetic set (:func:`benchmarks.run.make_demos`): both agents driven by shared latent
+    """The suite's own synthetic set (:func:`benchmarks.data.make_demos`): both agents driven by shared latent
     factors."""
-    from benchmarks.run import make_demos
+    from benchmarks.data import make_demos
 
     return make_demos(S, Do, Dc, T, seed=seed)
 

@@ -40,6 +40,7 @@ if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
 import interprim as ip  # noqa: E402
+from benchmarks.data import make_demos  # noqa: E402
 from interprim.core._compiled import loader  # noqa: E402
 from interprim.core.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
 from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
@@ -48,27 +49,6 @@ ROWS: list[dict] = []
 
 
 # ----------------------------------------------------------------------------- data
-def make_demos(S=30, Do=7, Dc=7, T=500, seed=0, stretch=(0.9, 1.1), noise=0.0):
-    """Smooth two-agent demonstrations: both agents driven by shared latent factors (correlated goals/shapes)."""
-    rng = np.random.default_rng(seed)
-    D = Do + Dc
-    K = 4
-    mix = rng.normal(size=(K, D))
-    f = np.arange(1, D + 1)[None, :]
-    demos = []
-    for _ in range(S):
-        z = rng.normal(size=K)
-        Tj = max(int(round(T * rng.uniform(*stretch))), 10)
-        s = np.linspace(0, 1, Tj)[:, None]
-        sm = 10 * s**3 - 15 * s**4 + 6 * s**5
-        y = ((z @ mix)[None, :] * sm + 0.3 * np.sin(np.pi * f * s * 0.5 + z[0])
-             + 0.1 * z[1] * np.sin(2 * np.pi * s * f / 3))
-        if noise:
-            y = y + noise * rng.standard_normal(y.shape)
-        demos.append(y)
-    return demos
-
-
 def fitted_model(Do=7, Dc=7, n_basis=25, S=30, T=500, seed=0, **kw):
     """The library's defaults (positions, sigma2 by CV) unless ``kw`` overrides them."""
     demos = make_demos(S, Do, Dc, T, seed=seed)

@@ -9,7 +9,9 @@ before it is decompressed.
 from __future__ import annotations
 
 import math
+import zipfile
 from dataclasses import dataclass
+from typing import IO
 
 import numpy as np
 
@@ -21,7 +23,7 @@ class NpyHeader:
     """What a ``.npy`` member declares: ``shape``, ``fortran`` order, ``dtype``, the byte ``offset`` of its data,
     the data's size ``nbytes`` and the member's uncompressed size ``declared`` (from the zip directory)."""
 
-    shape: tuple
+    shape: tuple[int, ...]
     fortran: bool
     dtype: np.dtype
     offset: int
@@ -39,7 +41,7 @@ class NpyHeader:
         return self.dtype.hasobject or self.offset + self.nbytes <= self.declared
 
 
-def read_npy_header(fh):
+def read_npy_header(fh: IO[bytes]) -> tuple[tuple[int, ...], bool, np.dtype]:
     """``(shape, fortran, dtype)`` from an open ``.npy`` stream positioned at its start (versions 1.0 and 2.0);
     ``ValueError`` for another version."""
     version = np.lib.format.read_magic(fh)
@@ -50,7 +52,7 @@ def read_npy_header(fh):
     raise ValueError(f".npy version {version} is not supported")
 
 
-def member_header(zf, info) -> NpyHeader:
+def member_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> NpyHeader:
     """The header of the member ``info`` (a ``zipfile.ZipInfo``) of the open archive ``zf``, no data read."""
     with zf.open(info) as fh:
         shape, fortran, dtype = read_npy_header(fh)

@@ -22,7 +22,16 @@ class ModelFileError(InterprimError, ValueError):
 
 
 class DataFileError(InterprimError, ValueError):
-    """A demonstration or observation file cannot be read or is malformed."""
+    """A demonstration or observation file cannot be read or is malformed.
+
+    Attributes
+    ----------
+    multiline : bool
+        The message holds a table (e.g. the markers missing frames): the command line prints it as it is instead
+        of joining its lines into one.  ``False`` unless set on the instance.
+    """
+
+    multiline: bool = False
 
 
 class MissingExtraError(InterprimError, ImportError):

@@ -32,13 +32,20 @@ DURATION_FACTOR = 1.5
 
 
 
-class _Marked(Protocol):
-    """What :func:`mark` sets on a prediction of any family."""
+class _DurationMarked(Protocol):
+    """What :func:`mark_duration` sets on a prediction of any family."""
+
+    duration_out_of_range: bool
+
+
+class _Marked(_DurationMarked, Protocol):
+    """What :func:`mark` sets on a prediction of any family (and :func:`mark_duration`, which it calls)."""
 
     input_distance: float
     out_of_range: bool
 
 
+_D = TypeVar("_D", bound=_DurationMarked)
 _P = TypeVar("_P", bound=_Marked)
 
 
@@ -62,10 +69,11 @@ def input_distance(model: Any, frames: ArrayLike) -> float:
     return float(np.max(np.abs(f - mean) / model.input_std_)) if f.size else 0.0
 
 
-def duration_range(model):
+def duration_range(model: Any) -> tuple[float, float] | None:
     """``(shortest, longest)`` demonstrated duration (s) of ``model`` (its own ``durations_``, those of the model
     it wraps or of its members), ``(mean, mean)`` when only the mean is known, ``None`` when nothing is."""
-    seen, todo = set(), [model]
+    seen: set[int] = set()
+    todo: list[Any] = [model]
     while todo:
         obj = todo.pop(0)
         if obj is None or id(obj) in seen:
@@ -85,7 +93,7 @@ def duration_range(model):
     return None
 
 
-def mark_duration(model, prediction):
+def mark_duration(model: Any, prediction: _D) -> _D:
     """Set ``prediction.duration_out_of_range``: its duration is more than :data:`DURATION_FACTOR` times the
     longest demonstration, or less than the shortest divided by it (flagged as the input range is)."""
     span = duration_range(model)

@@ -47,7 +47,9 @@ class MarkerSet:
     @classmethod
     def of_columns(cls, columns, axes=("_x", "_y", "_z")) -> MarkerSet:
         """Markers from column names ``<marker>_x/_y/_z`` (a column of another name is a marker alone)."""
-        names, groups, index = [], [], {}
+        names: list[str] = []
+        groups: list[list[int]] = []
+        index: dict[str, int] = {}
         for j, c in enumerate(columns):
             base = next((c[: -len(a)] for a in axes if c.endswith(a)), c)
             if base not in index:

@@ -263,16 +263,16 @@ def load_demonstrations(
     for o in (options,) if not isinstance(options, (list, tuple)) else options:  # typed options, as the readers take
         if type(o) not in OPTION_TYPES:
             raise TypeError(f"options: expected instances of {', '.join(t.__name__ for t in OPTION_TYPES)}, got {o!r}")
-        for f in fields(o):
-            value = getattr(o, f.name)
-            if value == f.default:
+        for fld in fields(o):
+            value = getattr(o, fld.name)
+            if value == fld.default:
                 continue
-            if f.name == "columns":
+            if fld.name == "columns":
                 columns = value if columns is None else columns
                 continue
-            if kwargs.get(f.name) not in (None, False, value):
-                raise ValueError(f"{f.name} is given twice: {kwargs[f.name]!r} and {value!r} ({type(o).__name__})")
-            kwargs[f.name] = value
+            if kwargs.get(fld.name) not in (None, False, value):
+                raise ValueError(f"{fld.name} is given twice: {kwargs[fld.name]!r} and {value!r} ({type(o).__name__})")
+            kwargs[fld.name] = value
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
@@ -290,10 +290,12 @@ def load_demonstrations(
                                                 for f in files)
     if parse_columns:
         kwargs["columns"] = columns
-    demos, times, labels = [], [], []
-    cols = None
-    meta = {}
-    notes = []
+    demos: list[np.ndarray] = []
+    times: list[np.ndarray] = []
+    labels: list[str] = []
+    cols: list[str] | None = None
+    meta: dict = {}
+    notes: list[str] = []
     all_bags = True  # bags are interpolated onto the resample_dt grid by their reader
     for f in files:
         is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
@@ -318,6 +320,7 @@ def load_demonstrations(
         demos.extend(d)
         times.extend(t)
         labels.extend(lab if len(files) == 1 else [f"{f.stem}:{x}" if len(d) > 1 else f.stem for x in lab])
+    assert cols is not None  # set by the first file (there is at least one)
     observed = None
     if meta.get("observed"):
         names = meta["observed"]
@@ -442,7 +445,7 @@ def save_demonstrations(path, demos, times=None, *, dt=None, columns=None, obser
             out[f"time_{i:03d}"] = t
         if obs_names:
             out["observed"] = np.array(obs_names, dtype=str)
-        np.savez(p, **out)
+        np.savez(p, allow_pickle=False, **out)  # float and text arrays only: the same file, and no pickle
         return p
 
     def write_csv(fp: Path, items):

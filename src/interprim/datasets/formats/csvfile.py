@@ -15,6 +15,7 @@ import math
 import os
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -120,7 +121,7 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
     max_cols = _csv_limit("max_columns")
     if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
         csv.field_size_limit(max_chars)
-    meta = {}
+    meta: dict[str, Any] = {}
     header = None
     header_line = 0
     with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -146,8 +147,8 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
         if n_cols > max_cols:
             raise _over(f"{path}, line {header_line}", "the number of columns", n_cols, "max_columns")
         if any(not h for h in header):
-            k = next(i for i, h in enumerate(header) if not h)
-            raise DataFileError(f"{path}, line {header_line}: empty column name in the header (column {k + 1} of "
+            empty = next(i for i, h in enumerate(header) if not h)
+            raise DataFileError(f"{path}, line {header_line}: empty column name in the header (column {empty + 1} of "
                                 f"{n_cols}: {shown_names(header)})")
         dup = sorted(h for h, c in Counter(header).items() if c > 1)
         if dup:
@@ -184,7 +185,8 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
         i_time = index[tname] if tname is not None else None
         i_demo = index.get(DEMO)
         i_data = [index[c] for c in data_cols]
-        order, groups = [], {}  # label -> (lines, rows of floats, times)
+        order: list[str] = []
+        groups: dict[str, tuple[list[int], list[list[float]], list[float]]] = {}  # label -> (lines, rows, times)
         last = None
 
         def num(cell, line, col, allow_missing):
@@ -241,6 +243,7 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
         lines, rows, ts = groups[label]
         where_demo = f"{path}" + (f", demo {label!r}" if i_demo is not None else "")
         y = np.array(rows, dtype=np.float64).reshape(len(rows), len(i_data))
+        t: np.ndarray
         if i_time is not None:
             t = np.asarray(ts, dtype=np.float64)
             if scale != 1.0:

@@ -65,8 +65,8 @@ def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=N
         raise DataFileError(f"{path}: the header lacks the Type, Name or Position rows of a Motive CSV export")
     rate_text = info.get("Export Frame Rate") or info.get("Capture Frame Rate")
     try:
-        rate = float(rate_text)
-    except (TypeError, ValueError):
+        rate = float(rate_text if rate_text is not None else "")  # no entry is refused as an empty one is
+    except ValueError:
         raise DataFileError(f"{path}: line 1 has no Export Frame Rate (got {rate_text!r})") from None
     if not (np.isfinite(rate) and rate > 0):
         raise DataFileError(f"{path}: the export frame rate must be positive, got {rate!r}")

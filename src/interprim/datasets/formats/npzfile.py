@@ -159,6 +159,7 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
             times.append(t)
             labels.append(k)
     if columns is None:
+        assert n_cols is not None  # set by the first of the demonstrations (there is at least one)
         columns = [f"dof_{j}" for j in range(n_cols)]
     return demos, times, columns, labels, meta
 

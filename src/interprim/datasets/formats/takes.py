@@ -31,7 +31,9 @@ def split_table(path: Path, table: Table, take: TakeOptions, common: Common, *, 
     if take.split_events:
         raise DataFileError(f"{path}: split_events applies to files that carry events (C3D, Qualisys TSV); cut this "
                             "take with split_gap=, split_repetitions= or split_frames=")
-    demos, times, labels = [], [], []
+    demos: list[np.ndarray] = []
+    times: list[np.ndarray] = []
+    labels: list[str] = []
     notes = list(table.meta.get("notes", []))
     multi = len(table.demos) > 1
     for i, (y, t) in enumerate(zip(table.demos, table.times)):

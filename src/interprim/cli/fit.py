@@ -13,6 +13,7 @@ described in ``docs/data-formats.md``.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import InterprimError
@@ -268,11 +269,12 @@ def _fit_other(args, ds, obs, n_read) -> int:
     if args.model == "auto" and len(ds) < 3:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "
                            "folds and needs at least 3 (or use --model ip). " + SPLIT_HINT)
+    budget: dict[str, Any] = {}  # not given: the library's default budget; "none": no budget
+    if args.frame_budget is not None:
+        budget["frame_budget"] = None if args.frame_budget == "none" else float(args.frame_budget)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
-                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon),
-                           **({} if args.frame_budget is None else {
-                               "frame_budget": None if args.frame_budget == "none" else args.frame_budget}))
+                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon), **budget)
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]

@@ -24,12 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
+from ..evaluation.nested import HOLDOUT, measure_fitted, split_holdout, standard_error_ratio, yardstick_table
 from ..models.registry import FAMILIES
 from ..model_selection.prefixes import Prefixes
-from ..evaluation.realtime import RealTimeConfig, default_methods, realtime_fold, summarise_realtime, whole_movement_fold
+from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_realtime
 
-__all__ = ["holdout_tasks", "run_task", "main"]
+__all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
 #: every family of the registry but the peer (Interaction ProMP, which needs the [bench] extra)
@@ -67,8 +67,6 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
-    import math
-
     from ..models.ensemble import CrossValidation, blend_from_cv, choice, scoring_config
 
     cfg = RealTimeConfig(point_dim=point_dim)
@@ -89,37 +87,24 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
         f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")
-    rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=3)  # every remaining frame
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
     records = {p: [] for p in prefixes}
-    fitted = {}
 
     def models():
         for m, factory in make.items():
-            fitted[m] = factory().fit(train, dt=dt)
-            yield m, fitted[m]
+            yield m, factory().fit(train, dt=dt)
         yield "auto", blend
 
     for first, (m, est) in enumerate(models()):
         t1 = time.perf_counter()
-        for j, test in enumerate(prefixes["causal"].demos):
-            orc = None if oracles is None or first else oracles[j]
-            for p, P in prefixes.items():
-                pre = (lambda k, j=j, P=P: P(j, k))
-                recs = realtime_fold(est, train, test, obs, dt, cfg, name=m, fitted=True, prefix=pre, oracle=orc)
-                recs += [dict(r, protocol="whole") for r in
-                         whole_movement_fold(est, test, obs, fractions, point_dim=point_dim, name=m, prefix=pre,
-                                             oracle=orc)]
-                recs += [dict(r, protocol="rest") for r in
-                         realtime_fold(est, train, test, obs, dt, rest_cfg, name=m, fitted=True, prefix=pre,
-                                       oracle=orc)]
-                for r in recs:
-                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
-                        continue
-                    r["demo"] = j
-                    records[p].append(r)
+        # real time after every frame, the rest of the movement after every 3rd frame (every remaining frame)
+        got = measure_fitted(est, m, train, prefixes["causal"], obs, dt, point_dim, horizon=cfg.horizon,
+                             rest_stride=3, fractions=fractions, oracles=oracles, references=first == 0,
+                             prefix_sets=prefixes)
+        for p in records:
+            records[p] += got[p]
         log(f"    {m}: fitted and measured in {time.perf_counter() - t1:.0f} s")
     for p in records:
         records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
@@ -129,17 +114,23 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         rest = summarise_realtime([dict(r, protocol=None) for r in records[p] if r.get("protocol") == "rest"])
         for m, s in rest.items():  # the rest of the movement, in seconds from now: error and band coverage
             summary[p].setdefault(m, {}).update({f"rest_{k}": v for k, v in s.items()
-                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock")})
+                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock",
+                                                          "rt_ctrl_vs_oracle")})
     return {"records": records, "summary": summary,
             "chosen": chosen, "inner": inner, "weights": weights,
             "se": {p: {f"{a}|{b}": standard_error_ratio(records[p], a, b) for a in ("chosen", "auto")
                        for b in ("nn", "clock", "oracle-duration", "prior")}
                    | {f"{a}|wm_{b}": standard_error_ratio(records[p], a, b, key="wm_ctrl") for a in ("chosen", "auto")
                       for b in ("prior", "nn")}
-                   for p in records}}
+                   | {f"{a}|rest_{b}": standard_error_ratio(records[p], a, b, protocol="rest")
+                      for a in ("chosen", "auto") for b in METHODS}
+                   for p in records},
+            "yardsticks": {p: yardstick_table(records[p], ["auto", "chosen", *METHODS, "clock", "oracle-duration"])
+                           for p in records}}
 
 
 COLUMNS = (("rest_rt_ctrl_vs_clock", "robot, rest of the movement in seconds ÷ clock"),
+           ("rest_rt_ctrl_vs_oracle", "robot, rest of the movement in seconds ÷ mean at true duration"),
            ("rest_cov_ctrl", "90 % band over the rest, robot"), ("rest_cov_obs", "90 % band over the rest, human"),
            ("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle", "÷ mean at true duration"),
            ("rt_ctrl_vs_floor", "÷ oracle (floor)"), ("rt_obs_vs_clock", "human real time ÷ clock"),
@@ -175,6 +166,31 @@ def tables(results, protocol="causal") -> str:
     return "\n".join(lines)
 
 
+def yardstick_tables(results, protocol="causal") -> str:
+    """Markdown: per yardstick (:data:`interprim.evaluation.nested.YARDSTICKS`), every method's ratio to the
+    reference ± its standard error over the held-out recordings, per task, and the geometric mean over tasks."""
+    names = [n for n in results if protocol in results[n].get("yardsticks", {})]
+    if not names:
+        return ""
+    labels = list(results[names[0]]["yardsticks"][protocol])
+    methods = list(results[names[0]]["yardsticks"][protocol][labels[0]])
+    lines = []
+    for label in labels:
+        rows = []
+        for m in methods:
+            cells = [results[n]["yardsticks"][protocol][label].get(m, (np.nan, np.nan)) for n in names]
+            ok = [r for r, _ in cells if np.isfinite(r) and r > 0]
+            if not ok or all(abs(r - 1.0) < 1e-12 for r in ok):  # the reference itself
+                continue
+            geo = float(np.exp(np.mean(np.log(ok))))
+            txt = ["—" if not np.isfinite(r) else (f"{r:.2f} ± {se:.2f}" if np.isfinite(se) else f"{r:.2f}")
+                   for r, se in cells]
+            rows.append(f"| {m} | " + " | ".join(txt) + f" | {geo:.2f} |")
+        lines += [f"**{label}** (± one standard error over the held-out recordings; {protocol} prefixes)", "",
+                  "| method | " + " | ".join(names) + " | geo-mean |", "|---" * (len(names) + 2) + "|", *rows, ""]
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.holdout", description=__doc__.split("\n")[0])
@@ -198,7 +214,8 @@ def main(argv=None) -> int:
             results[name] = run_task(name, dev, hold, obs, dt, pdim, orc, lookahead=args.lookahead,
                                      log=lambda s: print(s, flush=True))
             (out / "holdout.json").write_text(json.dumps(results, default=float))
-    md = tables(results) + ("\n\n" + tables(results, "lookahead") if args.lookahead else "")
+    md = (tables(results) + "\n\n" + yardstick_tables(results)
+          + ("\n\n" + tables(results, "lookahead") if args.lookahead else ""))
     (out / "holdout.md").write_text(md + "\n")
     print(md)
     print(f"wrote {out / 'holdout.json'} and {out / 'holdout.md'}")

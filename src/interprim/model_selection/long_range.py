@@ -1,0 +1,218 @@
+"""The blend beyond the real-time band: its remaining duration and its weights, chosen on the rest of the movement.
+
+The inner cross-validation of :class:`~interprim.models.AutoInteraction` fits the blend's weights per look-ahead
+band (:mod:`interprim.model_selection.stacking`).  Beyond the first quarter second, two things decide where the
+robot's hand will be: *when* the movement ends (the remaining duration) and *which* members are trusted.  On
+people the phase is still close to a clock, and weights fitted freely per band on 12-20 recordings overrate the
+nearest and kernel-weighted demonstrations at long look-aheads.  This module chooses both on the yardstick a user
+reads, the error over the rest of the movement in seconds (:mod:`interprim.model_selection.yardsticks`), with the
+one-standard-error rule: the simpler answer unless the complex one is better by more than its noise over the
+held-out demonstrations.
+
+**Timing** (:func:`remaining_duration`).  Beyond the real-time ``horizon`` every member runs to the end of the
+movement at one shared remaining duration
+
+    R = R_c + lam (R_b - R_c),    R_c = max(D_mean - elapsed, 0),    R_b = sum_m w_m(0) (1 - s_m) D_m,
+
+a shrinkage of the members' own estimate ``R_b`` (their phases ``s_m`` and durations ``D_m`` weighted with the
+real-time weights) toward the clock's ``R_c``; ``lam`` in :data:`LAMBDAS` (0: the clock's remaining duration) or
+``None`` (each member at its own duration, the blend before this module).  Up to ``horizon`` each member keeps its
+own speed (the real-time band is unchanged); after it, member ``m`` moves from where it is then,
+``u_h = s_m + horizon / D_m``, linearly to its end at ``R`` seconds from now (:func:`member_units`).
+
+**Weights beyond the real-time band** (:func:`long_range_choice`).  Candidates, from the simplest: the mean
+demonstration (``prior``) alone, each single family, the real-time weights held at every look-ahead, the weights
+fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
+cross-fitted (fitted on the other demonstrations' cases), the others need no fit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .yardsticks import case_rms, one_se_choice, place_cases
+
+__all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
+           "schedule", "held", "replaced", "PREFER"]
+
+#: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
+LAMBDAS = (0.0, 0.5, 1.0)
+#: How :func:`one_se_choice` orders the candidates: from the fitted one (the default) or from the simplest.
+PREFER = ("fitted", "simple")
+
+
+def remaining_duration(phase, duration, elapsed, mean_duration: float, w0, lam) -> np.ndarray:
+    """``(cases,)`` seconds left of the movement, ``R_c + lam (R_b - R_c)`` (module docstring).
+
+    Parameters
+    ----------
+    phase, duration : ndarray, shape (members, cases)
+        Each member's normalised time of "now" ``s_m`` and duration ``D_m`` (s) (as placed by
+        :func:`~interprim.model_selection.realtime.place_in_time`).
+    elapsed : ndarray, shape (cases,)
+        Seconds since the first frame.
+    mean_duration : float or ndarray
+        The demonstrations' mean duration (s).
+    w0 : ndarray, shape (members,)
+        The real-time weights.
+    lam : float
+        0: the clock's remaining duration; 1: the members' weighted estimate.
+    """
+    phase = np.atleast_2d(np.asarray(phase, dtype=np.float64))
+    duration = np.atleast_2d(np.asarray(duration, dtype=np.float64))
+    Rb = np.asarray(w0, dtype=np.float64) @ (np.clip(1.0 - phase, 0.0, None) * duration)
+    Rc = np.clip(np.asarray(mean_duration, dtype=np.float64) - np.asarray(elapsed, dtype=np.float64), 0.0, None)
+    return np.clip(Rc + float(lam) * (Rb - Rc), 0.0, None)
+
+
+def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndarray:
+    """``(cases, H)``: a member's normalised time ``t_ahead`` seconds from now, at its own speed ``1 / D_m`` up to
+    ``horizon`` and then linearly to its end (1) at ``remaining`` seconds from now (``remaining`` None: its own
+    speed throughout).  ``phase``, ``duration``: ``(cases,)`` of the member; ``remaining``: ``(cases,)``."""
+    s = np.asarray(phase, dtype=np.float64)[:, None]
+    D = np.asarray(duration, dtype=np.float64)[:, None]
+    t = np.asarray(t_ahead, dtype=np.float64)[None, :]
+    own = s + t / D
+    if remaining is None:
+        return np.clip(own, 0.0, 1.0)
+    h = float(horizon)
+    R = np.asarray(remaining, dtype=np.float64)[:, None]
+    uh = np.minimum(s + h / D, 1.0)
+    after = uh + (t - h) * (1.0 - uh) / np.maximum(R - h, 1e-9)
+    after = np.where(R > h, after, 1.0)  # the shared end is inside the real-time band: the members hold their end
+    return np.clip(np.where(t <= h + 1e-12, own, after), 0.0, 1.0)
+
+
+def case_groups(demo, k: int = 3) -> np.ndarray:
+    """``(cases,)`` group labels ``0..k-1``: the held-out demonstrations ``demo`` split into ``k`` contiguous groups
+    (every case of a demonstration in one group)."""
+    demo = np.asarray(demo)
+    u = np.unique(demo)
+    k = max(1, min(int(k), len(u)))
+    g = {d: i * k // len(u) for i, d in enumerate(u)}
+    return np.array([g[d] for d in demo], dtype=np.int64)
+
+
+def schedule(t_ahead, edges, W) -> np.ndarray:
+    """``(H, members)`` per-step weights of the per-band weights ``W`` (upper edges ``edges``), moved smoothly
+    between the bands' middles as the blend moves them (:func:`~interprim.model_selection.stacking.weights_at`)."""
+    try:
+        from .stacking import weights_at
+    except ImportError:  # before the selection moved out of the ensemble module
+        from ..models.ensemble import weights_at
+
+    return weights_at(t_ahead, edges, W)
+
+
+def held(W, w) -> np.ndarray:
+    """``(bands, M)``: the real-time band's weights ``W[0]``, then ``w`` in every later band."""
+    out = np.tile(np.asarray(w, dtype=np.float64), (np.shape(W)[0], 1))
+    out[0] = np.asarray(W, dtype=np.float64)[0]
+    return out
+
+
+def _blend(mean, per_step):
+    """``(cases, H, D)``: the blend of the members' placed predictions ``mean`` ``(M, cases, H, D)``."""
+    return np.einsum("hm,mchd->chd", per_step, mean)
+
+
+def _rest(cv, pred, idx=None):
+    """``(cases,)``: the rest-of-the-movement error of the controlled agent (every step inside the held-out
+    movement) of ``pred`` ``(cases, H, D)`` on the cases ``idx`` of ``cv``."""
+    idx = slice(None) if idx is None else idx
+    return case_rms(pred, cv.truth[idx], cv.valid[idx], cv.controlled or cv.observed, cv.point_dim)
+
+
+def replaced(cv, lam) -> np.ndarray:
+    """``(M, cases, H, D)``: the members' predictions of ``cv`` placed with the shared remaining duration of
+    ``lam`` (``None``: their own timing, ``cv.mean`` itself) and the real-time weights ``cv.w0``."""
+    if lam is None:
+        return cv.mean
+    R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
+    return np.stack([place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
+                     for i in range(len(cv.names))])
+
+
+def _order(names, prefer: str) -> list:
+    """The candidates in the order :func:`one_se_choice` tries them: from the simplest (``prefer="simple"``) or
+    from the fitted, most complex one (``prefer="fitted"``)."""
+    if prefer not in PREFER:
+        raise ValueError(f"prefer must be one of {PREFER}, got {prefer!r}")
+    names = list(names)
+    return names if prefer == "simple" else names[::-1]
+
+
+def timing_choice(cv, per_step, lambdas=LAMBDAS, prefer: str = "fitted") -> tuple:
+    """``(lam, table)``: the blend's remaining duration beyond the real-time band, chosen on the rest of the movement.
+
+    Candidates, from the simplest: the shared remaining duration of each ``lam`` of :data:`LAMBDAS`
+    (:func:`remaining_duration`), then ``None`` (each member at its own duration).  The blend (per-step weights
+    ``per_step`` ``(H, M)``) of each is scored on the rest of the movement in seconds over the held-out cases of
+    ``cv``; :func:`one_se_choice` takes the first candidate within one standard error (over the held-out
+    demonstrations) of the best, trying them from the simplest (``prefer="simple"``) or from the members' own
+    timing (``prefer="fitted"``: changed only when a simpler timing is better by more than its noise)."""
+    cands = {f"{lam:g}": lam for lam in lambdas}
+    cands["own"] = None
+    errors = {name: _rest(cv, _blend(replaced(cv, lam), per_step)) for name, lam in cands.items()}
+    name, table = one_se_choice(errors, cv.demo, _order(cands, prefer))
+    return cands[name], table
+
+
+def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = "fitted") -> tuple:
+    """``(W, name, table)``: the blend's weights beyond the real-time band, chosen on the rest of the movement.
+
+    Parameters
+    ----------
+    cv
+        The inner cross-validation (:class:`~interprim.model_selection.stacking.CrossValidation`), its members'
+        predictions placed as the blend will place them.
+    W : ndarray, shape (bands, M)
+        The weights fitted per band on all the cases (row 0: the real-time band, kept by every candidate).
+    edges : sequence of float
+        Upper edges (s) of the bands.
+    groups : int
+        The per-band weights are scored cross-fitted: fitted on the cases of the other ``groups - 1`` groups of
+        held-out demonstrations (:func:`case_groups`), scored on this group's.
+    prefer : {"fitted", "simple"}
+        :func:`one_se_choice` takes the first candidate within one standard error of the best, trying them from
+        the per-band weights (``"fitted"``: a simpler candidate only when it is better by more than its noise, so
+        the blend is never worse than the mean or a single family by more than one standard error on the inner
+        folds) or from the mean (``"simple"``: the per-band weights only when they are better by more than their
+        noise).
+
+    Returns
+    -------
+    W : ndarray, shape (bands, M)
+        The chosen weights (row 0 unchanged; the other rows all equal for a candidate that holds one set).
+    name : str
+        ``"prior"``, a family, ``"real-time weights"`` or ``"per band"``.
+    table : dict
+        :func:`one_se_choice`'s table over the candidates.
+    """
+    W = np.asarray(W, dtype=np.float64)
+    M = len(cv.names)
+    t = cv.t_ahead
+    cands = {m: held(W, np.eye(M)[i]) for i, m in enumerate(cv.names)}
+    first = {m: _rest(cv, _blend(cv.mean, schedule(t, edges, Wm))) for m, Wm in cands.items()}
+    order = (["prior"] if "prior" in cands else []) + sorted((m for m in cands if m != "prior"),
+                                                             key=lambda m: first[m].mean())
+    errors = {m: first[m] for m in order}
+    cands["real-time weights"] = held(W, W[0])
+    errors["real-time weights"] = _rest(cv, _blend(cv.mean, schedule(t, edges, cands["real-time weights"])))
+    if W.shape[0] > 1:
+        g = case_groups(cv.demo, groups)
+        crossed = np.zeros(len(g))
+        for gi in np.unique(g):
+            train, test = np.flatnonzero(g != gi), np.flatnonzero(g == gi)
+            sub = cv.cases(train)
+            steps = sub.band_steps(edges)
+            Wg = np.array([W[0]] + [sub.blend_weights(s) if sub.valid[:, s].any() else W[i + 1]
+                                    for i, s in enumerate(steps[1:])])
+            crossed[test] = _rest(cv, _blend(cv.mean[:, test], schedule(t, edges, Wg)), test)
+        errors["per band"] = crossed
+    order = list(errors)  # from the simplest: the mean, the families (the best first), held, per band
+    if _order(order, prefer) != order:  # from the fitted: per band, held, the families (the best first), the mean
+        fitted = [m for m in ("per band", "real-time weights") if m in errors]
+        order = fitted + [m for m in order if m not in fitted and m != "prior"] + [m for m in order if m == "prior"]
+    name, table = one_se_choice(errors, cv.demo, order)
+    return (W if name == "per band" else cands[name]), name, table

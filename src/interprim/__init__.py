@@ -23,7 +23,7 @@ _LAZY = {
     "Stream": "interprim.models.primitive.stream",
     "Recogniser": "interprim.models.recognition",
     "LearnedInteraction": "interprim.models.learned",
-    "AutoInteraction": "interprim.models.ensemble",
+    "AutoInteraction": "interprim.models.auto",
     "load_any": "interprim.models.files",
     "LearnedPhase": "interprim.phase.learned",
     "CouplingModel": "interprim.models.coupling",

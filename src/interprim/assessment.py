@@ -1,9 +1,10 @@
 """Evaluating a user's demonstrations with every model interprim offers: the real-time and whole-movement
 protocols of :mod:`interprim.evaluation.realtime` for each method, the family chosen and the blend that
-``interprim fit`` makes (:mod:`interprim.models.ensemble`) fitted inside each outer training fold only, and a verdict.
+``interprim fit`` makes (:class:`~interprim.models.auto.AutoInteraction`) fitted inside each outer training fold
+only, and a verdict.
 
-This sits above :mod:`interprim.models.ensemble`, which itself uses the protocols: the protocols know nothing of the models
-chosen with them.  ``interprim evaluate`` runs :func:`evaluate_demonstrations`.
+This sits above :mod:`interprim.models.auto`, which itself uses the protocols: the protocols know nothing of the
+models chosen with them.  ``interprim evaluate`` runs :func:`evaluate_demonstrations`.
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
     and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
     """
+    source = demos
     prefixes = Prefixes(demos, observed_dofs)
     demos = prefixes.demos
     if len(demos) < rt.MIN_DEMONSTRATIONS:
@@ -77,7 +79,7 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     recs = rt.realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
                           whole_movement=whole_movement)
     if nested:
-        choices, blended = _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement)
+        choices, blended = _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement)
         recs = recs + nested_choice_records(recs, choices) + blended
     summary = rt.summarise_realtime(recs)
     if nested:
@@ -87,15 +89,19 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     return recs, summary, f"{best}: " + rt.verdict(summary, best)
 
 
-def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
+def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
     """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
-    inner cross-validated error}, outer records of the blend)``.  The blend that ``interprim fit`` makes by default
-    is the one ``interprim fit`` makes by default (method ``"auto"``, :class:`~interprim.models.ensemble.Blend`, fitted on the
-    outer training demonstrations with the inner cross-validation's weights and variance model; only when at least
-    two of its candidate families are compared)."""
-    from .models import ensemble as auto  # looked up at call time (tests spy on auto.CrossValidation)
+    inner cross-validated error}, outer records of the blend)``.
 
-    blendable = [m for m in make if m in auto.CANDIDATES]
+    Each outer training fold is given to :class:`~interprim.models.auto.AutoInteraction` -- the model ``interprim
+    fit`` makes by default, with the evaluated methods among its candidate families (each built as the evaluation
+    builds it) -- whose inner ``inner_k``-fold cross-validation chooses the family (``chosen_``) and fits the blend
+    (method ``"auto"``; only when at least two candidates could be compared).  With fewer than two of its candidate
+    families evaluated, the choice is made among all the evaluated methods (``combine="best"``)."""
+    from .models.auto import CANDIDATES, AutoInteraction
+
+    blendable = [m for m in make if m in CANDIDATES]
+    names = blendable if len(blendable) >= 2 else list(make)
     choices, out = {}, []
     for held in rt.folds(len(prefixes), k):
         train = [i for i in range(len(prefixes)) if i not in set(held)]
@@ -105,28 +111,31 @@ def _nested_choices(make, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_mo
                 choices[j] = next(iter(make))
             continue
         arrays = [prefixes.demos[i] for i in train]
-        long_cfg = auto.scoring_config(cfg.horizon, arrays, dt, start=cfg.start, stop=cfg.stop,
-                                       stride=max(cfg.stride, 3), n_grid=cfg.n_grid, point_dim=cfg.point_dim)
-        cv = auto.CrossValidation(make, prefixes.subset(train), observed_dofs, dt, long_cfg, kk, horizon=cfg.horizon)
+        # the training fold with its raw samples (causal prefixes in the inner cross-validation), or its arrays
+        fold = source.take(train) if prefixes.causal and hasattr(source, "take") else arrays
+        auto = AutoInteraction(observed_dofs, candidates=[(m, make[m]) for m in names],
+                               combine="blend" if len(blendable) >= 2 else "best", folds=kk, horizon=cfg.horizon,
+                               stride=max(cfg.stride, 3), point_dim=cfg.point_dim)
         try:
-            best, _ = auto.choice(cv, list(make))
+            auto.fit(fold, dt=dt)
+            best = auto.chosen_
         except ValueError:  # no family could be fitted on every inner training fold
-            best = next(iter(make))
+            best, auto = next(iter(make)), None
         for j in held:
             choices[j] = best
-        sub = cv.subset(blendable)
-        if len(sub.names) < 2:
+        if auto is None or auto.selection_.get("combine") != "blend":
             continue
-        blend, info = auto.blend_from_cv(sub, make, arrays, dt, observed_dofs, cfg.horizon)
-        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in info["weights"].items())
+        tag = "blend " + ", ".join(f"{m} {x:.2f}" for m, x in auto.weights_.items())
         for j in held:
-            pre = (lambda kf, j=j: prefixes(j, kf))
-            for r in rt.realtime_fold(blend, arrays, prefixes.demos[j], observed_dofs, dt, cfg, name="auto",
-                                   fitted=True, prefix=pre):
+            def pre(kf, j=j):
+                return prefixes(j, kf)
+
+            for r in rt.realtime_fold(auto, arrays, prefixes.demos[j], observed_dofs, dt, cfg, name="auto",
+                                      fitted=True, prefix=pre):
                 if r["method"] == "auto":
                     out.append(dict(r, demo=int(j), chosen=tag))
             if whole_movement:
-                for r in rt.whole_movement_fold(blend, prefixes.demos[j], observed_dofs, whole_movement,
-                                             point_dim=cfg.point_dim, name="auto", prefix=pre):
+                for r in rt.whole_movement_fold(auto, prefixes.demos[j], observed_dofs, whole_movement,
+                                                point_dim=cfg.point_dim, name="auto", prefix=pre):
                     out.append(dict(r, demo=int(j), protocol="whole", chosen=tag))
     return choices, out

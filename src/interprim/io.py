@@ -67,8 +67,8 @@ FORMAT = "interprim-model"
 FORMAT_VERSION = 3
 READ_VERSIONS = (1, 2, 3)
 
-__all__ = ["model_kind", "save_estimator", "load_estimator", "read_archive", "write_archive", "checksum", "expect",
-           "FORMAT", "FORMAT_VERSION", "READ_VERSIONS", "MAX_ARCHIVE_BYTES", "MAX_METADATA_BYTES"]
+__all__ = ["model_kind", "save_estimator", "load_estimator", "estimator_from_state", "read_archive", "write_archive",
+           "checksum", "expect", "FORMAT", "FORMAT_VERSION", "READ_VERSIONS", "MAX_ARCHIVE_BYTES", "MAX_METADATA_BYTES"]
 
 _ZIP_MAGIC = b"PK\x03\x04"
 _NPY_MAGIC = b"\x93NUMPY"
@@ -119,14 +119,26 @@ def load_estimator(path, model_class):
             f"{name} model_version {version!r} is not supported by this interprim "
             f"(reads 1..{model_class.STATE_VERSION})")
     try:
-        model = model_class(**meta["params"])
-        model.load_state(data, meta["state"])
-        if "input_range" in meta["state"] and getattr(model, "input_range_", None) is None:
-            model.set_input_range(meta["state"]["input_range"])
+        model = estimator_from_state(model_class, meta["params"], data, meta["state"], source=path)
     except ModelFileError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise ModelFileError(f"{path}: corrupt {name} model file ({type(exc).__name__}: {exc})") from None
+    return model
+
+
+def estimator_from_state(model_class, params: dict, arrays: dict, state: dict, source="<state>"):
+    """The fitted ``model_class`` of its parameters ``params`` and the ``(arrays, state)`` of its ``to_state``: the
+    one way a model is rebuilt from its state (a model file, a blend's member).  A class with its own
+    ``from_state`` (the Interaction Primitive, whose state carries its parameters) restores itself; any other is
+    built from ``params`` and given the state (``load_state``), with the out-of-range statistics when the state has
+    them."""
+    if hasattr(model_class, "from_state"):
+        return model_class.from_state(arrays, state, source=source)
+    model = model_class(**params)
+    model.load_state(arrays, state)
+    if "input_range" in state and getattr(model, "input_range_", None) is None:
+        model.set_input_range(state["input_range"])
     return model
 
 

@@ -247,3 +247,37 @@ def test_equal_length_demonstrations_give_no_phase_ratio_but_a_reason():
     assert "timing cannot be compared with the clock's" in verdict(summary, "ip")
     recs.append({"method": "clock", "phase_err": 0.02, "rt_ctrl": 0.2, "rt_obs": 0.1})  # unequal: a ratio
     assert summarise_realtime(recs)["ip"]["phase_err_vs_clock"] == pytest.approx(0.01 / (0.02 / 5), rel=1e-9)
+
+
+def test_evaluate_the_papers_configuration_on_built_in_data(tmp_path, capsys):
+    """``interprim evaluate --data synthetic --methods ip-paper`` (a default method of the sweep) runs to its table:
+    the sweep builds its variants from the registry's rows (the paper's ``sigma2="residual"``)."""
+    pytest.importorskip("joblib")
+    pytest.importorskip("tqdm")
+    code = main(["evaluate", "--data", "synthetic", "--methods", "ip-paper", "--quick", "--no-recognition",
+                 "--no-figures", "--backend", "threading", "--out", str(tmp_path / "ev")])
+    out = capsys.readouterr().out
+    assert code == 0 and "ip-paper" in out
+    import json
+
+    res = json.loads((tmp_path / "ev" / "results.json").read_text())
+    recs = [r for r in res["folds"] if r["method"] == "ip-paper"]
+    assert len(recs) == 4 * 5 and all(np.isfinite(r["rmse_ctrl"]) for r in recs)
+
+
+def test_evaluate_with_a_horizon_prints_a_fit_command_for_that_horizon(tmp_path, capsys, monkeypatch):
+    """``interprim evaluate --horizon 0.5`` prints an ``interprim fit`` command that fits for 0.5 s, and that
+    command's model scores its candidates and tunes its kernel member for 0.5 s."""
+    data = _csv_with_observed_line(tmp_path / "demos.csv")
+    code = main(["evaluate", "--data", str(data), "--methods", "nn", "--folds", "3", "--horizon", "0.5",
+                 "--resample", "0.02", "--max-nan-gap", "1", "--no-figures", "--out", str(tmp_path / "ev")])
+    out = capsys.readouterr().out
+    assert code == 0
+    words = _printed_fit(out)
+    assert words[words.index("--horizon") + 1] == "0.5"
+    words[-1] = str(tmp_path / "model.npz")
+    assert main(words[1:] + ["--model", "kernel"]) == 0, capsys.readouterr().err
+    import interprim as ip
+
+    model = ip.load_any(tmp_path / "model.npz")
+    assert model.horizon == 0.5 and model.model_.horizon == 0.5

@@ -84,7 +84,7 @@ def test_no_prediction_sees_its_held_out_recording(monkeypatch):
     def spied_methods(*a, **kw):
         return {name: (lambda f=f, name=name: _Spy(f(), name, world)) for name, f in real_methods(*a, **kw).items()}
 
-    from interprim.models import ensemble as auto
+    from interprim.model_selection import stacking as auto
 
     real_cv = auto.CrossValidation
 

@@ -75,7 +75,7 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
     assert s["blend_cv_error"] <= s["cv_errors"][blend.chosen_] + 1e-12
     assert s["blend_vs_best"] <= 1.0 + 1e-12
     # ... and no other point of the simplex does better in the real-time band, nor in any later look-ahead band
-    from interprim.models import ensemble
+    from interprim.model_selection import stacking as ensemble
 
     cfg = ensemble.scoring_config(0.25, list(dev.demos), dev.dt, stride=3)
     cv = ensemble.CrossValidation(blend.factories(), dev.demos, [0, 1], dev.dt, cfg, k=3, horizon=0.25)
@@ -120,7 +120,7 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
 
 
 def test_weights_move_smoothly_from_real_time_to_the_whole_movement():
-    from interprim.models.ensemble import weights_at
+    from interprim.model_selection.stacking import weights_at
 
     W = np.array([[1.0, 0.0], [0.5, 0.5], [0.0, 1.0]])
     edges = [0.25, 0.5, 1.0]  # middles 0.125, 0.375, 0.75
@@ -218,7 +218,7 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
     weights and variance model are those the plain protocol gives."""
     from interprim.core.blas import single_thread
-    from interprim.models.ensemble import CrossValidation
+    from interprim.model_selection.stacking import CrossValidation
     from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
 
     dev, _ = task
@@ -312,3 +312,61 @@ def test_fit_shows_its_progress_when_asked(task, capsys, monkeypatch):
     assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]  # the last step is the last
     ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2).fit(dev.demos, dt=dev.dt)
     assert capsys.readouterr().err == ""
+
+
+def _user_family():
+    """A user's own family in a few lines (the public contract only): the mean demonstration in normalised time,
+    shifted so that its observed agent passes through the last observed frame at the clock's phase."""
+    from interprim.core.preprocessing import time_normalise
+    from interprim.models.base import GridPrediction, Predictor
+
+    class ShiftedMean(Predictor):
+        _FITTED = "mean_"
+
+        def __init__(self, observed_dofs, n: int = 101):
+            self.observed_dofs = observed_dofs
+            self.n = n
+
+        def fit(self, demos, dt=None):
+            self.dt_ = float(dt)
+            self.observed_dofs_ = [int(i) for i in self.observed_dofs]
+            self.mean_ = np.mean([time_normalise(np.asarray(d), self.n) for d in demos], axis=0)
+            self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
+            return self
+
+        def predict(self, partial):
+            x = np.asarray(partial, dtype=np.float64)
+            s = min((len(x) - 1) * self.dt_ / self.mean_duration_, 1.0)
+            u = np.linspace(0.0, 1.0, self.n)
+            at = np.array([np.interp(s, u, self.mean_[:, c]) for c in self.observed_dofs])
+            mean = self.mean_.copy()
+            mean[:, self.observed_dofs] += x[-1] - at
+            return GridPrediction(u, mean, None, phase=s, observed_dofs=list(self.observed_dofs),
+                                  duration=self.mean_duration_, mean_duration=self.mean_duration_,
+                                  n_observed=len(x))
+
+    return ShiftedMean
+
+
+def test_a_users_own_family_joins_the_blend(task, tmp_path):
+    """``candidates`` takes ``(name, factory)`` pairs beside registry names (as scikit-learn's
+    ``StackingRegressor(estimators=...)``): the user's family is compared on the same folds, weighted, fitted and
+    streamed like the registry's; a model file names registered families only, so saving it is refused clearly."""
+    dev, hold = task
+    ShiftedMean = _user_family()
+    auto = ip.AutoInteraction([0, 1], candidates=("nn", ("shifted", lambda: ShiftedMean([0, 1])), "prior"))
+    auto.fit(dev.demos, dt=dev.dt)
+    s = auto.selection_
+    assert set(s["cv_errors"]) == {"nn", "shifted", "prior"} and np.isfinite(s["cv_errors"]["shifted"])
+    assert auto.weights_.get("shifted", 0.0) > 0 and type(auto.model_.members_["shifted"]) is ShiftedMean
+    x = hold.demos[0][:30, :2]
+    st = auto.stream()
+    for f in x:
+        q = st.update(f)
+    np.testing.assert_array_equal(q.trajectory(40), auto.predict(x).trajectory(40))
+    assert auto.json_params()["candidates"] == ["nn", "shifted", "prior"]
+    with pytest.raises(ValueError, match="'shifted' is a ShiftedMean, not a family of interprim's registry"):
+        auto.save(tmp_path / "mine.npz")
+    assert not (tmp_path / "mine.npz").exists()
+    with pytest.raises(ValueError, match="pairs"):
+        ip.AutoInteraction([0, 1], candidates=("nn", ("shifted",))).fit(dev.demos, dt=dev.dt)

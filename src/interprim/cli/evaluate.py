@@ -5,6 +5,8 @@ Top-level imports are light; the work happens in :mod:`interprim.evaluation.swee
 
 from __future__ import annotations
 
+from ..core.cv import DEFAULT_HORIZON
+
 DEFAULT_METHODS = "ip-forcing,ip-position,ip-forcing+pca,ip-position+pca,ip-paper,iprompt,nn,prior"
 #: the methods of ``--data FILE`` (:func:`interprim.evaluation.realtime.default_methods`)
 USER_METHODS = "ip,learned,ip-paper,nn,prior"
@@ -41,8 +43,9 @@ def add_parser(subparsers):
                    help="with --data FILE: fill interior gaps of up to this many missing frames")
     p.add_argument("--folds", type=int, default=None,
                    help="with --data FILE: k-fold cross-validation (default: leave-one-out)")
-    p.add_argument("--horizon", type=float, default=0.25,
-                   help="with --data FILE: seconds ahead predicted after each observed frame (default 0.25)")
+    p.add_argument("--horizon", type=float, default=DEFAULT_HORIZON,
+                   help=f"with --data FILE: seconds ahead predicted after each observed frame (default "
+                   f"{DEFAULT_HORIZON}; the printed 'interprim fit' command fits for it)")
     p.add_argument("--dt", type=float, default=None,
                    help="with --data FILE: sampling interval in seconds of files without time stamps")
     p.add_argument("--smoothing-window", type=int, default=None,
@@ -172,7 +175,8 @@ def run_user_data(args) -> int:
 
     ctrl_flag = ["--controlled", ",".join(ds.columns[i] for i in range(ds.n_dofs) if i not in set(obs))] \
         if args.controlled else []
-    fit_data = shell_words([args.data] + data_flags(args) + ctrl_flag)
+    horizon_flag = [] if float(args.horizon) == DEFAULT_HORIZON else ["--horizon", f"{float(args.horizon):g}"]
+    fit_data = shell_words([args.data] + data_flags(args) + ctrl_flag + horizon_flag)
     fit_observed = shell_words([",".join(ds.columns[i] for i in obs)])
 
     def note(line):

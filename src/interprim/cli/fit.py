@@ -1,7 +1,7 @@
 """``interprim fit``: learn a model of the interaction from demonstration files and save it.
 
 By default (``--model auto``) the model is chosen on the demonstrations themselves
-(:class:`~interprim.models.ensemble.AutoInteraction`: the Interaction Primitive, the learned interaction, the
+(:class:`~interprim.models.auto.AutoInteraction`: the Interaction Primitive, the learned interaction, the
 kernel-weighted and the nearest demonstration and the mean, compared on held-out folds and blended);
 ``--model ip`` fits the Interaction Primitive alone, with every option of the paper's model.
 
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import InterprimError
 from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
                       print_notes, recording_options)
@@ -74,9 +75,15 @@ def add_parser(subparsers) -> None:
         choices=MODELS,
         default="auto",
         help="auto (default): compare the Interaction Primitive, the learned interaction, the kernel-weighted and "
-        "the nearest demonstration and the mean on held-out folds of the demonstrations (real-time error 0.25 s "
+        "the nearest demonstration and the mean on held-out folds of the demonstrations (real-time error --horizon s "
         "ahead) and blend them with cross-validated weights; or one model alone: ip (the Interaction Primitive; "
         "the options below marked 'ip' apply to it), learned, kernel, nn, prior",
+    )
+    p.add_argument(
+        "--horizon", type=float, default=None, metavar="SECONDS",
+        help=f"seconds ahead of the real-time band: --model auto scores its candidates and fits its first weights "
+        f"for it, the kernel model is tuned for it (default {DEFAULT_HORIZON}; --model ip predicts the whole "
+        f"movement and has no horizon)",
     )
     p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
     p.add_argument(
@@ -176,6 +183,7 @@ def cmd_fit(args) -> int:
     positive_number(args.n_basis, "--n-basis")
     positive_number(args.dt, "--dt")
     positive_number(args.resample, "--resample")
+    positive_number(args.horizon, "--horizon")
     ds = load_demonstrations(
         args.demos,
         columns=args.columns,
@@ -230,13 +238,14 @@ def cmd_fit(args) -> int:
 
 def _fit_other(args, ds, obs, n_read) -> int:
     """``--model auto`` (the model chosen on the data) or one of the other families alone."""
-    from interprim.models.ensemble import AutoInteraction
+    from interprim.models.auto import AutoInteraction
 
     if args.model == "auto" and len(ds) < 3:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "
                            "folds and needs at least 3 (or use --model ip)")
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
-                           n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True)
+                           n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
+                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon))
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]

@@ -33,8 +33,13 @@ import math
 
 import numpy as np
 
-__all__ = ["FOLD_ORDERS", "MIN_OBSERVED_FRAMES", "n_folds", "fold_labels", "folds", "paired_gain", "within_one_se",
+__all__ = ["DEFAULT_HORIZON", "FOLD_ORDERS", "MIN_OBSERVED_FRAMES", "n_folds", "fold_labels", "folds", "paired_gain", "within_one_se",
            "observed_frames"]
+
+#: Seconds ahead that the real-time protocol scores by default (the real-time band of the default model, the
+#: look-ahead the kernel family is tuned for, ``--horizon`` of ``interprim fit`` and ``interprim evaluate``): the
+#: one place this default is written.
+DEFAULT_HORIZON = 0.25
 
 #: How demonstrations are assigned to folds (see :func:`folds`).
 FOLD_ORDERS = ("interleaved", "contiguous", "shuffled")

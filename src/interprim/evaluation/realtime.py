@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.metrics import Z90
 from ..model_selection.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, folds, mean_demo,
                                         mean_duration, realtime_fold, realtime_sweep, summarise_realtime,
@@ -217,7 +218,7 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     return " ".join(parts)
 
 
-def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = 0.25, notes=(),
+def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = DEFAULT_HORIZON, notes=(),
                 unit: str = "data units") -> list:
     """Write ``realtime.json`` (records + summary), ``report.md`` (table + verdict) and, with matplotlib,
     ``realtime.png`` (real-time error of the controlled agent against the fraction seen, per method).

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.prefixes import observed_frames
 from .realtime import Z90, RealTimeConfig, realtime_fold, summarise_realtime
 
@@ -55,7 +56,7 @@ def _to_display(Y, R, off, point_dim):
 
 
 def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, gif_path=None, png_path=None, *,
-                                horizon: float = 0.25, point_dim: int = 3, view=(0, 2), facing: bool = True,
+                                horizon: float = DEFAULT_HORIZON, point_dim: int = 3, view=(0, 2), facing: bool = True,
                                 n_frames: int = 60, fps: int = 5, dpi: int = 85, snapshots=(0.3, 0.5, 0.7, 0.9),
                                 title: str = "", axis_labels=("forward [m]", "up [m]"),
                                 unit: tuple = ("cm", 100.0), prefix=None) -> dict:

@@ -19,7 +19,8 @@ Metrics per (task, method, held-out demo, fraction):
   method's pointwise 90 % predictive interval (``mean +- 1.645 std``).
 - ``phase`` / ``phase_true``: estimated and true fraction seen.
 
-Methods (:data:`METHODS`): ``ip-forcing`` and ``ip-position`` (this library with
+Methods (:data:`METHODS`, rows of :data:`interprim.models.registry.FAMILIES`): ``ip-forcing`` and
+``ip-position`` (this library with
 ``sigma2="cv"`` and ``phase_method="likelihood"``, conditioning on forcing
 values, Eq. 15, or on positions), ``ip-paper`` (the paper exactly: forcing,
 DTW phase, ``sigma2="residual"``), ``*-dtw`` variants (same but DTW phase),
@@ -175,14 +176,12 @@ def make_estimator(method: str, observed_dofs, cfg: EvalConfig):
 
     base, _, suffix = method.partition("+")
     pca = cfg.pca_components if suffix == "pca" else None
-    ip_variants = {"ip-forcing": ("forcing", "cv", "likelihood"), "ip-position": ("position", "cv", "likelihood"),
-                   "ip-forcing-dtw": ("forcing", "cv", "dtw"), "ip-position-dtw": ("position", "cv", "dtw"),
-                   "ip-paper": ("forcing", "auto", "dtw")}
-    if base in ip_variants:
-        observation, sigma2, phase = ip_variants[base]
-        return registry.family("ip").cls(observed_dofs=list(observed_dofs), n_basis=cfg.n_basis,
-                                         smoothing_window=cfg.smoothing_window, pca_components=pca,
-                                         observation=observation, sigma2=sigma2, phase_method=phase)
+    if base in ("ip-forcing", "ip-position", "ip-paper", "ip-forcing-dtw", "ip-position-dtw"):
+        # the registry's rows (ip-paper: the paper exactly); '-dtw': the same row with the paper's DTW phase
+        row = base[:-len("-dtw")] if base.endswith("-dtw") else base
+        settings = registry.Settings(tuple(observed_dofs), n_basis=cfg.n_basis, smoothing_window=cfg.smoothing_window,
+                                     phase_method="dtw" if base.endswith("-dtw") else None)
+        return registry.family(row).build(settings).set_params(pca_components=pca)
     if base == "iprompt":
         return registry.family("iprompt").cls(observed_dofs, n_weights=cfg.promp_weights)
     if base in ("nn", "prior"):

@@ -32,8 +32,9 @@ from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_rea
 __all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
-#: every family of the registry but the peer (Interaction ProMP, which needs the [bench] extra)
-METHODS = tuple(n for n, f in FAMILIES.items() if not f.needs)
+#: the families the real-time evaluation compares by default (all but the peer, Interaction ProMP, which needs the
+#: [bench] extra, and the leave-one-out sweep's variants)
+METHODS = tuple(n for n, f in FAMILIES.items() if f.default_method)
 
 
 def holdout_tasks(which=("nuisi", "synthetic"), data_path=None):
@@ -67,23 +68,20 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
-    from ..models.ensemble import CrossValidation, blend_from_cv, choice, scoring_config
+    from ..models.auto import CANDIDATES, AutoInteraction
 
     cfg = RealTimeConfig(point_dim=point_dim)
     make = {m: f for m, f in default_methods(obs).items() if m in methods}
     t0 = time.perf_counter()
-    # the inner cross-validation of AutoInteraction on the development recordings: the "chosen" family and the
-    # blend's weights and variance model ("auto", what AutoInteraction.fit(dev) makes; "ip-paper" is not one of
-    # its candidates)
-    cand = {m: make[m] for m in make if m != "ip-paper"}
+    # what AutoInteraction.fit(dev) makes: its inner cross-validation on the development recordings chooses the
+    # "chosen" family and fits the blend ("auto") of its candidate families among the methods
     train = [np.asarray(x, dtype=np.float64) for x in dev]
-    cv = CrossValidation(cand, Prefixes(dev, obs), obs, dt, scoring_config(cfg.horizon, train, dt, point_dim=point_dim,
-                                                                           stride=3), folds, horizon=cfg.horizon)
-    chosen, _ = choice(cv, list(cand))
-    inner = dict(cv.errors)
-    blend, info = blend_from_cv(cv, cand, train, dt, obs, cfg.horizon)
-    weights = info["weights"]
-    inner["blend"] = info["blend_cv_error"]
+    blend = AutoInteraction(obs, candidates=[(m, make[m]) for m in make if m in CANDIDATES], folds=folds,
+                            horizon=cfg.horizon, stride=3, point_dim=point_dim).fit(dev, dt=dt)
+    chosen = blend.chosen_
+    inner = dict(blend.selection_["cv_errors"])
+    weights = blend.weights_
+    inner["blend"] = blend.selection_["blend_cv_error"]
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
         f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")

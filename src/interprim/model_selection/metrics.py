@@ -1,7 +1,7 @@
 """Metrics of the evaluation protocols, defined once: point errors, the 90 % band, calibration ratios.
 
-Used by the scorer (:mod:`interprim.model_selection.realtime`), the ensemble's stacking
-(:mod:`interprim.models.ensemble`) and the reports (:mod:`interprim.evaluation`); names no model.
+Used by the scorer (:mod:`interprim.model_selection.realtime`), the family comparison
+(:mod:`interprim.model_selection.stacking`) and the reports (:mod:`interprim.evaluation`); names no model.
 """
 
 from __future__ import annotations

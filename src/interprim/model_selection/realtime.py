@@ -2,7 +2,7 @@
 
 :func:`realtime_fold` scores one fitted estimator on one held-out demonstration, :func:`realtime_sweep` runs it
 over folds, :func:`summarise_realtime` averages the records.  It takes factories of estimators and names no model:
-the ensemble's inner cross-validation (:mod:`interprim.models.ensemble`) and the reports
+the default model's inner cross-validation (:mod:`interprim.model_selection.stacking`) and the reports
 (:mod:`interprim.evaluation.realtime`, which documents the protocol) both use it.
 """
 
@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.cv import folds as cv_folds
+from ..core.cv import DEFAULT_HORIZON, folds as cv_folds
 from ..core.preprocessing import interp_columns, time_normalise
+from ..core.progress import Progress
 from .metrics import Z90, coverage, point_rms, z_ratio
 from .prefixes import Prefixes, observed_frames
 
@@ -31,7 +32,7 @@ def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
     """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
 
     The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
-    :func:`realtime_fold` and the blend of :mod:`interprim.models.ensemble` use it): the position ``t`` seconds
+    :func:`realtime_fold` and the blend of :mod:`interprim.models.blend` use it): the position ``t`` seconds
     after the last of ``n_frames`` observed frames is the prediction at normalised time ``s + t / D``.
 
     * ``s`` is ``pred.normalised_time``; a prediction without one (NaN, e.g. the prior mean) is played by the
@@ -71,7 +72,7 @@ class RealTimeConfig:
         Columns per point (3 for 3-D positions: errors are Euclidean distances of points), 1 for scalars.
     """
 
-    horizon: float = 0.25
+    horizon: float = DEFAULT_HORIZON
     start: float = 0.2
     stop: float = 0.9
     stride: int = 1
@@ -125,7 +126,7 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
 
     ``std=False`` skips the method's std (``cov_*`` and ``z_*`` are then NaN, ``"std"`` None) and
     ``references=False`` the clock and oracle-duration records, for a caller that needs only the method's errors
-    and placed means (:class:`interprim.models.ensemble.CrossValidation`); the method's records are unchanged.
+    and placed means (:class:`interprim.model_selection.stacking.CrossValidation`); the method's records are unchanged.
 
     When the estimator's stream gives exactly what ``predict`` gives (``exact_stream = True``, e.g.
     :class:`~interprim.models.kernel.KernelDemonstrations`, whose stream updates its alignments one frame
@@ -298,20 +299,15 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
     sets = sets or folds(len(demos), k)
-    it = sets
-    if progress:
-        try:
-            from tqdm import tqdm  # the [experiments] extra
-        except ImportError:
-            tqdm = None
-        if tqdm is not None:
-            it = tqdm(sets, desc="folds", unit="fold")
-    for held in it:
+    bar = Progress(progress, len(sets), desc="folds", unit="fold", lines=False)  # a bar with the [experiments] extra
+    for held in sets:
         train = [d for i, d in enumerate(demos) if i not in set(held)]
         for first, (name, factory) in enumerate(make_estimators.items()):
             est = factory().fit(train, dt=dt)
             for j in held:
-                pre = (lambda k, j=j: prefixes(j, k))
+                def pre(k, j=j):
+                    return prefixes(j, k)
+
                 orc = None if oracles is None else oracles[j]
                 for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
                                        prefix=pre, oracle=orc if not first else None, trace=trace, std=std,
@@ -327,6 +323,8 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
                         r["demo"] = int(j)
                         r["protocol"] = "whole"
                         recs.append(r)
+        bar.step()
+    bar.close()
     return recs
 
 

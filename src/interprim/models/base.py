@@ -483,7 +483,7 @@ class Predictor(Params):
     ``input_range_`` and in its model file); every prediction carries ``input_distance`` and ``out_of_range``
     (:func:`interprim.core.input_range.mark`; a stream: the largest distance of the frames seen so far) and warns
     once.  The base class adds this around a subclass's ``fit``, ``predict`` and ``stream``, unless the class does it
-    itself (``_CHECKS_INPUT = True``: the Interaction Primitive, :class:`~interprim.models.ensemble.AutoInteraction`).
+    itself (``_CHECKS_INPUT = True``: the Interaction Primitive, :class:`~interprim.models.auto.AutoInteraction`).
     """
 
     #: whether the class computes ``input_distance`` / ``out_of_range`` itself

@@ -1,8 +1,8 @@
 """Any model file, read as the class it names: :func:`load_any` (``interprim predict``, the server, its workers).
 
 The container (pickle-free ``.npz`` + JSON metadata, bounded reads, checksums) is :mod:`interprim.io`; the classes
-a file may name are the families of :mod:`interprim.models.registry` and the ensemble's two
-(:class:`~interprim.models.ensemble.AutoInteraction`, :class:`~interprim.models.ensemble.Blend`).
+a file may name are the families of :mod:`interprim.models.registry` and the default model's two
+(:class:`~interprim.models.auto.AutoInteraction`, :class:`~interprim.models.blend.Blend`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from pathlib import Path
 from ..core.errors import ModelFileError
 from ..io import model_kind
 from . import registry
-from .ensemble import AutoInteraction, Blend
+from .auto import AutoInteraction
+from .blend import Blend
 
 __all__ = ["load_any", "model_classes"]
 

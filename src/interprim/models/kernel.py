@@ -23,6 +23,7 @@ import numpy as np
 
 from .base import GridPrediction
 from .demonstrations import AlignedBaseline
+from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.prefixes import observed_frames
 
 __all__ = ["KernelDemonstrations"]
@@ -60,7 +61,7 @@ class KernelDemonstrations(AlignedBaseline):
 
     _FITTED = "demos_"
 
-    def __init__(self, observed_dofs, bandwidth="cv", horizon: float = 0.25, n: int = 201):
+    def __init__(self, observed_dofs, bandwidth="cv", horizon: float = DEFAULT_HORIZON, n: int = 201):
         self.observed_dofs = observed_dofs
         self.bandwidth = bandwidth
         self.horizon = horizon

@@ -1,6 +1,6 @@
 """The one table of model families: name -> class, how it is built from the shared settings, CLI name.
 
-Everything that names a family asks this module: the ensemble's candidates (:mod:`interprim.models.ensemble`),
+Everything that names a family asks this module: the default model's candidates (:mod:`interprim.models.auto`),
 the evaluation's methods (:mod:`interprim.evaluation`), ``interprim fit --model`` and the model files
 (:func:`interprim.models.files.load_any`).  A family is built from one dictionary of settings given once at the
 top (:class:`Settings`); each family takes the settings it uses and ignores the rest, so a setting such as the
@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
+from ..core.cv import DEFAULT_HORIZON
 from .demonstrations import NearestNeighbour, PriorMean
 from .kernel import KernelDemonstrations
 from .learned import LearnedInteraction
@@ -24,8 +25,6 @@ from .promp import InteractionProMP
 __all__ = ["Settings", "Family", "FAMILIES", "DEFAULT_HORIZON", "CANDIDATES", "family", "factories",
            "default_methods", "class_named"]
 
-#: Seconds ahead that the real-time protocol scores and the look-ahead-tuned members (kernel) are tuned for.
-DEFAULT_HORIZON = 0.25
 
 
 @dataclass(frozen=True)
@@ -79,6 +78,9 @@ class Family:
     fit_args: str | None = None
     #: what a user should know of that fit (printed after the command)
     fit_note: str = ""
+    #: among the methods the real-time evaluation (``interprim evaluate --data FILE``, :func:`default_methods`) and
+    #: the hold-out compare by default (False: a variant named on request, e.g. by the leave-one-out sweep)
+    default_method: bool = True
 
 
 #: Every model family, by name.  ``candidate``: compared by the default model (``interprim fit``).
@@ -91,6 +93,17 @@ FAMILIES = {f.name: f for f in (
            lambda s: _ip(s, observation="forcing", sigma2="residual", phase_method="dtw"),
            "the paper exactly: forcing observation (Eq. 15), open-end DTW phase (Eq. 5-9), sigma2 from the residual",
            cli=False, fit_args="--model ip --observation forcing --sigma2 residual --phase-method dtw"),
+    Family("ip-forcing", InteractionPrimitive,
+           lambda s: _ip(s, observation="forcing", sigma2="cv", phase_method=s.phase_method or "likelihood"),
+           "the Interaction Primitive conditioned on forcing values (Eq. 15), sigma2 by cross-validation, the "
+           "likelihood phase (a variant of the leave-one-out sweep; Settings.phase_method='dtw': the paper's phase)",
+           cli=False, default_method=False,
+           fit_args="--model ip --observation forcing --sigma2 cv --phase-method likelihood"),
+    Family("ip-position", InteractionPrimitive,
+           lambda s: _ip(s, observation="position", sigma2="cv", phase_method=s.phase_method or "likelihood"),
+           "the Interaction Primitive conditioned on positions, sigma2 by cross-validation, the likelihood phase "
+           "(a variant of the leave-one-out sweep)", cli=False, default_method=False,
+           fit_args="--model ip --observation position --sigma2 cv --phase-method likelihood"),
     Family("kernel", KernelDemonstrations, lambda s: KernelDemonstrations(list(s.observed_dofs), horizon=s.horizon),
            "the demonstrations weighted by a kernel on the aligned prefix", candidate=True, fit_args="--model kernel"),
     Family("nn", NearestNeighbour, lambda s: NearestNeighbour(list(s.observed_dofs)),
@@ -101,7 +114,7 @@ FAMILIES = {f.name: f for f in (
            fit_note="replays the mean demonstration"),
     Family("iprompt", InteractionProMP, lambda s: InteractionProMP(list(s.observed_dofs)),
            "Interaction ProMP (peer baseline, needs movement-primitives and gmr)", cli=False,
-           needs=("movement_primitives", "gmr")),
+           needs=("movement_primitives", "gmr"), default_method=False),
 )}
 
 #: The families the default model compares, in order of preference on ties.
@@ -127,10 +140,11 @@ def factories(names, settings: Settings) -> dict:
 
 def default_methods(observed_dofs, smoothing_window=None, n_basis: int = 20, phase_method: str | None = None,
                     horizon: float = DEFAULT_HORIZON) -> dict:
-    """Factories of the families the real-time evaluation compares by default (every family but the peer)."""
+    """Factories of the families the real-time evaluation compares by default (:attr:`Family.default_method`: every
+    family but the peer and the leave-one-out sweep's variants)."""
     s = Settings(tuple(observed_dofs), n_basis=n_basis, smoothing_window=smoothing_window, horizon=horizon,
                  phase_method=phase_method)
-    return factories([n for n in FAMILIES if n != "iprompt"], s)
+    return factories([n for n, f in FAMILIES.items() if f.default_method], s)
 
 
 def class_named(name: str):

@@ -1,0 +1,358 @@
+"""The family comparison of the default model: candidates scored on held-out folds, then stacked per look-ahead.
+
+Names no family: it takes ``{name: factory of an unfitted estimator}`` (any :class:`~interprim.models.base.Predictor`)
+and the training demonstrations, and returns what the comparison saw and chose.
+
+- :func:`scoring_config`: the inner cross-validation's protocol (every case scored from the next frame to the end of
+  the longest training movement).
+- :class:`CrossValidation`: the real-time protocol of :mod:`interprim.model_selection.realtime` in a ``k``-fold
+  cross-validation for each candidate, case by case (placed predictions and truth), with the stacking solver
+  (:meth:`CrossValidation.blend_weights`) and the variance model (:meth:`CrossValidation.blend_scales`).
+- :func:`look_ahead_bands`, :func:`weights_at`: the look-ahead bands over which the weights are fitted and the
+  weights at any look-ahead.
+- :func:`stack`: the blend's weights per band, its members (those carrying :data:`MIN_WEIGHT`) and variance model;
+  :func:`choice`: the best single family.
+
+:class:`interprim.models.auto.AutoInteraction` runs them and fits the members; the assessment and the hold-out run
+:class:`~interprim.models.auto.AutoInteraction`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.preprocessing import interp_columns
+from .metrics import Z90, point_rms
+from .realtime import RealTimeConfig, realtime_sweep
+
+__all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "look_ahead_bands",
+           "weights_at", "scoring_config", "stack", "choice", "choice_record"]
+
+#: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
+COMBINE = ("blend", "best")
+
+#: The smallest weight (in some look-ahead band) for which a family stays a member of the blend.
+MIN_WEIGHT = 0.05
+
+def look_ahead_bands(horizon: float, longest: float) -> np.ndarray:
+    """Upper edges (s) of the look-ahead bands over which the blend's weights are fitted: ``horizon`` (the real-time
+    band), then doubling, up to ``longest`` (the rest of the longest movement)."""
+    edges = [float(horizon)]
+    while edges[-1] < longest:
+        edges.append(edges[-1] * 2.0)
+    return np.array(edges)
+
+
+def weights_at(ahead, edges, W) -> np.ndarray:
+    """Blend weights ``(len(ahead), families)`` at ``ahead`` seconds after now, from the weights ``W`` ``(bands,
+    families)`` fitted per look-ahead band (upper edges ``edges``): linear between the bands' middles, held beyond
+    the first and the last, renormalised onto the simplex (so the blend moves smoothly from the real-time weights
+    to the whole-movement weights, with no jump at a band's edge)."""
+    W = np.atleast_2d(np.asarray(W, dtype=np.float64))
+    ahead = np.asarray(ahead, dtype=np.float64)
+    if W.shape[0] == 1:
+        return np.broadcast_to(W[0], (ahead.size, W.shape[1])).copy()
+    edges = np.asarray(edges, dtype=np.float64)
+    mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges)
+    out = interp_columns(ahead, mids, W)
+    out = np.clip(out, 0.0, None)
+    return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+
+
+def scoring_config(horizon: float, train, dt: float, **kw) -> RealTimeConfig:
+    """The inner cross-validation's protocol: every case scored from the next frame to the end of the longest
+    training movement, so that the blend's weights and variance are fitted for every look-ahead, not only for the
+    real-time ``horizon`` (``kw``: other :class:`~interprim.model_selection.realtime.RealTimeConfig` fields)."""
+    longest = max((len(d) - 1) * float(dt) for d in train)
+    return RealTimeConfig(horizon=max(float(horizon), longest), **kw)
+
+
+
+class Stacking:
+    """What :func:`stack` fitted: the members kept and their weights per look-ahead band, and the variance model.
+
+    Attributes
+    ----------
+    names : list of str
+        The members (families carrying at least :data:`MIN_WEIGHT` of some band), in the cross-validation's order.
+    W : ndarray, shape (bands, members)
+        Their weights per band (rows on the simplex).
+    edges : list of float
+        Upper edges (s) of the bands.
+    scales : dict
+        The variance model ``{"a", "b", "t"}`` (:meth:`CrossValidation.blend_scales`, ``t``: seconds ahead).
+    record : dict
+        ``weights`` (the real-time band's), ``band_weights``, ``bands``, ``blend_cv_error`` (real-time band,
+        in-sample for the weights) and ``variance_model``.
+    """
+
+    def __init__(self, names, W, edges, scales, record):
+        self.names, self.W, self.edges, self.scales, self.record = names, W, edges, scales, record
+
+    @property
+    def band_weights(self) -> dict:
+        """``{member: [weight per band]}``."""
+        return self.record["band_weights"]
+
+
+def stack(cv: "CrossValidation", horizon: float) -> Stacking:
+    """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
+
+    Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
+    look-ahead ``cv`` scored) by :meth:`CrossValidation.blend_weights` on that band's steps; a family that never
+    carries :data:`MIN_WEIGHT` of any band is dropped and the weights fitted again without it; the variance model is
+    fitted on every step with the weights there (:func:`weights_at`).
+    """
+    edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
+    steps = [s for i, s in enumerate(cv.band_steps(edges)) if i == 0 or cv.valid[:, s].any()]
+    edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the bands with held-out frames, up to their last step
+    W = np.array([cv.blend_weights(s) for s in steps])  # (bands, families)
+    # a member that never carries MIN_WEIGHT of any band costs a stream per frame for almost nothing: the
+    # weights are fitted again without it
+    keep = [i for i in range(len(cv.names)) if np.max(W[:, i]) >= MIN_WEIGHT] or [int(np.argmax(W.max(axis=0)))]
+    names = [cv.names[i] for i in keep]
+    sub = cv.subset(names)
+    if len(keep) < len(cv.names):
+        W = np.array([sub.blend_weights(s) for s in steps])
+    W = W / W.sum(axis=1, keepdims=True)
+    per_step = weights_at(cv.t_ahead, edges, W)
+    scales = sub.blend_scales(per_step)
+    scales["t"] = cv.t_ahead
+    band_weights = {m: [float(x) for x in W[:, i]] for i, m in enumerate(names)}
+    record = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)}, "band_weights": band_weights,
+              "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+              "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()}}
+    return Stacking(names, W, edges, scales, record)
+
+
+class CrossValidation:
+    """What the inner cross-validation of :class:`AutoInteraction` saw, case by case.
+
+    One case is one evaluated frame of one held-out training demonstration; for every family that could be
+    fitted on every inner fold, the prediction of the next ``horizon`` seconds placed in time by the family's own
+    timing (:func:`interprim.model_selection.realtime.place_in_time`), and the truth.
+
+    Attributes
+    ----------
+    errors : dict
+        ``{family: mean real-time error of the controlled agent}`` (``inf``: could not be fitted on a fold).
+    names : list of str
+        The families with finite errors, in the order of the arrays below.
+    mean : ndarray, shape (n_families, n_cases, H, D)
+        Placed predictions.
+    truth : ndarray, shape (n_cases, H, D)
+    controlled, observed : list of int
+        Columns of the two agents.
+    """
+
+    def __init__(self, make, demos, observed_dofs, dt, cfg, k, horizon=None, progress=None):
+        import warnings
+
+        from ..core.errors import OutOfRangeWarning, RepresentationWarning
+
+        self.observed = [int(i) for i in observed_dofs]
+        self.point_dim = int(cfg.point_dim)
+        self.dt = float(dt)
+        #: seconds of the real-time band (the protocol's look-ahead; ``cfg.horizon`` may reach further)
+        self.horizon = float(cfg.horizon if horizon is None else horizon)
+        self.errors, per = {}, {}
+        #: ``{family: why it could not be compared}`` for the families with an infinite error
+        self.why = {}
+        for name, factory in make.items():
+            try:
+                # only the family's errors and placed means are kept: its std and the clock's records are skipped
+                with warnings.catch_warnings():  # about held-out training folds, not the user's data
+                    warnings.simplefilter("ignore", OutOfRangeWarning)
+                    warnings.simplefilter("ignore", RepresentationWarning)
+                    recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True,
+                                          std=False, references=False)
+            except ValueError as exc:  # e.g. too few demonstrations in an inner training fold for this family
+                self.errors[name] = float("inf")
+                self.why[name] = str(exc).splitlines()[0]
+                continue
+            finally:
+                if progress is not None:
+                    progress.step(f"compared {name}")
+            per[name] = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
+            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in per[name].values()])
+                                      ) if per[name] else float("inf")
+        self.names = [m for m in per if np.isfinite(self.errors[m])]
+        cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
+        first = per[self.names[0]] if self.names else {}
+        self.truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
+        self.mean = np.array([[per[m][c]["mean"] for c in cases] for m in self.names], dtype=np.float64)
+        D = self.truth.shape[-1] if self.truth.size else len(self.observed)
+        self.controlled = [i for i in range(D) if i not in set(self.observed)]
+        H = self.truth.shape[1] if self.truth.ndim == 3 else 0
+        #: seconds ahead of every step of the arrays
+        self.t_ahead = np.arange(1, H + 1) * self.dt
+        #: ``(cases, H)``: whether the step is a frame of the held-out movement (not past its end, where the
+        #: protocol holds the last frame); the weights and the band beyond the real-time horizon are fitted on these
+        n_left = np.array([int(round(c[1] / first[c]["fraction"])) - c[1] for c in cases], dtype=np.int64)
+        self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
+
+    def _rt_error(self, mean, truth):
+        """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
+        n = max(1, int(round(self.horizon / self.dt)))
+        cols = self.controlled_cols(np.asarray(truth).shape[-1])
+        return point_rms((np.asarray(mean) - np.asarray(truth))[:n][:, cols], self.point_dim)
+
+    def controlled_cols(self, D):
+        """The controlled agent's columns (the observed ones for a single-agent model)."""
+        ctrl = [i for i in range(D) if i not in set(self.observed)]
+        return ctrl or self.observed
+
+    def band_steps(self, edges) -> list:
+        """Step indices of each look-ahead band (upper edges ``edges`` in seconds; each band non-empty)."""
+        out, lo = [], 0.0
+        for e in edges:
+            idx = np.flatnonzero((self.t_ahead > lo + 1e-12) & (self.t_ahead <= e + 1e-12))
+            if idx.size:
+                out.append(idx)
+            lo = e
+        return out
+
+    def subset(self, names) -> "CrossValidation":
+        """The same cases restricted to the families ``names`` (those with finite errors, in this order)."""
+        keep = [i for i, m in enumerate(self.names) if m in set(names)]
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
+        out.names = [self.names[i] for i in keep]
+        out.mean = self.mean[keep]
+        return out
+
+    def blend_weights(self, steps=None) -> np.ndarray:
+        """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean error of the
+        controlled agent over the cases at the look-ahead ``steps`` (default: every step): the RMS over the case's
+        steps inside its held-out movement (:attr:`valid`; the real-time band counts every step, as the protocol
+        does), averaged over cases -- for the real-time band the very figure :attr:`errors` reports (stacking,
+        Breiman 1996, on the protocol's own loss: a convex problem whose solution is a convex combination, so the
+        blend can always fall back on a single family).  Squared-error stacking was tried first: a few large errors
+        decided the weights and the blend came out worse than its best member on the protocol's loss."""
+        from scipy.optimize import minimize
+
+        M = len(self.names)
+        if M == 1:
+            return np.ones(1)
+        c = self.controlled or self.observed
+        sel = np.arange(self.truth.shape[1]) if steps is None else np.asarray(steps)
+        n_rt = max(1, int(round(self.horizon / self.dt)))
+        mask = self.valid[:, sel] | (sel < n_rt)[None, :]  # (cases, S)
+        keep = mask.any(axis=1)
+        mask = mask[keep]
+        C = len(c)
+        P = self.mean[:, keep][:, :, sel][..., c]  # (M, cases, S, C)
+        T = self.truth[keep][:, sel][..., c]
+        scale = max(float(np.sqrt(np.mean(T * T))), 1e-300)
+        P, T = P / scale, T / scale
+        W = mask[:, :, None].astype(np.float64)  # (cases, S, 1)
+        count = W.sum(axis=(1, 2)) * C
+
+        def loss(w):
+            e = (np.tensordot(w, P, axes=1) - T) * W
+            r = np.sqrt(np.sum(e * e, axis=(1, 2)) / count) + 1e-12
+            grad = np.einsum("mcsj,csj->m", P, e / (r * count)[:, None, None]) / len(r)
+            return float(np.mean(r)), grad
+
+        start = np.full(M, 1.0 / M)
+        best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
+        res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
+                       constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
+                       options={"ftol": 1e-10, "maxiter": 300})
+        w = np.clip(res.x, 0.0, None)
+        w[w < 1e-3] = 0.0
+        w = w / w.sum()
+        vertex = np.eye(M)[best]
+        return w if loss(w)[0] <= loss(vertex)[0] else vertex
+
+    def blend_scales(self, w) -> dict:
+        """The blend's variance model over the look-ahead, fitted to its held-out errors: per step ahead ``h`` and
+        column ``j``, ``var = a[h, j] * spread^2 + b[h, j]`` with ``spread^2`` the weighted disagreement of the
+        members, ``sum_m w_m (y_m - mean)^2``.  Where the spread alone is narrower than the held-out error,
+        ``a = 1`` and ``b`` adds the rest; where it is wider, ``b = 0`` and ``a < 1`` narrows it, so that the mean
+        predicted variance equals the mean squared held-out error at every step and column.  Held-out errors are
+        heavier-tailed than a normal distribution, so matching the variance alone leaves the 90 % band short (72-91
+        % on the synthetic hold-out over the rest of the movement); both ``a`` and ``b`` are then scaled, per step
+        and agent, by ``(q90 / 1.645)^2`` with ``q90`` the 90th percentile of the standardised held-out errors
+        ``|e| / sd``: the band ``mean +- 1.645 sd`` covers 90 % of the held-out cases at every step ahead.
+
+        The members' own std is not used: it does not carry over from the inner folds' smaller training sets to
+        the final fit (``LearnedInteraction``'s was 4x its error when fitted on 9 NuiSI demonstrations, about
+        right on 13), whereas their disagreement and the residual do.
+
+        Returns ``{"a": (H, D), "b": (H, D)}``.
+        """
+        w = np.asarray(w, dtype=np.float64)
+        w = (w[:, None] if w.ndim == 1 else w.T)[:, None, :, None]  # (M, 1, H or 1, 1)
+        mix = np.sum(w * self.mean, axis=0)
+        n_rt = max(1, int(round(self.horizon / self.dt)))
+        valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
+        n_valid = valid.sum(axis=0)
+        has = n_valid > 0
+        last = int(np.flatnonzero(has)[-1]) if has.any() else 0
+        vw = valid[:, :, None].astype(np.float64)
+
+        def step_mean(x):  # mean over the valid cases of every step, held from the last step that has any
+            m = np.sum(x * vw, axis=0) / np.maximum(n_valid, 1)[:, None]
+            m[~has] = m[last]
+            return m
+
+        case_spread = np.sum(w * (self.mean - mix) ** 2, axis=0)  # (cases, H, D)
+        spread = step_mean(case_spread)
+        err2 = step_mean((mix - self.truth) ** 2)
+        wide = spread > err2
+        a = np.where(wide, err2 / np.where(spread > 0, spread, 1.0), 1.0)
+        b = np.where(wide, 0.0, err2 - spread)
+
+        sd = np.sqrt(np.maximum(a * case_spread + b, 1e-300))
+        z = np.abs(mix - self.truth) / sd
+        for cols in (self.controlled, self.observed):
+            if cols and z.shape[0]:
+                q = np.ones(z.shape[1]) * Z90
+                for h in np.flatnonzero(has):
+                    q[h] = np.quantile(z[valid[:, h]][:, h][:, cols], 0.9, method="higher")
+                q[~has] = q[last]
+                r2 = (np.maximum(q, 1e-6) / Z90)[:, None] ** 2
+                a[:, cols] *= r2
+                b[:, cols] *= r2
+        return {"a": a, "b": b}
+
+    def blend_error(self, w) -> float:
+        """The blend's mean real-time error of the controlled agent over the cases, as :attr:`errors` measures it
+        (in-sample for the weights: an optimistic figure)."""
+        w = np.asarray(w, dtype=np.float64)
+        if w.ndim == 2:  # per-step weights (H, M): the real-time band's
+            w = w[0]
+        n = max(1, int(round(self.horizon / self.dt)))
+        mix = np.tensordot(w, self.mean[:, :, :n], axes=1)
+        e = (mix - self.truth[:, :n])[..., self.controlled or self.observed]
+        n_case, H, C = e.shape
+        pd = self.point_dim if C % self.point_dim == 0 else 1
+        point2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3)  # squared point errors
+        return float(np.mean(np.sqrt(point2.mean(axis=(1, 2)))))
+
+
+
+def choice(cv: CrossValidation, order) -> tuple:
+    """``(best family, selection record)`` from a :class:`CrossValidation` (ties: the earlier in ``order``)."""
+    errors = cv.errors
+    finite = {m: e for m, e in errors.items() if np.isfinite(e)}
+    if not finite:
+        why = "; ".join(f"{m}: {w}" for m, w in getattr(cv, "why", {}).items())
+        raise ValueError("no candidate family could be fitted on every inner training fold"
+                         + (f" ({why})" if why else ""))
+    chosen = min(finite, key=lambda m: (finite[m], list(order).index(m)))
+    return chosen, choice_record(chosen, errors)
+
+
+def choice_record(chosen: str, errors: dict) -> dict:
+    """The selection record of ``chosen`` among ``errors`` (``{family: held-out error}``): ``chosen``,
+    ``cv_errors``, ``runner_up``, ``margin`` (its error / the chosen one's) and ``vs_prior``."""
+    finite = {m: e for m, e in errors.items() if np.isfinite(e)}
+    others = {m: e for m, e in finite.items() if m != chosen}
+    runner = min(others, key=others.get) if others else None
+    best = finite.get(chosen, float("nan"))
+    return {"chosen": chosen, "cv_errors": {m: float(e) for m, e in errors.items()},
+            "runner_up": runner, "margin": float(others[runner] / best) if runner and best > 0 else float("nan"),
+            "vs_prior": float(best / finite["prior"]) if finite.get("prior", 0) > 0 else float("nan")}

@@ -1,0 +1,268 @@
+"""A convex combination of fitted models' predictions placed in time, with weights per look-ahead: :class:`Blend`,
+its prediction (:class:`BlendPrediction`) and its stream (:class:`BlendStream`).
+
+Made by :class:`~interprim.models.auto.AutoInteraction` from the weights and variance model that the family
+comparison fitted on held-out folds (:func:`interprim.model_selection.stacking.stack`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cv import DEFAULT_HORIZON
+from ..core.preprocessing import interp_columns, unit_grid
+from ..io import estimator_from_state
+from ..model_selection.realtime import place_in_time
+from ..model_selection.stacking import weights_at
+from . import registry
+from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
+
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state"]
+
+
+def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
+    """A blend's member (or the model of an :class:`~interprim.models.auto.AutoInteraction`) from its class name,
+    parameters and state (:func:`interprim.io.estimator_from_state`; a family of the registry or a :class:`Blend`)."""
+    cls = Blend if cls_name == "Blend" else registry.class_named(cls_name)
+    if cls is None:
+        raise ValueError(f"a blend member of class {cls_name!r}, which is not a family of interprim's registry "
+                         f"(known: {', '.join(f.cls.__name__ for f in registry.FAMILIES.values())})")
+    return estimator_from_state(cls, params, arrays, state)
+
+
+class Blend(Predictor):
+    """A convex combination of fitted models' predictions, each placed in time by its own timing, with weights that
+    depend on how far ahead the prediction is.
+
+    After ``k`` observed frames each member ``m`` says where "now" is in its normalised time (``s_m``) and how long
+    the movement lasts (``D_m``; :func:`interprim.model_selection.realtime.place_in_time`).  The blend's own timing is
+    the weighted mean ``s = sum w_m(0) s_m``, ``D = sum w_m(0) D_m`` with the real-time weights; its mean at
+    normalised time ``u``, ``a = (u - s) D`` seconds ahead of now, is ``sum w_m(a) y_m(u_m)`` with
+    ``u_m = s_m + a / D_m`` (the same instant in seconds for every member) and ``u_m = u s_m / s`` before now (where
+    ``a = 0``).  The weights ``w(a)`` were fitted per look-ahead band on held-out folds
+    (:func:`~interprim.model_selection.stacking.weights_at`): the next ``horizon`` seconds, then bands doubling in
+    length to the end of the longest demonstration.  Its variance is the members' weighted disagreement
+    ``sum w_m(a) (y_m - mean)^2``, scaled per column and per second ahead to the held-out errors (``scales``).
+
+    Made by :class:`~interprim.models.auto.AutoInteraction`; :meth:`fit` refits the members with the stored
+    weights (members of the registry's families).
+
+    Parameters
+    ----------
+    observed_dofs : sequence of int
+    weights : dict
+        ``{family: weight}``, or ``{family: [weight per band]}`` with ``bands`` (families of
+        :data:`interprim.models.registry.FAMILIES`).
+    scales : dict, optional
+        ``{"a": (H, D), "b": (H, D), "t": (H,)}``: the variance ``a * spread + b`` at ``t`` seconds ahead (default
+        ``a = 1, b = 0``: the spread alone; without ``t``, ``H`` steps spanning ``horizon``).
+    horizon : float
+        Seconds of the real-time band.
+    n_basis, smoothing_window
+        Settings of the Interaction Primitive members.
+    bands : list of float, optional
+        Upper edges (s) of the look-ahead bands of the weights (None: one set of weights for every look-ahead).
+    """
+
+    _FITTED = "members_"
+    #: 2: weights per look-ahead band, the variance model's own time axis
+    STATE_VERSION = 2
+    #: points of the normalised-time grid on which the members' predictions are read
+    N_GRID = 201
+
+    def __init__(self, observed_dofs, weights, scales=None, horizon: float = DEFAULT_HORIZON,
+                 n_basis: int = 20, smoothing_window=None, bands=None):
+        self.observed_dofs = observed_dofs
+        self.weights = weights
+        self.scales = scales
+        self.horizon = horizon
+        self.n_basis = n_basis
+        self.smoothing_window = smoothing_window
+        self.bands = bands
+
+    @classmethod
+    def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
+                    horizon: float = DEFAULT_HORIZON, bands=None, n_basis: int = 20,
+                    smoothing_window=None) -> "Blend":
+        """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
+        sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
+        blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
+                    None if bands is None else [float(b) for b in bands])
+        blend.adopt(members, demos, dt)
+        return blend
+
+    def _weight_table(self):
+        """``(names, W (bands, M), edges)`` of the stored weights."""
+        names = list(self.weights)
+        if self.bands is None:
+            W = np.array([[float(self.weights[m]) for m in names]])
+            return names, W, np.array([np.inf])
+        W = np.array([[float(x) for x in self.weights[m]] for m in names]).T
+        if W.shape[0] != len(self.bands):
+            raise ValueError(f"weights have {W.shape[0]} bands, bands has {len(self.bands)} edges")
+        return names, W, np.asarray(self.bands, dtype=np.float64)
+
+    def adopt(self, members, demos, dt):
+        """Take ``members`` (``{family: fitted model}``, trained on ``demos`` at ``dt``) as the fitted blend."""
+        names, W, edges = self._weight_table()
+        if np.any(W < 0) or not np.all(np.isfinite(W)) or np.any(W.sum(axis=1) <= 0):
+            raise ValueError("weights must be finite, non-negative and not all zero in any band")
+        self.members_ = {m: members[m] for m in names}
+        self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
+        #: the real-time weights (look-ahead 0), which place the blend in time after every frame
+        self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
+        self.observed_dofs_ = [int(i) for i in self.observed_dofs]
+        self.dt_ = float(dt)
+        self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
+        self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
+
+    def fit(self, demos, dt: float | None = None):
+        """Fit every member on ``demos`` (the weights and scales are kept)."""
+        train, dt, _ = uniform_demonstrations(demos, dt)
+        bad = [m for m in self.weights if m not in registry.FAMILIES]
+        if bad or not self.weights:
+            raise ValueError(f"weights must name some of {list(registry.FAMILIES)}, got {list(self.weights)!r}")
+        make = registry.factories(list(self.weights), registry.Settings(
+            tuple(self.observed_dofs), n_basis=self.n_basis, smoothing_window=self.smoothing_window,
+            horizon=float(self.horizon)))
+        self.adopt({m: make[m]().fit(train, dt=dt) for m in self.weights}, train, dt)
+        return self
+
+    def weights_at(self, ahead) -> np.ndarray:
+        """The blend's weights ``(len(ahead), members)`` at ``ahead`` seconds after now
+        (:func:`~interprim.model_selection.stacking.weights_at`)."""
+        self._check_fitted("weights_at")
+        return weights_at(np.atleast_1d(ahead), self._edges, self._W)
+
+    def variance(self, spread, ahead):
+        """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
+        if not self.scales:
+            return spread
+        a = np.asarray(self.scales["a"], dtype=np.float64)
+        b = np.asarray(self.scales["b"], dtype=np.float64)
+        if "t" in self.scales:
+            steps = np.asarray(self.scales["t"], dtype=np.float64)
+        else:
+            steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+        return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
+
+    def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
+        """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
+        (a :class:`~interprim.models.base.GridPrediction` whose std is computed when first asked for)."""
+        n_grid = self.N_GRID if n_grid is None else int(n_grid)
+        names = self._names
+        w0 = self._w_now
+        timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
+        s = float(np.dot(w0, [t[0] for t in timing]))
+        D = float(np.dot(w0, [t[1] for t in timing]))
+        u = unit_grid(n_grid)
+        ahead = np.clip((u - s) * D, 0.0, None)
+        W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)
+        Y = np.empty((len(names), n_grid, self.n_dofs_))
+        for i, (m, (sm, Dm)) in enumerate(zip(names, timing)):
+            um = np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0))
+            Y[i] = interp_columns(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(n_grid))
+        mean = np.einsum("gm,mgd->gd", W, Y)
+        return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
+
+    def predict(self, partial, **kwargs):
+        """The blend of every member's prediction for the observed frames ``partial`` ``(M, n_observed)``."""
+        self._check_fitted("predict")
+        if kwargs:
+            raise TypeError(f"Blend.predict takes only the observed frames, got {sorted(kwargs)}")
+        x = np.asarray(partial, dtype=np.float64)
+        return self.combine({m: est.predict(x) for m, est in self.members_.items()}, len(x))
+
+    def stream(self, robot_state=None):
+        """An online blend: every member's own stream, combined after each frame (equals :meth:`predict`)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: a blend does not roll out from a robot state; pass None")
+        return BlendStream(self)
+
+    def to_state(self):
+        """``(arrays, meta)``: every member's state, prefixed by its family."""
+        self._check_fitted("to_state")
+        arrays, members = {}, {}
+        for m, est in self.members_.items():
+            if registry.class_named(type(est).__name__) is not type(est):
+                raise ValueError(f"member {m!r} is a {type(est).__name__}, not a family of interprim's registry: a "
+                                 "model file names registered families only (add a Family row to "
+                                 "interprim.models.registry.FAMILIES to save it)")
+            a, meta = est.to_state()
+            arrays.update({f"{m}__{k}": v for k, v in a.items()})
+            members[m] = {"class": type(est).__name__, "params": est.json_params(), "state": meta,
+                          "version": int(est.STATE_VERSION)}
+        return arrays, {"members": members, "dt": self.dt_, "mean_duration": self.mean_duration_,
+                        "n_dofs": self.n_dofs_, "observed_dofs_": self.observed_dofs_}
+
+    def load_state(self, arrays, meta):
+        """Restore the state written by :meth:`to_state`."""
+        members = {}
+        for m in self.weights:
+            info = meta["members"][m]
+            inner = {k[len(m) + 2:]: v for k, v in arrays.items() if k.startswith(f"{m}__")}
+            members[m] = member_from_state(info["class"], info["params"], inner, info["state"])
+        n_dofs = int(meta["n_dofs"])
+        self.adopt(members, [np.zeros((2, n_dofs))], float(meta["dt"]))
+        self.mean_duration_ = float(meta["mean_duration"])
+        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+
+    def __repr__(self):
+        w = ", ".join(f"{m} {np.atleast_1d(x)[0]:.2f}" for m, x in self.weights.items())
+        return f"Blend({w}{'' if self.bands is None else f'; {len(self.bands)} look-ahead bands'})"
+
+
+class BlendPrediction(GridPrediction):
+    """The blend's prediction: its mean on the grid, its std (the members' weighted disagreement through the
+    variance model) computed when first asked for."""
+
+    def __init__(self, blend, u, mean, Y, W, ahead, phase, duration, n_observed):
+        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_, method="blend",
+                         duration=duration, mean_duration=blend.mean_duration_, n_observed=n_observed)
+        self._parts = (blend, Y, W, ahead)
+
+    @property
+    def std_values(self):
+        """The predictive std on the grid (the variance model at each point's look-ahead), computed once."""
+        parts = self.__dict__.get("_parts")
+        if parts is None:
+            return self.__dict__.get("_std")
+        blend, Y, W, ahead = parts
+        spread = np.einsum("gm,mgd->gd", W, (Y - self.mean[None]) ** 2)
+        var = blend.variance(spread, ahead)
+        self.__dict__["_std"] = np.sqrt(np.clip(var, 0.0, None)) if np.any(var > 0) else None
+        self.__dict__["_parts"] = None
+        return self.__dict__["_std"]
+
+    @std_values.setter
+    def std_values(self, value):
+        self.__dict__["_std"] = value
+
+
+class BlendStream(BaseStream):
+    """Online :class:`Blend`: one stream per member, combined after every frame (``update`` equals ``predict``;
+    ``extend`` is :class:`~interprim.models.base.BaseStream`'s, frame by frame)."""
+
+    def __init__(self, blend: Blend):
+        self.blend = blend
+        self.streams = {m: est.stream() for m, est in blend.members_.items()}
+        self._n = 0
+
+    @property
+    def n_frames(self) -> int:
+        """Frames received since the stream was created or last reset."""
+        return self._n
+
+    def reset(self, robot_state=None):
+        """Forget all frames (start a new interaction)."""
+        for st in self.streams.values():
+            st.reset()
+        self._n = 0
+
+    def update(self, frame, need_cov: bool = False):
+        """Add one observed frame; returns the blended prediction of every frame seen."""
+        preds = {m: st.update(frame) for m, st in self.streams.items()}
+        self._n += 1
+        return self.blend.combine(preds, self._n)
+

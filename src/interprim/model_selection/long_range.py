@@ -33,7 +33,7 @@ import numpy as np
 from .yardsticks import case_rms, one_se_choice, place_cases
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
-           "schedule", "held", "replaced", "PREFER"]
+           "schedule", "held", "replaced", "PREFER", "refine"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
@@ -96,10 +96,7 @@ def case_groups(demo, k: int = 3) -> np.ndarray:
 def schedule(t_ahead, edges, W) -> np.ndarray:
     """``(H, members)`` per-step weights of the per-band weights ``W`` (upper edges ``edges``), moved smoothly
     between the bands' middles as the blend moves them (:func:`~interprim.model_selection.stacking.weights_at`)."""
-    try:
-        from .stacking import weights_at
-    except ImportError:  # before the selection moved out of the ensemble module
-        from ..models.ensemble import weights_at
+    from .stacking import weights_at
 
     return weights_at(t_ahead, edges, W)
 
@@ -216,3 +213,53 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = "fitted") -> 
         order = fitted + [m for m in order if m not in fitted and m != "prior"] + [m for m in order if m == "prior"]
     name, table = one_se_choice(errors, cv.demo, order)
     return (W if name == "per band" else cands[name]), name, table
+
+
+def refine(cv, fitted, horizon: float, prefer: str = "fitted") -> tuple:
+    """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
+    ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
+    movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
+    per-band weights are fitted again on them when the timing changed).
+
+    ``remaining``: the chosen ``lam`` of :func:`remaining_duration` (``None``: each member at its own duration),
+    for :class:`~interprim.models.blend.Blend`.  The returned :class:`~interprim.model_selection.stacking.Stacking`
+    keeps the members carrying weight in some band, its variance model fitted again with the chosen weights, and
+    its ``record`` says what was chosen (``long_range``: ``remaining``, ``beyond`` and both choices' tables).
+    """
+    from .stacking import MIN_WEIGHT, Stacking, stack
+
+    names = list(cv.names)
+
+    def full(st):
+        W = np.zeros((st.W.shape[0], len(names)))
+        for i, m in enumerate(st.names):
+            W[:, names.index(m)] = st.W[:, i]
+        return W
+
+    W = full(fitted)
+    cv.w0 = W[0]
+    lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer)
+    placed = cv
+    if lam is not None:
+        placed = cv.cases(np.arange(len(cv.demo)))
+        placed.mean = replaced(cv, lam)
+        fitted = stack(placed, horizon)
+        W = full(fitted)
+    edges = list(fitted.edges)
+    Wc, beyond, b_table = long_range_choice(placed, W, edges, prefer=prefer)
+    keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]
+    members = [names[i] for i in keep]
+    Wk = Wc[:, keep]
+    Wk = Wk / Wk.sum(axis=1, keepdims=True)
+    sub = placed.subset(members)
+    per_step = schedule(cv.t_ahead, edges, Wk)
+    scales = sub.blend_scales(per_step)
+    scales["t"] = cv.t_ahead
+    band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
+    record = dict(fitted.record)
+    record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
+                   "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+                   "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
+                   "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
+                                  "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})
+    return Stacking(members, Wk, edges, scales, record), lam

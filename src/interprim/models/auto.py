@@ -25,7 +25,7 @@ from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
 from ..core.progress import Progress
-from ..model_selection import stacking
+from ..model_selection import long_range, stacking
 from . import registry
 from .base import CheckedStream, Predictor, uniform_demonstrations
 from .blend import Blend, member_from_state
@@ -199,6 +199,8 @@ class AutoInteraction(Predictor):
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
             fitted = stacking.stack(cv, float(self.horizon))
+            # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
+            fitted, remaining = long_range.refine(cv, fitted, float(self.horizon))
             info = fitted.record
             progress.grow(len(fitted.names))
             members = {}
@@ -207,7 +209,7 @@ class AutoInteraction(Predictor):
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,
-                                            smoothing_window=self.smoothing_window)
+                                            smoothing_window=self.smoothing_window, remaining=remaining)
             weights = info["weights"]
             selection.update(combine="blend", **info)
             best = selection["cv_errors"][chosen]

@@ -218,9 +218,11 @@ class CrossValidation:
         out = object.__new__(type(self))
         out.__dict__.update(self.__dict__)
         for a in ("truth", "valid", "demo", "elapsed", "mean_duration"):
-            setattr(out, a, getattr(self, a)[idx])
+            if hasattr(self, a):
+                setattr(out, a, getattr(self, a)[idx])
         for a in ("mean", "traj", "phase", "duration"):
-            setattr(out, a, getattr(self, a)[:, idx])
+            if hasattr(self, a):
+                setattr(out, a, getattr(self, a)[:, idx])
         return out
 
     def _rt_error(self, mean, truth):

@@ -101,3 +101,40 @@ def test_timing_choice_keeps_the_members_own_timing_when_it_is_what_the_truth_do
     assert table["1"]["error"] == pytest.approx(0.0, abs=1e-3)  # the members' own end is the truth's end
     assert table["0"]["error"] > 0.01  # the clock's end is not
     assert lam in (1.0, None)
+
+
+def test_inner_yardsticks_have_the_known_answers_of_the_truth_and_of_the_clock():
+    from interprim.model_selection.long_range import inner_yardsticks
+
+    dt, H, G = 0.05, 60, 201
+    grid = np.linspace(0.0, 1.0, G)
+    rng = np.random.default_rng(6)
+    n_demo, per = 8, 3
+    n_case = n_demo * per
+    frames = np.repeat(rng.integers(30, 50, n_demo), per)  # recordings of 30-49 frames
+    durations = (frames - 1) * dt
+    k = np.tile([10, 18, 24], n_demo)
+    elapsed = (k - 1) * dt
+    shape = np.stack([grid, np.sin(np.pi * grid)], axis=1)
+    t = np.arange(1, H + 1) * dt
+    u_true = (elapsed[:, None] + t[None, :]) / durations[:, None]
+    truth = np.stack([np.stack([np.interp(np.clip(u, 0, 1), grid, shape[:, j]) for j in range(2)], axis=1)
+                      for u in u_true])
+    md = 2.0
+    mean_traj = shape + np.array([0.0, 0.1])  # the mean: the shape moved by 0.1
+    clock_u = np.clip((elapsed[:, None] + t[None, :]) / md, 0, 1)
+    clock = np.stack([np.stack([np.interp(u, grid, mean_traj[:, j]) for j in range(2)], axis=1) for u in clock_u])
+    cv = _cv({"m": truth, "prior": clock}, truth, n_demo, dt=dt)
+    cv.traj = np.stack([np.broadcast_to(shape, (n_case, G, 2)), np.broadcast_to(mean_traj, (n_case, G, 2))])
+    cv.phase = np.stack([elapsed / durations, np.minimum(elapsed / md, 1.0)])
+    cv.duration = np.stack([durations, np.full(n_case, md)])
+    cv.elapsed, cv.mean_duration = elapsed, np.full(n_case, md)
+    cv.valid = np.arange(H)[None, :] < (frames - k)[:, None]
+    cv.unit_truth = {j: shape for j in range(n_demo)}
+    edges = [0.25, 0.5, 1.0, 3.0]
+    truth_only = inner_yardsticks(cv, np.tile([1.0, 0.0], (4, 1)), edges, None)
+    assert len(truth_only) == 5 and all(v[0] < 0.02 for v in truth_only.values())
+    mean_only = inner_yardsticks(cv, np.tile([0.0, 1.0], (4, 1)), edges, None)
+    assert mean_only["rest of the movement ÷ clock"][0] == pytest.approx(1.0)  # the mean, played by the clock
+    assert mean_only["real time ÷ clock"][0] == pytest.approx(1.0)
+    assert mean_only["whole movement at 60 % ÷ the mean demonstration"][0] == pytest.approx(1.0)

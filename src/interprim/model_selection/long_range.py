@@ -30,10 +30,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .yardsticks import case_rms, one_se_choice, place_cases
+from ..core.preprocessing import interp_columns
+from .yardsticks import (case_rms, clock_units, one_se_choice, place_cases, ratio_se,
+                         true_duration_units)
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
-           "schedule", "held", "replaced", "PREFER", "refine"]
+           "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
+           "summary_lines"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
@@ -257,9 +260,90 @@ def refine(cv, fitted, horizon: float, prefer: str = "fitted") -> tuple:
     scales["t"] = cv.t_ahead
     band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
     record = dict(fitted.record)
+    record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam)
     record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
                    "bands": edges, "blend_cv_error": sub.blend_error(per_step),
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
                    "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
                                   "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})
     return Stacking(members, Wk, edges, scales, record), lam
+
+
+def inner_yardsticks(cv, W, edges, lam) -> dict:
+    """The blend's figures on the inner folds' held-out cases, as a user reads them on a hold-out.
+
+    ``{label: [ratio, standard error]}`` over the held-out demonstrations (:func:`ratio_se`): real time (the
+    next ``cv.horizon`` seconds) and the rest of the movement in seconds, each ÷ the clock and ÷ the mean at the
+    true duration (known in a held-out fold), and the paper's Fig. 7 measure (the whole movement in normalised
+    time from the case nearest 60 % seen of each held-out demonstration) ÷ the mean demonstration.  ``W``,
+    ``edges``: the blend's weights per band; ``lam``: its remaining duration (:func:`refine`); ``cv.mean``: the
+    members placed with it.  Empty when the mean (``prior``) was not compared: its prediction is each inner
+    fold's mean demonstration, the references' shape.
+    """
+    if "prior" not in cv.names or not len(cv.demo):
+        return {}
+    W = np.asarray(W, dtype=np.float64)
+    t = cv.t_ahead
+    per_step = schedule(t, edges, W)
+    blend = _blend(cv.mean, per_step)
+    mean = cv.traj[cv.names.index("prior")]
+    k = np.rint(cv.elapsed / cv.dt).astype(np.int64) + 1
+    n_frames = k + cv.valid.sum(axis=1)
+    clock = place_cases(mean, clock_units(k, t, cv.dt, cv.mean_duration))
+    true = place_cases(mean, true_duration_units(k, n_frames, t, cv.dt))
+    cols = cv.controlled or cv.observed
+    n_rt = max(1, int(round(cv.horizon / cv.dt)))
+    rt = np.zeros_like(cv.valid)
+    rt[:, :n_rt] = True
+    out = {}
+    for label, mask in (("real time", rt), ("rest of the movement", cv.valid)):
+        err = case_rms(blend, cv.truth, mask, cols, cv.point_dim)
+        for ref, ref_pred in (("clock", clock), ("mean at the true duration", true)):
+            out[f"{label} ÷ {ref}"] = list(ratio_se(err, case_rms(ref_pred, cv.truth, mask, cols, cv.point_dim),
+                                                    cv.demo))
+    # the paper's measure: per held-out demonstration, the case nearest 60 % seen, on normalised time
+    frac = (k - 1) / np.maximum(n_frames - 1, 1)
+    G = mean.shape[1]
+    u = np.linspace(0.0, 1.0, G)
+    w_now = W[0] / W[0].sum()
+    wm_blend, wm_mean = [], []
+    for j in np.unique(cv.demo):
+        c = np.flatnonzero(cv.demo == j)[np.argmin(np.abs(frac[cv.demo == j] - 0.6))]
+        sm, Dm = cv.phase[:, c], cv.duration[:, c]
+        s, D = float(w_now @ sm), float(w_now @ Dm)
+        R = None
+        if lam is not None:
+            R = float(remaining_duration(sm[:, None], Dm[:, None], [cv.elapsed[c]], cv.mean_duration[c], w_now,
+                                         lam)[0])
+            D = R / (1.0 - s) if s < 1.0 - 1e-9 else D
+        ahead = np.clip((u - s) * D, 0.0, None)
+        Wu = np.clip(interp_columns(ahead, t, per_step), 0.0, None)
+        Wu = Wu / np.maximum(Wu.sum(axis=1, keepdims=True), 1e-300)
+        Y = np.zeros((G, mean.shape[2]))
+        for i in range(len(cv.names)):
+            future = (np.clip(sm[i] + ahead / Dm[i], 0.0, 1.0) if R is None
+                      else member_units([sm[i]], [Dm[i]], ahead, [R], cv.horizon)[0])
+            um = np.where(u >= s, future, u * (sm[i] / s if s > 0 else 1.0))
+            Y += Wu[:, i:i + 1] * place_cases(cv.traj[i, c][None], um[None])[0]
+        truth = cv.unit_truth[int(j)]
+        wm_blend.append(case_rms(Y[None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
+        wm_mean.append(case_rms(mean[c][None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
+    out["whole movement at 60 % ÷ the mean demonstration"] = list(ratio_se(wm_blend, wm_mean))
+    return out
+
+
+def summary_lines(record: dict) -> list:
+    """Lines of :meth:`~interprim.models.auto.AutoInteraction.summary` about the long-range choice (``record``: its
+    ``selection_``)."""
+    lr = record.get("long_range")
+    if not lr:
+        return []
+    rem = lr["remaining"]
+    timing = ("each member at its own duration" if rem == "own" else
+              f"one shared end, the members' remaining duration shrunk {1 - float(rem):.0%} toward the clock's")
+    out = [f"beyond the real-time band: {lr['beyond']} (chosen on the rest of the movement, one-standard-error "
+           f"rule from the {'fitted' if lr.get('prefer') == 'fitted' else 'simplest'} end); timing: {timing}"]
+    ys = record.get("inner_yardsticks") or {}
+    if ys:
+        out.append("inner folds: " + "; ".join(f"{k} {v[0]:.2f} ± {v[1]:.2f}" for k, v in ys.items()))
+    return out

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.preprocessing import interp_columns
+from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import RealTimeConfig, realtime_sweep
 
@@ -211,6 +211,9 @@ class CrossValidation:
         self.traj = np.array([[per[m][c]["trajectory"] for c in cases] for m in self.names], dtype=np.float64)
         self.phase = np.array([[per[m][c]["phase"] for c in cases] for m in self.names], dtype=np.float64)
         self.duration = np.array([[per[m][c]["duration"] for c in cases] for m in self.names], dtype=np.float64)
+        #: ``{demo: (G, D)}``: each held-out demonstration on the normalised-time grid (the paper's Fig. 7 measure)
+        G = self.traj.shape[2] if self.traj.ndim == 4 else 0
+        self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
 
     def cases(self, idx) -> "CrossValidation":
         """The same families restricted to the cases ``idx``."""

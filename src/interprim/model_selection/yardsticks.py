@@ -121,9 +121,10 @@ def place_cases(Y, u) -> np.ndarray:
 
 def clock_units(k, t_ahead, dt: float, mean_duration: float) -> np.ndarray:
     """``(cases, H)``: the clock's normalised time ``t_ahead`` seconds after the last of ``k`` frames seen (the
-    mean played from the first frame at the mean duration, ``mean_duration`` seconds)."""
+    mean played from the first frame at the mean duration, ``mean_duration`` seconds, one or one per case)."""
     elapsed = (np.asarray(k, dtype=np.float64) - 1.0) * float(dt)
-    return (elapsed[:, None] + np.asarray(t_ahead, dtype=np.float64)[None, :]) / float(mean_duration)
+    md = np.broadcast_to(np.asarray(mean_duration, dtype=np.float64), elapsed.shape)
+    return (elapsed[:, None] + np.asarray(t_ahead, dtype=np.float64)[None, :]) / md[:, None]
 
 
 def true_duration_units(k, n_frames, t_ahead, dt: float) -> np.ndarray:

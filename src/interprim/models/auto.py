@@ -311,6 +311,7 @@ class AutoInteraction(Predictor):
             w = ", ".join(f"{m} {x:.2f}" for m, x in sorted(self.weights_.items(), key=lambda kv: -kv[1]))
             lines.append(f"blend: {w} -> {s['blend_cv_error']:.4g} ({s['blend_vs_best']:.2f}x the best family; "
                          f"in-sample for its weights)")
+            lines += long_range.summary_lines(s)
         else:
             lines.append(f"using {self.chosen_} alone")
         return "\n".join(lines)

@@ -12,7 +12,9 @@ Run::
 
     python -m interprim.experiments.holdout --out holdout-results [--tasks nuisi,synthetic] [--lookahead]
 
-Writes ``holdout.json`` (every record and summary) and ``holdout.md`` (the tables) to ``--out``.
+Writes ``holdout.json`` (every record and summary), ``holdout.md`` (the tables, with standard errors) and
+``readme_table.md`` (the README's accuracy table) to ``--out``; ``--tables-from DIR`` writes the tables again from
+a ``holdout.json`` without measuring anything.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from ..models.registry import FAMILIES
 from ..model_selection.prefixes import Prefixes
 from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_realtime
 
-__all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "main"]
+__all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "readme_table", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
 #: the families the real-time evaluation compares by default (all but the peer, Interaction ProMP, which needs the
@@ -189,6 +191,37 @@ def yardstick_tables(results, protocol="causal") -> str:
     return "\n".join(lines)
 
 
+#: The README's accuracy table: ``(column title, summary key)``, each as NuiSI's geometric mean / all tasks'.
+README_COLUMNS = (("next 0.25 s ÷ clock", "rt_ctrl_vs_clock"),
+                  ("next 0.25 s ÷ mean at true duration", "rt_ctrl_vs_oracle"),
+                  ("rest of the movement ÷ clock", "rest_rt_ctrl_vs_clock"),
+                  ("rest ÷ mean at true duration", "rest_rt_ctrl_vs_oracle"),
+                  ("whole movement at 60 % ÷ mean", "wm_ctrl_vs_prior"))
+#: Its rows: ``(label, method)``.
+README_ROWS = (("`AutoInteraction` (what `interprim fit` makes)", "auto"), ("`InteractionPrimitive`, defaults", "ip"),
+               ("`LearnedInteraction`", "learned"), ("kernel-weighted demonstrations", "kernel"),
+               ("nearest demonstration", "nn"))
+
+
+def readme_table(results, protocol="causal") -> str:
+    """The README's accuracy table from the hold-out's results: geometric means over NuiSI's tasks / over all."""
+    names = [n for n in results if protocol in results[n]["summary"]]
+    nuisi = [n for n in names if not n.startswith("synthetic/")]
+
+    def geo(m, key, tasks):
+        v = [results[n]["summary"][protocol].get(m, {}).get(key, np.nan) for n in tasks]
+        v = [x for x in v if np.isfinite(x) and x > 0]
+        return f"{np.exp(np.mean(np.log(v))):.2f}" if v else "—"
+
+    head = (f"| model | " + " | ".join(f"{t}, NuiSI ({len(nuisi)}) / all {len(names)} tasks" if i == 0 else
+                                       f"{t}, NuiSI / {len(names)}" for i, (t, _) in enumerate(README_COLUMNS)) + " |")
+    lines = [head, "|---" * (len(README_COLUMNS) + 1) + "|"]
+    for label, m in README_ROWS:
+        lines.append(f"| {label} | " + " | ".join(f"{geo(m, k, nuisi)} / {geo(m, k, names)}" for _, k in README_COLUMNS)
+                     + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.holdout", description=__doc__.split("\n")[0])
@@ -197,8 +230,18 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated task names to run (default all)")
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     ap.add_argument("--lookahead", action="store_true", help="also measure with the uncut interpolation (NuiSI)")
+    ap.add_argument("--tables-from", default=None, help="only write the tables again from DIR/holdout.json")
     args = ap.parse_args(argv)
     from ..core.blas import single_thread
+
+    if args.tables_from is not None:
+        results = json.loads((Path(args.tables_from) / "holdout.json").read_text())
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "holdout.md").write_text(tables(results) + "\n\n" + yardstick_tables(results) + "\n")
+        (out / "readme_table.md").write_text(readme_table(results) + "\n")
+        print(f"wrote {out / 'holdout.md'} and {out / 'readme_table.md'}")
+        return 0
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -215,6 +258,7 @@ def main(argv=None) -> int:
     md = (tables(results) + "\n\n" + yardstick_tables(results)
           + ("\n\n" + tables(results, "lookahead") if args.lookahead else ""))
     (out / "holdout.md").write_text(md + "\n")
+    (out / "readme_table.md").write_text(readme_table(results) + "\n")
     print(md)
     print(f"wrote {out / 'holdout.json'} and {out / 'holdout.md'}")
     return 0

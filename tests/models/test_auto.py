@@ -154,8 +154,8 @@ def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     _, hold = task
     x = hold.demos[1][:35, :2]
     model = blend.model_
-    p = blend.predict(x)
     preds = {m: est.predict(x) for m, est in model.members_.items()}
+    p = model.combine(preds, len(x), n_grid=2001)  # a fine grid: the rule, not the grid's interpolation, is tested
     t = np.array([0.02, 0.1, 0.2])
     s_b, D_b = place_in_time(p, len(x), hold.dt, model.mean_duration_)
     got = np.stack([np.interp(s_b + t / D_b, p.times, p.mean[:, d]) for d in range(4)], axis=1)

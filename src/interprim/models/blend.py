@@ -168,8 +168,9 @@ class Blend(Predictor):
             R = float(remaining_duration(np.array([[t[0]] for t in timing]), np.array([[t[1]] for t in timing]),
                                          (n_frames - 1) * self.dt_, self.mean_duration_, w0,
                                          float(self.remaining))[0])
+            R = max(R, float(self.horizon))  # the real-time band is the members' own (long_range.member_units)
             if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
-                D = max(R / (1.0 - s), 1e-9)
+                D = R / (1.0 - s)
         u = unit_grid(n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
         W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)

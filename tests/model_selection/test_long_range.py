@@ -57,18 +57,22 @@ def test_the_mean_is_kept_when_the_members_are_no_better_than_noise():
                "b": prior + rng.normal(0.0, 0.05, truth.shape)}
     cv = _cv(members, truth, n_demo)
     W, edges = _stacked(cv)
-    Wc, name, table = long_range_choice(cv, W, edges, prefer="simple")
+    Wc, ec, name, table = long_range_choice(cv, W, edges, prefer="simple")
     assert name == "prior"
-    assert np.allclose(Wc[1:], [1.0, 0.0, 0.0]) and np.allclose(Wc[0], W[0])
+    assert np.allclose(Wc[2:], [1.0, 0.0, 0.0]) and np.allclose(Wc[:2], W[0])
+    # the real-time band keeps exactly its weights: the move to the mean starts after it
+    assert ec[:2] == pytest.approx([edges[0], edges[0] + cv.dt]) and ec[2:] == edges[1:]
+    rt_steps = cv.t_ahead <= cv.horizon + 1e-12
+    assert np.allclose(weights_at(cv.t_ahead[rt_steps], ec, Wc), W[0])
     assert table["prior"]["vs_best"] <= table["prior"]["se"]
     # a member that knows the future better than the noise: chosen whichever end the rule starts from
     members["a"] = truth + rng.normal(0.0, 0.2, truth.shape)
     cv = _cv(members, truth, n_demo)
     W, edges = _stacked(cv)
     for prefer in ("simple", "fitted"):
-        Wc, name, _ = long_range_choice(cv, W, edges, prefer=prefer)
+        Wc, ec, name, _ = long_range_choice(cv, W, edges, prefer=prefer)
         assert name != "prior"
-        per_step = weights_at(cv.t_ahead, edges, Wc)
+        per_step = weights_at(cv.t_ahead, ec, Wc)
         assert np.all(per_step[cv.t_ahead > 0.5, 1] > 0.9)  # "a" carries the long look-ahead
 
 

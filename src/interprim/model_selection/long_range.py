@@ -36,7 +36,7 @@ from .yardsticks import (case_rms, clock_units, one_se_choice, place_cases, rati
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
            "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
-           "summary_lines"]
+           "summary_lines", "keep_real_time"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
@@ -107,11 +107,23 @@ def schedule(t_ahead, edges, W) -> np.ndarray:
     return weights_at(t_ahead, edges, W)
 
 
-def held(W, w) -> np.ndarray:
-    """``(bands, M)``: the real-time band's weights ``W[0]``, then ``w`` in every later band."""
+def held(W, w, n_first: int = 1) -> np.ndarray:
+    """``(bands, M)``: the real-time band's weights ``W[0]`` in the first ``n_first`` bands, then ``w`` in every
+    later band."""
     out = np.tile(np.asarray(w, dtype=np.float64), (np.shape(W)[0], 1))
-    out[0] = np.asarray(W, dtype=np.float64)[0]
+    out[:n_first] = np.asarray(W, dtype=np.float64)[0]
     return out
+
+
+def keep_real_time(W, edges, dt: float) -> tuple:
+    """``(W, edges)`` with the real-time band's weights held to its edge: a band ``dt`` long is added after it with
+    the same weights, so that the move to the next band's weights (:func:`schedule`, linear between the bands'
+    middles) starts after the real-time band, not in its second half."""
+    W = np.asarray(W, dtype=np.float64)
+    edges = [float(e) for e in edges]
+    if W.shape[0] < 2 or edges[1] - edges[0] <= 2.0 * dt:
+        return W, edges
+    return np.vstack([W[:1], W]), [edges[0], edges[0] + float(dt)] + edges[1:]
 
 
 def _blend(mean, per_step):
@@ -187,6 +199,9 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
     -------
     W : ndarray, shape (bands, M)
         The chosen weights (row 0 unchanged; the other rows all equal for a candidate that holds one set).
+    edges : list of float
+        Their bands' upper edges: ``edges``, with a band after the real-time band for a candidate other than the
+        per-band weights (:func:`keep_real_time`: the real-time band keeps exactly its weights).
     name : str
         ``"prior"``, a family, ``"real-time weights"`` or ``"per band"``.
     table : dict
@@ -195,13 +210,15 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
     W = np.asarray(W, dtype=np.float64)
     M = len(cv.names)
     t = cv.t_ahead
-    cands = {m: held(W, np.eye(M)[i]) for i, m in enumerate(cv.names)}
-    first = {m: _rest(cv, _blend(cv.mean, schedule(t, edges, Wm))) for m, Wm in cands.items()}
+    W_rt, e_rt = keep_real_time(W, edges, cv.dt)  # the held candidates' bands
+    n_first = W_rt.shape[0] - W.shape[0] + 1
+    cands = {m: held(W_rt, np.eye(M)[i], n_first) for i, m in enumerate(cv.names)}
+    first = {m: _rest(cv, _blend(cv.mean, schedule(t, e_rt, Wm))) for m, Wm in cands.items()}
     order = (["prior"] if "prior" in cands else []) + sorted((m for m in cands if m != "prior"),
                                                              key=lambda m: first[m].mean())
     errors = {m: first[m] for m in order}
-    cands["real-time weights"] = held(W, W[0])
-    errors["real-time weights"] = _rest(cv, _blend(cv.mean, schedule(t, edges, cands["real-time weights"])))
+    cands["real-time weights"] = held(W_rt, W[0], n_first)
+    errors["real-time weights"] = _rest(cv, _blend(cv.mean, schedule(t, e_rt, cands["real-time weights"])))
     if W.shape[0] > 1:
         g = case_groups(cv.demo, groups)
         crossed = np.zeros(len(g))
@@ -218,7 +235,9 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
         fitted = [m for m in ("per band", "real-time weights") if m in errors]
         order = fitted + [m for m in order if m not in fitted and m != "prior"] + [m for m in order if m == "prior"]
     name, table = one_se_choice(errors, cv.demo, order)
-    return (W if name == "per band" else cands[name]), name, table
+    if name == "per band":
+        return W, list(edges), name, table
+    return cands[name], e_rt, name, table
 
 
 def refine(cv, fitted, horizon: float, prefer: str = PREFER[0]) -> tuple:
@@ -251,8 +270,7 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0]) -> tuple:
         placed.mean = replaced(cv, lam)
         fitted = stack(placed, horizon)
         W = full(fitted)
-    edges = list(fitted.edges)
-    Wc, beyond, b_table = long_range_choice(placed, W, edges, prefer=prefer)
+    Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
     keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]
     members = [names[i] for i in keep]
     Wk = Wc[:, keep]

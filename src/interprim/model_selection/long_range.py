@@ -108,22 +108,23 @@ def schedule(t_ahead, edges, W) -> np.ndarray:
 
 
 def held(W, w, n_first: int = 1) -> np.ndarray:
-    """``(bands, M)``: the real-time band's weights ``W[0]`` in the first ``n_first`` bands, then ``w`` in every
-    later band."""
+    """``(bands, M)``: the first ``n_first`` bands' weights of ``W``, then ``w`` in every later band."""
     out = np.tile(np.asarray(w, dtype=np.float64), (np.shape(W)[0], 1))
-    out[:n_first] = np.asarray(W, dtype=np.float64)[0]
+    out[:n_first] = np.asarray(W, dtype=np.float64)[:n_first]
     return out
 
 
 def keep_real_time(W, edges, dt: float) -> tuple:
-    """``(W, edges)`` with the real-time band's weights held to its edge: a band ``dt`` long is added after it with
-    the same weights, so that the move to the next band's weights (:func:`schedule`, linear between the bands'
-    middles) starts after the real-time band, not in its second half."""
+    """``(W, edges, n_first)``: the per-band weights with a band ``dt`` long added after the real-time band,
+    carrying the weights the per-band schedule has at the real-time band's edge; a candidate that changes the
+    bands after the first ``n_first`` then moves the blend only after the real-time band, whose weights stay (to a
+    step) those of the per-band schedule (:func:`schedule`: linear between the bands' middles)."""
     W = np.asarray(W, dtype=np.float64)
     edges = [float(e) for e in edges]
     if W.shape[0] < 2 or edges[1] - edges[0] <= 2.0 * dt:
-        return W, edges
-    return np.vstack([W[:1], W]), [edges[0], edges[0] + float(dt)] + edges[1:]
+        return W, edges, 1
+    w_edge = schedule(np.array([edges[0]]), edges, W)
+    return np.vstack([W[:1], w_edge, W[1:]]), [edges[0], edges[0] + float(dt)] + edges[1:], 2
 
 
 def _blend(mean, per_step):
@@ -201,7 +202,7 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
         The chosen weights (row 0 unchanged; the other rows all equal for a candidate that holds one set).
     edges : list of float
         Their bands' upper edges: ``edges``, with a band after the real-time band for a candidate other than the
-        per-band weights (:func:`keep_real_time`: the real-time band keeps exactly its weights).
+        per-band weights (:func:`keep_real_time`: the real-time band keeps the per-band schedule's weights).
     name : str
         ``"prior"``, a family, ``"real-time weights"`` or ``"per band"``.
     table : dict
@@ -210,8 +211,7 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
     W = np.asarray(W, dtype=np.float64)
     M = len(cv.names)
     t = cv.t_ahead
-    W_rt, e_rt = keep_real_time(W, edges, cv.dt)  # the held candidates' bands
-    n_first = W_rt.shape[0] - W.shape[0] + 1
+    W_rt, e_rt, n_first = keep_real_time(W, edges, cv.dt)  # the held candidates' bands
     cands = {m: held(W_rt, np.eye(M)[i], n_first) for i, m in enumerate(cv.names)}
     first = {m: _rest(cv, _blend(cv.mean, schedule(t, e_rt, Wm))) for m, Wm in cands.items()}
     order = (["prior"] if "prior" in cands else []) + sorted((m for m in cands if m != "prior"),

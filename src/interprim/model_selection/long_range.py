@@ -21,8 +21,8 @@ own speed (the real-time band is unchanged); after it, member ``m`` moves from w
 ``u_h = s_m + horizon / D_m``, linearly to its end at ``R`` seconds from now (:func:`member_units`).
 
 **Weights beyond the real-time band** (:func:`long_range_choice`).  Candidates, from the simplest: the mean
-demonstration (``prior``) alone, each single family, the real-time weights held at every look-ahead, the weights
-fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
+demonstration (``prior``) alone, (optionally each single family,) the real-time weights held at every look-ahead,
+the weights fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
 cross-fitted (fitted on the other demonstrations' cases), the others need no fit.
 """
 
@@ -175,7 +175,7 @@ def timing_choice(cv, per_step, lambdas=LAMBDAS, prefer: str = PREFER[0]) -> tup
     return cands[name], table
 
 
-def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) -> tuple:
+def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0], singles: bool = False) -> tuple:
     """``(W, name, table)``: the blend's weights beyond the real-time band, chosen on the rest of the movement.
 
     Parameters
@@ -190,6 +190,9 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
     groups : int
         The per-band weights are scored cross-fitted: fitted on the cases of the other ``groups - 1`` groups of
         held-out demonstrations (:func:`case_groups`), scored on this group's.
+    singles : bool
+        Also each family alone as a candidate (off by default: on the nested development folds a single family
+        chosen on 12-20 recordings was the choice that went wrong, on three NuiSI interactions of six).
     prefer : {"simple", "fitted"}
         :func:`one_se_choice` takes the first candidate within one standard error of the best, trying them from
         the mean (``"simple"``, the default: a more complex candidate only when it is better by more than its
@@ -212,7 +215,9 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0]) ->
     M = len(cv.names)
     t = cv.t_ahead
     W_rt, e_rt, n_first = keep_real_time(W, edges, cv.dt)  # the held candidates' bands
-    cands = {m: held(W_rt, np.eye(M)[i], n_first) for i, m in enumerate(cv.names)}
+    cands = {"prior": held(W_rt, np.eye(M)[cv.names.index("prior")], n_first)} if "prior" in cv.names else {}
+    if singles:
+        cands.update({m: held(W_rt, np.eye(M)[i], n_first) for i, m in enumerate(cv.names) if m != "prior"})
     first = {m: _rest(cv, _blend(cv.mean, schedule(t, e_rt, Wm))) for m, Wm in cands.items()}
     order = (["prior"] if "prior" in cands else []) + sorted((m for m in cands if m != "prior"),
                                                              key=lambda m: first[m].mean())

@@ -41,9 +41,9 @@ __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "lo
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
 #: How :func:`one_se_choice` orders the candidates: from the simplest (the default) or from the fitted one.  On the
-#: development recordings, in outer folds with the whole fit inside (6 NuiSI tasks), starting from the simplest gave
-#: 0.95x the clock over the rest of the movement and 0.97x the mean on the whole movement, from the fitted end
-#: 0.96x and 1.01x.
+#: development recordings, in outer folds with the whole fit inside (6 NuiSI tasks, docs/evaluation.md), starting
+#: from the simplest gave 0.95x the clock over the rest of the movement and 0.96x the mean on the whole movement,
+#: from the fitted end 0.95x and 1.01x (the blend before this choice: 0.93x and 1.00x).
 PREFER = ("simple", "fitted")
 
 

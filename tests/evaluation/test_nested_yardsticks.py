@@ -1,6 +1,5 @@
 """The nested evaluation of a whole fitting procedure and the hold-out's tables with standard errors."""
 
-import numpy as np
 import pytest
 
 from interprim.evaluation.nested import YARDSTICKS, nested_sweep, standard_error_ratio, yardstick_table

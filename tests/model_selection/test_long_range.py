@@ -4,8 +4,7 @@ movement with the one-standard-error rule (interprim.model_selection.long_range)
 import numpy as np
 import pytest
 
-from interprim.model_selection.long_range import (held, long_range_choice, member_units, remaining_duration,
-                                                  timing_choice)
+from interprim.model_selection.long_range import long_range_choice, member_units, remaining_duration, timing_choice
 from interprim.model_selection.stacking import CrossValidation, look_ahead_bands, weights_at
 
 

@@ -99,7 +99,9 @@ def measure_fitted(est, name: str, train, test, observed_dofs, dt: float, point_
     for j, rec in enumerate(test.demos):
         orc = None if oracles is None or not references else oracles[j]
         for p, P in sets.items():
-            pre = (lambda k, j=j, P=P: P(j, k))
+            def pre(k, j=j, P=P):
+                return P(j, k)
+
             recs = realtime_fold(est, train, rec, observed_dofs, dt, cfg, name=name, fitted=True, prefix=pre,
                                  oracle=orc, references=references)
             recs += [dict(r, protocol="whole") for r in

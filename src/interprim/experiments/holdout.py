@@ -213,7 +213,7 @@ def readme_table(results, protocol="causal") -> str:
         v = [x for x in v if np.isfinite(x) and x > 0]
         return f"{np.exp(np.mean(np.log(v))):.2f}" if v else "—"
 
-    head = (f"| model | " + " | ".join(f"{t}, NuiSI ({len(nuisi)}) / all {len(names)} tasks" if i == 0 else
+    head = ("| model | " + " | ".join(f"{t}, NuiSI ({len(nuisi)}) / all {len(names)} tasks" if i == 0 else
                                        f"{t}, NuiSI / {len(names)}" for i, (t, _) in enumerate(README_COLUMNS)) + " |")
     lines = [head, "|---" * (len(README_COLUMNS) + 1) + "|"]
     for label, m in README_ROWS:

@@ -74,7 +74,8 @@ def remaining_duration(phase, duration, elapsed, mean_duration: float, w0, lam) 
 def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndarray:
     """``(cases, H)``: a member's normalised time ``t_ahead`` seconds from now, at its own speed ``1 / D_m`` up to
     ``horizon`` and then linearly to its end (1) at ``remaining`` seconds from now, at least ``horizon``
-    (``remaining`` None: its own speed throughout).  ``phase``, ``duration``: ``(cases,)`` of the member; ``remaining``: ``(cases,)``."""
+    (``remaining`` None: its own speed throughout).  ``phase``, ``duration``: ``(cases,)`` of the member;
+    ``remaining``: ``(cases,)``."""
     s = np.asarray(phase, dtype=np.float64)[:, None]
     D = np.asarray(duration, dtype=np.float64)[:, None]
     t = np.asarray(t_ahead, dtype=np.float64)[None, :]

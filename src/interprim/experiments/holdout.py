@@ -84,9 +84,11 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     inner = dict(blend.selection_["cv_errors"])
     weights = blend.weights_
     inner["blend"] = blend.selection_["blend_cv_error"]
+    lr = blend.selection_.get("long_range", {})
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
-        f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")
+        f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())}; beyond the real-time band "
+        f"{lr.get('beyond', '-')}, remaining duration {lr.get('remaining', '-')}; in {time.perf_counter() - t0:.0f} s")
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
@@ -116,8 +118,11 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
             summary[p].setdefault(m, {}).update({f"rest_{k}": v for k, v in s.items()
                                                  if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock",
                                                           "rt_ctrl_vs_oracle")})
+    lr = blend.selection_.get("long_range", {})
     return {"records": records, "summary": summary,
             "chosen": chosen, "inner": inner, "weights": weights,
+            "long_range": {k: lr[k] for k in ("remaining", "beyond") if k in lr},
+            "inner_yardsticks": blend.selection_.get("inner_yardsticks", {}),
             "se": {p: {f"{a}|{b}": standard_error_ratio(records[p], a, b) for a in ("chosen", "auto")
                        for b in ("nn", "clock", "oracle-duration", "prior")}
                    | {f"{a}|wm_{b}": standard_error_ratio(records[p], a, b, key="wm_ctrl") for a in ("chosen", "auto")

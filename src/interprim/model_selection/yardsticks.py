@@ -16,10 +16,9 @@ one-standard-error rule of Breiman et al. 1984, *Classification and Regression T
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from ..core.cv import paired_gain
 from ..core.preprocessing import interp_columns
 
 __all__ = ["case_rms", "demo_means", "ratio_se", "one_se_choice", "place_cases", "clock_units",
@@ -74,8 +73,8 @@ def ratio_se(a, b, groups=None) -> tuple:
     r = float(a.mean()) / mb if mb > 0 else float("nan")
     if len(a) < 2 or not mb > 0:
         return r, float("nan")
-    d = a - r * b
-    return r, float(d.std(ddof=1) / math.sqrt(len(d)) / mb)
+    _, se = paired_gain(a, r * b)  # the standard error of the mean of a_i - r b_i
+    return r, float(se) / mb
 
 
 def one_se_choice(errors: dict, groups, order=None) -> tuple:
@@ -103,9 +102,8 @@ def one_se_choice(errors: dict, groups, order=None) -> tuple:
     best = min(order, key=lambda m: (float(per[m].mean()), order.index(m)))
     table = {}
     for m in order:
-        d = per[m] - per[best]
-        se = float(d.std(ddof=1) / math.sqrt(len(d))) if len(d) > 1 else float("inf")
-        table[m] = {"error": float(per[m].mean()), "vs_best": float(d.mean()), "se": se}
+        vs_best, se = paired_gain(per[m], per[best])  # mean of (m - best) over demonstrations, its standard error
+        table[m] = {"error": float(per[m].mean()), "vs_best": float(vs_best), "se": float(se)}
     chosen = next(m for m in order if table[m]["vs_best"] <= table[m]["se"] + 1e-12)
     return chosen, table
 

@@ -81,7 +81,8 @@ def bench_learned_stream(quick, make_demos, row):
         new, pn = _per_frame(li.stream(), frames, runs)
         old, po = _per_frame(PrefixStream(li), frames, runs)
         ref, _ = _per_frame(ipm.stream(), frames, runs)
-        same = all(np.array_equal(a.mean, b.mean) and np.array_equal(a.std_values, b.std_values) for a, b in zip(pn, po))
+        same = all(np.array_equal(a.mean, b.mean) and np.array_equal(a.std_values, b.std_values)
+                   for a, b in zip(pn, po))
         agree = "bitwise" if same else "NO"
         note = f"{li.coupling_.method_} coupling; {len(frames)} frames; agreement = new vs predict at every frame"
         row("LearnedInteraction stream: update + trajectory(100)", size, new, "the same model's PrefixStream", old,
@@ -93,4 +94,4 @@ def bench_learned_stream(quick, make_demos, row):
 def estimate_phase_only(model, partial):
     from interprim.phase.likelihood import estimate_phase
 
-    return estimate_phase(model, model.observed_to_latent(partial))
+    return estimate_phase(model.fitted_, model.fitted_.observed_to_latent(partial))

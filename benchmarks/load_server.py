@@ -357,7 +357,8 @@ class _RawSession(asyncio.Protocol):
         await self.handshaken
         self.transport.write(cls.encode(json.dumps({"type": "hello", "version": 1})))
         await self.control.get()
-        self.transport.write(cls.encode(json.dumps({"type": "open", "model": "highfive", "points": points, "std": std})))
+        opening = {"type": "open", "model": "highfive", "points": points, "std": std}
+        self.transport.write(cls.encode(json.dumps(opening)))
         reply = await self.control.get()
         assert reply.startswith(b'{"type":"opened"'), reply[:200]
         return self
@@ -563,7 +564,8 @@ def main(argv=None):
                 print(
                     f"{label:>9} N={n:4d}: {r['frames']} frames, median {r['median_ms']:.2f} ms, "
                     f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.1f} ms, {r['replies']} replies, "
-                    f"coalesced {r['coalesced']}, lost {r['lost']}, rate-limited {r['rate_limited']}, errors {r['errors']}, "
+                    f"coalesced {r['coalesced']}, lost {r['lost']}, rate-limited {r['rate_limited']}, "
+                    f"errors {r['errors']}, "
                     f"server CPU {r['server_cpu_pct']:.0f} % ({r['cpu_ms_per_frame']:.3f} ms/frame), "
                     f"client CPU {r['client_cpu_pct']:.0f} %, others' CPU {r['others_cpu_pct']:.0f} %, "
                     f"load {r['loadavg_before']:.1f} -> {r['loadavg']:.1f}",
@@ -600,7 +602,8 @@ def _loop_name(kind: str) -> str:
 
 
 def table_row(r) -> str:
-    return (f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | {r['max_ms']:.1f} | "
+    return (f"| {r['mode']} | {r['N']} | {r['frames']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | "
+            f"{r['max_ms']:.1f} | "
             f"{r['replies']} | {r['coalesced']} | {r['lost']} | {r['errors']} | {r['server_cpu_pct']:.0f} | "
             f"{r['cpu_ms_per_frame']:.3f} | {r['client_cpu_pct']:.0f} | {r['others_cpu_pct']:.0f} | "
             f"{r['loadavg_before']:.1f} -> {r['loadavg']:.1f} |")

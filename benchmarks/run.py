@@ -40,6 +40,7 @@ if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
 import interprim as ip  # noqa: E402
+from benchmarks.data import make_demos  # noqa: E402
 from interprim.core._compiled import loader  # noqa: E402
 from interprim.core.gaussian import LowRankConditioner, condition, condition_literal  # noqa: E402
 from interprim.phase.dtw import IncrementalDTW, open_end_dtw  # noqa: E402
@@ -48,26 +49,6 @@ ROWS: list[dict] = []
 
 
 # ----------------------------------------------------------------------------- data
-def make_demos(S=30, Do=7, Dc=7, T=500, seed=0, stretch=(0.9, 1.1), noise=0.0):
-    """Smooth two-agent demonstrations: both agents driven by shared latent factors (correlated goals/shapes)."""
-    rng = np.random.default_rng(seed)
-    D = Do + Dc
-    K = 4
-    mix = rng.normal(size=(K, D))
-    f = np.arange(1, D + 1)[None, :]
-    demos = []
-    for _ in range(S):
-        z = rng.normal(size=K)
-        Tj = max(int(round(T * rng.uniform(*stretch))), 10)
-        s = np.linspace(0, 1, Tj)[:, None]
-        sm = 10 * s**3 - 15 * s**4 + 6 * s**5
-        y = (z @ mix)[None, :] * sm + 0.3 * np.sin(np.pi * f * s * 0.5 + z[0]) + 0.1 * z[1] * np.sin(2 * np.pi * s * f / 3)
-        if noise:
-            y = y + noise * rng.standard_normal(y.shape)
-        demos.append(y)
-    return demos
-
-
 def fitted_model(Do=7, Dc=7, n_basis=25, S=30, T=500, seed=0, **kw):
     """The library's defaults (positions, sigma2 by CV) unless ``kw`` overrides them."""
     demos = make_demos(S, Do, Dc, T, seed=seed)
@@ -140,8 +121,8 @@ def ref_online_step(model, z, n_star, cost):
     G, B = X.T @ X, X.T @ Y
     post = condition(model.prior_.mean, model.prior_.cov, model.obs_index_, G, B, model.sigma2_,
                      yy=float(np.sum(Y * Y)), n_obs=Y.size, need_cov=False)
-    pred = ip.Prediction(model, post, (G, B, float(np.sum(Y * Y)), Y.size), s_end, duration, n_star, cost, M, y0,
-                         model.robot_start(None), z[-1])
+    pred = ip.Prediction(model.fitted_, post, (G, B, float(np.sum(Y * Y)), Y.size), s_end, duration, n_star, cost,
+                         M, y0, model.fitted_.robot_start(None), z[-1])
     return pred._response_reference(100)
 
 
@@ -242,7 +223,6 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
 def bench_likelihood_phase(quick):
     """``phase_method="likelihood"``: batch predict and the online step (batched phase kernel)."""
-    from interprim.phase import likelihood as PL
 
     print("likelihood phase")
     model, test = fitted_model(phase_method="likelihood")
@@ -251,7 +231,7 @@ def bench_likelihood_phase(quick):
     ours = timed(lambda: model.predict(partial), min_time=0.5 if quick else 2.0)
     N1 = model.reference_.shape[0] - 1
     s_ours = model.predict(partial).normalised_time
-    s_dtw = open_end_dtw(model.reference_, model.observed_to_latent(partial), return_path=False).n_star / N1
+    s_dtw = open_end_dtw(model.reference_, model.fitted_.observed_to_latent(partial), return_path=False).n_star / N1
     t_ref = timed(lambda: ref_likelihood_phase(model, partial, s_dtw), n=1 if quick else 3, warm=0)
     s_ref = ref_likelihood_phase(model, partial, s_dtw)
     row("predict, phase_method='likelihood'", "250 frames, 7+7 DoF", ours, "per-candidate reference phase only",
@@ -393,7 +373,6 @@ def bench_promp(model, test, quick):
     partial = test[:M, :7]
     s_end = 0.5
     X, Y, _ = model.fitted_.observation_design(partial, s_end)
-    G, B = X.T @ X, X.T @ Y
     cond = LowRankConditioner.from_prior(model.prior_, model.obs_index_)
     s2 = model.sigma2_
 
@@ -436,7 +415,8 @@ def bench_promp(model, test, quick):
         Omega[i * M:(i + 1) * M, model.obs_index_[i]] = X
     lit = condition_literal(model.prior_.mean, model.prior_.cov, Omega, Y.T.reshape(-1), s2)
     e_ol = max(rel(mean, lit.mean), float(np.max(np.abs(cov - lit.cov)) / cs))
-    e_pl = max(rel(pm.weight_mean[inv], lit.mean), float(np.max(np.abs(pm.weight_cov[np.ix_(inv, inv)] - lit.cov)) / cs))
+    e_pl = max(rel(pm.weight_mean[inv], lit.mean),
+               float(np.max(np.abs(pm.weight_cov[np.ix_(inv, inv)] - lit.cov)) / cs))
     row("conditioning, mean + covariance", f"{M} frames x 7 obs DoF, P=364", ours,
         "movement-primitives ProMP.condition_position/frame", peer, agree_str(max(e_mean, e_cov)),
         note=f"cov error relative to max|prior cov|; vs literal Eq.18: ours {e_ol:.1e}, ProMP {e_pl:.1e}")
@@ -607,7 +587,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "Models of the scaling sweeps: library defaults (positions, likelihood phase) with sigma2='residual' "
            "(the CV does not change the per-frame cost).", "",
            "### With the number of DoF (half observed, half controlled; 25 basis, 500 frames, 30 demos; "
-           "fit on 100 demos)", "", "| DoF | online median | online, last 10 % | predict (250 frames) | fit (100 demos) |",
+           "fit on 100 demos)", "",
+           "| DoF | online median | online, last 10 % | predict (250 frames) | fit (100 demos) |",
            "|---|---|---|---|---|"]
     md += [f"| {D} | {fmt_t(a)} | {fmt_t(b)} | {fmt_t(c)} | {fmt_t(d)} |" for D, a, b, c, d in scal["dof"]]
     md += ["", "### With the number of basis functions (7 + 7 DoF, 500 frames)", "",
@@ -618,7 +599,8 @@ def write_results(path, info, scal, quick, load_end, elapsed):
     md += [f"| {T} | {fmt_t(a)} | {fmt_t(b)} | {fmt_t(c)} |" for T, a, b, c in scal["length"]]
     md += ["", "## How cost grows", "",
            "- **Phase** per online frame: the likelihood phase (default) scores 3 candidate speeds 1 % apart on "
-           "a fixed log-lattice (more when the best one is at an edge of them); a lattice point seen at the previous frame keeps its statistics and dense factors "
+           "a fixed log-lattice (more when the best one is at an edge of them); a lattice point seen at the "
+           "previous frame keeps its statistics and dense factors "
            "and adds the new frame by rank-1 updates, O(D_o (q^2 + q r) + r^3) per candidate, independent of M "
            "(a point entering the window, or clipped at s = 1, is scored from scratch: O(M q (q + D_o)) for the "
            "statistics in 64-frame blocks plus O(D_o (q^3 + q^2 r + q r^2))); then the batch search's last step "

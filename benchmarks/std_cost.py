@@ -73,7 +73,7 @@ def _cpu_ms(entry, tests, points, std, repeats):
     """CPU time (ms) of each frame's reply, computed as the server computes it (inline lane)."""
     import time
 
-    from interprim.server.compute import _accepts_need_cov, OpenModel, compute_prediction
+    from interprim.server.compute import OpenModel, _accepts_need_cov, compute_prediction
 
     cols = entry.controlled_dofs or list(range(entry.n_dofs))
     out = []

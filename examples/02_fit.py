@@ -20,7 +20,8 @@ model = ip.InteractionPrimitive(observed_dofs=train.observed_dofs, n_basis=10).f
 print(f"fitted in {time.perf_counter() - tic:.1f} s: dt {model.dt_} s, mean duration {model.mean_duration_:.2f} s")
 sel = model.selection_
 print(f"  cross-validated noise sigma2 = {sel['sigma2']:.3g} (data units^2; ~ tracker noise^2 + model error), "
-      f"shrinkage {sel['shrinkage']:.2f}, held-out error {sel['cv_error']:.4f} vs prior mean {sel['cv_error_prior']:.4f}")
+      f"shrinkage {sel['shrinkage']:.2f}, held-out error {sel['cv_error']:.4f} "
+      f"vs prior mean {sel['cv_error_prior']:.4f}")
 
 ctrl = model.controlled_dofs_
 T = len(test)

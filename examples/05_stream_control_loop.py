@@ -5,10 +5,10 @@
 Every tick (the model's dt: 100 Hz) the sensor gives one frame of the partner (a held-out recording plus
 tracker noise), `stream.update(frame)` returns the prediction, and the robot (a kinematic servo of the
 simulated 3-joint arm) moves towards the predicted posture *now*.  When the estimated phase reaches 1 the
-movement is over and the loop stops updating (frames of a partner standing still would stretch it).  The predicted std of the final posture
-slows the robot while the prediction is uncertain; an out-of-range frame stops it.  Every tick starts by waiting
-for its time, so that every branch (also the out-of-range one, which skips the rest of the tick) keeps the rate
-(``tests/sim/test_control_loops.py`` counts the ticks on a fake clock).
+movement is over and the loop stops updating (frames of a partner standing still would stretch it).  The predicted std
+of the final posture slows the robot while the prediction is uncertain; an out-of-range frame stops it.  Every tick
+starts by waiting for its time, so that every branch (also the out-of-range one, which skips the rest of the tick) keeps
+the rate (``tests/sim/test_control_loops.py`` counts the ticks on a fake clock).
 """
 import time
 
@@ -52,6 +52,8 @@ for k in range(n_ticks):
 
 lat = 1e3 * np.array(latency)
 robot_hand, goal = arm.hand(q), arm.hand(truth[-1, 2:])  # the true robot ends at the high-five point
-print(f"{n_ticks} ticks at {1 / dt:.0f} Hz, {len(lat)} updates: latency median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms")
-print(f"final joint error {np.abs(q - truth[-1, 2:]).max():.3f} rad; robot hand {100 * np.linalg.norm(robot_hand - goal):.1f} cm "
+print(f"{n_ticks} ticks at {1 / dt:.0f} Hz, {len(lat)} updates: latency median {np.median(lat):.2f} ms, "
+      f"p99 {np.percentile(lat, 99):.2f} ms")
+print(f"final joint error {np.abs(q - truth[-1, 2:]).max():.3f} rad; "
+      f"robot hand {100 * np.linalg.norm(robot_hand - goal):.1f} cm "
       f"from the true high-five point; partner's hand {100 * np.linalg.norm(truth[-1, :2] - goal):.1f} cm from it")

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 import interprim as ip
-from interprim.datasets import load_bvh
 from interprim.core.preprocessing import time_normalise
+from interprim.datasets import load_bvh
 
 
 def person(p, x):

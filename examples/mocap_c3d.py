@@ -13,8 +13,8 @@ import ezc3d
 import numpy as np
 
 import interprim as ip
-from interprim.datasets import load_c3d
 from interprim.core.preprocessing import time_normalise
+from interprim.datasets import load_c3d
 
 LABELS = ["A:RHand", "A:RWrist", "B:RHand", "B:RWrist"]
 

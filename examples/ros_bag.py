@@ -16,8 +16,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 import interprim as ip
-from interprim.datasets import load_rosbag
 from interprim.core.preprocessing import time_normalise
+from interprim.datasets import load_rosbag
 
 
 def write_bag(path, rng):

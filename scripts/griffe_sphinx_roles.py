@@ -1,8 +1,8 @@
 """Griffe extension for the interprim site: Sphinx cross-reference roles in docstrings become links.
 
 interprim's docstrings are numpydoc and cite other objects with Sphinx roles (``:func:`fit_prior```,
-``:meth:`~interprim.models.primitive.stream.Stream.update```).  mkdocstrings does not read roles, so this extension rewrites
-each one, once the package is loaded, into an *optional* mkdocs-autorefs reference: a link where the target
+``:meth:`~interprim.models.primitive.stream.Stream.update```).  mkdocstrings does not read roles, so this extension
+rewrites each one, once the package is loaded, into an *optional* mkdocs-autorefs reference: a link where the target
 is documented on some page of the site, plain code otherwise (a private helper, a module without a page).
 Names are resolved in the docstring's own scope (class, module, package), as Sphinx does; ``~`` shows the
 last component only.  Used from ``mkdocs.yml`` (mkdocstrings' python handler, ``extensions:``).

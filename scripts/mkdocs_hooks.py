@@ -1,8 +1,9 @@
 """MkDocs hooks of the interprim site (``mkdocs.yml``: ``hooks:``).
 
-- The home page, the benchmark results, the changelog and the licence are generated from the repository's
-  own files (``README.md``, ``benchmarks/RESULTS.md``, ``CHANGELOG.md``, ``LICENSE``), with their links
-  rewritten from repository paths to site pages, so there is one copy of each text.
+- The home page, the benchmark results, the changelog, the contributors' guide and the licence are generated
+  from the repository's own files (``README.md``, ``benchmarks/RESULTS.md``, ``CHANGELOG.md``, ``CONTRIBUTING.md``,
+  ``LICENSE``), with their links rewritten from repository paths to site pages, so there is one copy of each
+  text.
 - ``<!-- interprim-cli-help -->`` in a page is replaced by the ``--help`` of every ``interprim`` command,
   taken from the parser itself (always in step with the code).
 
@@ -25,6 +26,7 @@ _LINK_MAP = {
     "README.md": "index.md",
     "benchmarks/RESULTS.md": "benchmarks.md",
     "CHANGELOG.md": "changelog.md",
+    "CONTRIBUTING.md": "contributing.md",
     "LICENSE": "license.md",
     "src/interprim/server/static/protocol.schema.json": "protocol.schema.json",
 }
@@ -34,6 +36,7 @@ _GENERATED = {
     "index.md": ("README.md", None),
     "benchmarks.md": ("benchmarks/RESULTS.md", None),
     "changelog.md": ("CHANGELOG.md", None),
+    "contributing.md": ("CONTRIBUTING.md", None),
     "license.md": ("LICENSE", "License"),
     "protocol.schema.json": ("src/interprim/server/static/protocol.schema.json", None),
 }

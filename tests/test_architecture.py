@@ -47,8 +47,8 @@ def test_the_counter_sees_private_accesses(tmp_path):
 
 
 def test_no_module_sets_attributes_on_the_estimator():
-    """Outside the primitive estimator (models/primitive/estimator.py) nothing assigns a fitted or private attribute ``model.<name>_ = ...`` (or ``m.``, ...;
-    constructor parameters may be set): selection and calibration return
+    """Outside the primitive estimator (models/primitive/estimator.py) nothing assigns a fitted or private attribute
+    ``model.<name>_ = ...`` (or ``m.``, ...; constructor parameters may be set): selection and calibration return
     their choices, the phase likelihood keeps derived arrays in the fitted state's store
     (``FittedPrimitive.cached``), io hands the fitted attributes to ``load_fitted``; the fitted state
     (``fitted``, ``state``) is written only by its own module."""
@@ -62,7 +62,8 @@ def test_no_module_sets_attributes_on_the_estimator():
             for t in targets:
                 for el in (t.elts if isinstance(t, ast.Tuple) else [t]):
                     if (isinstance(el, ast.Attribute) and isinstance(el.value, ast.Name) and el.value.id in (
-                            "model", "m", "ip", "est", "estimator", "fitted", "state") and (el.attr.endswith("_") or el.attr[0] == "_")):
+                            "model", "m", "ip", "est", "estimator", "fitted", "state")
+                            and (el.attr.endswith("_") or el.attr[0] == "_")):
                         bad.append(f"{path.relative_to(SRC)}:{el.lineno} {ast.unparse(el)}")
     assert not bad, "\n".join(bad)
 
@@ -118,8 +119,8 @@ def _entries_into(path_end: str, call):
 
 
 def test_one_predict_enters_primitive_py_once():
-    """The estimator hands a prediction to its fitted state (``interprim.models.primitive.fitted``): a ``predict`` call enters
-    models/primitive/estimator.py once (the call itself), the prediction's methods and a stream never."""
+    """The estimator hands a prediction to its fitted state (``interprim.models.primitive.fitted``): a ``predict`` call
+    enters models/primitive/estimator.py once (the call itself), the prediction's methods and a stream never."""
     import os
 
     from interprim.synthetic import two_agent_demos
@@ -183,3 +184,79 @@ def test_models_never_import_the_layers_above_them():
     from interprim.models import registry
 
     assert set(registry.CANDIDATES) <= set(registry.FAMILIES)
+
+
+def test_the_estimators_fitted_attributes_are_written_in_its_class_body():
+    """Every fitted attribute of the Interaction Primitive is a read-only view declared (and typed) in the class
+    body, not installed from outside it: a linter and a type checker see them, and the list cannot drift from the
+    fitted state's."""
+    from interprim.models.primitive.estimator import FittedView, InteractionPrimitive
+    from interprim.models.primitive.fitted import FITTED_NAMES
+
+    body = {k for k, v in vars(InteractionPrimitive).items() if isinstance(v, FittedView)}
+    assert body == set(FITTED_NAMES)
+    tree = ast.parse((SRC / "models" / "primitive" / "estimator.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "InteractionPrimitive")
+    annotated = {n.target.id for n in cls.body if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)}
+    assert set(FITTED_NAMES) <= annotated
+    setattrs = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+                and n.func.id == "setattr"]
+    assert not setattrs
+
+
+def demonstration_readers(tree: ast.AST) -> list[str]:
+    """Lines of ``tree`` that read demonstrations themselves: validate arrays named ``demos[...]``, check time
+    stamps named ``times[...]`` or sniff a ``Demonstrations`` by its attributes."""
+    def text(node) -> str:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            return node.value
+        if isinstance(node, ast.JoinedStr):
+            return "".join(v.value for v in node.values if isinstance(v, ast.Constant) and isinstance(v.value, str))
+        return ""
+
+    out = []
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, (ast.Name, ast.Attribute))):
+            continue
+        fn = node.func.id if isinstance(node.func, ast.Name) else node.func.attr
+        args = list(node.args)
+        if fn == "as_2d_finite" and len(args) >= 2 and text(args[1]).startswith("demos"):
+            out.append(f"{node.lineno} {ast.unparse(node)}")
+        elif fn == "check_times" and len(args) >= 3 and text(args[2]).startswith("times["):
+            out.append(f"{node.lineno} {ast.unparse(node)}")
+        elif fn == "hasattr" and len(args) == 2 and text(args[1]) in ("demos", "times"):
+            out.append(f"{node.lineno} {ast.unparse(node)}")
+    return out
+
+
+def test_only_the_adapter_reads_demonstrations():
+    """docs/architecture.md: every family reads demonstrations, time stamps and column names through one adapter,
+    ``interprim.models.training.training_set``; a family's ``_fit`` receives the validated ``TrainingSet``."""
+    # the blend still asks its source whether it has time stamps (for causal prefixes in its cross-validation);
+    # the TrainingSet carries them (``times``, ``raw``): to go when the blend takes the set from the adapter
+    known = {"models/auto.py hasattr(source, 'times')"}
+    bad = []
+    for path in sorted((SRC / "models").rglob("*.py")):
+        if path.name == "training.py":
+            continue
+        for line in demonstration_readers(ast.parse(path.read_text())):
+            where = f"{path.relative_to(SRC)} {line.split(' ', 1)[1]}"
+            if where not in known:
+                bad.append(f"{path.relative_to(SRC)}:{line}")
+    assert not bad, "\n".join(bad)
+    from interprim.models import registry
+    from interprim.models.base import Predictor
+
+    for name, fam in registry.FAMILIES.items():  # the base class's fit, around the family's _fit hook
+        assert fam.cls.fit is Predictor.fit and "_fit" in {k for c in fam.cls.__mro__ for k in vars(c)}, name
+
+
+def test_the_reader_check_sees_a_family_reading_demonstrations():
+    old = ast.parse(
+        "def fit(self, demos, dt=None, times=None):\n"
+        "    if hasattr(demos, 'demos') and hasattr(demos, 'times'):\n"
+        "        demos = list(demos.demos)\n"
+        "    arrays = [as_2d_finite(d, f'demos[{j}]') for j, d in enumerate(demos)]\n"
+        "    ts = [check_times(t, a.shape[0], f'times[{j}]') for j, (t, a) in enumerate(zip(times, arrays))]\n"
+        "    o = as_2d_finite(partial, 'partial')\n")
+    assert [h.split()[0] for h in demonstration_readers(old)] == ["2", "2", "4", "5"]

@@ -37,14 +37,17 @@ def _page(site, path):
 
 
 @pytest.mark.parametrize("page, symbols", [
-    ("reference/dmp", ["interprim.core.basis.Basis", "interprim.core.dmp.fit_weights", "interprim.core.dmp.LinearRollout"]),
+    ("reference/dmp", ["interprim.core.basis.Basis", "interprim.core.dmp.fit_weights",
+                       "interprim.core.dmp.LinearRollout"]),
     ("reference/phase", ["interprim.phase.estimate_phase", "interprim.phase.dtw.open_end_dtw",
                          "interprim.phase.dtw.IncrementalDTW.update", "interprim.phase.learned.LearnedPhase"]),
     ("reference/distribution", ["interprim.models.primitive.estimator.InteractionPrimitive",
                                 "interprim.models.primitive.estimator.InteractionPrimitive.fit",
-                                "interprim.models.primitive.estimator.InteractionPrimitive.predict", "interprim.core.gaussian.fit_prior"]),
+                                "interprim.models.primitive.estimator.InteractionPrimitive.predict",
+                                "interprim.core.gaussian.fit_prior"]),
     ("reference/conditioning", ["interprim.core.gaussian.condition", "interprim.core.gaussian.condition_literal",
-                                "interprim.models.primitive.prediction.Prediction.trajectory", "interprim.models.primitive.stream.Stream.update"]),
+                                "interprim.models.primitive.prediction.Prediction.trajectory",
+                                "interprim.models.primitive.stream.Stream.update"]),
     ("reference/client", ["interprim.server.client.Client.reset", "interprim.server.client.AsyncClient.frame"]),
     ("reference/server", ["interprim.server.app.InterprimServer.start", "interprim.server.app.ServerThread.stop"]),
     ("reference/errors", ["interprim.core.errors.ModelFileError", "interprim.core.errors.OutOfRangeWarning"]),
@@ -53,7 +56,8 @@ def _page(site, path):
                         "interprim.model_selection.realtime.realtime_fold"]),
     ("reference/contract", ["interprim.models.base.Predictor", "interprim.models.registry.Family",
                             "interprim.models.demonstrations.PriorMean.fit", "interprim.testing.check_predictor"]),
-    ("reference/cv", ["interprim.core.cv.folds", "interprim.core.cv.within_one_se", "interprim.core.cv.observed_frames"]),
+    ("reference/cv", ["interprim.core.cv.folds", "interprim.core.cv.within_one_se",
+                      "interprim.core.cv.observed_frames"]),
     ("reference/evaluation", ["interprim.evaluation.sweep.run_sweep"]),
 ])
 def test_reference_pages_render_the_api(site, page, symbols):
@@ -93,6 +97,8 @@ def test_generated_pages_and_links(site):
     assert 'href="equations/"' in home  # README's docs/equations.md, rewritten for the site
     assert "Keep a Changelog" in _page(site, "changelog") or "Unreleased" in _page(site, "changelog")
     assert "MIT License" in _page(site, "license")
+    assert "scripts/lint.sh" in _page(site, "contributing")  # CONTRIBUTING.md, its link to the architecture page
+    assert 'href="../architecture/"' in _page(site, "contributing")
     assert (site / "protocol.schema.json").is_file()
     cli = _page(site, "reference/cli")
     assert "interprim evaluate" in cli and "--scheduler" in cli

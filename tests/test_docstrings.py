@@ -64,7 +64,8 @@ def public_api():
 def test_public_api_is_found():
     symbols, modules = public_api()
     # the walk reaches the core, the optional parts and the methods (a walk that finds nothing passes anything)
-    for name in ("interprim.models.primitive.estimator.InteractionPrimitive.predict", "interprim.models.primitive.stream.Stream.update",
+    for name in ("interprim.models.primitive.estimator.InteractionPrimitive.predict",
+                 "interprim.models.primitive.stream.Stream.update",
                  "interprim.core.gaussian.condition", "interprim.server.client.Client.reset",
                  "interprim.core.preprocessing.PCA.fit", "interprim.datasets.files.load_demonstrations",
                  "interprim.evaluation.sweep.run_sweep"):

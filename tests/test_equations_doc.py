@@ -21,7 +21,8 @@ SKIP_PREFIXES = ("np.", "model.", "pred.", "self.")
 def _modules():
     mods = []
     for info in pkgutil.walk_packages(interprim.__path__, "interprim."):
-        if info.name.endswith("__main__") or ".server" in info.name or ".experiments" in info.name or ".sim" in info.name or ".cli" in info.name:
+        if info.name.endswith("__main__") or any(part in info.name for part in (".server", ".experiments", ".sim",
+                                                                                 ".cli")):
             continue
         try:
             mods.append(importlib.import_module(info.name))

@@ -89,6 +89,41 @@ def test_version_has_one_source():
     assert f"## [{interprim.__version__}]" in (ROOT / "CHANGELOG.md").read_text()
 
 
+def test_pypi_page_metadata():
+    """Keywords, classifiers (each one PyPI accepts: trove-classifiers' list) and links for the PyPI page; no
+    license classifier beside the SPDX ``license`` expression (PEP 639 forbids both)."""
+    tomllib = pytest.importorskip("tomllib", reason="reading pyproject.toml needs Python >= 3.11")
+    from trove_classifiers import classifiers as known
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert len(project["keywords"]) >= 5 and "interaction primitives" in project["keywords"]
+    unknown = [c for c in project["classifiers"] if c not in known]
+    assert unknown == [], f"classifiers PyPI would refuse: {unknown}"
+    assert not any(c.startswith("License ::") for c in project["classifiers"])
+    assert "Typing :: Typed" in project["classifiers"]  # py.typed is shipped
+    minor = int(project["requires-python"].removeprefix(">=3."))
+    versions = sorted(int(c.rsplit(".", 1)[1]) for c in project["classifiers"]
+                      if c.startswith("Programming Language :: Python :: 3.") and c.count(".") == 1)
+    assert versions and versions[0] == minor, (versions, project["requires-python"])
+    urls = project["urls"]
+    assert urls and all(u.startswith("https://") for u in urls.values())
+
+
+def test_the_lint_tools_are_pinned_and_in_the_test_extra():
+    """scripts/lint.sh (run by CI) uses the pinned ruff and mypy of the ``lint`` extra; the README's test command
+    installs them through the ``test`` extra."""
+    tomllib = pytest.importorskip("tomllib", reason="reading pyproject.toml needs Python >= 3.11")
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert sorted(r.split("==")[0] for r in extras["lint"]) == ["mypy", "ruff"]
+    assert all(re.fullmatch(r"[a-z]+==[0-9.]+", r) for r in extras["lint"]), extras["lint"]
+    assert any(r.startswith("interprim[") and "lint" in r for r in extras["test"])
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert ci.index("bash scripts/lint.sh") < ci.index("bash scripts/test.sh")
+    hooks = (ROOT / ".pre-commit-config.yaml").read_text()
+    ruff_pin = next(r for r in extras["lint"] if r.startswith("ruff=="))
+    assert f"rev: v{ruff_pin.split('==')[1]}" in hooks  # the hook runs the same ruff as CI
+
+
 def test_import_and_help_load_no_optional_module_even_when_installed():
     """In this (test) environment every extra is installed: the lazy imports, not their absence, keep them out."""
     found = _probe(sys.executable)
@@ -122,6 +157,10 @@ def test_wheel_builds_and_installs_clean(tmp_path):
     assert metadata["Version"] == version
     assert metadata["License-Expression"] == "MIT"
     assert license_text.startswith("MIT License") and "interprim developers" in license_text
+    # the PyPI page: keywords, classifiers and links (test_pypi_page_metadata checks their values)
+    assert "interaction primitives" in metadata["Keywords"]
+    assert "Typing :: Typed" in metadata.get_all("Classifier")
+    assert any(u.startswith("Paper, https://") for u in metadata.get_all("Project-URL"))
     requires = metadata.get_all("Requires-Dist")
     core = sorted(r.split(">")[0].split("=")[0].strip() for r in requires if "extra ==" not in r)
     assert core == ["numba", "numpy", "scipy", "threadpoolctl"]

@@ -12,8 +12,14 @@ from __future__ import annotations
 
 import importlib
 
-from .core.errors import (DataFileError, InterprimError, ModelFileError, NotFittedError, OutOfRangeWarning,
-                     RepresentationWarning)
+from .core.errors import (
+    DataFileError,
+    InterprimError,
+    ModelFileError,
+    NotFittedError,
+    OutOfRangeWarning,
+    RepresentationWarning,
+)
 
 __version__ = "0.1.0"
 

@@ -97,7 +97,8 @@ def one_line(model) -> str:
     sel = getattr(model, "selection_", None) or {}
     n = getattr(model, "n_demos_", None)
     parts = ([f"{int(n)} demonstrations"] if n is not None else []) + [
-        f"phase {getattr(model, 'phase_method_', model.phase_method)!r}", f"sigma2 {_g(getattr(model, 'sigma2_', None))}"]
+        f"phase {getattr(model, 'phase_method_', model.phase_method)!r}",
+        f"sigma2 {_g(getattr(model, 'sigma2_', None))}"]
     if "shrinkage" in sel:
         parts.append(f"shrinkage {_g(sel['shrinkage'], 2)}")
     if "cross_shrinkage" in sel:
@@ -109,7 +110,8 @@ def summary(model, fit_seconds: float | None = None) -> str:
     """A few lines: the data the model was fitted on and what it chose (see :data:`SELECTION_KEYS`)."""
     n_obs, n_ctrl = len(model.observed_dofs_), len(model.controlled_dofs_)
     n = getattr(model, "n_demos_", None)
-    head = (f"{type(model).__name__} fitted on {'?' if n is None else int(n)} demonstrations: {n_obs} observed + {n_ctrl} "
+    head = (f"{type(model).__name__} fitted on {'?' if n is None else int(n)} demonstrations: "
+            f"{n_obs} observed + {n_ctrl} "
             f"controlled columns, dt {model.dt_:.4g} s, mean duration {model.mean_duration_:.3g} s, "
             f"{model.n_basis} basis functions per DoF")
     if fit_seconds is not None:

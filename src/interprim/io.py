@@ -14,8 +14,8 @@ Versions (``format_version``):
 
 * **3** (written now): version 2 with a look-ahead-aware calibration of the predictive std: the arrays
   ``calibration_lookaheads (H,)`` and ``calibration_column_scale (F, H, D)``, and ``calibration_scale_{observed,
-  controlled}`` of shape ``(F, H)`` (:class:`~interprim.models.primitive.calibration.Calibration`).  An older interprim refuses
-  the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
+  controlled}`` of shape ``(F, H)`` (:class:`~interprim.models.primitive.calibration.Calibration`).  An older interprim
+  refuses the file with "format_version 3 is not supported"; version 1 and 2 files still load (a version 2
   calibration, ``(F,)`` scales, acts at every look-ahead as it did).
 * **2**: ``metadata`` also holds
   ``checksums``, ``{name: {"dtype", "shape", "sha256"}}`` for every other array
@@ -23,8 +23,9 @@ Versions (``format_version``):
   the hyper-parameter selection record of ``fit``, or ``null``); and the
   arrays ``prior_diag``/``prior_factor`` (the diagonal + low-rank form of the
   prior covariance), ``pca_*_explained_variance_ratio`` and ``calibration_{fractions,scale_observed,
-  scale_controlled,n_cases}`` (:class:`~interprim.models.primitive.calibration.Calibration`) and ``input_mean``/``input_std``
-  (with ``input_limit`` in the metadata: the out-of-range check of the observed frames) when the model has them.
+  scale_controlled,n_cases}`` (:class:`~interprim.models.primitive.calibration.Calibration`) and
+  ``input_mean``/``input_std`` (with ``input_limit`` in the metadata: the out-of-range check of the observed frames)
+  when the model has them.
 * **1**: the same without ``checksums``, ``selection`` and those arrays;
   still read (every array's shape is checked, the rest is unset or rebuilt).
 
@@ -53,11 +54,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import struct
 import tokenize
 import zipfile
 import zlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -80,14 +83,14 @@ _READ_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, 
                 SyntaxError, TypeError, tokenize.TokenError)  # a .npy header is parsed as a Python literal
 
 
-def checksum(arr: np.ndarray) -> dict:
+def checksum(arr: np.ndarray) -> dict[str, Any]:
     """``{"dtype", "shape", "sha256"}`` of an array (SHA-256 of its C-ordered bytes), as the metadata keeps it."""
     arr = np.asarray(arr)
     return {"dtype": arr.dtype.str, "shape": list(arr.shape),
             "sha256": hashlib.sha256(np.ascontiguousarray(arr).tobytes()).hexdigest()}
 
 
-def save_estimator(model, path) -> None:
+def save_estimator(model: Any, path: str | os.PathLike[str]) -> None:
     """Write a fitted model other than the Interaction Primitive (any :class:`~interprim.models.base.Predictor`).
 
     The same container as :func:`save_model` (format version 3: checksummed ``.npy`` members and a JSON
@@ -107,7 +110,7 @@ def save_estimator(model, path) -> None:
     write_archive(path, meta, arrays)
 
 
-def load_estimator(path, model_class):
+def load_estimator(path: str | os.PathLike[str], model_class: type[Any]) -> Any:
     """Read a model written by :func:`save_estimator` as a ``model_class`` (no pickle, every array checked)."""
     path = Path(path)
     meta, data = read_archive(path)
@@ -127,7 +130,8 @@ def load_estimator(path, model_class):
     return model
 
 
-def estimator_from_state(model_class, params: dict, arrays: dict, state: dict, source="<state>"):
+def estimator_from_state(model_class: Any, params: dict[str, Any], arrays: dict[str, np.ndarray],
+                         state: dict[str, Any], source: str | os.PathLike[str] = "<state>") -> Any:
     """The fitted ``model_class`` of its parameters ``params`` and the ``(arrays, state)`` of its ``to_state``: the
     one way a model is rebuilt from its state (a model file, a blend's member).  A class with its own
     ``from_state`` (the Interaction Primitive, whose state carries its parameters) restores itself; any other is
@@ -142,7 +146,7 @@ def estimator_from_state(model_class, params: dict, arrays: dict, state: dict, s
     return model
 
 
-def write_archive(path: Path, meta: dict, arrays: dict) -> None:
+def write_archive(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
     """Write ``arrays`` and the JSON ``meta`` as one model file at ``path`` (through a temporary file moved into
     place, so a failure never leaves a half-written model)."""
     arrays = dict(arrays)
@@ -151,14 +155,14 @@ def write_archive(path: Path, meta: dict, arrays: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     try:
         with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+            np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]  # numpy's stub mixes in its own keywords
         tmp.replace(path)
     except BaseException:
         tmp.unlink(missing_ok=True)  # a failed save leaves neither the model nor its temporary file
         raise
 
 
-def expect(cond: bool, path, msg: str):
+def expect(cond: bool, path: str | os.PathLike[str], msg: str) -> None:
     """Raise :class:`~interprim.core.errors.ModelFileError` ``"{path}: {msg}"`` unless ``cond``."""
     if not cond:
         raise ModelFileError(f"{path}: {msg}")
@@ -169,7 +173,8 @@ MAX_METADATA_BYTES = 16 << 20  # its metadata member (JSON) once decompressed
 _NPY_HEADER_SLACK = 1 << 16  # bytes a .npy member may hold besides its data (magic + header)
 
 
-def _read_member(zf, info, path, name: str, budget: int, want=None) -> np.ndarray:
+def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, name: str, budget: int,
+                 want: dict[str, Any] | None = None) -> np.ndarray:
     """One ``.npy`` member, read through a bounded reader: its header first (dtype and shape, no data), then
     exactly the data bytes it declares.  Refused before anything is decompressed when the member's declared
     (uncompressed) size is over ``budget`` or does not match ``want`` (``{"dtype", "shape"}`` from the
@@ -187,14 +192,10 @@ def _read_member(zf, info, path, name: str, budget: int, want=None) -> np.ndarra
         expect(n is not None and n <= declared <= n + _NPY_HEADER_SLACK, path,
                 f"array '{name}' declares {declared} bytes uncompressed, but the metadata gives it shape "
                 f"{want.get('shape')} and dtype {want.get('dtype')}: refusing to decompress it")
+    from ._npz import read_npy_header  # the one .npy header guard (also of data files)
+
     with zf.open(info) as fh:
-        version = np.lib.format.read_magic(fh)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-        else:
-            raise ValueError(f".npy version {version} is not supported")
+        shape, fortran, dtype = read_npy_header(fh)
         expect(not dtype.hasobject and dtype.fields is None and dtype.kind in _DTYPE_KINDS, path,
                 f"not a readable interprim model file: array '{name}' has dtype {dtype}, "
                 "but model files hold only numeric arrays")
@@ -208,10 +209,11 @@ def _read_member(zf, info, path, name: str, budget: int, want=None) -> np.ndarra
         expect(len(raw) == nbytes, path, f"array '{name}' is truncated or corrupt ({len(raw)} bytes of data for "
                                           f"shape {shape}, {dtype})")
     arr = np.frombuffer(raw, dtype=dtype, count=count)
-    return arr.reshape(shape, order="F" if fortran else "C").copy(order="K")
+    out: np.ndarray = arr.reshape(shape, order="F" if fortran else "C").copy(order="K")
+    return out
 
 
-def read_archive(path: Path):
+def read_archive(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """``(meta, arrays)`` of a model file, every member's CRC-32 and (version 2) SHA-256 checked.
 
     Bounded before expanded: the members' declared sizes are checked (against the metadata's shapes and dtypes
@@ -263,7 +265,7 @@ def read_archive(path: Path):
             sums = meta.get("checksums") if version >= 2 else None
             if version >= 2:
                 expect(isinstance(sums, dict), path, "corrupt metadata: no 'checksums' table")
-                extra = sorted(set(members) - set(sums) - {"metadata"})
+                extra = sorted(set(members) - set(sums or ()) - {"metadata"})
                 expect(not extra, path, f"array(s) {extra} are not listed in the metadata's checksums")
             data = {}
             for name, info in members.items():
@@ -290,11 +292,11 @@ def read_archive(path: Path):
     return meta, data
 
 
-def model_kind(path) -> str:
+def model_kind(path: str | os.PathLike[str]) -> str:
     """The model class a model file names (``metadata["model"]``; files of version 1 hold the Interaction
     Primitive), after the whole file has been checked as a container."""
     path = Path(path)
     meta, _ = read_archive(path)
     kind = meta.get("model", "InteractionPrimitive")
     expect(isinstance(kind, str), path, f"metadata 'model' must be a class name, got {kind!r}")
-    return kind
+    return str(kind)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["check_predictor", "jittered_demonstrations"]
+__all__ = ["check_predictor", "jittered_demonstrations", "object_snapshot"]
 
 
 def jittered_demonstrations(n: int = 8, seed: int = 0, jitter: float = 0.3):
@@ -41,11 +41,73 @@ def _state_text(model) -> str:
     return json.dumps([digest, meta], sort_keys=True, default=repr)
 
 
+def object_snapshot(obj, _seen=None):
+    """A deep, comparable copy of everything ``obj`` holds: its ``__dict__`` (and ``__slots__``) followed into the
+    objects, lists, tuples and dicts it refers to, arrays by value (dtype, shape and bytes).
+
+    Two snapshots compare equal (``==``) when nothing reachable from ``obj`` was written in between (scikit-learn's
+    ``check_dict_unchanged``, followed into nested objects).  A :class:`~interprim.core.cache.DerivedCache` (a
+    declared store of values computed from the fitted state, filled on first use) is compared by identity only;
+    functions, modules and classes by identity.
+    """
+    seen = {} if _seen is None else _seen
+    if obj is None or isinstance(obj, (bool, int, float, complex, str, bytes)):
+        return (type(obj).__name__, repr(obj))
+    if isinstance(obj, np.generic):
+        return ("np", obj.dtype.str, obj.tobytes())
+    if isinstance(obj, np.ndarray):
+        if obj.dtype == object:
+            return ("ndarray[object]", obj.shape, tuple(object_snapshot(v, seen) for v in obj.ravel()))
+        return ("ndarray", obj.dtype.str, obj.shape, np.ascontiguousarray(obj).tobytes())
+    from .core.cache import DerivedCache
+
+    if isinstance(obj, DerivedCache) or callable(obj) and not hasattr(obj, "__dict__") \
+            or isinstance(obj, (type, type(json))) or hasattr(obj, "__code__"):
+        return ("identity", type(obj).__name__, id(obj))
+    key = id(obj)
+    if key in seen:
+        return ("seen", seen[key])
+    seen[key] = len(seen)
+    if isinstance(obj, (list, tuple)):
+        return (type(obj).__name__, tuple(object_snapshot(v, seen) for v in obj))
+    if isinstance(obj, (set, frozenset)):
+        return (type(obj).__name__, tuple(sorted(repr(v) for v in obj)))
+    if isinstance(obj, dict):
+        return ("dict", tuple((repr(k), object_snapshot(v, seen)) for k, v in obj.items()))
+    fields = dict(getattr(obj, "__dict__", {}))
+    for cls in type(obj).__mro__:
+        for name in getattr(cls, "__slots__", ()):
+            if isinstance(name, str) and hasattr(obj, name):
+                fields[name] = getattr(obj, name)
+    return (type(obj).__qualname__, tuple((k, object_snapshot(v, seen)) for k, v in sorted(fields.items())))
+
+
+def _changed(before, after, path="model") -> str:
+    """The first place where two :func:`object_snapshot` results differ (for the message)."""
+    if before == after:
+        return ""
+    if (isinstance(before, tuple) and isinstance(after, tuple) and len(before) == len(after) == 2
+            and before[0] == after[0] and isinstance(before[1], tuple) and isinstance(after[1], tuple)):
+        b, a = before[1], after[1]
+        if all(isinstance(x, tuple) and len(x) == 2 and isinstance(x[0], str) for x in b + a):
+            bd, ad = dict(b), dict(a)
+            for k in list(bd) + [k for k in ad if k not in bd]:
+                if k not in ad:
+                    return f"{path}.{k} (removed)"
+                if k not in bd:
+                    return f"{path}.{k} (added)"
+                if bd[k] != ad[k]:
+                    return _changed(bd[k], ad[k], f"{path}.{k}")
+    return path
+
+
 def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> dict:
     """Check that a model family honours the prediction contract; returns what was measured.
 
     Checks, in order: ``predict`` before ``fit`` raises ``NotFittedError``; ``fit`` returns the model; ``predict``
-    leaves the fitted state unchanged; irregular time stamps give the recorded durations; ``save`` ->
+    leaves the fitted state and everything else the model holds unchanged (:func:`object_snapshot`, before and
+    after, as scikit-learn's ``check_dict_unchanged``; so does a stream's ``update``); irregular time stamps give
+    the recorded durations; ``save`` ->
     :func:`interprim.load_any` gives the same predictions; ``clone`` (``type(m)(**m.get_params())``) fits to the same
     predictions; the stream equals ``predict`` frame by frame; ``input_distance`` is finite and ``out_of_range``
     False on held-out frames, True (with one ``OutOfRangeWarning``) on frames in millimetres.  (That the
@@ -68,7 +130,7 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
 
     demos = two_agent_demos(8, seed=3) if demos is None else demos
     train, held = list(demos[:-1]), np.asarray(demos[-1], dtype=np.float64)
-    out = {}
+    out: dict = {}
     model = make()
     try:
         model.predict(held[:10, :2])
@@ -78,9 +140,11 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
         raise AssertionError("predict before fit did not raise NotFittedError")
     assert model.fit(train, dt=dt) is model, "fit must return the model"
     partial = held[: max(10, int(0.5 * len(held))), :2]
-    before = _state_text(model)
+    before, whole = _state_text(model), object_snapshot(model)
     pred = model.predict(partial)
     assert _state_text(model) == before, "predict changed the model's fitted state"
+    where = _changed(whole, object_snapshot(model))
+    assert not where, f"predict changed the model: {where}"
     Y = pred.trajectory(50)
     assert Y.shape == (50, held.shape[1]) and np.all(np.isfinite(Y)), f"trajectory(50) has shape {Y.shape}"
 
@@ -101,13 +165,18 @@ def check_predictor(make, demos=None, dt: float = 0.01, rtol: float = 1e-6) -> d
             "save -> load_any changed the prediction"
 
     clone = type(model)(**model.get_params(deep=False)).fit(train, dt=dt)
-    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol, atol=rtol * max(1.0, float(np.abs(Y).max()))), \
+    assert np.allclose(clone.predict(partial).trajectory(50), Y, rtol=rtol,
+                       atol=rtol * max(1.0, float(np.abs(Y).max()))), \
         "a clone fitted on the same demonstrations predicts differently"
 
+    whole = object_snapshot(model)
     stream = model.stream()
     worst = 0.0
     for k, f in enumerate(partial, start=1):
         p = stream.update(f)
+        if k == 10:
+            where = _changed(whole, object_snapshot(model))
+            assert not where, f"the stream changed the model: {where}"
         if k % 7 == 0 or k == len(partial):
             a, b = p.trajectory(50), model.predict(partial[:k]).trajectory(50)
             worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, float(np.abs(b).max()))))

@@ -41,7 +41,8 @@ def files(tmp_path_factory):
     save_demonstrations(d / "partial.csv", [test[0][:k, :2]], [np.arange(k) * 0.02], columns=COLS[:2])
     # a full demo with every column (the extra robot column is ignored by predict)
     save_demonstrations(d / "partial_full.npz", [test[0][:k]], [np.arange(k) * 0.02], columns=COLS)
-    assert main(["fit", "--model", "ip", str(d / "demos.csv"), "--observed", "human_x,human_y", "-o", str(d / "model.npz")]) == 0
+    assert main(["fit", "--model", "ip", str(d / "demos.csv"), "--observed", "human_x,human_y", "-o",
+                 str(d / "model.npz")]) == 0
     return d
 
 
@@ -69,7 +70,8 @@ def test_fit_writes_a_loadable_model_with_columns(files, capsys):
 
 @pytest.mark.parametrize("src", ["demos_meta.npz", "folder"])
 def test_fit_from_npz_metadata_and_folder(files, src, capsys, tmp_path):
-    argv = ["fit", "--model", "ip", str(files / src), "-o", str(tmp_path / "m.npz"), "--n-basis", "8", "--smoothing-window", "5"]
+    argv = ["fit", "--model", "ip", str(files / src), "-o", str(tmp_path / "m.npz"), "--n-basis", "8",
+            "--smoothing-window", "5"]
     if src == "folder":
         argv += ["--observed", "0", "--observed", "1"]
     assert main(argv) == 0
@@ -78,24 +80,26 @@ def test_fit_from_npz_metadata_and_folder(files, src, capsys, tmp_path):
 
 
 def test_fit_single_agent_model(files, tmp_path, capsys):
-    assert main(["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "0,1,2", "-o", str(tmp_path / "s.npz")]) == 0
+    assert main(["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "0,1,2", "-o",
+                 str(tmp_path / "s.npz")]) == 0
     assert "single-agent" in capsys.readouterr().out
 
 
 def test_predict_csv_output_columns(files, tmp_path, capsys):
     out = tmp_path / "pred.csv"
-    assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out), "--samples", "3"]) == 0
+    assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out), "--samples",
+                 "3"]) == 0
     assert "phase" in capsys.readouterr().out
     lines = out.read_text().splitlines()
-    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in lines if l.startswith("#") and ":" in l}
+    comments = {ln.split(":")[0][2:]: ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("#") and ":" in ln}
     phase = float(comments["phase"])
     assert 0.3 < phase < 0.7  # half of a movement of typical speed was observed
-    header = next(l for l in lines if not l.startswith("#")).split(",")
+    header = next(ln for ln in lines if not ln.startswith("#")).split(",")
     assert header[:3] == ["phase", "s", "time"]
     assert header[3:6] == [f"mean_{c}" for c in COLS] and header[6:9] == [f"std_{c}" for c in COLS]
     assert header[9:12] == [f"sample0_{c}" for c in COLS] and len(header) == 9 + 3 * 3
-    data = [l for l in lines if not l.startswith("#")][1:]
-    rows = np.array([[float(v) for v in l.split(",")] for l in data])
+    data = [ln for ln in lines if not ln.startswith("#")][1:]
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in data])
     assert rows.shape == (100, len(header))
     np.testing.assert_allclose(rows[:, 0], phase)
     np.testing.assert_allclose(rows[:, 1], np.linspace(0, 1, 100))
@@ -130,7 +134,8 @@ def test_fit_errors(files, tmp_path, capsys):
     err = _err(capsys, ["fit", "--model", "ip", str(tmp_path / "missing.csv"), "--observed", "a", "-o", m])
     assert "interprim fit: error:" in err and "not found" in err and "missing.csv" in err
     (tmp_path / "demos.txt").write_text("time,x\n0,1\n")
-    assert "unsupported file type '.txt'" in _err(capsys, ["fit", "--model", "ip", str(tmp_path / "demos.txt"), "--observed", "x", "-o", m])
+    assert "unsupported file type '.txt'" in _err(capsys, ["fit", "--model", "ip", str(tmp_path / "demos.txt"),
+                                                           "--observed", "x", "-o", m])
     err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "human_z", "-o", m])
     assert "unknown column 'human_z'" in err and "human_x, human_y, robot_q" in err
     err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "-o", m])
@@ -175,7 +180,8 @@ def test_console_script_round_trip(files, tmp_path):
     exe = Path(sys.executable).with_name("interprim")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "interprim.cli"]
     model = tmp_path / "m.npz"
-    r = subprocess.run(cmd + ["fit", "--model", "ip", str(files / "folder"), "--observed", "human_x,human_y", "-o", str(model)],
+    r = subprocess.run(cmd + ["fit", "--model", "ip", str(files / "folder"), "--observed", "human_x,human_y", "-o",
+                              str(model)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "saved" in r.stdout
@@ -198,7 +204,8 @@ def test_fit_and_predict_irregular_time_stamps(tmp_path, capsys):
     save_demonstrations(tmp_path / "irr.npz", demos, times, columns=COLS)
     assert load_demonstrations(tmp_path / "irr.npz").dt is None
     model = tmp_path / "m.npz"
-    assert main(["fit", "--model", "ip", str(tmp_path / "irr.npz"), "--observed", "human_x,human_y", "-o", str(model)]) == 0
+    assert main(["fit", "--model", "ip", str(tmp_path / "irr.npz"), "--observed", "human_x,human_y", "-o",
+                 str(model)]) == 0
     test, _ = _demos(n=1, seed=7)
     k = 30
     t = 5.0 + np.cumsum(rng.uniform(0.015, 0.025, size=k))  # any clock origin
@@ -234,9 +241,9 @@ def test_predict_says_when_the_input_is_out_of_range(files, tmp_path, capsys):
         warnings.simplefilter("error")
         assert main(["predict", str(files / "model.npz"), str(path), "-o", str(out), "--dt", "0.02"]) == 0
     assert capsys.readouterr().out.count("WARNING: the observed frames are") == 1
-    comments = {l.split(":")[0][2:]: l.split(":", 1)[1].strip() for l in out.read_text().splitlines()
-                if l.startswith("#") and ":" in l}
-    assert float(comments["out_of_range"]) == 1.0 and float(comments["input_distance"]) > 8
+    comments = {ln.split(":")[0][2:]: ln.split(":", 1)[1].strip() for ln in out.read_text().splitlines()
+                if ln.startswith("#") and ":" in ln}
+    assert comments["out_of_range"] == "true" and float(comments["input_distance"]) > 8
 
 
 def test_fit_chooses_the_model_on_the_data_by_default(files, tmp_path, capsys):
@@ -248,11 +255,15 @@ def test_fit_chooses_the_model_on_the_data_by_default(files, tmp_path, capsys):
     assert main(["fit", str(files / "demos.csv"), "--observed", "human_x,human_y", "-o", str(m)]) == 0
     out = capsys.readouterr().out
     assert "held-out real-time error of the controlled agent, by family" in out
-    for family in ("ip", "learned", "kernel", "nn", "prior"):
-        assert f"  {family} " in out
     model = ip.load_any(m)
     assert type(model) is ip.AutoInteraction and model.columns_ == COLS
-    assert set(model.selection_["cv_errors"]) == {"ip", "learned", "kernel", "nn", "prior"}
+    # every family is compared, or left out (and said so) because its frame alone exceeds the frame budget
+    left_out = model.selection_["cost"]["left_out"]
+    assert set(model.selection_["cv_errors"]) | set(left_out) == {"ip", "learned", "kernel", "nn", "prior"}
+    for family in model.selection_["cv_errors"]:
+        assert f"  {family} " in out
+    for family in left_out:
+        assert f"{family} (" in out.split("left out for the budget:")[1]
     assert main(["predict", str(m), str(files / "partial.csv"), "-o", str(tmp_path / "p.npz")]) == 0
     with np.load(tmp_path / "p.npz", allow_pickle=False) as f:
         assert 0 < float(f["phase"]) < 1 and np.all(np.isfinite(f["mean"])) and f["mean"].shape == (100, 3)

@@ -281,3 +281,23 @@ def test_evaluate_with_a_horizon_prints_a_fit_command_for_that_horizon(tmp_path,
 
     model = ip.load_any(tmp_path / "model.npz")
     assert model.horizon == 0.5 and model.model_.horizon == 0.5
+
+
+def test_fit_frame_budget_option(tmp_path, capsys):
+    """``interprim fit --frame-budget X`` bounds the default's frame (``none``: no bound), is refused for one family
+    alone and for a value that is not a positive number, and the printed summary says what the frame costs."""
+    data = _csv_with_observed_line(tmp_path / "demos.csv")
+    out = tmp_path / "m.npz"
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--model", "nn", "--frame-budget", "2",
+                 "-o", str(out)]) != 0
+    assert "--frame-budget" in capsys.readouterr().err and not out.exists()
+    with pytest.raises(SystemExit):
+        main(["fit", str(data), "--frame-budget", "-1", "-o", str(out)])
+    capsys.readouterr()
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--frame-budget", "1.5",
+                 "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "streamed frame (modelled)" in text and "budget 1.5x" in text
+    import interprim as ip
+
+    assert ip.load_any(out).frame_budget == 1.5

@@ -160,13 +160,15 @@ def test_evaluate_demonstrations_minimum_is_the_documented_constant():
 @pytest.fixture(scope="module")
 def fitted(recordings, tmp_path_factory):
     path = tmp_path_factory.mktemp("model") / "model.npz"
-    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
+    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o",
+                 str(path)]) == 0
     return path
 
 
 def test_fit_prints_what_it_chose(recordings, tmp_path, capsys):
     path = tmp_path / "m.npz"
-    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o", str(path)]) == 0
+    assert main(["fit", "--model", "ip", str(recordings[6]), "--observed", "human_x,human_y", "--n-basis", "6", "-o",
+                 str(path)]) == 0
     out = capsys.readouterr().out
     model = ip.InteractionPrimitive.load(path)
     sel = model.selection_

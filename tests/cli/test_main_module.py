@@ -1,11 +1,10 @@
-"""`python -m interprim` runs the command line (the signal handling of `interprim serve`: tests/server/test_server_shutdown.py)."""
+"""`python -m interprim` runs the command line (the signal handling of `interprim serve`:
+tests/server/test_server_shutdown.py)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
-
-
 
 
 def test_python_m_interprim():

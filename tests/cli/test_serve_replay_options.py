@@ -2,7 +2,6 @@
 a BVH folder in centimetres, and a ROS bag with its topics."""
 
 import numpy as np
-import pytest
 from test_loaders_mocap import SKELETON, _cli, write_bvh
 from test_loaders_ros import bag_path, two_agent_bag
 
@@ -35,7 +34,8 @@ def test_serve_replays_a_bvh_folder_in_centimetres(tmp_path, capsys):
         write_bvh(folder / f"h{k}.bvh", np.column_stack([lift, 0 * s, 10 * s, -lift * 0.9, 0 * s, -10 * s]),
                   frame_time=1 / 30, head=SKELETON)
     model = tmp_path / "m.npz"
-    code, _, err = _cli(["fit", "--model", "ip", folder, "--joints", "A_Hand,B_Hand", "--length-unit", "cm", "--observed", "A_Hand_*",
+    code, _, err = _cli(["fit", "--model", "ip", folder, "--joints", "A_Hand,B_Hand", "--length-unit", "cm",
+                         "--observed", "A_Hand_*",
                          "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     truth = load_demonstrations(folder, joints="A_Hand,B_Hand", length_unit="cm")  # metres
@@ -63,11 +63,12 @@ def test_serve_replays_a_bag_with_its_topics(tmp_path, capsys):
     two_agent_bag("ros1", starts=(10.0, 12.0, 14.0, 16.0), n=30, marker="/start").write(path)
     model = tmp_path / "b.npz"
     topics = "/human/wrist,/robot/joint_states"
-    code, out, err = _cli(["fit", "--model", "ip", path, "--topics", topics, "--split-topic", "/start", "--n-basis", "5", "-o", model],
+    code, out, err = _cli(["fit", "--model", "ip", path, "--topics", topics, "--split-topic", "/start", "--n-basis",
+                           "5", "-o", model],
                           capsys)
     assert code == 0, err
     code, _, err = _cli(["serve", model, "--replay", f"b={path}"], capsys)
-    assert code == 1 and "a ROS bag needs topics=OBSERVED,CONTROLLED" in err.replace("--topics", "topics")
+    assert code == 1 and "a ROS bag needs topics OBSERVED,CONTROLLED" in err.replace("--topics", "topics")
     models = _serve_replays([model, "--replay", f"b={path}", "--topics", topics, "--split-topic", "/start"])
     replay = models["b"].meta["replay"]
     # both streams on the model's grid (dt 0.02 s from where both have started), as 'fit --resample 0.02' reads them

@@ -9,13 +9,25 @@ from scipy.linalg import expm
 import interprim as ip
 from interprim.core._compiled import loader, registry
 from interprim.core._compiled.observation import StatsWorkspace
-from interprim.core.preprocessing import start_position
 from interprim.core.basis import Basis
-from interprim.core.dmp import LinearRollout, _discretisation, _expm_small, fit_weights, fit_weights_targets, forcing_targets
-from interprim.core.gaussian import (LowRankConditioner, condition, condition_literal, fit_prior, lowrank_parts,
-                                shrinkage_intensity)
+from interprim.core.dmp import (
+    LinearRollout,
+    _discretisation,
+    _expm_small,
+    fit_weights,
+    fit_weights_targets,
+    forcing_targets,
+)
+from interprim.core.gaussian import (
+    LowRankConditioner,
+    condition,
+    condition_literal,
+    fit_prior,
+    lowrank_parts,
+    shrinkage_intensity,
+)
+from interprim.core.preprocessing import derivatives, start_position
 from interprim.phase.dtw import IncrementalDTW, accumulate_np, accumulated_cost, open_end_dtw
-from interprim.core.preprocessing import derivatives
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
@@ -181,7 +193,7 @@ def test_position_statistics_kernel_equals_numpy(fitted, fitted_smooth, fitted_s
     assert m.observation == "position"
     _, test = synthetic
     d = np.concatenate([test[0], test[1]])
-    z = m.observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
+    z = m.fitted_.observed_to_latent(d[:M, :2]) + 0.3  # start away from 0: y0 matters
     ws = StatsWorkspace(8, z.shape[1], m.params_per_dof_, "position")
     for workspace in (ws, None, ws):  # reused, fresh, reused after a call with other sizes
         (G, B, yy, n), y0 = m.fitted_.observation_stats(z, s_end, workspace)
@@ -318,9 +330,9 @@ def test_stream_fast_path_equals_reference_path(synthetic, config, request):
     dtw = IncrementalDTW(fitted.reference_)
     for i in range(120):
         p = st.update(d[i, :2])
-        n, c = dtw.update(fitted.observed_to_latent(d[i : i + 1, :2])[0])
+        n, c = dtw.update(fitted.fitted_.observed_to_latent(d[i : i + 1, :2])[0])
         if i in (2, 3, 10, 60, 64, 119):
-            z = fitted.observed_to_latent(d[: i + 1, :2])
+            z = fitted.fitted_.observed_to_latent(d[: i + 1, :2])
             if fitted.phase_method == "dtw":
                 s_end, _ = fitted.fitted_.phase_info(n, i + 1)
                 assert p.normalised_time == s_end

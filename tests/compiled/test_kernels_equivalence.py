@@ -20,11 +20,10 @@ import pytest
 
 import interprim as ip
 from interprim.core._compiled import registry
-from interprim.core.dmp import forcing_targets
 from interprim.core.gaussian import LowRankConditioner
+from interprim.core.preprocessing import derivatives
 from interprim.phase import likelihood as PL
 from interprim.phase.dtw import IncrementalDTW
-from interprim.core.preprocessing import derivatives
 from interprim.synthetic import two_agent_demos
 
 JIT_DISABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
@@ -203,7 +202,7 @@ def check_observation_position_stats(models, demos):
         v0 = m.start_velocity_[:n_o]
         ro = m.rollout_
         for M, s_end in PREFIXES + ((65, 0.6), (130, 0.9)):  # one block of 64 frames, two, three
-            z = np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M)) + 0.3)  # y0 matters
+            z = np.ascontiguousarray(m.fitted_.observed_to_latent(_prefix(demos, M)) + 0.3)  # y0 matters
             X, Y, y0 = obs(m.fitted_, z, s_end)
             G, B = np.empty((q, q)), np.empty((q, n_o))
             yy = comp(z, M, s_end, y0, v0, ro.Z, ro.powers, G, B, np.empty((q, 64)), np.empty((n_o, 64)))
@@ -236,7 +235,7 @@ def check_conditioning_lowrank_condition_mean(models, demos):
         cond = LowRankConditioner.from_prior(m.prior_, m.obs_index_, m.thetas_, float(m.ridge))
         assert cond is not None
         for M, s_end in PREFIXES:
-            X, Y, _ = obs(m.fitted_, np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M))), s_end)
+            X, Y, _ = obs(m.fitted_, np.ascontiguousarray(m.fitted_.observed_to_latent(_prefix(demos, M))), s_end)
             G, B, yy = X.T @ X, X.T @ Y, float(np.sum(Y * Y))
             for s2 in (1e-3, 0.7):
                 (mc, llc), (mn, lln) = cond.mean_compiled(G, B, s2, yy, Y.size), cond.mean_numpy(G, B, s2, yy, Y.size)
@@ -303,11 +302,11 @@ def check_resample_interp_columns():
 def check_phase_likelihood_phase_loglik_batch(models, demos):
     comp, ref = both("phase_likelihood.phase_loglik_batch")
     m = models["likelihood"]
-    fs = PL.fast_state(m)
-    s2 = PL.phase_noise(m)
+    fs = PL.fast_state(m.fitted_)
+    s2 = PL.phase_noise(m.fitted_)
     worst = 0.0
     for M in (2, 5, 40, 70):
-        z = np.ascontiguousarray(m.observed_to_latent(_prefix(demos, M)))
+        z = np.ascontiguousarray(m.fitted_.observed_to_latent(_prefix(demos, M)))
         Rg = fs.mean_path(z[0])
         s = np.linspace(0.05, 1.0, 7)
         a = comp(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, s2, np.empty(s.size))

@@ -12,8 +12,14 @@ import pytest
 
 import interprim
 from interprim.core import cv
-from interprim.core.preprocessing import (interp_columns, resample_step, resample_uniform, step_count, step_grid,
-                                     time_normalise)
+from interprim.core.preprocessing import (
+    interp_columns,
+    resample_step,
+    resample_uniform,
+    step_count,
+    step_grid,
+    time_normalise,
+)
 
 SRC = Path(interprim.__file__).resolve().parent
 

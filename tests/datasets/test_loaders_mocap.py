@@ -5,15 +5,15 @@ Every file is small and written by the test; the values read back are compared w
 """
 
 import random
+import re
 import warnings
 
+import ezc3d  # the [mocap] extra, part of the test extra
 import numpy as np
 import pytest
 
-from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.core.errors import DataFileError, DataFileWarning, MissingExtraError
-
-import ezc3d  # the [mocap] extra, part of the test extra
+from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 
 
 # ----------------------------------------------------------------------------- writers
@@ -22,8 +22,8 @@ def write_c3d(path, xyz, labels, *, rate=100.0, units="mm", first_frame=1, lost=
     """Write markers ``xyz`` (T, M, 3) in ``units`` with ezc3d; ``lost``/``zeroed`` (T, M) mark missing markers
     (residual -1, or coordinates written as 0), ``angles`` adds model-output points listed in POINT:ANGLES,
     ``analog`` adds that many analog channels (10 samples per frame; with one channel ezc3d stores ANALOG:SCALE
-    and ANALOG:OFFSET as single values without dimensions, as in the kinetics-toolkit sample files), ``point_units`` writes POINT:UNITS as
-    these strings (one per point, as Optotrak exports do) instead of ``units``."""
+    and ANALOG:OFFSET as single values without dimensions, as in the kinetics-toolkit sample files), ``point_units``
+    writes POINT:UNITS as these strings (one per point, as Optotrak exports do) instead of ``units``."""
     T, M, _ = xyz.shape
     n_pts = M + len(angles)
     c = ezc3d.c3d()
@@ -113,10 +113,15 @@ def test_c3d_missing_markers_gap_rules(tmp_path):
     zeroed = np.zeros((30, 4), bool)
     zeroed[20, 1] = True  # A:RWrist written as (0, 0, 0) in frame 21
     path = write_c3d(tmp_path / "gap.c3d", xyz, LABELS, lost=lost, zeroed=zeroed)
-    with pytest.raises(DataFileError, match=r"gap\.c3d, marker 'A:RWrist' \(column 'A:RWrist_x'\).*frame 21"):
-        load_c3d(path)
-    with pytest.raises(DataFileError, match=r"marker 'B:RHand'.*3 missing values \(max_nan_gap=2\).*frame 11"):
+    with pytest.raises(DataFileError) as err:
+        load_c3d(path, max_nan_gap=0)
+    assert "gap.c3d: 2 of 4 markers still miss frames after filling no gap (max_nan_gap=0)" in str(err.value)
+    assert re.search(r"B:RHand +10 % +3 frames \(0\.03 s\), frames 11-13\n", str(err.value)), str(err.value)
+    assert re.search(r"A:RWrist +3\.33 % +1 frame, frame 21\n", str(err.value)), str(err.value)
+    assert "max_nan_gap=3: fill gaps of up to 3 frames (0.03 s)" in str(err.value)
+    with pytest.raises(DataFileError, match=r"B:RHand +10 % +3 frames .*frames 11-13"):
         load_c3d(path, max_nan_gap=2)
+    assert load_c3d(path).demos[0].shape == (30, 12)  # the default fills 0.1 s (10 frames at 100 Hz)
     ds = load_c3d(path, max_nan_gap=3)
     y = ds.demos[0].reshape(30, 4, 3)
     ref = f32(xyz) * 1e-3
@@ -132,8 +137,10 @@ def test_c3d_marker_missing_at_the_start_is_an_error(tmp_path):
     lost = np.zeros((20, 4), bool)
     lost[:2, 0] = True
     path = write_c3d(tmp_path / "s.c3d", handover(20), LABELS, lost=lost, first_frame=100)
-    with pytest.raises(DataFileError, match=r"marker 'A:RHand'.*at the start or end starting at frame 100"):
+    with pytest.raises(DataFileError, match=r"A:RHand +10 % +2 frames \(0\.02 s\), frames 100-101 \(at the start "
+                                            r"or end: not filled\)\nwhat fixes it:\n  trim=True"):
         load_c3d(path, max_nan_gap=10)
+    assert load_c3d(path, trim=True).demos[0].shape == (18, 12)
 
 
 def test_c3d_marker_selection_and_model_outputs(tmp_path):
@@ -442,7 +449,8 @@ def test_bvh_binary_garbage_and_unknown_joint(tmp_path):
     path = write_bvh(tmp_path / "j.bvh", _rows(6))
     with pytest.raises(DataFileError, match=r"j\.bvh: unknown joint 'Leg' \(joints=Leg\); the joints are: Hips, Arm"):
         load_bvh(path, joints="Leg")
-    with pytest.raises(DataFileError, match=r"the option markers= applies to \.c3d files, not to this \.bvh file"):
+    with pytest.raises(DataFileError, match=r"the option markers= applies to C3D, Qualisys TSV, Motive CSV files, "
+                                            r"not to this BVH file"):
         load_demonstrations(path, markers="x")
 
 
@@ -464,7 +472,8 @@ def test_cli_fit_and_predict_on_c3d_takes(tmp_path, capsys):
     for k in range(5):
         write_c3d(takes / f"take{k}.c3d", handover(30 + 3 * k, seed=k), LABELS, rate=50.0)
     model = tmp_path / "m.npz"
-    code, out, err = _cli(["fit", "--model", "ip", takes, "--observed", "A:*", "--controlled", "B:RHand_*", "--n-basis", "5",
+    code, out, err = _cli(["fit", "--model", "ip", takes, "--observed", "A:*", "--controlled", "B:RHand_*", "--n-basis",
+                           "5",
                            "-o", model], capsys)
     assert code == 0, err
     assert "dropped:    3 columns named in neither --observed nor --controlled" in out
@@ -490,19 +499,23 @@ def test_cli_errors_on_recordings_are_one_line(tmp_path, capsys):
     code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "A:*", "-o", tmp_path / "m.npz"], capsys)
     assert code == 1 and err.count("\n") == 1
     assert "one.c3d holds 1 demonstration; at least 2 are needed" in err
-    code, _, err = _cli(["fit", "--model", "ip", path, "--markers", "Nose", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
-    assert code == 1 and err.count("\n") == 1 and "unknown marker 'Nose' (--markers=Nose)" in err
+    code, _, err = _cli(["fit", "--model", "ip", path, "--markers", "Nose", "--observed", "0", "-o",
+                         tmp_path / "m.npz"], capsys)
+    assert code == 1 and err.count("\n") == 1 and "unknown marker 'Nose' (--markers Nose)" in err
     code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "C:*", "-o", tmp_path / "m.npz"], capsys)
     assert code == 1 and "--observed: the pattern 'C:*' matches no column" in err
-    code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o", tmp_path / "m.npz"],
+    code, _, err = _cli(["fit", "--model", "ip", path, "--observed", "A:*", "--controlled", "A:RHand_x", "-o",
+                         tmp_path / "m.npz"],
                         capsys)
     assert code == 1 and "--observed and --controlled both name A:RHand_x" in err
     data_start = _data_start(path)
     (tmp_path / "cut.c3d").write_bytes(path.read_bytes()[: data_start + 10])
-    code, _, err = _cli(["fit", "--model", "ip", tmp_path / "cut.c3d", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
+    code, _, err = _cli(["fit", "--model", "ip", tmp_path / "cut.c3d", "--observed", "0", "-o", tmp_path / "m.npz"],
+                        capsys)
     assert code == 1 and err.count("\n") == 1 and "cut.c3d: truncated file" in err and "frame" in err
-    code, _, err = _cli(["fit", "--model", "ip", path, "--split-topic", "/x", "--observed", "0", "-o", tmp_path / "m.npz"], capsys)
-    assert code == 1 and "the option --split-topic= applies to ROS bag files, not to this .c3d file" in err
+    code, _, err = _cli(["fit", "--model", "ip", path, "--split-topic", "/x", "--observed", "0", "-o",
+                         tmp_path / "m.npz"], capsys)
+    assert code == 1 and "the option --split-topic applies to ROS bag files, not to this C3D file" in err
 
 
 SKELETON = """HIERARCHY
@@ -551,13 +564,15 @@ def test_cli_fit_on_bvh_recordings(tmp_path, capsys):
         rows = np.column_stack([lift, 0 * s, 10 * s, -lift * 0.9, 0 * s, -10 * s])
         write_bvh(folder / f"h{k}.bvh", rows, frame_time=1 / 30, head=SKELETON)
     model = tmp_path / "m.npz"
-    code, out, err = _cli(["fit", "--model", "ip", folder, "--joints", "A_Hand,B_Hand", "--length-unit", "cm", "--observed", "A_Hand_*",
+    code, out, err = _cli(["fit", "--model", "ip", folder, "--joints", "A_Hand,B_Hand", "--length-unit", "cm",
+                           "--observed", "A_Hand_*",
                            "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     m = ip.InteractionPrimitive.load(model)
     assert list(m.columns_) == ["A_Hand_x", "A_Hand_y", "A_Hand_z", "B_Hand_x", "B_Hand_y", "B_Hand_z"]
     assert m.dt_ == pytest.approx(1 / 30)
-    code, out, err = _cli(["fit", "--model", "ip", folder, "--bvh-mode", "angles", "--observed", "A_*", "--n-basis", "5",
+    code, out, err = _cli(["fit", "--model", "ip", folder, "--bvh-mode", "angles", "--observed", "A_*", "--n-basis",
+                           "5",
                            "-o", tmp_path / "a.npz"], capsys)
     assert code == 0, err
     assert "controlled: B_Shoulder_Zrotation, B_Shoulder_Xrotation, B_Shoulder_Yrotation" in out

@@ -11,10 +11,10 @@ import pytest
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interprim.datasets import load_demonstrations, load_rosbag
 from interprim.core.errors import DataFileError, MissingExtraError
+from interprim.datasets import load_demonstrations, load_rosbag
 
 KINDS = ("ros1", "db3", "mcap")
 
@@ -294,7 +294,8 @@ def test_missing_topic_wrong_type_and_bad_options(tmp_path):
         load_demonstrations(path)
     with pytest.raises(DataFileError, match=r"the observed and controlled agents are the same stream"):
         load_rosbag(path, ["/human/wrist", "human/wrist"])
-    with pytest.raises(DataFileError, match=r"the option markers= applies to \.c3d files, not to this ROS bag"):
+    with pytest.raises(DataFileError, match=r"the option markers= applies to C3D, Qualisys TSV, Motive CSV files, "
+                                            r"not to this ROS bag file"):
         load_demonstrations(path, topics="/human/wrist", markers="x")
     single = load_rosbag(path, "/human/wrist")  # one agent
     assert single.columns == ["human/wrist_x", "human/wrist_y", "human/wrist_z"] and single.observed_dofs is None
@@ -374,7 +375,8 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
             b.joints("/robot/joint_states", t + 0.004, ["j1", "j2"], [amp * s**2, -0.5 * amp * s])
     path = b.write(tmp_path / "rec")
     model = tmp_path / "m.npz"
-    argv = ["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic", "/demo_start",
+    argv = ["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
+            "/demo_start",
             "--n-basis", "5", "-o", str(model)]
     assert main(argv) == 0
     out = capsys.readouterr().out
@@ -390,8 +392,9 @@ def test_cli_fit_on_a_bag_split_by_markers(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit", "--model", "ip", str(path), "-o", str(model)]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "a ROS bag needs --topics=OBSERVED,CONTROLLED" in err
-    assert main(["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic", "/nope",
+    assert err.count("\n") == 1 and "a ROS bag needs --topics OBSERVED,CONTROLLED" in err
+    assert main(["fit", "--model", "ip", str(path), "--topics", "/human/wrist,/robot/joint_states", "--split-topic",
+                 "/nope",
                  "-o", str(model)]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "no topic '/nope' (--split-topic=/nope)" in err
+    assert err.count("\n") == 1 and "no topic '/nope' (--split-topic /nope)" in err

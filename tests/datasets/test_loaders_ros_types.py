@@ -11,8 +11,8 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interprim.datasets import load_rosbag
 from interprim.core.errors import DataFileError
+from interprim.datasets import load_rosbag
 
 TURTLE_POSE = "float32 x\nfloat32 y\nfloat32 theta\nfloat32 linear_velocity\nfloat32 angular_velocity\n"
 
@@ -58,7 +58,8 @@ def _stamp(ts, t, kind, frame="world"):
 
 def turtles(t):
     """turtle1 drives a circle; turtle2 follows 0.3 s behind."""
-    return np.array([5 + 2 * np.cos(t), 5 + 2 * np.sin(t)]), np.array([5 + 2 * np.cos(t - 0.3), 5 + 2 * np.sin(t - 0.3)])
+    return np.array([5 + 2 * np.cos(t), 5 + 2 * np.sin(t)]), np.array([5 + 2 * np.cos(t - 0.3),
+                                                                       5 + 2 * np.sin(t - 0.3)])
 
 
 def turtlesim_bag(path, kind="ros1", n=60, dt=1 / 62.5):
@@ -72,7 +73,8 @@ def turtlesim_bag(path, kind="ros1", n=60, dt=1 / 62.5):
             items.append((t, f"/{name}/pose", "turtlesim/msg/Pose",
                           T["turtlesim/msg/Pose"](x=float(p[0]), y=float(p[1]), theta=0.5, linear_velocity=2.0,
                                                   angular_velocity=1.0)))
-        tr = T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](float(p2[0]), float(p2[1]), 0.0),
+        tr = T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](float(p2[0]), float(p2[1]),
+                                                                                         0.0),
                                               rotation=T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0))
         stamped = T["geometry_msgs/msg/TransformStamped"](header=_stamp(ts, t, kind), child_frame_id="turtle2",
                                                           transform=tr)

@@ -5,17 +5,15 @@ frames that were written for it.
 """
 
 import re
-import warnings
 
+import ezc3d
 import numpy as np
 import pytest
 from test_loaders_mocap import LABELS, _cli, f32, handover, write_bvh, write_c3d
 
+from interprim.core.errors import DataFileError
 from interprim.datasets import load_bvh, load_c3d, load_demonstrations
 from interprim.datasets._split import spans
-from interprim.core.errors import DataFileError
-
-import ezc3d
 
 
 def add_events(path, events, rate):
@@ -63,8 +61,9 @@ def test_c3d_trim_leading_zero_marker_like_my_looped_motion(tmp_path):
     zeroed[:25, 2] = True
     zeroed[57:, 1] = True  # and lost again for the last 3 frames
     path = write_c3d(tmp_path / "looped.c3d", xyz, LABELS, first_frame=1, zeroed=zeroed)
-    with pytest.raises(DataFileError, match=r"looped\.c3d, marker 'B:RHand' .*missing value\(s\) starting at frame 1 "
-                                            r"\(25 frame\(s\)\)"):
+    with pytest.raises(DataFileError, match=r"(?s)looped\.c3d: 1 of 1 markers still miss frames.*B:RHand +41\.7 % +25 "
+                                            r"frames \(0\.25 s\), frames 1-25 \(at the start or end: not filled\)"
+                                            r".*trim=True"):
         load_c3d(path, markers="B:RHand")
     ds = load_c3d(path, trim=True)
     assert ds.labels == ["looped"] and ds.demos[0].shape == (32, 12)
@@ -91,14 +90,18 @@ def test_c3d_split_by_the_files_events(tmp_path):
     # an event at s seconds is capture frame round(s * rate) + 1, i.e. row round(s * rate) here
     add_events(path, [("Start", s / 100.0) for s in starts] + [("Foot Strike", 0.07)], rate=100.0)
     ds = load_c3d(path, split_events="Start")
+    # the piece after the last event runs to the end of the take, not to a next event: left out, and said so
+    assert len(ds) == 2
+    assert any("the piece after the last event (frames " in n and "not a whole cycle: left out" in n for n in ds.notes)
+    ds = load_c3d(path, split_events="Start", keep_partial=True)
     assert len(ds) == 3
     bounds = starts[1:] + [len(xyz)]
     for d, t, a, b in zip(ds.demos, ds.times, starts, bounds):
         np.testing.assert_allclose(d, f32(xyz[a:b]).reshape(b - a, 12) * 1e-3)
         assert t[0] == 0.0 and len(t) == b - a
     assert ds.labels == [f"long@{s / 100:.3f}s" for s in starts]
-    assert len(load_c3d(path, split_events=True)) == 4  # every event, 'Foot Strike' too
-    assert len(load_c3d(path, split_events="Right:Start")) == 3
+    assert len(load_c3d(path, split_events=True)) == 3  # every event, 'Foot Strike' too (the last piece left out)
+    assert len(load_c3d(path, split_events="Right:Start")) == 2
     with pytest.raises(DataFileError, match=r"long\.c3d: no event Heel inside frames 1-\d+ to split at "
                                             r"\(split_events\); the file's events: Right:Start at 0\.500 s"):
         load_c3d(path, split_events="Heel")
@@ -157,7 +160,8 @@ def test_split_options_belong_to_their_formats(tmp_path):
     from test_loaders_mocap import _rows
 
     bvh = write_bvh(tmp_path / "x.bvh", _rows(10))
-    with pytest.raises(DataFileError, match=r"the option split_events= applies to \.c3d files, not to this \.bvh"):
+    with pytest.raises(DataFileError, match=r"split_events applies to files that carry events \(C3D, Qualisys TSV\), "
+                                            r"not to this BVH file"):
         load_demonstrations(bvh, split_events=True)
     with pytest.raises(ValueError, match="split_gap must be a positive number of seconds"):
         load_demonstrations(bvh, split_gap=-1)
@@ -169,16 +173,24 @@ def test_cli_fit_on_one_take_split_by_events_and_predict_a_fraction(tmp_path, ca
     path = write_c3d(tmp_path / "long.c3d", xyz, LABELS)
     add_events(path, [("Start", s / 100.0) for s in starts], rate=100.0)
     model = tmp_path / "m.npz"
-    code, out, err = _cli(["fit", "--model", "ip", path, "--split-events", "--observed", "A:*", "--n-basis", "5", "-o", model], capsys)
+    code, out, err = _cli(["fit", "--model", "ip", path, "--split-events", "--observed", "A:*", "--n-basis", "5", "-o",
+                           model], capsys)
     assert code == 0, err
-    assert "fitted 4 demonstrations" in out
+    assert "fitted 3 demonstrations" in out  # the piece after the last event is left out, and the command says so
+    assert re.search(r"note: .*long\.c3d: --split-events: the piece after the last event "
+                     r"\(frames \d+-\d+, [\d.]+ s\) runs to the end of the recording, not to a next event, so it is "
+                     r"not a whole cycle: left out \(keep it with --keep-partial\)", out), out
+    code, out, err = _cli(["fit", "--model", "ip", path, "--split-events", "--keep-partial", "--observed", "A:*",
+                           "--n-basis", "5", "-o", model], capsys)
+    assert code == 0 and "fitted 4 demonstrations" in out, err
     one = write_c3d(tmp_path / "one.c3d", handover(40, seed=1), LABELS)
     code, out, err = _cli(["predict", model, one, "--observe-fraction", "0.6", "-o", tmp_path / "p.csv"], capsys)
     assert code == 0, err
     assert "24 frames observed" in out  # ceil(0.6 * 40)
     code, out, err = _cli(["predict", model, one, "--observe-fraction", "0", "-o", tmp_path / "p.csv"], capsys)
     assert code == 1 and "--observe-fraction must be in (0, 1], got 0.0" in err
-    code, out, err = _cli(["fit", "--model", "ip", path, "--trim", "--split-frames", "51-90,141-180,231-270", "--observed", "A:*",
+    code, out, err = _cli(["fit", "--model", "ip", path, "--trim", "--split-frames", "51-90,141-180,231-270",
+                           "--observed", "A:*",
                            "--n-basis", "5", "-o", model], capsys)
     assert code == 0, err
     assert "fitted 3 demonstrations" in out
@@ -267,8 +279,9 @@ def test_pieces_too_short_after_splitting_are_dropped_with_one_warning(tmp_path)
     msgs = [str(w.message) for w in rec if issubclass(w.category, DataFileWarning)]
     assert len(msgs) == 1
     assert re.search(r"ev\.c3d: 1 piece\(s\) shorter than 5 frames left out \(frames 101-103\); "
-                     r"3 demonstrations kept", msgs[0]), msgs
-    assert [len(d) for d in ds.demos] == [50, 97, len(xyz) - 200]
+                     r"2 demonstrations kept", msgs[0]), msgs
+    assert [len(d) for d in ds.demos] == [50, 97]  # the piece after the last event is not a whole cycle
+    assert any("the piece after the last event (frames 201-" in n for n in ds.notes)
 
 
 def test_split_repetitions_auto_is_refused_with_its_name(tmp_path):

@@ -138,7 +138,7 @@ def _two_people(n=10, seed=3):
     own frame (x forward, z up), reaching up together with random amplitude and duration."""
     rng = np.random.default_rng(seed)
     demos = []
-    for i in range(n):
+    for _ in range(n):
         T = int(rng.integers(26, 36))
         s = np.linspace(0, 1, T)
         amp = rng.uniform(0.3, 0.5)
@@ -190,8 +190,8 @@ def test_realtime_figure_writes_gif_and_png_with_the_protocol_numbers(realtime_c
 def test_realtime_trace_matches_a_direct_prediction(realtime_case):
     """The error drawn for a frame is the point RMS, over the next 0.25 s, of predict() placed in time by its own
     phase and duration; the clock's is the training mean played at the mean duration (computed here by hand)."""
-    from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
     from interprim.core.preprocessing import time_normalise
+    from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
 
     models, train, test, obs = realtime_case
     dt, k = 0.05, 14
@@ -304,7 +304,8 @@ def test_demo_nuisi_section(monkeypatch, tmp_path, capsys):
     m = r["models"]["fast"]
     report = (tmp_path / "report.md").read_text()
     assert report.startswith("# earlier part\n")
-    line = f"fast: {100 * m['rt_ctrl']:.1f} cm vs clock {100 * m['clock_rt_ctrl']:.1f} cm ({m['rt_ctrl_vs_clock']:.2f}x)"
+    line = (f"fast: {100 * m['rt_ctrl']:.1f} cm vs clock {100 * m['clock_rt_ctrl']:.1f} cm "
+            f"({m['rt_ctrl_vs_clock']:.2f}x)")
     assert line in report and line in capsys.readouterr().out
     assert "![gif](nuisi_wave1_01_realtime.gif)" in report
     n, _ = _gif_frames(tmp_path / "nuisi_wave1_01_realtime.gif")

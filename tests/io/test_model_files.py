@@ -3,7 +3,6 @@ files of format version 1, files that are not models at all, and the CLI's one-l
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import io
 import json
@@ -17,8 +16,8 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.core._compiled import loader as _fast
 from interprim import io as ipio
+from interprim.core._compiled import loader as _fast
 from interprim.synthetic import two_agent_demos
 
 CONFIGS = {
@@ -438,7 +437,8 @@ def test_cli_serve_with_bad_model_file_prints_one_line(bad_models, bad):
 
 # ----------------------------------------------------------------------------- other CLI errors (item 5)
 def test_cli_evaluate_with_a_user_file_is_one_line(tmp_path):
-    # a user's file is evaluated (tests/model_selection/test_realtime.py); a bad one is one line naming it, before any work
+    # a user's file is evaluated (tests/model_selection/test_realtime.py); a bad one is one line naming it, before any
+    # work
     (tmp_path / "demos.csv").write_text("time,x,y\n0,1,2\n0.1,1,2\n")
     r = _cli("evaluate", "--data", str(tmp_path / "demos.csv"), "--out", str(tmp_path / "ev"))
     assert r.returncode == 1 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
@@ -462,16 +462,18 @@ def test_cli_messages_name_flags_not_python_arguments(tmp_path, capsys):
     rows[4] = rows[4].split(",")[0] + ",nan," + rows[4].split(",")[2]
     (tmp_path / "gap.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
     out = str(tmp_path / "m.npz")
-    assert main(["fit", "--model", "ip", str(tmp_path / "gap.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "1"]) == 1
+    assert main(["fit", "--model", "ip", str(tmp_path / "gap.csv"), "--observed", "x", "-o", out, "--max-nan-gap",
+                 "1"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "max_nan_gap" not in err, err
-    assert "a run of 2 missing values (--max-nan-gap=1) starting at line 5" in err
-    assert err.rstrip().endswith("or interpolate interior gaps of up to 2 frames with --max-nan-gap=2"), err
+    assert "a run of 2 missing values (--max-nan-gap 1) starting at line 5" in err
+    assert err.rstrip().endswith("or interpolate interior gaps of up to 2 frames with --max-nan-gap 2"), err
     # a run at the start cannot be interpolated: no advice to pass an option that cannot help
     rows = [f"{0.1 * i:.1f},{i},{2 * i}" for i in range(8)]
     rows[0] = "0.0,,0"
     (tmp_path / "start.csv").write_text("time,x,y\n" + "\n".join(rows) + "\n")
-    assert main(["fit", "--model", "ip", str(tmp_path / "start.csv"), "--observed", "x", "-o", out, "--max-nan-gap", "3"]) == 1
+    assert main(["fit", "--model", "ip", str(tmp_path / "start.csv"), "--observed", "x", "-o", out, "--max-nan-gap",
+                 "3"]) == 1
     err = capsys.readouterr().err
     assert "at the start or end starting at line 2" in err and err.rstrip().endswith("fill or cut them"), err
     assert "nan-gap" not in err and "max_nan_gap" not in err

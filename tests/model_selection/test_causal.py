@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from interprim.datasets import Demonstrations, RawStream, load_nuisi
-from interprim.model_selection.prefixes import Prefixes, causal_prefix
 from interprim.evaluation.realtime import RealTimeConfig, realtime_sweep
+from interprim.model_selection.prefixes import Prefixes, causal_prefix
 
 
 def _nuisi_file():

@@ -3,16 +3,16 @@
 import numpy as np
 import pytest
 
-from interprim.models.demonstrations import PriorMean
 from interprim.core.preprocessing import time_normalise
 from interprim.evaluation.realtime import RealTimeConfig, folds, realtime_fold, realtime_sweep, summarise_realtime
+from interprim.models.demonstrations import PriorMean
 
 
 def _demos(n=6, seed=0):
     """Two-agent demos with different durations: the controlled agent mirrors the observed one."""
     rng = np.random.default_rng(seed)
     out = []
-    for j in range(n):
+    for _ in range(n):
         T = int(rng.integers(40, 80))
         t = np.linspace(0.0, 1.0, T)
         a = 1.0 + 0.3 * rng.normal()

@@ -4,8 +4,15 @@ one-standard-error choice, on cases with a known answer."""
 import numpy as np
 import pytest
 
-from interprim.model_selection.yardsticks import (case_rms, clock_units, demo_means, one_se_choice, place_cases,
-                                                  ratio_se, true_duration_units)
+from interprim.model_selection.yardsticks import (
+    case_rms,
+    clock_units,
+    demo_means,
+    one_se_choice,
+    place_cases,
+    ratio_se,
+    true_duration_units,
+)
 
 
 def test_case_rms_counts_only_the_masked_steps_and_whole_points():

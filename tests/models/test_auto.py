@@ -105,9 +105,10 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
         for v in np.eye(len(sub.names)):  # never worse than one family alone in its band
             assert band_error(v) >= best - 1e-7
     # the blend's weights and timing: the long-range choice made on those stacked weights
-    from interprim.model_selection.long_range import refine, replaced
+    from interprim.model_selection.long_range import candidate_cases, refine, replaced
 
     fitted, lam = refine(cv, stacked, 0.25)
+    cv = candidate_cases(cv, stacked)  # the families the choice could use, with the real-time weights
     assert s["long_range"]["remaining"] == ("own" if lam is None else lam)
     assert blend.model_.remaining == lam
     assert set(s["band_weights"]) == set(fitted.names)
@@ -161,7 +162,7 @@ def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     got = np.stack([np.interp(s_b + t / D_b, p.times, p.mean[:, d]) for d in range(4)], axis=1)
     want = 0
     wt = model.weights_at(t)  # (instants, members): the weights fitted for each look-ahead
-    for i, (m, pm) in enumerate(preds.items()):
+    for i, pm in enumerate(preds.values()):
         sm, Dm = place_in_time(pm, len(x), hold.dt, model.mean_duration_)
         Y = pm.trajectory(model.N_GRID)
         grid = np.linspace(0, 1, model.N_GRID)
@@ -235,8 +236,8 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     bitwise, those of the plain protocol (every prefix predicted anew, every record computed), so the blend's
     weights and variance model are those the plain protocol gives."""
     from interprim.core.blas import single_thread
-    from interprim.model_selection.stacking import CrossValidation
     from interprim.evaluation.realtime import realtime_sweep, summarise_realtime
+    from interprim.model_selection.stacking import CrossValidation
 
     dev, _ = task
     fams = ("kernel", "nn", "prior")
@@ -260,10 +261,9 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
         by = {(r["demo"], r["k"]): r for r in recs if r["method"] == m}
         np.testing.assert_array_equal(cv.mean[i], np.array([by[c]["mean"] for c in mine]))
         np.testing.assert_array_equal(cv.truth, np.array([by[c]["truth"] for c in mine]))
-    auto = ip.AutoInteraction([0, 1], candidates=fams).fit(dev.demos, dt=dev.dt)
+    auto = ip.AutoInteraction([0, 1], candidates=fams, frame_budget=None).fit(dev.demos, dt=dev.dt)  # every family
     with single_thread():  # as fit computes them (a BLAS thread count changes the last bits of the weights)
         w = cv.blend_weights()
-        vm = cv.blend_scales(w)
     # the real-time band's weights are those of the 0.25 s protocol (the fit scores further ahead too)
     np.testing.assert_allclose([auto.weights_.get(m, 0.0) for m in cv.names], w, atol=1e-6)
 
@@ -323,10 +323,16 @@ def test_fit_shows_its_progress_when_asked(task, capsys, monkeypatch):
 
     dev, _ = task
     monkeypatch.setattr(builtins, "__import__", no_tqdm)
-    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True).fit(dev.demos, dt=dev.dt)
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True, frame_budget=None).fit(
+        dev.demos, dt=dev.dt)
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("fit: step 1/2 compared kernel") and "fitted" in err[-1]
     assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]  # the last step is the last
+    # with a frame budget, the Interaction Primitive that sets it is fitted first, and the count still adds up
+    ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2, progress=True).fit(dev.demos, dt=dev.dt)
+    err = capsys.readouterr().err.splitlines()
+    assert "fitted ip (the frame budget's yardstick)" in err[0]
+    assert err[-1].split()[2].split("/")[0] == err[-1].split()[2].split("/")[1]
     ip.AutoInteraction([0, 1], candidates=("kernel", "prior"), folds=2).fit(dev.demos, dt=dev.dt)
     assert capsys.readouterr().err == ""
 
@@ -387,3 +393,118 @@ def test_a_users_own_family_joins_the_blend(task, tmp_path):
     assert not (tmp_path / "mine.npz").exists()
     with pytest.raises(ValueError, match="pairs"):
         ip.AutoInteraction([0, 1], candidates=("nn", ("shifted",))).fit(dev.demos, dt=dev.dt)
+
+
+def _tied(n=12, Do=3, Dc=3, T=80, seed=0):
+    """Sines of random amplitude, frequency and phase for the observed agent and a fixed quadratic map of them for
+    the controlled one: data on which the families tie (issue 37's second benchmark set, smaller)."""
+    rng = np.random.default_rng(seed)
+    A, B = rng.normal(size=(Do, Dc)) / np.sqrt(Do), rng.normal(size=(Do, Dc)) / np.sqrt(Do)
+    out = []
+    for _ in range(n):
+        s = np.linspace(0, 1, int(round(T * rng.uniform(0.9, 1.1))))[:, None]
+        x = rng.uniform(0.7, 1.3, Do) * np.sin(2 * np.pi * rng.uniform(0.8, 1.2, Do) * s + rng.uniform(-.3, .3, Do))
+        out.append(np.hstack([x, x @ A + (x ** 2) @ B]) + 0.01 * rng.standard_normal((len(s), Do + Dc)))
+    return out
+
+
+def _modelled_frame(auto, demos):
+    """The modelled frame of ``auto``'s members, recomputed from the registry's cost model."""
+    from interprim.models import registry
+    from interprim.models.blend import Blend
+
+    z = registry.FrameSizes(len(demos), float(np.mean([len(d) for d in demos])), len(auto.observed_dofs),
+                            demos[0].shape[1], auto.n_basis)
+    members = list(auto.model_.members_) if hasattr(auto.model_, "members_") else [auto.chosen_]
+    return sum(registry.frame_cost(m, z) for m in members) + Blend.frame_overhead(len(members), demos[0].shape[1])
+
+
+@pytest.fixture(scope="module")
+def tied():
+    demos = _tied()
+    return demos, ip.AutoInteraction([0, 1, 2]).fit(demos, dt=0.02)
+
+
+def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_budget(tied, blend):
+    """Every member of a fitted default carries weight (at least MIN_WEIGHT of some look-ahead band), and on the
+    tied data its modelled frame is within the budget: 3x the Interaction Primitive's, by the cost model."""
+    from interprim.model_selection.stacking import MIN_WEIGHT
+
+    demos, auto = tied
+    for model in (auto, blend):
+        s = model.selection_
+        if s["combine"] == "blend":
+            assert set(s["band_weights"]) == set(model.model_.members_)
+            for m, w in s["band_weights"].items():
+                assert max(w) >= MIN_WEIGHT, (m, w)
+    c = auto.selection_["cost"]
+    assert c["budget"] == pytest.approx(3.0 * c["ip_frame"]) and c["frame"] <= c["budget"]
+    assert c["frame"] == pytest.approx(_modelled_frame(auto, demos), rel=1e-12)
+    for m in c["left_out"]:  # what was left out was left out for the budget, and is not run
+        assert m not in getattr(auto.model_, "members_", {auto.chosen_: None})
+    assert "streamed frame (modelled)" in auto.summary()
+    x = _tied(1, seed=7)[0][:40, :3]
+    st = auto.stream()
+    for f in x:
+        q = st.update(f)
+    np.testing.assert_allclose(q.trajectory(60), auto.predict(x).trajectory(60), rtol=0, atol=1e-8)  # rounding
+
+
+def test_the_budget_picks_the_best_set_of_families_within_it(task):
+    """``stack`` with a frame budget: when the full blend costs more, the blend is made of the set of families within
+    the budget with the smallest summed band loss (checked by brute force over every set), and says what it left
+    out; without a budget (or within it) the blend is the unbudgeted one."""
+    from itertools import combinations
+
+    from interprim.model_selection import stacking
+
+    dev, _ = task
+    fams = ("kernel", "nn", "prior")
+    make = {m: f for m, f in default_methods([0, 1]).items() if m in fams}
+    cfg = stacking.scoring_config(0.25, list(dev.demos), dev.dt, stride=3)
+    cv = stacking.CrossValidation(make, dev.demos, [0, 1], dev.dt, cfg, k=3, horizon=0.25)
+    price = {"kernel": 5.0, "nn": 2.0, "prior": 1.0}
+
+    def cost(names):
+        return sum(price[m] for m in names) + (0.5 if len(names) > 1 else 0.0)
+
+    free = stacking.stack(cv, 0.25)
+    assert stacking.stack(cv, 0.25, cost=cost, budget=100.0).band_weights == free.band_weights
+    budget = 4.0  # kernel alone is over; nn + prior fit (3.5)
+    got = stacking.stack(cv, 0.25, cost=cost, budget=budget)
+    assert cost(got.names) <= budget and "kernel" not in got.names
+    assert got.record["cost"]["left_out"] == {"kernel": 5.0}
+    edges = stacking.look_ahead_bands(0.25, float(cv.t_ahead[-1]))
+    steps = [s for i, s in enumerate(cv.band_steps(edges)) if i == 0 or cv.valid[:, s].any()]
+    options = [set(c) for n in (1, 2, 3) for c in combinations(fams, n) if cost(c) <= budget]
+    best = min(options, key=lambda f: sum(cv.subset([m for m in fams if m in f]).band_loss(s) for s in steps))
+    assert set(got.names) <= best
+
+
+def test_the_blend_stream_is_the_weighted_combination_of_its_members_streamed_alone(blend, task):
+    """After every frame, the blend's stream equals (to rounding) the combination of each member's own stream run
+    alone on the same frames: the blend adds the weights, never another member computation."""
+    _, hold = task
+    model = blend.model_
+    x = hold.demos[2][:30, :2]
+    alone = {m: est.stream() for m, est in model.members_.items()}
+    st = model.stream()
+    for k, f in enumerate(x, start=1):
+        got = st.update(f)
+        want = model.combine({m: s.update(f) for m, s in alone.items()}, k)
+        np.testing.assert_allclose(got.trajectory(50), want.trajectory(50), rtol=0, atol=1e-12)
+
+
+def test_inner_fold_messages_name_the_users_demonstrations(task):
+    """With 4 demonstrations a family that cannot be fitted on an inner training fold is reported with the user's
+    count and why the fold is smaller, not with the fold's count alone."""
+    dev, _ = task
+    auto = ip.AutoInteraction([0, 1], candidates=("learned", "nn", "prior"), folds=3).fit(dev.demos[:4], dt=dev.dt)
+    why = auto.selection_["not_compared"]["learned"]
+    assert "of your 4 demonstrations" in why and "3-fold cross-validation" in why
+    assert "of your 4 demonstrations" in auto.summary()
+
+
+def test_frame_budget_is_checked():
+    with pytest.raises(ValueError, match="frame_budget"):
+        ip.AutoInteraction([0, 1], frame_budget=0).fit(_tied(4, 1, 1, 30), dt=0.02)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from interprim.core.preprocessing import time_normalise
 from interprim.models.demonstrations import NearestNeighbour, PriorMean
 from interprim.models.promp import InteractionProMP
-from interprim.core.preprocessing import time_normalise
 from interprim.synthetic import two_agent_demos
 
 
@@ -28,7 +28,7 @@ def test_nearest_neighbour_finds_the_demo_a_prefix_came_from(data):
     for j in (0, 7, 13):
         d = train[j]
         p = nn.predict(d[: int(0.6 * d.shape[0]), :2])
-        assert nn.neighbour_ == j
+        assert p.neighbour == j
         np.testing.assert_allclose(p.trajectory(50), time_normalise(d, 50), atol=1e-2)
         assert p.phase == pytest.approx(0.6, abs=0.02)
 

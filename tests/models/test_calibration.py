@@ -1,5 +1,5 @@
-"""Calibrated predictive std (interprim.models.primitive.calibration): look-ahead-aware factors, held-out coverage on data with
-known noise, shrinkage, model files with and without the look-ahead arrays."""
+"""Calibrated predictive std (interprim.models.primitive.calibration): look-ahead-aware factors, held-out coverage on
+data with known noise, shrinkage, model files with and without the look-ahead arrays."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 
 import interprim as ip
 from interprim import io as ipio
-from interprim.models.primitive.calibration import Calibration, _shrink
 from interprim.evaluation.realtime import RealTimeConfig, realtime_fold
+from interprim.models.primitive.calibration import Calibration, _shrink
 from interprim.synthetic import two_agent_demos
 
 NOISE = 0.05  # i.i.d. per frame and column: larger than the model's own errors on this data

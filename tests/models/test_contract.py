@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 import interprim as ip
+from interprim.models import registry
 from interprim.models.base import BasePrediction, BaseStream, Predictor
 from interprim.models.demonstrations import NearestNeighbour, PriorMean
-from interprim.models.promp import InteractionProMP
 from interprim.models.kernel import KernelDemonstrations
 from interprim.models.learned import LearnedInteraction
-from interprim.models import registry
+from interprim.models.promp import InteractionProMP
 from interprim.synthetic import two_agent_demos
 
 OBS = [0, 1]
@@ -140,7 +140,8 @@ def test_extend_equals_update_frame_by_frame(name, fitted, demos):
         assert b.n_frames == a.n_frames == i
         np.testing.assert_array_equal(pb.trajectory(30), pa.trajectory(30))
         assert pb.conditioned == pa.conditioned
-        assert pb.normalised_time == pa.normalised_time or (np.isnan(pb.normalised_time) and np.isnan(pa.normalised_time))
+        assert pb.normalised_time == pa.normalised_time or (np.isnan(pb.normalised_time)
+                                                            and np.isnan(pa.normalised_time))
     assert i == 50
     for bad in (np.zeros((0, 2)), np.zeros((3, 3)), np.array([[0.0, np.nan]])):  # nothing enters on bad input
         with pytest.raises(ValueError, match="frame"):

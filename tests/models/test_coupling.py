@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from interprim.models.base import GridPrediction
-from interprim.models.coupling import CouplingModel
 from interprim.core.errors import NotFittedError
 from interprim.core.preprocessing import time_normalise
+from interprim.models.base import GridPrediction
+from interprim.models.coupling import CouplingModel
 
 T = 40
 OBS = [0, 1]

@@ -36,7 +36,8 @@ SCRIPT = textwrap.dedent(
                                  "samples": p.samples(30, 40, random_state=0).tolist(),
                                  "ll": p.log_likelihood})
     s = m.stream()
-    out["stream"] = [[float(q.phase), *q.response(20)[1][-1].tolist()] for q in (s.update(f) for f in test[0][:120, :2])]
+    out["stream"] = [[float(q.phase), *q.response(20)[1][-1].tolist()]
+                     for q in (s.update(f) for f in test[0][:120, :2])]
     json.dump(out, open(sys.argv[1], "w"))
     """
 )
@@ -99,8 +100,8 @@ def test_numpy_and_compiled_paths_agree(runs):
 
 
 def test_same_call_same_bits_within_a_process():
-    from interprim.synthetic import two_agent_demos
     import interprim as ip
+    from interprim.synthetic import two_agent_demos
 
     train = two_agent_demos(12, seed=2)
     m = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10, sigma2=1e-3).fit(train, dt=0.01)

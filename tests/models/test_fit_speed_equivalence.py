@@ -1,5 +1,5 @@
-"""The fast conditioning of the hyper-parameter selection (:func:`interprim.core.gaussian.lowrank_case`: matrix products,
-and a compressed observation reused across priors) against Eq. 17-18 as printed, with the ``N x N`` matrix
+"""The fast conditioning of the hyper-parameter selection (:func:`interprim.core.gaussian.lowrank_case`: matrix
+products, and a compressed observation reused across priors) against Eq. 17-18 as printed, with the ``N x N`` matrix
 ``A = sigma^2 I + Omega Sigma Omega^T`` built and factorised (by Cholesky: the explicit inverse of
 :func:`~interprim.core.gaussian.condition_literal` is less accurate than what it would check).
 

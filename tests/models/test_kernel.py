@@ -31,7 +31,7 @@ def test_prediction_shapes_timing_and_weights(reach):
     assert np.all(p.std(50) >= 0)
     assert p.duration == pytest.approx((k - 1) * dev.dt / p.phase)
     assert 0.2 < p.phase < 0.8
-    assert sum(m.weights_.values()) == pytest.approx(1.0)
+    assert sum(p.weights.values()) == pytest.approx(1.0)
 
 
 def test_small_bandwidth_is_the_nearest_demonstration_and_large_the_uniform_mix(reach):
@@ -39,15 +39,13 @@ def test_small_bandwidth_is_the_nearest_demonstration_and_large_the_uniform_mix(
     test = hold.demos[1]
     k = len(test) // 2
     km = KernelDemonstrations([0, 1], bandwidth=1e-6).fit(dev.demos, dt=dev.dt)
-    km.predict(test[:k, :2])
+    w = km.predict(test[:k, :2]).weights
     nn = NearestNeighbour([0, 1])
     nn.fit(dev.demos)
-    nn.predict(test[:k, :2])
-    w = km.weights_
-    assert max(w, key=w.get) == nn.neighbour_ and w[nn.neighbour_] > 0.999
+    best = nn.predict(test[:k, :2]).neighbour
+    assert max(w, key=w.get) == best and w[best] > 0.999
     wide = KernelDemonstrations([0, 1], bandwidth=1e9).fit(dev.demos, dt=dev.dt)
-    wide.predict(test[:k, :2])
-    np.testing.assert_allclose(list(wide.weights_.values()), 1 / len(dev.demos), rtol=1e-6)
+    np.testing.assert_allclose(list(wide.predict(test[:k, :2]).weights.values()), 1 / len(dev.demos), rtol=1e-6)
 
 
 def test_errors_name_the_problem(reach):
@@ -129,10 +127,9 @@ def test_aligned_stream_equals_predict_on_every_frame(reach, cls, path):
         assert isinstance(st, AlignedStream)
         for k in range(1, len(x) + 1):
             p = st.update(x[k - 1])
-            chosen = dict(m.weights_) if cls is KernelDemonstrations else m.neighbour_
             q = m.predict(x[:k])
             _same_prediction(p, q)
-            assert chosen == (dict(m.weights_) if cls is KernelDemonstrations else m.neighbour_)
+            assert (p.weights, p.neighbour) == (q.weights, q.neighbour)
         assert st.n_frames == len(x)
         st.reset()
         assert st.n_frames == 0
@@ -183,7 +180,10 @@ def test_protocol_predicts_anew_when_the_prefixes_are_not_nested(reach):
     dev, hold = reach
     m = KernelDemonstrations([0, 1]).fit(dev.demos, dt=dev.dt)
     d = hold.demos[0]
-    shifted = lambda k: d[:k, :2] + 1e-3 * k  # every prefix differs from the start of the next
+
+    def shifted(k):  # every prefix differs from the start of the next
+        return d[:k, :2] + 1e-3 * k
+
     recs = realtime_fold(m, dev.demos, d, [0, 1], dev.dt, RealTimeConfig(stride=4), fitted=True, trace=True,
                          prefix=shifted, references=False)
     for r in recs:

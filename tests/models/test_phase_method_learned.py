@@ -118,8 +118,8 @@ def test_auto_is_the_default_and_picks_the_learned_phase_on_recordings_of_people
 
 
 def test_calibration_folds_refit_the_learned_phase():
-    """The calibration's fold models (interprim.models.primitive.calibration.fold_model) refit a learned phase on the kept
-    demonstrations only: the full model's phase model has seen the held-out prefixes, which made the held-out
+    """The calibration's fold models (interprim.models.primitive.calibration.fold_model) refit a learned phase on the
+    kept demonstrations only: the full model's phase model has seen the held-out prefixes, which made the held-out
     timing, and so the calibrated band, optimistic (NuiSI fistbump2 covered 82 % for a 90 % band)."""
     from interprim.models.primitive.calibration import fold_model
 

@@ -51,7 +51,7 @@ def test_derived_values_are_not_attributes_and_copies_do_not_share_them():
     _use(model, demos[0][:50, :2])
     assert set(vars(model)) == before  # predicting adds no attribute to the estimator
     twin = copy.copy(model)
-    assert twin.cached("x", (), lambda: 1) == 1 and model.cached("x", (), lambda: 2) == 2
+    assert twin.fitted_.cached("x", (), lambda: 1) == 1 and model.fitted_.cached("x", (), lambda: 2) == 2
 
 
 # ----------------------------------------------------------------------------- scikit-learn conventions
@@ -145,7 +145,8 @@ def test_to_state_from_state_round_trip():
         ip.InteractionPrimitive.from_state(bad, meta)
 
 
-# ----------------------------------------------------------------------------- the fitted state (interprim.models.primitive.fitted)
+# ----------------------------------------------------------------------------- the fitted state
+# (interprim.models.primitive.fitted)
 def test_fit_builds_a_new_fitted_state_and_the_attributes_are_its_read_only_views():
     from interprim.models.primitive.fitted import FITTED_NAMES, FittedPrimitive
 

@@ -86,8 +86,7 @@ def test_cv_falls_back_towards_the_prior_when_agents_are_independent():
 
 
 def test_lowrank_cv_equals_dense_conditioning():
-    from interprim.core.gaussian import condition, fit_prior
-    from interprim.core.gaussian import LowRankPrior, lowrank_case
+    from interprim.core.gaussian import LowRankPrior, condition, fit_prior, lowrank_case
 
     rng = np.random.default_rng(0)
     n_o, q, n_c = 3, 6, 2

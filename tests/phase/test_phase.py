@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
+from _dtw_reference import brute_force_dtw
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from _dtw_reference import brute_force_dtw
 from hypothesis.extra.numpy import arrays
 
 from interprim.phase.dtw import IncrementalDTW, accumulated_cost, open_end_dtw, phase_from_index
-
 
 small = arrays(np.float64, st.tuples(st.integers(1, 12), st.integers(1, 3)),
                elements=st.floats(-5, 5, allow_nan=False, width=32))

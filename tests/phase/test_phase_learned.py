@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from interprim.core.errors import NotFittedError
-from interprim.phase.learned import FEATURE_GROUPS, LearnedPhase, prefix_features as _prefix_features
+from interprim.phase.learned import FEATURE_GROUPS, LearnedPhase
+from interprim.phase.learned import prefix_features as _prefix_features
 
 DT = 0.05
 

@@ -1,11 +1,12 @@
-"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood, interprim.phase.tracking)."""
+"""Phase estimation by the marginal likelihood of the observation (interprim.phase.likelihood,
+interprim.phase.tracking)."""
 
 import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.phase.dtw import open_end_dtw
 from interprim.core._compiled import registry as kernels
+from interprim.phase.dtw import open_end_dtw
 from interprim.phase.likelihood import estimate_phase, phase_log_likelihood
 
 
@@ -44,13 +45,13 @@ def test_phase_noise_is_selected_and_reported(lik_model):
 def test_estimate_phase_maximises_the_curve(synthetic, lik_model):
     _, test = synthetic
     z = test[0][:80, :2]
-    est = estimate_phase(lik_model, z, refine=True)
+    est = estimate_phase(lik_model.fitted_, z, refine=True)
     assert 0.0 < est.s_end <= 1.0
     assert est.grid.shape == est.curve.shape
     assert est.log_posterior >= est.curve.max() - 1e-9
     # the likelihood at the estimate is higher than far away from it
     far = 1.0 if est.s_end < 0.5 else 0.1
-    assert phase_log_likelihood(lik_model, z, est.s_end) > phase_log_likelihood(lik_model, z, far)
+    assert phase_log_likelihood(lik_model.fitted_, z, est.s_end) > phase_log_likelihood(lik_model.fitted_, z, far)
 
 
 def test_known_phase_bypasses_estimation(synthetic, lik_model):
@@ -116,11 +117,11 @@ def _small_model(observation, pca, covariance):
 
 
 def _latent(model, frames):
-    return model.observed_to_latent(frames[:, model.observed_dofs_])
+    return model.fitted_.observed_to_latent(frames[:, model.observed_dofs_])
 
 
 def _both_paths(model, z, s, s2):
-    fs = PL.fast_state(model)
+    fs = PL.fast_state(model.fitted_)
     assert fs is not None
     Rg = fs.mean_path(np.ascontiguousarray(z[0]))
     num = PL._loglik_batch_numpy(fs.Zh, Rg, np.ascontiguousarray(z), s, fs.sq, fs.Uh, fs.K0, s2)
@@ -138,13 +139,13 @@ def test_batched_log_likelihoods_equal_reference(observation, pca, covariance):
     s = np.exp(np.linspace(np.log(0.02), 0.0, 15))
     for M in (2, 3, 17, 60, 120):
         z = _latent(model, test[:M])
-        s2 = PL.phase_noise(model)
-        ref = np.array([PL._phase_log_likelihood_reference(model, z, x, s2) for x in s])
+        s2 = PL.phase_noise(model.fitted_)
+        ref = np.array([PL._phase_log_likelihood_reference(model.fitted_, z, x, s2) for x in s])
         num, comp = _both_paths(model, z, s, s2)
         np.testing.assert_allclose(num, ref, rtol=1e-8, atol=0)
         np.testing.assert_allclose(comp, ref, rtol=1e-8, atol=0)
-        np.testing.assert_allclose(PL.phase_log_likelihoods(model, z, s), ref, rtol=1e-8, atol=0)
-        assert PL.phase_log_likelihood(model, z, s[3]) == pytest.approx(ref[3], rel=1e-8)
+        np.testing.assert_allclose(PL.phase_log_likelihoods(model.fitted_, z, s), ref, rtol=1e-8, atol=0)
+        assert PL.phase_log_likelihood(model.fitted_, z, s[3]) == pytest.approx(ref[3], rel=1e-8)
 
 
 def test_batched_log_likelihood_matches_extended_precision_where_reference_loses_digits():
@@ -152,12 +153,12 @@ def test_batched_log_likelihood_matches_extended_precision_where_reference_loses
     digits; the batched form agrees with a direct dense evaluation in extended precision."""
     model = _small_model("position", None, "shrinkage")
     z = _latent(model, _demos(1, seed=7)[0][:30])
-    pr = PL._factored(model)
+    pr = PL._factored(model.fitted_)
     n_o, q = model.n_observed_latent_, model.params_per_dof_
     LD = np.longdouble
     for s2 in (1e-2, 1e-6):
         for s in (0.3, 0.8):
-            X, Y = PL.observation_design(model, z, s, "position")
+            X, Y = PL.observation_design(model.fitted_, z, s, "position")
             H = X.astype(LD)
             mu = pr.mean[: n_o * q].reshape(n_o, q).astype(LD)
             W = pr.W.astype(LD)
@@ -191,12 +192,12 @@ def test_dense_fallback_when_prior_is_not_low_rank():
     cov[:n, :n] += 0.05 * np.mean(np.diag(cov[:n, :n])) * np.eye(n)  # no longer diag(d) + W^T W of thetas_
     prior.cov = cov
     model = model.with_fitted(prior_=prior)
-    assert PL._factored(model) is None and PL.fast_state(model) is None
+    assert PL._factored(model.fitted_) is None and PL.fast_state(model.fitted_) is None
     z = _latent(model, _demos(1, seed=7)[0][:50])
     s = np.array([0.2, 0.45, 0.9])
-    ref = [PL._phase_log_likelihood_reference(model, z, x) for x in s]
-    np.testing.assert_allclose(PL.phase_log_likelihoods(model, z, s), ref, rtol=1e-12)
-    est = estimate_phase(model, z)
+    ref = [PL._phase_log_likelihood_reference(model.fitted_, z, x) for x in s]
+    np.testing.assert_allclose(PL.phase_log_likelihoods(model.fitted_, z, s), ref, rtol=1e-12)
+    est = estimate_phase(model.fitted_, z)
     assert 0.0 < est.s_end <= 1.0
 
 
@@ -207,9 +208,10 @@ def _paused(frames, pre=20, post=40):
 
 def _window_reference(model, z, ss):
     """Log posterior of each candidate phase, one reference evaluation each (no batching, no kernel)."""
-    s2 = PL.phase_noise(model)
+    s2 = PL.phase_noise(model.fitted_)
     M = z.shape[0]
-    return np.array([PL._phase_log_likelihood_reference(model, z, s, s2) + float(PL.log_speed_prior(model, M, s))
+    fitted = model.fitted_
+    return np.array([PL._phase_log_likelihood_reference(fitted, z, s, s2) + float(PL.log_speed_prior(fitted, M, s))
                      for s in ss])
 
 
@@ -280,7 +282,9 @@ def test_finish_finds_the_maximum_and_does_not_depend_on_the_starting_candidates
 
     for _ in range(40):
         c, k = rng.uniform(0.1, 0.95), rng.uniform(1e2, 1e5)
-        f = (lambda s, c=c, k=k: -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3)
+        def f(s, c=c, k=k):
+            return -k * np.log(s / c) ** 2 - 0.3 * k * np.log(s / c) ** 3
+
         sc = scorer(f)
         fine = np.exp(np.linspace(np.log(c) - 0.4, min(np.log(c) + 0.4, 0.0), 400001))
         s_max = fine[np.argmax(f(fine))]
@@ -400,11 +404,11 @@ def test_compiled_kernel_padding_shapes_equal_reference(n_basis, n_obs, n_demos)
     multiples, an odd number of observed DoFs, and fewer demonstrations than basis functions."""
     model = ip.InteractionPrimitive(observed_dofs=list(range(n_obs)), n_basis=n_basis, sigma2=1e-2,
                                     phase_method="likelihood").fit(_demos(n_demos, D=4), dt=0.01)
-    s2 = PL.phase_noise(model)
+    s2 = PL.phase_noise(model.fitted_)
     s = np.exp(np.linspace(np.log(0.05), 0.0, 9))
     for M in (2, 5, 64, 65, 120):
         z = _latent(model, _demos(1, D=4, seed=3)[0][:M])
-        ref = np.array([PL._phase_log_likelihood_reference(model, z, x, s2) for x in s])
+        ref = np.array([PL._phase_log_likelihood_reference(model.fitted_, z, x, s2) for x in s])
         num, comp = _both_paths(model, z, s, s2)
         np.testing.assert_allclose(comp, ref, rtol=1e-8, atol=0)
         np.testing.assert_allclose(num, ref, rtol=1e-8, atol=0)
@@ -441,12 +445,12 @@ def test_refined_phase_is_a_local_maximum(synthetic, lik_model):
     _, test = synthetic
     for frac in (0.2, 0.5, 0.8):
         z = test[1][: int(frac * test[1].shape[0]), :2]
-        est = estimate_phase(lik_model, z, refine=True)
-        coarse = estimate_phase(lik_model, z, refine=False)
+        est = estimate_phase(lik_model.fitted_, z, refine=True)
+        coarse = estimate_phase(lik_model.fitted_, z, refine=False)
         assert est.log_posterior >= coarse.log_posterior - 1e-12
         from interprim.phase.likelihood import make_scorer, phase_noise
 
-        sc = make_scorer(lik_model, z, phase_noise(lik_model), True)
+        sc = make_scorer(lik_model.fitted_, z, phase_noise(lik_model.fitted_), True)
         h = 2e-3 * est.s_end
         nb = np.clip(np.array([est.s_end - h, est.s_end + h]), 1e-3, 1.0)
         nb = nb[np.abs(nb - est.s_end) > 1e-12]
@@ -459,7 +463,7 @@ def test_batch_predict_reports_the_dtw_cost_on_demand(synthetic, lik_model):
     _, test = synthetic
     obs = test[2][:70, :2]
     p = lik_model.predict(obs)
-    z = lik_model.observed_to_latent(obs)
+    z = lik_model.fitted_.observed_to_latent(obs)
     assert p.dtw_cost == pytest.approx(open_end_dtw(lik_model.reference_, z, return_path=False).cost, rel=1e-12)
     assert isinstance(p.dtw_cost, float)
 

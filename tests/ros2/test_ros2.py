@@ -7,6 +7,7 @@ wire format is checked with ``rosbags``' CDR deserializer (an implementation ind
 
 import json
 import logging
+import math
 import os
 import random
 import signal
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import time
 import uuid
+import warnings
 
 import numpy as np
 import pytest
@@ -71,11 +73,10 @@ class Wire:
     bridge's two topics (raw samples kept, so the bytes on the wire can be checked)."""
 
     def __init__(self, bridge, partner_type="PointStamped", partner_topic=None):
+        from cyclonedds.domain import DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
-
-        from cyclonedds.domain import DomainParticipant
 
         dp = self.participant = DomainParticipant(bridge.domain_id)  # another participant of the bridge's domain
         q = QosSpec.parse("best_effort,1").dds()
@@ -506,10 +507,10 @@ def test_cli_bridges_between_processes(model, demos, tmp_path):
 def test_cli_bad_observe_is_one_line(model, tmp_path):
     path = tmp_path / "m.npz"
     model.save(path)
-    from interprim.cli import main
-
     import contextlib
     import io
+
+    from interprim.cli import main
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
@@ -584,3 +585,55 @@ def test_response_derivatives_are_the_movements_velocity_and_acceleration():
     v, a = response_derivatives([0.0, 0.5, 1.0, 1.5], [[0.0], [1.0], [2.0], [3.0]])
     np.testing.assert_allclose(v, 2.0)
     np.testing.assert_allclose(a, 0.0, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# a hostile or broken publisher; the frame of the response; the duration flag
+
+
+def test_non_finite_and_absurd_partner_values_are_refused_before_the_model(bridge_of, model, demos, caplog):
+    """As the server's bad_frame: NaN, inf and 1e300 never reach the model; counted with the invalid messages."""
+    b = bridge_of()
+    out = _sink(b)
+    d = demos[1][0][:20]
+    bad = {5: (math.nan, 0.1), 8: (math.inf, 0.1), 11: (1e300, 0.1), 14: (0.1, -1e300)}
+    with caplog.at_level(logging.INFO, logger="interprim.ros2"), warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning from the model's kernels
+        for k in range(20):
+            x, y = bad.get(k, (d[k, 0], d[k, 1]))
+            b.handle(0, _point(k * DT, x, y))
+    assert b.counts["invalid"] == 4 and b.counts["published"] == 16 and b.counts["unusable"] == 0
+    assert len(out) == 16 and all(np.isfinite([p.positions for p in r.points]).all() for r, _ in out)
+    assert b.counts["frames"] == 20  # the refused stamps are bridged on the grid from the good neighbours
+    msgs = [r.getMessage() for r in caplog.records if "invalid" in r.getMessage()]
+    assert len(msgs) == 1 and "a non-finite value (nan or inf)" in msgs[0]
+
+
+def test_published_frame_id_defaults_to_the_partners(bridge_of, demos):
+    b = bridge_of()
+    out = _sink(b)
+    d = demos[1][0]
+    b.handle(0, _point(0.0, d[0, 0], d[0, 1], frame="mocap_world"))
+    assert out[-1][0].header.frame_id == "mocap_world"
+    assert out[-1][1].header.frame_id == "mocap_world"
+    named = bridge_of(frame_id="base_link")
+    out2 = _sink(named)
+    named.handle(0, _point(0.0, d[0, 0], d[0, 1], frame="mocap_world"))
+    assert out2[-1][0].header.frame_id == "base_link"
+
+
+def test_status_flags_a_partner_three_times_slower_than_the_demonstrations(bridge_of, model, demos):
+    from interprim.core.preprocessing import resample_uniform
+
+    b = bridge_of()
+    out = _sink(b)
+    d = demos[1][0]
+    slow = resample_uniform(d, np.arange(len(d)) * 3 * DT, dt=DT)[0][: int(len(d) * 3 * 0.6)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for k, f in enumerate(slow):
+            b.handle(0, _point(k * DT, f[0], f[1]))
+    first, last = _status_values(out[5][1]), _status_values(out[-1][1])
+    assert first["duration_out_of_range"] == "false"
+    assert last["duration_out_of_range"] == "true" and last["out_of_range"] == "false"
+    assert float(last["duration"]) > 1.5 * float(model.durations_.max())

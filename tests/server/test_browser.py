@@ -72,7 +72,8 @@ def wait_for(drv, script, timeout=30.0):
         if value:
             return value
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for: {script}\nstate: {drv.execute_script('return JSON.stringify(window.ipState)')[:2000]}")
+    state = drv.execute_script("return JSON.stringify(window.ipState)")[:2000]
+    raise AssertionError(f"timed out waiting for: {script}\nstate: {state}")
 
 
 def path_end_world(drv, q):
@@ -141,7 +142,7 @@ def test_drag_moves_robot_to_the_high_five_point(live_server, driver):
     d_meet = math.dist(meet, goal)
     driver.save_screenshot(str(ARTIFACTS / "browser_highfive_drag.png"))
     print(f"goal {goal}, human hand {human_end}, robot hand {robot}, meeting point {meet}: "
-          f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m)")
+          f"robot-goal {d_robot:.3f} m (rest {d_rest:.3f} m), meeting point-goal {d_meet:.3f} m")
     assert math.dist(human_end, path_end_world(driver, observed[-1])) < 0.05  # the drag followed the path
     # The frames are those of the path on the virtual clock, so the result is fixed (0.065 m here, with the
     # demo model's input_noise=0.01 rad for pointer input; 1.5 m before input_noise existed): the bound
@@ -183,8 +184,9 @@ def test_replay_button_and_handwriting_tab(live_server, driver):
     assert d_rest > 1.0  # the robot really had to move
     driver.find_element("id", "tab-writing").click()
     # write an "s" with the mouse: the server must recognise it among c, s, u
-    from interprim.server.demo import synthetic_letters
     from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    from interprim.server.demo import synthetic_letters
 
     stroke = synthetic_letters("s", 1, seed=7)[0]
     pts = driver.execute_script("return arguments[0].map(p => window.ipView.letterToClient(p[0], p[1]))",

@@ -13,7 +13,6 @@ Skipped only when Chromium (or its driver) is not installed: ``apt-get install -
 from __future__ import annotations
 
 import pytest
-
 from test_browser import CHROMIUM, DRIVER, driver, wait_for  # noqa: F401  (the driver fixture)
 
 pytestmark = [
@@ -85,7 +84,8 @@ def test_generic_view_replay_labels_band_phase_and_out_of_range(user_server, dri
     driver.find_element("id", "tab-generic").click()
     assert driver.execute_script("return window.ipState.gen.model") == "a_wave"
     Select(driver.find_element("id", "gen-model")).select_by_value("synth")
-    wait_for(driver, "const g = window.ipState.gen; return g.model === 'synth' && g.opened && g.opened.model === 'synth'"
+    wait_for(driver,
+             "const g = window.ipState.gen; return g.model === 'synth' && g.opened && g.opened.model === 'synth'"
                      " && g.replayAvailable > 0")
     opened = driver.execute_script("return window.ipState.gen.opened")
     assert opened["column_names"] == NAMES and opened["column_units"] == UNITS
@@ -141,7 +141,8 @@ def test_generic_view_drag_one_dof(user_server, driver):  # noqa: F811
     wait_for(driver, "return window.ipState && window.ipState.ready")
     driver.find_element("id", "tab-generic").click()
     Select(driver.find_element("id", "gen-model")).select_by_value("synth")
-    wait_for(driver, "const g = window.ipState.gen; return g.model === 'synth' && g.opened && g.opened.model === 'synth'"
+    wait_for(driver,
+             "const g = window.ipState.gen; return g.model === 'synth' && g.opened && g.opened.model === 'synth'"
                      " && g.drawn && g.drawn.series.length === 5")
     # from the value at the demonstrations' mean start up by 30 % of the row's scale, in 40 pointer moves of 10 ms
     result = driver.execute_script(
@@ -163,7 +164,8 @@ def test_generic_view_drag_one_dof(user_server, driver):  # noqa: F811
     driver.execute_script("delete window.ipClock")
     st = driver.execute_script("return window.ipState.gen")
     assert st["dragged"] == "hand_y" and st["error"] is None
-    # one pixel of the row is (range / row height in CSS pixels); the last frame is the release point to within two of them
+    # one pixel of the row is (range / row height in CSS pixels); the last frame is the release point to within two of
+    # them
     px = (result["range"][1] - result["range"][0]) / driver.execute_script("return window.ipView.genRowHeight(1)")
     assert abs(st["lastFrame"][1] - result["v1"]) < 2 * px, (st["lastFrame"], result)
     assert st["conditioned"] is True and st["phase"] is not None

@@ -17,6 +17,7 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from websockets.exceptions import ConnectionClosed  # noqa: E402
 from websockets.sync.client import connect as _connect  # noqa: E402
 
 NAMES = ["hand_x", "hand_y", "arm_a", "arm_b", "arm_c"]
@@ -140,7 +141,8 @@ def test_hello_welcome_open_and_labels(server):
     c, w, o = hello_open(server.ws_url, model="pair", points=20)
     try:
         assert w["version"] == 1 and isinstance(w["session"], int)
-        assert {"max_sessions", "max_message_bytes", "max_rate_hz", "rate_burst", "max_points", "send_queue"} <= set(w["limits"])
+        assert {"max_sessions", "max_message_bytes", "max_rate_hz", "rate_burst", "max_points",
+                "send_queue"} <= set(w["limits"])
         info = model_info(w, "pair")
         # "Model info"
         assert info["kind"] == "interaction" and info["n_dofs"] == 5
@@ -161,7 +163,8 @@ def test_hello_welcome_open_and_labels(server):
         assert o2["columns"] == [0, 1, 2, 3, 4] and o2["column_names"] == NAMES
         # "recognise" with one candidate: lists, as for one model
         o3 = c.rpc({"type": "open", "model": "recognise", "candidates": ["pair"]})
-        assert o3["model"] == "recognise" and o3["columns"] == [2, 3, 4] and o3["column_names"] == ["arm_a", "arm_b", "arm_c"]
+        assert o3["model"] == "recognise" and o3["columns"] == [2, 3, 4] and o3["column_names"] == ["arm_a", "arm_b",
+                                                                                                    "arm_c"]
         # several candidates: per-candidate objects; probabilities uniform until conditioned
         o4 = c.rpc({"type": "open", "model": "recognise", "candidates": ["pair", "pair_b"], "points": 5})
         assert o4["columns"] == {"pair": [2, 3, 4], "pair_b": [2, 3, 4]}
@@ -278,7 +281,7 @@ def test_second_hello_changes_nothing(server):
         assert p["type"] == "prediction" and p["seq"] == 5 and p["frames"] == 5  # same interaction, same count
         bad = c.rpc({"type": "hello", "version": 99})  # checked like the first: fatal
         assert bad["type"] == "error" and bad["code"] == "bad_version"
-        with pytest.raises(Exception):
+        with pytest.raises(ConnectionClosed):
             c.ws.recv(timeout=10)  # closed by the server (1008)
         assert c.ws.close_code == 1008
     finally:

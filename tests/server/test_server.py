@@ -24,6 +24,24 @@ from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
+from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
+    RawWS,
+    closed_with,
+    connect,
+    covered,
+    frame_msg,
+    hello,
+    models,
+    n_sessions,
+    opened,
+    replies_until,
+    rpc,
+    server,
+    strict,
+    test_demo,
+    validator,
+    wait_until,
+)
 from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
 
 from interprim.core.errors import ModelFileError  # noqa: E402
@@ -32,26 +50,6 @@ from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # 
 from interprim.server.client import Client, ServerError  # noqa: E402
 from interprim.server.demo import synthetic_letters  # noqa: E402
 from interprim.server.models import entry_for, load_models  # noqa: E402
-
-
-from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
-    connect,
-    models,
-    test_demo,
-    server,
-    strict,
-    validator,
-    hello,
-    opened,
-    rpc,
-    frame_msg,
-    wait_until,
-    n_sessions,
-    closed_with,
-    covered,
-    replies_until,
-    RawWS,
-)
 
 
 # ---------------------------------------------------------------------------- happy path
@@ -86,7 +84,8 @@ def test_happy_path_matches_direct_stream(server, models, test_demo, validator):
         server_v.validate(r)
         assert r == {"type": "reset_done", "seq": len(test_demo)}
         p = c.frame(test_demo[0, :2])
-        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:, 2:],
+        np.testing.assert_allclose(p["mean"], models["pair"].model.stream().update(test_demo[0, :2]).trajectory(30)[:,
+                                                                                                                    2:],
                                    atol=2e-6)
         assert c.close_session() == {"type": "closed", "seq": len(test_demo) + 1}
         with pytest.raises(ServerError) as e:
@@ -123,8 +122,8 @@ def test_auto_recognises_the_letter(server, validator):
 
 
 def test_auto_probabilities_are_the_recognisers(server, models):
-    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the observed
-    positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
+    """Issue 20: "recognise" recognises with interprim.models.recognition.Recogniser (the candidates' likelihoods of the
+    observed positions at their own most probable phases, with one noise shared by all), not a softmax of each model's
     own-noise log-likelihood; coalesced frames (one reply for several) count as well, and reset starts over."""
     from interprim.models.recognition import Recogniser
 
@@ -305,18 +304,24 @@ def test_non_websocket_garbage_on_the_port(server, test_demo):
 
 def test_disconnect_mid_session(server, test_demo, caplog):
     with caplog.at_level(logging.INFO, logger="interprim.server"):
-        before = n_sessions(server)
         raw = RawWS(server.server.port)
+        # this connection's own session, by its address and port (a count of all sessions would also see an
+        # earlier test's session still leaving on a busy machine)
+        me = "%s:%s" % raw.sock.getsockname()[:2]
+
+        def mine():
+            return server.call(lambda: [s.id for s in server.server.sessions.values() if s.peer == me])
+
         raw.send(json.dumps({"type": "hello"}))
         raw.send(json.dumps({"type": "open", "model": "pair"}))
         for f in test_demo[:20, :2]:
             raw.send(frame_msg(f))
         # the session exists once its hello is accepted (a connection holds no slot before): vanish only then
-        assert wait_until(lambda: n_sessions(server) == before + 1)
+        assert wait_until(lambda: len(mine()) == 1)
         raw.send(b'{"type": "frame", "fr', opcode=1, fin=False)  # half a fragmented message, then vanish
         raw.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
         raw.close()  # RST, no close frame
-        assert wait_until(lambda: n_sessions(server) == before)
+        assert wait_until(lambda: not mine())
         # the session leaves the table before its last log line is written: wait for the line, not only the count
         assert wait_until(lambda: any("without a close frame" in r.getMessage() or "ended" in r.getMessage()
                                       for r in caplog.records))
@@ -580,8 +585,8 @@ def test_cli_replay_and_units_for_a_model_file(tmp_path):
     """``interprim serve m.npz --replay m=demos.csv --units m=...``: the page's replay data and labels."""
     import interprim as ip
     from interprim.cli.serve import _attach_replays, _attach_units
-    from interprim.datasets import save_demonstrations
     from interprim.core.errors import InterprimError
+    from interprim.datasets import save_demonstrations
     from interprim.synthetic import two_agent_demos
 
     names = ["a", "b", "c", "d", "e"]

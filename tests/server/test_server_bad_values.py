@@ -11,10 +11,10 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from _server_support import frame_msg, models, opened, rpc, test_demo  # noqa: E402,F401
+
 from interprim.server import compute  # noqa: E402
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
-
-from _server_support import frame_msg, models, opened, rpc, test_demo  # noqa: E402,F401
 
 
 @pytest.fixture

@@ -24,9 +24,9 @@ import pytest
 
 pytest.importorskip("websockets")
 
-from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
-
 from _server_support import RawWS, models  # noqa: E402,F401
+
+from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 
 MAX_BYTES = 4096
 

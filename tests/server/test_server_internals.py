@@ -12,10 +12,10 @@ import pytest
 
 pytest.importorskip("websockets")
 
+from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
+
 from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
 from interprim.server.client import Client, ServerError  # noqa: E402
-
-from _server_support import covered, models, n_sessions, server, test_demo, wait_until  # noqa: E402,F401  (fixtures and helpers)
 
 
 @pytest.mark.slow  # starts worker processes
@@ -227,7 +227,8 @@ def _reply_text(op, frames):
 @pytest.mark.parametrize("std,dofs", [(False, "controlled"), (True, "all")])
 def test_reply_encoding_fast_paths_equal_the_reference(models, test_demo, std, dofs):
     """compute_prediction's cached rollout (mean) and its text head give the message that
-    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their precision."""
+    Prediction.trajectory + json.dumps would give; the orjson (float32) and printf (%.7g) number formats agree to their
+    precision."""
     from interprim.server import compute
 
     e = models["pair"]

@@ -20,11 +20,6 @@ from interprim.models.base import BasePrediction, BaseStream
 
 pytest.importorskip("websockets")
 
-from interprim.server import compute  # noqa: E402
-from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
-from interprim.server.client import Client  # noqa: E402
-from interprim.server.models import entry_for  # noqa: E402
-
 from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
     covered,
     frame_msg,
@@ -34,6 +29,11 @@ from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
     test_demo,
     wait_until,
 )
+
+from interprim.server import compute  # noqa: E402
+from interprim.server.app import InterprimServer, ServerConfig, ServerThread  # noqa: E402
+from interprim.server.client import Client  # noqa: E402
+from interprim.server.models import entry_for  # noqa: E402
 
 VOLATILE = ("compute_ms", "covers", "first_seq")  # what may differ between a coalesced reply and a per-frame one
 
@@ -61,8 +61,8 @@ def _assert_close(a, b, where="reply"):
 def _open(models, names, std, points=12):
     entries = [models[n] for n in names]
     streams = [e.model.stream() for e in entries]
-    op = compute.OpenModel(names[0] if len(names) == 1 else "recognise", entries, streams,
-                       [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries], points, std)
+    cols = [e.controlled_dofs if e.controlled_dofs else list(range(e.n_dofs)) for e in entries]
+    op = compute.OpenModel(names[0] if len(names) == 1 else "recognise", entries, streams, cols, points, std)
     op.update_kw = {"need_cov": std}
     return op
 

@@ -25,12 +25,11 @@ pytest.importorskip("websockets")
 if not hasattr(os, "killpg"):  # pragma: no cover - POSIX signals
     pytest.skip("POSIX signals and process groups", allow_module_level=True)
 
+from _server_support import connect, covered, frame_msg  # noqa: E402
 from websockets.exceptions import ConnectionClosed  # noqa: E402
 
 import interprim as ip  # noqa: E402
 from interprim.synthetic import two_agent_demos  # noqa: E402
-
-from _server_support import connect, covered, frame_msg  # noqa: E402
 
 START_TIMEOUT = 300  # s: a fresh interpreter imports interprim and loads the compiled kernels (slow when busy)
 BAD_STDERR = ("Traceback", "Warning", "WARNING", "ERROR", "Exception", "never awaited", "interrupted")

@@ -16,9 +16,6 @@ import pytest
 
 pytest.importorskip("websockets")
 
-from interprim.server import wsfast  # noqa: E402
-from interprim.server.protocol import encode_binary_frame  # noqa: E402
-
 from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
     RawWS,
     frame_msg,
@@ -26,6 +23,9 @@ from _server_support import (  # noqa: E402,F401  (fixtures and helpers)
     server,
     test_demo,
 )
+
+from interprim.server import wsfast  # noqa: E402
+from interprim.server.protocol import encode_binary_frame  # noqa: E402
 
 
 def _client_frame(payload: bytes, opcode: int, fin: bool = True, rsv: int = 0, mask: bool = True) -> bytes:

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import interprim.sim
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
 from doc_outputs import TUTORIAL, blocks  # noqa: E402
 

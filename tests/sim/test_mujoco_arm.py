@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import mujoco  # the [mujoco] extra, part of the test extra
 import numpy as np
 import pytest
-
-import mujoco  # the [mujoco] extra, part of the test extra
 
 from interprim.sim import controlled_arm, observed_arm
 from interprim.sim.mujoco_arm import (

@@ -49,9 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _flag_names(parser, command, exc) -> str:
-    """The message of ``exc`` in one line, with the command's Python argument names (``max_nan_gap``) as flags."""
-    msg = " ".join(str(exc).split("\n"))
+def flag_names(parser, command, exc) -> str:
+    """The message of ``exc`` with the command's Python argument names as flags: ``max_nan_gap=30`` as
+    ``--max-nan-gap 30``, ``trim=True`` as ``--trim``, ``time_column=`` (no value) as ``--time-column``.
+
+    One line, unless the error holds a table (``exc.multiline``), which is printed as it is."""
+    msg = str(exc) if getattr(exc, "multiline", False) else " ".join(str(exc).split("\n"))
     try:
         sub = parser._subparsers._group_actions[0].choices[command]
     except (AttributeError, IndexError, KeyError, TypeError):  # pragma: no cover
@@ -60,23 +63,76 @@ def _flag_names(parser, command, exc) -> str:
 
     for action in sub._actions:
         flags = [o for o in action.option_strings if o.startswith("--")]
-        if flags and "_" in action.dest:  # a whole word, not part of a file name
-            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}(?![\w/\\-]|\.\w)", flags[0], msg)
-        elif flags:  # a one-word option only where a message writes it as a keyword argument: 'markers=...'
-            msg = re.sub(rf"(?<![\w./\\-]){re.escape(action.dest)}=", flags[0] + "=", msg)
+        if not flags:
+            continue
+        flag, name = flags[0], re.escape(action.dest)
+        lead = r"(?<![\w./\\-])"
+        if action.nargs == 0 and action.const is True:  # a store_true flag
+            msg = re.sub(lead + name + r"=True\b", flag, msg)
+        msg = re.sub(lead + name + r"=(?=[\s,;:)]|$)", flag, msg)  # 'name=' without a value: the flag alone
+        msg = re.sub(lead + name + r"=(?=\S)", flag + " ", msg)  # 'name=value': the flag and the value
+        if "_" in action.dest:  # a whole word, not part of a file name
+            msg = re.sub(lead + name + r"(?![\w/\\-]|\.\w)", flag, msg)
     return msg
 
 
+class _OncePerCause:
+    """Warnings of a command: each cause printed once, as one line ``warning: ...`` (no Python source line), and
+    at the end how many times each cause repeated."""
+
+    def __init__(self, parser, command):
+        self.parser, self.command = parser, command
+        self.seen: dict = {}
+
+    def show(self, message, category, filename, lineno, file=None, line=None):
+        import re
+
+        from ..core.errors import DataFileWarning
+
+        text = str(message)
+        # one cause: a warning about a file is its own (file names differ); another warning of one category whose
+        # numbers differ (a fold's ratios) is one cause
+        key = (category.__name__, text if issubclass(category, DataFileWarning) else re.sub(r"\d+(\.\d+)?", "#", text))
+        if key in self.seen:
+            self.seen[key][0] += 1
+            return
+        self.seen[key] = [1, text]
+        text = flag_names(self.parser, self.command, message if isinstance(message, Exception) else Exception(message))
+        print(f"warning: {text} ({category.__name__})", file=sys.stderr)
+
+    def summary(self):
+        for (name, _), (n, msg) in self.seen.items():
+            if n > 1:
+                short = msg if len(msg) <= 60 else msg[:57] + "..."
+                print(f"warning: the {name} above ({short!r}) was raised {n} times in all (its numbers may differ)",
+                      file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    once = _OncePerCause(parser, args.command)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")  # counted here, printed once per cause
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+        warnings.showwarning = once.show
+        try:
+            return _run(parser, args)
+        finally:
+            once.summary()
+
+
+def _run(parser, args) -> int:
     try:
         return int(args.func(args) or 0)
     except (InterprimError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"interprim {args.command}: error: {_flag_names(parser, args.command, exc)}", file=sys.stderr)
+        print(f"interprim {args.command}: error: {flag_names(parser, args.command, exc)}", file=sys.stderr)
         return 2 if isinstance(exc, ModelFileError) else 1  # a corrupt or non-model file given as MODEL
     except ImportError as exc:  # an optional extra that is not installed: one line naming the pip install
         from .._optional import extra_for_import_error

@@ -85,9 +85,11 @@ def positive_number(value, name):
 
 
 # ----------------------------------------------------------------------------- recordings
+MAX_NAN_GAP_HELP = ("fill interior gaps of up to this many missing frames by linear interpolation (default: none for "
+                    "CSV, NPZ, BVH and ROS bags; 0.1 s of frames for marker files: C3D, TSV, Motive CSV)")
 RECORDING_HELP = (
-    "recordings: motion capture (.c3d, .bvh) and ROS bags (.bag, .db3, .mcap, rosbag2 folder); "
-    "see docs/data-formats.md"
+    "recordings and takes: motion capture (.c3d, Qualisys .tsv, OptiTrack Motive .csv, .bvh), ROS bags (.bag, "
+    ".db3, .mcap, rosbag2 folder), and CSV/NPZ takes to split; see docs/data-formats.md"
 )
 
 
@@ -105,31 +107,39 @@ def add_recording_args(p, what="DEMOS") -> None:
                    help="ROS bag: a topic whose messages (e.g. std_msgs/Empty) mark the start of each demonstration")
     g.add_argument("--split-gap", type=float, metavar="SECONDS",
                    help="a pause longer than SECONDS starts a new demonstration: ROS bag, no message in either "
-                        "stream; C3D/BVH, every column slower than 5%% of the take's 95th-percentile speed, or a "
-                        "marker missing")
+                        "stream; a take (CSV, NPZ, C3D, BVH, TSV), every column slower than 5%% of the take's "
+                        "95th-percentile speed, or a value missing")
     g.add_argument("--split-events", nargs="?", const="*", default=None, metavar="LABELS",
-                   help="C3D: each of the file's events (or only those labelled LABELS, comma-separated) starts a "
-                        "demonstration lasting until the next")
+                   help="C3D, Qualisys TSV: each of the file's events (or only those labelled LABELS, "
+                        "comma-separated) starts a demonstration lasting until the next; the piece after the last "
+                        "event is not a whole cycle and is left out (see --keep-partial)")
+    g.add_argument("--keep-partial", action="store_true",
+                   help="with --split-events: also keep the piece after the last event")
     g.add_argument("--split-frames", metavar="A-B,C-D",
-                   help="C3D/BVH: the demonstrations as frame ranges (inclusive; C3D frames as the capture numbers "
-                        "them, BVH frames from 0)")
+                   help="the demonstrations as frame ranges (inclusive; C3D/TSV/Motive frames as the capture numbers "
+                        "them, BVH frames and CSV/NPZ rows from 0)")
     g.add_argument("--split-repetitions", nargs="?", const=True, default=None, metavar="PERIOD",
-                   help="C3D/BVH: cut a continuous take (walking, hopping, repeated serves) into the repetitions of "
-                        "its movement; the period is found from the take (or give it in seconds)")
+                   help="cut a continuous take (CSV, NPZ, C3D, BVH, TSV: walking, hopping, repeated serves) into the "
+                        "repetitions of its movement; the period is found from the take (or give it in seconds)")
     g.add_argument("--trim", action="store_true",
-                   help="C3D/BVH: drop the leading and trailing frames in which a marker is missing (0,0,0) or a "
-                        "channel is nan")
+                   help="drop the leading and trailing frames of each demonstration in which a marker or value is "
+                        "missing")
+    g.add_argument("--min-marker-coverage", type=float, default=None, metavar="SHARE",
+                   help="marker files (C3D, TSV, Motive CSV): leave out the markers seen in fewer than this share of "
+                        "the frames (default 0.5; 0 keeps all; markers named with --markers are always kept)")
     g.add_argument("--orientation", action="store_true",
                    help="ROS bag: also read the orientation quaternion of poses and tf frames (_qx, _qy, _qz, _qw)")
     g.add_argument("--joints", metavar="J1,J2",
                    help="BVH: joints to keep; ROS JointState: joints to read (default all)")
-    g.add_argument("--markers", metavar="M1,M2", help="C3D: markers to keep (default all)")
+    g.add_argument("--markers", metavar="M1,M2",
+                   help="C3D, TSV, Motive CSV: markers to keep (default: all seen in at least --min-marker-coverage "
+                        "of the frames)")
     g.add_argument("--bvh-mode", choices=("positions", "angles"), default=None,
                    help="BVH: joint world positions <joint>_x/_y/_z by forward kinematics (default) or joint angles "
                         "<joint>_<channel> in radians")
     g.add_argument("--length-unit", metavar="UNIT", choices=("mm", "cm", "m", "in", "ft"),
-                   help="BVH: the file's length unit (positions are converted to metres); C3D: overrides the file's "
-                        "POINT:UNITS (C3D positions are always converted to metres)")
+                   help="BVH: the file's length unit (positions are converted to metres); C3D, TSV, Motive CSV: "
+                        "overrides the file's unit (marker positions are always converted to metres)")
     g.add_argument("--end-sites", action="store_true", help="BVH positions: also the End Site points (<joint>_end_x)")
     c = p.add_argument_group("CSV files (also rostopic echo -p and ros2 bag / PlotJuggler CSV exports)")
     c.add_argument("--time-column", metavar="NAME",
@@ -160,19 +170,22 @@ def recording_options(args) -> dict:
         end_sites=bool(args.end_sites),
         time_column=getattr(args, "time_column", None),
         time_unit=getattr(args, "time_unit", None),
+        min_marker_coverage=getattr(args, "min_marker_coverage", None),
+        keep_partial=bool(getattr(args, "keep_partial", False)),
     )
 
 
 #: (attribute, flag, default) of every option that changes which data a command reads or how it is fitted, shared
 #: by ``evaluate`` and ``fit``: :func:`data_flags`.
 DATA_OPTIONS = (
-    ("dt", "--dt", None), ("resample", "--resample", None), ("max_nan_gap", "--max-nan-gap", 0),
+    ("dt", "--dt", None), ("resample", "--resample", None), ("max_nan_gap", "--max-nan-gap", None),
     ("topics", "--topics", None), ("split_topic", "--split-topic", None), ("split_gap", "--split-gap", None),
     ("split_events", "--split-events", None), ("split_frames", "--split-frames", None), ("trim", "--trim", False),
     ("orientation", "--orientation", False), ("joints", "--joints", None), ("markers", "--markers", None),
     ("bvh_mode", "--bvh-mode", None), ("length_unit", "--length-unit", None), ("end_sites", "--end-sites", False),
     ("time_column", "--time-column", None), ("time_unit", "--time-unit", None),
-    ("split_repetitions", "--split-repetitions", None),
+    ("split_repetitions", "--split-repetitions", None), ("min_marker_coverage", "--min-marker-coverage", None),
+    ("keep_partial", "--keep-partial", False),
     ("smoothing_window", "--smoothing-window", None), ("n_basis", "--n-basis", 20),
 )
 
@@ -211,10 +224,52 @@ def _repetitions(text):
     return positive_number(value, "--split-repetitions")
 
 
-def print_notes(ds) -> None:
-    """What the reader decided for the user to know (``Demonstrations.notes``), one line each."""
+#: what a command says when a file holds one demonstration (a continuous recording): how to cut it
+SPLIT_HINT = ("If it is one continuous recording, cut it with --split-gap SECONDS (pauses), --split-repetitions (a "
+              "repeated movement) or --split-frames A-B,C-D (C3D and TSV files with events: --split-events)")
+
+
+def read_demonstrations(path, args, *, columns=None, flag="--resample"):
+    """The demonstrations of ``path`` as every command reads them (``fit FILE``, ``evaluate --data FILE``,
+    ``serve --replay``): the data options of ``args``; irregular time stamps without ``--resample`` resampled at
+    their median interval (the rule of the models' ``fit``), said in one note."""
+    from ..datasets import load_demonstrations
+    from ..datasets._base import sampling
+    from ..datasets.files import median_interval, resampled
+
+    resample = getattr(args, "resample", None)
+    positive_number(resample, flag)
+    positive_number(getattr(args, "dt", None), "--dt")
+    ds = load_demonstrations(path, columns=columns, dt=getattr(args, "dt", None), resample_dt=resample,
+                             max_nan_gap=getattr(args, "max_nan_gap", None), **recording_options(args))
+    if ds.dt is None and len(ds) and all(len(t) > 1 for t in ds.times):
+        why = sampling(ds.times).describe(ds.labels)
+        dt = median_interval(ds.times)
+        ds = resampled(ds, dt)
+        ds.notes = list(ds.notes) + [f"{why}; resampled at their median interval {dt:.6g} s (as {flag} {dt:.6g}); "
+                                     f"give {flag} DT to choose the interval"]
+    return ds
+
+
+def as_flags(text: str, command: str | None) -> str:
+    """``text`` with the Python argument names of ``command`` written as its flags (``keep_partial=True`` as
+    ``--keep-partial``), as its errors are printed."""
+    if not command:
+        return text
+    from . import build_parser, flag_names
+
+    return flag_names(build_parser(), command, _Text(text))
+
+
+class _Text(Exception):
+    multiline = True
+
+
+def print_notes(ds, command: str | None = None, file=None) -> None:
+    """What the reader decided for the user to know (``Demonstrations.notes``), one line each, with the flags of
+    ``command``."""
     for note in getattr(ds, "notes", ()) or ():
-        print(f"note: {note}")
+        print(f"note: {as_flags(note, command)}", file=file)
 
 
 def expand_columns(columns, names, flag: str) -> list:

@@ -120,10 +120,9 @@ def _nuisi_figure(action, demo, out):
     """The NuiSI real-time figure (:func:`interprim.evaluation.realtime_plots.nuisi_realtime_figure`): GIF, PNG,
     ``nuisi_realtime.json`` and a section of ``report.md``; prints one line per model.  Returns the files."""
     import json
+    from pathlib import Path
 
     from ..evaluation.realtime_plots import nuisi_realtime_figure
-
-    from pathlib import Path
 
     r = nuisi_realtime_figure(action, demo, out)
     names = {k: Path(v).name for k, v in r["files"].items()}

@@ -13,11 +13,13 @@ USER_METHODS = "ip,learned,ip-paper,nn,prior"
 
 
 def add_parser(subparsers):
+    from ._common import MAX_NAN_GAP_HELP
+
     p = subparsers.add_parser(
         "evaluate",
         help="leave-one-out evaluation of IPs and peers (RMSE vs %% observed, recognition, figures)",
         description=(
-            "Leave-one-out over the demonstrations of each task: observe 10-100 %% of the observed agent, "
+            "Leave-one-out over the demonstrations of each task: observe 10-100 % of the observed agent, "
             "predict the controlled agent (NuiSI: agent 2's right hand) and the observed agent's completion. "
             "Methods: ip-forcing / ip-position (sigma2 by cross-validation, likelihood phase; '-dtw' and "
             "'-oracle' phase variants are reported from the same fits), ip-paper (the paper exactly), iprompt "
@@ -39,8 +41,8 @@ def add_parser(subparsers):
     p.add_argument("--resample", type=float, default=None, metavar="DT",
                    help="with --data FILE: resample the demonstrations to this interval (s) (needed for irregular "
                         "time stamps; ROS bags: the grid both agents are interpolated onto)")
-    p.add_argument("--max-nan-gap", type=int, default=0,
-                   help="with --data FILE: fill interior gaps of up to this many missing frames")
+    p.add_argument("--max-nan-gap", type=int, default=None,
+                   help="with --data FILE: " + MAX_NAN_GAP_HELP)
     p.add_argument("--folds", type=int, default=None,
                    help="with --data FILE: k-fold cross-validation (default: leave-one-out)")
     p.add_argument("--horizon", type=float, default=DEFAULT_HORIZON,
@@ -129,35 +131,34 @@ def _is_user_data(data: str) -> bool:
 
 def run_user_data(args) -> int:
     """``--data FILE``: every protocol of :mod:`interprim.evaluation.realtime` on the user's own demonstrations."""
+    import sys
     from pathlib import Path
 
-    from ..datasets import load_demonstrations
-    from ..core.errors import InterprimError
-    import sys
-
     from ..assessment import evaluate_demonstrations
-    from ..evaluation.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, default_methods,
-                                       markdown_table, save_report)
+    from ..core.errors import InterprimError
+    from ..evaluation.realtime import (
+        ALL_METHODS_FROM,
+        MIN_DEMONSTRATIONS,
+        RealTimeConfig,
+        default_methods,
+        markdown_table,
+        save_report,
+    )
 
     if not Path(args.data).exists():
         raise InterprimError(f"--data {args.data}: no such file or folder")
     if getattr(args, "development_only", False):
         raise InterprimError("--development-only holds out the built-in NuiSI hold-out; with --data FILE keep your own "
                              "hold-out recordings out of the file instead")
-    from ._common import positive_number, split_cols, agent_columns, recording_options
+    from ._common import SPLIT_HINT, agent_columns, print_notes, read_demonstrations, split_cols
 
-    positive_number(args.resample, "--resample")
-    ds = load_demonstrations(args.data, dt=args.dt, resample_dt=args.resample, max_nan_gap=args.max_nan_gap,
-                             **recording_options(args))
+    ds = read_demonstrations(args.data, args)  # as 'interprim fit' reads it: irregular stamps at their median
+    print_notes(ds, "evaluate", file=sys.stderr)
     ds, obs = agent_columns(ds, split_cols([args.observed]), split_cols([args.controlled]), args.data)
-    if ds.dt is None:  # the rule of every command: uniform within 1 % of the interval plus the stamps' rounding
-        from ..datasets._base import sampling
-
-        raise InterprimError(f"--data {args.data}: {sampling(ds.times).describe(ds.labels)}; resample them with "
-                             "--resample DT")
     if len(ds.demos) < MIN_DEMONSTRATIONS:
         raise InterprimError(f"--data {args.data}: {len(ds.demos)} demonstration(s); the evaluation needs at least "
-                             f"{MIN_DEMONSTRATIONS} (every method runs from {ALL_METHODS_FROM}, leave-one-out)")
+                             f"{MIN_DEMONSTRATIONS} (every method runs from {ALL_METHODS_FROM}, leave-one-out). "
+                             + SPLIT_HINT)
     if args.folds is not None and args.folds < 2:
         raise InterprimError(f"--folds {args.folds}: needs at least 2 folds")
     methods = None

@@ -16,8 +16,18 @@ import argparse
 
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import InterprimError
-from ._common import (CommandError, positive_number, split_cols, add_recording_args, agent_columns, output_when_done,
-                      print_notes, recording_options)
+from ._common import (
+    MAX_NAN_GAP_HELP,
+    SPLIT_HINT,
+    CommandError,
+    add_recording_args,
+    agent_columns,
+    output_when_done,
+    positive_number,
+    print_notes,
+    read_demonstrations,
+    split_cols,
+)
 
 __all__ = ["add_parser", "CommandError"]
 
@@ -26,8 +36,11 @@ DEMOS is a CSV file (header of column names, a 'time' column in seconds, optiona
 column splitting several demonstrations), a folder of such files, or an NPZ archive with
 demo_000, demo_001, ... (T, D) arrays, time_000, ... and 'columns' (see docs/data-formats.md).
 It may also be a recording: a folder of C3D files (markers <marker>_x/_y/_z in metres; needs
-pip install 'interprim[mocap]') or BVH files (one demonstration per file), or a ROS bag (.bag,
-.db3, .mcap or a rosbag2 folder; needs pip install 'interprim[ros]') with --topics.
+pip install 'interprim[mocap]'), Qualisys TSV or OptiTrack Motive CSV exports, or BVH files (one
+demonstration per file), or a ROS bag (.bag, .db3, .mcap or a rosbag2 folder; needs
+pip install 'interprim[ros]') with --topics. One continuous take (any of these, CSV and NPZ too) is
+cut into demonstrations with --split-gap, --split-repetitions, --split-frames (C3D/TSV: --split-events).
+Marker gaps up to 0.1 s are filled; markers seen in under half the frames are left out (one warning).
 --observed and --controlled take names, 0-based indices or shell patterns ('A:*', 'RHand_?').
 
 examples:
@@ -85,6 +98,12 @@ def add_parser(subparsers) -> None:
         f"for it, the kernel model is tuned for it (default {DEFAULT_HORIZON}; --model ip predicts the whole "
         f"movement and has no horizon)",
     )
+    p.add_argument(
+        "--frame-budget", type=_frame_budget, default=None, metavar="X",
+        help="--model auto: the most a streamed frame may cost, as a multiple of the Interaction Primitive's on "
+        "the same data (default 3; 'none': no bound); families that do not fit are left out, and the summary "
+        "says which",
+    )
     p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
     p.add_argument(
         "--observation",
@@ -128,7 +147,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--smoothing-window", type=int, default=None, help="Savitzky-Golay window in frames for derivatives (odd)"
     )
-    p.add_argument("--pca", type=int, default=None, metavar="K", help="project each agent onto K principal components (ip)")
+    p.add_argument("--pca", type=int, default=None, metavar="K",
+                   help="project each agent onto K principal components (ip)")
     p.add_argument("--dt", type=float, default=None, help="sampling interval (s) for files without time stamps")
     p.add_argument(
         "--resample", type=float, default=None, metavar="DT",
@@ -136,8 +156,7 @@ def add_parser(subparsers) -> None:
         "interpolated onto"
     )
     p.add_argument(
-        "--max-nan-gap", type=int, default=0,
-        help="fill interior gaps of up to this many missing frames (missing values, lost mocap markers)",
+        "--max-nan-gap", type=int, default=None, help=MAX_NAN_GAP_HELP,
     )
     add_recording_args(p)
     p.set_defaults(func=cmd_fit)
@@ -154,6 +173,18 @@ MODELS = _models()
 IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("sigma2", "--sigma2"),
            ("phase_method", "--phase-method"), ("input_noise", "--input-noise"), ("pca", "--pca"),
            ("calibrate", "--calibrate"))
+
+
+def _frame_budget(text):
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}") from None
+    if not value > 0 or value != value or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}")
+    return value
 
 
 def _sigma2(text):
@@ -178,25 +209,19 @@ def _calibrate(text):
 def cmd_fit(args) -> int:
     """``interprim fit``: load demonstrations, fit the model (chosen on them by default), save it."""
     import interprim as ip
-    from interprim.datasets import load_demonstrations
 
     positive_number(args.n_basis, "--n-basis")
-    positive_number(args.dt, "--dt")
-    positive_number(args.resample, "--resample")
     positive_number(args.horizon, "--horizon")
-    ds = load_demonstrations(
-        args.demos,
-        columns=args.columns,
-        dt=args.dt,
-        resample_dt=args.resample,
-        max_nan_gap=args.max_nan_gap,
-        **recording_options(args),
-    )
-    print_notes(ds)
+    ds = read_demonstrations(args.demos, args, columns=args.columns)  # as 'interprim evaluate --data' reads it
+    print_notes(ds, "fit")
     n_read = ds.n_dofs
     ds, obs = agent_columns(ds, split_cols(args.observed), split_cols(args.controlled), args.demos)
     if len(ds) < 2:
-        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a distribution")
+        raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
+                           "distribution. " + SPLIT_HINT)
+    if args.model != "auto" and args.frame_budget is not None:
+        raise CommandError(f"--frame-budget bounds the blend of --model auto; --model {args.model} is one family "
+                           "alone (drop --frame-budget, or use --model auto)")
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -242,14 +267,19 @@ def _fit_other(args, ds, obs, n_read) -> int:
 
     if args.model == "auto" and len(ds) < 3:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstrations; --model auto compares models on held-out "
-                           "folds and needs at least 3 (or use --model ip)")
+                           "folds and needs at least 3 (or use --model ip). " + SPLIT_HINT)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
-                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon))
+                           horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon),
+                           **({} if args.frame_budget is None else {
+                               "frame_budget": None if args.frame_budget == "none" else args.frame_budget}))
     model = auto
     fit_seconds, out = _fit_and_save(model, lambda: auto.fit(ds, dt=ds.dt), args)  # one family alone: no comparison
     ctrl = [i for i in range(ds.n_dofs) if i not in set(obs)]
     what = model.summary()
+    unit = _unit(ds, ctrl)
+    if unit and "error" in what:
+        what += f"\n  (errors in {unit}: the unit of the controlled columns, as the file states it)"
     resampled = "" if ds.dt is not None else " (irregular time stamps resampled at their median interval)"
     print(
         f"fitted {len(ds)} demonstrations, {ds.n_dofs} columns, dt={model.dt_:.4g} s{resampled}, mean duration "
@@ -262,6 +292,15 @@ def _fit_other(args, ds, obs, n_read) -> int:
         + f"fit in {fit_seconds:.1f} s; saved {out}"
     )
     return 0
+
+
+def _unit(ds, cols) -> str:
+    """The one unit the file states for the columns ``cols`` (empty when it states none, or several)."""
+    units = getattr(ds, "units", None)
+    if not units or not cols:
+        return ""
+    got = {units[i] for i in cols}
+    return got.pop() if len(got) == 1 and None not in got and "" not in got else ""
 
 
 def _fit_and_save(model, fit, args):

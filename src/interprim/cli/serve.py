@@ -94,8 +94,9 @@ def add_parser(subparsers) -> None:
                    help="event loop: best (default) = uvloop if installed (about a third less CPU per frame), "
                         "else asyncio's")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
-    p.add_argument("--max-nan-gap", type=int, default=0,
-                   help="--replay: fill interior gaps of up to this many missing frames (as 'interprim fit')")
+    from ._common import MAX_NAN_GAP_HELP
+
+    p.add_argument("--max-nan-gap", type=int, default=None, help="--replay: " + MAX_NAN_GAP_HELP)
     from ._common import add_recording_args
 
     add_recording_args(p, what="--replay")  # the same recording options as 'interprim fit', for every --replay
@@ -131,7 +132,8 @@ def _run(args) -> int:
 
     from ..core.errors import InterprimError, ModelFileError
 
-    logging.basicConfig(level=getattr(logging, args.log_level), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=getattr(logging, args.log_level),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log = logging.getLogger("interprim.server")
     if args.log_level != "DEBUG":  # the websockets library logs every HTTP request at INFO
         logging.getLogger("interprim.server.websockets").setLevel(logging.WARNING)

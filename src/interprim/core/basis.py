@@ -15,17 +15,28 @@ forcing function depends on it only through ``x``.
 
 from __future__ import annotations
 
+from typing import overload
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["canonical_phase", "phase_to_time", "Basis"]
 
 
-def canonical_phase(s, alpha_x: float):
+@overload
+def canonical_phase(s: float, alpha_x: float) -> float: ...
+@overload
+def canonical_phase(s: np.ndarray, alpha_x: float) -> np.ndarray: ...
+def canonical_phase(s: float | np.ndarray, alpha_x: float) -> float | np.ndarray:
     """Phase ``x = exp(-alpha_x * s)`` of the canonical system at normalised time ``s`` (Eq. 9)."""
     return np.exp(-alpha_x * np.asarray(s, dtype=np.float64))
 
 
-def phase_to_time(x, alpha_x: float):
+@overload
+def phase_to_time(x: float, alpha_x: float) -> float: ...
+@overload
+def phase_to_time(x: np.ndarray, alpha_x: float) -> np.ndarray: ...
+def phase_to_time(x: float | np.ndarray, alpha_x: float) -> float | np.ndarray:
     """Inverse of :func:`canonical_phase`: normalised time ``s = -log(x) / alpha_x``."""
     return -np.log(np.asarray(x, dtype=np.float64)) / alpha_x
 
@@ -64,16 +75,16 @@ class Basis:
         dc = np.append(dc, dc[-1])
         self.widths = 1.0 / (2.0 * (self.overlap * dc) ** 2)
 
-    def phi(self, s) -> np.ndarray:
+    def phi(self, s: ArrayLike) -> np.ndarray:
         """Basis ``phi(x(s))`` (Eq. 2) at normalised times ``s``; shape ``(len(s), n_basis)``."""
         x = canonical_phase(np.atleast_1d(s), self.alpha_x)
         # log-sum-exp style normalisation: stable far from every centre
         e = -self.widths[None, :] * (x[:, None] - self.centers[None, :]) ** 2
         e -= e.max(axis=1, keepdims=True)
         psi = np.exp(e)
-        return psi * (x / psi.sum(axis=1))[:, None]
+        return np.asarray(psi * (x / psi.sum(axis=1))[:, None])
 
-    def phi_tilde(self, s, alpha_y: float, beta_y: float) -> np.ndarray:
+    def phi_tilde(self, s: ArrayLike, alpha_y: float, beta_y: float) -> np.ndarray:
         """Rows ``[phi_t^T, alpha_y * beta_y]`` of Eq. 13 (basis plus a constant for the goal ``g``).
 
         Shape ``(len(s), n_basis + 1)``.

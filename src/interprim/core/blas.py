@@ -39,38 +39,58 @@ import ctypes
 import functools
 import sys
 import threading
+from collections.abc import Callable, Iterable
+from typing import Any, Literal, ParamSpec, TypeVar
 
 __all__ = ["single_thread", "one_blas_thread"]
 
+_A = ParamSpec("_A")
+_R = TypeVar("_R")
+
 _LOCK = threading.Lock()
-_STATE = {"depth": 0, "saved": None, "ctrl": None, "key": -1, "local": None}
+
+
+class _State:
+    """The process-wide limiter's state (under ``_LOCK``)."""
+
+    depth = 0  # library calls running in the process (nested ones counted)
+    saved: list[tuple[Any, int]] | None = None  # (pool, its thread count) to restore at the last exit
+    ctrl: list[Any] | None = None  # threadpoolctl's controllers of the loaded libraries
+    key = -1  # len(sys.modules) when they were inspected
+    local: list[Any] | None = None  # OpenBLAS's thread-local setters (ctypes functions)
+
+
+_STATE = _State()
 _THREAD = threading.local()  # per thread: depth of library calls and the thread-local counts to restore
-_HOOK = [None]  # called at the entry of an outermost call (interprim.core._compiled.loader switches paths there)
+# called at the entry of an outermost call (interprim.core._compiled.loader switches paths there)
+_HOOK: list[Callable[[], object] | None] = [None]
 
 
-def _controllers():
+def _controllers() -> list[Any]:
     """The BLAS/OpenMP pools of the loaded libraries, inspected again only after new imports."""
     key = len(sys.modules)
-    if _STATE["ctrl"] is None or key != _STATE["key"]:
+    if _STATE.ctrl is None or key != _STATE.key:
         from threadpoolctl import ThreadpoolController
 
-        _STATE["ctrl"] = ThreadpoolController().lib_controllers
-        _STATE["key"] = key
-        _STATE["local"] = None
-    return _STATE["ctrl"]
+        _STATE.ctrl = ctrl = list(ThreadpoolController().lib_controllers)
+        _STATE.key = key
+        _STATE.local = None
+        return ctrl
+    return _STATE.ctrl
 
 
-def _local_setters() -> list:
+def _local_setters() -> list[Any]:
     """``openblas_set_num_threads_local`` of every loaded OpenBLAS that has it (see the module docstring)."""
-    if _STATE["local"] is None:
+    if _STATE.local is None:
         fns = []
         for lc in _controllers():
             fn = getattr(getattr(lc, "dynlib", None), "openblas_set_num_threads_local", None)
             if fn is not None and getattr(lc, "internal_api", "") == "openblas":
                 fn.argtypes, fn.restype = [ctypes.c_int], ctypes.c_int
                 fns.append(fn)
-        _STATE["local"] = fns
-    return _STATE["local"]
+        _STATE.local = fns
+        return fns
+    return _STATE.local
 
 
 class _OneThread:
@@ -78,7 +98,7 @@ class _OneThread:
 
     __slots__ = ()
 
-    def __enter__(self):
+    def __enter__(self) -> _OneThread:
         t = _THREAD
         d = getattr(t, "depth", 0)
         if d == 0:  # this thread's outermost call: OpenBLAS's thread-local count, which any thread may set
@@ -89,7 +109,7 @@ class _OneThread:
             t.local = setters
         t.depth = d + 1
         with _LOCK:
-            if _STATE["depth"] == 0:
+            if _STATE.depth == 0:
                 hook = _HOOK[0]
                 if hook is not None:
                     hook()
@@ -99,17 +119,17 @@ class _OneThread:
                     if n is not None and n != 1:
                         lc.set_num_threads(1)
                         saved.append((lc, n))
-                _STATE["saved"] = saved
-            _STATE["depth"] += 1
+                _STATE.saved = saved
+            _STATE.depth += 1
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         with _LOCK:
-            _STATE["depth"] -= 1
-            if _STATE["depth"] == 0:
-                for lc, n in _STATE["saved"]:
+            _STATE.depth -= 1
+            if _STATE.depth == 0:
+                for lc, n in _STATE.saved or ():
                     lc.set_num_threads(n)
-                _STATE["saved"] = None
+                _STATE.saved = None
         t = _THREAD
         t.depth -= 1
         if t.depth == 0:
@@ -132,22 +152,22 @@ def single_thread() -> _OneThread:
     return _ONE
 
 
-def one_blas_thread(fn):
+def one_blas_thread(fn: Callable[_A, _R]) -> Callable[_A, _R]:
     """Decorator: run ``fn`` inside :func:`single_thread` (the library's public numeric entry points)."""
 
     if getattr(fn, "__interprim_one_blas__", False):
         return fn  # already limited: once is enough
 
     @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
+    def wrapper(*args: _A.args, **kwargs: _A.kwargs) -> _R:
         with _ONE:
             return fn(*args, **kwargs)
 
-    wrapper.__interprim_one_blas__ = True
+    wrapper.__interprim_one_blas__ = True  # type: ignore[attr-defined]  # the mark that it is limited
     return wrapper
 
 
-def limit_methods(cls, names) -> None:
+def limit_methods(cls: type, names: Iterable[str]) -> None:
     """Wrap the methods ``names`` that ``cls`` itself defines with :func:`one_blas_thread` (the model contract's
     numeric entry points: every family's ``fit``/``predict``, its stream's ``update``/``extend``, its prediction's
     accessors), so that no family can forget one.  Properties and inherited methods are left as they are."""
@@ -159,10 +179,10 @@ def limit_methods(cls, names) -> None:
 
 def depth() -> int:
     """Number of library calls running (nested ones counted) in this process."""
-    return _STATE["depth"]
+    return _STATE.depth
 
 
-def on_outer_entry(fn) -> None:
+def on_outer_entry(fn: Callable[[], object] | None) -> None:
     """Call ``fn()`` at the start of every outermost library call (``None``: nothing); see
     :mod:`interprim.core._compiled.loader`: the kernels a call uses are chosen before it starts, never inside it."""
     _HOOK[0] = fn

@@ -2,8 +2,8 @@
 
 Several parts of the library choose something on held-out parts of the *training* demonstrations:
 ``sigma^2`` and the shrinkage (:mod:`interprim.models.primitive.selection`), the calibration of the predictive std
-(:mod:`interprim.models.primitive.calibration`), the coupling model (:mod:`interprim.models.coupling`), the learned phase
-(:mod:`interprim.phase.learned`), the kernel baseline's bandwidth and the evaluation's folds
+(:mod:`interprim.models.primitive.calibration`), the coupling model (:mod:`interprim.models.coupling`), the learned
+phase (:mod:`interprim.phase.learned`), the kernel baseline's bandwidth and the evaluation's folds
 (:mod:`interprim.evaluation`).  They share four rules, which live here:
 
 * **Folds** (:func:`folds`, :func:`fold_labels`, :func:`n_folds`): which demonstrations are held out
@@ -21,8 +21,8 @@ Several parts of the library choose something on held-out parts of the *training
   phase, a speed and the derivatives of Eq. 15) and at most ``T`` (or ``T - keep`` when ``keep`` frames must
   remain to be predicted).  :mod:`interprim.model_selection.prefixes` states the evaluation's protocol with it.
 
-Resampling, the fourth shared rule, lives with the other preprocessing (:func:`interprim.core.preprocessing.interp_columns`,
-:func:`interprim.core.preprocessing.resample_step`).
+Resampling, the fourth shared rule, lives with the other preprocessing
+(:func:`interprim.core.preprocessing.interp_columns`, :func:`interprim.core.preprocessing.resample_step`).
 
 Pure numpy, no I/O; part of the core (it imports nothing from :mod:`interprim.evaluation`).
 """
@@ -32,9 +32,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-__all__ = ["DEFAULT_HORIZON", "FOLD_ORDERS", "MIN_OBSERVED_FRAMES", "n_folds", "fold_labels", "folds", "paired_gain", "within_one_se",
-           "observed_frames"]
+__all__ = ["DEFAULT_HORIZON", "FOLD_ORDERS", "MIN_OBSERVED_FRAMES", "n_folds", "fold_labels", "folds", "paired_gain",
+           "within_one_se", "observed_frames"]
 
 #: Seconds ahead that the real-time protocol scores by default (the real-time band of the default model, the
 #: look-ahead the kernel family is tuned for, ``--horizon`` of ``interprim fit`` and ``interprim evaluate``): the
@@ -71,7 +72,8 @@ def n_folds(requested: int | None, n: int) -> int:
     return int(min(max(int(requested), 2), n))
 
 
-def fold_labels(n: int, k: int | None, order: str = "interleaved", rng=None) -> np.ndarray:
+def fold_labels(n: int, k: int | None, order: str = "interleaved",
+                rng: np.random.Generator | None = None) -> np.ndarray:
     """The fold of each of ``n`` demonstrations, shape ``(n,)``, values ``0 .. k' - 1``.
 
     Parameters
@@ -96,7 +98,8 @@ def fold_labels(n: int, k: int | None, order: str = "interleaved", rng=None) -> 
     return labels
 
 
-def folds(n: int, k: int | None, order: str = "interleaved", rng=None) -> list:
+def folds(n: int, k: int | None, order: str = "interleaved",
+          rng: np.random.Generator | None = None) -> list[np.ndarray]:
     """Held-out index sets of a ``k``-fold cross-validation over ``n`` demonstrations.
 
     Every index ``0 .. n - 1`` is in exactly one set; the sets are sorted and the result is deterministic
@@ -144,7 +147,8 @@ def folds(n: int, k: int | None, order: str = "interleaved", rng=None) -> list:
 
 
 # --------------------------------------------------------------------------------- one-standard-error rule
-def paired_gain(reference, candidate, axis: int = 0):
+def paired_gain(reference: ArrayLike, candidate: ArrayLike,
+                axis: int = 0) -> tuple[float | np.ndarray, float | np.ndarray]:
     """How much ``candidate`` improves on ``reference`` over paired held-out cases, and its standard error.
 
     Parameters
@@ -170,7 +174,7 @@ def paired_gain(reference, candidate, axis: int = 0):
     return gain, d.std(axis=axis, ddof=1) / math.sqrt(m)
 
 
-def within_one_se(errors) -> np.ndarray:
+def within_one_se(errors: ArrayLike) -> np.ndarray:
     """Candidates whose mean error exceeds the best's by at most one paired standard error.
 
     Parameters
@@ -195,7 +199,7 @@ def within_one_se(errors) -> np.ndarray:
         excess, se = paired_gain(flat, flat[:, best][:, None], axis=0)
         ok = (excess <= se) & np.isfinite(flat.mean(axis=0))
     ok[best] = True
-    return ok.reshape(E.shape[1:])
+    return np.asarray(ok.reshape(E.shape[1:]))
 
 
 # ------------------------------------------------------------------------------------------- the prefix rule

@@ -25,9 +25,11 @@ for a given start state, it is precomputed once as a linear map.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .basis import Basis
 
@@ -35,7 +37,8 @@ __all__ = ["forcing_targets", "forcing_values", "fit_weights", "fit_weights_stac
            "LinearRollout", "cached_rollout", "representation_report", "warn_representation"]
 
 
-def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
+def forcing_targets(y: np.ndarray, yd: np.ndarray, ydd: np.ndarray, g: np.ndarray, alpha_y: float,
+                    beta_y: float) -> np.ndarray:
     """Forcing targets ``F = y'' - alpha_y (beta_y (g - y) - y')`` (Eq. 3, normalised time).
 
     ``y, yd, ydd`` have shape ``(T, D)``, ``g`` shape ``(D,)``.
@@ -43,7 +46,7 @@ def forcing_targets(y, yd, ydd, g, alpha_y: float, beta_y: float):
     return ydd - alpha_y * (beta_y * (g - y) - yd)
 
 
-def forcing_values(y, yd, ydd, alpha_y: float, beta_y: float):
+def forcing_values(y: np.ndarray, yd: np.ndarray, ydd: np.ndarray, alpha_y: float, beta_y: float) -> np.ndarray:
     """Forcing values of an observation, Eq. 15: ``f* = y'' - alpha_y (-beta_y y - y')``.
 
     These equal ``Phi_tilde theta`` (Eq. 13-14) for the movement's parameters.
@@ -51,7 +54,9 @@ def forcing_values(y, yd, ydd, alpha_y: float, beta_y: float):
     return ydd + alpha_y * (beta_y * y + yd)
 
 
-def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y: float, ridge: float = 1e-10):
+def fit_weights(Y_list: Sequence[np.ndarray], Yd_list: Sequence[np.ndarray], Ydd_list: Sequence[np.ndarray],
+                basis: Basis, alpha_y: float, beta_y: float,
+                ridge: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares DMP parameters of many demonstrations at once (Eq. 3-4).
 
     The goal of each DoF is its last recorded position (``g = y_T``); the
@@ -80,7 +85,7 @@ def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y:
     groups: dict[int, list[int]] = {}
     for j, Y in enumerate(Y_list):
         groups.setdefault(Y.shape[0], []).append(j)
-    for T, idx in groups.items():
+    for idx in groups.values():
         th, r = fit_weights_stacked(np.stack([Y_list[j] for j in idx]), np.stack([Yd_list[j] for j in idx]),
                                     np.stack([Ydd_list[j] for j in idx]), basis, alpha_y, beta_y, ridge)
         theta[idx] = th
@@ -88,8 +93,8 @@ def fit_weights(Y_list, Yd_list, Ydd_list, basis: Basis, alpha_y: float, beta_y:
     return theta, resid
 
 
-def fit_weights_stacked(Y, Yd, Ydd, basis: Basis, alpha_y: float, beta_y: float, ridge: float = 1e-10,
-                        resid_dofs=None):
+def fit_weights_stacked(Y: np.ndarray, Yd: np.ndarray, Ydd: np.ndarray, basis: Basis, alpha_y: float, beta_y: float,
+                        ridge: float = 1e-10, resid_dofs: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fit_weights` for ``n`` demonstrations of one length stacked as ``(n, T, D)`` arrays.
 
     One Cholesky factorisation of ``Phi^T Phi`` (Eq. 4) and one BLAS product
@@ -110,8 +115,10 @@ def fit_weights_stacked(Y, Yd, Ydd, basis: Basis, alpha_y: float, beta_y: float,
     return fit_weights_targets(F, g, basis, ridge, resid_dofs)
 
 
-def fit_weights_targets(F, g, basis: Basis, ridge: float = 1e-10, resid_dofs=None):
-    """Eq. 4 for forcing targets ``F`` ``(n, T, D)`` (Eq. 3) and goals ``g`` ``(n, D)``; see :func:`fit_weights_stacked`."""
+def fit_weights_targets(F: np.ndarray, g: np.ndarray, basis: Basis, ridge: float = 1e-10,
+                        resid_dofs: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 4 for forcing targets ``F`` ``(n, T, D)`` (Eq. 3) and goals ``g`` ``(n, D)``; see
+    :func:`fit_weights_stacked`."""
     n, T, D = F.shape
     m = basis.n_basis
     Phi = basis.phi(np.linspace(0.0, 1.0, T))  # (T, m)
@@ -134,7 +141,7 @@ def fit_weights_targets(F, g, basis: Basis, ridge: float = 1e-10, resid_dofs=Non
     return theta, resid
 
 
-def _expm_small(A):
+def _expm_small(A: np.ndarray) -> np.ndarray:
     """Matrix exponential of a small matrix by scaling and squaring with a Taylor series (to double precision)."""
     nrm = float(np.abs(A).sum(axis=1).max())
     k = max(0, int(np.ceil(np.log2(nrm / 0.25))) if nrm > 0.25 else 0)
@@ -149,7 +156,7 @@ def _expm_small(A):
     return E
 
 
-def _scan_powers(Ad, n: int):
+def _scan_powers(Ad: np.ndarray, n: int) -> np.ndarray:
     """``Ad^k`` for ``k = 0..n`` by doubling (``log2 n`` batched products instead of ``n``)."""
     out = np.empty((n + 1,) + Ad.shape)
     out[0] = np.eye(Ad.shape[0])
@@ -164,7 +171,7 @@ def _scan_powers(Ad, n: int):
 
 
 @lru_cache(maxsize=16)
-def _discretisation(alpha_y: float, beta_y: float, n_steps: int):
+def _discretisation(alpha_y: float, beta_y: float, n_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation of the DMP's linear part over one step ``1 / n_steps``."""
     h = 1.0 / n_steps
     A = np.array([[0.0, 1.0], [-alpha_y * beta_y, -alpha_y]])
@@ -229,11 +236,11 @@ class LinearRollout:
         """Parameters ``q`` of one DoF (``[w, g]``: ``n_basis + 1``), the columns of the design per DoF."""
         return self._Z.shape[2]
 
-    def index(self, s) -> np.ndarray:
+    def index(self, s: ArrayLike) -> np.ndarray:
         """Grid index of normalised time(s) ``s`` (clipped to [0, 1])."""
         return np.clip(np.rint(np.asarray(s, dtype=np.float64) * self.n_steps), 0, self.n_steps).astype(np.intp)
 
-    def design(self, s0: float, s_out, derivative: int = 0):
+    def design(self, s0: float, s_out: ArrayLike, derivative: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Linear map from start state and ``theta`` to positions (or velocities) at ``s_out``.
 
         Returns
@@ -265,7 +272,7 @@ class LinearRollout:
             H += wgt * (self._Z[k, row, :] - P @ self._Z[k0])
         return free, H
 
-    def grid_design(self, n: int):
+    def grid_design(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`design` ``(0, linspace(0, 1, n))``, the map of every whole-movement trajectory on ``n`` points,
         computed once per ``n`` (read-only arrays: it depends on the rollout only, and a streamed frame asks for
         it again with every prediction's trajectory)."""
@@ -281,7 +288,8 @@ class LinearRollout:
             cache[n] = out
         return out
 
-    def rollout(self, theta, y0, yd0, s0: float = 0.0, s_out=None, n: int = 100):
+    def rollout(self, theta: np.ndarray, y0: ArrayLike, yd0: ArrayLike, s0: float = 0.0, s_out: ArrayLike | None = None,
+                n: int = 100) -> np.ndarray:
         """Positions of several DoFs from a start state (Eq. 1 integrated).
 
         Parameters
@@ -306,7 +314,8 @@ class LinearRollout:
         z0 = np.stack([np.broadcast_to(y0, theta.shape[0]), np.broadcast_to(yd0, theta.shape[0])])  # (2, D)
         return free @ z0 + H @ theta.T
 
-    def integrate(self, theta, y0, yd0=0.0, tau: float = 1.0, dt: float = 0.01, x0: float = 1.0):
+    def integrate(self, theta: np.ndarray, y0: ArrayLike, yd0: ArrayLike = 0.0, tau: float = 1.0, dt: float = 0.01,
+                  x0: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """Integrate Eq. 1 in real time from phase ``x0`` until ``x = exp(-alpha_x)``.
 
         Parameters
@@ -337,11 +346,14 @@ class LinearRollout:
 
 @lru_cache(maxsize=8)
 def cached_rollout(n_basis: int, alpha_x: float, alpha_y: float, beta_y: float, n_steps: int) -> LinearRollout:
-    """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as read-only)."""
+    """A shared :class:`LinearRollout` per hyper-parameter set (it depends on nothing learned; treat it as
+    read-only)."""
     return LinearRollout(Basis(int(n_basis), float(alpha_x)), float(alpha_y), float(beta_y), int(n_steps))
 
 
-def representation_report(latent, starts, theta, rollout, n: int = 101, groups=None) -> dict:
+def representation_report(latent: Sequence[np.ndarray], starts: Sequence[tuple[np.ndarray, np.ndarray]],
+                          theta: np.ndarray, rollout: LinearRollout, n: int = 101,
+                          groups: dict[str, Sequence[int] | slice] | None = None) -> dict[str, dict[str, float]]:
     """How well the DMPs (Eq. 1-4) represent the demonstrations, relative to the spread between them.
 
     For every demonstration, its own parameters ``theta[j]`` are rolled out (Eq. 1) from its start state and
@@ -399,8 +411,9 @@ def representation_report(latent, starts, theta, rollout, n: int = 101, groups=N
 REPRESENTATION_LIMIT = 0.5
 
 
-def warn_representation(report: dict, n_basis: int):
-    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations."""
+def warn_representation(report: dict[str, dict[str, float]], n_basis: int, stacklevel: int = 4) -> None:
+    """One warning, with the numbers and what to do, when the DMPs cannot represent the demonstrations
+    (``stacklevel``: of :func:`warnings.warn`, counted from here, so that it names the user's line)."""
     import warnings
 
     from .errors import RepresentationWarning
@@ -414,4 +427,4 @@ def warn_representation(report: dict, n_basis: int):
                   f"{REPRESENTATION_LIMIT}x they lose what distinguishes the demonstrations, as periodic or long "
                   f"movements do). Try a larger n_basis (e.g. {2 * n_basis}), and compare with "
                   f"LearnedInteraction and the kernel-weighted demonstrations on your data: "
-                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=4)
+                  f"interprim evaluate --data FILE", RepresentationWarning, stacklevel=stacklevel)

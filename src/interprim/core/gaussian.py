@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._compiled import registry as _kernels  # light: the kernels themselves load on first use
 
@@ -64,7 +65,8 @@ class GaussianPrior:
         The diagonal-plus-low-rank form of ``cov``.
     """
 
-    def __init__(self, mean, cov, method: str, shrinkage: float, diag=None, factor=None):
+    def __init__(self, mean: np.ndarray, cov: np.ndarray | None, method: str, shrinkage: float,
+                 diag: np.ndarray | None = None, factor: np.ndarray | None = None) -> None:
         if cov is None and (diag is None or factor is None):
             raise ValueError("GaussianPrior: give cov, or diag and factor")
         self.mean = mean
@@ -76,7 +78,7 @@ class GaussianPrior:
         self.factor = factor
 
     @classmethod
-    def factored(cls, thetas, method: str, ridge: float, lam) -> "GaussianPrior":
+    def factored(cls, thetas: ArrayLike, method: str, ridge: float, lam: float | None) -> GaussianPrior:
         """The prior of :func:`fit_prior` in factored form only, ``N(mean, diag(d) + W^T W)``, without the
         ``P x P`` matrix: what the folds of cross-validation condition on (:func:`lowrank_case`).
 
@@ -97,52 +99,65 @@ class GaussianPrior:
         W = np.sqrt((1.0 - lam) / n) * Xc  # (n, P)
         return cls(mean, None, method, lam, lam * diag + floor, W.T)
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> np.ndarray:
         # ``cov`` of a factored prior: diag(diag) + factor factor^T, built on first use and then kept
-        if name != "cov" or self.__dict__.get("factor") is None or self.__dict__.get("diag") is None:
+        diag, factor = self.__dict__.get("diag"), self.__dict__.get("factor")  # (not through __getattr__ again)
+        if name != "cov" or factor is None or diag is None:
             raise AttributeError(f"GaussianPrior has no attribute {name!r}")
-        U = np.asarray(self.factor, dtype=np.float64)
+        U = np.asarray(factor, dtype=np.float64)
         cov = U @ U.T
-        cov[np.diag_indices(cov.shape[0])] += self.diag
+        cov[np.diag_indices(cov.shape[0])] += diag
         self.cov = cov
         return cov
 
     @property
     def d(self) -> np.ndarray:
         """The diagonal part ``d`` of ``cov = diag(d) + W^T W`` (``diag``)."""
+        if self.diag is None:
+            raise AttributeError("this prior has no diagonal-plus-low-rank form")
         return self.diag
 
     @property
     def W(self) -> np.ndarray:
         """The low-rank part ``W`` (``r x P``, ``factor.T``) of ``cov = diag(d) + W^T W``."""
+        if self.factor is None:
+            raise AttributeError("this prior has no diagonal-plus-low-rank form")
         return self.factor.T
 
-    def marginal(self, n: int) -> "GaussianPrior":
+    def marginal(self, n: int) -> GaussianPrior:
         """The prior of the first ``n`` parameters (the observed agent's block when ``n = D_o q``), in the forms
         this one has (views, no copies)."""
-        cut = (lambda a: None if a is None else a[:n])
+        def cut(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[:n]
+
         cov = self.__dict__.get("cov")
         return GaussianPrior(self.mean[:n], None if cov is None else cov[:n, :n], self.method,
                              self.shrinkage, cut(self.diag), cut(self.factor))
 
-    def conditioner(self, obs_index, thetas=None, ridge: float | None = None) -> "LowRankConditioner | None":
+    def conditioner(self, obs_index: np.ndarray, thetas: ArrayLike | None = None,
+                    ridge: float | None = None) -> LowRankConditioner | None:
         """Eq. 16-18 precomputed for this prior and the observed parameters ``obs_index`` (``(D_o, q)``):
         :meth:`LowRankConditioner.from_prior`, or ``None`` when the covariance has no low-rank form."""
         return LowRankConditioner.from_prior(self, obs_index, thetas, ridge)
 
-    def condition(self, obs_index, G, B, sigma2: float, yy: float | None = None, n_obs: int | None = None,
-                  need_cov: bool = True) -> "Posterior":
+    def condition(self, obs_index: np.ndarray, G: np.ndarray, B: np.ndarray, sigma2: float, yy: float | None = None,
+                  n_obs: int | None = None,
+                  need_cov: bool = True) -> Posterior:
         """Eq. 16-18 in the structured dense form (:func:`condition`) from the statistics ``G = X^T X``,
         ``B = X^T F`` of an observation of the parameters ``obs_index``."""
         return condition(self.mean, self.cov, obs_index, G, B, sigma2, yy=yy, n_obs=n_obs, need_cov=need_cov)
 
-    def posterior_means(self, n_o: int, q: int, X, Y, sigma2, compressed=None) -> np.ndarray:
+    def posterior_means(self, n_o: int, q: int, X: np.ndarray, Y: np.ndarray, sigma2: ArrayLike,
+                        compressed: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Posterior means ``(len(sigma2), P)`` of Eq. 18 for the observation ``Y = X theta_i + noise`` of the
         first ``n_o`` DoFs (``q`` parameters each), every noise candidate at once (:func:`lowrank_case`)."""
-        return lowrank_case(self, n_o, q, X, Y, np.atleast_1d(np.asarray(sigma2, dtype=np.float64)),
-                            compressed=compressed)[0]
+        means = lowrank_case(self, n_o, q, X, Y, np.atleast_1d(np.asarray(sigma2, dtype=np.float64)),
+                             compressed=compressed)[0]
+        assert means is not None  # need_mean
+        return means
 
-    def evidence(self, n_o: int, q: int, X, Y, sigma2, compressed=None):
+    def evidence(self, n_o: int, q: int, X: np.ndarray, Y: np.ndarray, sigma2: ArrayLike,
+                 compressed: tuple[np.ndarray, np.ndarray] | None = None) -> float | np.ndarray:
         """The evidence ``log p(tau_o)`` (Eq. 16-17: the marginal log-likelihood) of the observation
         ``Y = X theta_i + noise`` of the first ``n_o`` DoFs: a float for one ``sigma2``, an array for an array of
         candidates (all at once, :func:`lowrank_case`); the structured dense form when the prior has no
@@ -151,7 +166,9 @@ class GaussianPrior:
         many = s2.ndim > 0
         s2 = np.atleast_1d(s2)
         if self.diag is not None and self.factor is not None:
-            ll = lowrank_case(self, n_o, q, X, Y, s2, need_mean=False, need_ll=True, compressed=compressed)[1]
+            lls = lowrank_case(self, n_o, q, X, Y, s2, need_mean=False, need_ll=True, compressed=compressed)[1]
+            assert lls is not None  # need_ll
+            ll = lls
         else:
             idx = np.arange(n_o * q).reshape(n_o, q)
             G, B = X.T @ X, X.T @ Y
@@ -160,7 +177,7 @@ class GaussianPrior:
                            for v in s2])
         return ll if many else float(ll[0])
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f"GaussianPrior(P={np.shape(self.mean)[0]}, method={self.method!r}, shrinkage={self.shrinkage:.3g}"
                 f"{', low rank' if self.factor is not None else ''})")
 
@@ -232,7 +249,8 @@ def shrinkage_intensity(X: np.ndarray) -> float:
     return float(np.clip(var_off / r2_off, 0.0, 1.0))
 
 
-def fit_prior(thetas, method: str = "shrinkage", ridge: float = 1e-6, shrinkage: float | None = None) -> GaussianPrior:
+def fit_prior(thetas: ArrayLike, method: str = "shrinkage", ridge: float = 1e-6,
+              shrinkage: float | None = None) -> GaussianPrior:
     """Gaussian over ``theta`` from one parameter vector per demonstration (Eq. 10).
 
     Parameters
@@ -273,13 +291,13 @@ def fit_prior(thetas, method: str = "shrinkage", ridge: float = 1e-6, shrinkage:
     return GaussianPrior(mean=mean, cov=cov, method=method, shrinkage=lam, diag=d, factor=factor)
 
 
-def _floor(emp, ridge):
+def _floor(emp: np.ndarray, ridge: float) -> float:
     P = emp.shape[0]
     scale = float(np.mean(np.diag(emp))) if P else 0.0
     return max(ridge * scale, 1e-12 * max(scale, 1e-300), 1e-300)
 
 
-def _lowrank(Xc, emp, lam, floor):
+def _lowrank(Xc: np.ndarray, emp: np.ndarray, lam: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
     """The covariance of :func:`fit_prior` as diagonal + low rank: ``diag(d) + U U^T``, ``U = sqrt((1-lam)/S) Xc^T``."""
     S, P = Xc.shape
     d = lam * np.diag(emp) + floor
@@ -295,11 +313,11 @@ class Posterior:
     """``p(theta | tau_o) = N(mean, cov)`` (Eq. 18) and the marginal log-likelihood of the observation."""
 
     mean: np.ndarray
-    cov: np.ndarray
+    cov: np.ndarray | None  # None when the covariance was not asked for (need_cov=False)
     log_likelihood: float
 
 
-def _compress(G, B, tol=1e-14):
+def _compress(G: np.ndarray, B: np.ndarray, tol: float = 1e-14) -> tuple[np.ndarray, np.ndarray]:
     e, V = np.linalg.eigh(0.5 * (G + G.T))
     keep = e > tol * max(float(e[-1]), 1e-300)
     e, V = e[keep], V[:, keep]
@@ -309,7 +327,8 @@ def _compress(G, B, tol=1e-14):
     return L, z
 
 
-def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None, n_obs: int | None = None,
+def condition(mean: np.ndarray, cov: np.ndarray, obs_index: np.ndarray, G: np.ndarray, B: np.ndarray, sigma2: float,
+              yy: float | None = None, n_obs: int | None = None,
               need_cov: bool = True) -> Posterior:
     """Condition ``N(mean, cov)`` on a linear-Gaussian observation of some DoFs (Eq. 16-18, structured).
 
@@ -349,7 +368,6 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
     obs_index = np.asarray(obs_index)
     D_o, q = obs_index.shape
     flat = obs_index.reshape(-1)
-    P = mean.shape[0]
     Po = flat.size
     G = 0.5 * (np.asarray(G, dtype=np.float64) + np.asarray(G, dtype=np.float64).T)
     # Whitened by the prior of the observed parameters, Sigma_oo = Lp Lp^T:
@@ -383,7 +401,7 @@ def condition(mean, cov, obs_index, G, B, sigma2: float, yy: float | None = None
     return Posterior(post_mean, post_cov, loglik)
 
 
-def condition_literal(mean, cov, Omega, F, sigma2: float) -> Posterior:
+def condition_literal(mean: np.ndarray, cov: np.ndarray, Omega: np.ndarray, F: np.ndarray, sigma2: float) -> Posterior:
     """Eq. 17-18 exactly as printed: builds ``A = sigma^2 I + Omega Sigma Omega^T`` and inverts it.
 
     ``Omega`` is the full ``(T D_o) x P`` feature matrix (``Omega~ = [Omega, 0]``)
@@ -401,7 +419,8 @@ def condition_literal(mean, cov, Omega, F, sigma2: float) -> Posterior:
     return Posterior(post_mean, post_cov, float(loglik))
 
 
-def sample(mean, cov, n: int, random_state=None) -> np.ndarray:
+def sample(mean: ArrayLike, cov: ArrayLike, n: int,
+           random_state: int | np.random.Generator | None = None) -> np.ndarray:
     """Draw ``n`` samples of ``N(mean, cov)``; robust to a positive semi-definite ``cov``.
 
     ``mean + z L^T`` with ``z`` standard normal and ``L`` the Cholesky factor of ``cov``.  The Cholesky factor
@@ -430,7 +449,8 @@ def sample(mean, cov, n: int, random_state=None) -> np.ndarray:
     return mean + rng.standard_normal((n, mean.shape[0])) @ L.T
 
 
-def lowrank_parts(prior: GaussianPrior, thetas=None, ridge: float | None = None, tol: float = 1e-10):
+def lowrank_parts(prior: GaussianPrior, thetas: ArrayLike | None = None, ridge: float | None = None,
+                  tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray] | None:
     """``(d, U)`` with ``prior.cov == diag(d) + U U^T`` (checked to ``tol`` relative), or ``None``.
 
     Uses ``prior.diag``/``prior.factor`` when present (set by :func:`fit_prior`);
@@ -491,7 +511,7 @@ class LowRankConditioner:
     demonstrations) is small.
     """
 
-    def __init__(self, mean, d, U, obs_index):
+    def __init__(self, mean: np.ndarray, d: np.ndarray, U: np.ndarray, obs_index: np.ndarray) -> None:
         obs_index = np.asarray(obs_index, dtype=np.intp)
         self.obs_index = obs_index
         D_o, q = obs_index.shape
@@ -514,14 +534,15 @@ class LowRankConditioner:
         self.K0 = np.eye(self.r) + Uh2.T @ Uh2
 
     @classmethod
-    def from_prior(cls, prior: GaussianPrior, obs_index, thetas=None, ridge: float | None = None):
+    def from_prior(cls, prior: GaussianPrior, obs_index: np.ndarray, thetas: ArrayLike | None = None,
+                   ridge: float | None = None) -> LowRankConditioner | None:
         """A conditioner for ``prior``, or ``None`` if its covariance is not diagonal plus low rank."""
         parts = lowrank_parts(prior, thetas, ridge)
         if parts is None:
             return None
         return cls(prior.mean, parts[0], parts[1], obs_index)
 
-    def _loglik(self, ld_T, ld_K, resid, sigma2, n_obs):
+    def _loglik(self, ld_T: float, ld_K: float, resid: float, sigma2: float, n_obs: int | None) -> float:
         if n_obs is None:
             return float("nan")
         D_o, q = self.D_o, self.q
@@ -529,14 +550,16 @@ class LowRankConditioner:
         logdet = n_obs * log_s2 + ld_T - D_o * q * log_s2 + ld_K
         return float(-0.5 * (n_obs * LOG2PI + logdet + max(resid, 0.0) / sigma2))
 
-    def mean_and_evidence(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
+    def mean_and_evidence(self, G: np.ndarray, B: np.ndarray, sigma2: float, yy: float = 0.0,
+                          n_obs: int | None = None) -> tuple[np.ndarray, float] | None:
         """Posterior mean and log-likelihood (the evidence of Eq. 16-17) of Eq. 18: the compiled kernel when the
         kernels are in use (:func:`interprim.core._compiled.registry.in_use`), else :meth:`mean_numpy` (the same
         numbers to rounding); ``None`` if a factorisation failed."""
         return self.mean_compiled(G, B, sigma2, yy, n_obs) if _kernels.in_use() else \
             self.mean_numpy(G, B, sigma2, yy, n_obs)
 
-    def mean_compiled(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None, out=None):
+    def mean_compiled(self, G: np.ndarray, B: np.ndarray, sigma2: float, yy: float = 0.0, n_obs: int | None = None,
+                      out: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
         """Posterior mean and log-likelihood with the compiled kernel; ``None`` if a factorisation failed."""
         lowrank_condition_mean = _kernels.compiled("conditioning.lowrank_condition_mean")
         if out is None:
@@ -547,7 +570,7 @@ class LowRankConditioner:
             return None
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
 
-    def _factors(self, G, sigma2):
+    def _factors(self, G: np.ndarray, sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q = self.q
         T = self.sq[:, :, None] * G[None, :, :] * self.sq[:, None, :]
         T[:, np.arange(q), np.arange(q)] += sigma2
@@ -556,7 +579,8 @@ class LowRankConditioner:
         K = self.K0 - sigma2 * (self.Uh.reshape(-1, r).T @ TinvUh.reshape(-1, r))  # sum_i Uh_i^T T_i^-1 Uh_i
         return T, TinvUh, 0.5 * (K + K.T)
 
-    def mean_numpy(self, G, B, sigma2: float, yy: float = 0.0, n_obs: int | None = None):
+    def mean_numpy(self, G: ArrayLike, B: ArrayLike, sigma2: float, yy: float = 0.0,
+                   n_obs: int | None = None) -> tuple[np.ndarray, float]:
         """Same as :meth:`mean_compiled` in plain numpy (no compilation; used before the kernels are ready)."""
         G = np.asarray(G, dtype=np.float64)
         B = np.asarray(B, dtype=np.float64)
@@ -576,7 +600,7 @@ class LowRankConditioner:
         ld_K = float(np.linalg.slogdet(K)[1])
         return out, self._loglik(ld_T, ld_K, resid, sigma2, n_obs)
 
-    def cov(self, G, sigma2: float) -> np.ndarray:
+    def cov(self, G: np.ndarray, sigma2: float) -> np.ndarray:
         """Posterior covariance of Eq. 18 (``P x P``), as a sum of positive semi-definite terms."""
         from scipy.linalg import solve_triangular  # lazy: keeps `import interprim` light
 
@@ -597,18 +621,21 @@ class LowRankConditioner:
         return out
 
 
-def LowRankPrior(thetas, method, ridge, lam) -> GaussianPrior:
+def LowRankPrior(thetas: ArrayLike, method: str, ridge: float, lam: float | None) -> GaussianPrior:
     """:meth:`GaussianPrior.factored` (the name of the factored prior when it was a type of its own)."""
     return GaussianPrior.factored(thetas, method, ridge, lam)
 
 
-def compress_observation(X, Y):
+def compress_observation(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(L, z)`` of the compressed observation of :func:`lowrank_case` (``G = X^T X = L^T L``, ``z = L^-T X^T Y``):
     depends on the design only, so it can be computed once and passed to every prior it is conditioned on."""
     return _compress(X.T @ X, X.T @ Y, tol=1e-10)
 
 
-def lowrank_case(pr: LowRankPrior, n_o, q, X, Y, s2, need_mean=True, need_ll=False, compressed=None):
+def lowrank_case(pr: GaussianPrior, n_o: int, q: int, X: np.ndarray, Y: np.ndarray, s2: np.ndarray,
+                 need_mean: bool = True, need_ll: bool = False,
+                 compressed: tuple[np.ndarray, np.ndarray] | None = None,
+                 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Posterior means ``(len(s2), P)`` and/or marginal log-likelihoods ``(len(s2),)`` for one observation.
 
     The observation ``Y = X theta_i + noise`` (one column per observed DoF ``i``, Eq. 16) is seen through

@@ -16,15 +16,33 @@ them, so the check does not claim to catch a column order.
 from __future__ import annotations
 
 import warnings
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .errors import OutOfRangeWarning
 
-__all__ = ["fit_input_range", "input_distance", "mark"]
+__all__ = ["fit_input_range", "input_distance", "mark", "mark_duration", "duration_range", "DURATION_FACTOR"]
+
+#: A predicted duration longer than this many times the longest demonstration, or shorter than the shortest
+#: divided by it, is out of range (``Prediction.duration_out_of_range``): demonstrations of one interaction at
+#: natural speeds differ by less (NuiSI: 1.7-2.7 s, 1.6x), a prediction 2.4x the longest does not follow them.
+DURATION_FACTOR = 1.5
 
 
-def fit_input_range(frames):
+
+class _Marked(Protocol):
+    """What :func:`mark` sets on a prediction of any family."""
+
+    input_distance: float
+    out_of_range: bool
+
+
+_P = TypeVar("_P", bound=_Marked)
+
+
+def fit_input_range(frames: ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
     """``(mean, std, limit)`` of the observed agent's training frames ``(n, D_o)`` (data columns)."""
     f = np.asarray(frames, dtype=np.float64)
     mean = f.mean(axis=0)
@@ -34,7 +52,7 @@ def fit_input_range(frames):
     return mean, std, max(3.0 * train, 8.0)
 
 
-def input_distance(model, frames) -> float:
+def input_distance(model: Any, frames: ArrayLike) -> float:
     """Largest standardised distance of frames ``(t, D_o)`` from ``model``'s training frames; NaN for a model
     (file) without the statistics."""
     mean = getattr(model, "input_mean_", None)
@@ -44,12 +62,46 @@ def input_distance(model, frames) -> float:
     return float(np.max(np.abs(f - mean) / model.input_std_)) if f.size else 0.0
 
 
-def mark(model, prediction, dist, warn: bool = True):
+def duration_range(model):
+    """``(shortest, longest)`` demonstrated duration (s) of ``model`` (its own ``durations_``, those of the model
+    it wraps or of its members), ``(mean, mean)`` when only the mean is known, ``None`` when nothing is."""
+    seen, todo = set(), [model]
+    while todo:
+        obj = todo.pop(0)
+        if obj is None or id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        d = getattr(obj, "durations_", None)
+        if d is not None and np.size(d):
+            d = np.asarray(d, dtype=np.float64)
+            return float(d.min()), float(d.max())
+        todo.append(getattr(obj, "model_", None))
+        members = getattr(obj, "members_", None)
+        if isinstance(members, dict):
+            todo.extend(members.values())
+    mean = getattr(model, "mean_duration_", None)
+    if mean is not None and np.isfinite(mean) and mean > 0:
+        return float(mean), float(mean)
+    return None
+
+
+def mark_duration(model, prediction):
+    """Set ``prediction.duration_out_of_range``: its duration is more than :data:`DURATION_FACTOR` times the
+    longest demonstration, or less than the shortest divided by it (flagged as the input range is)."""
+    span = duration_range(model)
+    duration = float(getattr(prediction, "duration", float("nan")))
+    prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
+        duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
+    return prediction
+
+
+def mark(model: Any, prediction: _P, dist: float, warn: bool = True) -> _P:
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
+    mark_duration(model, prediction)
     if prediction.out_of_range and warn:
         import inspect
 

@@ -9,8 +9,11 @@ arguments are kept as given) works.  Validation happens in ``fit``, before any e
 from __future__ import annotations
 
 import inspect
+from typing import Any, TypeVar
 
 __all__ = ["Params"]
+
+_S = TypeVar("_S", bound="Params")
 
 
 class Params:
@@ -22,7 +25,7 @@ class Params:
         return [p.name for p in sig.parameters.values()
                 if p.name != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
 
-    def get_params(self, deep: bool = True) -> dict:
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
         """The constructor's arguments, as given (scikit-learn convention).
 
         Parameters
@@ -42,13 +45,13 @@ class Params:
                 out.update((f"{name}__{k}", v) for k, v in value.get_params(deep=True).items())
         return out
 
-    def set_params(self, **params):
+    def set_params(self: _S, **params: Any) -> _S:
         """Set constructor arguments (``"<name>__<param>"`` for a nested estimator's); returns ``self``.
 
         The new values are validated by the next ``fit``; the fitted state, if any, is unchanged until then.
         """
         valid = self._param_names()
-        nested: dict[str, dict] = {}
+        nested: dict[str, dict[str, Any]] = {}
         for key, value in params.items():
             name, _, sub = key.partition("__")
             if name not in valid:
@@ -57,6 +60,6 @@ class Params:
                 nested.setdefault(name, {})[sub] = value
             else:
                 setattr(self, name, value)
-        for name, sub in nested.items():
-            getattr(self, name).set_params(**sub)
+        for name, inner in nested.items():
+            getattr(self, name).set_params(**inner)
         return self

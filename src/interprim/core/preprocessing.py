@@ -11,8 +11,10 @@ is used.  ``window=None`` falls back to plain central differences
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._compiled import registry as _registry
 from .validation import as_2d_finite, check_times
@@ -21,7 +23,7 @@ __all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "inte
            "start_position", "derivatives", "PCA", "time_normalise"]
 
 
-def interp_columns(x_new, x, y) -> np.ndarray:
+def interp_columns(x_new: ArrayLike, x: ArrayLike, y: ArrayLike) -> np.ndarray:
     """Linear interpolation of every column of ``y`` (sampled at ``x``) at ``x_new``: the one resampling rule.
 
     Parameters
@@ -60,10 +62,10 @@ try:  # numpy >= 2 (numpy.interp's C routine; a private name, hence the fallback
     from numpy._core.multiarray import interp as _interp_1d
 except ImportError:
     try:  # numpy 1.x
-        from numpy.core.multiarray import interp as _interp_1d
+        from numpy.core.multiarray import interp as _interp_1d  # type: ignore[no-redef]  # the same routine
     except ImportError:  # a numpy that moved it: numpy.interp itself (the same numbers, a little slower)
 
-        def _interp_1d(x_new, x, y, left, right):
+        def _interp_1d(x_new: Any, x: Any, y: Any, left: Any, right: Any) -> Any:  # type: ignore[no-redef]  # idem
             return np.interp(x_new, x, y, left, right)
 
 
@@ -80,7 +82,7 @@ def unit_grid(n: int) -> np.ndarray:
     return out
 
 
-_UNIT_GRIDS: dict = {}
+_UNIT_GRIDS: dict[int, np.ndarray] = {}
 
 
 def step_count(duration: float, dt: float) -> int:
@@ -93,7 +95,7 @@ def step_grid(duration: float, dt: float) -> np.ndarray:
     return np.arange(step_count(duration, dt)) * dt
 
 
-def resample_step(y, times, dt: float):
+def resample_step(y: ArrayLike, times: ArrayLike, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Interpolate a ``(T, D)`` movement onto ``times[0] + k dt`` up to ``times[-1]`` (the step kept exactly).
 
     Unlike :func:`resample_uniform`, which stretches its step so that the grid ends at ``times[-1]``, the grid
@@ -117,7 +119,8 @@ def resample_step(y, times, dt: float):
     return interp_columns(t_new, t, y), t_new
 
 
-def resample_uniform(y, times, n: int | None = None, dt: float | None = None):
+def resample_uniform(y: ArrayLike, times: ArrayLike, n: int | None = None,
+                     dt: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Linearly interpolate an irregularly sampled ``(T, D)`` movement onto a uniform grid.
 
     Parameters
@@ -147,15 +150,15 @@ def resample_uniform(y, times, n: int | None = None, dt: float | None = None):
     return interp_columns(tu, t, y), tu
 
 
-def time_normalise(y, n: int) -> np.ndarray:
+def time_normalise(y: ArrayLike, n: int) -> np.ndarray:
     """Resample a uniformly sampled ``(T, D)`` movement to ``n`` frames over normalised time [0, 1]."""
-    y = np.asarray(y, dtype=np.float64)
-    if y.shape[0] == n:
-        return y.copy()
-    return interp_columns(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, y.shape[0]), y)
+    a = np.asarray(y, dtype=np.float64)
+    if a.shape[0] == n:
+        return np.array(a)  # a copy
+    return interp_columns(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, a.shape[0]), a)
 
 
-def savgol_window(T: int, window, polyorder: int = 3):
+def savgol_window(T: int, window: int | None, polyorder: int = 3) -> tuple[int, int] | None:
     """The Savitzky-Golay ``(window, polyorder)`` used for ``T`` frames, or ``None`` for no smoothing.
 
     The window shrinks to the largest odd number not above ``T``; ``None`` when ``window`` is None or
@@ -182,12 +185,12 @@ def _savgol_start_coeffs(w: int, p: int) -> np.ndarray:
     """
     x = np.linspace(-1.0, 1.0, w)
     Q, _ = np.linalg.qr(np.vander(x, p + 1))
-    c = Q @ Q[0]
+    c: np.ndarray = Q @ Q[0]
     c.setflags(write=False)
     return c
 
 
-def start_position(z, window, polyorder: int = 3) -> np.ndarray:
+def start_position(z: np.ndarray, window: int | None, polyorder: int = 3) -> np.ndarray:
     """``derivatives(z, ds, window, polyorder)[0][0]`` (:func:`derivatives`) in ``O(window D)``.
 
     The first frame of the smoothed observation, with the same window rule
@@ -196,11 +199,14 @@ def start_position(z, window, polyorder: int = 3) -> np.ndarray:
     """
     wp = savgol_window(z.shape[0], window, polyorder)
     if wp is not None:
-        return _savgol_start_coeffs(*wp) @ z[:wp[0]]
-    return z[0].copy()
+        out: np.ndarray = _savgol_start_coeffs(*wp) @ z[:wp[0]]
+        return out
+    first: np.ndarray = z[0].copy()
+    return first
 
 
-def derivatives(y, ds: float, window: int | None = None, polyorder: int = 3):
+def derivatives(y: np.ndarray, ds: float, window: int | None = None,
+                polyorder: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smoothed position, first and second derivative of a uniformly sampled movement.
 
     Parameters
@@ -253,12 +259,12 @@ class PCA:
         Number of principal components ``k`` kept.
     """
 
-    def __init__(self, n_components: int):
+    def __init__(self, n_components: int) -> None:
         if int(n_components) < 1:
             raise ValueError(f"n_components must be >= 1, got {n_components}")
         self.n_components = int(n_components)
 
-    def fit(self, frames):
+    def fit(self, frames: ArrayLike) -> PCA:
         """Fit the components to all frames.
 
         Parameters
@@ -286,10 +292,12 @@ class PCA:
         self.explained_variance_ratio_ = var[: self.n_components] / max(var.sum(), np.finfo(float).tiny)
         return self
 
-    def transform(self, X):
+    def transform(self, X: ArrayLike) -> np.ndarray:
         """Project frames ``(..., D)`` on the components: ``(X - mean_) @ components_.T``, shape ``(..., k)``."""
-        return (np.asarray(X, dtype=np.float64) - self.mean_) @ self.components_.T
+        out: np.ndarray = (np.asarray(X, dtype=np.float64) - self.mean_) @ self.components_.T
+        return out
 
-    def inverse_transform(self, Z):
+    def inverse_transform(self, Z: ArrayLike) -> np.ndarray:
         """Map component scores ``(..., k)`` back to frames ``(..., D)``: ``Z @ components_ + mean_``."""
-        return np.asarray(Z, dtype=np.float64) @ self.components_ + self.mean_
+        out: np.ndarray = np.asarray(Z, dtype=np.float64) @ self.components_ + self.mean_
+        return out

@@ -57,10 +57,10 @@ class Progress:
         if self.bar is not None:
             self.bar.close()
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -70,12 +70,12 @@ class _Lines:
     def __init__(self, total: int, desc: str):
         self.total, self.n, self.what, self.desc = total, 0, "", desc
 
-    def set_postfix_str(self, what, refresh=False):
+    def set_postfix_str(self, what: str, refresh: bool = False) -> None:
         self.what = what
 
-    def update(self, k):
+    def update(self, k: int) -> None:
         self.n += k
         print(f"{self.desc}: step {self.n}/{self.total} {self.what}", file=sys.stderr, flush=True)
 
-    def close(self):
+    def close(self) -> None:
         pass

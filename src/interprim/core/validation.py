@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def as_2d_finite(a, name: str, n_cols: int | None = None, min_rows: int = 1) -> np.ndarray:
+def as_2d_finite(a: ArrayLike, name: str, n_cols: int | None = None, min_rows: int = 1) -> np.ndarray:
     """Return ``a`` as a C-contiguous float64 ``(T, D)`` array or raise a clear error.
 
     Parameters
@@ -42,7 +45,7 @@ def as_2d_finite(a, name: str, n_cols: int | None = None, min_rows: int = 1) -> 
     return np.ascontiguousarray(arr)
 
 
-def as_frame(frame, name: str, n_cols: int) -> np.ndarray:
+def as_frame(frame: ArrayLike, name: str, n_cols: int) -> np.ndarray:
     """Check a single frame of ``n_cols`` finite values."""
     try:
         arr = np.asarray(frame, dtype=np.float64)
@@ -57,7 +60,7 @@ def as_frame(frame, name: str, n_cols: int) -> np.ndarray:
     return arr
 
 
-def check_times(times, n_rows: int, name: str) -> np.ndarray:
+def check_times(times: ArrayLike, n_rows: int, name: str) -> np.ndarray:
     """Check time stamps: 1-D, one per frame, finite and strictly increasing."""
     t = np.asarray(times, dtype=np.float64)
     if t.ndim != 1 or t.shape[0] != n_rows:
@@ -73,7 +76,7 @@ def check_times(times, n_rows: int, name: str) -> np.ndarray:
     return t
 
 
-def check_positive(value, name: str) -> float:
+def check_positive(value: Any, name: str) -> float:  # any user input
     try:
         v = float(value)
     except (TypeError, ValueError):

@@ -41,7 +41,7 @@ class RawStream:
     columns: tuple
     values: np.ndarray
 
-    def select(self, idx) -> "RawStream":
+    def select(self, idx) -> RawStream:
         """The same samples re-indexed for the column selection ``idx`` (columns not selected are dropped)."""
         pos = {c: k for k, c in enumerate(idx)}
         keep = [j for j, c in enumerate(self.columns) if c in pos]
@@ -155,7 +155,7 @@ class Demonstrations(Sequence):
         """
         return select_columns(self.columns, names, where=self.source or self.name or "demonstrations")
 
-    def take(self, indices) -> "Demonstrations":
+    def take(self, indices) -> Demonstrations:
         """A new set holding only the demonstrations ``indices`` (in that order), with their time stamps,
         labels and raw samples (a hold-out split keeps causal prefixes).
 
@@ -182,7 +182,7 @@ class Demonstrations(Sequence):
             raw=None if self.raw is None else [self.raw[i] for i in idx],
         )
 
-    def select(self, names) -> "Demonstrations":
+    def select(self, names) -> Demonstrations:
         """A new set holding only the columns ``names`` (in that order)."""
         idx = self.column_indices(names)
         obs = None
@@ -217,7 +217,7 @@ def select_columns(columns, names, where: str) -> list:
     if isinstance(names, str):
         names = [n.strip() for n in names.split(",") if n.strip()]
     out = []
-    pos = None  # name -> index, built once (linear in the number of columns)
+    pos: dict | None = None  # name -> index, built once (linear in the number of columns)
     for n in names:
         if isinstance(n, (int, np.integer)) and not isinstance(n, bool):
             i = int(n)

@@ -28,11 +28,15 @@ def fill_nans(y, max_nan_gap, where, row_of):
             while j < T and col[j]:
                 j += 1
             run = j - i
+            if run == T:  # empty everywhere: not a gap at the start or end
+                raise DataFileError(f"{where(d)}: no value in any of its {T} frames; leave it out (columns=, "
+                                    "markers=, joints=)")
             if run > max_nan_gap or i == 0 or j == T:
                 why = (
                     "missing value(s)"
                     if max_nan_gap == 0
-                    else ("a run of missing values at the start or end" if (i == 0 or j == T) else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
+                    else ("a run of missing values at the start or end" if (i == 0 or j == T)
+                          else f"a run of {run} missing values (max_nan_gap={max_nan_gap})")
                 )
                 edge = i == 0 or j == T  # interpolation cannot fill a run at the start or end
                 raise DataFileError(

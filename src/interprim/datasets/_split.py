@@ -7,6 +7,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..core.errors import DataFileError
@@ -74,9 +76,9 @@ def parse_ranges(text, where: str, first: int, last: int) -> list:
     out = []
     for item in items:
         if isinstance(item, str):
-            a, sep, b = item.partition("-")
+            first_text, sep, last_text = item.partition("-")
             try:
-                a, b = int(a), int(b)
+                a, b = int(first_text), int(last_text)
             except ValueError:
                 raise DataFileError(f"{where}: split_frames {item!r} is not a frame range FIRST-LAST") from None
             if not sep:
@@ -240,7 +242,7 @@ def find_repetitions(y, rate, *, where: str, period=None):
 
 
 def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=None, gap=None,
-               repetitions=None, notes=None) -> list:
+               repetitions=None, notes=None, keep_partial=False, names=None) -> list:
     """Row intervals ``(i0, i1)`` (inclusive) of the demonstrations in one motion-capture take.
 
     Parameters
@@ -268,7 +270,12 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
         Cut a continuous take into the repetitions of one movement (:func:`find_repetitions`); a float is
         the period in seconds.  Applied to each piece left by the other options.
     notes : list, optional
-        Receives what the repetition finder decided (period, cuts), for the user.
+        Receives what the repetition finder decided (period, cuts) and what was left out, for the user.
+    keep_partial : bool
+        With ``events``: also keep the piece after the last event (by default left out, and said in
+        ``notes``: it is not a whole cycle).
+    names : sequence of str, optional
+        The columns' names (for messages).
 
     Returns
     -------
@@ -287,6 +294,18 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
     if events is not None and not len(events):
         raise DataFileError(f"{where}: no event inside the recording to split at (split_events)")
     segs = spans(0, T - 1, starts=events or (), cuts=cuts, ranges=rows)
+    if events is not None and len(segs) > 1 and not keep_partial:
+        # the piece after the last event runs to the end of the recording, not to a next event: not a whole cycle
+        last = max(int(e) for e in events)
+        tail = [(a, b) for a, b in segs if a >= last]
+        if tail:
+            a, b = tail[0]
+            segs = [s_ for s_ in segs if s_[0] < last]
+            if notes is not None:
+                notes.append(f"{where}: split_events: the piece after the last event (frames "
+                             f"{numbers[a]}-{numbers[b]}, {(b - a + 1) / rate:.3g} s) runs to the end of the "
+                             "recording, not to a next event, so it is not a whole cycle: left out (keep it with "
+                             "keep_partial=True)")
     if not segs:
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
     if repetitions is not None:
@@ -315,32 +334,41 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
                 continue
             out.append((a, b))
         if not out:
-            raise DataFileError(f"{where}: every frame has a missing value; trimming leaves nothing")
+            gone = np.flatnonzero(np.isnan(y).all(axis=0))
+            named = ([str(names[j]) for j in gone] if names is not None else [f"column {j}" for j in gone])[:20]
+            why = (f"{', '.join(named)} {'is' if len(gone) == 1 else 'are'} missing in every frame" if len(gone)
+                   else "in every frame some column is missing")
+            raise DataFileError(f"{where}: trimming leaves nothing: {why}; leave them out (markers=, columns= or "
+                                "min_marker_coverage=) or fill the gaps (max_nan_gap=)")
         segs = out
     return segs
 
 
-def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, row_of):
-    """One motion-capture take as demonstrations: split (:func:`split_take`), gaps filled, lengths checked.
+def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, row_of, markers=None,
+             names=None, named=False):
+    """One take as demonstrations: split (:func:`split_take`), gaps filled, lengths checked.
 
-    ``split`` holds ``trim``, ``events`` (row indices or None), ``ranges`` and ``gap``; ``where_col(d)``
-    names column ``d`` and ``row_of(i)`` row ``i`` of the take in messages.  Returns ``(demos, times,
-    labels)``: one demonstration per interval, time stamps from 0, labels ``<file>@<start>s`` when the
-    take is split (the file's name otherwise).
+    ``split`` holds ``trim``, ``events`` (row indices or None), ``ranges``, ``gap``, ``repetitions`` and
+    ``keep_partial``; ``where_col(d)`` names column ``d`` and ``row_of(i)`` row ``i`` of the take in messages.
+    ``markers`` (:class:`~interprim.datasets._gaps.MarkerSet`): a marker take, whose gaps follow
+    :mod:`interprim.datasets._gaps` (gaps of up to ``max_nan_gap`` frames filled, or the default; what is left
+    refused with one table); otherwise each missing value left after filling ``max_nan_gap`` frames is an error.
+    Returns ``(demos, times, labels)``: one demonstration per interval, time stamps from 0, labels
+    ``<file>@<start>s`` when the take is split (the file's name otherwise).
     """
-    from ._checks import check_frames, fill_nans
-
-    from ._checks import warn
     from ..core.errors import DataFileWarning
+    from ._checks import check_frames, fill_nans, warn
+    from ._gaps import GapReport, default_max_gap, fill_runs
 
-    rate = 1.0 / float(t[1] - t[0]) if len(t) > 1 else 1.0
+    path = Path(path)
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     automatic = any(split.get(k) is not None for k in ("events", "gap", "repetitions"))
     splitting = automatic or split.get("ranges") is not None
     notes = split.setdefault("notes", [])
     if splitting or split.get("trim"):
         segs = split_take(y, rate, numbers, where=str(path), trim=bool(split.get("trim")), events=split.get("events"),
                           ranges=split.get("ranges"), gap=split.get("gap"), repetitions=split.get("repetitions"),
-                          notes=notes)
+                          notes=notes, keep_partial=bool(split.get("keep_partial")), names=names)
     else:
         segs = [(0, y.shape[0] - 1)]
     if automatic and len(segs) > 1:  # pieces too short to learn from, left by pauses, events or repetitions: dropped
@@ -348,15 +376,32 @@ def cut_take(path, y, t, numbers, split, *, max_nan_gap, min_frames, where_col, 
         if short and len(short) < len(segs):
             shown = ", ".join(f"{numbers[a]}-{numbers[b]}" for a, b in short[:10]) + (" ..." if len(short) > 10 else "")
             warn(f"{path}: {len(short)} piece(s) shorter than {min_frames} frames left out (frames {shown}); "
-                  f"{len(segs) - len(short)} demonstrations kept", DataFileWarning)
+                 f"{len(segs) - len(short)} demonstrations kept", DataFileWarning)
             segs = [(a, b) for a, b in segs if b - a + 1 >= min_frames]
+    gap = max_nan_gap
+    if markers is not None and gap is None:
+        gap = default_max_gap(rate)
+    gap = int(gap or 0)
+    report = GapReport(path, markers, y.shape[0], rate, gap, named=named) if markers is not None else None
     demos, times, labels = [], [], []
     for a, b in segs:
         where = str(path) if not splitting else f"{path}, frames {numbers[a]}-{numbers[b]}"
         hint = " (a larger split_gap, fewer events or longer split_frames?)" if splitting and len(segs) > 1 else ""
         check_frames(b - a + 1, min_frames, where + hint)
-        piece = fill_nans(y[a:b + 1], max_nan_gap, where_col, lambda i, _a=a: row_of(_a + i))
+        if report is not None:
+            piece = fill_runs(y[a:b + 1], gap)
+            report.add(markers.missing(piece), numbers[a:b + 1])
+        else:
+            piece = fill_nans(y[a:b + 1], gap, where_col, lambda i, _a=a: row_of(_a + i))
         demos.append(piece)
         times.append(t[a:b + 1] - t[a])
         labels.append(f"{path.stem}@{t[a]:.3f}s" if splitting else path.stem)
+    if report is not None and report.bad:
+        if gap:
+            how = (f"filling gaps of up to {gap} frames ({gap / rate:.3g} s at {rate:.4g} Hz"
+                   + ("; the default" if max_nan_gap is None else f"; max_nan_gap={gap}")
+                   + ") by linear interpolation")
+        else:
+            how = "filling no gap (max_nan_gap=0)"
+        raise report.error(how)
     return demos, times, labels

@@ -1,32 +1,17 @@
-"""Reading and writing users' own demonstrations (CSV and NPZ; see ``docs/data-formats.md``).
+"""Reading and writing users' own demonstrations (see ``docs/data-formats.md``).
 
-:func:`load_demonstrations` also reads motion-capture recordings (C3D, BVH: :mod:`.mocap_c3d`,
-:mod:`.mocap_bvh`) and ROS bags (:mod:`.ros_bags`), choosing the reader by extension.
-
-Formats
--------
-CSV (one file)
-    A header row of column names, then one row per frame.  A ``time`` column (seconds,
-    strictly increasing within a demonstration) is required unless ``dt`` is given.  An
-    optional ``demo`` column labels the demonstration each row belongs to; rows of one
-    demonstration must be contiguous.  Every other column is a degree of freedom (numbers;
-    an empty cell, ``nan`` or ``NA`` is a missing value).  Lines starting with ``#`` are
-    comments; ``# observed: a, b`` names the observed agent's columns.
-Folder
-    Every ``*.csv`` and ``*.npz`` file in it (not recursive), in natural order; all must
-    have the same columns.
-NPZ
-    Arrays ``demo_000``, ``demo_001``, ... of shape ``(T, D)``, ``time_000``, ... of shape
-    ``(T,)`` (or a scalar ``dt``), optional ``columns`` (``(D,)`` strings) and ``observed``
-    (strings).  Read with ``allow_pickle=False``.
+:func:`load_demonstrations` chooses the reader of a file by its suffix (and, for a ``.csv`` file, its first
+bytes: an OptiTrack Motive export) among the readers of :mod:`interprim.datasets.formats`, one module per
+format behind one interface with typed options: CSV and NPZ files, motion capture (C3D, Qualisys TSV, Motive
+CSV, BVH) and ROS bags.  A folder is read file by file; all files must have the same columns.
+:func:`save_demonstrations` writes CSV or NPZ.
 """
 
 from __future__ import annotations
 
-import csv
-import math
 import os
 import re
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -34,420 +19,21 @@ import numpy as np
 from ..core.errors import DataFileError
 from ..core.preprocessing import resample_step
 from ._base import DataNotFoundError, Demonstrations, RawStream, sampling, select_columns, uniform_dt
-from ._checks import check_frames, check_stamps, fill_nans
+from .formats import OPTION_TYPES, READERS, Common, Reader, Table, reader_for
+from .formats.csvfile import CSV_LIMITS, TIME_CANDIDATES, TIME_UNITS  # noqa: F401 - documented names
+from .formats.npzfile import MAX_NPZ_ARRAY_BYTES  # noqa: F401 - documented name
 
-__all__ = ["load_demonstrations", "save_demonstrations"]
+__all__ = ["load_demonstrations", "save_demonstrations", "resampled", "median_interval"]
 
 TIME = "time"
 DEMO = "demo"
-_MISSING = {"", "nan", "NaN", "NAN", "NA", "N/A", "na", "null", "None"}
-_DEMO_KEY = re.compile(r"^demo_(\d+)$")
-_TIME_KEY = re.compile(r"^time_(\d+)$")
-_NPZ_META = {"columns", "dt", "observed"}
+#: suffixes of the files a folder is read for
+RECORDING_SUFFIXES = (".c3d", ".bvh", ".bag", ".db3", ".mcap", ".tsv")
+_FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
 
 
 def _natural_key(p: Path):
     return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", p.name)]
-
-
-# --------------------------------------------------------------------------- CSV limits
-#: Limits of the CSV reader, checked while reading (the file is streamed, never held whole). Raise one with
-#: its environment variable (e.g. ``INTERPRIM_CSV_MAX_COLUMNS=500000``) or by assigning to this dict.
-CSV_LIMITS = {"max_line_chars": 64 * 2**20, "max_columns": 1_000_000, "max_bytes": 8 * 2**30}
-_LIMIT_ENV = {"max_line_chars": "INTERPRIM_CSV_MAX_LINE_CHARS", "max_columns": "INTERPRIM_CSV_MAX_COLUMNS",
-              "max_bytes": "INTERPRIM_CSV_MAX_BYTES"}
-
-
-def _csv_limit(name: str) -> int:
-    env = os.environ.get(_LIMIT_ENV[name])
-    if env:
-        try:
-            value = int(env)
-        except ValueError:
-            raise ValueError(f"{_LIMIT_ENV[name]}={env!r} is not a whole number") from None
-        if value > 0:
-            return value
-    return int(CSV_LIMITS[name])
-
-
-def _over(path, what, value, name):
-    return DataFileError(
-        f"{path}: {what} ({value}) exceeds the CSV reader's limit {name}={_csv_limit(name)}; if the file is "
-        f"right, raise it with the environment variable {_LIMIT_ENV[name]}=N"
-    )
-
-
-def _lines(fh, path, max_chars):
-    """The file's lines, each read with a bounded ``readline``: a too-long line is refused without reading it."""
-    n = 0
-    while True:
-        line = fh.readline(max_chars + 1)
-        if not line:
-            return
-        n += 1
-        if len(line) > max_chars and not line.endswith("\n"):
-            raise _over(f"{path}, line {n}", "a line longer than the limit", f"more than {max_chars} characters",
-                        "max_line_chars")
-        yield line
-
-
-#: Time columns recognised when a CSV file has no ``time`` column, in this order: ``rostopic echo -p``
-#: (``%time``, ns), PlotJuggler and ``ros2 bag`` CSV exports (``__time``, ``timestamp``), bagpy (``Time``).
-TIME_CANDIDATES = ("%time", "__time", "timestamp", "Time", "field.header.stamp", "header.stamp")
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
-# A ROS export's bookkeeping fields: not degrees of freedom unless named with columns=.
-_ROS_BOOKKEEPING = re.compile(r"(^|[./])(header[./](seq|frame_id|stamp([./](secs|nsecs|sec|nanosec))?)|child_frame_id)$")
-
-
-def _ros_shaped(header) -> bool:
-    """A ``rostopic echo -p`` (``%time``, ``field.*``) or ``ros2 bag``/PlotJuggler (``__time``, ``/topic/...``)
-    export."""
-    return "%time" in header or "__time" in header or any(h.startswith(("field.", "/")) for h in header[:50])
-
-
-def _time_scale(t_all, name, unit, explicit):
-    """Seconds per unit of the time column, and a note saying which unit was taken and why."""
-    if unit is not None:
-        return TIME_UNITS[unit], None
-    if name == TIME and not explicit:
-        return 1.0, None  # the documented format: seconds
-    steps = np.diff(t_all)
-    steps = steps[steps > 0]
-    whole = bool(np.all(np.mod(t_all, 1.0) == 0))
-    if whole and steps.size and float(np.median(steps)) > 1e3:
-        return 1e-9, (f"time column {name!r}: whole numbers {float(np.median(steps)):.3g} apart, taken as "
-                      "nanoseconds (as ROS stamps are); pass time_unit= (--time-unit) to say otherwise")
-    return 1.0, (f"time column {name!r}: taken as seconds (median step {float(np.median(steps)) if steps.size else 0:.3g}); "
-                 "pass time_unit= (--time-unit) to say otherwise")
-
-
-def _read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_unit=None, columns=None):
-    """Parse one CSV file into (demos, times, columns, labels, meta), streaming it line by line.
-
-    ``columns`` (names or indices of the data columns) restricts what is parsed: the other columns may
-    hold text.  Checks as it reads: :data:`CSV_LIMITS`.
-    """
-    from collections import Counter
-
-    from ._base import select_columns, shown_names
-
-    size = path.stat().st_size
-    if size > _csv_limit("max_bytes"):
-        raise _over(path, "the file's size", f"{size} bytes", "max_bytes")
-    max_chars = _csv_limit("max_line_chars")
-    max_cols = _csv_limit("max_columns")
-    if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
-        csv.field_size_limit(max_chars)
-    meta = {}
-    header = None
-    header_line = 0
-    with open(path, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.reader(_lines(fh, path, max_chars))
-        try:
-            for cells in reader:  # the comments and the header
-                if not cells or all(not c.strip() for c in cells):
-                    continue
-                if cells[0].lstrip().startswith("#"):
-                    text = ",".join(cells).lstrip()[1:]
-                    if ":" in text:
-                        k, v = text.split(":", 1)
-                        meta[k.strip().lower()] = v.strip()
-                    continue
-                header = [c.strip() for c in cells]
-                header_line = reader.line_num
-                break
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise DataFileError(f"{path}: not a readable CSV text file ({exc})") from None
-        if header is None:
-            raise DataFileError(f"{path}: empty file, expected a header row of column names")
-        n_cols = len(header)
-        if n_cols > max_cols:
-            raise _over(f"{path}, line {header_line}", "the number of columns", n_cols, "max_columns")
-        if any(not h for h in header):
-            k = next(i for i, h in enumerate(header) if not h)
-            raise DataFileError(f"{path}, line {header_line}: empty column name in the header (column {k + 1} of "
-                                f"{n_cols}: {shown_names(header)})")
-        dup = sorted(h for h, c in Counter(header).items() if c > 1)
-        if dup:
-            raise DataFileError(f"{path}, line {header_line}: duplicate column name(s) {dup[:10]}")
-        index = {h: i for i, h in enumerate(header)}
-        ros = _ros_shaped(header)
-        if time_column is not None:
-            if time_column not in index:
-                raise DataFileError(f"{path}: no column {time_column!r} (time_column); the header has {n_cols} "
-                                    f"columns: {shown_names(header)}")
-            tname = time_column
-        elif TIME in index:
-            tname = TIME
-        elif dt is None or ros:  # a ROS export's own stamps win over a fallback dt (predict passes the model's)
-            tname = next((c for c in TIME_CANDIDATES if c in index), None)
-            if tname is None and dt is None:
-                raise DataFileError(
-                    f"{path}: missing column 'time' (seconds); the header has {n_cols} columns: {shown_names(header)}. "
-                    "Name the time column with time_column= (--time-column), add a time column, or pass dt for "
-                    "uniformly sampled data"
-                )
-        else:
-            tname = None
-        skip = {TIME, DEMO, tname}
-        if ros:
-            skip.update(h for h in header if h in TIME_CANDIDATES or _ROS_BOOKKEEPING.search(h))
-        data_cols = [h for h in header if h not in skip]
-        if columns is not None:
-            pool = data_cols if not ros else [h for h in header if h not in (TIME, DEMO, tname)]
-            data_cols = [pool[i] for i in select_columns(pool, columns, where=str(path))]
-        if not data_cols:
-            raise DataFileError(f"{path}: no data columns besides the time and demo columns in the header "
-                                f"({shown_names(header)})")
-        i_time = index[tname] if tname is not None else None
-        i_demo = index.get(DEMO)
-        i_data = [index[c] for c in data_cols]
-        order, groups = [], {}  # label -> (lines, rows of floats, times)
-        last = None
-
-        def num(cell, line, col, allow_missing):
-            s = cell.strip()
-            if s in _MISSING:
-                if not allow_missing:
-                    raise DataFileError(f"{path}, line {line}: missing value in column {col!r}")
-                return math.nan
-            try:
-                v = float(s)
-            except ValueError:
-                hint = ("" if columns is not None or not allow_missing  # the time column has no such hint
-                        else "; choose the numeric columns with columns= (--columns)")
-                raise DataFileError(
-                    f"{path}, line {line}: non-numeric value {cell[:80]!r} in column {col!r}{hint}") from None
-            if math.isinf(v):
-                raise DataFileError(f"{path}, line {line}: infinite value {cell[:80]!r} in column {col!r}")
-            return v
-
-        try:
-            for cells in reader:
-                line = reader.line_num
-                if not cells or all(not c.strip() for c in cells):
-                    continue
-                if cells[0].lstrip().startswith("#"):
-                    continue
-                if len(cells) != n_cols:
-                    raise DataFileError(f"{path}, line {line}: {len(cells)} cells but the header has {n_cols} columns")
-                label = cells[i_demo].strip() if i_demo is not None else "0"
-                if label != last:
-                    if label in groups:
-                        raise DataFileError(f"{path}, line {line}: rows of demo {label!r} are not contiguous "
-                                            f"(it appeared before line {line})")
-                    groups[label] = ([], [], [])
-                    order.append(label)
-                    last = label
-                lines, rows, ts = groups[label]
-                lines.append(line)
-                rows.append([num(cells[i], line, header[i], True) for i in i_data])
-                if i_time is not None:
-                    ts.append(num(cells[i_time], line, tname, False))
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise DataFileError(f"{path}, line {reader.line_num}: not a readable CSV text file ({exc})") from None
-    if not order:
-        raise DataFileError(f"{path}: no data rows after the header (line {header_line})")
-    scale = 1.0
-    if i_time is not None:
-        t_all = np.concatenate([np.asarray(groups[g][2], dtype=np.float64) for g in order])
-        scale, note = _time_scale(t_all, tname, time_unit, explicit=time_column is not None)
-        if note:
-            meta["notes"] = [note]
-    demos, times, labels = [], [], []
-    for label in order:
-        lines, rows, ts = groups[label]
-        where_demo = f"{path}" + (f", demo {label!r}" if i_demo is not None else "")
-        y = np.array(rows, dtype=np.float64).reshape(len(rows), len(i_data))
-        if i_time is not None:
-            t = np.asarray(ts, dtype=np.float64)
-            if scale != 1.0:
-                t = t * scale
-        else:
-            t = np.arange(len(rows)) * float(dt)
-
-        def row_of(i, _lines=lines):
-            return f"line {_lines[i]}"
-
-        check_frames(len(rows), min_frames, where_demo)
-        check_stamps(t, where_demo, row_of)
-        y = fill_nans(y, max_nan_gap, lambda d, _w=where_demo: f"{_w}, column {data_cols[d]!r}", row_of)
-        demos.append(y)
-        times.append(t)
-        labels.append(label if i_demo is not None else path.stem)
-    if columns is not None:
-        meta["selected"] = True
-    return demos, times, data_cols, labels, meta
-
-
-# --------------------------------------------------------------------------- NPZ
-MAX_NPZ_ARRAY_BYTES = 4 << 30  # one array of a data .npz once read (4 GiB)
-
-
-def _check_npz_member(npz, key: str, path: Path) -> None:
-    """Refuse an array of a data ``.npz`` from its ``.npy`` header (shape and dtype; no data read) when it declares
-    more than :data:`MAX_NPZ_ARRAY_BYTES`, or more than the member holds."""
-    zf = getattr(npz, "zip", None)
-    if zf is None:
-        return
-    try:
-        info = zf.getinfo(key + ".npy")
-        with zf.open(info) as fh:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-            else:
-                return  # np.load reports it
-            offset = fh.tell()
-    except (KeyError, ValueError, OSError, EOFError):
-        return  # np.load reports it
-    count = 1
-    for d in shape:
-        count *= int(d)
-    nbytes = count * dtype.itemsize
-    if nbytes > MAX_NPZ_ARRAY_BYTES:
-        raise DataFileError(f"{path}: key {key!r} declares shape {shape} of {dtype} ({count:.3g} values, "
-                            f"{nbytes / 2**30:.3g} GiB), over the limit of {MAX_NPZ_ARRAY_BYTES / 2**30:g} GiB "
-                            "for one array: a damaged file?")
-    if not dtype.hasobject and offset + nbytes > int(info.file_size):
-        raise DataFileError(f"{path}: key {key!r} declares shape {shape} of {dtype} ({nbytes} bytes) but holds "
-                            f"only {int(info.file_size) - offset} bytes: the file is truncated or damaged")
-
-
-def _read_npz(path: Path, dt, max_nan_gap, min_frames):
-    try:
-        npz = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001
-        raise DataFileError(f"{path}: not a readable .npz file ({exc})") from None
-    if not hasattr(npz, "files"):
-        raise DataFileError(f"{path}: a single .npy array, expected an .npz archive with demo_000, ...")
-    meta = {}
-    with npz:
-        keys = list(npz.files)
-        demo_keys = {}
-        time_keys = {}
-        for k in keys:
-            m = _DEMO_KEY.match(k)
-            if m:
-                demo_keys[int(m.group(1))] = k
-                continue
-            m = _TIME_KEY.match(k)
-            if m:
-                time_keys[int(m.group(1))] = k
-                continue
-            if k not in _NPZ_META:
-                raise DataFileError(
-                    f"{path}: unknown key {k!r}; expected demo_000, demo_001, ..., time_000, ..., "
-                    "and optionally columns, dt, observed"
-                )
-        if not demo_keys:
-            raise DataFileError(f"{path}: no demonstrations (keys demo_000, demo_001, ...); it has {keys}")
-        extra = sorted(set(time_keys) - set(demo_keys))
-        if extra:
-            raise DataFileError(f"{path}: {time_keys[extra[0]]!r} has no matching demo_ key")
-
-        def load(k):
-            _check_npz_member(npz, k, path)  # from its header, before any data is read
-            try:
-                return npz[k]
-            except ValueError as exc:  # object arrays would need pickle
-                raise DataFileError(f"{path}: key {k!r} cannot be read without pickle ({exc})") from None
-            except MemoryError:
-                raise DataFileError(f"{path}: key {k!r} does not fit in memory") from None
-
-        file_dt = None
-        if "dt" in npz.files:
-            a = load("dt")
-            try:
-                file_dt = float(np.asarray(a, dtype=np.float64).reshape(()))
-            except (TypeError, ValueError):
-                raise DataFileError(f"{path}: 'dt' must be one positive number, got shape {a.shape}") from None
-            if not (np.isfinite(file_dt) and file_dt > 0):
-                raise DataFileError(f"{path}: 'dt' must be a positive number, got {file_dt!r}")
-        columns = None
-        if "columns" in npz.files:
-            a = load("columns")
-            if a.dtype.kind not in "US" or a.ndim != 1:
-                raise DataFileError(f"{path}: 'columns' must be a 1-D string array, got dtype {a.dtype} shape {a.shape}")
-            columns = [str(c) for c in a.astype(str)]
-            dup = sorted({c for c in columns if columns.count(c) > 1})
-            if dup:
-                raise DataFileError(f"{path}: duplicate column name(s) {dup} in 'columns'")
-        if "observed" in npz.files:
-            a = load("observed")
-            meta["observed"] = ",".join(str(c) for c in np.atleast_1d(a).astype(str))
-        if time_keys and len(time_keys) != len(demo_keys):
-            missing = [demo_keys[i] for i in sorted(demo_keys) if i not in time_keys]
-            raise DataFileError(f"{path}: time stamps missing for {missing[:3]} (every demo_ needs a time_ or none)")
-        step = file_dt if file_dt is not None else dt
-        if not time_keys and step is None:
-            raise DataFileError(f"{path}: no time stamps (time_000, ...) and no 'dt'; add either, or pass dt")
-        demos, times, labels = [], [], []
-        n_cols = None
-        for i in sorted(demo_keys):
-            k = demo_keys[i]
-            y = load(k)
-            if y.dtype.kind not in "fiub":
-                raise DataFileError(f"{path}: {k!r} is not numeric (dtype {y.dtype})")
-            if y.ndim == 1:
-                y = y[:, None]
-            if y.ndim != 2:
-                raise DataFileError(f"{path}: {k!r} must have shape (T, D), got {y.shape}")
-            y = y.astype(np.float64)
-            if n_cols is None:
-                n_cols = y.shape[1]
-                if columns is not None and len(columns) != n_cols:
-                    raise DataFileError(f"{path}: 'columns' names {len(columns)} columns but {k!r} has {n_cols}")
-            elif y.shape[1] != n_cols:
-                raise DataFileError(f"{path}: {k!r} has {y.shape[1]} columns, the first demonstration has {n_cols}")
-            where = f"{path}, {k}"
-            check_frames(y.shape[0], min_frames, where)
-            if np.isinf(y).any():
-                r, c = np.argwhere(np.isinf(y))[0]
-                raise DataFileError(f"{where}: infinite value at row {r}, column {c}")
-            if i in time_keys:
-                t = load(time_keys[i])
-                if t.dtype.kind not in "fiu" or t.ndim != 1 or t.shape[0] != y.shape[0]:
-                    raise DataFileError(
-                        f"{path}: {time_keys[i]!r} must be numeric with shape ({y.shape[0]},), got {t.dtype} {t.shape}"
-                    )
-                t = t.astype(np.float64)
-            else:
-                t = np.arange(y.shape[0]) * float(step)
-
-            def row_of(r):
-                return f"row {r}"
-
-            check_stamps(t, f"{path}, {time_keys.get(i, k)}", row_of)
-            cols_now = columns or [f"dof_{j}" for j in range(n_cols)]
-            y = fill_nans(y, max_nan_gap, lambda d, _w=where, _c=cols_now: f"{_w}, column {_c[d]!r}", row_of)
-            demos.append(y)
-            times.append(t)
-            labels.append(k)
-    if columns is None:
-        columns = [f"dof_{j}" for j in range(n_cols)]
-    return demos, times, columns, labels, meta
-
-
-# --------------------------------------------------------------------------- public
-RECORDING_SUFFIXES = (".c3d", ".bvh", ".bag", ".db3", ".mcap")
-_FOLDER_SUFFIXES = (".csv", ".npz") + RECORDING_SUFFIXES
-# Which format reads which option (the options not listed for a format must be left at None).
-_OPTIONS = {
-    ".csv": ("time_column", "time_unit", "columns"),
-    ".c3d": ("markers", "length_unit", "trim", "split_events", "split_frames", "split_gap", "split_repetitions"),
-    ".bvh": ("bvh_mode", "joints", "length_unit", "end_sites", "trim", "split_frames", "split_gap",
-             "split_repetitions"),
-    "ros": ("topics", "joints", "orientation", "split_topic", "split_gap"),
-}
-
-
-def _take_split(opts) -> dict:
-    """The splitting options of a motion-capture take (:func:`._split.cut_take`)."""
-    return dict(trim=bool(opts["trim"]), events=opts["split_events"], ranges=opts["split_frames"],
-                gap=opts["split_gap"], repetitions=opts["split_repetitions"])
 
 
 def _check_readable(p: Path) -> None:
@@ -470,43 +56,41 @@ def _check_readable(p: Path) -> None:
         raise DataFileError(f"{p}: is {kind}, not a regular file; demonstrations are read from files or folders")
 
 
-def _read_file(p: Path, dt, max_nan_gap, min_frames, opts, resample_dt=None):
-    from .ros_bags import is_rosbag2_folder
+def _options(kwargs: dict) -> dict:
+    """The typed options (:data:`~.formats.OPTION_TYPES`) of ``load_demonstrations``'s keyword arguments."""
+    return {T: T(**{f.name: kwargs[f.name] for f in fields(T) if f.name in kwargs}) for T in OPTION_TYPES}
 
-    suffix = p.suffix.lower()
-    kind = "ros" if (suffix in (".bag", ".db3", ".mcap") or is_rosbag2_folder(p)) else suffix
-    allowed = _OPTIONS.get(kind, ())
-    for name, value in opts.items():
-        if value is not None and value is not False and name not in allowed:
-            fmts = [k if k != "ros" else "ROS bag" for k, v in _OPTIONS.items() if name in v]
-            this = "ROS bag" if kind == "ros" else (kind or "extension-less") + " file"
-            raise DataFileError(f"{p}: the option {name}= applies to {', '.join(fmts)} files, not to this {this}")
-    if kind == ".csv":
-        return _read_csv(p, dt, max_nan_gap, min_frames, time_column=opts["time_column"], time_unit=opts["time_unit"],
-                         columns=opts["columns"])
-    if kind == ".npz":
-        return _read_npz(p, dt, max_nan_gap, min_frames)
-    if kind == ".c3d":
-        from .mocap_c3d import read_c3d
 
-        return read_c3d(p, markers=opts["markers"], length_unit=opts["length_unit"], max_nan_gap=max_nan_gap,
-                        min_frames=min_frames, split=_take_split(opts))
-    if kind == ".bvh":
-        from .mocap_bvh import read_bvh
+def _given(kwargs: dict) -> list:
+    """The names of the format options that were given (not left at their defaults)."""
+    return [k for k, v in kwargs.items() if v is not None and v is not False]
 
-        return read_bvh(p, mode=opts["bvh_mode"] or "positions", joints=opts["joints"],
-                        length_unit=opts["length_unit"], end_sites=bool(opts["end_sites"]),
-                        max_nan_gap=max_nan_gap, min_frames=min_frames, split=_take_split(opts))
-    if kind == "ros":
-        from .ros_bags import read_rosbag
 
-        return read_rosbag(p, topics=opts["topics"], joints=opts["joints"], orientation=bool(opts["orientation"]),
-                           split_topic=opts["split_topic"], split_gap=opts["split_gap"], grid_dt=resample_dt,
-                           max_nan_gap=max_nan_gap, min_frames=min_frames)
-    raise DataFileError(
-        f"{p}: unsupported file type {p.suffix!r}; expected .csv, .npz, .c3d, .bvh, a ROS bag (.bag, .db3, .mcap, "
-        "a rosbag2 folder) or a folder of such files"
-    )
+def _module_order(reader) -> int:
+    """A reader's place in :data:`~.formats.MODULES` (messages list the formats in one order)."""
+    from .formats import MODULES
+
+    name = reader.__module__.rsplit(".", 1)[-1]
+    return MODULES.index(name) if name in MODULES else len(MODULES)
+
+
+def _read_file(p: Path, common: Common, kwargs: dict) -> Table:
+    """``p`` read by its format's reader, after refusing the options that reader does not take."""
+    cls = reader_for(p)
+    if cls is None:
+        known = list(dict.fromkeys(s for r in sorted(READERS, key=_module_order) for s in r.suffixes))
+        raise DataFileError(
+            f"{p}: unsupported file type {p.suffix!r}; expected {', '.join(known)}, a rosbag2 folder or a folder of "
+            "such files (other formats: convert them to CSV, see docs/data-formats.md)"
+        )
+    accepted = cls.accepts()
+    for name in _given(kwargs):
+        if name not in accepted:
+            fmts = [r.name for r in sorted(READERS, key=_module_order) if name in r.accepts()]
+            raise DataFileError(f"{p}: the option {name}= applies to {', '.join(dict.fromkeys(fmts))} files, not to "
+                                f"this {cls.name} file")
+    opts = _options(kwargs)
+    return cls().read(p, common, {T: opts[T] for T in cls.takes})
 
 
 def load_demonstrations(
@@ -515,7 +99,7 @@ def load_demonstrations(
     columns=None,
     dt: float | None = None,
     resample_dt: float | None = None,
-    max_nan_gap: int = 0,
+    max_nan_gap: int | None = None,
     min_frames: int = 5,
     markers=None,
     joints=None,
@@ -532,6 +116,9 @@ def load_demonstrations(
     time_column: str | None = None,
     time_unit: str | None = None,
     split_repetitions=None,
+    min_marker_coverage: float | None = None,
+    keep_partial: bool = False,
+    options=(),
 ) -> Demonstrations:
     """Load demonstrations from CSV/NPZ files, motion-capture recordings or ROS bags.
 
@@ -562,15 +149,19 @@ def load_demonstrations(
         interval (:func:`interprim.core.preprocessing.resample_uniform`).  For a ROS bag both
         agents' streams are interpolated onto that grid directly (instead of onto the
         observed agent's stamps).
-    max_nan_gap : int
+    max_nan_gap : int, optional
         Longest interior run of missing values (per column) that is filled by linear
-        interpolation (default 0: any missing value is an error).  Missing values at the
-        start or end of a demonstration are always an error.  Missing motion-capture markers
-        and joints absent from a JointState message are missing values.
+        interpolation.  Default: 0 for CSV, NPZ, BVH and ROS bags (any missing value is an
+        error); for marker files (C3D, Qualisys TSV, Motive CSV) gaps of up to 0.1 s
+        (:data:`interprim.datasets._gaps.DEFAULT_GAP_SECONDS`: 10 frames at 100 Hz), and what is
+        left is refused with one table of the markers, their missing share and longest gap
+        (:mod:`interprim.datasets._gaps`).  Missing values at the start or end of a
+        demonstration are never filled (see ``trim``).
     min_frames : int
         Fewest frames a demonstration may have (default 5).
     markers : sequence of str or str, optional
-        C3D: the markers to keep (default all).
+        C3D, Qualisys TSV, Motive CSV: the markers to keep (default all seen in at least
+        ``min_marker_coverage`` of the frames).
     joints : sequence of str or str, optional
         BVH: the joints to keep; ROS JointState: the joints to read (default all).
     length_unit : str, optional
@@ -588,14 +179,14 @@ def load_demonstrations(
         ROS bags: a topic whose messages mark the start of each demonstration.
     split_gap : float, optional
         A pause longer than this many seconds starts a new demonstration: in a ROS bag, no
-        message in either stream; in a C3D or BVH take, a run of frames in which every column
+        message in either stream; in a take (CSV, NPZ, C3D, BVH, TSV, Motive CSV), a run of frames in which every column
         moves slower than 5 % of the take's 95th-percentile speed, or in which a value is missing
         (:func:`interprim.datasets._split.split_take`).
     trim : bool
-        C3D, BVH: drop the leading and trailing frames (of each demonstration) in which a
+        Every take format: drop the leading and trailing frames (of each demonstration) in which a
         marker or channel is missing (written as 0,0,0, with a negative residual, or ``nan``).
     split_events : True or str or sequence of str, optional
-        C3D: each of the file's events (``True``: every event; else the event labels, or
+        C3D, Qualisys TSV: each of the file's events (``True``: every event; else the event labels, or
         ``Context:Label``) starts a demonstration lasting until the next one.
     time_column : str, optional
         CSV: the column holding the time stamps (default ``time``; without it, the first of
@@ -606,14 +197,27 @@ def load_demonstrations(
         column, nanoseconds when its values are whole numbers more than 1000 apart (ROS stamps),
         else seconds; the choice is stated in ``Demonstrations.notes``.
     split_repetitions : True or float, optional
-        C3D, BVH: cut a continuous take (walking, hopping, serves one after the other) into the
+        CSV, NPZ, C3D, BVH, Qualisys TSV, Motive CSV: cut a continuous take (walking, hopping,
+        serves one after the other) into the
         repetitions of its movement: ``True`` finds the period from the take's autocorrelation, a
         number gives it in seconds (:func:`interprim.datasets._split.find_repetitions`); what was
         found is stated in ``Demonstrations.notes``.  Pieces left by ``split_gap``, ``split_events``
         or ``split_repetitions`` that are shorter than ``min_frames`` are left out with one warning.
+    min_marker_coverage : float, optional
+        Marker files: a marker seen in fewer than this share of the take's frames is left out,
+        with one warning listing them (default 0.5; 0 keeps every marker; markers named with
+        ``markers`` are always kept).
+    keep_partial : bool
+        With ``split_events``: also keep the piece after the last event, which runs to the end
+        of the recording and is not a whole cycle (left out by default, said in ``notes``).
+    options : option instance or sequence of them, optional
+        The format options as the readers take them (:mod:`interprim.datasets.formats`):
+        ``TakeOptions(split_gap=1.0)``, ``MarkerOptions(markers=["A:RHand"])``, ``CsvOptions``,
+        ``BvhOptions``, ``RosOptions``; the same as the keyword arguments of their fields.
     split_frames : str or sequence of (int, int), optional
-        C3D, BVH: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive; C3D
-        frames numbered as the capture software numbers them, BVH frames from 0).
+        Every take format: the demonstrations as frame ranges ``"FIRST-LAST,FIRST-LAST"`` (inclusive;
+        C3D, TSV and Motive frames numbered as the capture software numbers them, BVH frames and the
+        rows of each CSV/NPZ demonstration from 0).
 
     Returns
     -------
@@ -649,10 +253,26 @@ def load_demonstrations(
         raise ValueError(f"bvh_mode must be 'positions' or 'angles', got {bvh_mode!r}")
     if split_gap is not None and not (np.isfinite(split_gap) and split_gap > 0):
         raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
-    opts = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
-                topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
-                split_events=split_events or None, split_frames=split_frames, time_column=time_column,
-                time_unit=time_unit, columns=None, split_repetitions=split_repetitions)
+    if min_marker_coverage is not None and not (0.0 <= float(min_marker_coverage) <= 1.0):
+        raise ValueError(f"min_marker_coverage must be a share of frames in [0, 1], got {min_marker_coverage!r}")
+    kwargs = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
+                  topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
+                  split_events=split_events or None, split_frames=split_frames, time_column=time_column,
+                  time_unit=time_unit, split_repetitions=split_repetitions, min_marker_coverage=min_marker_coverage,
+                  keep_partial=keep_partial)
+    for o in (options,) if not isinstance(options, (list, tuple)) else options:  # typed options, as the readers take
+        if type(o) not in OPTION_TYPES:
+            raise TypeError(f"options: expected instances of {', '.join(t.__name__ for t in OPTION_TYPES)}, got {o!r}")
+        for f in fields(o):
+            value = getattr(o, f.name)
+            if value == f.default:
+                continue
+            if f.name == "columns":
+                columns = value if columns is None else columns
+                continue
+            if kwargs.get(f.name) not in (None, False, value):
+                raise ValueError(f"{f.name} is given twice: {kwargs[f.name]!r} and {value!r} ({type(o).__name__})")
+            kwargs[f.name] = value
     if p.is_dir() and not is_rosbag2_folder(p):
         files = sorted(
             (f for f in p.iterdir() if (f.is_file() and f.suffix.lower() in _FOLDER_SUFFIXES) or is_rosbag2_folder(f)),
@@ -660,13 +280,16 @@ def load_demonstrations(
         )
         if not files:
             raise DataFileError(
-                f"{p}: the folder holds no .csv or .npz files (nor recordings: .c3d, .bvh, .bag, .db3, .mcap files "
-                "or rosbag2 folders)"
+                f"{p}: the folder holds no .csv or .npz files (nor recordings: .c3d, .bvh, .tsv, .bag, .db3, .mcap "
+                "files or rosbag2 folders)"
             )
     else:
         files = [p]
-    if columns is not None and all(f.suffix.lower() == ".csv" and f.is_file() for f in files):
-        opts["columns"] = columns  # parsed by the CSV reader: the columns not named may hold text
+    # parsed by the CSV reader when every file is a plain CSV file: the columns not named may hold text
+    parse_columns = columns is not None and all(f.is_file() and "columns" in (reader_for(f) or Reader).accepts()
+                                                for f in files)
+    if parse_columns:
+        kwargs["columns"] = columns
     demos, times, labels = [], [], []
     cols = None
     meta = {}
@@ -675,8 +298,9 @@ def load_demonstrations(
     for f in files:
         is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
         all_bags = all_bags and is_bag
-        d, t, c, lab, m = _read_file(f, dt, int(max_nan_gap), int(min_frames), opts,
-                                     resample_dt=resample_dt if is_bag else None)
+        common = Common(dt=dt, max_nan_gap=None if max_nan_gap is None else int(max_nan_gap),
+                        min_frames=int(min_frames), resample_dt=resample_dt if is_bag else None)
+        d, t, c, lab, m = _read_file(f, common, kwargs)
         notes += [n for n in m.get("notes", []) if n not in notes]  # once per cause, not once per file
         if cols is None:
             cols, first = c, f
@@ -697,7 +321,7 @@ def load_demonstrations(
     observed = None
     if meta.get("observed"):
         names = meta["observed"]
-        if opts["columns"] is not None:  # the columns not selected are not read: the observed ones among those kept
+        if parse_columns:  # the columns not selected are not read: the observed ones among those kept
             kept = set(cols)
             names = [n for n in (x.strip() for x in names.split(",")) if n in kept]
         if names:
@@ -706,22 +330,36 @@ def load_demonstrations(
         demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
         name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=notes,
     )  # fmt: skip
-    if columns is not None and opts["columns"] is None:
+    if columns is not None and not parse_columns:
         ds = ds.select(columns)
-    if resample_dt is not None and not all_bags and sampling(ds.times, dt=resample_dt).uniform:
-        ds.dt = float(resample_dt)  # already on that grid up to rounding (the rule of every command): kept as read
-    elif resample_dt is not None and not all_bags:
-        new_d, new_t = [], []
-        # the recorded samples, so that an evaluation can build causal prefixes (evaluation.protocol)
-        ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]
-                  for y, t in zip(ds.demos, ds.times)]
-        for y, t in zip(ds.demos, ds.times):
-            yy, t_new = resample_step(y, t, resample_dt)
-            new_d.append(yy)
-            new_t.append(t_new)
-        ds.demos, ds.times, ds.dt = new_d, new_t, float(resample_dt)
+    if resample_dt is not None and not all_bags:
+        ds = resampled(ds, resample_dt)
     elif resample_dt is not None:
         ds.dt = float(resample_dt)
+    return ds
+
+
+def median_interval(times) -> float:
+    """The median interval (s) of all the stamps of ``times`` (a list of arrays): the grid irregular stamps are
+    resampled onto when no interval is given (the rule of :func:`interprim.models.base.uniform_demonstrations`)."""
+    return float(np.median(np.concatenate([np.diff(np.asarray(t, dtype=np.float64)) for t in times])))
+
+
+def resampled(ds: Demonstrations, dt: float) -> Demonstrations:
+    """``ds`` linearly interpolated onto a uniform grid of interval ``dt`` (s), its recorded samples kept in ``raw``
+    (so that an evaluation builds causal prefixes); stamps already on that grid up to rounding are kept as read."""
+    if sampling(ds.times, dt=dt).uniform:
+        ds.dt = float(dt)
+        return ds
+    new_d, new_t = [], []
+    # the recorded samples, so that an evaluation can build causal prefixes (evaluation.protocol)
+    ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]
+              for y, t in zip(ds.demos, ds.times)]
+    for y, t in zip(ds.demos, ds.times):
+        yy, t_new = resample_step(y, t, dt)
+        new_d.append(yy)
+        new_t.append(t_new)
+    ds.demos, ds.times, ds.dt = new_d, new_t, float(dt)
     return ds
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.errors import DataFileError, DataFileWarning, MissingExtraError
 
-__all__ = ["read_c3d", "LENGTH_UNITS"]
+__all__ = ["read_c3d", "marker_take", "LENGTH_UNITS"]
 
 #: Seconds the child process may take to read a C3D file, plus 2 s per MB of file.
 READ_TIMEOUT = 20.0
@@ -113,8 +113,8 @@ def _run_reader(path: Path, size: int):
                 "header or parameter section?)"
             ) from None
         if r.returncode != 0 or not os.path.exists(out):
-            why = r.stderr.decode("utf-8", "replace").strip().splitlines()
-            why = why[-1][:300] if why else (f"the reader stopped with signal {-r.returncode}" if r.returncode < 0
+            said = r.stderr.decode("utf-8", "replace").strip().splitlines()
+            why = said[-1][:300] if said else (f"the reader stopped with signal {-r.returncode}" if r.returncode < 0
                                              else f"the reader stopped with exit status {r.returncode}")
             if "MemoryError" in why or "bad_alloc" in why:
                 why = f"the reader needed more than {memory / 1024**3:.1f} GB of memory"
@@ -175,14 +175,16 @@ def _unit_scales(path, params, n_points, length_unit):
                      for i, u in enumerate(units)])
 
 
-def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=5, split=None):
+def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=None, min_frames=5, split=None,
+             min_marker_coverage=None):
     """Read one C3D file; returns ``(demos, times, columns, labels, meta)`` as the other readers do.
 
     See :func:`load_c3d` for the parameters and what is read; ``split`` holds ``trim``, ``events``
-    (True or event labels), ``ranges`` and ``gap`` (:func:`._split.cut_take`).
+    (True or event labels), ``ranges``, ``gap``, ``repetitions`` and ``keep_partial`` (:func:`._split.cut_take`).
+    Missing markers follow :mod:`interprim.datasets._gaps` (sparse markers left out, short gaps filled, the rest
+    refused with a table).
     """
     from ._checks import warn
-    from ._split import cut_take  # the rules of every reader for splitting, gaps and lengths
 
     _import_ezc3d()
     path = Path(path)
@@ -264,16 +266,40 @@ def read_c3d(path, *, markers=None, length_unit=None, max_nan_gap=0, min_frames=
     y[missing[:, keep]] = np.nan
     y = y.reshape(n_frames, 3 * len(keep))
     columns = [f"{labels[i]}_{a}" for i in keep for a in _AXES]
+    return marker_take(path, y, columns, rate, first, params=params, named=markers is not None,
+                       max_nan_gap=max_nan_gap, min_frames=min_frames, split=split,
+                       min_marker_coverage=min_marker_coverage)
+
+
+def marker_take(path, y, columns, rate, first, *, named, max_nan_gap, min_frames, split, min_marker_coverage,
+                params=None, events=None):
+    """A marker take ``(T, 3M)`` (``nan`` where a marker is missing, columns ``<marker>_x/_y/_z`` in metres) as
+    demonstrations: sparse markers left out, split, gaps filled (:mod:`interprim.datasets._gaps`); returns
+    ``(demos, times, columns, labels, meta)``.  ``first``: the number of the first frame; ``events``: the
+    file's events as ``(context, label, seconds)`` (C3D: from ``params``)."""
+    from ._gaps import DEFAULT_MIN_COVERAGE, MarkerSet, drop_sparse
+    from ._split import cut_take
+
+    path = Path(path)
+    n_frames = y.shape[0]
+    cov = DEFAULT_MIN_COVERAGE if min_marker_coverage is None else float(min_marker_coverage)
+    if not 0.0 <= cov <= 1.0:
+        raise ValueError(f"min_marker_coverage must be a share of frames in [0, 1], got {min_marker_coverage!r}")
+    y, columns = drop_sparse(path, y, columns, MarkerSet.of_columns(columns), cov, named)
+    marker_set = MarkerSet.of_columns(columns)
 
     def where_col(d):
-        return f"{path}, marker {labels[keep[d // 3]]!r} (column {columns[d]!r})"
+        return f"{path}, marker {marker_set.names[[d in g for g in marker_set.groups].index(True)]!r} " \
+               f"(column {columns[d]!r})"
 
     split = dict(split or {})
     if split.get("events") is not None:
-        split["events"] = _event_rows(path, _events(params), split["events"], rate, first, n_frames)
+        evs = _events(params) if params is not None else list(events or [])
+        split["events"] = _event_rows(path, evs, split["events"], rate, first, n_frames)
     t = np.arange(n_frames) / rate
     demos, times, names = cut_take(path, y, t, first + np.arange(n_frames), split, max_nan_gap=max_nan_gap,
-                                   min_frames=min_frames, where_col=where_col, row_of=lambda i: f"frame {first + i}")
+                                   min_frames=min_frames, where_col=where_col, row_of=lambda i: f"frame {first + i}",
+                                   markers=marker_set, names=columns, named=named)
     meta = {"units": ["m"] * len(columns), "notes": split.get("notes", [])}
     return demos, times, columns, names, meta
 

@@ -94,7 +94,7 @@ def _joints(spec, what: str) -> tuple:
         if spec in JOINT_GROUPS:
             return tuple(JOINT_GROUPS[spec])
         spec = [s.strip() for s in spec.split(",") if s.strip()]
-    out = []
+    out: list = []
     for j in spec:
         if j in JOINT_GROUPS and j not in NUISI_JOINTS:
             out.extend(JOINT_GROUPS[j])

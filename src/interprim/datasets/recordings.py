@@ -11,8 +11,9 @@ from .files import load_demonstrations
 __all__ = ["load_c3d", "load_bvh", "load_rosbag"]
 
 
-def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_frames: int = 5, trim=False,
-             split_events=None, split_frames=None, split_gap=None, split_repetitions=None):
+def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int | None = None, min_frames: int = 5,
+             trim=False, split_events=None, split_frames=None, split_gap=None, split_repetitions=None,
+             min_marker_coverage: float | None = None, keep_partial: bool = False):
     """Load the marker trajectories of a C3D motion-capture file (or a folder of them).
 
     Each file is one demonstration.  Every marker becomes three columns ``<marker>_x``,
@@ -25,10 +26,13 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
 
     Time stamps are ``k / POINT:RATE`` seconds for frame ``k`` counted from 0 at the file's
     first frame.  A marker that is missing in a frame (residual < 0, or the coordinates
-    ``(0, 0, 0)``, which some exporters write for a lost marker) is a missing value: interior
-    gaps of up to ``max_nan_gap`` frames are filled by linear interpolation, any other gap is a
-    :class:`~interprim.core.errors.DataFileError` naming the file, the marker and the frame number
-    (as the capture software numbers it).
+    ``(0, 0, 0)``, which some exporters write for a lost marker) is a missing value, handled by the
+    rule of every marker file (:mod:`interprim.datasets._gaps`): markers seen in fewer than
+    ``min_marker_coverage`` of the frames (default half) are left out with one warning; interior
+    gaps of up to ``max_nan_gap`` frames (default 0.1 s of frames) are filled by linear
+    interpolation; what is left is a :class:`~interprim.core.errors.DataFileError` holding a table of
+    the markers, their missing share and their longest gap (frame numbers as the capture software
+    numbers them), and the options that fix it.
 
     Parameters
     ----------
@@ -39,10 +43,14 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
         Marker labels to keep, in this order (default all markers).
     length_unit : str, optional
         Overrides the file's ``POINT:UNITS`` (for files that state a wrong unit).
-    max_nan_gap : int
-        Longest interior gap (frames) filled by interpolation (default 0: none).
+    max_nan_gap : int, optional
+        Longest interior gap (frames) filled by interpolation (default: 0.1 s of frames, 10 at 100 Hz).
     min_frames : int
         Fewest frames a demonstration may have (default 5).
+    min_marker_coverage : float, optional
+        Markers seen in fewer than this share of the frames are left out (default 0.5; 0 keeps all).
+    keep_partial : bool
+        With ``split_events``: also keep the piece after the last event (not a whole cycle).
     trim : bool
         Drop the leading and trailing frames in which a selected marker is missing (e.g. a marker
         written as 0,0,0 until it is first seen); with splitting, in each demonstration.
@@ -69,6 +77,7 @@ def load_c3d(path, *, markers=None, length_unit=None, max_nan_gap: int = 0, min_
     return load_demonstrations(
         path, markers=markers, length_unit=length_unit, max_nan_gap=max_nan_gap, min_frames=min_frames, trim=trim,
         split_events=split_events, split_frames=split_frames, split_gap=split_gap, split_repetitions=split_repetitions,
+        min_marker_coverage=min_marker_coverage, keep_partial=keep_partial,
     )
 
 

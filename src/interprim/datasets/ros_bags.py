@@ -199,8 +199,10 @@ class _Stream:
         self.frame = frame.strip().lstrip("/") or None  # a tf frame, or the field paths of another message
         self.fields = None
         self.msgtype = None
-        self.stamps, self.bag_times, self.rows = [], [], []
-        self.names = []  # JointState: joint names in order of appearance
+        self.stamps: list = []
+        self.bag_times: list = []
+        self.rows: list = []
+        self.names: list = []  # JointState: joint names in order of appearance
         self.parent = None
 
     @property

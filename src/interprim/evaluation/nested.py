@@ -57,7 +57,7 @@ def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl", protocol
     demonstrations it is NaN.  ``protocol``: the records counted for a key other than ``wm_*`` (the whole-movement
     records, ``protocol="whole"``): ``None`` the real-time ones, ``"rest"`` the rest of the movement.
     """
-    per = {}
+    per: dict = {}
     for r in records:
         if key.startswith("wm"):
             if r.get("protocol") != "whole":
@@ -95,7 +95,7 @@ def measure_fitted(est, name: str, train, test, observed_dofs, dt: float, point_
     cfg = RealTimeConfig(point_dim=point_dim, horizon=float(horizon), stride=int(stride))
     rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=int(rest_stride))
     sets = prefix_sets or {"causal": test}
-    out = {p: [] for p in sets}
+    out: dict = {p: [] for p in sets}
     for j, rec in enumerate(test.demos):
         orc = None if oracles is None or not references else oracles[j]
         for p, P in sets.items():

@@ -173,8 +173,8 @@ def skeleton_animation(model, action, demo_index, path, data_path=None, dt=0.05,
         ax.set_ylim(*lims[1])
         ax.set_zlim(*lims[2])
         ax.set_box_aspect(tuple(b - a for a, b in lims))
-        ax.set_title(f"{action}: {100 * M / T:.0f} % of agent 1 seen\nblue: human, grey: partner (black dot: its hand), "
-                     "red: predicted robot hand", fontsize=8)
+        ax.set_title(f"{action}: {100 * M / T:.0f} % of agent 1 seen\n"
+                     "blue: human, grey: partner (black dot: its hand), red: predicted robot hand", fontsize=8)
         ax.view_init(elev=15, azim=-60)
         return []
 

@@ -25,7 +25,7 @@ Baselines, always on the same splits:
 * ``clock``: the mean of the time-normalised training demonstrations, played from the first frame at the
   mean training duration (what a robot without any perception of timing would do);
 * ``oracle-duration``: the same mean stretched to the true duration of the held-out demonstration (not
-  available online: a floor that shows how much of the error is timing).
+  available online: a reference that shows how much of the error is timing, not a lower bound).
 
 A method without a ``duration`` but with a ``phase`` (e.g. nearest neighbour) is placed in time at the
 speed implied by its phase (elapsed time / phase); a method with neither (the prior mean) is played by the
@@ -38,14 +38,22 @@ import numpy as np
 
 from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.metrics import Z90
-from ..model_selection.realtime import (ALL_METHODS_FROM, MIN_DEMONSTRATIONS, RealTimeConfig, folds, mean_demo,
-                                        mean_duration, realtime_fold, realtime_sweep, summarise_realtime,
-                                        whole_movement_fold)
+from ..model_selection.realtime import (
+    ALL_METHODS_FROM,
+    MIN_DEMONSTRATIONS,
+    RealTimeConfig,
+    folds,
+    mean_demo,
+    realtime_fold,
+    realtime_sweep,
+    summarise_realtime,
+    whole_movement_fold,
+)
 from ..models.registry import default_methods
 from .nested import standard_error_ratio
 
-__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep", "summarise_realtime",
-           "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
+__all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep",
+           "summarise_realtime", "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
            "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
 
 def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
@@ -158,14 +166,15 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     """The verdict of an evaluation whose choice was made inside the training folds (nested).
 
     Says which method the inner cross-validation chose (per outer fold), how the chosen model compares with the
-    clock and with the mean stretched to the true duration (a floor no online method has), names the best method
+    clock and with the mean stretched to the true duration (a reference that knows the
+    true duration; not a lower bound), names the best method
     among all rows and says plainly when a baseline beats the chosen model by more than one standard error, and
     gives the command that fits the chosen method.
     """
     m = summary.get(method)
     if m is None or "rt_ctrl_vs_clock" not in m:
         return verdict(summary, next((x for x in ("ip", "learned") if x in summary), "ip"), threshold)
-    picks = {}
+    picks: dict = {}
     for r in records:
         if r["method"] == method and r.get("protocol") != "whole":
             picks.setdefault(r["chosen"], set()).add(r["demo"])
@@ -176,7 +185,8 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     parts = [f"chosen inside the training folds: {chosen}."]
     ro = m.get("rt_ctrl_vs_oracle", float("nan"))
     parts.append(f"Real time: {r:.2f}x the clock's error and {ro:.2f}x the mean stretched to the true duration "
-                 f"(a floor that needs the future).")
+                 f"(a reference that knows the true duration, which no online method does; not a lower bound: it can "
+                 f"be worse than the clock).")
     online = [x for x in summary if x not in ("oracle-duration", "oracle", method) and "rt_ctrl" in summary[x]]
     best = min(online, key=lambda x: summary[x]["rt_ctrl"]) if online else None
     if best is not None:
@@ -253,12 +263,12 @@ def save_report(records, summary, sentence, out_dir, title: str = "", horizon: f
         e = np.array([r["rt_ctrl"] for r in rs])
         idx = np.clip(np.digitize(f, bins) - 1, 0, len(bins) - 2)
         curves[m] = np.array([e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(mids))])
-    drawn = []
+    drawn: list = []
     for m, y in curves.items():
         # a curve equal (to 0.1 %) to one drawn before (the prior mean is played by the clock) would hide under it:
         # say so in its label and draw it dotted with open markers, so that both stay visible
         same = next((o for o in drawn if np.allclose(y, curves[o], rtol=1e-3, atol=1e-12, equal_nan=True)), None)
-        style = dict(marker="o", ms=3, ls="--" if m in ("clock", "oracle-duration") else "-")
+        style: dict = dict(marker="o", ms=3, ls="--" if m in ("clock", "oracle-duration") else "-")
         if same is not None:
             style = dict(marker="s", ms=6, mfc="none", ls=":", lw=2.5)
         ax.plot(mids, y, label=m if same is None else f"{m} (= {same})", zorder=3 if same is None else 2, **style)

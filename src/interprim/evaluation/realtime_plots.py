@@ -107,10 +107,10 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
     -------
     dict
         ``T``, ``dt``, ``horizon_s``, ``n_frames`` (of the GIF), ``files`` (``{"gif": path, "png": path}``) and
-        ``models``: per model label, the protocol's summary on this demonstration (frames seen from 20 to 90 %, :func:`~interprim.evaluation.realtime.summarise_realtime`):
-        ``rt_ctrl`` (RMSE of the controlled agent over the next ``horizon`` s, data units), ``clock_rt_ctrl``,
-        ``rt_ctrl_vs_clock``, ``phase_err``, ``clock_phase_err``, ``cov_ctrl`` (coverage of the 90 % band)
-        and ``z_ctrl`` (RMS error / RMS std).
+        ``models``: per model label, the protocol's summary on this demonstration (frames seen from 20 to 90 %,
+        :func:`~interprim.evaluation.realtime.summarise_realtime`): ``rt_ctrl`` (RMSE of the controlled agent over the
+        next ``horizon`` s, data units), ``clock_rt_ctrl``, ``rt_ctrl_vs_clock``, ``phase_err``, ``clock_phase_err``,
+        ``cov_ctrl`` (coverage of the 90 % band) and ``z_ctrl`` (RMS error / RMS std).
     """
     test = np.asarray(test, dtype=np.float64)
     train = [np.asarray(d, dtype=np.float64) for d in train]
@@ -133,7 +133,8 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
                              prefix=prefix)  # the protocol's frames
         summ = summarise_realtime(recs)
         m, c = summ[label], summ["clock"]
-        out["models"][label] = {"rt_ctrl": m["rt_ctrl"], "clock_rt_ctrl": c["rt_ctrl"], "rt_ctrl_vs_clock": m["rt_ctrl_vs_clock"],
+        out["models"][label] = {"rt_ctrl": m["rt_ctrl"], "clock_rt_ctrl": c["rt_ctrl"],
+                                "rt_ctrl_vs_clock": m["rt_ctrl_vs_clock"],
                       "phase_err": m["phase_err"], "clock_phase_err": c["phase_err"], "cov_ctrl": m["cov_ctrl"],
                       "z_ctrl": m["z_ctrl"], "n_evaluated": m["n"]}
         tr = realtime_fold(model, train, test, obs, dt, cfg, name=label, fitted=True, frames=all_k, trace=True,
@@ -189,7 +190,8 @@ def realtime_interaction_figure(models, train, test, observed_dofs, dt: float, g
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
 
-        h = [Line2D([], [], color="tab:blue", lw=2.5, marker="o", ms=4, label="observed person's right arm (path of the hand)"),
+        h = [Line2D([], [], color="tab:blue", lw=2.5, marker="o", ms=4,
+                    label="observed person's right arm (path of the hand)"),
              Line2D([], [], color="0.45", lw=0.8, label="partner's right hand so far"),
              Line2D([], [], color="k", marker="o", ls="", ms=6, label="partner's hand now"),
              Line2D([], [], color="k", ls=":", lw=1.5, label=f"partner's hand, true next {horizon:g} s"),
@@ -273,10 +275,9 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     returns the figure's numbers (metres) with ``action``, ``demo`` and ``n_train``.
     """
     from ..datasets import load_nuisi
-    from ..models.primitive.estimator import InteractionPrimitive
-
-    from .nested import split_holdout
     from ..model_selection.prefixes import Prefixes
+    from ..models.primitive.estimator import InteractionPrimitive
+    from .nested import split_holdout
 
     ds = load_nuisi(data_path, action=action, observed="right_arm", controlled="right_hand", dt=dt)
     if development_only:
@@ -291,6 +292,7 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     test = ds.demos[int(demo)]
     prefixes = Prefixes(ds, ds.observed_dofs)
     train = [d for i, d in enumerate(ds.demos) if i != int(demo)]
+    assert ds.observed_dofs is not None and ds.dt is not None  # load_nuisi sets both
     obs = list(ds.observed_dofs)
     models = {label: InteractionPrimitive(observed_dofs=obs, **kw).fit(train, dt=ds.dt)
               for label, kw in (methods or NUISI_FIGURE_METHODS).items()}

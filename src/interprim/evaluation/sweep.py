@@ -3,8 +3,8 @@
 Protocol: for every task (one NuiSI
 interaction, the synthetic set, ...) and every demonstration ``j``: fit each
 method on the other demonstrations, observe the first ``p`` % of demonstration
-``j``'s observed agent (:func:`~interprim.model_selection.prefixes.observed_frames`) (``p`` = 10, 20, ..., 100), predict the whole
-interaction and compare it with the truth on a common normalised-time grid.
+``j``'s observed agent (:func:`~interprim.model_selection.prefixes.observed_frames`) (``p`` = 10, 20, ..., 100), predict
+the whole interaction and compare it with the truth on a common normalised-time grid.
 
 Metrics per (task, method, held-out demo, fraction):
 
@@ -41,18 +41,18 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
 from ..core.preprocessing import time_normalise
-
 from ..model_selection.metrics import Z90, point_rms
 from ..model_selection.prefixes import observed_frames
 
-__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table", "make_estimator", "evaluate_fold",
-           "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
+__all__ = ["EvalConfig", "METHODS", "METHOD_NEEDS", "FRACTIONS", "task_names", "save_results", "recognition_table",
+           "make_estimator", "evaluate_fold", "recognition_fold", "run_sweep", "summarise", "markdown_tables"]
 
 FRACTIONS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 METHODS = ("ip-forcing", "ip-position", "ip-paper", "iprompt", "nn", "prior")
@@ -112,7 +112,8 @@ class Task:
     dt: float
     point_dim: int = 1
     columns: list = field(default_factory=list)
-    prefixes: object = None  # Prefixes: causal observed prefixes (None: the first frames of the arrays)
+    # Prefixes: causal observed prefixes (None: the first frames of the arrays)
+    prefixes: Callable[[int, int], np.ndarray] | None = None
 
     def prefix(self, j: int, k: int):
         """The first ``k`` observed frames of demonstration ``j`` as a robot had them (causal)."""
@@ -127,7 +128,6 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
     causal prefixes; the built-in synthetic and simulated sets; the handwritten characters)."""
     if dataset == "nuisi":
         from ..datasets import load_nuisi
-
         from ..model_selection.prefixes import Prefixes
 
         d = load_nuisi(cfg.data_path, action=name, observed="upper_body", controlled="right_hand", dt=cfg.nuisi_dt)
@@ -135,6 +135,7 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
             from .nested import split_holdout
 
             d = d.take(split_holdout(len(d))[0])
+        assert d.observed_dofs is not None and d.dt is not None  # load_nuisi sets both
         return Task(f"nuisi/{name}", list(d.demos), list(d.observed_dofs), float(d.dt), 3, list(d.columns),
                     Prefixes(d, d.observed_dofs))
     if dataset == "synthetic":
@@ -156,7 +157,8 @@ def load_task(dataset: str, name: str, cfg: EvalConfig) -> Task:
 
         d = load_character_trajectories(None, letters=name, max_per_letter=30)[name]
         return Task(f"characters/{name}", [np.asarray(x)[:, :2] for x in d.demos], [0, 1], float(d.dt or 0.005), 2)
-    raise ValueError(f"unknown data set {dataset!r}; expected nuisi, synthetic, synthetic-noisy, highfive-sim, characters")
+    raise ValueError(f"unknown data set {dataset!r}; expected nuisi, synthetic, synthetic-noisy, highfive-sim, "
+                     "characters")
 
 
 def task_names(dataset: str) -> list:
@@ -205,7 +207,7 @@ def evaluate_fold(dataset: str, task: str, method: str, j: int, cfg: EvalConfig 
     n = cfg.n_out
     truth = time_normalise(test, n)
     base, plus, suffix = method.partition("+")
-    variants = [(method, None)]
+    variants: list[tuple[str, str | None]] = [(method, None)]
     if base in ("ip-forcing", "ip-position"):
         # one fit, three ways to get the phase: likelihood (the method), the paper's DTW, the true phase
         variants = [(f"{base}{'' if v == 'likelihood' else '-' + v}{plus}{suffix}", v) for v in PHASE_VARIANTS]
@@ -257,7 +259,8 @@ def _recognition_model(dataset: str, task: str, cfg: EvalConfig, leave_out: int)
     demos = [d for i, d in enumerate(t.demos) if i != leave_out]
     # recognition uses the prior and the phase noise only (chosen in fit), not the conditioning sigma2
     return InteractionPrimitive(observed_dofs=t.observed_dofs, n_basis=cfg.n_basis,
-                                smoothing_window=cfg.smoothing_window, sigma2=1.0, covariance=cfg.recognition_covariance,
+                                smoothing_window=cfg.smoothing_window, sigma2=1.0,
+                                covariance=cfg.recognition_covariance,
                                 phase_method="likelihood").fit(demos, dt=t.dt)
 
 
@@ -346,7 +349,8 @@ def run_sweep(datasets=("nuisi",), methods=METHODS, cfg: EvalConfig = EvalConfig
         cluster = None if scheduler else LocalCluster(n_workers=max(1, n_jobs if n_jobs > 0 else 2),
                                                       threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(scheduler or cluster)
-    folds, recog = [], []
+    folds: list = []
+    recog: list = []
     try:
         with parallel_config(backend=backend, n_jobs=n_jobs, inner_max_num_threads=1 if backend == "loky" else None):
             gen = Parallel(return_as="generator_unordered")(delayed(_run_job)(jb, cfg) for jb in jobs)
@@ -386,7 +390,7 @@ def summarise(results) -> dict:
     rec_s = {t: {f: _agg(v) for f, v in sorted(fr.items())} for t, fr in rec.items()}
     if rec:
         allf: dict = {}
-        for t, fr in rec.items():
+        for fr in rec.values():
             for f, v in fr.items():
                 allf.setdefault(f, []).extend(v)
         rec_s["all"] = {f: _agg(v) for f, v in sorted(allf.items())}

@@ -15,7 +15,8 @@ Methods:
 
 - ``coupling`` - :class:`interprim.models.coupling.CouplingModel` with its defaults;
 - ``ip`` - :class:`interprim.InteractionPrimitive` with its defaults;
-- ``prior`` - :class:`interprim.models.demonstrations.PriorMean`; ``nn`` - :class:`interprim.models.demonstrations.NearestNeighbour`.
+- ``prior`` - :class:`interprim.models.demonstrations.PriorMean`; ``nn`` -
+  :class:`interprim.models.demonstrations.NearestNeighbour`.
 
 ``coupling`` and ``ip`` are given the phase in two ways: ``true`` (the true fraction seen; the
 coupling is told its std is 0) and ``clock`` (elapsed time / mean training duration, clipped to 1;
@@ -60,10 +61,10 @@ def _fmt_param(p):
 def run_fold(demos, obs, dt, j, fractions=FRACTIONS, methods=("coupling", "ip", "prior", "nn"), coupling_kw=None):
     """Fit every method without demonstration ``j``; records for every fraction and phase source."""
     import interprim
-    from interprim.models.demonstrations import NearestNeighbour, PriorMean
-    from interprim.models.coupling import CouplingModel
-    from interprim.model_selection.prefixes import observed_frames
     from interprim.core.preprocessing import time_normalise
+    from interprim.model_selection.prefixes import observed_frames
+    from interprim.models.coupling import CouplingModel
+    from interprim.models.demonstrations import NearestNeighbour, PriorMean
 
     train = [d for i, d in enumerate(demos) if i != j]
     test = demos[j]
@@ -149,7 +150,8 @@ def summarise(records):
 def tables(summary, fractions):
     labels = ["coupling-true", "coupling-clock", "ip-true", "ip-clock", "nn"]
     lines = ["## agent 2 whole-movement RMSE, ratio to the prior mean (prior RMSE in m in the last column)", ""]
-    head = "| interaction | method | " + " | ".join(f"{int(round(f * 100))} %" for f in fractions) + " | mean 40/60/80 |"
+    head = ("| interaction | method | " + " | ".join(f"{int(round(f * 100))} %" for f in fractions)
+            + " | mean 40/60/80 |")
     lines += [head, "|" + "---|" * (len(fractions) + 3)]
     agg = {lab: [] for lab in labels}
     for a, am in summary.items():
@@ -196,7 +198,8 @@ def tables(summary, fractions):
                 if ideal:
                     lines.append(f"| {lab} | {name} | same for a calibrated Gaussian | "
                                  + " | ".join(f"{x:.2f}" for x in ideal) + " |")
-                    lines.append(f"| {lab} | {name} | RMS of error/std | " + " | ".join(f"{x:.2f}" for x in zrms) + " |")
+                    lines.append(f"| {lab} | {name} | RMS of error/std | "
+                                 + " | ".join(f"{x:.2f}" for x in zrms) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -213,8 +216,8 @@ def main(argv=None):
     ap.add_argument("--from-results", default=None, nargs="+",
                     help="only summarise these results.json files (of earlier runs) into --out")
     args = ap.parse_args(argv)
-    from interprim.datasets import load_nuisi
     from interprim.core.blas import single_thread
+    from interprim.datasets import load_nuisi
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -237,7 +240,8 @@ def _run(args, methods, out, load_nuisi, single_thread, t_start):
             d = load_nuisi(args.data, action=a, observed=args.observed, controlled=args.controlled)
             demos, obs = list(d.demos), list(d.observed_dofs)
             n = len(demos)
-            idx = range(n) if args.max_demos is None else np.unique(np.linspace(0, n - 1, min(args.max_demos, n)).astype(int))
+            idx = (range(n) if args.max_demos is None
+                   else np.unique(np.linspace(0, n - 1, min(args.max_demos, n)).astype(int)))
             for j in idx:
                 for r in run_fold(demos, obs, float(d.dt), int(j), methods=methods,
                                   coupling_kw=json.loads(args.coupling_kw)):

@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.cv import folds
-from ..model_selection.prefixes import observed_frames
 from ..core.preprocessing import resample_step, time_normalise
+from ..model_selection.prefixes import observed_frames
 
 __all__ = [
     "run_handwriting",
@@ -226,7 +226,8 @@ def run_handwriting(
     if not observations or any(o not in ("forcing", "position") for o in observations):
         raise ValueError(f"observations must be a non-empty list of 'forcing'/'position', got {observations}")
     # the paper's method per observation model: DTW phase, sigma2 from the fit residual
-    variants = {f"ip_{o}": {"sigma2": "residual", **kwargs, "observation": o, "phase_method": "dtw"} for o in observations}
+    variants = {f"ip_{o}": {"sigma2": "residual", **kwargs, "observation": o, "phase_method": "dtw"}
+                for o in observations}
     for name, kw in (extra_variants or {}).items():
         if name in variants or name in ("prior_mean", "nearest_neighbour"):
             raise ValueError(f"extra_variants: the name {name!r} is already used")
@@ -235,7 +236,8 @@ def run_handwriting(
     oracle = f"ip_{observations[-1]}_true_phase" if true_phase else None
     oracle_of = f"ip_{observations[-1]}"
     methods = tuple(ip_methods + ([oracle] if oracle else []) + ["prior_mean", "nearest_neighbour"])
-    shown = "ip_defaults" if "ip_defaults" in variants else f"ip_{'position' if 'position' in observations else observations[0]}"
+    shown = ("ip_defaults" if "ip_defaults" in variants
+             else f"ip_{'position' if 'position' in observations else observations[0]}")
     items = _load_items(letters, max_per_letter, tuple(lasa_shapes or ()), lasa_subsample, data_path)
     s_grid = np.linspace(0.0, 1.0, n_points)
 
@@ -247,11 +249,12 @@ def run_handwriting(
 
         bar = tqdm(total=total, desc="handwriting folds", unit="fold", leave=False)
     per_item = {}
-    examples = {}
+    examples: dict = {}
     for it in items:
         D = it.demos[0].shape[1]
-        err = {m: {"rmse": [[] for _ in percents], "rmse_unseen": [[] for _ in percents]} for m in methods}
-        phase_err = [[] for _ in percents]
+        err: dict[str, dict[str, list[list]]] = {
+            m: {"rmse": [[] for _ in percents], "rmse_unseen": [[] for _ in percents]} for m in methods}
+        phase_err: list[list] = [[] for _ in percents]
         for fi, test_idx in enumerate(folds_of[it.name]):
             train = [it.demos[i] for i in range(len(it.demos)) if i not in set(test_idx.tolist())]
             models = {
@@ -475,7 +478,8 @@ def write_report(out_dir, results) -> None:
         lines += _table(o, P, M)
         lines += ["", f"Unseen part only ({unit}):", ""]
         lines += _table(o, P, M, "rmse_unseen")
-        lines += ["", "Mean |estimated - true phase|: " + ", ".join(f"{p}%: {v:.3f}" for p, v in zip(P, o["phase_error"])), ""]
+        lines += ["", "Mean |estimated - true phase|: "
+                  + ", ".join(f"{p}%: {v:.3f}" for p, v in zip(P, o["phase_error"])), ""]
         per = results[k]
         ipm = [m for m in M if m.startswith("ip_") and not m.endswith("_true_phase")]
         cols = ipm + ["prior_mean", "nearest_neighbour"]

@@ -41,7 +41,6 @@ from pathlib import Path
 import numpy as np
 
 from ..core.preprocessing import time_normalise
-
 from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 from .highfive_figures import animate, plot_fig6, plot_fig7, plot_fig8, plot_setup
 
@@ -102,9 +101,9 @@ class HighFiveConfig:
     extra: dict = field(default_factory=dict)
 
     @classmethod
-    def quick(cls, **kw) -> "HighFiveConfig":
+    def quick(cls, **kw) -> HighFiveConfig:
         """A smaller run for tests and smoke checks (about a quarter of the work)."""
-        base = dict(n_train=30, n_test=8, n_val=6, sigma2_grid=(100.0, 1000.0), n_samples=20, gif_frames=16)
+        base: dict = dict(n_train=30, n_test=8, n_val=6, sigma2_grid=(100.0, 1000.0), n_samples=20, gif_frames=16)
         base.update(kw)
         return cls(**base)
 
@@ -249,14 +248,14 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
 
     P = list(cfg.percents)
     n_te, n_p = len(test), len(P)
-    oa, ca = test.observed_arm, test.controlled_arm
+    ca = test.controlled_arm
     train_norm = np.stack([time_normalise(d, cfg.n_points) for d in train.demos])  # (J, n, 5)
     prior = train_norm.mean(axis=0)
     train_goal_pts = ca.hand(np.stack([d[-1, 2:] for d in train.demos]))
     prior_goal = ca.hand(prior[-1, 2:])
     train_obs = [d[:, :2] for d in train.demos]
 
-    out = {
+    out: dict = {
         "mse_obs": {m: np.full((n_te, n_p), np.nan) for m in METHODS},
         "mse_ctrl": {m: np.full((n_te, n_p), np.nan) for m in METHODS},
         "goal_err": {m: np.full((n_te, n_p), np.nan) for m in METHODS},
@@ -272,7 +271,7 @@ def evaluate(model, train, test, cfg, progress=True, extra_models=None) -> dict:
         ks = [n_observed(T, p) for p in P]
         nn = nearest_neighbours(d[:, :2], train_obs, ks)
         out["nn_index"][i] = nn
-        for j, (p, k) in enumerate(zip(P, ks)):
+        for j, k in enumerate(ks):
             partial = d[:k, :2]
             true_phase = (k - 1) / (T - 1)
             preds = {}
@@ -360,7 +359,8 @@ def _run_highfive(out_dir, config, progress, log):
     val = generate_highfive(cfg.n_val, seed=cfg.seed + 2_000_003, region="train", **gen_kw)
     timing["data_s"] = time.perf_counter() - t0
     log(f"data: {cfg.n_train} train / {cfg.n_test} test / {cfg.n_val} validation interactions "
-        f"in {timing['data_s']:.1f} s (max hand error {1000 * max(train.hand_errors.max(), test.hand_errors.max()):.2g} mm)")
+        f"in {timing['data_s']:.1f} s "
+        f"(max hand error {1000 * max(train.hand_errors.max(), test.hand_errors.max()):.2g} mm)")
 
     t0 = time.perf_counter()
     model, sigma2, scores = _select_sigma2(train, val, cfg, progress)
@@ -428,7 +428,9 @@ def _run_highfive(out_dir, config, progress, log):
         "goal_distance_m": {m: _summary_stats(ev["goal_err"][m]) for m in METHODS},
         "fig8": {
             "percent": p8,
-            "mean_distance_m": {m: float(np.nanmean(ev["goal_err"][m][:, j8])) for m in METHODS},
+            # a method that did not run (the optional ProMP baseline skipped) has no value: None, not a warning
+            "mean_distance_m": {m: (float(np.nanmean(ev["goal_err"][m][:, j8]))
+                                    if np.isfinite(ev["goal_err"][m][:, j8]).any() else None) for m in METHODS},
             "true_goals": test.goals.tolist(),
             "predicted_goals": ev["pred_goals"]["ip"][:, j8].tolist(),
         },
@@ -498,7 +500,8 @@ def format_summary(results) -> str:
         return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.1f} cm"
 
     lines.append(
-        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {cm(md['ip'])}, IP-lik {cm(md.get('ip_likelihood'))}, "
+        f"Fig. 8: mean goal distance at {f8['percent']} % seen: IP {cm(md['ip'])}, "
+        f"IP-lik {cm(md.get('ip_likelihood'))}, "
         f"IP-def {cm(md.get('ip_default'))}, "
         f"prior {cm(md['prior'])}, NN {cm(md['nn'])}"
     )
@@ -578,8 +581,10 @@ def write_report(results) -> str:
           f"Goal spread (RMS distance of the {f6['n_samples']} sampled end points from their mean): example "
           f"(test interaction {f6['example_test_index']}) {100 * f6['goal_spread_m_example'][0]:.1f} cm at 40 %, "
           f"{100 * f6['goal_spread_m_example'][1]:.1f} cm at 60 %; mean over all test interactions "
-          f"{100 * f6['goal_spread_m_mean_over_test'][0]:.1f} cm and {100 * f6['goal_spread_m_mean_over_test'][1]:.1f} cm "
-          f"(spread shrinks in {100 * f6['fraction_of_test_where_spread_shrinks_40_to_60']:.0f} % of test interactions).",
+          f"{100 * f6['goal_spread_m_mean_over_test'][0]:.1f} cm and "
+          f"{100 * f6['goal_spread_m_mean_over_test'][1]:.1f} cm "
+          f"(spread shrinks in {100 * f6['fraction_of_test_where_spread_shrinks_40_to_60']:.0f} % "
+          "of test interactions).",
           "", "![fig6](fig6_samples.png)", ""]
     if "animation" in results["files"]:
         a = results.get("animation") or {}

@@ -10,6 +10,7 @@ import numpy as np
 from ..core.preprocessing import interp_columns
 from .highfive_common import METHOD_LABELS, METHODS, goal_spread, n_observed
 
+
 def _draw_arm(ax, arm, q, **kw):
     pts = arm.forward_kinematics(q)
     (line,) = ax.plot(pts[:, 0], pts[:, 1], "-o", lw=kw.pop("lw", 3), ms=kw.pop("ms", 5), **kw)
@@ -123,7 +124,8 @@ def plot_fig7(ev, cfg, path):
         "promp": dict(color="tab:cyan", lw=1.5, ls="-", marker="s"),
     }
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2))
-    for ax, key, title in zip(axes, ("mse_obs", "mse_ctrl"), ("observed agent (prediction)", "controlled agent (inferred response)")):
+    for ax, key, title in zip(axes, ("mse_obs", "mse_ctrl"),
+                              ("observed agent (prediction)", "controlled agent (inferred response)")):
         for m in METHODS:
             a = ev[key][m]
             if np.all(np.isnan(a)):

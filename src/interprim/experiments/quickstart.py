@@ -26,7 +26,7 @@ def _mse_ctrl(pred, demo, n_obs_cols):
 
 
 PAPER = dict(observation="forcing", sigma2="residual", phase_method="dtw")
-CONFIGS = {
+CONFIGS: dict[str, dict] = {
     "paper, reference=mean": dict(PAPER, reference="mean"),
     "paper, reference=demo 0": dict(PAPER, reference=0),
     "positions, sigma2=cv, DTW phase": dict(phase_method="dtw"),

@@ -80,7 +80,7 @@ def realtime_tasks(which=("nuisi", "synthetic", "highfive-sim"), data_path=None,
 
 def run_realtime(tasks, methods=METHODS, k: int = 5, log=print) -> dict:
     """``{task: {"summary": ..., "deciles": ..., "seconds": ...}}``: the 5-fold real-time sweep of every task."""
-    out = {}
+    out: dict = {}
     for name, demos, obs, dt, point_dim, oracles in tasks:
         t0 = time.perf_counter()
         make = {m: f for m, f in default_methods(obs).items() if m in methods}
@@ -97,7 +97,7 @@ def run_realtime(tasks, methods=METHODS, k: int = 5, log=print) -> dict:
 
 def calibration_deciles(records, edges=(0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)) -> dict:
     """Mean RMS error ÷ RMS std over the frames of each 10 % of the movement seen, per method and agent."""
-    out = {}
+    out: dict = {}
     for r in records:
         if r.get("protocol") == "whole" or "z_ctrl" not in r:
             continue

@@ -36,7 +36,7 @@ from .yardsticks import (case_rms, clock_units, one_se_choice, place_cases, rati
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
            "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
-           "summary_lines", "keep_real_time"]
+           "summary_lines", "keep_real_time", "candidate_cases"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
@@ -246,7 +246,28 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0], si
     return cands[name], e_rt, name, table
 
 
-def refine(cv, fitted, horizon: float, prefer: str = PREFER[0]) -> tuple:
+def _full(st, names) -> np.ndarray:
+    """``(bands, len(names))``: the weights of the stacking ``st`` over ``names`` (0 for the others)."""
+    W = np.zeros((st.W.shape[0], len(names)))
+    for i, m in enumerate(st.names):
+        W[:, names.index(m)] = st.W[:, i]
+    return W
+
+
+def candidate_cases(cv, fitted, cost=None, budget: float | None = None):
+    """The cross-validation ``cv`` restricted to the families the long-range choice may use: the members the
+    stacking ``fitted`` kept and the mean (``prior``, when compared and within the budget), with ``w0``, the
+    real-time weights over them (what :func:`replaced` places the shared end with)."""
+    allowed = list(fitted.names)
+    if "prior" in cv.names and "prior" not in allowed and (
+            cost is None or budget is None or cost(allowed + ["prior"]) <= budget):
+        allowed.append("prior")
+    out = cv.subset([m for m in cv.names if m in allowed])
+    out.w0 = _full(fitted, list(out.names))[0]
+    return out
+
+
+def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budget: float | None = None) -> tuple:
     """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
     ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
     movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
@@ -256,25 +277,26 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0]) -> tuple:
     for :class:`~interprim.models.blend.Blend`.  The returned :class:`~interprim.model_selection.stacking.Stacking`
     keeps the members carrying weight in some band, its variance model fitted again with the chosen weights, and
     its ``record`` says what was chosen (``long_range``: ``remaining``, ``beyond`` and both choices' tables).
+
+    ``cost``, ``budget``: the frame budget of :func:`~interprim.model_selection.stacking.stack`.  The choice is
+    made among the members ``fitted`` kept (within the budget) and the mean (``prior``, when compared and, with a
+    budget, when it fits in it); a re-stacking keeps the budget; the record's ``cost`` is that of the members kept.
     """
     from .stacking import MIN_WEIGHT, Stacking, stack
 
+    cv = candidate_cases(cv, fitted, cost, budget)
     names = list(cv.names)
 
     def full(st):
-        W = np.zeros((st.W.shape[0], len(names)))
-        for i, m in enumerate(st.names):
-            W[:, names.index(m)] = st.W[:, i]
-        return W
+        return _full(st, names)
 
     W = full(fitted)
-    cv.w0 = W[0]
     lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer)
     placed = cv
     if lam is not None:
         placed = cv.cases(np.arange(len(cv.demo)))
         placed.mean = replaced(cv, lam)
-        fitted = stack(placed, horizon)
+        fitted = stack(placed, horizon, cost=cost, budget=budget)
         W = full(fitted)
     Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
     keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]
@@ -293,6 +315,8 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0]) -> tuple:
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
                    "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
                                   "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})
+    if cost is not None and "cost" in record:
+        record["cost"] = dict(record["cost"], frame=float(cost(members)))
     return Stacking(members, Wk, edges, scales, record), lam
 
 

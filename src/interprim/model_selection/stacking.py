@@ -23,10 +23,10 @@ import numpy as np
 
 from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
-from .realtime import RealTimeConfig, realtime_sweep
+from .realtime import RealTimeConfig, folds, realtime_sweep
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "look_ahead_bands",
-           "weights_at", "scoring_config", "stack", "choice", "choice_record"]
+           "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
 COMBINE = ("blend", "best")
@@ -95,25 +95,29 @@ class Stacking:
         return self.record["band_weights"]
 
 
-def stack(cv: "CrossValidation", horizon: float) -> Stacking:
+def stack(cv: "CrossValidation", horizon: float, cost=None, budget: float | None = None) -> Stacking:
     """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
 
     Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
     look-ahead ``cv`` scored) by :meth:`CrossValidation.blend_weights` on that band's steps; a family that never
-    carries :data:`MIN_WEIGHT` of any band is dropped and the weights fitted again without it; the variance model is
-    fitted on every step with the weights there (:func:`weights_at`).
+    carries :data:`MIN_WEIGHT` of any band is dropped and the weights fitted again without it (until every member
+    carries it somewhere); the variance model is fitted on every step with the weights there (:func:`weights_at`).
+
+    With a frame budget (``cost``: a callable giving the modelled seconds a frame of a blend of the named members
+    costs; ``budget``: seconds), a blend whose members cost more is not made: among the sets of families that fit
+    the budget and to which no other family can be added within it, the one with the smallest sum over the bands of
+    :meth:`CrossValidation.band_loss` is blended (ties: the cheaper, then the earlier in ``cv.names``).  Adding a
+    family never raises a band's smallest loss, so no smaller set can do better.  The record's ``cost`` says what
+    the blend costs and which families were left out for the budget.
     """
     edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
     steps = [s for i, s in enumerate(cv.band_steps(edges)) if i == 0 or cv.valid[:, s].any()]
     edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the bands with held-out frames, up to their last step
-    W = np.array([cv.blend_weights(s) for s in steps])  # (bands, families)
-    # a member that never carries MIN_WEIGHT of any band costs a stream per frame for almost nothing: the
-    # weights are fitted again without it
-    keep = [i for i in range(len(cv.names)) if np.max(W[:, i]) >= MIN_WEIGHT] or [int(np.argmax(W.max(axis=0)))]
-    names = [cv.names[i] for i in keep]
+    names, W = _members(cv, cv.names, steps)
+    left_out = {}
+    if cost is not None and budget is not None and cost(names) > budget:
+        names, W, left_out = _within_budget(cv, steps, cost, float(budget))
     sub = cv.subset(names)
-    if len(keep) < len(cv.names):
-        W = np.array([sub.blend_weights(s) for s in steps])
     W = W / W.sum(axis=1, keepdims=True)
     per_step = weights_at(cv.t_ahead, edges, W)
     scales = sub.blend_scales(per_step)
@@ -122,7 +126,58 @@ def stack(cv: "CrossValidation", horizon: float) -> Stacking:
     record = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)}, "band_weights": band_weights,
               "bands": edges, "blend_cv_error": sub.blend_error(per_step),
               "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()}}
+    if cost is not None:
+        record["cost"] = {"frame": float(cost(names)), "budget": None if budget is None else float(budget),
+                          "left_out": left_out}
     return Stacking(names, W, edges, scales, record)
+
+
+def _members(cv: "CrossValidation", names, steps) -> tuple:
+    """``(members, W (bands, members))``: the weights per band of the families ``names``, without those that carry
+    less than :data:`MIN_WEIGHT` of every band (fitted again without them until none is left)."""
+    sub = cv.subset(names)
+    W = np.array([sub.blend_weights(s) for s in steps])  # (bands, families)
+    while True:
+        # a member that never carries MIN_WEIGHT of any band costs a stream per frame for almost nothing: the
+        # weights are fitted again without it
+        keep = [i for i in range(len(sub.names)) if np.max(W[:, i]) >= MIN_WEIGHT] or [
+            int(np.argmax(W.max(axis=0)))]
+        if len(keep) == len(sub.names):
+            return list(sub.names), W
+        sub = sub.subset([sub.names[i] for i in keep])
+        W = np.array([sub.blend_weights(s) for s in steps])
+
+
+def _within_budget(cv: "CrossValidation", steps, cost, budget: float) -> tuple:
+    """``(members, W, left_out)`` of the best blend whose modelled frame fits ``budget`` (see :func:`stack`)."""
+    from itertools import combinations
+
+    names = list(cv.names)
+    fits = [set(c) for n in range(1, len(names) + 1) for c in combinations(names, n) if cost(list(c)) <= budget]
+    if not fits:  # not even one family alone: the cheapest, said so
+        cheapest = min(names, key=lambda m: (cost([m]), names.index(m)))
+        fits = [{cheapest}]
+    maximal = [f for f in fits if not any(f < g for g in fits)]
+
+    def score(fam):
+        sub = cv.subset([m for m in names if m in fam])
+        return sum(sub.band_loss(s) for s in steps)
+
+    best = min(maximal, key=lambda f: (score(f), cost([m for m in names if m in f]),
+                                       sorted(names.index(m) for m in f)))
+    chosen = [m for m in names if m in best]
+    members, W = _members(cv, chosen, steps)
+    left_out = {m: float(cost([m])) for m in names if m not in best}
+    return members, W, left_out
+
+
+def fold_message(why: str, n: int, k) -> str:
+    """``why`` a family could not be fitted on an inner training fold, said of the user's data: how many of the
+    ``n`` demonstrations a ``k``-fold cross-validation's smallest training fold holds, and why it is smaller."""
+    sets = folds(n, k)
+    n_train = n - max(len(f) for f in sets)
+    return (f"{why} (in an inner training fold: the {len(sets)}-fold cross-validation trains on {n_train} of your "
+            f"{n} demonstrations, holding the others out to score the family)")
 
 
 class CrossValidation:
@@ -168,7 +223,7 @@ class CrossValidation:
                                           std=False, references=False)
             except ValueError as exc:  # e.g. too few demonstrations in an inner training fold for this family
                 self.errors[name] = float("inf")
-                self.why[name] = str(exc).splitlines()[0]
+                self.why[name] = fold_message(str(exc).splitlines()[0], len(demos), k)
                 continue
             finally:
                 if progress is not None:
@@ -270,11 +325,37 @@ class CrossValidation:
         Breiman 1996, on the protocol's own loss: a convex problem whose solution is a convex combination, so the
         blend can always fall back on a single family).  Squared-error stacking was tried first: a few large errors
         decided the weights and the blend came out worse than its best member on the protocol's loss."""
+        if len(self.names) == 1:
+            return np.ones(1)
+        return self._solve(steps)[0]
+
+    def band_loss(self, steps=None) -> float:
+        """The smallest mean error :meth:`blend_weights` reaches over the look-ahead ``steps`` (its own loss, on
+        the truth's scale; what a set of families can do in that band, used to compare sets under a budget)."""
+        return self._solve(steps)[1]
+
+    def _solve(self, steps):
+        """``(weights, their loss in units of the truth's RMS)`` of :meth:`blend_weights`."""
         from scipy.optimize import minimize
 
         M = len(self.names)
+        loss = self._loss(steps)
         if M == 1:
-            return np.ones(1)
+            return np.ones(1), loss(np.ones(1))[0]
+        start = np.full(M, 1.0 / M)
+        best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
+        res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
+                       constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
+                       options={"ftol": 1e-10, "maxiter": 300})
+        w = np.clip(res.x, 0.0, None)
+        w[w < 1e-3] = 0.0
+        w = w / w.sum()
+        vertex = np.eye(M)[best]
+        lw, lv = loss(w)[0], loss(vertex)[0]
+        return (w, lw) if lw <= lv else (vertex, lv)
+
+    def _loss(self, steps):
+        """The stacking loss of weights ``w`` over ``steps`` and its gradient (a closure over the band's arrays)."""
         c = self.controlled or self.observed
         sel = np.arange(self.truth.shape[1]) if steps is None else np.asarray(steps)
         n_rt = max(1, int(round(self.horizon / self.dt)))
@@ -295,16 +376,7 @@ class CrossValidation:
             grad = np.einsum("mcsj,csj->m", P, e / (r * count)[:, None, None]) / len(r)
             return float(np.mean(r)), grad
 
-        start = np.full(M, 1.0 / M)
-        best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
-        res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
-                       constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
-                       options={"ftol": 1e-10, "maxiter": 300})
-        w = np.clip(res.x, 0.0, None)
-        w[w < 1e-3] = 0.0
-        w = w / w.sum()
-        vertex = np.eye(M)[best]
-        return w if loss(w)[0] <= loss(vertex)[0] else vertex
+        return loss
 
     def blend_scales(self, w) -> dict:
         """The blend's variance model over the look-ahead, fitted to its held-out errors: per step ahead ``h`` and

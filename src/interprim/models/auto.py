@@ -9,13 +9,16 @@ the nearest demonstration (``nn``) and the mean demonstration at the mean speed 
 as a ``(name, factory)`` pair.  From the held-out predictions it fits a :class:`~interprim.models.blend.Blend`: the
 convex weights that minimise the protocol's own error per look-ahead band (stacking; a choice of one family made on
 12-20 demonstrations proved noisy: on the project's hold-out it picked a worse family on one NuiSI interaction of
-six), and a variance fitted to the held-out errors step by step over the look-ahead.  ``combine="best"`` keeps the
-family with the smallest held-out error alone.  Predictions, streams and model files follow
-:mod:`interprim.models.base`; ``selection_`` says what was compared and chosen, and by how much.
+six), and a variance fitted to the held-out errors step by step over the look-ahead, within a frame budget (a
+multiple of the Interaction Primitive's streamed frame on the same data, by a deterministic cost model: see
+``frame_budget``).  ``combine="best"`` keeps the family with the smallest held-out error alone.  Predictions,
+streams and model files follow :mod:`interprim.models.base`; ``selection_`` says what was compared and chosen, and by
+how much.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -30,10 +33,14 @@ from . import registry
 from .base import CheckedStream, Predictor, uniform_demonstrations
 from .blend import Blend, member_from_state
 
-__all__ = ["AutoInteraction", "CANDIDATES"]
+__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET"]
 
 #: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
 CANDIDATES = registry.CANDIDATES
+
+#: The default frame budget: a blend's modelled streamed frame at most this many times the Interaction Primitive's
+#: (issue 37's target: a frame at most 3x the IP's, on any data).
+DEFAULT_FRAME_BUDGET = 3.0
 
 
 class AutoInteraction(Predictor):
@@ -75,6 +82,18 @@ class AutoInteraction(Predictor):
     progress : bool, default False
         Show the fit's progress (a tqdm bar when installed, else one line per step on stderr); ``interprim fit``
         turns it on.
+    frame_budget : float or None, default DEFAULT_FRAME_BUDGET (3.0)
+        The most a streamed frame (``stream.update`` + ``trajectory(100)``) may cost, as a multiple of the
+        Interaction Primitive's on the same data (None: no bound).  Costs come from a deterministic cost model
+        (:func:`interprim.models.registry.frame_cost`, :meth:`~interprim.models.blend.Blend.frame_overhead`: a
+        formula per family in the sizes of the data -- demonstrations, frames, DoFs, basis -- whose constants were
+        calibrated once in ``benchmarks/auto.py``), not from timings taken during the fit: one input gives one
+        model whatever the machine's load.  A family whose frame alone exceeds the budget is not compared at all
+        (nor fitted: the fit is cheaper too); when the best blend exceeds it, the best set of families within it
+        is blended instead (:func:`interprim.model_selection.stacking.stack`).  ``selection_["cost"]`` and
+        :meth:`summary` say what the model's frame costs and what was left out for the budget.  A user's own
+        family (a ``(name, factory)`` pair not named after a registry family) has no cost model: it is not counted,
+        and said so.
 
     Attributes
     ----------
@@ -92,7 +111,10 @@ class AutoInteraction(Predictor):
         fitted on a fold), ``runner_up`` and ``margin`` (its error / the chosen one's), ``vs_prior`` (the chosen
         one's error / the mean demonstration's at the mean speed), ``combine``, ``weights`` and, for a blend,
         ``blend_cv_error`` (in-sample for its weights), ``blend_vs_best`` and ``variance_model`` (``a``, ``b`` of
-        :meth:`interprim.model_selection.stacking.CrossValidation.blend_scales`).
+        :meth:`interprim.model_selection.stacking.CrossValidation.blend_scales`); ``cost``: ``frame`` (the
+        model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
+        ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
+        for the budget) and ``not_costed``.
     """
 
     _FITTED = "model_"
@@ -103,7 +125,7 @@ class AutoInteraction(Predictor):
 
     def __init__(self, observed_dofs, candidates=CANDIDATES, combine: str = "blend", folds: int = 3,
                  horizon: float = DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
-                 point_dim: int = 1, progress: bool = False):
+                 point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -114,6 +136,7 @@ class AutoInteraction(Predictor):
         self.smoothing_window = smoothing_window
         self.point_dim = point_dim
         self.progress = progress
+        self.frame_budget = frame_budget
 
     def _check(self):
         known = list(registry.FAMILIES)
@@ -136,6 +159,18 @@ class AutoInteraction(Predictor):
             raise ValueError(f"stride must be an integer >= 1, got {self.stride!r}")
         if not (isinstance(self.point_dim, (int, np.integer)) and self.point_dim >= 1):
             raise ValueError(f"point_dim must be an integer >= 1, got {self.point_dim!r}")
+        fb = self.frame_budget
+        if fb is not None and not (isinstance(fb, (int, float, np.integer, np.floating)) and not isinstance(fb, bool)
+                                   and np.isfinite(fb) and fb > 0):
+            raise ValueError(f"frame_budget must be a positive multiple of the Interaction Primitive's frame, or "
+                             f"None (no budget), got {fb!r}")
+
+    def frame_costs(self, sizes: registry.FrameSizes) -> dict:
+        """``{candidate: modelled seconds of one streamed frame}`` on data of ``sizes``
+        (:func:`interprim.models.registry.frame_cost`; a ``(name, factory)`` pair named after a registry family is
+        costed as that family, any other is not: None)."""
+        names = [c if isinstance(c, str) else c[0] for c in self.candidates]
+        return {m: registry.frame_cost(m, sizes) for m in names}
 
     def factories(self) -> dict:
         """``{family: factory of an unfitted estimator}`` of the candidates: a registry name built with this model's
@@ -151,7 +186,7 @@ class AutoInteraction(Predictor):
         named.candidates = [c if isinstance(c, str) else c[0] for c in self.candidates]
         return Predictor.json_params(named)
 
-    def settings(self) -> "registry.Settings":
+    def settings(self) -> registry.Settings:
         """The settings every member is built with (given once here and passed down to each family)."""
         return registry.Settings(tuple(self.observed_dofs), n_basis=self.n_basis,
                                  smoothing_window=self.smoothing_window, horizon=float(self.horizon))
@@ -183,9 +218,44 @@ class AutoInteraction(Predictor):
         # irregular stamps were resampled above and the CV sees the resampled frames
         cv_demos = source if getattr(source, "dt", None) is not None and hasattr(source, "times") else train
         make = self.factories()
+        sizes = registry.FrameSizes(n, float(np.mean([len(d) for d in train])), len(self.observed_dofs),
+                                    int(train[0].shape[1]), int(self.n_basis))
+        costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
+        n_dofs = int(train[0].shape[1])
+
+        def cost(names) -> float:  # the modelled frame of a blend of ``names`` (or of one family alone)
+            return float(sum(costs[m] or 0.0 for m in names)) + Blend.frame_overhead(len(names), n_dofs)
+
+        progress = Progress(self.progress, len(make))
+        ref = None
+        if self.frame_budget is not None and len(make) > 1:
+            # the Interaction Primitive of these data, fitted once: the budget's yardstick (its phase, chosen by its
+            # own cross-validation, moves its frame by up to 2.5x) and, when the blend keeps it, its ip member
+            ref = registry.family("ip").build(self.settings()).fit(train, dt=dt)
+            progress.grow(1)
+            progress.step("fitted ip (the frame budget's yardstick)")
+            sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
+            costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
+        ip_frame = registry.frame_cost("ip", sizes)
+        budget = None if self.frame_budget is None else float(self.frame_budget) * ip_frame
+
+        def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
+            if m == "ip" and ref is not None and "ip" in self.candidates:
+                return ref
+            return make[m]().fit(train, dt=dt)
+
+        left_out = {}
+        if budget is not None and len(make) > 1:
+            # a family whose frame alone exceeds the budget cannot be in any blend within it: it is neither
+            # compared nor fitted (the fit's cost falls with it); the cheapest family stays if none fits
+            over = {m: costs[m] for m in make if costs[m] is not None and costs[m] > budget}
+            if len(over) == len(make):
+                over.pop(min(over, key=lambda m: (over[m], list(make).index(m))))
+            left_out = {m: float(c) for m, c in over.items()}
+            make = {m: f for m, f in make.items() if m not in over}
+            progress.grow(-len(over))  # not compared: fewer steps than announced
         cfg = stacking.scoring_config(float(self.horizon), train, dt, stride=int(self.stride),
                                       point_dim=int(self.point_dim))
-        progress = Progress(self.progress, len(make))
         if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
             cv = None
             chosen = next(iter(make))
@@ -198,14 +268,14 @@ class AutoInteraction(Predictor):
             if cv.why:
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
-            fitted = stacking.stack(cv, float(self.horizon))
+            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget)
             # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
-            fitted, remaining = long_range.refine(cv, fitted, float(self.horizon))
+            fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
             info = fitted.record
             progress.grow(len(fitted.names))
             members = {}
             for m in fitted.names:
-                members[m] = make[m]().fit(train, dt=dt)
+                members[m] = final(m)
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,
@@ -216,10 +286,15 @@ class AutoInteraction(Predictor):
             selection["blend_vs_best"] = selection["blend_cv_error"] / best if best > 0 else float("nan")
         else:
             progress.grow(1)
-            self.model_ = make[chosen]().fit(train, dt=dt)
+            self.model_ = final(chosen)
             progress.step(f"fitted {chosen}")
             weights = {chosen: 1.0}
             selection.update(combine="best", weights=weights)
+        members = [m for m, w in weights.items()]
+        record = selection.pop("cost", {})
+        selection["cost"] = {"frame": cost(members), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
+                             "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
+                             "not_costed": [m for m in members if costs.get(m) is None]}
         progress.close()
         dt = float(dt)
         self.chosen_ = chosen
@@ -298,7 +373,7 @@ class AutoInteraction(Predictor):
         """A few lines: what was compared, what was chosen, and by how much."""
         s = self.selection_
         if s.get("runner_up") is None:
-            return f"model: {self.chosen_} alone ({type(self.model_).__name__})"
+            return "\n".join([f"model: {self.chosen_} alone ({type(self.model_).__name__})", *self._cost_lines()])
         lines = ["held-out real-time error of the controlled agent, by family (inner cross-validation):"]
         why = s.get("not_compared", {})
         for m, e in sorted(s["cv_errors"].items(), key=lambda kv: kv[1]):
@@ -314,5 +389,23 @@ class AutoInteraction(Predictor):
             lines += long_range.summary_lines(s)
         else:
             lines.append(f"using {self.chosen_} alone")
-        return "\n".join(lines)
+        return "\n".join(lines + self._cost_lines())
+
+    def _cost_lines(self) -> list:
+        """What the model's streamed frame costs (modelled) against the budget, and what was left out for it."""
+        c = self.selection_.get("cost")
+        if not c:  # a model file of an older version
+            return []
+        ip_frame = c["ip_frame"]
+        line = (f"streamed frame (modelled): {1e3 * c['frame']:.2f} ms, {c['frame'] / ip_frame:.1f}x the "
+                f"Interaction Primitive's {1e3 * ip_frame:.2f} ms on these data")
+        if c.get("budget") is not None:
+            line += f" (budget {c['frame_budget']:g}x: {1e3 * c['budget']:.2f} ms)"
+        out = [line]
+        if c.get("left_out"):
+            out.append("left out for the budget: " + ", ".join(
+                f"{m} ({1e3 * v:.2f} ms a frame)" for m, v in sorted(c["left_out"].items(), key=lambda kv: kv[1])))
+        if c.get("not_costed"):
+            out.append("not costed (no cost model): " + ", ".join(c["not_costed"]))
+        return out
 

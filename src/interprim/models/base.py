@@ -3,7 +3,9 @@
 Every model -- :class:`~interprim.models.primitive.estimator.InteractionPrimitive`, :class:`~interprim.models.learned.LearnedInteraction`
 and the peer methods of :mod:`interprim.models.demonstrations` -- is a :class:`Predictor`:
 
-* ``fit(demos, dt=None)`` returns the model; ``predict(partial)`` and ``stream()`` raise
+* ``fit(demos, dt=None, times=None, columns=None)`` returns the model (``demos``: a list of arrays, a
+  :class:`~interprim.datasets.Demonstrations` or a :class:`~interprim.models.training.TrainingSet`);
+  ``predict(partial)`` and ``stream()`` raise
   :class:`~interprim.core.errors.NotFittedError` before it;
 * ``predict(partial)`` takes the observed agent's frames from the start of the movement, shape
   ``(M, len(observed_dofs))``, and returns a :class:`BasePrediction`;
@@ -32,15 +34,13 @@ Every prediction is a :class:`BasePrediction`: the same attributes (``phase``, `
 ``goal``                           ``(D,)`` the predicted end point (the DMP goal for an IP)
 =================================  ===========================================================
 
-:class:`GridPrediction` is the prediction of the models that tabulate their mean and standard deviation on a
-normalised-time grid (the coupling, the learned interaction and the baselines); the Interaction Primitive's
-:class:`~interprim.models.primitive.prediction.Prediction` integrates its DMPs instead.
+:class:`~interprim.models.grid.GridPrediction` is the prediction of the models that tabulate their mean and
+standard deviation on a normalised-time grid (the coupling, the learned interaction and the baselines); the
+Interaction Primitive's :class:`~interprim.models.primitive.prediction.Prediction` integrates its DMPs instead.
 """
 
 from __future__ import annotations
 
-import functools
-import math
 import warnings
 
 import numpy as np
@@ -48,53 +48,22 @@ import numpy as np
 from ..core.blas import limit_methods, one_blas_thread
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
-from ..core.preprocessing import interp_columns
 from ..core.errors import NotFittedError, OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
+from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
 
-__all__ = ["BasePrediction", "BaseStream", "GridPrediction", "Predictor", "PrefixStream",
-           "uniform_demonstrations", "DEFAULT_DT", "CheckedStream"]
-
-#: Sampling interval (s) assumed for plain arrays given without ``dt``.
-DEFAULT_DT = 0.01
+__all__ = ["BasePrediction", "BaseStream", "Predictor", "PrefixStream", "CheckedStream", "TrajectoryColumns",
+           "TrainingSet", "training_set", "uniform_demonstrations", "DEFAULT_DT"]
 
 
-def uniform_demonstrations(demos, dt=None):
-    """The one rule by which every family reads demonstrations and their time stamps.
+def __getattr__(name: str):
+    # ``from interprim.models.base import GridPrediction`` of code written before the grid prediction got its own
+    # module (interprim.models.grid); imported on first use, as grid imports this module
+    if name == "GridPrediction":
+        from .grid import GridPrediction
 
-    Returns ``(arrays, dt, columns)``: ``(T_i, D)`` float arrays on a uniform grid, the sampling interval in
-    seconds and the column names (``None`` without).  A :class:`~interprim.datasets.Demonstrations` with a common
-    interval (``demos.dt``) is used as it is; one whose time stamps are irregular (jitter beyond 1 %, dropped
-    frames: ``demos.dt is None``) is resampled linearly onto a grid at the median interval of all its stamps, so
-    its durations are the recorded ones.  Plain arrays take ``dt`` (default :data:`DEFAULT_DT`).
-    """
-    from ..core.preprocessing import resample_uniform
-    from ..core.validation import check_positive, check_times
-
-    columns = None
-    if hasattr(demos, "demos") and hasattr(demos, "times"):  # interprim.datasets.Demonstrations
-        columns = getattr(demos, "columns", None)
-        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos.demos)]
-        if dt is None and getattr(demos, "dt", None) is None:
-            ts = [check_times(t, a.shape[0], f"times[{j}]") for j, (t, a) in enumerate(zip(demos.times, arrays))]
-            dt = float(np.median(np.concatenate([np.diff(t) for t in ts])))
-            arrays = [resample_uniform(a, t, dt=dt)[0] for a, t in zip(arrays, ts)]
-        elif dt is None:
-            dt = demos.dt
-    else:
-        if isinstance(demos, np.ndarray) and demos.ndim == 3:
-            demos = list(demos)
-        if not isinstance(demos, (list, tuple)):
-            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
-        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
-    if not arrays:
-        raise ValueError("demos is empty: at least one demonstration is needed")
-    D = arrays[0].shape[1]
-    for j, a in enumerate(arrays):
-        if a.shape[1] != D:
-            raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
-    dt = DEFAULT_DT if dt is None else check_positive(dt, "dt")
-    return arrays, float(dt), None if columns is None else [str(c) for c in columns]
+        return GridPrediction
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
@@ -132,6 +101,9 @@ class BasePrediction:
     input_distance: float = float("nan")
     #: whether that distance passed the model's limit
     out_of_range: bool = False
+    #: whether the predicted duration is far outside the demonstrated ones
+    #: (:data:`interprim.core.input_range.DURATION_FACTOR`)
+    duration_out_of_range: bool = False
 
     def trajectory(self, n: int = 100) -> np.ndarray:  # pragma: no cover - interface
         """Mean of every data column on ``linspace(0, 1, n)`` (normalised time), shape ``(n, D)``."""
@@ -185,157 +157,6 @@ class TrajectoryColumns:
         return np.asarray(pred.trajectory(self.n))[:, self.columns]
 
 
-class GridPrediction(BasePrediction):
-    """A prediction of the whole movement of all DoFs tabulated on normalised time ``0 .. 1``.
-
-    Made by :class:`~interprim.models.coupling.CouplingModel`, :class:`~interprim.models.learned.LearnedInteraction` and
-    the demonstration families.
-
-    Parameters
-    ----------
-    times : ndarray, shape (K,)
-        Normalised times of ``mean`` (and ``std``), increasing from 0 to 1.
-    mean : ndarray, shape (K, D)
-        Predictive mean, columns in the demonstrations' order.
-    std : ndarray, shape (K, D), optional
-        Predictive standard deviation (kept as ``std_values``); ``None`` when the model gives no uncertainty.
-    phase : float
-        The phase estimate (fraction of the movement seen) the prediction was made with (NaN: none).
-    phase_std : float
-        Its standard deviation (0: known or not modelled).
-    observed_dofs, controlled_dofs : list of int, optional
-        Columns of the two agents (default: none observed, all controlled).
-    method : str, optional
-        What made it (e.g. the coupling chosen, ``"mean"`` for the prior mean).
-    leverage : float
-        ``h`` of :mod:`interprim.models.coupling` (parameter variance / residual variance; NaN when not defined).
-    log_likelihood : float
-    duration : float
-        Estimated duration of the whole movement in seconds (NaN when not estimated).
-    mean_duration : float
-        Mean duration of the demonstrations in seconds (the unit of ``speed``; NaN when unknown).
-    n_observed : int
-        Observed frames the prediction used.
-    timing : bool
-        Whether :meth:`std` adds the uncertainty of the timing (``phase_std``) to ``std``.
-    conditioned : bool
-        Whether the prediction depends on the observed frames.
-    """
-
-    def __init__(self, times, mean, std=None, phase=float("nan"), phase_std=0.0, observed_dofs=None,
-                 controlled_dofs=None, method=None, leverage=float("nan"), log_likelihood=float("nan"),
-                 duration=float("nan"), mean_duration=float("nan"), n_observed: int = 0, timing: bool = False,
-                 conditioned: bool = True):
-        self.times = np.asarray(times, dtype=np.float64)
-        self.mean = np.asarray(mean, dtype=np.float64)
-        self.std_values = None if std is None else np.asarray(std, dtype=np.float64)
-        D = self.mean.shape[1]
-        self.phase = float(phase)
-        self.normalised_time = self.phase
-        self.phase_std = float(phase_std)
-        self.observed_dofs = [] if observed_dofs is None else [int(i) for i in observed_dofs]
-        self.controlled_dofs = ([i for i in range(D) if i not in set(self.observed_dofs)]
-                                if controlled_dofs is None else [int(i) for i in controlled_dofs])
-        self.method = method
-        self.leverage = float(leverage)
-        self.log_likelihood = float(log_likelihood)
-        self.duration = float(duration)
-        self.speed = float(mean_duration) / self.duration if self.duration > 0 else float("nan")
-        self.n_observed = int(n_observed)
-        self.timing = bool(timing)
-        self.conditioned = bool(conditioned)
-        self.input_distance = float("nan")
-        self.out_of_range = False
-
-    def _at(self, Y, s, cols=None):
-        return interp_columns(s, self.times, Y if cols is None else Y[:, list(cols)])
-
-    def trajectory(self, n: int = 100) -> np.ndarray:
-        """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)`` (linear interpolation)."""
-        return self._at(self.mean, np.linspace(0.0, 1.0, int(n)))
-
-    @one_blas_thread
-    def std(self, n: int = 100, calibrated: bool = True, timing: bool | None = None):
-        """Predictive standard deviation of all DoFs, shape ``(n, D)``; ``None`` when the model gives none.
-
-        With ``timing`` (default: the prediction's own ``timing`` flag, and only when ``calibrated``) the
-        uncertainty of the timing is added: a point at normalised time ``u`` is placed in real time by the phase
-        ``s`` and the duration ``elapsed / s``; a relative error ``e = phase_std / s`` of the phase moves it by
-        ``u e`` to first order, and the position there by ``|dy/du| u e``, added in quadrature (``e`` capped
-        at 1).  ``calibrated=False``: the tabulated std alone.
-        """
-        if self.std_values is None:
-            return None
-        sd = self._at(self.std_values, np.linspace(0.0, 1.0, int(n)))
-        use_timing = (self.timing and calibrated) if timing is None else bool(timing)
-        if not use_timing or not self.phase > 0.0 or self.phase_std <= 0.0:
-            return sd
-        u = np.linspace(0.0, 1.0, int(n))
-        slope = np.gradient(self.trajectory(n), u, axis=0)
-        e = min(self.phase_std / self.phase, 1.0)
-        return np.sqrt(sd * sd + (slope * (u * e)[:, None]) ** 2)
-
-    @one_blas_thread
-    def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:
-        """Trajectories ``trajectory(n) + z * std(n)``, shape ``(n_samples, n, D)``, with one standard normal ``z``
-        per sample and column (the tabulated std is pointwise: each sample is a whole-movement offset with the
-        right pointwise spread); copies of the mean when the model gives no std."""
-        rng = np.random.default_rng(random_state)
-        mean = self.trajectory(n)
-        sd = self.std(n)
-        z = rng.standard_normal((int(n_samples), 1, mean.shape[1]))
-        if sd is None:
-            return np.repeat(mean[None], int(n_samples), axis=0)
-        return mean[None] + z * sd[None]
-
-    def _now(self) -> float:
-        s = self.phase
-        return float(min(max(s, 0.0), 1.0)) if math.isfinite(s) else 0.0
-
-    def response(self, n: int = 100, state=None):
-        """The controlled agent's mean movement from the current phase to the end.
-
-        Returns ``(t, y)``: seconds from now (at the estimated ``duration``; normalised time when the model
-        estimates none) and positions ``(n, len(controlled_dofs))``.  ``state`` (a robot state) is not used by a
-        tabulated prediction and must be ``None``.
-        """
-        if state is not None:
-            raise ValueError("state: this model's prediction does not roll out from a robot state; pass None")
-        s0 = self._now()
-        s = np.linspace(s0, 1.0, int(n))
-        scale = self.duration if math.isfinite(self.duration) and self.duration > 0 else 1.0
-        return (s - s0) * scale, self._at(self.mean, s, self.controlled_dofs)
-
-    def completion(self, n: int = 100):
-        """The observed agent's remaining movement: ``(s, y)``, normalised times from the current phase to 1 and
-        the mean ``(n, len(observed_dofs))`` there (its std: :meth:`completion_std`)."""
-        s = np.linspace(self._now(), 1.0, int(n))
-        return s, self._at(self.mean, s, self.observed_dofs)
-
-    def completion_std(self, n: int = 100):
-        """The std of :meth:`completion`'s positions, ``(n, len(observed_dofs))`` (``None`` without a std)."""
-        if self.std_values is None:
-            return None
-        return self._at(self.std_values, np.linspace(self._now(), 1.0, int(n)), self.observed_dofs)
-
-    @property
-    def goal(self) -> np.ndarray:
-        """The predicted end point of every DoF, shape ``(D,)``."""
-        return self.mean[-1].copy()
-
-    def band(self, n: int = 100, coverage: float = 0.9):
-        """Lower and upper edge of the pointwise ``coverage`` band, each ``(n, D)``."""
-        from statistics import NormalDist
-
-        z = NormalDist().inv_cdf(0.5 + coverage / 2.0)
-        m, s = self.trajectory(n), self.std(n)
-        return m - z * s, m + z * s
-
-    def __repr__(self):
-        return (f"GridPrediction(phase={self.phase:.3f}, duration={self.duration:.3f}, method={self.method!r}, "
-                f"n_observed={self.n_observed})")
-
-
 class BaseStream:
     """What every model's online predictor offers: :meth:`update`, :meth:`extend`, :meth:`reset` and ``n_frames``.
 
@@ -378,8 +199,8 @@ class BaseStream:
             frame's :meth:`update`).
         """
         block = as_2d_finite(frames, "frames", min_rows=1)
-        pred = None
-        for f in block:
+        pred = self.update(block[0], need_cov=need_cov)
+        for f in block[1:]:
             pred = self.update(f, need_cov=need_cov)
         return pred
 
@@ -436,54 +257,30 @@ class PrefixStream(BaseStream):
         return self.model.predict(self._buf[: self._n].copy())
 
 
-def _fit_then_range(fit):
-    @functools.wraps(fit)
-    def wrapper(self, demos, *args, **kwargs):
-        out = fit(self, demos, *args, **kwargs)
-        obs = getattr(self, "observed_dofs_", None)
-        if obs is not None:
-            arrays, _, _ = uniform_demonstrations(demos, kwargs.get("dt", args[0] if args else None))
-            self.set_input_range(fit_input_range(np.concatenate([a[:, list(obs)] for a in arrays])))
-        return out
-
-    return wrapper
-
-
-def _predict_then_mark(predict):
-    @functools.wraps(predict)
-    def wrapper(self, partial, *args, **kwargs):
-        pred = predict(self, partial, *args, **kwargs)
-        if getattr(self, "input_range_", None) is not None and not np.isfinite(
-                getattr(pred, "input_distance", float("nan"))):
-            mark(self, pred, self.input_distance(partial))
-        return pred
-
-    return wrapper
-
-
-def _checked_stream(stream):
-    @functools.wraps(stream)
-    def wrapper(self, *args, **kwargs):
-        inner = stream(self, *args, **kwargs)
-        if getattr(self, "input_range_", None) is None or isinstance(inner, CheckedStream) or inner.marks_input:
-            return inner
-        return CheckedStream(self, inner)
-
-    return wrapper
-
-
 class Predictor(Params):
     """Base of every model: the contract of the module docstring.
 
-    Subclasses implement ``fit``, ``predict``, :meth:`to_state` and :meth:`load_state`, and name one fitted
-    attribute in ``_FITTED``; ``STATE_VERSION`` is the version of their model-file content.
+    A family implements the hooks and the base class writes the public methods around them once, here:
+
+    * ``_fit(data)`` learns from a :class:`~interprim.models.training.TrainingSet`.  :meth:`fit` builds that set
+      once (:func:`~interprim.models.training.training_set`, the one reader of demonstrations and time stamps),
+      calls ``_fit`` and then keeps the range of the observed agent's training frames;
+    * ``_predict(partial, **kwargs)`` returns the prediction; :meth:`predict` marks it with ``input_distance`` and
+      ``out_of_range``;
+    * ``_stream(robot_state)`` (default: :class:`PrefixStream`, ``predict`` of the frames seen) returns the online
+      predictor; :meth:`stream` marks its predictions (:class:`CheckedStream`) unless it marks them itself;
+    * :meth:`to_state` and :meth:`load_state`, and ``_FITTED`` names one fitted attribute; ``STATE_VERSION`` is
+      the version of their model-file content.
 
     **The out-of-range check is part of the contract.**  After ``fit``, every model knows the range of its
     training frames of the observed agent (:func:`interprim.core.input_range.fit_input_range`, kept in
     ``input_range_`` and in its model file); every prediction carries ``input_distance`` and ``out_of_range``
     (:func:`interprim.core.input_range.mark`; a stream: the largest distance of the frames seen so far) and warns
-    once.  The base class adds this around a subclass's ``fit``, ``predict`` and ``stream``, unless the class does it
-    itself (``_CHECKS_INPUT = True``: the Interaction Primitive, :class:`~interprim.models.auto.AutoInteraction`).
+    once.  A class that computes them itself sets ``_CHECKS_INPUT = True`` (the Interaction Primitive, whose
+    fitted state marks its predictions, and :class:`~interprim.models.auto.AutoInteraction`).
+
+    :meth:`fit` and :meth:`predict` run on one BLAS thread (:func:`interprim.core.blas.one_blas_thread`); a subclass
+    that overrides them instead of the hooks gets the same limit around its own.
     """
 
     #: whether the class computes ``input_distance`` / ``out_of_range`` itself
@@ -493,14 +290,71 @@ class Predictor(Params):
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        if not cls.__dict__.get("_CHECKS_INPUT", False):
-            for name, wrap in (("fit", _fit_then_range), ("predict", _predict_then_mark),
-                               ("stream", _checked_stream)):
-                if name in cls.__dict__ and not getattr(cls.__dict__[name], "__interprim_checked__", False):
-                    f = wrap(cls.__dict__[name])
-                    f.__interprim_checked__ = True
-                    setattr(cls, name, f)
-        limit_methods(cls, ("fit", "predict"))  # one BLAS thread, the range check included (see BasePrediction)
+        limit_methods(cls, [n for n in ("fit", "predict") if n in cls.__dict__
+                            and not getattr(cls.__dict__[n], "__interprim_one_blas__", False)])
+
+    @one_blas_thread
+    def fit(self, demos, dt: float | None = None, times=None, columns=None):
+        """Learn the model from demonstrations of both agents; returns the model.
+
+        Parameters
+        ----------
+        demos : list of array_like, shape (T_j, D), Demonstrations or TrainingSet
+            One array per demonstration, time on axis 0, the columns of both agents (``observed_dofs`` for the
+            observed one); lengths may differ.  An :class:`interprim.datasets.Demonstrations` (any loader's
+            result) is taken with its ``dt`` (or time stamps) and column names unless given here.
+        dt : float, optional
+            Sampling interval in seconds of uniformly sampled arrays (default 0.01 when neither ``dt`` nor
+            ``times`` is given).
+        times : list of array_like, shape (T_j,), optional
+            Time stamps in seconds per demonstration: irregular sampling is resampled onto a uniform grid at the
+            median interval (:func:`~interprim.models.training.training_set`).
+        columns : list of str, optional
+            Names of the ``D`` columns.
+
+        Returns
+        -------
+        self
+        """
+        data = training_set(demos, dt, times=times, columns=columns)
+        self._fit(data)
+        obs = getattr(self, "observed_dofs_", None)
+        if not self._CHECKS_INPUT and obs is not None:
+            self.set_input_range(fit_input_range(data.frames(obs)))
+        return self
+
+    def _fit(self, data: TrainingSet) -> None:  # pragma: no cover - interface
+        """Learn from the validated training set (the family's part of :meth:`fit`)."""
+        raise NotImplementedError
+
+    @one_blas_thread
+    def predict(self, partial, **kwargs) -> BasePrediction:
+        """The prediction from the observed agent's frames ``partial`` ``(M, len(observed_dofs))`` since the start
+        of the movement, marked with ``input_distance`` and ``out_of_range``; the model is left unchanged."""
+        pred = self._predict(partial, **kwargs)
+        if not self._CHECKS_INPUT and self.input_range_ is not None and not np.isfinite(
+                getattr(pred, "input_distance", float("nan"))):
+            mark(self, pred, self.input_distance(partial))
+        return pred
+
+    def _predict(self, partial, **kwargs) -> BasePrediction:  # pragma: no cover - interface
+        """The family's prediction of :meth:`predict` (unmarked)."""
+        raise NotImplementedError
+
+    def stream(self, robot_state=None) -> BaseStream:
+        """Online predictor that takes one observed frame at a time; its answers equal :meth:`predict` of the
+        frames seen, marked with the largest input distance so far."""
+        inner = self._stream(robot_state)
+        if self._CHECKS_INPUT or self.input_range_ is None or isinstance(inner, CheckedStream) or inner.marks_input:
+            return inner
+        return CheckedStream(self, inner)
+
+    def _stream(self, robot_state=None) -> BaseStream:
+        """The family's online predictor of :meth:`stream` (default :class:`PrefixStream`)."""
+        self._check_fitted("stream")
+        if robot_state is not None:
+            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
+        return PrefixStream(self)
 
     def set_input_range(self, input_range):
         """Set ``input_range_`` (``(mean, std, limit)`` or None), e.g. from a model file."""
@@ -535,13 +389,6 @@ class Predictor(Params):
         if not hasattr(self, self._FITTED):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit(demos) before {what}")
 
-    def stream(self, robot_state=None) -> BaseStream:
-        """Online predictor that takes one observed frame at a time (:class:`PrefixStream`)."""
-        self._check_fitted("stream")
-        if robot_state is not None:
-            raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
-        return PrefixStream(self)
-
     def json_params(self) -> dict:
         """:meth:`get_params` (not deep) as stored in a model file (tuples as lists)."""
         import json
@@ -569,9 +416,6 @@ class Predictor(Params):
         from ..io import load_estimator
 
         return load_estimator(path, cls)
-
-
-Predictor.stream = _checked_stream(Predictor.stream)  # PrefixStream of every model that has no stream of its own
 
 
 def _jsonable(v):

@@ -20,6 +20,9 @@ from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 
 __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state"]
 
+#: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
+_OVERHEAD_US = (40.8, 98.4, 2.62)
+
 
 def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
     """A blend's member (or the model of an :class:`~interprim.models.auto.AutoInteraction`) from its class name,
@@ -90,7 +93,7 @@ class Blend(Predictor):
     @classmethod
     def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
                     horizon: float = DEFAULT_HORIZON, bands=None, n_basis: int = 20,
-                    smoothing_window=None, remaining=None) -> "Blend":
+                    smoothing_window=None, remaining=None) -> Blend:
         """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
         sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
         blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
@@ -119,6 +122,8 @@ class Blend(Predictor):
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
+        #: the bands' middles, between which :func:`weights_at` interpolates (computed once, not per frame)
+        self._mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges) if len(edges) > 1 else None
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
@@ -173,17 +178,46 @@ class Blend(Predictor):
                 D = R / (1.0 - s)
         u = unit_grid(n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
-        W = weights_at(ahead, self._edges, self._W)  # (n_grid, M)
-        Y = np.empty((len(names), n_grid, self.n_dofs_))
-        for i, (m, (sm, Dm)) in enumerate(zip(names, timing)):
-            if R is None:
-                future = sm + ahead / Dm
-            else:
-                future = member_units([sm], [Dm], ahead, [R], float(self.horizon))[0]
-            um = np.where(u >= s, future, u * (sm / s if s > 0 else 1.0))
-            Y[i] = interp_columns(np.clip(um, 0.0, 1.0), u, preds[m].trajectory(n_grid))
+        W = self._weights_on(ahead)  # (n_grid, M)
+        # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
+        # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
+        on = W.any(axis=0)
+        active = np.flatnonzero(on)
+        if len(active) < len(names):
+            W = W[:, active]
+        # every active member's normalised time at each grid point, all at once: ``s_m + a / D_m`` ahead of now
+        # (with a shared end, ``long_range.member_units`` beyond the real-time band), ``u s_m / s`` before it
+        sm = np.array([timing[i][0] for i in active])[:, None]
+        Dm = np.array([timing[i][1] for i in active])[:, None]
+        if R is None:
+            future = sm + ahead / Dm
+        else:
+            future = member_units(sm[:, 0], Dm[:, 0], ahead, np.full(len(active), R), float(self.horizon))
+        um = np.clip(np.where(u >= s, future, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
+        Y = np.empty((len(active), n_grid, self.n_dofs_))
+        for j, i in enumerate(active):
+            Y[j] = interp_columns(um[j], u, preds[names[i]].trajectory(n_grid))
         mean = np.einsum("gm,mgd->gd", W, Y)
         return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
+
+    def _weights_on(self, ahead) -> np.ndarray:
+        """:func:`~interprim.model_selection.stacking.weights_at` of the fitted weights at ``ahead`` (the same
+        operations, with the bands' middles computed once)."""
+        if self._mids is None:
+            return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
+        out = np.clip(interp_columns(ahead, self._mids, self._W), 0.0, None)
+        return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+
+    @staticmethod
+    def frame_overhead(n_members: int, n_dofs: int) -> float:
+        """Modelled seconds a blend of ``n_members`` members adds to their own streamed frames (placing each in
+        time, the weights over the look-ahead, reading each member on the common grid, combining): the same
+        deterministic cost model as :func:`interprim.models.registry.frame_cost`, calibrated with it
+        (``python -m benchmarks.auto --calibrate``); 0 for a single family, which is not blended."""
+        if n_members < 2:
+            return 0.0
+        a, b, c = _OVERHEAD_US
+        return (a + b * n_members + c * n_members * n_dofs) * 1e-6
 
     def predict(self, partial, **kwargs):
         """The blend of every member's prediction for the observed frames ``partial`` ``(M, n_observed)``."""

@@ -53,6 +53,10 @@ model and its training distribution:
   the ``coverage (1 + 1/n)`` quantile of the standardised errors, the split-conformal level for
   ``n`` exchangeable held-out demonstrations) so that the ``coverage`` band is calibrated.
 
+Each conditioning method is one small type of :mod:`interprim.models.conditioners` (``Mean``, ``Ridge``,
+``PPCA``, ``Kernel``, ``Blend``) with one interface, the row weights of a shared ``Context``; the cross-validation
+scores a list of them and ``method_`` / ``param_`` name the one chosen.
+
 Pure numpy.  References: H. Ben Amor, G. Neumann, S. Kamthe, O. Kroemer, J. Peters, "Interaction
 Primitives for Human-Robot Cooperation Tasks", ICRA 2014 (Eq. 10, 16-18); M. E. Tipping and
 C. M. Bishop, "Probabilistic principal component analysis", JRSS-B 1999; T. Hastie, R. Tibshirani,
@@ -69,9 +73,12 @@ from statistics import NormalDist
 import numpy as np
 
 from ..core.blas import one_blas_thread
+from ..core.cache import DerivedCache
 from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite
-from .base import GridPrediction
+from .conditioners import PPCA, Blend, Conditioner, Context, Kernel, Mean, Ridge, conditioner, target_block
+from .grid import GridPrediction
+from .training import training_set
 from ..core.cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
 from ..core.errors import NotFittedError
 
@@ -106,16 +113,6 @@ def _jitter_nodes(k: int) -> np.ndarray:
 
 
 _NODES: dict = {}
-
-
-def _target_block(P, Ydc, R):
-    """``P L / b`` (R x rank C): the target block of ``CouplingModel._ppca_weights``'s ``Z``, with
-    ``C = Ydc Ydc^T = L L^T`` (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and
-    ``b^2 = tr(P C P^T) / R``."""
-    ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
-    b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
-    kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
-    return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
 
 
 def _resample(frames, stop, n):
@@ -233,6 +230,7 @@ class CouplingModel:
         self.blend_weights = blend_weights
         self.smooth_window = smooth_window
         self.score = score
+        self._derived = DerivedCache()  # values derived from the fitted state (renewed by every fit)
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, D):
@@ -275,44 +273,38 @@ class CouplingModel:
 
         Parameters
         ----------
-        demos : list of array_like, shape (T_j, D)
-            Demonstrations of both agents (time on axis 0, uniformly sampled, from the start of the
-            movement to its end); lengths may differ.  An
-            :class:`interprim.datasets.Demonstrations` is accepted.
+        demos : TrainingSet, list of array_like, shape (T_j, D), or Demonstrations
+            Demonstrations of both agents (time on axis 0, from the start of the movement to its end; at
+            least 4 of at least 3 frames); lengths may differ.  Read by
+            :func:`~interprim.models.training.training_set` (a :class:`~interprim.models.training.TrainingSet`
+            as it is).
         dt : float, optional
-            Sampling interval (s); only used to report durations (``mean_duration_``).
+            Sampling interval (s, default 0.01); only used to report durations (``mean_duration_``).
 
         Returns
         -------
         self
         """
-        if hasattr(demos, "demos") and not isinstance(demos, (list, tuple, np.ndarray)):
-            dt = getattr(demos, "dt", None) if dt is None else dt
-            demos = demos.demos
-        if isinstance(demos, np.ndarray) and demos.ndim == 2:
-            raise TypeError(f"demos must be a list of (T, D) arrays, got one array of shape {demos.shape}")
-        try:
-            demos = list(demos)
-        except TypeError:
-            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}") from None
-        if len(demos) < 4:
-            raise ValueError(f"demos has {len(demos)} demonstrations; the coupling needs at least 4 "
+        data = training_set(demos, dt)
+        if len(data) < 4:
+            raise ValueError(f"demos has {len(data)} demonstrations; the coupling needs at least 4 "
                              "(its cross-validation holds some out)")
-        arrays = [as_2d_finite(d, f"demos[{j}]", min_rows=3) for j, d in enumerate(demos)]
-        D = arrays[0].shape[1]
-        for j, a in enumerate(arrays):
-            if a.shape[1] != D:
-                raise ValueError(f"demos[{j}] has {a.shape[1]} columns, expected {D} like demos[0]")
+        short = [j for j, a in enumerate(data.arrays) if a.shape[0] < 3]
+        if short:
+            raise ValueError(f"demos[{short[0]}] has {data.arrays[short[0]].shape[0]} frames, at least 3 are needed")
+        arrays = list(data.arrays)
+        D = data.n_dofs
         obs, methods, fr = self._check_params(D)
         ctrl = [i for i in range(D) if i not in set(obs)]
         self.observed_dofs_, self.controlled_dofs_, self.n_dofs_ = obs, ctrl, D
+        self._derived = DerivedCache()  # values derived from this fit, filled on first use
         self.methods_ = methods
         self.fractions_ = fr
         n = len(arrays)
         self.n_demos_ = n
         self.obs_frames_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
         lengths = np.array([a.shape[0] for a in arrays], dtype=np.float64)
-        self.durations_ = (lengths - 1) * (float(dt) if dt is not None else 1.0)
+        self.durations_ = (lengths - 1) * data.dt
         rel = lengths.mean() / lengths
         self.clock_rel_std_ = float(np.std(rel - 1.0)) if n > 1 else 0.0
         from ..core.preprocessing import time_normalise
@@ -378,143 +370,38 @@ class CouplingModel:
     def _padded_obs(self):
         """``(frames (n, T_max, Do), lengths (n,))``: the observed frames of the demonstrations, zero-padded
         (rebuilt when ``obs_frames_`` is replaced, by a fit or a load)."""
-        cached = self.__dict__.get("_padded")
-        if cached is None or cached[0] is not self.obs_frames_:
+        def build():
             T = np.array([f.shape[0] for f in self.obs_frames_], dtype=np.intp)
             frames = np.zeros((len(T), int(T.max()), self.obs_frames_[0].shape[1]))
             for j, f in enumerate(self.obs_frames_):
                 frames[j, : f.shape[0]] = f
-            cached = (self.obs_frames_, frames, T)
-            self.__dict__["_padded"] = cached
-        return cached[1], cached[2]
+            return frames, T
+
+        return self._derived.get_or_build("padded", (self.obs_frames_,), build)
 
     # ------------------------------------------------------------------ the smoothers
     @staticmethod
-    def _context(X, groups, Ydemo, x):
-        """What every candidate of one training set and one batch of queries shares (computed once).
-
-        ``X`` (R, p) rows, ``groups`` (R,) the demonstration of each row (every demonstration has
-        the same number of rows), ``Ydemo`` (n, q) the targets of the demonstrations, ``x`` (Q, p).
-        """
-        R = X.shape[0]
-        mu = X.mean(axis=0)
-        ug, inv = np.unique(groups, return_inverse=True)
-        P = np.zeros((R, ug.size))
-        P[np.arange(R), inv] = 1.0
-        Yd = Ydemo[ug]
-        ybar = Yd.mean(axis=0)
-        return {"R": R, "Xc": X - mu, "xc": x - mu, "P": P, "ybar": ybar, "Ydc": Yd - ybar}
-
-    @staticmethod
-    def _ridge_svd(ctx):
-        if "svd" not in ctx:
-            U, S, Vt = np.linalg.svd(ctx["Xc"], full_matrices=False)
-            ctx["svd"] = (U, S, ctx["xc"] @ Vt.T)
-        return ctx["svd"]
-
-    def _weights(self, method, param, ctx):
-        """Row weights ``alpha`` (Q, R): the prediction is ``ybar + sum_i alpha_i (y_i - ybar)``.
-
-        Eq. 18 for the covariance model of ``method`` (module docstring):
-        ``mu_y|x - mu_y = S_yx (S_xx + sigma^2 I)^-1 (x - mu_x)`` with ``S_yx = Y_c^T X_c / R``, i.e.
-        ``alpha = X_c (S_xx + sigma^2 I)^-1 (x - mu_x) / R``.
-        """
-        R, xc = ctx["R"], ctx["xc"]
-        Q = xc.shape[0]
-        if method == "mean":
-            return np.zeros((Q, R))
-        if method == "ridge":
-            U, S, xv = self._ridge_svd(ctx)
-            sigma2 = float(param) * float(np.sum(S**2)) / (R * ctx["Xc"].shape[1])  # lambda tr(S_xx) / p
-            # (S_xx + s2 I)^-1 on the row space of X_c: V diag(1 / (S^2/R + s2)) V^T
-            return (xv * (S / (S**2 + R * sigma2))) @ U.T
-        if method == "kernel":
-            if "d2" not in ctx:
-                Xc = ctx["Xc"]
-                d2 = (np.sum(xc**2, axis=1)[:, None] + np.sum(Xc**2, axis=1)[None, :] - 2.0 * xc @ Xc.T)
-                d2 = np.maximum(d2, 0.0)
-                ctx["d2"] = d2
-                ctx["med"] = np.maximum(np.median(d2, axis=1, keepdims=True), 1e-300)
-            d2 = ctx["d2"]
-            logw = -0.5 * d2 / (float(param) ** 2 * ctx["med"])
-            w = np.exp(logw - logw.max(axis=1, keepdims=True))
-            return w / w.sum(axis=1, keepdims=True) - 1.0 / R
-        if method == "ppca":
-            return self._ppca_weights(int(param), ctx)
-        if method == "blend":
-            lam, bw, w = param
-            return w * self._weights("ridge", lam, ctx) + (1.0 - w) * self._weights("kernel", bw, ctx)
-        raise AssertionError(method)
+    def _context(X, groups, Ydemo, x) -> Context:
+        """:meth:`Context.of <interprim.models.conditioners.Context.of>` (what every candidate of one training set
+        and one batch of queries shares)."""
+        return Context.of(X, groups, Ydemo, x)
 
     @staticmethod
     def _ppca_weights(rank, ctx):
-        """Row weights of the reduced-rank (probabilistic PCA) joint Gaussian conditioning.
+        """The row weights of :class:`~interprim.models.conditioners.PPCA` of rank ``rank`` for ``ctx`` (a
+        :class:`~interprim.models.conditioners.Context` or a mapping with its fields)."""
+        return PPCA(rank).weights(Context.from_mapping(ctx))
 
-        The joint covariance of ``z = [x / a, y / b]`` (each block scaled to unit total variance) is
-        ``W W^T + diag(s_x^2 I, s_y^2 I)`` with ``W`` the first ``rank`` principal directions scaled
-        by ``sqrt(lambda_k - s^2)`` (Tipping & Bishop's ML solution; ``s_x^2`` = the x block's
-        variance the directions leave unexplained, per dimension).  Eq. 18 then gives
-        ``mu_y + W_y (W_x^T W_x + s_x^2 I)^-1 W_x^T (x - mu_x)``, a linear combination of the centred
-        training rows (``W_y = Y_c^T U_r diag(sqrt(lambda - s^2) / S_r) / b``).
-        """
-        R, Xc, xc = ctx["R"], ctx["Xc"], ctx["xc"]
-        p = Xc.shape[1]
-        if "pca" not in ctx:
-            P, Ydc = ctx["P"], ctx["Ydc"]
-            a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
-            # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
-            # and the demonstrations only, not on the phase or the query)
-            PLb = ctx["ylow"] if "ylow" in ctx else _target_block(P, Ydc, R)
-            # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
-            # C = Ydc Ydc^T = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T
-            # (U = Z V / S), the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
-            a = math.sqrt(a2)
-            Z = np.concatenate([Xc / a, PLb], axis=1)
-            if Z.shape[0] <= Z.shape[1]:  # fewer rows than columns (no jitter): the rows' own Gram matrix
-                e, U = np.linalg.eigh(Z @ Z.T)
-                e, U = e[::-1], U[:, ::-1]
-                keep = e > 1e-12 * max(float(e[0]), 1e-300)
-                U, S = U[:, keep], np.sqrt(e[keep])
-                V = (Z.T @ U) / S  # right singular vectors
-            else:
-                e, V = np.linalg.eigh(Z.T @ Z)
-                e, V = e[::-1], V[:, ::-1]
-                keep = e > 1e-12 * max(float(e[0]), 1e-300)
-                V, S, U = V[:, keep], np.sqrt(e[keep]), None  # U = Z V / S, formed for the r columns used
-            # x block of the right singular vectors: V[:p] (Z^T U = V S and the x block of Z^T U S^-1 is Vx^T)
-            ctx["pca"] = (a, Z, V, S, U, Ydc.shape[1] + p)
-        a, Z, V, S, U, dim = ctx["pca"]
-        r = int(min(rank, max(S.size - 1, 1)))
-        lam = S**2 / R
-        Vx = V[:p, :r].T  # (r, p)
-        sig2 = float(lam[r:].sum()) / max(dim - r, 1)
-        scale = np.sqrt(np.maximum(lam[:r] - sig2, 0.0))
-        Wx = Vx.T * scale  # (p, r)
-        sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
-        m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
-        coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
-        if U is None:  # U_r = Z V_r / S_r folded in
-            return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
-        return (U[:, :r] @ coef).T
-
-    def _predict_rows(self, method, param, ctx):
-        """Mean (Q, q) and leverage ``h`` (Q,) of candidate ``(method, param)``."""
-        A = self._weights(method, param, ctx)
-        R = ctx["R"]
-        G = A @ ctx["P"]  # per demonstration: the sum of its rows' weights
-        mean = ctx["ybar"] + G @ ctx["Ydc"]
-        G += 1.0 / ctx["P"].shape[1]  # the weights of the mean itself
-        return mean, np.sum(G**2, axis=1)
-
-    def _candidates(self):
-        c = [("mean", None)]
+    def _candidates(self) -> list[Conditioner]:
+        """The prior mean, then every hyper-parameter of every method in ``methods_`` (the order of the grids)."""
+        c: list[Conditioner] = [Mean()]
         for m in self.methods_:
             if m == "ridge":
-                c += [("ridge", float(v)) for v in self.ridge_grid]
+                c += [Ridge(float(v)) for v in self.ridge_grid]
             elif m == "ppca":
-                c += [("ppca", int(v)) for v in self.rank_grid if int(v) <= self.n_demos_ - 2]
+                c += [PPCA(int(v)) for v in self.rank_grid if int(v) <= self.n_demos_ - 2]
             elif m == "kernel":
-                c += [("kernel", float(v)) for v in self.bandwidth_grid]
+                c += [Kernel(float(v)) for v in self.bandwidth_grid]
         return c
 
     # ------------------------------------------------------------------ cross-validation
@@ -556,8 +443,8 @@ class CouplingModel:
                     cache[key] = self._context(X, g, Yflat, xq)
                 ctx = cache[key]
                 truth = np.repeat(Yflat[hold], nj, axis=0)
-                for c, (m, prm) in enumerate(cands):
-                    mean, h = self._predict_rows(m, prm, ctx)
+                for c, cand in enumerate(cands):
+                    mean, h = cand.predict(ctx)
                     e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
                     loss[c, a, hold] = np.mean(np.sum(e[..., ctrl] ** 2 * w_ctrl, axis=-1), axis=(1, 2))
                     if keep is not None and c == keep:
@@ -578,9 +465,10 @@ class CouplingModel:
         if "ridge" in self.methods_ and "kernel" in self.methods_ and self.blend_weights:
             # model averaging of the best ridge and the best kernel conditioning (both linear smoothers)
             sc = loss.mean(axis=(1, 2))
-            br = min((i for i, c in enumerate(cands) if c[0] == "ridge"), key=lambda i: sc[i])
-            bk = min((i for i, c in enumerate(cands) if c[0] == "kernel"), key=lambda i: sc[i])
-            blends = [("blend", (cands[br][1], cands[bk][1], float(w))) for w in self.blend_weights]
+            br = min((i for i, c in enumerate(cands) if isinstance(c, Ridge)), key=lambda i: sc[i])
+            bk = min((i for i, c in enumerate(cands) if isinstance(c, Kernel)), key=lambda i: sc[i])
+            blends: list[Conditioner] = [Blend((cands[br].param, cands[bk].param, float(w)))
+                                         for w in self.blend_weights]
             loss = np.concatenate([loss, self._cv_pass(blends, None)[0]])
             cands = cands + blends
         by_phase = loss.mean(axis=2)  # (candidates, fractions)
@@ -592,18 +480,18 @@ class CouplingModel:
         if best == 0 or gain <= se:
             choice = 0
             reason = ("the prior mean: no coupling beat it on held-out demonstrations by more than one "
-                      f"paired standard error (best {cands[best][0]} {cands[best][1]}: "
+                      f"paired standard error (best {cands[best].name} {cands[best].param}: "
                       f"{scores[best] / max(scores[0], 1e-300):.3f}x the mean's error, gain {gain:.3g} <= se {se:.3g})")
         else:
             choice = best
-            reason = (f"{cands[best][0]} ({cands[best][1]}): {scores[best] / scores[0]:.3f}x the prior mean's "
+            reason = (f"{cands[best].name} ({cands[best].param}): {scores[best] / scores[0]:.3f}x the prior mean's "
                       f"held-out error (gain {gain:.3g} > paired se {se:.3g})")
-        self.method_, self.param_ = cands[choice]
+        self.method_, self.param_ = cands[choice].key
         self.fallback_to_mean_ = choice == 0
         self.selection_ = {
             "method": self.method_, "param": self.param_, "reason": reason,
-            "scores": {f"{m}:{p}": float(v) for (m, p), v in zip(cands, scores)},
-            "scores_by_phase": {f"{m}:{p}": [float(x) for x in v] for (m, p), v in zip(cands, by_phase)},
+            "scores": {f"{c.name}:{c.param}": float(v) for c, v in zip(cands, scores)},
+            "scores_by_phase": {f"{c.name}:{c.param}": [float(x) for x in v] for c, v in zip(cands, by_phase)},
             "error_mean": float(scores[0]), "error_best": float(scores[best]), "paired_se": se,
             "n_folds": K,
         }
@@ -694,29 +582,24 @@ class CouplingModel:
         n, D = self.n_demos_, self.n_dofs_
         X, g = self._rows(np.arange(n), s, sig)
         st = self._static(X.shape[0])
-        mu = X.mean(axis=0)  # what _context computes, with its query-free part cached
-        ctx = {"R": X.shape[0], "Xc": X - mu, "xc": x - mu, "P": st["P"], "ybar": st["ybar"], "Ydc": st["Ydc"]}
-        if self.method_ in ("ppca",):
-            ctx["ylow"] = st["ylow"]
-        mean, h = self._predict_rows(self.method_, self.param_, ctx)
+        mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
+        cond = conditioner(self.method_, self.param_)
+        ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, st.ylow if isinstance(cond, PPCA) else None)
+        mean, h = cond.predict(ctx)
         return mean[0].reshape(self.n_out, D), float(h[0])
 
-    def _static(self, R: int) -> dict:
-        """The query- and phase-free part of :meth:`_context` for the rows of all demonstrations (``R`` of them,
-        grouped by demonstration) and the target block of ``"ppca"``'s factorisation (``_target_block``);
-        cached per ``R`` and rebuilt when ``Y_`` is replaced (a fit or a load)."""
-        cached = self.__dict__.get("_static_cache")
-        if cached is None or cached[0] is not self.Y_:
-            cached = (self.Y_, {})
-            self.__dict__["_static_cache"] = cached
-        if R not in cached[1]:
+    def _static(self, R: int) -> Context:
+        """The query- and phase-free part of a :class:`~interprim.models.conditioners.Context` for the rows of all
+        demonstrations (``R`` of them, grouped by demonstration: ``P``, ``ybar``, ``Ydc``) and the target block of
+        :class:`~interprim.models.conditioners.PPCA`'s factorisation (``ylow``, :func:`target_block`);
+        kept per ``R`` in the model's :class:`~interprim.core.cache.DerivedCache` (a new one per fit or load)."""
+        def build():
             n = self.n_demos_
-            ctx = self._context(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
-                                np.zeros((1, 1)))
-            st = {k: ctx[k] for k in ("P", "ybar", "Ydc")}
-            st["ylow"] = _target_block(st["P"], st["Ydc"], R)
-            cached[1][R] = st
-        return cached[1][R]
+            ctx = Context.of(np.zeros((R, 1)), np.repeat(np.arange(n), R // n), self.Y_.reshape(n, -1),
+                             np.zeros((1, 1)))
+            return Context(ctx.Xc, ctx.xc, ctx.P, ctx.ybar, ctx.Ydc, target_block(ctx.P, ctx.Ydc, R))
+
+        return self._derived.get_or_build(("static", R), (self.Y_,), build)
 
     def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's

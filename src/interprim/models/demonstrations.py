@@ -16,15 +16,18 @@ Every method follows the prediction contract of :mod:`interprim.models.base` (``
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame
 from ..core.input_range import mark
-from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
 from ..core.preprocessing import time_normalise
+from ..core.validation import as_2d_finite, as_frame
+from .base import BaseStream, Predictor
+from .grid import GridPrediction
+from .training import TrainingSet
 
-__all__ = ["Baseline", "PriorMean", "NearestNeighbour", "AlignedStream", "AlignedBaseline",
-           "check_demos"]
+__all__ = ["Baseline", "PriorMean", "NearestNeighbour", "AlignedStream", "AlignedBaseline"]
 
 
 
@@ -32,10 +35,16 @@ __all__ = ["Baseline", "PriorMean", "NearestNeighbour", "AlignedStream", "Aligne
 class Baseline(Predictor):
     """What the three methods share: the column layout, the sampling interval and the prediction's timing."""
 
-    def _fit_common(self, demos, dt):
-        demos, dt, _ = uniform_demonstrations(demos, dt)
-        arrays = check_demos(demos)
-        D = arrays[0].shape[1]
+    observed_dofs: Any  # a parameter of each subclass's __init__
+
+    def _fit_common(self, data: TrainingSet) -> list:
+        """The demonstrations of the validated training set (at least 2), with ``observed_dofs_``, ``dt_``,
+        ``mean_duration_`` and ``n_dofs_`` set."""
+        if len(data) < 2:
+            raise ValueError(f"at least 2 demonstrations are needed, got {len(data)}")
+        arrays = list(data.arrays)
+        dt = data.dt
+        D = data.n_dofs
         obs = self.observed_dofs
         if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
             raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
@@ -56,7 +65,7 @@ class Baseline(Predictor):
 
     def _prediction(self, times, mean, std, M, phase=float("nan"), log_likelihood=float("nan"), method=None,
                     conditioned=True):
-        """A :class:`~interprim.models.base.GridPrediction` with the duration ``elapsed / phase`` (the mean
+        """A :class:`~interprim.models.grid.GridPrediction` with the duration ``elapsed / phase`` (the mean
         duration when the phase is unknown or 0)."""
         elapsed = (M - 1) * self.dt_
         duration = elapsed / phase if (np.isfinite(phase) and phase > 0 and M > 1) else self.mean_duration_
@@ -140,18 +149,6 @@ class AlignedStream(BaseStream):
         return self._advance(block)
 
 
-def check_demos(demos):
-    """The demonstrations as ``(T_i, D)`` float arrays of one width with finite values (a clear error otherwise)."""
-    arrays = [np.asarray(d, dtype=np.float64) for d in demos]
-    if len(arrays) < 2:
-        raise ValueError(f"at least 2 demonstrations are needed, got {len(arrays)}")
-    D = arrays[0].shape[1]
-    for j, a in enumerate(arrays):
-        if a.ndim != 2 or a.shape[1] != D or not np.all(np.isfinite(a)):
-            raise ValueError(f"demos[{j}] must be a finite (T, {D}) array, got shape {a.shape}")
-    return arrays
-
-
 class AlignedBaseline(Baseline):
     """A baseline that predicts from the open-end DTW alignments of the observed prefix to every training
     demonstration (:class:`NearestNeighbour`, :class:`~interprim.models.kernel.KernelDemonstrations`): its
@@ -161,7 +158,7 @@ class AlignedBaseline(Baseline):
     #: ``stream()`` gives exactly what ``predict`` gives (see :func:`interprim.evaluation.realtime.realtime_fold`)
     exact_stream = True
 
-    def stream(self, robot_state=None) -> AlignedStream:
+    def _stream(self, robot_state=None) -> AlignedStream:
         """Online predictor (:class:`AlignedStream`: the alignments advance one frame at a time; every
         ``update`` equals :meth:`predict` of all frames seen)."""
         self._check_fitted("stream")
@@ -218,28 +215,15 @@ class PriorMean(Baseline):
         self.observed_dofs = observed_dofs
         self.n = n
 
-    def fit(self, demos, dt=None):
-        """Average the time-normalised demonstrations.
-
-        Parameters
-        ----------
-        demos : list of ndarray, shape (T_j, D)
-            At least 2 finite demonstrations with the same columns.
-        dt : float, optional
-            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
-
-        Returns
-        -------
-        PriorMean
-            ``self``, with ``mean_`` and ``std_`` (sample std, ``ddof=1``) of shape ``(n, D)``.
-        """
-        arrays = self._fit_common(demos, dt)
+    def _fit(self, data: TrainingSet) -> None:
+        """Average the time-normalised demonstrations (at least 2): ``mean_`` and ``std_`` (sample std,
+        ``ddof=1``) of shape ``(n, D)``; ``dt`` is the unit of the predictions' ``duration``."""
+        arrays = self._fit_common(data)
         Y = np.stack([time_normalise(a, self.n) for a in arrays])
         self.mean_ = Y.mean(axis=0)
         self.std_ = Y.std(axis=0, ddof=1)
-        return self
 
-    def predict(self, partial) -> GridPrediction:
+    def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """The mean demonstration whatever ``partial`` holds (no conditioning, phase NaN; ``partial`` may be
         ``None``)."""
         self._check_fitted("predict")
@@ -272,26 +256,13 @@ class NearestNeighbour(AlignedBaseline):
         self.observed_dofs = observed_dofs
         self.n = n
 
-    def fit(self, demos, dt=None):
-        """Keep the demonstrations: their observed columns as DTW references, and each time-normalised.
-
-        Parameters
-        ----------
-        demos : list of ndarray, shape (T_j, D)
-            At least 2 finite demonstrations with the same columns.
-        dt : float, optional
-            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
-
-        Returns
-        -------
-        NearestNeighbour
-            ``self``.
-        """
-        arrays = self._fit_common(demos, dt)
+    def _fit(self, data: TrainingSet) -> None:
+        """Keep the demonstrations (at least 2): their observed columns as DTW references, and each
+        time-normalised."""
+        arrays = self._fit_common(data)
         obs = self.observed_dofs_
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
         self.demos_ = [time_normalise(a, self.n) for a in arrays]
-        return self
 
     def to_state(self):
         """``(arrays, meta)`` of the fitted model (see :meth:`interprim.models.base.Predictor.to_state`)."""
@@ -307,11 +278,11 @@ class NearestNeighbour(AlignedBaseline):
         self.observed_ = [np.ascontiguousarray(u) for u in np.split(arrays["observed"], ends[:-1])]
         self.demos_ = list(arrays["demos"])
 
-    def predict(self, partial) -> GridPrediction:
+    def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """The nearest demonstration to ``partial`` (``(M, len(observed_dofs))`` frames from the start).
 
-        Sets ``neighbour_`` to its index; the prediction's phase is its matched fraction ``(n*+1)/N_j``
-        and its ``std`` is ``None``.
+        The prediction's ``neighbour`` is its index, its phase the matched fraction ``(n*+1)/N_j`` and its
+        ``std`` is ``None`` (the model is left unchanged).
         """
         v = self._partial(partial)
         _, n_star, cost = self._alignments(v)
@@ -324,6 +295,7 @@ class NearestNeighbour(AlignedBaseline):
         for j, u in enumerate(self.observed_):
             if cost[j] < best_c:
                 best, best_c, frac = j, cost[j], (int(n_star[j]) + 1) / u.shape[0]
-        self.neighbour_ = best
-        return self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, M, phase=frac,
+        pred = self._prediction(np.linspace(0.0, 1.0, self.n), self.demos_[best], None, M, phase=frac,
                                 method=f"demonstration {best}")
+        pred.neighbour = best
+        return pred

@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import GridPrediction
-from .demonstrations import AlignedBaseline
+from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..model_selection.prefixes import observed_frames
+from .demonstrations import AlignedBaseline
+from .grid import GridPrediction
+from .training import TrainingSet
 
 __all__ = ["KernelDemonstrations"]
 
@@ -52,8 +54,6 @@ class KernelDemonstrations(AlignedBaseline):
         The bandwidth used.
     cv_errors_ : dict
         ``{h: mean held-out error}`` of the cross-validation (empty when ``bandwidth`` is given).
-    weights_ : dict
-        ``{training demonstration: weight}`` of the last prediction.
     std_scale_, std_floor_ : ndarray, shape (D,)
         Calibration of the weighted spread: ``std = sqrt((std_scale_ spread)^2 + std_floor_^2)``, per agent fitted
         to the leave-one-out errors over ``horizon`` (``bandwidth="cv"``; the raw spread otherwise).
@@ -68,44 +68,31 @@ class KernelDemonstrations(AlignedBaseline):
         self.n = n
 
     # -- fitting ---------------------------------------------------------------------------------
-    def fit(self, demos, dt=None):
-        """Keep the demonstrations and choose the bandwidth.
-
-        Parameters
-        ----------
-        demos : list of ndarray, shape (T_j, D)
-            At least 2 finite demonstrations with the same columns (3 for ``bandwidth="cv"``).
-        dt : float, optional
-            Sampling interval in seconds (default 0.01).
-
-        Returns
-        -------
-        KernelDemonstrations
-            ``self``.
-        """
+    def _fit(self, data: TrainingSet) -> None:
+        """Keep the demonstrations (at least 2; 3 for ``bandwidth="cv"``) and choose the bandwidth."""
         if not (self.bandwidth == "cv" or (isinstance(self.bandwidth, (int, float)) and self.bandwidth > 0)):
             raise ValueError(f"bandwidth must be a positive number or 'cv', got {self.bandwidth!r}")
         if not (isinstance(self.horizon, (int, float)) and self.horizon > 0):
             raise ValueError(f"horizon must be a positive number of seconds, got {self.horizon!r}")
-        arrays = self._fit_common(demos, dt)
+        arrays = self._fit_common(data)
         obs = self.observed_dofs_
         D = arrays[0].shape[1]
         self.obs_ = obs
         self.ctrl_ = [i for i in range(D) if i not in set(obs)] or obs
         self.demos_ = arrays
+        self._derived = DerivedCache()  # the demonstrations zero-padded (_frames_at), filled on first use
         self.observed_ = [np.ascontiguousarray(a[:, obs]) for a in arrays]
-        self.cv_errors_ = {}
+        self.cv_errors_: dict[float, float] = {}
         D = arrays[0].shape[1]
         self.std_scale_, self.std_floor_ = np.ones(D), np.zeros(D)  # the raw spread unless calibrated by "cv"
         if self.bandwidth != "cv":
             self.cost_scale_ = self._cost_scale()
             self.bandwidth_ = float(self.bandwidth)
-            return self
+            return
         if len(arrays) < 3:
             raise ValueError(f"bandwidth='cv' needs at least 3 demonstrations, got {len(arrays)}")
         self.cost_scale_ = self._cost_scale()
         self.bandwidth_ = self._choose_bandwidth()
-        return self
 
     def _frames_at(self, idx, f, cols):
         """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
@@ -115,15 +102,14 @@ class KernelDemonstrations(AlignedBaseline):
         unit grid (``y[k]`` at an integer ``f = k``, else ``(y[k+1] - y[k]) * (f - k) + y[k]``), so the numbers
         are those of one ``interp_columns`` per demonstration.
         """
-        cached = self.__dict__.get("_padded")
-        if cached is None or cached[0] is not self.demos_:
+        def build():
             lengths = np.array([len(a) for a in self.demos_], dtype=np.intp)
             padded = np.zeros((len(lengths), int(lengths.max()) + 1, self.demos_[0].shape[1]))
             for j, a in enumerate(self.demos_):
                 padded[j, : len(a)] = a
-            cached = (self.demos_, padded, lengths)
-            self.__dict__["_padded"] = cached
-        _, padded, lengths = cached
+            return padded, lengths
+
+        padded, lengths = self._derived.get_or_build("padded", (self.demos_,), build)
         idx = np.asarray(idx, dtype=np.intp)
         A = padded[idx][..., cols]
         k = np.floor(f).astype(np.intp)
@@ -222,6 +208,7 @@ class KernelDemonstrations(AlignedBaseline):
         self._set_common(meta)
         ends = np.cumsum(arrays["lengths"])
         self.demos_ = [np.ascontiguousarray(a) for a in np.split(arrays["demos"], ends[:-1])]
+        self._derived = DerivedCache()
         self.obs_ = list(self.observed_dofs_)
         self.ctrl_ = [i for i in range(self.n_dofs_) if i not in set(self.obs_)] or self.obs_
         self.observed_ = [np.ascontiguousarray(a[:, self.obs_]) for a in self.demos_]
@@ -231,12 +218,13 @@ class KernelDemonstrations(AlignedBaseline):
         self.cost_scale_ = float(meta["cost_scale_"])
         self.cv_errors_ = {float(h): float(e) for h, e in meta["cv_errors_"]}
 
-    def predict(self, partial) -> GridPrediction:
+    def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """Predict the whole movement of both agents from the observed prefix ``partial`` (``(M, n_obs)``).
 
         The prediction's ``phase`` is the fraction of the movement seen and ``duration`` the predicted total
         duration in seconds; ``trajectory(n)`` and ``std(n)`` are the weighted mean and spread of the aligned
-        demonstrations on normalised time.  ``weights_`` holds each training demonstration's weight.
+        demonstrations on normalised time; its ``weights`` holds each training demonstration's weight (the model is
+        left unchanged).
         """
         v = self._partial(partial)
         _, n_star, cost = self._alignments(v)
@@ -244,7 +232,8 @@ class KernelDemonstrations(AlignedBaseline):
 
     def predict_from_alignment(self, M, n_star, cost) -> GridPrediction:
         """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
-        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; sets ``weights_``)."""
+        :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; the prediction's
+        ``weights``: ``{demonstration: weight}``)."""
         idx = list(range(len(self.demos_)))
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_
@@ -261,6 +250,7 @@ class KernelDemonstrations(AlignedBaseline):
         mean = np.einsum("j,jkd->kd", w, Y)
         spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
-        self.weights_ = dict(zip(idx, w))
-        return GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
+        pred = GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
                               duration=dur, mean_duration=self.mean_duration_, n_observed=M)
+        pred.weights = dict(zip(idx, (float(x) for x in w)))
+        return pred

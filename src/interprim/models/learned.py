@@ -14,11 +14,11 @@ clock, a response better than the mean):
 The phase error the coupling is trained with is the learned phase's cross-validated error at each elapsed
 time (``LearnedPhase.std_grid_``, as a fraction of the movement), not a guess.  The model follows the prediction
 contract of :mod:`interprim.models.base` (``fit``, ``predict``, ``stream``, ``save``/``load``, ``get_params``/
-``set_params``); its prediction is a :class:`~interprim.models.base.GridPrediction` whose ``std`` includes the
+``set_params``); its prediction is a :class:`~interprim.models.grid.GridPrediction` whose ``std`` includes the
 timing uncertainty.
 
-It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout from a
-robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
+It does not replace :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: there is no DMP and no rollout
+from a robot state.  Each :meth:`predict` is a pure function of the prefix that reads a few of its frames (the phase
 features) and ``n_in`` resampled points (the coupling's observation); :meth:`LearnedInteraction.stream` returns a
 :class:`LearnedStream` whose answer is, bitwise, ``predict`` of the frames seen.
 """
@@ -27,24 +27,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite, as_frame
-from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
-from .coupling import CouplingModel
 from ..phase.learned import LearnedPhase
-
+from .base import BasePrediction, BaseStream, Predictor
+from .coupling import CouplingModel
+from .grid import GridPrediction
+from .training import TrainingSet
 
 __all__ = ["LearnedInteraction", "LearnedStream"]
 
 
 def _Prediction(cp: GridPrediction, est) -> GridPrediction:
     """``cp`` (the coupling's prediction) placed in time by the phase estimate ``est``, with the timing
-    uncertainty added to its std (:meth:`~interprim.models.base.GridPrediction.std`)."""
+    uncertainty added to its std (:meth:`~interprim.models.grid.GridPrediction.std`)."""
     out = GridPrediction(cp.times, cp.mean, cp.std_values, est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
                          cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
                          conditioned=cp.conditioned)
     out.speed = float(est.speed)
-    out.phase_estimate = est
+    out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
     return out
 
 
@@ -78,19 +78,17 @@ class LearnedInteraction(Predictor):
         self.phase_kwargs = phase_kwargs
         self.coupling_kwargs = coupling_kwargs
 
-    @one_blas_thread
-    def fit(self, demos, dt: float | None = None):
+    def _fit(self, data: TrainingSet) -> None:
         """Fit the timing model on the observed columns, then the coupling with the timing model's own error."""
-        demos, dt, _ = uniform_demonstrations(demos, dt)
+        dt = data.dt
         for name in ("phase_kwargs", "coupling_kwargs"):
             v = getattr(self, name)
             if v is not None and not isinstance(v, dict):
                 raise TypeError(f"{name} must be a dict or None, got {type(v).__name__}")
         obs = [int(i) for i in self.observed_dofs]
-        phase = LearnedPhase(**(self.phase_kwargs or {})).fit([d[:, obs] for d in demos], dt=dt)
-        coupling = CouplingModel(obs, **self._coupling_kwargs(phase)).fit(demos, dt=dt)
+        phase = LearnedPhase(**(self.phase_kwargs or {})).fit([d[:, obs] for d in data.arrays], dt=dt)
+        coupling = CouplingModel(obs, **self._coupling_kwargs(phase)).fit(data)
         self.phase_, self.coupling_, self.dt_, self.observed_dofs_ = phase, coupling, float(dt), obs
-        return self
 
     @property
     def mean_duration_(self) -> float:
@@ -110,8 +108,7 @@ class LearnedInteraction(Predictor):
         kw.update(self.coupling_kwargs or {})
         return kw
 
-    @one_blas_thread
-    def predict(self, partial) -> GridPrediction:
+    def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """Phase of the prefix (learned), then the whole movement of both agents given it (coupling)."""
         self._check_fitted("predict")
         partial = as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
@@ -120,7 +117,7 @@ class LearnedInteraction(Predictor):
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
         return _Prediction(cp, est)
 
-    def stream(self, robot_state=None) -> "LearnedStream":
+    def _stream(self, robot_state=None) -> LearnedStream:
         """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it
         returns, bitwise, :meth:`predict` of those ``M`` frames, without recomputing anything over the prefix."""
         self._check_fitted("stream")
@@ -202,13 +199,13 @@ class LearnedStream(BaseStream):
         self._raw[self._n:need] = block
         self._n = need
 
-    def update(self, frame, need_cov: bool = False) -> GridPrediction:
+    def update(self, frame, need_cov: bool = False) -> BasePrediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns ``predict`` of all frames
         seen."""
         self._append(as_frame(frame, "frame", self._n_cols)[None, :])
         return self.model.predict(self._raw[: self._n])
 
-    def extend(self, frames, need_cov: bool = False) -> GridPrediction:
+    def extend(self, frames, need_cov: bool = False) -> BasePrediction:
         """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns what :meth:`update`
         returns for the last of them (one prediction, since it depends on the frames only)."""
         self._append(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))

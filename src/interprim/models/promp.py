@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import GridPrediction
 from .demonstrations import Baseline
+from .grid import GridPrediction
+from .training import TrainingSet
 
 __all__ = ["InteractionProMP"]
 
@@ -46,20 +47,10 @@ class InteractionProMP(Baseline):
         T = np.append(np.asarray(t, dtype=np.float64), 1.0)
         return self.promp_._rbfs_1d_sequence(T.copy())[:, :-1]
 
-    def fit(self, demos, dt=None):
-        """Fit ProMP weights to every demonstration and a Gaussian over the stacked weights of both agents.
-
-        Parameters
-        ----------
-        demos : list of ndarray, shape (T_j, D)
-            At least 2 finite demonstrations with the same columns; each is put on normalised time [0, 1].
-        dt : float, optional
-            Sampling interval in seconds (default 0.01): the unit of the predictions' ``duration``.
-
-        Returns
-        -------
-        InteractionProMP
-            ``self``, with ``mean_``, ``cov_`` (observed DoFs' weights first) and ``sigma2_``.
+    def _fit(self, data: TrainingSet) -> None:
+        """Fit ProMP weights to every demonstration (at least 2, each put on normalised time [0, 1]) and a
+        Gaussian over the stacked weights of both agents: ``mean_``, ``cov_`` (observed DoFs' weights first) and
+        ``sigma2_``.
 
         Raises
         ------
@@ -68,22 +59,22 @@ class InteractionProMP(Baseline):
         """
         from movement_primitives.promp import ProMP
 
-        arrays = self._fit_common(demos, dt)
+        arrays = self._fit_common(data)
         D = arrays[0].shape[1]
         obs = self.observed_dofs_
         ctrl = [i for i in range(D) if i not in set(obs)]
         self.order_ = obs + ctrl  # observed DoFs first in the stacked weights
         self.n_dofs_ = D
         self.promp_ = ProMP(n_dims=D, n_weights_per_dim=int(self.n_weights))
-        W, res = [], []
+        rows, res = [], []
         for a in arrays:
             t = np.linspace(0.0, 1.0, a.shape[0])
             Y = a[:, self.order_]
             w = self.promp_.weights(t, Y)
-            W.append(w)
+            rows.append(w)
             if self.sigma2 == "residual":
                 res.append(np.mean((self.promp_.trajectory_from_weights(t, w)[:, : len(obs)] - Y[:, : len(obs)]) ** 2))
-        W = np.asarray(W)
+        W = np.asarray(rows)
         self.weights_ = W
         self.mean_ = W.mean(axis=0)
         cov = np.cov(W, rowvar=False, bias=True)
@@ -92,7 +83,6 @@ class InteractionProMP(Baseline):
         var_o = float(np.mean([np.var(a[:, obs]) for a in arrays]))
         self.sigma2_ = (max(float(np.mean(res)), 1e-6 * var_o) if self.sigma2 == "residual" else float(self.sigma2))
         self.n_obs_ = len(obs)
-        return self
 
     def to_state(self):
         """``(arrays, meta)`` of the fitted model (see :meth:`interprim.models.base.Predictor.to_state`); the
@@ -127,7 +117,7 @@ class InteractionProMP(Baseline):
         return condition(self.mean_[: self.n_obs_ * K], self.cov_[: self.n_obs_ * K, : self.n_obs_ * K], idx,
                          G, B, self.sigma2_, yy=yy, n_obs=n, need_cov=False).log_likelihood
 
-    def predict(self, partial, phase: float | None = None) -> GridPrediction:
+    def _predict(self, partial, phase: float | None = None) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """Condition on the observed prefix (phase by maximum likelihood unless given)."""
         from gmr import MVN
 

@@ -37,7 +37,7 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
         two frames the DTW phase).
     dtw : (int, float), optional
         ``(n_star, cost)`` of the open-end DTW of ``z``, when already known (an incremental DTW).
-    tracker : interprim.phase.tracking._Tracker, optional
+    tracker : interprim.phase.tracking.Tracker, optional
         Online likelihood phase (a stream's): one local search step on ``z`` instead of a full search.
 
     Returns
@@ -108,7 +108,8 @@ def movement_prefix(model, z, n_star):
     frame would squeeze a partner who holds still onto ``[0, 1]`` and move the robot's goal with each still frame
     (NuiSI highfive1: up to 3.5 cm over 30 frames).  A pure function of ``z`` (binary search over prefix lengths
     for the first whose estimate is 1; ``O(M log M)``), so :meth:`~interprim.models.primitive.stream.Stream.update` and
-    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` agree.  Other phase methods: ``z`` unchanged.
+    :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` agree.  Other phase methods: ``z``
+    unchanged.
     """
     if model.phase_method_used() != "learned" or n_star < model.reference_.shape[0] - 1 or z.shape[0] < 3:
         return z

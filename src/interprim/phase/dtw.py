@@ -35,8 +35,8 @@ __all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "p
 
 
 # ----------------------------------------------------------------------------- numpy equivalents
-# Used until the compiled kernels (interprim.core._compiled.dtw) are loaded (see interprim.core._compiled.loader), e.g. for the
-# first prediction of a fresh process.  They perform exactly the operations of the compiled recursion
+# Used until the compiled kernels (interprim.core._compiled.dtw) are loaded (see interprim.core._compiled.loader), e.g.
+# for the first prediction of a fresh process.  They perform exactly the operations of the compiled recursion
 # (the same cost summation order, min, then one addition per cell), so results are bitwise equal.
 
 

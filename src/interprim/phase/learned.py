@@ -69,9 +69,9 @@ import math
 
 import numpy as np
 
-from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
+from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
 from ._learned_features import group_dims, jsonable, kernel_loo, prefix_features, ridge_loo
 from .estimate import PhaseEstimate
 
@@ -224,7 +224,7 @@ class LearnedPhase:
         return feats, bw, al, (lo, hi)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, demos, dt: float | None = None, times=None) -> "LearnedPhase":
+    def fit(self, demos, dt: float | None = None, times=None) -> LearnedPhase:
         """Learn the phase map from demonstrations of the observed agent.
 
         Parameters
@@ -325,7 +325,8 @@ class LearnedPhase:
             return best
 
         if self.select_features:
-            chosen, best = [], None
+            chosen: list = []
+            best = None
             remaining = list(feats)
             while remaining:
                 cands = [(evaluate(chosen + [g]), g) for g in remaining]
@@ -360,6 +361,7 @@ class LearnedPhase:
             self.cv_improvement_se_ = float(gain / se) if se > 0 else math.inf
             use = self.cv_improvement_se_ > float(self.fallback_se)
         if use:
+            assert best is not None  # use needs a best candidate
             err, m, tg, hyp, P = best
             self.method_, self.target_ = m, tg
             self.features_ = tuple(groups)
@@ -402,7 +404,8 @@ class LearnedPhase:
             if self.method_ == "kernel":
                 p = Z.shape[2]
                 self._Z = np.ascontiguousarray(Z / math.sqrt(max(p, 1)))
-                self._inv2h2 = 1.0 / (2.0 * self.bandwidth_ ** 2)
+                assert self.bandwidth_ is not None  # set with the kernel method
+                self._inv2h2 = 1.0 / (2.0 * float(self.bandwidth_) ** 2)
                 self._nrm = np.einsum("knp,knp->kn", self._Z, self._Z)
                 self._isd = 1.0 / (sd * math.sqrt(max(p, 1)))  # sd = inf (no variation) -> 0
                 self._mis = mu * self._isd
@@ -411,7 +414,8 @@ class LearnedPhase:
                 Zc = Z - Zm
                 ym = self._y.mean(axis=1)
                 p = Z.shape[2]
-                A = np.einsum("knp,knq->kpq", Zc, Zc) + self.alpha_ * np.eye(p)[None]
+                assert self.alpha_ is not None  # set with the ridge method
+                A = np.einsum("knp,knq->kpq", Zc, Zc) + float(self.alpha_) * np.eye(p)[None]
                 b = np.einsum("knp,kn->kp", Zc, self._y - ym[:, None])
                 beta = np.linalg.solve(A, b[..., None])[..., 0]
                 self._beta = beta
@@ -567,7 +571,7 @@ class LearnedPhase:
         return arrays, meta
 
     @classmethod
-    def from_state(cls, arrays, meta) -> "LearnedPhase":
+    def from_state(cls, arrays, meta) -> LearnedPhase:
         """The estimator saved by :meth:`to_state`."""
         obj = cls.__new__(cls)
         for k, v in meta.items():
@@ -577,7 +581,7 @@ class LearnedPhase:
         cls._check_fitted(obj)
         return obj
 
-    def tracker(self) -> "PhaseTracker":
+    def tracker(self) -> PhaseTracker:
         """An online estimator fed one frame at a time (features updated in ``O(D)`` per frame)."""
         self._check_fitted()
         return PhaseTracker(self)
@@ -669,5 +673,6 @@ class PhaseTracker:
                 lo = x.astype(np.int64)  # floor (x >= 0)
                 f = (x - lo)[:, None]
                 h = self._hist
+                assert h is not None  # kept when the model uses the history group
                 out[sl] = ((1.0 - f) * h[lo] + f * h[np.minimum(lo + 1, k)] - self._first).ravel()
         return m.estimate_at(k * m.dt_, out)

@@ -28,7 +28,7 @@ demonstrations' durations.
 
 The search evaluates a grid of candidates (plus the DTW estimate, when given),
 then refines the best one by a bounded scalar search.  Streams track the same maximum frame by frame
-(:class:`interprim.phase.tracking._Tracker`).
+(:class:`interprim.phase.tracking.Tracker`).
 
 All candidates of a search are evaluated in one batched computation
 (:func:`phase_log_likelihoods`): since the design of every observed DoF is the
@@ -45,8 +45,8 @@ import math
 
 import numpy as np
 
-from ..core.blas import single_thread
 from ..core._compiled import registry as kernels
+from ..core.blas import single_thread
 from ..core.dmp import forcing_values
 from ..core.gaussian import LOG2PI, GaussianPrior, condition
 from ..core.preprocessing import derivatives
@@ -226,7 +226,8 @@ def fast_state(model):
 
 
 def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
-    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_batch` (all candidates at once)."""
+    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_batch` (all candidates at
+    once)."""
     M, n_o = z.shape
     n_steps = Zh.shape[0] - 1
     q = Zh.shape[1]
@@ -422,7 +423,7 @@ def _search(grid, scores, refine, lo=S_MIN, hi=1.0):
 
 
 _GOLD = 0.5 * (3.0 - 5.0 ** 0.5)
-_POLISH = 0.01  # spacing in log s of the last refinement (batch) = the stream's lattice spacing (tracking._Tracker)
+_POLISH = 0.01  # spacing in log s of the last refinement (batch) = the stream's lattice spacing (tracking.Tracker)
 _H_FINAL = 2e-3  # spacing in log s of the last parabola (finish)
 
 
@@ -494,7 +495,7 @@ def _vertex(x, y):
 
 def finish(scores, ss, lps, i, lo, hi, max_rounds: int = 6) -> float:
     """The phase from candidates ``ss`` (increasing, log posteriors ``lps``, best ``i``): the last step of
-    both the batch search (:func:`_search`) and the stream's tracker (:class:`~interprim.phase.tracking._Tracker`).
+    both the batch search (:func:`_search`) and the stream's tracker (:class:`~interprim.phase.tracking.Tracker`).
 
     1. ``u1``: the vertex (in ``log s``) of the parabola through the best candidate and its neighbours,
        within their bracket (the best candidate itself when the parabola is not concave or there is no

@@ -11,9 +11,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.blas import single_thread
 from ..core._compiled import registry as kernels
-from .likelihood import S_MIN, search_bounds, finish, fast_state, make_scorer, speed_prior_params, estimate_phase, phase_noise
+from ..core.blas import single_thread
+from .likelihood import (
+    S_MIN,
+    estimate_phase,
+    fast_state,
+    finish,
+    make_scorer,
+    phase_noise,
+    search_bounds,
+    speed_prior_params,
+)
 
 __all__: list[str] = []  # used through Stream (the one-shot track_phase was removed: nothing used it)
 
@@ -26,9 +35,10 @@ _MAX_GAP = 8  # a slot more frames behind than this is recomputed (a rank-1 step
 
 
 def _lattice_candidates(v0: float, kc: int, nh: int, dlog: float, M: int):
-    """Candidates of :func:`interprim.core._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the clipped
-    ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
-    js, ss = [], []
+    """Candidates of :func:`interprim.core._compiled.phase_likelihood.track_step`: ``(js, s)`` in increasing ``s``, the
+    clipped ones merged (``s_min``: the largest such ``j``; ``1``: the smallest)."""
+    js: list = []
+    ss: list = []
     for j in range(kc - nh, kc + nh + 1):
         s = float(v0 * np.exp(dlog * j)) * (M - 1)
         if s < S_MIN:
@@ -108,7 +118,8 @@ class Tracker:
             s = estimate_phase(model, z, speed_prior=self.speed_prior).s_end
             self.kc = int(round(np.log(s / (self.v0 * (M - 1))) / self.dlog))
             return s
-        return finish(make_scorer(model, z, s2, self.speed_prior, _parts=(fs, prior)), ss, lps, i, *search_bounds(model, M))
+        return finish(make_scorer(model, z, s2, self.speed_prior, _parts=(fs, prior)), ss, lps, i,
+                      *search_bounds(model, M))
 
     def _lattice_step(self, z, fs, s2, prior, kern):
         """Best lattice point for ``z``: ``(phases, log posteriors, index of the best, found)`` of the last

@@ -7,11 +7,12 @@ into ``model.stream()`` and publishes, for each message that gave at least one f
 * the response (``pred.response(points)``) as ``trajectory_msgs/msg/JointTrajectory`` (joint names: the model's
   controlled columns; ``time_from_start``: the prediction's seconds ahead; ``header.stamp``: the time of the grid
   frame it answers; each point's velocities and accelerations from the spline through the points:
-  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model whose
-  controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
+  :func:`response_derivatives`), or as ``nav_msgs/msg/Path`` / ``geometry_msgs/msg/PoseArray`` for a task-space model
+  whose controlled columns are ``<name>_x``, ``_y`` (and ``_z``);
 * on ``<publish>/status`` a ``diagnostic_msgs/msg/DiagnosticArray`` with one status: level OK (WARN when the
   partner is out of the training range), and the values ``phase``, ``normalised_time``, ``speed``,
-  ``duration``, ``out_of_range``, ``input_distance``, ``n_observed``, ``frame_time`` and, per controlled column,
+  ``duration``, ``out_of_range``, ``duration_out_of_range``, ``input_distance``, ``n_observed``, ``frame_time``
+  and, per controlled column,
   ``std.<column>``: the prediction's standard deviation at the response's points (a JSON list; the band is
   ``mean +- z * std``).
 
@@ -60,7 +61,7 @@ class QosSpec:
         self.reliable, self.depth = bool(reliable), depth
 
     @classmethod
-    def parse(cls, text: str) -> "QosSpec":
+    def parse(cls, text: str) -> QosSpec:
         """``KIND[,DEPTH]``: ``reliable`` (default depth 10) or ``best_effort`` (default depth 1)."""
         kind, _, depth = str(text).strip().partition(",")
         kind = kind.strip().lower().replace("-", "_")
@@ -101,8 +102,8 @@ class _Say:
 
     def __init__(self, interval: float):
         self.interval = float(interval)
-        self.last = {}
-        self.pending = {}
+        self.last: dict = {}
+        self.pending: dict = {}
 
     def __call__(self, cause: str, message: str, level=logging.WARNING) -> None:
         now = time.monotonic()
@@ -114,6 +115,24 @@ class _Say:
         if now - self.last[cause] >= self.interval:
             log.log(level, "%s (%d times in the last %.0f s)", message, self.pending[cause], now - self.last[cause])
             self.last[cause], self.pending[cause] = now, 0
+
+
+#: A partner frame further than this many standard deviations from the training frames, or (for a model that does
+#: not know its training range) a value larger than ``MAX_ABS_VALUE``, is absurd: refused before the model with
+#: the non-finite ones (the rule of the server's ``bad_frame``: ``interprim.server.compute``).
+MAX_INPUT_DISTANCE = 1e6
+MAX_ABS_VALUE = 1e12
+
+
+def _bad_values(vals):
+    """Why the partner's values cannot go to the model (non-finite or absurd), or ``None``."""
+    v = np.asarray(vals, dtype=np.float64)
+    if not np.all(np.isfinite(v)):
+        return "a non-finite value (nan or inf)"
+    big = np.abs(v) > MAX_ABS_VALUE
+    if big.any():
+        return f"an absurd value {float(v[big][0]):.3g} (beyond +-{MAX_ABS_VALUE:g})"
+    return None
 
 
 def _stamp_text(base_sec: int, t: float) -> str:
@@ -184,7 +203,7 @@ class Ros2Bridge:
         Cyclone DDS XML configuration of the domain (e.g. :func:`loopback_config`); default: Cyclone's own
         (``CYCLONEDDS_URI``).
     frame_id : str
-        ``header.frame_id`` of the published messages.
+        ``header.frame_id`` of the published messages (default: the partner's, from its messages' headers).
     """
 
     def __init__(self, model, observe, publish="/interprim/response", **options):
@@ -215,7 +234,7 @@ class Ros2Bridge:
         self.response_type = known_type(response_type).split("/")[-1]
         if self.response_type not in RESPONSE_TYPES:
             raise ValueError(f"response_type must be one of {', '.join(RESPONSE_TYPES)}, got {response_type!r}")
-        self._xyz = None
+        self._xyz: tuple | None = None
         if self.response_type != "JointTrajectory":
             self._xyz = _xyz_group(self.controlled)
             if self._xyz is None:
@@ -227,23 +246,24 @@ class Ros2Bridge:
         self.partner_qos = partner_qos if isinstance(partner_qos, QosSpec) else QosSpec.parse(partner_qos)
         self.response_qos = response_qos if isinstance(response_qos, QosSpec) else QosSpec.parse(response_qos)
         self.frame_id = str(frame_id)
+        self.partner_frame = ""  # header.frame_id of the partner's last message (the default of the response's)
         self.grid = StampGrid(float(model.dt_), max_gap)
         self.stream = model.stream()
-        self._latest = [None] * len(self.sources)
+        self._latest: list[np.ndarray | None] = [None] * len(self.sources)
         self.counts = {"received": 0, "frames": 0, "published": 0, "duplicate": 0, "late": 0, "gap": 0, "back": 0,
                        "invalid": 0, "unusable": 0, "waiting": 0, "between": 0}
         self._say = _Say(log_interval)
         self._std_grid = 101
         self._domain_id = domain_id
         self._config = config
-        self._dds = None
+        self._dds: dict | None = None
         self._sink = None  # callable(response, status) instead of DDS writers (tests of the logic)
         self._stop = threading.Event()
-        self._thread = None
-        self._wrong_types = set()
+        self._thread: threading.Thread | None = None
+        self._wrong_types: set = set()
         self.last_prediction = None
-        self.last_frame_time = None  # seconds since 1970 of the last grid frame
-        self.base_sec = None  # whole seconds of the first stamp: the origin of the grid's times
+        self.last_frame_time: float | None = None  # seconds since 1970 of the last grid frame
+        self.base_sec: int | None = None  # whole seconds of the first stamp: the origin of the grid's times
 
     # ---- the logic, independent of the transport ----
     def handle(self, index: int, msg) -> bool:
@@ -256,6 +276,15 @@ class Ros2Bridge:
             self.counts["unusable"] += 1
             self._say(f"unusable:{src.spec}", f"dropped a message: {exc}")
             return False
+        bad = _bad_values(vals)
+        if bad is not None:  # refused before the model, counted with the other invalid messages
+            self.counts["invalid"] += 1
+            self._say("invalid", f"{src.topic}: dropped an invalid message: {bad}")
+            return False
+        if index == 0:
+            frame = getattr(getattr(msg, "header", None), "frame_id", "")
+            if isinstance(frame, str) and frame:
+                self.partner_frame = frame
         self._latest[index] = vals
         if index != 0:
             return False
@@ -264,10 +293,16 @@ class Ros2Bridge:
             missing = [s.topic for s, v in zip(self.sources, self._latest) if v is None]
             self._say("waiting", f"waiting for a first message on {', '.join(missing)}", logging.INFO)
             return False
-        y = np.concatenate(self._latest)[self._order]
+        y = np.concatenate([v for v in self._latest if v is not None])[self._order]  # none is None here
+        dist = self.model.input_distance(y) if hasattr(self.model, "input_distance") else float("nan")
+        if math.isfinite(dist) and dist > MAX_INPUT_DISTANCE:
+            self.counts["invalid"] += 1
+            self._say("invalid", f"{src.topic}: dropped an invalid message: a frame {dist:.3g} standard deviations "
+                                 f"from the training demonstrations (beyond {MAX_INPUT_DISTANCE:g})")
+            return False
         if self.base_sec is None and stamp is not None:
             self.base_sec = int(stamp.sec)  # stamps in seconds after this (float seconds since 1970 lose ~0.2 us)
-        t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec)
+        t = math.nan if stamp is None else stamp_seconds(stamp, self.base_sec or 0)
         step = self.grid.add(t, y)
         if step.status in ("duplicate", "late", "invalid"):
             self.counts[step.status] += 1
@@ -281,11 +316,12 @@ class Ros2Bridge:
         if step.status == "gap":
             self.counts["gap"] += 1
             self._say("gap", f"{src.topic}: no message for more than {self.grid.max_gap} s: a new interaction starts "
-                             f"at {_stamp_text(self.base_sec, t)} s (stream reset)", logging.INFO)
+                             f"at {_stamp_text(self.base_sec or 0, t)} s (stream reset)", logging.INFO)
         elif step.status == "back":
             self.counts["back"] += 1
             self._say("back", f"{src.topic}: the stamps jumped back by more than {self.grid.max_gap} s (a restarted "
-                              f"clock?): a new interaction starts at {_stamp_text(self.base_sec, t)} s (stream reset)")
+                              f"clock?): a new interaction starts at {_stamp_text(self.base_sec or 0, t)} s "
+                              "(stream reset)")
         if step.restarted:
             self.stream.reset()
         if len(step.times) == 0:
@@ -295,18 +331,24 @@ class Ros2Bridge:
         pred = self.stream.update(frames[0]) if len(frames) == 1 else self.stream.extend(frames)
         self.counts["frames"] += len(frames)
         self.last_prediction = pred
-        self.last_frame_time = self.base_sec + float(step.times[-1])
-        response, status = self.messages(pred, float(step.times[-1]), self.base_sec)
+        base = self.base_sec or 0  # a frame on the grid has a stamp, so base_sec is set
+        self.last_frame_time = base + float(step.times[-1])
+        response, status = self.messages(pred, float(step.times[-1]), base)
         self._emit(response, status)
         self.counts["published"] += 1
         return True
+
+    @property
+    def out_frame(self) -> str:
+        """``header.frame_id`` of the published messages: ``frame_id`` when given, else the partner's frame."""
+        return self.frame_id or self.partner_frame
 
     def messages(self, pred, frame_time: float, base_sec: int = 0):
         """The response and the status message of ``pred`` for the grid frame at ``base_sec + frame_time`` s."""
         t, y = pred.response(self.points)
         t = np.asarray(t, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.frame_id)
+        header = new_message("std_msgs/msg/Header", stamp=stamp_of(frame_time, base_sec), frame_id=self.out_frame)
         if self.response_type == "JointTrajectory":
             vel, acc = response_derivatives(t, y)
             pts = [new_message("trajectory_msgs/msg/JointTrajectoryPoint", positions=[float(v) for v in row],
@@ -315,9 +357,10 @@ class Ros2Bridge:
             response = new_message("trajectory_msgs/msg/JointTrajectory", header=header,
                                    joint_names=list(self.controlled), points=pts)
         else:
+            assert self._xyz is not None  # checked by __init__ for these response types
             ix, iy, iz = self._xyz
             poses = []
-            for dt, row in zip(t, y):
+            for row in y:
                 pos = new_message("geometry_msgs/msg/Point", x=float(row[ix]), y=float(row[iy]),
                                   z=float(row[iz]) if iz is not None else 0.0)
                 pose = new_message("geometry_msgs/msg/Pose", position=pos,
@@ -327,7 +370,7 @@ class Ros2Bridge:
                 response = new_message("geometry_msgs/msg/PoseArray", header=header, poses=poses)
             else:
                 stamped = [new_message("geometry_msgs/msg/PoseStamped", pose=p, header=new_message(
-                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.frame_id))
+                    "std_msgs/msg/Header", stamp=stamp_of(frame_time + float(dt), base_sec), frame_id=self.out_frame))
                     for dt, p in zip(t, poses)]
                 response = new_message("nav_msgs/msg/Path", header=header, poses=stamped)
         return response, self._status(pred, base_sec + frame_time, t, header)
@@ -360,6 +403,7 @@ class Ros2Bridge:
         values = [kv("phase", repr(float(pred.phase))), kv("normalised_time", repr(float(pred.normalised_time))),
                   kv("speed", repr(float(pred.speed))), kv("duration", repr(float(pred.duration))),
                   kv("out_of_range", "true" if oor else "false"),
+                  kv("duration_out_of_range", "true" if getattr(pred, "duration_out_of_range", False) else "false"),
                   kv("input_distance", repr(float(pred.input_distance))), kv("n_observed", str(int(pred.n_observed))),
                   kv("frame_time", repr(float(frame_time)))]
         for c, sd in self.band(pred, t).items():
@@ -383,7 +427,7 @@ class Ros2Bridge:
         import os
 
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
-        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
@@ -435,6 +479,7 @@ class Ros2Bridge:
 
         if self._dds is None:
             self.open()
+        assert self._dds is not None  # set by open
         self._dds["waitset"].wait(duration(seconds=float(timeout)))
         n = 0
         for i, (r, _) in enumerate(self._dds["readers"]):
@@ -456,7 +501,7 @@ class Ros2Bridge:
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             self.spin_once(0.05)
 
-    def start(self) -> "Ros2Bridge":
+    def start(self) -> Ros2Bridge:
         """Open and spin in a background thread (until :meth:`close`)."""
         if self._dds is None:
             self.open()

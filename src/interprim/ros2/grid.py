@@ -75,10 +75,10 @@ class StampGrid:
 
     def reset(self) -> None:
         """Forget the grid: the next sample starts a new one."""
-        self.t0 = None  # grid origin (s)
+        self.t0: float | None = None  # grid origin (s)
         self.k = -1  # index of the last emitted grid frame
-        self.last_t = None
-        self.last_y = None
+        self.last_t = math.nan
+        self.last_y = np.empty(0)
 
     @property
     def last_frame_time(self):

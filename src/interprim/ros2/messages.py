@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import keyword
 import math
-from functools import lru_cache
+from functools import cache, lru_cache
 
 from ..core.errors import MissingExtraError
 
@@ -120,11 +120,10 @@ def message_class(msgtype: str):
     return _message_class(known_type(msgtype))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _message_class(full: str):
     _imports()
-    from cyclonedds.idl import make_idl_struct
-    from cyclonedds.idl import types
+    from cyclonedds.idl import make_idl_struct, types
 
     fields = {}
     for name, desc in ros2_typestore().fielddefs[full][1]:
@@ -132,7 +131,7 @@ def _message_class(full: str):
     if not fields:  # an empty ROS message carries one uint8 on the wire (rosidl's structure_needs_at_least_one_member)
         fields["structure_needs_at_least_one_member"] = types.uint8
     cls = make_idl_struct(full.split("/")[-1] + "_", dds_type_name(full), fields)
-    cls.__ros_type__ = full
+    cls.__ros_type__ = full  # type: ignore[attr-defined]  # the ROS name, read back by the bridge
     return cls
 
 

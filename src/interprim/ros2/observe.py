@@ -29,7 +29,6 @@ records its columns' names, not their units or frames, so the bridge checks name
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..datasets.ros_bags import field_value
@@ -121,8 +120,8 @@ class Source:
                 self.offers.append((path, f"{self.prefix}_{path}"))
                 if col:
                     self.renames[path] = col
-        self.columns = []  # set by match_columns
-        self._take = []
+        self.columns: list = []  # set by match_columns
+        self._take: list = []
 
     def _pose_offers(self, prefix, pos, rot, selector):
         keys = {k: f"{pos}.{k}" for k in _XYZ}
@@ -226,7 +225,7 @@ def match_columns(sources, observed_columns) -> None:
     """
     observed = [str(c) for c in observed_columns]
     want = set(observed)
-    by_col = {}
+    by_col: dict = {}
     for s in sources:
         if s.msgtype == JOINT_STATE and not s.explicit:  # joint names are the model's column names
             s.offers = [(c, c) for c in observed if c not in by_col]

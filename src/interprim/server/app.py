@@ -348,11 +348,11 @@ class ServerThread:
     def __init__(self, server: InterprimServer):
         self.server = server
         self.loop = None
-        self._thread = None
+        self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error = None
 
-    def start(self) -> "ServerThread":
+    def start(self) -> ServerThread:
         """Start the server in a daemon thread; returns ``self`` once it listens (waits up to 30 s).
 
         An error while starting (e.g. the port is taken) is raised here, in the caller's thread.

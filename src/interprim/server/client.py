@@ -103,7 +103,7 @@ class Client:
             self.ws = connect(url, **kw)
         self.ws.send(_hello(token, "interprim.server.Client"))
         self.welcome = self.recv()
-        self.opened = None
+        self.opened: dict | None = None
 
     @property
     def models(self) -> list:
@@ -118,8 +118,8 @@ class Client:
              dofs: str | None = None, robot_state=None) -> dict:
         """Open a model (or ``"recognise"``: recognise among ``candidates``, default all). Returns ``opened``."""
         self.ws.send(_open_msg(model, candidates, points, std, dofs, robot_state))
-        self.opened = self.recv()
-        return self.opened
+        self.opened = opened = self.recv()
+        return opened
 
     def frame(self, frame, *, t=None, binary: bool = False) -> dict:
         """Send one observed frame and return its ``prediction``."""
@@ -166,10 +166,10 @@ class AsyncClient:
     def __init__(self, ws, welcome):
         self.ws = ws
         self.welcome = welcome
-        self.opened = None
+        self.opened: dict | None = None
 
     @classmethod
-    async def connect(cls, url: str, token: str | None = None, **connect_kwargs) -> "AsyncClient":
+    async def connect(cls, url: str, token: str | None = None, **connect_kwargs) -> AsyncClient:
         """Connect to ``url`` (``ws://host:port/ws``) and say ``hello``; returns the client once welcomed.
 
         Parameters

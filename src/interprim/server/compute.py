@@ -10,11 +10,13 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..core.blas import single_thread
+from ..core.errors import OutOfRangeWarning
 from . import protocol as P
 
 log = logging.getLogger("interprim.server")
@@ -33,7 +35,7 @@ class OpenModel:
     frames: int = 0
     update_kw: dict = field(default_factory=dict)
     heads: list | None = None  # per candidate: constant parts of the reply (see _head_parts)
-    recognition: "Recognition | None" = None  # with several candidates: which one (created on first use)
+    recognition: Recognition | None = None  # with several candidates: which one (created on first use)
     history: list = field(default_factory=list)  # blocks of frames in the streams since the last reset (rollback)
 
     def reset(self, robot_state=None) -> None:
@@ -89,8 +91,8 @@ def frame_problem(op: OpenModel, frame: np.ndarray) -> str | None:
 
 
 class Recognition:
-    """Which of a ``"recognise"`` session's candidates is being observed: :class:`interprim.models.recognition.Recogniser` on
-    the frames of the current interaction.
+    """Which of a ``"recognise"`` session's candidates is being observed:
+    :class:`interprim.models.recognition.Recogniser` on the frames of the current interaction.
 
     Each candidate scores the observed positions at its own most probable phase, with **one** position noise for
     all of them (the Recogniser's ``noise="shared"``): with each model's own noise (a softmax of the predictions'
@@ -138,14 +140,26 @@ class Recognition:
 
 
 
+def warm_up_frames(model, n_observed: int, n: int = 20):
+    """``n`` frames inside the model's training range: from its training frames' mean, half a standard deviation
+    down to half up per column (zeros around 0.05 for a model file without the range)."""
+    rng = getattr(model, "input_range_", None)
+    s = np.linspace(-0.5, 0.5, n)[:, None]
+    if rng is not None and np.shape(rng[0]) == (n_observed,):
+        return np.asarray(rng[0], dtype=np.float64) + s * np.asarray(rng[1], dtype=np.float64)
+    return (s + 0.5) * 0.1 * np.ones(n_observed)
+
+
 def warm_up(entries) -> None:
     """Run one prediction per model so that JIT compilation (numba) happens before the first client."""
     for e in entries:
         try:
             st = e.model.stream()
-            ramp = np.linspace(0.0, 0.1, 20)[:, None] * np.ones(e.n_observed)
-            for k, f in enumerate(ramp):
-                p = st.update(f, need_cov=k % 2 == 1)
+            ramp = warm_up_frames(e.model, e.n_observed)
+            with warnings.catch_warnings():  # no OutOfRangeWarning from the warm-up itself
+                warnings.simplefilter("ignore", OutOfRangeWarning)
+                for k, f in enumerate(ramp):
+                    p = st.update(f, need_cov=k % 2 == 1)
             p.trajectory(5)
             p.std(5)
         except Exception:  # a model that cannot predict from zeros will say so to its first client
@@ -159,15 +173,15 @@ _NONFINITE = "the model produced non-finite values for this frame"
 try:  # optional accelerator: numpy arrays to JSON in compiled code
     import orjson as _orjson
 except ImportError:  # pragma: no cover - depends on the installation
-    _orjson = None
+    _orjson = None  # type: ignore[assignment]  # the module or None, tested before each use
 
 
 def _json_array(a) -> str:
     """A 1-D or 2-D float array as JSON text, about 7 significant digits.
 
     With :mod:`orjson` installed: the array rounded to float32 and written with the shortest text
-    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).  Without:
-    ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
+    that reads back to the same float32 (relative error <= 1.2e-7 once parsed as float64; ~6 us for 50 x 3 values).
+    Without: ``%.7g`` (relative error <= 5e-7; one %-format for the whole array, ~30 us, still about twice as
     fast as ``json.dumps(a.tolist())``).  Raises ``FloatingPointError`` on NaN/inf, which are not
     JSON (and on values beyond the float32 range with orjson).
     """
@@ -230,7 +244,8 @@ def _column_slice(cols, n_dofs):
 class _MeanRollout:
     """``pred.trajectory(n)[:, cols]`` for the predictions of one model: the prediction contract's
     :meth:`~interprim.models.base.BasePrediction.mean_rollout`, made from the first prediction (for an
-    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design built once).
+    Interaction Primitive the core's :class:`~interprim.models.primitive.prediction.MeanRollout`, the grid's design
+    built once).
     """
 
     __slots__ = ("n", "sel", "fn")
@@ -304,9 +319,10 @@ def compute_prediction(op: OpenModel, frame: np.ndarray, seq: int, t, covers: in
     # input far outside the training demonstrations (wrong units, columns, frame of reference): the flag and
     # the largest standardised distance seen since the session's last reset (null for an old model file)
     dist = float(pred.input_distance)
-    parts.append(',"out_of_range":%s,"input_distance":%s' % (
+    parts.append(',"out_of_range":%s,"input_distance":%s,"duration_out_of_range":%s' % (
         "true" if pred.out_of_range else "false",
-        ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null")))
+        ("%.6g" % dist) if math.isfinite(dist) else ("1e308" if dist > 0 else "null"),
+        "true" if getattr(pred, "duration_out_of_range", False) else "false"))
     parts.append(',"compute_ms":%.4f}' % ((time.perf_counter() - t0) * 1e3))
     return "".join(parts)
 

@@ -89,6 +89,7 @@ def highfive_model(n_train: int = 40, n_test: int = 4, seed: int = 0, n_basis: i
                    n_jobs: int = 1):
     """Fit the high-five IP on simulated interactions; returns a :class:`ModelEntry` with replay data."""
     import interprim as ip
+
     from ..sim import highfive_split
 
     train, test = highfive_split(n_train, n_test, seed=seed, progress=progress, n_jobs=n_jobs)

@@ -212,13 +212,15 @@ class HttpApi:
             log.warning("refused %s from origin %r: not an allowed origin", path[:100],
                         str(request.headers.get("Origin"))[:100])
             self.stats["rejected"] += 1
-            return self._json(conn, 403, {"error": "cross-origin request refused; start the server with --allow-origin"})
+            return self._json(conn, 403,
+                              {"error": "cross-origin request refused; start the server with --allow-origin"})
         if path == "/ws":
             if not self._origin_ok(request):
                 log.warning("rejected WebSocket from origin %r (host %r): cross-site request",
                             request.headers.get("Origin"), request.headers.get("Host"))
                 self.stats["rejected"] += 1
-                return self._json(conn, 403, {"error": "cross-origin WebSocket refused; start the server with --allow-origin"})
+                return self._json(conn, 403,
+                                  {"error": "cross-origin WebSocket refused; start the server with --allow-origin"})
             return None  # go on with the WebSocket handshake
         if path in ("/", "/index.html"):
             body, ctype = self._static["index.html"]

@@ -23,10 +23,14 @@ import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .compute import OpenModel, compute_batch, warm_up
+
+if TYPE_CHECKING:
+    from .workers import ProcessPool
 
 log = logging.getLogger("interprim.server")
 
@@ -58,7 +62,7 @@ class TokenBucket:
 @dataclass
 class Session:
     id: int
-    ws: object
+    ws: Any  # the WebSocket connection (websockets' ServerConnection; the server's extra)
     peer: str
     out: asyncio.Queue
     bucket: TokenBucket
@@ -312,7 +316,7 @@ class Compute:
         self.processes = int(processes)
         self.pool = ThreadPoolExecutor(self.workers, thread_name_prefix="ip-worker") if (
             self.workers and not self.processes) else None
-        self.procs = None  # the worker processes (interprim.server.workers.ProcessPool) once started
+        self.procs: ProcessPool | None = None  # the worker processes once started
         self.lanes: list = []
 
     @property
@@ -379,6 +383,8 @@ class Compute:
     async def call(self, sid: int, op: str, **fields):
         """Run ``op`` for session ``sid`` in its worker process (``remote`` only); raises ``RuntimeError`` when it
         fails there."""
+        if self.procs is None:
+            raise RuntimeError(f"{op}: the server runs no worker processes")
         return await self.procs.call(sid, op, **fields)
 
     def stop(self) -> None:

@@ -14,8 +14,11 @@ import json
 import math
 import re
 import struct
+from collections.abc import Sequence
+from typing import Any, NoReturn, TypeGuard, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 PROTOCOL_VERSION = 1
 """Version of the wire protocol.  Bumped on any incompatible change."""
@@ -62,16 +65,16 @@ class ProtocolError(Exception):
         self.fatal = fatal
 
 
-def _is_number(v) -> bool:
+def _is_number(v: object) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-def _describe(v) -> str:
+def _describe(v: object) -> str:
     text = json.dumps(v, allow_nan=True, default=str) if not isinstance(v, str) else repr(v)
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def parse_text(data: str) -> dict:
+def parse_text(data: str) -> dict[str, Any]:
     """Parse one text message into a dict with a valid ``type``."""
     try:
         msg = _DECODER.decode(data)
@@ -91,15 +94,16 @@ def parse_text(data: str) -> dict:
     return msg
 
 
-def _reject_constant(name: str):
+def _reject_constant(name: str) -> NoReturn:
     # json.loads accepts the non-standard tokens NaN, Infinity, -Infinity; the protocol does not.
     raise ProtocolError("bad_json", f"message is not valid JSON: non-standard constant {name} (use finite numbers)")
 
 
-_DECODER = json.JSONDecoder(parse_constant=_reject_constant)  # one decoder: json.loads(...) with options builds one per call
+# one decoder: json.loads(...) with options builds one per call
+_DECODER = json.JSONDecoder(parse_constant=_reject_constant)
 
 
-def check_hello(msg: dict) -> dict:
+def check_hello(msg: dict[str, Any]) -> dict[str, Any]:
     """Validate a ``hello``; returns ``{"version": int, "token": str|None, "client": str|None}``."""
     version = msg.get("version", PROTOCOL_VERSION)
     if not isinstance(version, int) or isinstance(version, bool):
@@ -123,7 +127,8 @@ def check_hello(msg: dict) -> dict:
 RECOGNISE = "recognise"
 
 
-def check_open(msg: dict, models: dict, *, default_points: int, max_points: int) -> dict:
+def check_open(msg: dict[str, Any], models: dict[str, Any], *, default_points: int,
+               max_points: int) -> dict[str, Any]:
     """Validate an ``open`` against the loaded ``models`` (name -> entry with ``n_observed``)."""
     name = msg.get("model", RECOGNISE)
     if not isinstance(name, str):
@@ -162,7 +167,8 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
         cands = [name]
     points = msg.get("points", default_points)
     if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= max_points:
-        raise ProtocolError("bad_message", f"open.points must be an integer in [2, {max_points}], got {_describe(points)}")
+        raise ProtocolError("bad_message",
+                            f"open.points must be an integer in [2, {max_points}], got {_describe(points)}")
     std = msg.get("std", False)
     if not isinstance(std, bool):
         raise ProtocolError("bad_message", f"open.std must be true or false, got {_describe(std)}")
@@ -180,7 +186,7 @@ def check_open(msg: dict, models: dict, *, default_points: int, max_points: int)
     }
 
 
-def check_robot_state(value, where: str):
+def check_robot_state(value: object, where: str) -> list[float] | list[list[float]] | None:
     """Validate a ``robot_state``: ``null``, the controlled agent's current positions ``[p1, ..., pn]``, or
     positions and velocities (units per second) ``[[p1, ..., pn], [v1, ..., vn]]``.  The length ``n``
     is checked against each model by :func:`check_robot_state_for`."""
@@ -205,10 +211,11 @@ def check_robot_state(value, where: str):
         finite = False
     if not finite:
         raise ProtocolError("bad_message", f"{where} contains NaN, inf or a number too large for a float64")
-    return value
+    return cast("list[float] | list[list[float]]", value)
 
 
-def check_robot_state_for(robot_state, name: str, n_controlled: int, where: str) -> None:
+def check_robot_state_for(robot_state: list[float] | list[list[float]] | None, name: str, n_controlled: int,
+                          where: str) -> None:
     """``robot_state`` (validated by :func:`check_robot_state`) must have ``n_controlled`` values per row."""
     if robot_state is None:
         return
@@ -220,7 +227,7 @@ def check_robot_state_for(robot_state, name: str, n_controlled: int, where: str)
                             f"{n_controlled} DoFs (its controlled_dofs, in that order)")
 
 
-def check_reset(msg: dict):
+def check_reset(msg: dict[str, Any]) -> list[float] | list[list[float]] | None:
     """Validate a ``reset``; returns its optional ``robot_state``."""
     return check_robot_state(msg.get("robot_state"), "reset.robot_state")
 
@@ -248,20 +255,20 @@ def scan_unparsed(text: str) -> tuple[bool, float | None]:
     return True, t
 
 
-def frame_stamp(msg: dict | None):
+def frame_stamp(msg: dict[str, Any] | None) -> float | None:
     """A parsed frame message's ``t`` if it is a finite number (echoed in replies and errors), else ``None``."""
     if msg is None:
         return None
     t = msg.get("t")
     if _is_number(t):
         try:
-            return t if math.isfinite(t) else None
+            return float(t) if math.isfinite(t) else None
         except OverflowError:
             return None
     return None
 
 
-def check_frame(msg: dict, n: int) -> tuple[np.ndarray, float | None]:
+def check_frame(msg: dict[str, Any], n: int) -> tuple[np.ndarray, float | None]:
     """Validate a JSON ``frame``; returns the float64 frame and the optional echo stamp ``t``."""
     frame = msg.get("frame")
     if not isinstance(frame, list):
@@ -301,24 +308,24 @@ def decode_binary_frame(data: bytes, n: int) -> np.ndarray:
     return arr
 
 
-def encode_binary_frame(frame) -> bytes:
+def encode_binary_frame(frame: Sequence[float] | np.ndarray) -> bytes:
     """Encode a frame for the binary form of ``frame`` (little-endian float64)."""
     values = [float(v) for v in frame]
     return struct.pack(f"<{len(values)}d", *values)
 
 
-def error(code: str, message: str, **extra) -> dict:
+def error(code: str, message: str, **extra: Any) -> dict[str, Any]:
     out = {"type": "error", "code": code, "message": message}
     out.update({k: v for k, v in extra.items() if v is not None})
     return out
 
 
-def dumps(obj) -> str:
+def dumps(obj: Any) -> str:
     """Compact JSON; raises ``ValueError`` on NaN/inf (never sent on the wire)."""
     return json.dumps(obj, separators=(",", ":"), allow_nan=False)
 
 
-def softmax(values) -> list[float]:
+def softmax(values: ArrayLike) -> list[float]:
     """Posterior probabilities from log-likelihoods (uniform prior); robust to -inf/NaN."""
     v = np.asarray(values, dtype=np.float64)
     v = np.where(np.isnan(v), -np.inf, v)
@@ -327,4 +334,4 @@ def softmax(values) -> list[float]:
     v = v - np.max(v[np.isfinite(v)])
     e = np.exp(np.clip(v, -745.0, 0.0))
     e[~np.isfinite(v)] = 0.0
-    return (e / e.sum()).tolist()
+    return [float(v) for v in e / e.sum()]

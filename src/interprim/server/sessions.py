@@ -282,7 +282,8 @@ class Sessions:
             s.closing = True
             s.close_reason = reason
             # Bypass the full queue: close now (the library aborts the TCP connection after close_timeout).
-            s.writer.cancel()
+            if s.writer is not None:
+                s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(P.CLOSE_POLICY, reason))
 
     def _fatal(self, s: Session, code: int, reason: str, message: dict | None = None, level=logging.WARNING) -> None:
@@ -298,7 +299,8 @@ class Sessions:
         try:
             s.out.put_nowait((_CLOSE, code, reason[:120]))
         except asyncio.QueueFull:
-            s.writer.cancel()
+            if s.writer is not None:
+                s.writer.cancel()
             s.writer = asyncio.get_running_loop().create_task(s.ws.close(code, reason[:120]))
 
     def _error(self, s: Session, exc: P.ProtocolError, seq=None, t=None) -> None:
@@ -402,15 +404,17 @@ class Sessions:
             t = P.frame_stamp(msg)
         if not s.bucket.take():
             await self._reply_error(
-                s, P.ProtocolError("rate_limited", f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"),
-                seq, t)
+                s, P.ProtocolError("rate_limited",
+                                   f"over {c.max_rate_hz:g} messages/s (burst {c.rate_burst}); dropped"), seq, t)
             return False
         try:
             if is_frame:
+                assert seq is not None  # counted above
                 await self._on_frame(s, data, msg, seq)
                 return True
             if s.queued:  # answer the frames received before this message first
                 await self._until(s, lambda: not s.queued)
+            assert msg is not None  # a control message is parsed text
             await self._on_control(s, msg)
         except P.ProtocolError as exc:
             await self._reply_error(s, exc, seq, t)
@@ -455,12 +459,13 @@ class Sessions:
             for e in entries:
                 P.check_robot_state_for(o["robot_state"], e.name, len(e.controlled_dofs), "open.robot_state")
             rec = None
-            if len(entries) > 1:  # "recognise": the Recogniser must take the candidates (made here, used in this process)
+            # "recognise": the Recogniser must take the candidates (made here, used in this process)
+            if len(entries) > 1:
                 try:
                     rec = Recognition(entries)
                 except (TypeError, ValueError, AttributeError) as exc:
-                    raise P.ProtocolError("bad_message", f"'recognise' cannot recognise among {o['candidates']}: {exc}") \
-                        from None
+                    raise P.ProtocolError(
+                        "bad_message", f"'recognise' cannot recognise among {o['candidates']}: {exc}") from None
             streams, cols = [], []
             for e in entries:
                 dofs = o["dofs"] or ("all" if e.kind == "single" or not e.controlled_dofs else "controlled")

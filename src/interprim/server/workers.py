@@ -5,8 +5,8 @@ arrays, so threads do not run it in parallel (the GIL).  With ``--processes N`` 
 pinned to one of N worker processes, which owns that session's ``model.stream()``; the event loop
 only does the network I/O.  A slow session then only delays the sessions of its own worker.
 
-Models reach the workers as safe ``.npz`` model files (``model.save`` / :func:`interprim.load_any`, whatever model a file holds);
-requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
+Models reach the workers as safe ``.npz`` model files (``model.save`` / :func:`interprim.load_any`, whatever model a
+file holds); requests and replies are JSON over a ``multiprocessing`` pipe (``send_bytes``/``recv_bytes``; no
 pickle).  A request is one JSON header line, then (for frames) the frames as raw little-endian float64
 values; a reply is one JSON header line, then (for predictions) the finished JSON texts for the
 client, one per line, so they are not encoded twice.  A session's pending frames go to its worker in
@@ -19,6 +19,7 @@ asks them to at its shutdown, or when their pipe closes because the server is go
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import json
 import logging
@@ -105,8 +106,15 @@ class ProcessPool:
         self.n = int(n)
         self.workers: list[_Worker] = []
         self._rid = itertools.count(1)
-        self._tmp = None
-        self._loop = None
+        self._tmp: tempfile.TemporaryDirectory | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        """The event loop the pool is attached to (:meth:`attach`)."""
+        if self._loop is None:
+            raise RuntimeError("the worker pool is not attached to an event loop")
+        return self._loop
 
     def start(self) -> None:
         """Save the models, start the processes and wait until they have loaded them (blocking)."""
@@ -135,7 +143,7 @@ class ProcessPool:
                 child.close()
                 self.workers.append(_Worker(proc, parent))
         finally:
-            if masked:
+            if old_mask is not None:
                 signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
         for w in self.workers:
             if not w.conn.poll(120):
@@ -176,7 +184,7 @@ class ProcessPool:
             return
         w.dead = True
         try:
-            self._loop.remove_reader(w.conn.fileno())
+            self.loop.remove_reader(w.conn.fileno())
         except Exception:
             pass
         log.error("worker process %s (pid %s) died; its sessions get 'internal' errors", w.proc.name, w.proc.pid)
@@ -200,7 +208,7 @@ class ProcessPool:
         if w.dead:
             raise RuntimeError("worker process died")
         rid = next(self._rid)
-        fut = self._loop.create_future()
+        fut = self.loop.create_future()
         w.pending[rid] = fut
         try:
             w.conn.send_bytes(json.dumps({"op": op, "rid": rid, "sid": sid, **fields}).encode() + b"\n" + payload)
@@ -214,7 +222,7 @@ class ProcessPool:
         for w in self.workers:
             try:
                 if self._loop is not None and not w.dead:
-                    self._loop.remove_reader(w.conn.fileno())
+                    self.loop.remove_reader(w.conn.fileno())
             except Exception:
                 pass
             try:

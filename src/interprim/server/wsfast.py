@@ -16,8 +16,8 @@ asynchronous context manager.  At 10,000 frames/s that is most of the server's o
   message is a protocol error (RFC 6455 Sec. 5.4) that the library answers with 1002, so it goes there.
   ``tests/server/test_server_conformance.py`` sends the same malformed sequences (those of the library's own test
   suite: fragmentation, control frames, masking, reserved bits, UTF-8, sizes, close frames) to a server
-  with and without this path and requires the same answers and close codes.  The fast path switches itself off for good (the library
-  then gets every byte) when the connection leaves the OPEN state, when a frame announces more than
+  with and without this path and requires the same answers and close codes.  The fast path switches itself off for good
+  (the library then gets every byte) when the connection leaves the OPEN state, when a frame announces more than
   ``max_size`` bytes, and when it cannot know that the library's parser is at a frame boundary (bytes
   left over from the handshake).
 * :func:`write_now` writes a reply's text frame to the transport at once when nothing else is being
@@ -32,12 +32,18 @@ connection, and without them the library does everything, as before.
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING
 
 try:
     from websockets.frames import apply_mask  # the library's C speedup when built, else its Python version
     from websockets.protocol import OPEN
 except ImportError:  # pragma: no cover - websockets is a dependency of the server
-    apply_mask = OPEN = None
+    apply_mask = OPEN = None  # type: ignore[assignment]  # the server's extra is missing: nothing here runs
+
+if TYPE_CHECKING:  # the mixin's methods call and read the connection class it is mixed into
+    from websockets.asyncio.server import ServerConnection as _Connection
+else:
+    _Connection = object
 
 _TEXT, _BINARY = 0x1, 0x2
 
@@ -86,7 +92,7 @@ def write_now(conn, data) -> bool:
         return False
 
 
-class FastFrames:
+class FastFrames(_Connection):
     """Mixin for a :class:`websockets.asyncio.server.ServerConnection` subclass: see the module's docstring."""
 
     fast_frame = None  # set by the session: callable(str | bytes) -> bool

@@ -152,7 +152,7 @@ class HighFiveData:
         """Task-space hand trajectories ``(T_i, 2)`` of both arms (observed, controlled)."""
         return self.observed_arm.hand(self.observed(i)), self.controlled_arm.hand(self.controlled(i))
 
-    def subset(self, idx) -> "HighFiveData":
+    def subset(self, idx) -> HighFiveData:
         """A new :class:`HighFiveData` with the interactions ``idx``."""
         idx = np.asarray(idx, dtype=int)
         return HighFiveData(
@@ -276,14 +276,15 @@ def generate_highfive(
     else:
         from joblib import Parallel, delayed
 
-        tasks = [t[:-1] + (None,) for t in tasks]
+        tasks = [t[:-1] + ({},) for t in tasks]  # no cache shared across processes
         results = Parallel(n_jobs=n_jobs, return_as="generator")(delayed(_solve_one)(t) for t in tasks)
         results = list(tqdm(results, total=n, desc=desc, disable=not progress, leave=False))
     n_fail = sum(not r[6] for r in results)
     if n_fail:
         import warnings
 
-        warnings.warn(f"{n_fail} of {n} optimal-control problems did not report convergence", RuntimeWarning)
+        warnings.warn(f"{n_fail} of {n} optimal-control problems did not report convergence", RuntimeWarning,
+                      stacklevel=2)
     return HighFiveData(
         demos=[r[0] for r in results],
         goals=np.array([r[1] for r in results]),

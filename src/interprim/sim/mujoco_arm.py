@@ -378,7 +378,8 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
         partner, goal = test.observed(0), test.goals[0]
     partner = np.asarray(partner, dtype=np.float64)
     if partner.ndim != 2 or partner.shape[1] != 2 or partner.shape[0] < 3 or not np.all(np.isfinite(partner)):
-        raise ValueError(f"partner must be a finite (T, 2) array of joint angles with T >= 3, got shape {partner.shape}")
+        raise ValueError("partner must be a finite (T, 2) array of joint angles with T >= 3, "
+                         f"got shape {partner.shape}")
     dt = float(model.dt_)
     substeps = int(round(dt / physics_dt))
     if substeps < 1 or abs(substeps * physics_dt - dt) > 1e-9 * dt:
@@ -399,7 +400,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
     t_all = np.arange(n) * physics_dt
     frame_time, phase, latency = [], [], []
     out_of_range = False
-    Y = dY = ddY = None
+    Y = dY = ddY = np.empty((0, 3))  # set at the partner's first frame
     s_k = D_k = t_k = 0.0
     grid = np.linspace(0.0, 1.0, n_grid)
     i = 0
@@ -425,7 +426,7 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
             sim.set_human(qh, qhd)
             s = s_k + (t - t_k) / D_k
             if s >= 1.0:
-                ref = (Y[-1], np.zeros(3), np.zeros(3))
+                ref: tuple = (Y[-1], np.zeros(3), np.zeros(3))
             else:
                 sc = max(s, 0.0)
                 ref = tuple(interp_columns(sc, grid, A[:, :3]) * f
@@ -457,10 +458,10 @@ def run_mujoco_highfive(model=None, partner=None, *, goal=None, seed: int = 0, n
 def draw_mujoco_highfive(result: MujocoResult, path, n_snapshots: int = 5):
     """Draw ``result`` to ``path`` (PNG, matplotlib with the Agg backend; no display or GL context needed).
 
-    Top row: the two arms at ``n_snapshots`` instants from the start to the meeting, and at the end (the kinematics of :mod:`interprim.sim.arm`, the same
-    chains as the MJCF model), with the partner's hand path so far and the robot's reference posture (dashed).
-    Bottom: the distance between the hands over time, the threshold and the meeting time; the joint angles
-    against the reference.
+    Top row: the two arms at ``n_snapshots`` instants from the start to the meeting, and at the end (the kinematics of
+    :mod:`interprim.sim.arm`, the same chains as the MJCF model), with the partner's hand path so far and the robot's
+    reference posture (dashed). Bottom: the distance between the hands over time, the threshold and the meeting time;
+    the joint angles against the reference.
     """
     import matplotlib
 
@@ -513,8 +514,8 @@ def draw_mujoco_highfive(result: MujocoResult, path, n_snapshots: int = 5):
     ax2.set_xlabel("time [s]")
     ax2.set_ylabel("robot joints [rad] (dashed: IP reference)")
     ax2.legend(fontsize=7)
-    fig.suptitle("MuJoCo: the robot (red, torque-controlled) answers the replayed partner (blue) through model.stream()",
-                 fontsize=10)
+    fig.suptitle("MuJoCo: the robot (red, torque-controlled) answers the replayed partner (blue) "
+                 "through model.stream()", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

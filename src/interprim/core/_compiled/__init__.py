@@ -14,5 +14,5 @@ not import numba.
 #: (inputs are checked finite upstream)
 FASTMATH = {"contract", "reassoc", "nsz", "arcp"}
 
-#: log(2 pi) of the Gaussian log-likelihoods (the same float as interprim.core.gaussian._LOG2PI)
+#: log(2 pi) of the Gaussian log-likelihoods (the same float as interprim.core.gaussian.LOG2PI)
 LOG2PI = 1.8378770664093453

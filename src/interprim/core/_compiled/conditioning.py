@@ -14,7 +14,6 @@ import numpy as np
 from numba import njit
 
 from . import FASTMATH as _FM
-
 from .linalg import chol_inplace, chol_solve_vec, forward_rows, syrk_sub
 
 

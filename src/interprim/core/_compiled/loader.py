@@ -40,6 +40,7 @@ import os
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def _mode() -> str:
     return os.environ.get("INTERPRIM_JIT", "auto").strip().lower()
 
 
-def _compile_all():
+def _compile_all() -> None:
     """Import numba and compile (or load from the cache) every kernel once, with tiny inputs of the real types."""
     from . import conditioning as k
     from . import dtw as dk
@@ -95,7 +96,7 @@ def _compile_all():
     kp.warm_track(kp.track_step)
 
 
-def _fill_cache():
+def _fill_cache() -> None:
     """With a cold cache, compile every kernel into numba's cache in a child process and wait for it.
 
     The kernels are then loaded from the cache in this process, as in every later one: numba's freshly
@@ -114,7 +115,7 @@ def _fill_cache():
         pass
 
 
-def _load():
+def _load() -> None:
     global _READY, _ERROR
     try:
         if not _PENDING:  # (a background compilation has filled the cache already)
@@ -152,7 +153,7 @@ def cache_is_warm() -> bool:
 
         for name in KERNELS:
             disp = compiled(name)
-            if not disp._cache._cache_file._load_index():
+            if not disp._cache._cache_file._load_index():  # type: ignore[attr-defined]  # numba's dispatcher
                 return False
         return True
     except ImportError:
@@ -169,7 +170,7 @@ def _child_command() -> list[str]:
     return [sys.executable, "-c", code]
 
 
-def _background():
+def _background() -> None:
     """Cold cache: compile in a child process (no GIL shared with the caller), then load from the cache here."""
     try:
         child = subprocess.Popen(_child_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
@@ -189,7 +190,7 @@ def _compile_main() -> int:
     return 0
 
 
-def _start(target):
+def _start(target: Callable[[], None]) -> threading.Thread:
     global _THREAD
     with _LOCK:
         if _THREAD is None:
@@ -238,13 +239,13 @@ def _outside_calls() -> bool:
     return _blas.depth() == 0
 
 
-def _arm_switch():
+def _arm_switch() -> None:
     from .. import blas as _blas
 
     _blas.on_outer_entry(_switch)
 
 
-def _disarm_switch():
+def _disarm_switch() -> None:
     from .. import blas as _blas
 
     _blas.on_outer_entry(None)

@@ -116,8 +116,8 @@ def vexp_nonpos(t, n, out, ibuf):
 def design_stats(YT, M, s_end, centers, widths, alpha_x, const, XT, G, B, work, ibuf):
     """``G = X^T X``, ``B = X^T Y`` and ``|Y|^2`` of Eq. 13 rows at ``s_j = linspace(0, s_end, M)``.
 
-    ``YT`` holds the targets transposed, ``(D, >= M)``.  Row ``j`` of ``X`` is ``[phi(x(s_j)), const]`` (Eq. 2 and 13, ``const = alpha_y beta_y``),
-    computed as :meth:`interprim.core.basis.Basis.phi` (max-shifted exponentials) with the
+    ``YT`` holds the targets transposed, ``(D, >= M)``.  Row ``j`` of ``X`` is ``[phi(x(s_j)), const]`` (Eq. 2 and 13,
+    ``const = alpha_y beta_y``), computed as :meth:`interprim.core.basis.Basis.phi` (max-shifted exponentials) with the
     exponentials of :func:`vexp_nonpos`.  ``XT`` is a ``(q, >= M)`` workspace, ``work``
     a ``(4, >= M)`` one and ``ibuf`` an int64 ``(>= M)`` one; ``G`` ``(q, q)`` and ``B``
     ``(q, D)`` are outputs.  Loops run along the frames, so they vectorise.

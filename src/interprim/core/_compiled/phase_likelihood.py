@@ -35,13 +35,15 @@ factorisation; no BLAS call (so no thread pool to limit).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numba import njit
 
 from . import FASTMATH as _FM
 from . import LOG2PI as _LOG2PI
 from .linalg import chol_inplace, chol_update_R, forward_rows, solve_R
-
 
 BLOCK = 64  # frames per block of the statistics: fixed-size workspaces, whatever the number of frames
 
@@ -64,17 +66,17 @@ def _chol_aug(A, p4, Wd):
                 Rk[j] *= inv
             for kk in range(k + 1, 4):
                 Rkk = A[p + kk]
-                l = Rk[p + kk]
+                lc = Rk[p + kk]
                 for j in range(p, Wd):
-                    Rkk[j] -= l * Rk[j]
-        R0 = A[p]; R1 = A[p + 1]; R2 = A[p + 2]; R3 = A[p + 3]
+                    Rkk[j] -= lc * Rk[j]
+        R0, R1, R2, R3 = A[p], A[p + 1], A[p + 2], A[p + 3]
         for a in range(p + 4, p4, 2):
-            T0 = A[a]; T1 = A[a + 1]
-            l00 = R0[a]; l01 = R1[a]; l02 = R2[a]; l03 = R3[a]
-            l10 = R0[a + 1]; l11 = R1[a + 1]; l12 = R2[a + 1]; l13 = R3[a + 1]
+            T0, T1 = A[a], A[a + 1]
+            l00, l01, l02, l03 = R0[a], R1[a], R2[a], R3[a]
+            l10, l11, l12, l13 = R0[a + 1], R1[a + 1], R2[a + 1], R3[a + 1]
             js = a - (a % 4)
             for j in range(js, Wd):
-                r0 = R0[j]; r1 = R1[j]; r2 = R2[j]; r3 = R3[j]
+                r0, r1, r2, r3 = R0[j], R1[j], R2[j], R3[j]
                 T0[j] -= l00 * r0 + l01 * r1 + l02 * r2 + l03 * r3
                 T1[j] -= l10 * r0 + l11 * r1 + l12 * r2 + l13 * r3
     return logdet
@@ -84,37 +86,57 @@ def _syrk_T(VT, L, K):
     """K[c1, c2] = dot(VT[c1, :L], VT[c2, :L]) for c2 < c1 rounded up to 4 (rows of VT: a multiple of 4)."""
     r = VT.shape[0]
     for c1 in range(0, r, 4):
-        A0 = VT[c1]; A1 = VT[c1 + 1]; A2 = VT[c1 + 2]; A3 = VT[c1 + 3]
+        A0, A1, A2, A3 = VT[c1], VT[c1 + 1], VT[c1 + 2], VT[c1 + 3]
         for c2 in range(0, c1 + 4, 2):
-            B0 = VT[c2]; B1 = VT[c2 + 1]
-            s00 = 0.0; s01 = 0.0; s10 = 0.0; s11 = 0.0; s20 = 0.0; s21 = 0.0; s30 = 0.0; s31 = 0.0
+            B0, B1 = VT[c2], VT[c2 + 1]
+            s00 = s01 = s10 = s11 = s20 = s21 = s30 = s31 = 0.0
             for m in range(L):
-                b0 = B0[m]; b1 = B1[m]
-                a0 = A0[m]; a1 = A1[m]; a2 = A2[m]; a3 = A3[m]
-                s00 += a0 * b0; s01 += a0 * b1; s10 += a1 * b0; s11 += a1 * b1
-                s20 += a2 * b0; s21 += a2 * b1; s30 += a3 * b0; s31 += a3 * b1
-            K[c1, c2] = s00; K[c1, c2 + 1] = s01
-            K[c1 + 1, c2] = s10; K[c1 + 1, c2 + 1] = s11
-            K[c1 + 2, c2] = s20; K[c1 + 2, c2 + 1] = s21
-            K[c1 + 3, c2] = s30; K[c1 + 3, c2 + 1] = s31
+                b0, b1 = B0[m], B1[m]
+                a0, a1, a2, a3 = A0[m], A1[m], A2[m], A3[m]
+                s00 += a0 * b0
+                s01 += a0 * b1
+                s10 += a1 * b0
+                s11 += a1 * b1
+                s20 += a2 * b0
+                s21 += a2 * b1
+                s30 += a3 * b0
+                s31 += a3 * b1
+            K[c1, c2] = s00
+            K[c1, c2 + 1] = s01
+            K[c1 + 1, c2] = s10
+            K[c1 + 1, c2 + 1] = s11
+            K[c1 + 2, c2] = s20
+            K[c1 + 2, c2 + 1] = s21
+            K[c1 + 3, c2] = s30
+            K[c1 + 3, c2 + 1] = s31
 
 @njit(cache=True, fastmath=_FM)
 def _gram_block(ET, nb, q4, P, G):
-    """G[j, l] += dot(ET[j, :nb], ET[l, :nb]) for j < q4 (blocks of 4 rows), l from the block start to P (pairs)."""
+    """G[j, lc] += dot(ET[j, :nb], ET[lc, :nb]) for j < q4 (blocks of 4 rows), lc from the block start to P (pairs)."""
     for j in range(0, q4, 4):
-        A0 = ET[j]; A1 = ET[j + 1]; A2 = ET[j + 2]; A3 = ET[j + 3]
-        for l in range(j, P, 2):
-            B0 = ET[l]; B1 = ET[l + 1]
-            s00 = 0.0; s01 = 0.0; s10 = 0.0; s11 = 0.0; s20 = 0.0; s21 = 0.0; s30 = 0.0; s31 = 0.0
+        A0, A1, A2, A3 = ET[j], ET[j + 1], ET[j + 2], ET[j + 3]
+        for lc in range(j, P, 2):
+            B0, B1 = ET[lc], ET[lc + 1]
+            s00 = s01 = s10 = s11 = s20 = s21 = s30 = s31 = 0.0
             for m in range(nb):
-                b0 = B0[m]; b1 = B1[m]
-                a0 = A0[m]; a1 = A1[m]; a2 = A2[m]; a3 = A3[m]
-                s00 += a0 * b0; s01 += a0 * b1; s10 += a1 * b0; s11 += a1 * b1
-                s20 += a2 * b0; s21 += a2 * b1; s30 += a3 * b0; s31 += a3 * b1
-            G[j, l] += s00; G[j, l + 1] += s01
-            G[j + 1, l] += s10; G[j + 1, l + 1] += s11
-            G[j + 2, l] += s20; G[j + 2, l + 1] += s21
-            G[j + 3, l] += s30; G[j + 3, l + 1] += s31
+                b0, b1 = B0[m], B1[m]
+                a0, a1, a2, a3 = A0[m], A1[m], A2[m], A3[m]
+                s00 += a0 * b0
+                s01 += a0 * b1
+                s10 += a1 * b0
+                s11 += a1 * b1
+                s20 += a2 * b0
+                s21 += a2 * b1
+                s30 += a3 * b0
+                s31 += a3 * b1
+            G[j, lc] += s00
+            G[j, lc + 1] += s01
+            G[j + 1, lc] += s10
+            G[j + 1, lc + 1] += s11
+            G[j + 2, lc] += s20
+            G[j + 2, lc + 1] += s21
+            G[j + 3, lc] += s30
+            G[j + 3, lc + 1] += s31
 
 @njit(cache=True, fastmath=_FM, inline="always")
 def _grid_cell(u, n_steps):
@@ -147,8 +169,8 @@ def _stats(Zh, Rg, z, M, s, q4, ET, G):
     step = s / (M - 1) if M > 1 else 0.0
     rr = 0.0
     for j in range(q4):
-        for l in range(P):
-            G[j, l] = 0.0
+        for lc in range(P):
+            G[j, lc] = 0.0
     for m0 in range(0, M, W):
         nb = min(W, M - m0)
         for k in range(nb):
@@ -271,7 +293,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# online tracking on a lattice of speeds (interprim.phase.tracking._Tracker)
+# online tracking on a lattice of speeds (interprim.phase.tracking.Tracker)
 #
 # A stream's candidates are speeds ``v_j = v0 exp(dlog j)`` (integer ``j``): frame ``m`` of candidate ``j`` sits
 # at phase ``v_j m`` whatever the number of frames seen, so each lattice point keeps its statistics ``G``,
@@ -317,8 +339,8 @@ def _stats_lattice(Zh, Rg, z, M, vn, q4, ET, G, h, rv):
     P = ET.shape[0]
     rr = 0.0
     for j in range(q4):
-        for l in range(P):
-            G[j, l] = 0.0
+        for lc in range(P):
+            G[j, lc] = 0.0
     for m0 in range(0, M, W):
         nb = min(W, M - m0)
         for k in range(nb):
@@ -402,8 +424,8 @@ def _add_frame(h, rv, q4, sq, Uh, s2, G, Rs, Ks, Ys, ts, u, p, x, w):
     for j in range(q):
         hj = h[j]
         Gj = G[j]
-        for l in range(j, q):
-            Gj[l] += hj * h[l]
+        for lc in range(j, q):
+            Gj[lc] += hj * h[lc]
         for i in range(n_o):
             Gj[q4 + i] += hj * rv[i]
     dld = 0.0
@@ -484,7 +506,7 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
     q4 = Gs.shape[1]
     NS = keys.shape[0]
     vn = v * (Zh.shape[0] - 1)
-    h = vec[0]; rv = vec[1]; u = vec[2]; p = vec[3]; x = vec[4]; w = vec[5]
+    h, rv, u, p, x, w = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
     slot = -1
     for k in range(NS):
         if keys[k] == j:
@@ -534,7 +556,8 @@ def _slot_loglik(Zh, Rg, z, M, j, v, kc, nh, max_gap, sq, Uh, K0, s2, keys, cnt,
 
 @njit(cache=True, fastmath=_FM)
 def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, logel, mu, sd, max_gap,
-               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js, s_out, lp_out):
+               keys, cnt, last, Gs, rrs, Rs, Ks, ldTs, ET, T, Ub, V, VT, Kacc, F, vec, s1, o1, Ys, ts, Js,
+               s_out, lp_out):
     """One online phase update on the speed lattice; returns ``(j, s)``: the chosen lattice index and phase.
 
     Candidates: ``j = kc - nh .. kc + nh`` at ``s_j = v0 exp(dlog j) (M - 1)``; those above 1 are scored once at
@@ -543,7 +566,7 @@ def track_step(Zh, Rg, z, M, v0, kc, nh, dlog, s_min, sq, Uh, K0, s2, prior, log
     plus, with ``prior``, the log-normal duration prior (``logel`` = log elapsed time).  Ties: the smallest ``s``.
     Every scored candidate's phase and score are written to ``s_out[j - kc + nh]``, ``lp_out[j - kc + nh]``
     (``-inf`` where a candidate was merged into a clipped one), for the refinement of
-    :class:`interprim.phase.tracking._Tracker`.
+    :class:`interprim.phase.tracking.Tracker`.
     """
     for t in range(2 * nh + 1):
         s_out[t] = -1.0
@@ -614,7 +637,7 @@ def track_buffers(q: int, n_o: int, n: int, n_slots: int = N_SLOTS):
             np.zeros(MAX_CANDIDATES))
 
 
-def warm_batch(fn):
+def warm_batch(fn: Callable[..., Any]) -> None:
     """Compile (or load from numba's cache) :func:`phase_loglik_batch` with tiny inputs of the real types."""
     rng = np.random.default_rng(0)
     K, q, n_o, n, M = 8, 3, 2, 2, 4
@@ -625,7 +648,7 @@ def warm_batch(fn):
        np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
 
 
-def warm_track(fn, s_min=0.02):
+def warm_track(fn: Callable[..., Any], s_min: float = 0.02) -> None:
     """Compile (or load from numba's cache) :func:`track_step` with tiny inputs of the real types."""
     rng = np.random.default_rng(0)
     K, q, n_o, n, M = 8, 3, 2, 2, 6

@@ -4,8 +4,9 @@ Every kernel called from Python is one row of :data:`KERNELS`: where the compile
 module of :mod:`interprim.core._compiled`, which imports numba) and where its numpy reference lives (a
 module that does not import numba, so that the reference runs with ``INTERPRIM_JIT=0``, without numba,
 and while a cold cache compiles in the background).  Kernel and reference sit side by side in one row
-(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other, kernel by kernel, in one process (``tests/compiled/test_kernels_equivalence.py``,
-which also runs with ``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
+(the kernels' modules cannot hold the references: importing them imports numba) and are tested against each other,
+kernel by kernel, in one process (``tests/compiled/test_kernels_equivalence.py``, which also runs with
+``NUMBA_DISABLE_JIT=1`` so that the kernel bodies run as Python).
 
 Callers ask for a kernel by name; whether the compiled kernels are in use is decided once, by
 :func:`interprim.core._compiled.loader.ready` (its environment switches and cold-start behaviour):
@@ -24,7 +25,9 @@ Importing this module does not import numba.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 from . import loader
 from .table import KERNELS, Kernel, compiled, names, reference, spec
@@ -33,7 +36,7 @@ __all__ = ["Kernel", "KERNELS", "kernel", "loaded_kernel", "implementation", "re
            "forced"]
 
 
-_FORCED: list = [None]  # None: loader.ready() decides; "numpy" / "compiled": forced (tests, see forced)
+_FORCED: list[str | None] = [None]  # None: loader.ready() decides; "numpy" / "compiled": forced (tests, see forced)
 
 
 def in_use() -> bool:
@@ -44,7 +47,7 @@ def in_use() -> bool:
 
 
 @contextmanager
-def forced(which: str):
+def forced(which: str) -> Iterator[None]:
     """Run the block on one path, ``"numpy"`` or ``"compiled"``, whatever :func:`loader.ready` decided.
 
     For tests that compare the two paths in one process (``tests/compiled/test_kernels_equivalence.py``); not
@@ -61,7 +64,7 @@ def forced(which: str):
         _FORCED[0] = before
 
 
-def kernel(name: str):
+def kernel(name: str) -> Callable[..., Any] | None:
     """The compiled kernel ``name`` if the compiled kernels are in use now (:func:`loader.ready`), else ``None``."""
     forced_path = _FORCED[0]
     if loader.ready() if forced_path is None else forced_path == "compiled":
@@ -70,7 +73,7 @@ def kernel(name: str):
     return None
 
 
-def loaded_kernel(name: str):
+def loaded_kernel(name: str) -> Callable[..., Any] | None:
     """The compiled kernel ``name`` if the compiled kernels are in use already (:func:`loader.loaded`: this call
     never decides, loads or compiles), else ``None``; for kernels equal to their reference bit for bit."""
     forced_path = _FORCED[0]
@@ -79,7 +82,7 @@ def loaded_kernel(name: str):
     return None
 
 
-def implementation(name: str, which: str = "auto"):
+def implementation(name: str, which: str = "auto") -> Callable[..., Any]:
     """The implementation of kernel ``name``: ``"compiled"``, ``"numpy"`` (its reference) or ``"auto"`` (the
     compiled kernel when in use, else the reference; only for ``drop_in`` kernels)."""
     row = spec(name)

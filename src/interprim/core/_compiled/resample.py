@@ -21,8 +21,8 @@ _SIGNATURE = types.boolean(_IN1, _IN1, _IN2, types.Array(types.float64, 2, "C"))
 @njit(_SIGNATURE, cache=True, fastmath=False)
 def interp_columns_into(x_new, x, y, out):
     """``out[i, d] = numpy.interp(x_new[i], x, y[:, d])`` for C-contiguous float64 ``x_new`` (n,), ``x`` (T,),
-    ``y`` (T, D) and ``out`` (n, D); returns False (``out`` undefined) when ``x`` is not strictly increasing or has fewer than two
-    points, where numpy's search among equal positions is not reproduced (the caller then uses numpy)."""
+    ``y`` (T, D) and ``out`` (n, D); returns False (``out`` undefined) when ``x`` is not strictly increasing or has
+    fewer than two points, where numpy's search among equal positions is not reproduced (the caller then uses numpy)."""
     T = x.shape[0]
     D = y.shape[1]
     if T < 2:

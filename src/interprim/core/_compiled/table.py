@@ -6,7 +6,9 @@ Importing this module does not import numba; :func:`compiled` imports a kernel's
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["Kernel", "KERNELS", "names", "spec", "compiled", "reference"]
 
@@ -81,7 +83,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "log posteriors are the reference's log-likelihoods plus the speed prior"),
 )}
 
-_RESOLVED: dict[str, object] = {}
+_RESOLVED: dict[str, Callable[..., Any]] = {}
 
 def names() -> list[str]:
     """Names of the registered kernels."""
@@ -96,7 +98,7 @@ def spec(name: str) -> Kernel:
         raise KeyError(f"no compiled kernel named {name!r}; registered: {', '.join(KERNELS)}") from None
 
 
-def compiled(name: str):
+def compiled(name: str) -> Callable[..., Any]:
     """The compiled kernel ``name`` (imports numba; compiles it, or loads it from the cache, on its first call).
 
     With ``NUMBA_DISABLE_JIT=1`` this is the kernel's body as a plain Python function.
@@ -109,10 +111,10 @@ def compiled(name: str):
     return fn
 
 
-def reference(name: str):
+def reference(name: str) -> Callable[..., Any]:
     """The numpy reference of the kernel ``name`` (a function, or an unbound method)."""
     mod, qual = spec(name).reference.split(":")
     obj = importlib.import_module(mod)
     for part in qual.split("."):
         obj = getattr(obj, part)
-    return obj
+    return obj  # type: ignore[return-value]  # a function or an unbound method, found by name

@@ -138,7 +138,7 @@ class Calibration:
         return out
 
     @classmethod
-    def from_arrays(cls, d) -> "Calibration":
+    def from_arrays(cls, d) -> Calibration:
         """Rebuild a calibration from the arrays written by :meth:`to_arrays` (a mapping of the names;
         ``lookaheads`` and ``column_scale`` may be absent: a calibration written before they existed)."""
         opt = {k: (np.asarray(d[k], dtype=np.float64) if k in d else None) for k in ("lookaheads", "column_scale")}
@@ -355,7 +355,7 @@ def _estimate(sums, hsum, agents, clip):
     col = np.ones((F, B, D))
     with np.errstate(invalid="ignore", divide="ignore"):
         own, own_var = _log_ratio(E, V, axis=())  # (F, B, D): every column on its own
-    for a, cols in enumerate(agents):
+    for cols in agents:
         if not cols:
             scales.append(np.ones((F, B)))
             continue

@@ -18,18 +18,27 @@ from __future__ import annotations
 
 import copy
 import numbers
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..base import Predictor
+from ..training import TrainingSet
 from ...core.blas import one_blas_thread
-from ...core.validation import as_2d_finite, check_positive, check_times
+from ...core.validation import check_positive
 from ...core.dmp import warn_representation
 from ...core.errors import NotFittedError
-from .fitted import FITTED_NAMES, FittedPrimitive
+from .fitted import FittedPrimitive
 from .prediction import Prediction
-from ...core.preprocessing import resample_uniform
 from .stream import Stream
+
+if TYPE_CHECKING:
+    from ...core.basis import Basis
+    from ...core.dmp import LinearRollout
+    from ...core.gaussian import GaussianPrior
+    from ...core.preprocessing import PCA
+    from ...phase.learned import LearnedPhase
+    from .calibration import Calibration
 
 __all__ = ["InteractionPrimitive", "Prediction", "Stream"]
 
@@ -40,6 +49,32 @@ SIGMA2_RULES = ("cv", "residual")
 CALIBRATE_RULES = ("with-cv",)
 #: Values of releases up to 0.1.0 that model files may still hold: read as their names of today (interprim.io)
 OLD_VALUES = {"phase_method": {"auto": "cv"}, "sigma2": {"auto": "residual"}, "calibrate": {"auto": "with-cv"}}
+
+
+class FittedView:
+    """A read-only attribute of the estimator that shows the fitted state's attribute of the same name
+    (``InteractionPrimitive.prior_`` is ``InteractionPrimitive.fitted_.prior_``); like a ``property`` without a
+    setter, and ``AttributeError`` before ``fit``."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.__doc__ = f"``fitted_.{name}``: a read-only view of the fitted state (see the class docstring)."
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        st = obj.__dict__.get("fitted_")
+        if st is None:
+            raise AttributeError(f"{self.name} (this InteractionPrimitive is not fitted yet)")
+        return getattr(st, self.name)
+
+    def __set__(self, obj, value):
+        raise AttributeError(f"{self.name} is a read-only view of the fitted state; use with_fitted({self.name}=...)")
+
+
+def fitted_view(name: str) -> Any:
+    """A :class:`FittedView` of ``name`` (typed ``Any``, so the class body can annotate each view's type)."""
+    return FittedView(name)
 
 
 class InteractionPrimitive(Predictor):
@@ -209,6 +244,40 @@ class InteractionPrimitive(Predictor):
     _CHECKS_INPUT = True  # its fitted state and stream compute input_distance / out_of_range themselves
     OLD_VALUES = OLD_VALUES
 
+    # the fitted attributes: read-only views of the fitted state (``fitted_``; the Attributes section above)
+    observed_dofs_: list[int] = fitted_view("observed_dofs_")
+    controlled_dofs_: list[int] = fitted_view("controlled_dofs_")
+    n_dofs_: int = fitted_view("n_dofs_")
+    columns_: list[str] | None = fitted_view("columns_")
+    dt_: float = fitted_view("dt_")
+    n_demos_: int = fitted_view("n_demos_")
+    durations_: np.ndarray = fitted_view("durations_")
+    mean_duration_: float = fitted_view("mean_duration_")
+    beta_y_: float = fitted_view("beta_y_")
+    pca_observed_: PCA | None = fitted_view("pca_observed_")
+    pca_controlled_: PCA | None = fitted_view("pca_controlled_")
+    n_observed_latent_: int = fitted_view("n_observed_latent_")
+    n_latent_: int = fitted_view("n_latent_")
+    basis_: Basis = fitted_view("basis_")
+    rollout_: LinearRollout = fitted_view("rollout_")
+    params_per_dof_: int = fitted_view("params_per_dof_")
+    obs_index_: np.ndarray = fitted_view("obs_index_")
+    thetas_: np.ndarray = fitted_view("thetas_")
+    start_position_: np.ndarray = fitted_view("start_position_")
+    start_velocity_: np.ndarray = fitted_view("start_velocity_")
+    prior_: GaussianPrior = fitted_view("prior_")
+    representation_: dict = fitted_view("representation_")
+    sigma2_: float = fitted_view("sigma2_")
+    phase_sigma2_: float | None = fitted_view("phase_sigma2_")
+    selection_: dict = fitted_view("selection_")
+    phase_model_: LearnedPhase | None = fitted_view("phase_model_")
+    phase_method_: str = fitted_view("phase_method_")
+    reference_: np.ndarray = fitted_view("reference_")
+    input_mean_: np.ndarray = fitted_view("input_mean_")
+    input_std_: np.ndarray = fitted_view("input_std_")
+    input_limit_: float = fitted_view("input_limit_")
+    calibration_: Calibration | None = fitted_view("calibration_")
+
     def __init__(self, observed_dofs, n_basis: int = 20, alpha_y: float = 25.0, beta_y: float | None = None,
                  alpha_x: float = 3.0, sigma2="cv", covariance: str = "shrinkage", ridge: float = 1e-6,
                  observation: str = "position", smoothing_window: int | None = None, pca_components=None,
@@ -325,66 +394,20 @@ class InteractionPrimitive(Predictor):
         return obs, ctrl, kk
 
     # ------------------------------------------------------------------ fitting
-    @one_blas_thread
-    def fit(self, demos, dt: float | None = None, times=None, columns=None):
-        """Learn the Interaction Primitive from demonstrations of both agents.
-
-        Parameters
-        ----------
-        demos : list of array_like, shape (T_j, D)
-            One array per demonstration, time on axis 0, the columns of both
-            agents (``observed_dofs`` for the human).  Lengths may differ.
-        dt : float, optional
-            Sampling interval in seconds of uniformly sampled demos (default 0.01 if
-            neither ``dt`` nor ``times`` is given).
-            An :class:`interprim.datasets.Demonstrations` (any loader's result) is
-            taken as it is: its ``dt`` (or ``times``) and column names are used
-            unless given here.
-        times : list of array_like, shape (T_j,), optional
-            Time stamps in seconds per demonstration; irregular sampling is
-            resampled onto a uniform grid at the median interval.
-        columns : list of str, optional
-            Names of the ``D`` columns; kept as ``columns_`` and in the model file.
-
-        Returns
-        -------
-        self
-        """
-        if hasattr(demos, "demos") and hasattr(demos, "times"):  # interprim.datasets.Demonstrations
-            if dt is None and times is None:
-                if getattr(demos, "dt", None) is not None:
-                    dt = demos.dt
-                else:
-                    times = list(demos.times)
-            if columns is None:
-                columns = getattr(demos, "columns", None)
-            demos = list(demos.demos)
-        if isinstance(demos, np.ndarray) and demos.ndim == 3:
-            demos = list(demos)
-        if not isinstance(demos, (list, tuple)):
-            raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
-        if len(demos) < 2:
-            raise ValueError(f"at least 2 demonstrations are needed to learn a distribution, got {len(demos)}")
-        arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
-        D = arrays[0].shape[1]
-        for j, a in enumerate(arrays):
-            if a.shape[1] != D:
-                raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
-        if columns is not None:
-            columns = [str(c) for c in columns]
-            if len(columns) != D:
-                raise ValueError(f"columns has {len(columns)} names but the demonstrations have {D} columns")
+    def _fit(self, data: TrainingSet) -> None:
+        """Learn the Interaction Primitive from the validated training set (:meth:`fit` of
+        :class:`~interprim.models.base.Predictor`: a list of ``(T_j, D)`` arrays with ``dt`` or ``times``, a
+        :class:`~interprim.datasets.Demonstrations` or a :class:`~interprim.models.training.TrainingSet`): at
+        least 2 demonstrations of at least 5 frames (``smoothing_window`` when larger); the column names are
+        kept as ``columns_`` and in the model file."""
+        if len(data) < 2:
+            raise ValueError(f"at least 2 demonstrations are needed to learn a distribution, got {len(data)}")
+        arrays = list(data.arrays)
+        D = data.n_dofs
+        columns = None if data.columns is None else list(data.columns)
+        dt = data.dt
         obs, ctrl, kk = self._check_params(D, len(arrays))
         min_frames = max(5, self.smoothing_window or 0)
-        if times is not None:
-            if dt is not None:
-                raise ValueError("give either dt or times, not both")
-            if len(times) != len(arrays):
-                raise ValueError(f"times has {len(times)} entries but there are {len(arrays)} demos")
-            ts = [check_times(t, a.shape[0], f"times[{j}]") for j, (t, a) in enumerate(zip(times, arrays))]
-            dt = float(np.median(np.concatenate([np.diff(t) for t in ts])))
-            arrays = [resample_uniform(a, t, dt=dt)[0] for a, t in zip(arrays, ts)]
-        dt = 0.01 if dt is None else check_positive(dt, "dt")
         for j, a in enumerate(arrays):
             if a.shape[0] < min_frames:
                 raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
@@ -397,8 +420,8 @@ class InteractionPrimitive(Predictor):
         self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk)
         if chosen is not None:
             self.fitted_.selection_["n_basis"] = chosen  # fit assigns what the choice returned
-        warn_representation(self.fitted_.representation_, int(params["n_basis"]))  # at the caller's line
-        return self
+        # at the caller's line: here, Predictor.fit, its one-BLAS-thread wrapper, the caller
+        warn_representation(self.fitted_.representation_, int(params["n_basis"]), stacklevel=5)
 
     # ------------------------------------------------------------------ the fitted state
     def _state(self) -> FittedPrimitive:
@@ -438,33 +461,6 @@ class InteractionPrimitive(Predictor):
         new.fitted_ = self.fitted_.with_fitted(**fitted)
         return new
 
-    # the estimator's methods of the fitted state before it had its own object (kept for code written against
-    # them; the library itself uses the state's)
-    def latent_map(self):
-        """Linear map ``M`` (D x D_latent) and offset (D,) from latent DoFs to data columns."""
-        return self._fitted("latent_map").latent_map()
-
-    def controlled_map(self):
-        """``(M_c^T, off_c)`` mapping latent controlled DoFs to their data columns, or ``(None, None)`` if identity."""
-        return self._fitted("controlled_map").controlled_map()
-
-    def observed_to_latent(self, o):
-        """Frames ``(t, len(observed_dofs))`` of the observed agent in the model's latent DoFs (PCA, Sec. IV)."""
-        return self._fitted("observed_to_latent").observed_to_latent(o)
-
-    def robot_start(self, robot_state):
-        """Start ``(y0, v0)`` of the controlled agent's latent DoFs from ``robot_state`` (see :meth:`predict`)."""
-        return self._fitted("robot_start").robot_start(robot_state)
-
-    def condition(self, stats, need_cov: bool):
-        """Eq. 16-18 from sufficient statistics (:meth:`FittedPrimitive.condition
-        <interprim.models.primitive.fitted.FittedPrimitive.condition>`)."""
-        return self._fitted("condition").condition(stats, need_cov)
-
-    def predict_latent(self, z, n_star, cost, robot_state, need_cov=False, robot_start=None, workspace=None):
-        """:meth:`FittedPrimitive.predict_latent <interprim.models.primitive.fitted.FittedPrimitive.predict_latent>`."""
-        return self._state().predict_latent(z, n_star, cost, robot_state, need_cov, robot_start, workspace)
-
     def phase_method_used(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"cv"`` the one ``fit`` chose (``phase_method_``)."""
         if self.phase_method == "cv":
@@ -473,19 +469,13 @@ class InteractionPrimitive(Predictor):
 
     def input_distance(self, frames) -> float:
         """Largest standardised distance of observed frames ``(t, D_o)`` (data columns) from the training frames
-        (:mod:`interprim.core.input_range`); NaN for a model file without those statistics."""
-        return self._fitted("input_distance").input_distance(frames)
-
-    def cached(self, name: str, key: tuple, build):
-        """The fitted state's store of derived values (:meth:`FittedPrimitive.cached
-        <interprim.models.primitive.fitted.FittedPrimitive.cached>`)."""
-        return self._fitted("cached").cached(name, key, build)
-
-    def _fitted(self, what: str) -> FittedPrimitive:
-        self._check_fitted(what)
-        return self.fitted_
+        (:mod:`interprim.core.input_range`, the contract of :class:`~interprim.models.base.Predictor`); NaN for a
+        model file without those statistics."""
+        self._check_fitted("input_distance")
+        return self.fitted_.input_distance(frames)
 
     # ------------------------------------------------------------------ prediction
+    @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> Prediction:
         """Predict the interaction from a partial observation of the observed agent.
@@ -573,22 +563,6 @@ class InteractionPrimitive(Predictor):
         from ..._summary import summary
 
         return summary(self, fit_seconds)
-
-
-def _view(name: str) -> property:
-    def get(self):
-        st = self.__dict__.get("fitted_")
-        if st is None:
-            raise AttributeError(f"{name} (this InteractionPrimitive is not fitted yet)")
-        return getattr(st, name)
-
-    get.__doc__ = f"``fitted_.{name}``: a read-only view of the fitted state (see the class docstring's Attributes)."
-    return property(get)
-
-
-for _name in FITTED_NAMES:  # the fitted attributes, read-only views of the fitted state
-    setattr(InteractionPrimitive, _name, _view(_name))
-del _name
 
 
 #: The numbers of basis functions per DoF that ``n_basis="cv"`` compares (capped by the demonstrations' length).

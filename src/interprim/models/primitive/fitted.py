@@ -1,7 +1,7 @@
 """What an Interaction Primitive learned, and the one path of its predictions (paper Sec. III, Eq. 1-18).
 
-:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: the
-hyper-parameters it was fitted with, the DMP basis and rollout (Eq. 1-2), the per-agent PCA and latent maps
+:class:`FittedPrimitive` is the fitted state of an :class:`~interprim.models.primitive.estimator.InteractionPrimitive`:
+the hyper-parameters it was fitted with, the DMP basis and rollout (Eq. 1-2), the per-agent PCA and latent maps
 (Sec. IV), the demonstrations' parameters and the prior ``p(theta)`` (Eq. 10) with its conditioner
 (Eq. 16-18), the observation noise, the phase model and its reference (Sec. III-B), the observation
 statistics (Eq. 13-15), the calibration and the input range.  Every ``fit`` builds a new one
@@ -13,10 +13,11 @@ in its own store (:meth:`FittedPrimitive.cached`), so a refit, which makes a new
 derived from the previous fit.
 
 Its attribute names are the estimator's fitted attributes (names ending in ``_``, documented in
-:class:`~interprim.models.primitive.estimator.InteractionPrimitive`) and constructor parameters, so that a reader finds one
-name for one thing; the estimator shows them as read-only views.  :class:`~interprim.models.primitive.prediction.Prediction`,
-:class:`~interprim.models.primitive.stream.Stream`, :mod:`interprim.phase`, :mod:`interprim.models.primitive.selection`,
-:mod:`interprim.models.primitive.calibration` and :mod:`interprim.models.recognition` work on this object, not on the estimator.
+:class:`~interprim.models.primitive.estimator.InteractionPrimitive`) and constructor parameters, so that a reader finds
+one name for one thing; the estimator shows them as read-only views.
+:class:`~interprim.models.primitive.prediction.Prediction`, :class:`~interprim.models.primitive.stream.Stream`,
+:mod:`interprim.phase`, :mod:`interprim.models.primitive.selection`, :mod:`interprim.models.primitive.calibration` and
+:mod:`interprim.models.recognition` work on this object, not on the estimator.
 """
 
 from __future__ import annotations
@@ -25,16 +26,17 @@ import copy
 
 import numpy as np
 
-from ...core.blas import one_blas_thread, single_thread
 from ...core._compiled import registry as kernels
-from ...core.validation import as_2d_finite, check_positive, check_times
 from ...core.basis import Basis
+from ...core.blas import one_blas_thread, single_thread
+from ...core.cache import DerivedCache
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from ...core.gaussian import Posterior, fit_prior
 from ...core.input_range import fit_input_range, input_distance, mark
+from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
+from ...core.validation import as_2d_finite, check_positive, check_times
 from ...phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
-from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
 
 __all__ = ["FittedPrimitive", "PARAM_NAMES", "FITTED_NAMES"]
 
@@ -74,13 +76,17 @@ class FittedPrimitive:
     :meth:`with_fitted`, :meth:`with_params`, :meth:`to_state` / :meth:`from_state`.
     """
 
+    # constructor parameters, installed from ``params`` (PARAM_NAMES) by __init__ and read as attributes
+    phase_method: str
+    min_observed: int
+
     def __init__(self, params: dict, fitted: dict | None = None):
         missing = [k for k in PARAM_NAMES if k not in params]
         if missing:
             raise ValueError(f"FittedPrimitive: parameters {missing} missing")
         self.params = {k: params[k] for k in PARAM_NAMES}
         self.__dict__.update(self.params)
-        self._derived = {}
+        self._derived = DerivedCache()
         if fitted:
             bad = [k for k in fitted if not k.endswith("_") or k.startswith("_")]
             if bad:
@@ -102,18 +108,18 @@ class FittedPrimitive:
         self.params_per_dof_ = q  # n_basis + 1 entries of theta per DoF (Eq. 2)
         self.obs_index_ = np.arange(self.n_observed_latent_ * q).reshape(self.n_observed_latent_, q)
 
-    def with_fitted(self, **fitted) -> "FittedPrimitive":
+    def with_fitted(self, **fitted) -> FittedPrimitive:
         """A copy with some fitted attributes (names ending in ``_``) replaced, e.g. the prior re-estimated on a
-        subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the other
-        fitted arrays and has its own store of derived values; ``self`` is unchanged."""
+        subset of the demonstrations (:func:`interprim.models.primitive.calibration.fold_model`).  The copy shares the
+        other fitted arrays and has its own store of derived values; ``self`` is unchanged."""
         bad = [k for k in fitted if not k.endswith("_") or k.startswith("_") or not hasattr(self, k)]
         if bad:
             raise ValueError(f"with_fitted: {bad} are not fitted attributes of this model")
         new = copy.copy(self)
-        new.__dict__.update(fitted, _derived={})
+        new.__dict__.update(fitted, _derived=DerivedCache())
         return new
 
-    def with_params(self, **params) -> "FittedPrimitive":
+    def with_params(self, **params) -> FittedPrimitive:
         """A copy that predicts with some parameters changed after the fit (``phase_method``: the estimator's
         parameter set after ``fit``).  It shares the store of derived values, which depend on the fitted
         arrays only."""
@@ -133,17 +139,7 @@ class FittedPrimitive:
         so a refit never sees a value derived from the previous fit.  Modules that need derived arrays of the
         model (the phase likelihood's factored prior, for example) keep them here.
         """
-        store = self._derived
-        hit = store.get(name)
-        if hit is not None and len(hit[0]) == len(key):
-            for a, b in zip(hit[0], key):  # per frame of a stream: a plain loop, no generator
-                if a is not b:
-                    break
-            else:
-                return hit[1]
-        value = build()
-        store[name] = (tuple(key), value)
-        return value
+        return self._derived.get_or_build(name, key, build)
 
     # ------------------------------------------------------------------ persistence
     def to_state(self):
@@ -154,22 +150,23 @@ class FittedPrimitive:
         return model_state(self)
 
     @classmethod
-    def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> "FittedPrimitive":
+    def from_state(cls, arrays: dict, meta: dict, params: dict, source="<state>") -> FittedPrimitive:
         """The state of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's), every array checked
-        (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters (a file's
-        ``meta["params"]`` with the defaults filled in)."""
+        (:func:`interprim.models.primitive.state_io.fitted_from_state`); ``params``: the estimator's complete parameters
+        (a file's ``meta["params"]`` with the defaults filled in)."""
         from .state_io import fitted_from_state
 
         return cls(params, fitted_from_state(arrays, meta, params, source))
 
     # ------------------------------------------------------------------ fitting
     @classmethod
-    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> "FittedPrimitive":
+    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> FittedPrimitive:
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
-        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference (Sec. III-B), the
-        input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``, ``ctrl``: the agents'
-        columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter check returns)."""
+        with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference
+        (Sec. III-B), the input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``,
+        ``ctrl``: the agents' columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter
+        check returns)."""
         st = cls(params)
         cls._learn(st, arrays, dt, columns, obs, ctrl, kk)
         return st
@@ -407,8 +404,8 @@ class FittedPrimitive:
     @one_blas_thread
     def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
                 phase: float | None = None) -> Prediction:
-        """:meth:`InteractionPrimitive.predict <interprim.models.primitive.estimator.InteractionPrimitive.predict>` (the same
-        arguments): validate and resample the partial observation, estimate its phase, condition (Eq. 13-18)."""
+        """:meth:`InteractionPrimitive.predict <interprim.models.primitive.estimator.InteractionPrimitive.predict>` (the
+        same arguments): validate and resample the partial observation, estimate its phase, condition (Eq. 13-18)."""
         n_cols = len(self.observed_dofs_)
         o = as_2d_finite(partial, "partial", n_cols=n_cols, min_rows=1)
         if times is not None:
@@ -429,7 +426,8 @@ class FittedPrimitive:
         return mark(self, p, dist)
 
     def stream(self, robot_state=None):
-        """Online predictor that takes one observed frame at a time (:class:`~interprim.models.primitive.stream.Stream`)."""
+        """Online predictor that takes one observed frame at a time
+        (:class:`~interprim.models.primitive.stream.Stream`)."""
         from .stream import Stream
 
         return Stream(self, robot_state)
@@ -518,8 +516,8 @@ class FittedPrimitive:
         return (X.T @ X, X.T @ Y, float(np.sum(Y * Y)), Y.size), y0
 
     def conditioner(self):
-        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior (:class:`~interprim.core.gaussian.LowRankConditioner`),
-        or ``None`` when the prior has no such form."""
+        """Precomputed Eq. 18 for the low-rank-plus-diagonal prior
+        (:class:`~interprim.core.gaussian.LowRankConditioner`), or ``None`` when the prior has no such form."""
         return self.cached("conditioner", (self.prior_, self.obs_index_), lambda: self.prior_.conditioner(
             self.obs_index_, getattr(self, "thetas_", None), float(self.ridge)))
 

@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 
-from ...core.blas import one_blas_thread
 from ...core._compiled import registry as kernels
-from ..base import BasePrediction
+from ...core.blas import one_blas_thread
 from ...core.gaussian import Posterior, sample
+from ..base import BasePrediction
 
 __all__ = ["Prediction", "MeanRollout"]
 
@@ -76,7 +76,7 @@ class Prediction(BasePrediction):
         self.out_of_range = False
 
     @property
-    def conditioned(self) -> bool:
+    def conditioned(self) -> bool:  # type: ignore[override]  # an attribute of GridPrediction, computed here
         """Whether the posterior is conditioned on the observed frames.  ``False`` while fewer than the
         model's ``min_observed`` frames (or only a phase of 0) were seen: the prediction is then the prior
         (the mean interaction from the first frame), ``log_likelihood`` is 0 and ``phase``/``speed``/``duration``
@@ -104,6 +104,7 @@ class Prediction(BasePrediction):
         access after a mean-only (streaming) update."""
         if self._post.cov is None:  # a mean-only update (streaming): compute the covariance on demand
             self._post = self._m.condition(self._stats, need_cov=True)
+        assert self._post.cov is not None  # asked for above
         return self._post.cov
 
     @property
@@ -152,8 +153,8 @@ class Prediction(BasePrediction):
 
     def _calibration_scale(self, n: int):
         """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``
-        (:mod:`interprim.models.primitive.calibration`: per column, at this prediction's phase and each point's look-ahead
-        ``u - phase``), or ``None``."""
+        (:mod:`interprim.models.primitive.calibration`: per column, at this prediction's phase and each point's
+        look-ahead ``u - phase``), or ``None``."""
         m = self._m
         cal = getattr(m, "calibration_", None)
         if cal is None:
@@ -166,8 +167,8 @@ class Prediction(BasePrediction):
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)``.
 
         ``calibrated=True`` (default): the posterior std (Eq. 18) scaled by the model's
-        :class:`~interprim.models.primitive.calibration.Calibration` (held-out errors on the training demonstrations), per
-        column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
+        :class:`~interprim.models.primitive.calibration.Calibration` (held-out errors on the training demonstrations),
+        per column, at this prediction's phase and at each point's look-ahead ``u - phase`` (the observed past
         included), so that a 90 % band ``trajectory +- 1.645 std`` covers about 90 % of what happens;
         ``False``, or a model without calibration: the posterior std itself.
         """
@@ -291,7 +292,7 @@ class Prediction(BasePrediction):
         obs = m.observed_dofs_
         return s, lat @ M[obs, :n_o].T + off[obs]
 
-    def mean_rollout(self, n: int = 100, columns=None) -> "MeanRollout":
+    def mean_rollout(self, n: int = 100, columns=None) -> MeanRollout:
         """A :class:`MeanRollout`: ``trajectory(n)[:, columns]`` for this and every later prediction of the same
         model, with the design of the grid built once."""
         return MeanRollout(self._m, n, columns)

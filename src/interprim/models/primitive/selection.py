@@ -61,14 +61,22 @@ from typing import NamedTuple
 import numpy as np
 
 from ...core.blas import single_thread
-from ...core.cv import fold_labels, n_folds as _n_folds, observed_frames, within_one_se
-from ...core.gaussian import (GaussianPrior, compress_observation, fit_prior, lowrank_case, shrink_cross,
-                       shrinkage_intensity)
+from ...core.cv import fold_labels, observed_frames, within_one_se
+from ...core.cv import n_folds as _n_folds
+from ...core.gaussian import (
+    GaussianPrior,
+    compress_observation,
+    fit_prior,
+    lowrank_case,
+    shrink_cross,
+    shrinkage_intensity,
+)
+from ...core.preprocessing import time_normalise
 from ...phase.dtw import open_end_dtw
 from ...phase.likelihood import observation_design
-from ...core.preprocessing import time_normalise
 
-__all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID", "DEFAULT_SIGMA2_FACTORS"]
+__all__ = ["select_hyperparameters", "Selection", "DEFAULT_FRACTIONS", "DEFAULT_SHRINKAGE_GRID",
+           "DEFAULT_SIGMA2_FACTORS"]
 
 DEFAULT_FRACTIONS = (0.2, 0.4, 0.6, 0.8)
 DEFAULT_SHRINKAGE_GRID = (0.0, 0.02, 0.1, 0.3, 0.6, 0.95)
@@ -222,7 +230,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                         if kind0 == "position":
                             ll[a] += outs[b][1]
             if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
-                for j, designs, base, comp in held:
+                for _j, designs, _base, comp in held:
                     X, Y = designs["position"]
                     ll[a] += lowrank_case(prior, n_o, q, X, Y, s2_grid["position"], need_mean=False,
                                            need_ll=True, compressed=comp["position"])[1]
@@ -395,7 +403,7 @@ def _refined_phase_error(model, kept, s2, b) -> float:
     s2a = np.array([s2])
     errs = []
     for prior, zo, M, s_true, grid, curves in kept:
-        def f(s):
+        def f(s, prior=prior, zo=zo, M=M):  # this case's arrays (f is minimised within the iteration)
             X, Y = observation_design(model, zo, float(s), "position")
             return -float(lowrank_case(prior, n_o, q, X, Y, s2a, need_mean=False, need_ll=True)[1][0]
                           + log_speed_prior(model, M, s))

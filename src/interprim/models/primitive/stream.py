@@ -10,27 +10,28 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.blas import one_blas_thread
 from ...core._compiled import registry as kernels
-from ..base import BaseStream
+from ...core.blas import one_blas_thread
+from ...core.input_range import mark, mark_duration
 from ...core.validation import as_2d_finite, as_frame
-from ...core.input_range import mark
 from ...phase import IncrementalDTW, estimate_phase, movement_prefix
+from ..base import BaseStream
 from .prediction import Prediction
 
 __all__ = ["Stream"]
 
 
 class Stream(BaseStream):
-    """Online use of a fitted :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: one observed frame at a time.
+    """Online use of a fitted :class:`~interprim.models.primitive.estimator.InteractionPrimitive`: one observed frame at
+    a time.
 
     Each :meth:`update` adds one column to the open-end DTW (Eq. 5-8, ``O(N D)``)
     and conditions on all frames seen so far at their new phases (Eq. 15-18).
     :meth:`extend` adds several frames at once (a caller that fell behind) and conditions once, for
     the last of them.  The frame buffer is preallocated and grows by doubling.
 
-    With the likelihood phase (what ``phase_method="cv"`` picks on most data) the phase is tracked on a lattice of speeds whose
-    scores are extended frame by frame (:class:`interprim.phase.tracking.Tracker`) and then taken
+    With the likelihood phase (what ``phase_method="cv"`` picks on most data) the phase is tracked on a lattice of
+    speeds whose scores are extended frame by frame (:class:`interprim.phase.tracking.Tracker`) and then taken
     to the maximum of the log posterior by the batch search's own last step, so that the stream's
     phase, and hence its prediction, is :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict`'s
     on the same frames (issue 12: within 1e-3, measured ~1e-6).  Eq. 16-18 are then evaluated at that
@@ -101,6 +102,7 @@ class Stream(BaseStream):
             if p.out_of_range and not self._warned:
                 self._warned = True
                 mark(m, p, self._max_dist)
+        mark_duration(m, p)  # a predicted duration far outside the demonstrated ones
         return p
 
     def _update(self, frame, need_cov: bool = False) -> Prediction:
@@ -151,8 +153,8 @@ class Stream(BaseStream):
         :class:`Prediction` for the last of them.
 
         The answer is the one ``k`` calls of :meth:`update` give for their last frame, exactly (the same
-        numbers), and so the one :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` gives for all the
-        frames seen: the DTW and learned phases are functions of the frames, and with the likelihood phase
+        numbers), and so the one :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.predict` gives for
+        all the frames seen: the DTW and learned phases are functions of the frames, and with the likelihood phase
         the tracker walks its lattice frame by frame as :meth:`update` does, so that its state does not
         depend on how frames were grouped.  It costs less: for each of the ``k`` frames only
         what the stream keeps from a frame is done, namely the DTW column (Eq. 5-8, ``O(N D_o)``), the

@@ -1,0 +1,278 @@
+"""The conditioning methods of :class:`~interprim.models.coupling.CouplingModel`, one small type each.
+
+Every method predicts ``mu_y + sum_i alpha_i (y_i - mu_y)``, a linear smoother of the training rows (Eq. 18 of Ben
+Amor et al., ICRA 2014, with the prefix observation model of :mod:`interprim.models.coupling`).  A
+:class:`Conditioner` gives the row weights ``alpha`` ``(Q, R)`` of a batch of ``Q`` queries from a
+:class:`Context`: the centred training rows and queries of one training set, shared by every candidate (what more
+than one candidate needs -- the rows' SVD, the query-row distances, the joint PCA -- is computed once, on first use).
+
+======================  =====================================================================================
+:class:`Mean`           ``"mean"``: the prior mean (no coupling), ``alpha = 0``
+:class:`Ridge`          ``"ridge"``: the sample covariance with Eq. 16's noise ``sigma^2 = lambda tr(S_xx) / p``
+:class:`PPCA`           ``"ppca"``: a probabilistic-PCA (reduced-rank) joint covariance of rank ``r``
+:class:`Kernel`         ``"kernel"``: Gaussian weights of the distance between prefixes (relative bandwidth)
+:class:`Blend`          ``"blend"``: ``w ridge + (1 - w) kernel`` (model averaging of two linear smoothers)
+======================  =====================================================================================
+
+A conditioner is made from the ``(method, param)`` a model file stores by :func:`conditioner`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+__all__ = ["Context", "Conditioner", "Mean", "Ridge", "PPCA", "Kernel", "Blend", "CONDITIONERS", "conditioner",
+           "target_block"]
+
+
+def target_block(P, Ydc, R):
+    """``P L / b`` (R x rank C): the target block of :class:`PPCA`'s ``Z``, with ``C = Ydc Ydc^T = L L^T``
+    (eigenpairs of the demonstrations' Gram matrix, rank ``<= n_u - 1``) and ``b^2 = tr(P C P^T) / R``."""
+    ec, Vc = np.linalg.eigh(Ydc @ Ydc.T)
+    b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
+    kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
+    return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
+
+
+class Context:
+    """What every conditioner of one training set and one batch of queries shares; the base fields can also be
+    read as a mapping (``ctx["Xc"]``, ``dict(ctx)``).
+
+    Parameters
+    ----------
+    Xc : ndarray, shape (R, p)
+        The training rows, centred (grouped by demonstration, every demonstration with the same number of rows).
+    xc : ndarray, shape (Q, p)
+        The queries, centred by the rows' mean.
+    P : ndarray, shape (R, n)
+        The group indicator: ``P[i, j] = 1`` when row ``i`` belongs to demonstration ``j``.
+    ybar : ndarray, shape (q,)
+        The demonstrations' mean target.
+    Ydc : ndarray, shape (n, q)
+        The demonstrations' centred targets.
+    ylow : ndarray, optional
+        :func:`target_block` of ``P`` and ``Ydc`` when the caller has it (it does not depend on the phase).
+    """
+
+    FIELDS: ClassVar[tuple[str, ...]] = ("R", "Xc", "xc", "P", "ybar", "Ydc")
+
+    def __init__(self, Xc: np.ndarray, xc: np.ndarray, P: np.ndarray, ybar: np.ndarray, Ydc: np.ndarray,
+                 ylow: np.ndarray | None = None):
+        self.R = Xc.shape[0]
+        self.Xc, self.xc, self.P, self.ybar, self.Ydc, self.ylow = Xc, xc, P, ybar, Ydc, ylow
+        self._svd: tuple | None = None
+        self._distances: tuple | None = None
+        self._pca: tuple | None = None
+
+    @classmethod
+    def of(cls, X: np.ndarray, groups: np.ndarray, Ydemo: np.ndarray, x: np.ndarray) -> Context:
+        """The context of rows ``X`` (R, p) of demonstrations ``groups`` (R,), the demonstrations' targets ``Ydemo``
+        (n, q) and queries ``x`` (Q, p)."""
+        R = X.shape[0]
+        mu = X.mean(axis=0)
+        ug, inv = np.unique(groups, return_inverse=True)
+        P = np.zeros((R, ug.size))
+        P[np.arange(R), inv] = 1.0
+        Yd = Ydemo[ug]
+        ybar = Yd.mean(axis=0)
+        return cls(X - mu, x - mu, P, ybar, Yd - ybar)
+
+    @classmethod
+    def from_mapping(cls, m) -> Context:
+        """A context from a mapping with the base fields (and optionally ``"ylow"``)."""
+        return m if isinstance(m, Context) else cls(m["Xc"], m["xc"], m["P"], m["ybar"], m["Ydc"], m.get("ylow"))
+
+    def keys(self):
+        """The base fields' names (with :meth:`__getitem__`, ``dict(ctx)`` works)."""
+        return self.FIELDS
+
+    def __getitem__(self, name: str):
+        if name not in self.FIELDS:
+            raise KeyError(name)
+        return getattr(self, name)
+
+    def svd(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(U, S, xc V)`` of the thin SVD ``Xc = U S V^T`` (computed once)."""
+        if self._svd is None:
+            U, S, Vt = np.linalg.svd(self.Xc, full_matrices=False)
+            self._svd = (U, S, self.xc @ Vt.T)
+        return self._svd
+
+    def distances(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(d2, med)``: squared distances (Q, R) of the queries to the rows and each query's median (computed
+        once)."""
+        if self._distances is None:
+            xc, Xc = self.xc, self.Xc
+            d2 = (np.sum(xc**2, axis=1)[:, None] + np.sum(Xc**2, axis=1)[None, :] - 2.0 * xc @ Xc.T)
+            d2 = np.maximum(d2, 0.0)
+            self._distances = (d2, np.maximum(np.median(d2, axis=1, keepdims=True), 1e-300))
+        return self._distances
+
+    def pca(self) -> tuple:
+        """``(a, Z, V, S, U, dim)``: the joint PCA of :class:`PPCA` (computed once; see there)."""
+        if self._pca is None:
+            R, Xc, P, Ydc = self.R, self.Xc, self.P, self.Ydc
+            p = Xc.shape[1]
+            a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
+            # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
+            # and the demonstrations only, not on the phase or the query)
+            PLb = self.ylow if self.ylow is not None else target_block(P, Ydc, R)
+            # The rows' Gram matrix Xc Xc^T / a2 + P C P^T / b2 (R x R) is Z Z^T with Z = [Xc / a, P L / b] and
+            # C = Ydc Ydc^T = L L^T: its eigenpairs come from the (p + rank C)-square Z^T Z = V diag(S^2) V^T
+            # (U = Z V / S), the same SVD of [Xc / a, Yc / b] at a fraction of the cost (R = n_demos x n_jitter rows).
+            a = math.sqrt(a2)
+            Z = np.concatenate([Xc / a, PLb], axis=1)
+            if Z.shape[0] <= Z.shape[1]:  # fewer rows than columns (no jitter): the rows' own Gram matrix
+                e, U = np.linalg.eigh(Z @ Z.T)
+                e, U = e[::-1], U[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                U, S = U[:, keep], np.sqrt(e[keep])
+                V = (Z.T @ U) / S  # right singular vectors
+            else:
+                e, V = np.linalg.eigh(Z.T @ Z)
+                e, V = e[::-1], V[:, ::-1]
+                keep = e > 1e-12 * max(float(e[0]), 1e-300)
+                V, S, U = V[:, keep], np.sqrt(e[keep]), None  # U = Z V / S, formed for the r columns used
+            # x block of the right singular vectors: V[:p] (Z^T U = V S and the x block of Z^T U S^-1 is Vx^T)
+            self._pca = (a, Z, V, S, U, Ydc.shape[1] + p)
+        return self._pca
+
+
+class Conditioner:
+    """One conditioning method with its hyper-parameter: the row weights of Eq. 18 for its covariance model.
+
+    Subclasses set ``name`` (the method's name in :data:`CONDITIONERS`, in ``selection_`` and in model files) and
+    implement :meth:`weights`; ``param`` is what a model file stores.
+    """
+
+    name: ClassVar[str] = ""
+
+    def __init__(self, param: Any = None):
+        self.param = param
+
+    @property
+    def key(self) -> tuple[str, Any]:
+        """``(name, param)``, as ``CouplingModel.method_`` / ``param_`` and a model file hold them."""
+        return self.name, self.param
+
+    def weights(self, ctx: Context) -> np.ndarray:  # pragma: no cover - interface
+        """Row weights ``alpha`` (Q, R): the prediction is ``ybar + sum_i alpha_i (y_i - ybar)``."""
+        raise NotImplementedError
+
+    def predict(self, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (Q, q) and leverage ``h`` (Q,) of the linear smoother (module docstring of
+        :mod:`interprim.models.coupling`: ``h = sum_j (sum_{i in demo j} alpha_i + 1/N)^2``)."""
+        A = self.weights(ctx)
+        G = A @ ctx.P  # per demonstration: the sum of its rows' weights
+        mean = ctx.ybar + G @ ctx.Ydc
+        G += 1.0 / ctx.P.shape[1]  # the weights of the mean itself
+        return mean, np.sum(G**2, axis=1)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.param!r})"
+
+
+class Mean(Conditioner):
+    """The prior mean: no coupling (``alpha = 0``)."""
+
+    name = "mean"
+
+    def weights(self, ctx: Context) -> np.ndarray:
+        """Zeros (Q, R)."""
+        return np.zeros((ctx.xc.shape[0], ctx.R))
+
+
+class Ridge(Conditioner):
+    """Eq. 18 with the sample covariance and the noise ``sigma^2 = lambda tr(S_xx) / p`` of Eq. 16 as the
+    regulariser (ridge regression from the prefix to the trajectories); ``param`` is ``lambda``.
+
+    ``mu_y|x - mu_y = S_yx (S_xx + sigma^2 I)^-1 (x - mu_x)`` with ``S_yx = Y_c^T X_c / R``, i.e.
+    ``alpha = X_c (S_xx + sigma^2 I)^-1 (x - mu_x) / R``.
+    """
+
+    name = "ridge"
+
+    def weights(self, ctx: Context) -> np.ndarray:
+        """``alpha`` (Q, R) on the row space of ``X_c``: ``V diag(1 / (S^2/R + sigma^2)) V^T``."""
+        R = ctx.R
+        U, S, xv = ctx.svd()
+        sigma2 = float(self.param) * float(np.sum(S**2)) / (R * ctx.Xc.shape[1])  # lambda tr(S_xx) / p
+        return (xv * (S / (S**2 + R * sigma2))) @ U.T
+
+
+class Kernel(Conditioner):
+    """A locally weighted conditioning: the demonstrations' trajectories averaged with Gaussian weights of the
+    distance between their prefixes and the observed one; ``param`` is the bandwidth relative to the root median
+    squared distance (``-> inf``: the mean, ``-> 0``: the nearest neighbour)."""
+
+    name = "kernel"
+
+    def weights(self, ctx: Context) -> np.ndarray:
+        """Normalised Gaussian weights minus ``1/R`` (Q, R)."""
+        d2, med = ctx.distances()
+        logw = -0.5 * d2 / (float(self.param) ** 2 * med)
+        w = np.exp(logw - logw.max(axis=1, keepdims=True))
+        return w / w.sum(axis=1, keepdims=True) - 1.0 / ctx.R
+
+
+class PPCA(Conditioner):
+    """The reduced-rank (probabilistic PCA) joint Gaussian conditioning; ``param`` is the rank ``r``.
+
+    The joint covariance of ``z = [x / a, y / b]`` (each block scaled to unit total variance) is
+    ``W W^T + diag(s_x^2 I, s_y^2 I)`` with ``W`` the first ``rank`` principal directions scaled by
+    ``sqrt(lambda_k - s^2)`` (Tipping & Bishop's ML solution; ``s_x^2`` = the x block's variance the directions
+    leave unexplained, per dimension).  Eq. 18 then gives ``mu_y + W_y (W_x^T W_x + s_x^2 I)^-1 W_x^T (x - mu_x)``,
+    a linear combination of the centred training rows (``W_y = Y_c^T U_r diag(sqrt(lambda - s^2) / S_r) / b``).
+    """
+
+    name = "ppca"
+
+    def weights(self, ctx: Context) -> np.ndarray:
+        """``alpha`` (Q, R) through an ``r x r`` solve on the joint PCA (:meth:`Context.pca`)."""
+        R, Xc, xc = ctx.R, ctx.Xc, ctx.xc
+        p = Xc.shape[1]
+        a, Z, V, S, U, dim = ctx.pca()
+        r = int(min(int(self.param), max(S.size - 1, 1)))
+        lam = S**2 / R
+        Vx = V[:p, :r].T  # (r, p)
+        sig2 = float(lam[r:].sum()) / max(dim - r, 1)
+        scale = np.sqrt(np.maximum(lam[:r] - sig2, 0.0))
+        Wx = Vx.T * scale  # (p, r)
+        sx2 = max((1.0 - float(np.sum(Wx**2))) / p, 1e-12)
+        m = np.linalg.solve(Wx.T @ Wx + sx2 * np.eye(r), Wx.T @ (xc.T / a))  # (r, Q) latent means
+        coef = (scale / np.maximum(S[:r], 1e-300))[:, None] * m
+        if U is None:  # U_r = Z V_r / S_r folded in
+            return (Z @ (V[:, :r] @ (coef / S[:r, None]))).T
+        return (U[:, :r] @ coef).T
+
+
+class Blend(Conditioner):
+    """``w`` times a ridge plus ``1 - w`` times a kernel conditioning (model averaging of two linear smoothers);
+    ``param`` is ``(lambda, bandwidth, w)``."""
+
+    name = "blend"
+
+    def __init__(self, param: tuple):
+        lam, bw, w = param
+        super().__init__((lam, bw, w))
+        self.ridge, self.kernel, self.w = Ridge(lam), Kernel(bw), w
+
+    def weights(self, ctx: Context) -> np.ndarray:
+        """``w alpha_ridge + (1 - w) alpha_kernel``."""
+        return self.w * self.ridge.weights(ctx) + (1.0 - self.w) * self.kernel.weights(ctx)
+
+
+#: every conditioning method by its name
+CONDITIONERS: dict[str, type[Conditioner]] = {c.name: c for c in (Mean, Ridge, PPCA, Kernel, Blend)}
+
+
+def conditioner(method: str, param: Any = None) -> Conditioner:
+    """The conditioner of a ``(method, param)`` pair (``CouplingModel.method_`` / ``param_``, a model file)."""
+    try:
+        cls = CONDITIONERS[method]
+    except KeyError:
+        raise ValueError(f"unknown coupling method {method!r}; expected one of {sorted(CONDITIONERS)}") from None
+    return cls(param)

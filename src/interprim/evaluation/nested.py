@@ -119,7 +119,7 @@ def measure_fitted(est, name: str, train, test, observed_dofs, dt: float, point_
 def nested_sweep(make, demos, observed_dofs, dt: float, k: int = 3, point_dim: int = 1, stride: int = 3,
                  rest_stride: int = 3, fractions=(0.6,), oracles=None, log=None) -> list:
     """The whole fitting procedure evaluated in ``k`` outer folds: every method of ``make`` (``{name: factory}``;
-    e.g. :class:`~interprim.models.AutoInteraction`, whose inner cross-validation then runs inside each outer
+    e.g. :class:`~interprim.models.auto.AutoInteraction`, whose inner cross-validation then runs inside each outer
     training fold) fitted on the outer training recordings and measured on the held-out ones with every yardstick
     (:func:`measure_fitted`).  ``demos``: a :class:`~interprim.datasets.Demonstrations` (causal prefixes) or a list
     of arrays; ``oracles``: one per recording (synthetic data).  Returns the records, ``demo`` numbering ``demos``.

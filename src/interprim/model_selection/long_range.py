@@ -1,6 +1,6 @@
 """The blend beyond the real-time band: its remaining duration and its weights, chosen on the rest of the movement.
 
-The inner cross-validation of :class:`~interprim.models.AutoInteraction` fits the blend's weights per look-ahead
+The inner cross-validation of :class:`~interprim.models.auto.AutoInteraction` fits the blend's weights per look-ahead
 band (:mod:`interprim.model_selection.stacking`).  Beyond the first quarter second, two things decide where the
 robot's hand will be: *when* the movement ends (the remaining duration) and *which* members are trusted.  On
 people the phase is still close to a clock, and weights fitted freely per band on 12-20 recordings overrate the

@@ -136,7 +136,7 @@ def true_duration_units(k, n_frames, t_ahead, dt: float) -> np.ndarray:
 def whole_movement_units(u, phase, member_phase, duration, member_duration) -> np.ndarray:
     """``(members, G)``: where each member is read for the blend's normalised time ``u`` ``(G,)`` when the blend
     places "now" at ``phase`` with the duration ``duration`` and member ``m`` at ``member_phase[m]``,
-    ``member_duration[m]`` (the rule of :class:`interprim.models.ensemble.Blend`: the same instant in seconds
+    ``member_duration[m]`` (the rule of :class:`interprim.models.blend.Blend`: the same instant in seconds
     ahead of now for every member, and ``u * s_m / s`` before now)."""
     u = np.asarray(u, dtype=np.float64)[None, :]
     sm = np.asarray(member_phase, dtype=np.float64)[:, None]

@@ -81,11 +81,13 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
     cv = ensemble.CrossValidation(blend.factories(), dev.demos, [0, 1], dev.dt, cfg, k=3, horizon=0.25)
     for m, e in s["cv_errors"].items():
         assert cv.errors[m] == pytest.approx(e)
-    sub = cv.subset(list(s["band_weights"]))
-    bands = s["bands"]
+    # the per-band weights stacked on the inner folds (before the long-range choice, tested below)
+    stacked = ensemble.stack(cv, 0.25)
+    sub = cv.subset(stacked.names)
+    bands = stacked.edges
     assert 0.25 - dev.dt < bands[0] <= 0.25 and bands[-1] >= 0.5 * cv.t_ahead[-1]
     assert cv.t_ahead[-1] >= max(len(d) - 1 for d in dev.demos) * dev.dt - 1e-9  # scored to the end
-    Wb = np.array([[s["band_weights"][m][b] for m in sub.names] for b in range(len(bands))])
+    Wb = np.array([[stacked.band_weights[m][b] for m in sub.names] for b in range(len(bands))])
     rng = np.random.default_rng(0)
     for b, steps in enumerate(sub.band_steps(bands)):
         assert b == 0 or sub.valid[:, steps].any()  # every band has frames of held-out movements
@@ -102,6 +104,22 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
             assert band_error(rng.dirichlet(np.ones(len(sub.names)))) >= best - 1e-7
         for v in np.eye(len(sub.names)):  # never worse than one family alone in its band
             assert band_error(v) >= best - 1e-7
+    # the blend's weights and timing: the long-range choice made on those stacked weights
+    from interprim.model_selection.long_range import candidate_cases, refine, replaced
+
+    fitted, lam = refine(cv, stacked, 0.25)
+    cv = candidate_cases(cv, stacked)  # the families the choice could use, with the real-time weights
+    assert s["long_range"]["remaining"] == ("own" if lam is None else lam)
+    assert blend.model_.remaining == lam
+    assert set(s["band_weights"]) == set(fitted.names)
+    for m in fitted.names:
+        assert s["band_weights"][m] == pytest.approx(fitted.band_weights[m])
+    bands = fitted.edges
+    if lam is not None:
+        cv = cv.cases(np.arange(len(cv.demo)))
+        cv.mean = replaced(cv, lam)
+    sub = cv.subset(fitted.names)
+    Wb = np.array([[fitted.band_weights[m][b] for m in sub.names] for b in range(len(bands))])
     per_step = ensemble.weights_at(sub.t_ahead, bands, Wb)
     assert sub.blend_error(per_step) == pytest.approx(s["blend_cv_error"], rel=1e-9)
     # the variance model's 90 % band covers 90 % of the held-out cases at every step ahead, for each agent
@@ -137,8 +155,8 @@ def test_blend_mean_is_the_weighted_members_placed_in_time(blend, task):
     _, hold = task
     x = hold.demos[1][:35, :2]
     model = blend.model_
-    p = blend.predict(x)
     preds = {m: est.predict(x) for m, est in model.members_.items()}
+    p = model.combine(preds, len(x), n_grid=2001)  # a fine grid: the rule, not the grid's interpolation, is tested
     t = np.array([0.02, 0.1, 0.2])
     s_b, D_b = place_in_time(p, len(x), hold.dt, model.mean_duration_)
     got = np.stack([np.interp(s_b + t / D_b, p.times, p.mean[:, d]) for d in range(4)], axis=1)

@@ -15,7 +15,8 @@ import numpy as np
 
 from ..core.cv import paired_gain
 
-__all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio"]
+__all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio", "measure_fitted",
+           "nested_sweep", "YARDSTICKS", "yardstick_table"]
 
 #: The untouched hold-out, fixed on 2026-11-26 before any new model was developed (docs/evaluation.md):
 #: for every real data set, the last third of each interaction's recordings in the file's order (NuiSI: the
@@ -49,15 +50,19 @@ def nested_choice_records(records, choices, name: str = "chosen") -> list:
     return out
 
 
-def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl") -> tuple:
+def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl", protocol=None) -> tuple:
     """``(ratio of means a / b, its standard error)`` over demonstrations, from per-demo mean errors (paired).
 
     The standard error is the delta-method one of the ratio of two paired means; with fewer than two
-    demonstrations it is NaN.
+    demonstrations it is NaN.  ``protocol``: the records counted for a key other than ``wm_*`` (the whole-movement
+    records, ``protocol="whole"``): ``None`` the real-time ones, ``"rest"`` the rest of the movement.
     """
     per: dict = {}
     for r in records:
-        if r.get("protocol") == "whole" and not key.startswith("wm"):
+        if key.startswith("wm"):
+            if r.get("protocol") != "whole":
+                continue
+        elif r.get("protocol") != protocol:
             continue
         if key in r and r["method"] in (a, b):
             per.setdefault(r["demo"], {}).setdefault(r["method"], []).append(r[key])
@@ -70,3 +75,94 @@ def standard_error_ratio(records, a: str, b: str, key: str = "rt_ctrl") -> tuple
         return float(ratio), float("nan")
     _, se = paired_gain(pairs[:, 0], ratio * pairs[:, 1])  # the paired standard error of a - ratio b
     return float(ratio), float(se / mb)
+
+
+def measure_fitted(est, name: str, train, test, observed_dofs, dt: float, point_dim: int = 1, horizon: float = 0.25,
+                   stride: int = 1, rest_stride: int = 3, fractions=(0.6,), oracles=None, references: bool = True,
+                   prefix_sets=None) -> dict:
+    """Every yardstick of one fitted estimator on held-out recordings: ``{prefix kind: records}``.
+
+    For each held-out recording of ``test`` (a :class:`~interprim.model_selection.prefixes.Prefixes`, causal
+    prefixes when it holds raw samples): real time (the next ``horizon`` seconds after every ``stride``-th frame
+    from 20 to 90 %; no ``protocol``), the rest of the movement in seconds (every remaining frame, every
+    ``rest_stride``-th frame seen; ``protocol="rest"``) and the paper's Fig. 7 measure (whole movement in normalised
+    time after each of ``fractions`` seen; ``protocol="whole"``).  ``references`` adds the clock, the mean at the
+    true duration and, with ``oracles``, the oracle; records carry ``demo`` (the index in ``test``).
+    ``prefix_sets``: ``{kind: Prefixes}`` of the same recordings (default ``{"causal": test}``).
+    """
+    from ..model_selection.realtime import RealTimeConfig, realtime_fold, whole_movement_fold
+
+    cfg = RealTimeConfig(point_dim=point_dim, horizon=float(horizon), stride=int(stride))
+    rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=int(rest_stride))
+    sets = prefix_sets or {"causal": test}
+    out: dict = {p: [] for p in sets}
+    for j, rec in enumerate(test.demos):
+        orc = None if oracles is None or not references else oracles[j]
+        for p, P in sets.items():
+            def pre(k, j=j, P=P):
+                return P(j, k)
+
+            recs = realtime_fold(est, train, rec, observed_dofs, dt, cfg, name=name, fitted=True, prefix=pre,
+                                 oracle=orc, references=references)
+            recs += [dict(r, protocol="whole") for r in
+                     whole_movement_fold(est, rec, observed_dofs, fractions, point_dim=point_dim, name=name,
+                                         prefix=pre, oracle=orc)]
+            recs += [dict(r, protocol="rest") for r in
+                     realtime_fold(est, train, rec, observed_dofs, dt, rest_cfg, name=name, fitted=True, prefix=pre,
+                                   oracle=orc, references=references)]
+            for r in recs:
+                r["demo"] = j
+            out[p] += recs
+    return out
+
+
+def nested_sweep(make, demos, observed_dofs, dt: float, k: int = 3, point_dim: int = 1, stride: int = 3,
+                 rest_stride: int = 3, fractions=(0.6,), oracles=None, log=None) -> list:
+    """The whole fitting procedure evaluated in ``k`` outer folds: every method of ``make`` (``{name: factory}``;
+    e.g. :class:`~interprim.models.auto.AutoInteraction`, whose inner cross-validation then runs inside each outer
+    training fold) fitted on the outer training recordings and measured on the held-out ones with every yardstick
+    (:func:`measure_fitted`).  ``demos``: a :class:`~interprim.datasets.Demonstrations` (causal prefixes) or a list
+    of arrays; ``oracles``: one per recording (synthetic data).  Returns the records, ``demo`` numbering ``demos``.
+    """
+    from ..model_selection.prefixes import Prefixes
+    from ..model_selection.realtime import folds
+
+    n = len(demos)
+    out = []
+    for held in folds(n, k):
+        keep = [i for i in range(n) if i not in set(held)]
+        if hasattr(demos, "take"):
+            train_d, test_d = demos.take(keep), demos.take(held)
+        else:
+            train_d, test_d = [demos[i] for i in keep], [demos[i] for i in held]
+        train = [np.asarray(x, dtype=np.float64) for x in train_d]
+        test = Prefixes(test_d, observed_dofs)
+        orc = None if oracles is None else [oracles[i] for i in held]
+        for first, (name, factory) in enumerate(make.items()):
+            est = factory().fit(train_d, dt=dt)
+            recs = measure_fitted(est, name, train, test, observed_dofs, dt, point_dim, stride=stride,
+                                  rest_stride=rest_stride, fractions=fractions, oracles=orc,
+                                  references=first == 0)["causal"]
+            for r in recs:
+                r["demo"] = held[r["demo"]]
+            out += recs
+            if log is not None:
+                log(f"    fold {held[0]}..{held[-1]}: {name} fitted and measured")
+    return out
+
+
+#: The yardsticks of :func:`yardstick_table`: ``(label, key, protocol, reference)``.
+YARDSTICKS = (("real time ÷ clock", "rt_ctrl", None, "clock"),
+              ("real time ÷ mean at the true duration", "rt_ctrl", None, "oracle-duration"),
+              ("rest of the movement ÷ clock", "rt_ctrl", "rest", "clock"),
+              ("rest of the movement ÷ mean at the true duration", "rt_ctrl", "rest", "oracle-duration"),
+              ("whole movement at 60 % (normalised time) ÷ mean demonstration", "wm_ctrl", "whole", "prior"))
+
+
+def yardstick_table(records, methods, yardsticks=YARDSTICKS) -> dict:
+    """``{label: {method: (ratio, standard error)}}``: every method's error ÷ the reference's on each yardstick
+    (ratios of means over the held-out demonstrations, paired standard errors; :func:`standard_error_ratio`)."""
+    out = {}
+    for label, key, protocol, ref in yardsticks:
+        out[label] = {m: standard_error_ratio(records, m, ref, key=key, protocol=protocol) for m in methods}
+    return out

@@ -12,7 +12,9 @@ Run::
 
     python -m interprim.experiments.holdout --out holdout-results [--tasks nuisi,synthetic] [--lookahead]
 
-Writes ``holdout.json`` (every record and summary) and ``holdout.md`` (the tables) to ``--out``.
+Writes ``holdout.json`` (every record and summary), ``holdout.md`` (the tables, with standard errors) and
+``readme_table.md`` (the README's accuracy table) to ``--out``; ``--tables-from DIR`` writes the tables again from
+a ``holdout.json`` without measuring anything.
 """
 
 from __future__ import annotations
@@ -24,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..evaluation.nested import HOLDOUT, split_holdout, standard_error_ratio
+from ..evaluation.nested import HOLDOUT, measure_fitted, split_holdout, standard_error_ratio, yardstick_table
 from ..models.registry import FAMILIES
 from ..model_selection.prefixes import Prefixes
-from ..evaluation.realtime import RealTimeConfig, default_methods, realtime_fold, summarise_realtime, whole_movement_fold
+from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_realtime
 
-__all__ = ["holdout_tasks", "run_task", "main"]
+__all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "readme_table", "main"]
 
 NUISI_ACTIONS = ("highfive1", "handshake2", "fistbump2", "clapfist2", "rocket1", "wave1")
 #: the families the real-time evaluation compares by default (all but the peer, Interaction ProMP, which needs the
@@ -68,8 +70,6 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
 
     Returns ``{"records": [...], "summary": {protocol: summary}, "chosen": name, "inner": scores}``.
     """
-    import math
-
     from ..models.auto import CANDIDATES, AutoInteraction
 
     cfg = RealTimeConfig(point_dim=point_dim)
@@ -84,40 +84,29 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     inner = dict(blend.selection_["cv_errors"])
     weights = blend.weights_
     inner["blend"] = blend.selection_["blend_cv_error"]
+    lr = blend.selection_.get("long_range", {})
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
-        f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())} in {time.perf_counter() - t0:.0f} s")
-    rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=3)  # every remaining frame
+        f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())}; beyond the real-time band "
+        f"{lr.get('beyond', '-')}, remaining duration {lr.get('remaining', '-')}; in {time.perf_counter() - t0:.0f} s")
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
     records = {p: [] for p in prefixes}
-    fitted = {}
 
     def models():
         for m, factory in make.items():
-            fitted[m] = factory().fit(train, dt=dt)
-            yield m, fitted[m]
+            yield m, factory().fit(train, dt=dt)
         yield "auto", blend
 
     for first, (m, est) in enumerate(models()):
         t1 = time.perf_counter()
-        for j, test in enumerate(prefixes["causal"].demos):
-            orc = None if oracles is None or first else oracles[j]
-            for p, P in prefixes.items():
-                pre = (lambda k, j=j, P=P: P(j, k))
-                recs = realtime_fold(est, train, test, obs, dt, cfg, name=m, fitted=True, prefix=pre, oracle=orc)
-                recs += [dict(r, protocol="whole") for r in
-                         whole_movement_fold(est, test, obs, fractions, point_dim=point_dim, name=m, prefix=pre,
-                                             oracle=orc)]
-                recs += [dict(r, protocol="rest") for r in
-                         realtime_fold(est, train, test, obs, dt, rest_cfg, name=m, fitted=True, prefix=pre,
-                                       oracle=orc)]
-                for r in recs:
-                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
-                        continue
-                    r["demo"] = j
-                    records[p].append(r)
+        # real time after every frame, the rest of the movement after every 3rd frame (every remaining frame)
+        got = measure_fitted(est, m, train, prefixes["causal"], obs, dt, point_dim, horizon=cfg.horizon,
+                             rest_stride=3, fractions=fractions, oracles=oracles, references=first == 0,
+                             prefix_sets=prefixes)
+        for p in records:
+            records[p] += got[p]
         log(f"    {m}: fitted and measured in {time.perf_counter() - t1:.0f} s")
     for p in records:
         records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
@@ -127,17 +116,26 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         rest = summarise_realtime([dict(r, protocol=None) for r in records[p] if r.get("protocol") == "rest"])
         for m, s in rest.items():  # the rest of the movement, in seconds from now: error and band coverage
             summary[p].setdefault(m, {}).update({f"rest_{k}": v for k, v in s.items()
-                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock")})
+                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock",
+                                                          "rt_ctrl_vs_oracle")})
+    lr = blend.selection_.get("long_range", {})
     return {"records": records, "summary": summary,
             "chosen": chosen, "inner": inner, "weights": weights,
+            "long_range": {k: lr[k] for k in ("remaining", "beyond") if k in lr},
+            "inner_yardsticks": blend.selection_.get("inner_yardsticks", {}),
             "se": {p: {f"{a}|{b}": standard_error_ratio(records[p], a, b) for a in ("chosen", "auto")
                        for b in ("nn", "clock", "oracle-duration", "prior")}
                    | {f"{a}|wm_{b}": standard_error_ratio(records[p], a, b, key="wm_ctrl") for a in ("chosen", "auto")
                       for b in ("prior", "nn")}
-                   for p in records}}
+                   | {f"{a}|rest_{b}": standard_error_ratio(records[p], a, b, protocol="rest")
+                      for a in ("chosen", "auto") for b in METHODS}
+                   for p in records},
+            "yardsticks": {p: yardstick_table(records[p], ["auto", "chosen", *METHODS, "clock", "oracle-duration"])
+                           for p in records}}
 
 
 COLUMNS = (("rest_rt_ctrl_vs_clock", "robot, rest of the movement in seconds ÷ clock"),
+           ("rest_rt_ctrl_vs_oracle", "robot, rest of the movement in seconds ÷ mean at true duration"),
            ("rest_cov_ctrl", "90 % band over the rest, robot"), ("rest_cov_obs", "90 % band over the rest, human"),
            ("rt_ctrl_vs_clock", "robot real time ÷ clock"), ("rt_ctrl_vs_oracle", "÷ mean at true duration"),
            ("rt_ctrl_vs_floor", "÷ oracle (floor)"), ("rt_obs_vs_clock", "human real time ÷ clock"),
@@ -173,6 +171,62 @@ def tables(results, protocol="causal") -> str:
     return "\n".join(lines)
 
 
+def yardstick_tables(results, protocol="causal") -> str:
+    """Markdown: per yardstick (:data:`interprim.evaluation.nested.YARDSTICKS`), every method's ratio to the
+    reference ± its standard error over the held-out recordings, per task, and the geometric mean over tasks."""
+    names = [n for n in results if protocol in results[n].get("yardsticks", {})]
+    if not names:
+        return ""
+    labels = list(results[names[0]]["yardsticks"][protocol])
+    methods = list(results[names[0]]["yardsticks"][protocol][labels[0]])
+    lines = []
+    for label in labels:
+        rows = []
+        for m in methods:
+            cells = [results[n]["yardsticks"][protocol][label].get(m, (np.nan, np.nan)) for n in names]
+            ok = [r for r, _ in cells if np.isfinite(r) and r > 0]
+            if not ok or all(abs(r - 1.0) < 1e-12 for r in ok):  # the reference itself
+                continue
+            geo = float(np.exp(np.mean(np.log(ok))))
+            txt = ["—" if not np.isfinite(r) else (f"{r:.2f} ± {se:.2f}" if np.isfinite(se) else f"{r:.2f}")
+                   for r, se in cells]
+            rows.append(f"| {m} | " + " | ".join(txt) + f" | {geo:.2f} |")
+        lines += [f"**{label}** (± one standard error over the held-out recordings; {protocol} prefixes)", "",
+                  "| method | " + " | ".join(names) + " | geo-mean |", "|---" * (len(names) + 2) + "|", *rows, ""]
+    return "\n".join(lines)
+
+
+#: The README's accuracy table: ``(column title, summary key)``, each as NuiSI's geometric mean / all tasks'.
+README_COLUMNS = (("next 0.25 s ÷ clock", "rt_ctrl_vs_clock"),
+                  ("next 0.25 s ÷ mean at true duration", "rt_ctrl_vs_oracle"),
+                  ("rest of the movement ÷ clock", "rest_rt_ctrl_vs_clock"),
+                  ("rest ÷ mean at true duration", "rest_rt_ctrl_vs_oracle"),
+                  ("whole movement at 60 % ÷ mean", "wm_ctrl_vs_prior"))
+#: Its rows: ``(label, method)``.
+README_ROWS = (("`AutoInteraction` (what `interprim fit` makes)", "auto"), ("`InteractionPrimitive`, defaults", "ip"),
+               ("`LearnedInteraction`", "learned"), ("kernel-weighted demonstrations", "kernel"),
+               ("nearest demonstration", "nn"))
+
+
+def readme_table(results, protocol="causal") -> str:
+    """The README's accuracy table from the hold-out's results: geometric means over NuiSI's tasks / over all."""
+    names = [n for n in results if protocol in results[n]["summary"]]
+    nuisi = [n for n in names if not n.startswith("synthetic/")]
+
+    def geo(m, key, tasks):
+        v = [results[n]["summary"][protocol].get(m, {}).get(key, np.nan) for n in tasks]
+        v = [x for x in v if np.isfinite(x) and x > 0]
+        return f"{np.exp(np.mean(np.log(v))):.2f}" if v else "—"
+
+    head = ("| model | " + " | ".join(f"{t}, NuiSI ({len(nuisi)}) / all {len(names)} tasks" if i == 0 else
+                                       f"{t}, NuiSI / {len(names)}" for i, (t, _) in enumerate(README_COLUMNS)) + " |")
+    lines = [head, "|---" * (len(README_COLUMNS) + 1) + "|"]
+    for label, m in README_ROWS:
+        lines.append(f"| {label} | " + " | ".join(f"{geo(m, k, nuisi)} / {geo(m, k, names)}" for _, k in README_COLUMNS)
+                     + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """The command line of this module (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.holdout", description=__doc__.split("\n")[0])
@@ -181,8 +235,18 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated task names to run (default all)")
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     ap.add_argument("--lookahead", action="store_true", help="also measure with the uncut interpolation (NuiSI)")
+    ap.add_argument("--tables-from", default=None, help="only write the tables again from DIR/holdout.json")
     args = ap.parse_args(argv)
     from ..core.blas import single_thread
+
+    if args.tables_from is not None:
+        results = json.loads((Path(args.tables_from) / "holdout.json").read_text())
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "holdout.md").write_text(tables(results) + "\n\n" + yardstick_tables(results) + "\n")
+        (out / "readme_table.md").write_text(readme_table(results) + "\n")
+        print(f"wrote {out / 'holdout.md'} and {out / 'readme_table.md'}")
+        return 0
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -196,8 +260,10 @@ def main(argv=None) -> int:
             results[name] = run_task(name, dev, hold, obs, dt, pdim, orc, lookahead=args.lookahead,
                                      log=lambda s: print(s, flush=True))
             (out / "holdout.json").write_text(json.dumps(results, default=float))
-    md = tables(results) + ("\n\n" + tables(results, "lookahead") if args.lookahead else "")
+    md = (tables(results) + "\n\n" + yardstick_tables(results)
+          + ("\n\n" + tables(results, "lookahead") if args.lookahead else ""))
     (out / "holdout.md").write_text(md + "\n")
+    (out / "readme_table.md").write_text(readme_table(results) + "\n")
     print(md)
     print(f"wrote {out / 'holdout.json'} and {out / 'holdout.md'}")
     return 0

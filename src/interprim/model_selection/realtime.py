@@ -114,7 +114,9 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     ``cfg.stop``, every ``cfg.stride``-th), e.g. every frame for a figure.  ``trace=True`` adds what the
     numbers were computed from to every record (for figures; not JSON-serialisable): ``"t_ahead"`` (seconds
     after frame ``k``, ``(H,)``), ``"truth"`` (the held-out frames there, ``(H, D)``), ``"mean"`` and ``"std"``
-    (the prediction placed in time there, ``(H, D)``; ``std`` None without one).
+    (the prediction placed in time there, ``(H, D)``; ``std`` None without one); the method's records also
+    carry ``"trajectory"`` (its prediction on the normalised-time grid, ``(n_grid, D)``), ``"duration"`` (the
+    duration ``D`` in seconds that placed it) and ``"n_frames"`` (the held-out movement's length ``T``).
 
     ``prefix``: ``prefix(k)`` returns the observed columns of the first ``k`` frames as a robot had them at
     frame ``k`` (:class:`~interprim.model_selection.prefixes.Prefixes`; causal prefixes of interpolated recordings);
@@ -196,6 +198,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
                     rec[f"z_{agent}"] = float("nan")
             if trace:
                 rec.update(t_ahead=t_ahead, truth=truth, mean=Yh, std=Sh)
+                if method == name:  # the prediction on normalised time and its timing (re-placed by the selection)
+                    rec.update(trajectory=Y, duration=float(dur), n_frames=int(T))
             out.append(rec)
     return out
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.preprocessing import interp_columns
+from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import RealTimeConfig, folds, realtime_sweep
 
@@ -245,6 +245,43 @@ class CrossValidation:
         #: protocol holds the last frame); the weights and the band beyond the real-time horizon are fitted on these
         n_left = np.array([int(round(c[1] / first[c]["fraction"])) - c[1] for c in cases], dtype=np.int64)
         self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
+        self._keep_timing(per, cases, demos, k)
+
+    def _keep_timing(self, per, cases, demos, k):
+        """What the blend's long-range choice (:mod:`interprim.model_selection.long_range`) re-places: per case,
+        ``demo`` (the held-out demonstration), ``elapsed`` (s), ``mean_duration`` (s, of the inner training fold),
+        and per family ``traj`` (the prediction on normalised time), ``phase`` and ``duration`` (as placed)."""
+        from .prefixes import Prefixes
+        from .realtime import folds
+
+        self.demo = np.array([c[0] for c in cases], dtype=np.int64)
+        self.elapsed = np.array([(c[1] - 1) * self.dt for c in cases], dtype=np.float64)
+        ds = (demos if isinstance(demos, Prefixes) else Prefixes(demos, self.observed)).demos
+        lengths = np.array([len(d) for d in ds], dtype=np.float64)
+        fold_mean = {}
+        for held in folds(len(ds), k):
+            rest = np.delete(lengths, held)
+            fold_mean.update({j: float(np.mean(rest - 1.0)) * self.dt for j in held})
+        self.mean_duration = np.array([fold_mean[j] for j in self.demo], dtype=np.float64)
+        self.traj = np.array([[per[m][c]["trajectory"] for c in cases] for m in self.names], dtype=np.float64)
+        self.phase = np.array([[per[m][c]["phase"] for c in cases] for m in self.names], dtype=np.float64)
+        self.duration = np.array([[per[m][c]["duration"] for c in cases] for m in self.names], dtype=np.float64)
+        #: ``{demo: (G, D)}``: each held-out demonstration on the normalised-time grid (the paper's Fig. 7 measure)
+        G = self.traj.shape[2] if self.traj.ndim == 4 else 0
+        self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
+
+    def cases(self, idx) -> "CrossValidation":
+        """The same families restricted to the cases ``idx``."""
+        idx = np.asarray(idx)
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        for a in ("truth", "valid", "demo", "elapsed", "mean_duration"):
+            if hasattr(self, a):
+                setattr(out, a, getattr(self, a)[idx])
+        for a in ("mean", "traj", "phase", "duration"):
+            if hasattr(self, a):
+                setattr(out, a, getattr(self, a)[:, idx])
+        return out
 
     def _rt_error(self, mean, truth):
         """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
@@ -275,6 +312,9 @@ class CrossValidation:
         out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
         out.names = [self.names[i] for i in keep]
         out.mean = self.mean[keep]
+        for a in ("traj", "phase", "duration"):
+            if hasattr(self, a):
+                setattr(out, a, getattr(self, a)[keep])
         return out
 
     def blend_weights(self, steps=None) -> np.ndarray:

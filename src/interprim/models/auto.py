@@ -28,7 +28,7 @@ from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
 from ..core.progress import Progress
-from ..model_selection import stacking
+from ..model_selection import long_range, stacking
 from . import registry
 from .base import CheckedStream, Predictor, uniform_demonstrations
 from .blend import Blend, member_from_state
@@ -269,6 +269,8 @@ class AutoInteraction(Predictor):
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
             fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget)
+            # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
+            fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
             info = fitted.record
             progress.grow(len(fitted.names))
             members = {}
@@ -277,7 +279,7 @@ class AutoInteraction(Predictor):
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,
-                                            smoothing_window=self.smoothing_window)
+                                            smoothing_window=self.smoothing_window, remaining=remaining)
             weights = info["weights"]
             selection.update(combine="blend", **info)
             best = selection["cv_errors"][chosen]
@@ -384,6 +386,7 @@ class AutoInteraction(Predictor):
             w = ", ".join(f"{m} {x:.2f}" for m, x in sorted(self.weights_.items(), key=lambda kv: -kv[1]))
             lines.append(f"blend: {w} -> {s['blend_cv_error']:.4g} ({s['blend_vs_best']:.2f}x the best family; "
                          f"in-sample for its weights)")
+            lines += long_range.summary_lines(s)
         else:
             lines.append(f"using {self.chosen_} alone")
         return "\n".join(lines + self._cost_lines())

@@ -12,6 +12,7 @@ import numpy as np
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
 from ..io import estimator_from_state
+from ..model_selection.long_range import member_units, remaining_duration
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
 from . import registry
@@ -65,6 +66,11 @@ class Blend(Predictor):
         Settings of the Interaction Primitive members.
     bands : list of float, optional
         Upper edges (s) of the look-ahead bands of the weights (None: one set of weights for every look-ahead).
+    remaining : float, optional
+        None: every member runs at its own duration ``D_m``.  A number ``lam``: beyond ``horizon`` the members run
+        to one shared end, ``R`` seconds from now, the members' remaining duration shrunk toward the clock's by
+        ``lam`` (:func:`interprim.model_selection.long_range.remaining_duration`, chosen on the inner folds' rest
+        of the movement); up to ``horizon`` each keeps its own speed.
     """
 
     _FITTED = "members_"
@@ -74,8 +80,9 @@ class Blend(Predictor):
     N_GRID = 201
 
     def __init__(self, observed_dofs, weights, scales=None, horizon: float = DEFAULT_HORIZON,
-                 n_basis: int = 20, smoothing_window=None, bands=None):
+                 n_basis: int = 20, smoothing_window=None, bands=None, remaining=None):
         self.observed_dofs = observed_dofs
+        self.remaining = remaining
         self.weights = weights
         self.scales = scales
         self.horizon = horizon
@@ -86,11 +93,12 @@ class Blend(Predictor):
     @classmethod
     def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
                     horizon: float = DEFAULT_HORIZON, bands=None, n_basis: int = 20,
-                    smoothing_window=None) -> Blend:
+                    smoothing_window=None, remaining=None) -> Blend:
         """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
         sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
         blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
-                    None if bands is None else [float(b) for b in bands])
+                    None if bands is None else [float(b) for b in bands],
+                    None if remaining is None else float(remaining))
         blend.adopt(members, demos, dt)
         return blend
 
@@ -160,6 +168,14 @@ class Blend(Predictor):
         timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
         s = float(np.dot(w0, [t[0] for t in timing]))
         D = float(np.dot(w0, [t[1] for t in timing]))
+        R = None
+        if self.remaining is not None:  # one shared end beyond the real-time band (long_range.remaining_duration)
+            R = float(remaining_duration(np.array([[t[0]] for t in timing]), np.array([[t[1]] for t in timing]),
+                                         (n_frames - 1) * self.dt_, self.mean_duration_, w0,
+                                         float(self.remaining))[0])
+            R = max(R, float(self.horizon))  # the real-time band is the members' own (long_range.member_units)
+            if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
+                D = R / (1.0 - s)
         u = unit_grid(n_grid)
         ahead = np.clip((u - s) * D, 0.0, None)
         W = self._weights_on(ahead)  # (n_grid, M)
@@ -169,11 +185,15 @@ class Blend(Predictor):
         active = np.flatnonzero(on)
         if len(active) < len(names):
             W = W[:, active]
-        # every active member's normalised time at each grid point, all at once: ``s_m + a / D_m`` ahead of now,
-        # ``u s_m / s`` before it
+        # every active member's normalised time at each grid point, all at once: ``s_m + a / D_m`` ahead of now
+        # (with a shared end, ``long_range.member_units`` beyond the real-time band), ``u s_m / s`` before it
         sm = np.array([timing[i][0] for i in active])[:, None]
         Dm = np.array([timing[i][1] for i in active])[:, None]
-        um = np.clip(np.where(u >= s, sm + ahead / Dm, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
+        if R is None:
+            future = sm + ahead / Dm
+        else:
+            future = member_units(sm[:, 0], Dm[:, 0], ahead, np.full(len(active), R), float(self.horizon))
+        um = np.clip(np.where(u >= s, future, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
         Y = np.empty((len(active), n_grid, self.n_dofs_))
         for j, i in enumerate(active):
             Y[j] = interp_columns(um[j], u, preds[names[i]].trajectory(n_grid))

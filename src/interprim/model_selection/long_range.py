@@ -1,0 +1,400 @@
+"""The blend beyond the real-time band: its remaining duration and its weights, chosen on the rest of the movement.
+
+The inner cross-validation of :class:`~interprim.models.auto.AutoInteraction` fits the blend's weights per look-ahead
+band (:mod:`interprim.model_selection.stacking`).  Beyond the first quarter second, two things decide where the
+robot's hand will be: *when* the movement ends (the remaining duration) and *which* members are trusted.  On
+people the phase is still close to a clock, and weights fitted freely per band on 12-20 recordings overrate the
+nearest and kernel-weighted demonstrations at long look-aheads.  This module chooses both on the yardstick a user
+reads, the error over the rest of the movement in seconds (:mod:`interprim.model_selection.yardsticks`), with the
+one-standard-error rule: the simpler answer unless the complex one is better by more than its noise over the
+held-out demonstrations.
+
+**Timing** (:func:`remaining_duration`).  Beyond the real-time ``horizon`` every member runs to the end of the
+movement at one shared remaining duration
+
+    R = R_c + lam (R_b - R_c),    R_c = max(D_mean - elapsed, 0),    R_b = sum_m w_m(0) (1 - s_m) D_m,
+
+a shrinkage of the members' own estimate ``R_b`` (their phases ``s_m`` and durations ``D_m`` weighted with the
+real-time weights) toward the clock's ``R_c``; ``lam`` in :data:`LAMBDAS` (0: the clock's remaining duration) or
+``None`` (each member at its own duration, the blend before this module).  Up to ``horizon`` each member keeps its
+own speed (the real-time band is unchanged); after it, member ``m`` moves from where it is then,
+``u_h = s_m + horizon / D_m``, linearly to its end at ``R`` seconds from now (:func:`member_units`).
+
+**Weights beyond the real-time band** (:func:`long_range_choice`).  Candidates, from the simplest: the mean
+demonstration (``prior``) alone, (optionally each single family,) the real-time weights held at every look-ahead,
+the weights fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
+cross-fitted (fitted on the other demonstrations' cases), the others need no fit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.preprocessing import interp_columns
+from .yardsticks import (case_rms, clock_units, one_se_choice, place_cases, ratio_se,
+                         true_duration_units)
+
+__all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
+           "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
+           "summary_lines", "keep_real_time", "candidate_cases"]
+
+#: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
+LAMBDAS = (0.0, 0.5, 1.0)
+#: How :func:`one_se_choice` orders the candidates: from the simplest (the default) or from the fitted one.  On the
+#: development recordings, in outer folds with the whole fit inside (6 NuiSI tasks, docs/evaluation.md), starting
+#: from the simplest gave 0.95x the clock over the rest of the movement and 0.96x the mean on the whole movement,
+#: from the fitted end 0.95x and 1.01x (the blend before this choice: 0.93x and 1.00x).
+PREFER = ("simple", "fitted")
+
+
+def remaining_duration(phase, duration, elapsed, mean_duration: float, w0, lam) -> np.ndarray:
+    """``(cases,)`` seconds left of the movement, ``R_c + lam (R_b - R_c)`` (module docstring).
+
+    Parameters
+    ----------
+    phase, duration : ndarray, shape (members, cases)
+        Each member's normalised time of "now" ``s_m`` and duration ``D_m`` (s) (as placed by
+        :func:`~interprim.model_selection.realtime.place_in_time`).
+    elapsed : ndarray, shape (cases,)
+        Seconds since the first frame.
+    mean_duration : float or ndarray
+        The demonstrations' mean duration (s).
+    w0 : ndarray, shape (members,)
+        The real-time weights.
+    lam : float
+        0: the clock's remaining duration; 1: the members' weighted estimate.
+    """
+    phase = np.atleast_2d(np.asarray(phase, dtype=np.float64))
+    duration = np.atleast_2d(np.asarray(duration, dtype=np.float64))
+    Rb = np.asarray(w0, dtype=np.float64) @ (np.clip(1.0 - phase, 0.0, None) * duration)
+    Rc = np.clip(np.asarray(mean_duration, dtype=np.float64) - np.asarray(elapsed, dtype=np.float64), 0.0, None)
+    return np.clip(Rc + float(lam) * (Rb - Rc), 0.0, None)
+
+
+def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndarray:
+    """``(cases, H)``: a member's normalised time ``t_ahead`` seconds from now, at its own speed ``1 / D_m`` up to
+    ``horizon`` and then linearly to its end (1) at ``remaining`` seconds from now, at least ``horizon``
+    (``remaining`` None: its own speed throughout).  ``phase``, ``duration``: ``(cases,)`` of the member;
+    ``remaining``: ``(cases,)``."""
+    s = np.asarray(phase, dtype=np.float64)[:, None]
+    D = np.asarray(duration, dtype=np.float64)[:, None]
+    t = np.asarray(t_ahead, dtype=np.float64)[None, :]
+    own = s + t / D
+    if remaining is None:
+        return np.clip(own, 0.0, 1.0)
+    h = float(horizon)
+    R = np.maximum(np.asarray(remaining, dtype=np.float64)[:, None], h)  # never ends inside the real-time band
+    uh = np.minimum(s + h / D, 1.0)
+    after = uh + (t - h) * (1.0 - uh) / np.maximum(R - h, 1e-9)
+    after = np.where(R > h, after, 1.0)  # the shared end at the band's edge: the members hold their end after it
+    return np.clip(np.where(t <= h + 1e-12, own, after), 0.0, 1.0)
+
+
+def case_groups(demo, k: int = 3) -> np.ndarray:
+    """``(cases,)`` group labels ``0..k-1``: the held-out demonstrations ``demo`` split into ``k`` contiguous groups
+    (every case of a demonstration in one group)."""
+    demo = np.asarray(demo)
+    u = np.unique(demo)
+    k = max(1, min(int(k), len(u)))
+    g = {d: i * k // len(u) for i, d in enumerate(u)}
+    return np.array([g[d] for d in demo], dtype=np.int64)
+
+
+def schedule(t_ahead, edges, W) -> np.ndarray:
+    """``(H, members)`` per-step weights of the per-band weights ``W`` (upper edges ``edges``), moved smoothly
+    between the bands' middles as the blend moves them (:func:`~interprim.model_selection.stacking.weights_at`)."""
+    from .stacking import weights_at
+
+    return weights_at(t_ahead, edges, W)
+
+
+def held(W, w, n_first: int = 1) -> np.ndarray:
+    """``(bands, M)``: the first ``n_first`` bands' weights of ``W``, then ``w`` in every later band."""
+    out = np.tile(np.asarray(w, dtype=np.float64), (np.shape(W)[0], 1))
+    out[:n_first] = np.asarray(W, dtype=np.float64)[:n_first]
+    return out
+
+
+def keep_real_time(W, edges, dt: float) -> tuple:
+    """``(W, edges, n_first)``: the per-band weights with a band ``dt`` long added after the real-time band,
+    carrying the weights the per-band schedule has at the real-time band's edge; a candidate that changes the
+    bands after the first ``n_first`` then moves the blend only after the real-time band, whose weights stay (to a
+    step) those of the per-band schedule (:func:`schedule`: linear between the bands' middles)."""
+    W = np.asarray(W, dtype=np.float64)
+    edges = [float(e) for e in edges]
+    if W.shape[0] < 2 or edges[1] - edges[0] <= 2.0 * dt:
+        return W, edges, 1
+    w_edge = schedule(np.array([edges[0]]), edges, W)
+    return np.vstack([W[:1], w_edge, W[1:]]), [edges[0], edges[0] + float(dt)] + edges[1:], 2
+
+
+def _blend(mean, per_step):
+    """``(cases, H, D)``: the blend of the members' placed predictions ``mean`` ``(M, cases, H, D)``."""
+    return np.einsum("hm,mchd->chd", per_step, mean)
+
+
+def _rest(cv, pred, idx=None):
+    """``(cases,)``: the rest-of-the-movement error of the controlled agent (every step inside the held-out
+    movement) of ``pred`` ``(cases, H, D)`` on the cases ``idx`` of ``cv``."""
+    idx = slice(None) if idx is None else idx
+    return case_rms(pred, cv.truth[idx], cv.valid[idx], cv.controlled or cv.observed, cv.point_dim)
+
+
+def replaced(cv, lam) -> np.ndarray:
+    """``(M, cases, H, D)``: the members' predictions of ``cv`` placed with the shared remaining duration of
+    ``lam`` (``None``: their own timing, ``cv.mean`` itself) and the real-time weights ``cv.w0``."""
+    if lam is None:
+        return cv.mean
+    R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
+    return np.stack([place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
+                     for i in range(len(cv.names))])
+
+
+def _order(names, prefer: str) -> list:
+    """The candidates in the order :func:`one_se_choice` tries them: from the simplest (``prefer="simple"``) or
+    from the fitted, most complex one (``prefer="fitted"``)."""
+    if prefer not in PREFER:
+        raise ValueError(f"prefer must be one of {PREFER}, got {prefer!r}")
+    names = list(names)
+    return names if prefer == "simple" else names[::-1]
+
+
+def timing_choice(cv, per_step, lambdas=LAMBDAS, prefer: str = PREFER[0]) -> tuple:
+    """``(lam, table)``: the blend's remaining duration beyond the real-time band, chosen on the rest of the movement.
+
+    Candidates, from the simplest: the shared remaining duration of each ``lam`` of :data:`LAMBDAS`
+    (:func:`remaining_duration`), then ``None`` (each member at its own duration).  The blend (per-step weights
+    ``per_step`` ``(H, M)``) of each is scored on the rest of the movement in seconds over the held-out cases of
+    ``cv``; :func:`one_se_choice` takes the first candidate within one standard error (over the held-out
+    demonstrations) of the best, trying them from the simplest (``prefer="simple"``, the default: the clock's
+    remaining duration unless the members' is better by more than its noise) or from the members' own timing
+    (``prefer="fitted"``)."""
+    cands = {f"{lam:g}": lam for lam in lambdas}
+    cands["own"] = None
+    errors = {name: _rest(cv, _blend(replaced(cv, lam), per_step)) for name, lam in cands.items()}
+    name, table = one_se_choice(errors, cv.demo, _order(cands, prefer))
+    return cands[name], table
+
+
+def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0], singles: bool = False) -> tuple:
+    """``(W, name, table)``: the blend's weights beyond the real-time band, chosen on the rest of the movement.
+
+    Parameters
+    ----------
+    cv
+        The inner cross-validation (:class:`~interprim.model_selection.stacking.CrossValidation`), its members'
+        predictions placed as the blend will place them.
+    W : ndarray, shape (bands, M)
+        The weights fitted per band on all the cases (row 0: the real-time band, kept by every candidate).
+    edges : sequence of float
+        Upper edges (s) of the bands.
+    groups : int
+        The per-band weights are scored cross-fitted: fitted on the cases of the other ``groups - 1`` groups of
+        held-out demonstrations (:func:`case_groups`), scored on this group's.
+    singles : bool
+        Also each family alone as a candidate (off by default: on the nested development folds a single family
+        chosen on 12-20 recordings was the choice that went wrong, on three NuiSI interactions of six).
+    prefer : {"simple", "fitted"}
+        :func:`one_se_choice` takes the first candidate within one standard error of the best, trying them from
+        the mean (``"simple"``, the default: a more complex candidate only when it is better by more than its
+        noise) or from the per-band weights (``"fitted"``: a simpler candidate only when it is better by more than
+        its noise).
+
+    Returns
+    -------
+    W : ndarray, shape (bands, M)
+        The chosen weights (row 0 unchanged; the other rows all equal for a candidate that holds one set).
+    edges : list of float
+        Their bands' upper edges: ``edges``, with a band after the real-time band for a candidate other than the
+        per-band weights (:func:`keep_real_time`: the real-time band keeps the per-band schedule's weights).
+    name : str
+        ``"prior"``, a family, ``"real-time weights"`` or ``"per band"``.
+    table : dict
+        :func:`one_se_choice`'s table over the candidates.
+    """
+    W = np.asarray(W, dtype=np.float64)
+    M = len(cv.names)
+    t = cv.t_ahead
+    W_rt, e_rt, n_first = keep_real_time(W, edges, cv.dt)  # the held candidates' bands
+    cands = {"prior": held(W_rt, np.eye(M)[cv.names.index("prior")], n_first)} if "prior" in cv.names else {}
+    if singles:
+        cands.update({m: held(W_rt, np.eye(M)[i], n_first) for i, m in enumerate(cv.names) if m != "prior"})
+    first = {m: _rest(cv, _blend(cv.mean, schedule(t, e_rt, Wm))) for m, Wm in cands.items()}
+    order = (["prior"] if "prior" in cands else []) + sorted((m for m in cands if m != "prior"),
+                                                             key=lambda m: first[m].mean())
+    errors = {m: first[m] for m in order}
+    cands["real-time weights"] = held(W_rt, W[0], n_first)
+    errors["real-time weights"] = _rest(cv, _blend(cv.mean, schedule(t, e_rt, cands["real-time weights"])))
+    if W.shape[0] > 1:
+        g = case_groups(cv.demo, groups)
+        crossed = np.zeros(len(g))
+        for gi in np.unique(g):
+            train, test = np.flatnonzero(g != gi), np.flatnonzero(g == gi)
+            sub = cv.cases(train)
+            steps = sub.band_steps(edges)
+            Wg = np.array([W[0]] + [sub.blend_weights(s) if sub.valid[:, s].any() else W[i + 1]
+                                    for i, s in enumerate(steps[1:])])
+            crossed[test] = _rest(cv, _blend(cv.mean[:, test], schedule(t, edges, Wg)), test)
+        errors["per band"] = crossed
+    order = list(errors)  # from the simplest: the mean, the families (the best first), held, per band
+    if _order(order, prefer) != order:  # from the fitted: per band, held, the families (the best first), the mean
+        fitted = [m for m in ("per band", "real-time weights") if m in errors]
+        order = fitted + [m for m in order if m not in fitted and m != "prior"] + [m for m in order if m == "prior"]
+    name, table = one_se_choice(errors, cv.demo, order)
+    if name == "per band":
+        return W, list(edges), name, table
+    return cands[name], e_rt, name, table
+
+
+def _full(st, names) -> np.ndarray:
+    """``(bands, len(names))``: the weights of the stacking ``st`` over ``names`` (0 for the others)."""
+    W = np.zeros((st.W.shape[0], len(names)))
+    for i, m in enumerate(st.names):
+        W[:, names.index(m)] = st.W[:, i]
+    return W
+
+
+def candidate_cases(cv, fitted, cost=None, budget: float | None = None):
+    """The cross-validation ``cv`` restricted to the families the long-range choice may use: the members the
+    stacking ``fitted`` kept and the mean (``prior``, when compared and within the budget), with ``w0``, the
+    real-time weights over them (what :func:`replaced` places the shared end with)."""
+    allowed = list(fitted.names)
+    if "prior" in cv.names and "prior" not in allowed and (
+            cost is None or budget is None or cost(allowed + ["prior"]) <= budget):
+        allowed.append("prior")
+    out = cv.subset([m for m in cv.names if m in allowed])
+    out.w0 = _full(fitted, list(out.names))[0]
+    return out
+
+
+def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budget: float | None = None) -> tuple:
+    """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
+    ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
+    movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
+    per-band weights are fitted again on them when the timing changed).
+
+    ``remaining``: the chosen ``lam`` of :func:`remaining_duration` (``None``: each member at its own duration),
+    for :class:`~interprim.models.blend.Blend`.  The returned :class:`~interprim.model_selection.stacking.Stacking`
+    keeps the members carrying weight in some band, its variance model fitted again with the chosen weights, and
+    its ``record`` says what was chosen (``long_range``: ``remaining``, ``beyond`` and both choices' tables).
+
+    ``cost``, ``budget``: the frame budget of :func:`~interprim.model_selection.stacking.stack`.  The choice is
+    made among the members ``fitted`` kept (within the budget) and the mean (``prior``, when compared and, with a
+    budget, when it fits in it); a re-stacking keeps the budget; the record's ``cost`` is that of the members kept.
+    """
+    from .stacking import MIN_WEIGHT, Stacking, stack
+
+    cv = candidate_cases(cv, fitted, cost, budget)
+    names = list(cv.names)
+
+    def full(st):
+        return _full(st, names)
+
+    W = full(fitted)
+    lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer)
+    placed = cv
+    if lam is not None:
+        placed = cv.cases(np.arange(len(cv.demo)))
+        placed.mean = replaced(cv, lam)
+        fitted = stack(placed, horizon, cost=cost, budget=budget)
+        W = full(fitted)
+    Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
+    keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]
+    members = [names[i] for i in keep]
+    Wk = Wc[:, keep]
+    Wk = Wk / Wk.sum(axis=1, keepdims=True)
+    sub = placed.subset(members)
+    per_step = schedule(cv.t_ahead, edges, Wk)
+    scales = sub.blend_scales(per_step)
+    scales["t"] = cv.t_ahead
+    band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
+    record = dict(fitted.record)
+    record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam)
+    record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
+                   "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+                   "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
+                   "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
+                                  "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})
+    if cost is not None and "cost" in record:
+        record["cost"] = dict(record["cost"], frame=float(cost(members)))
+    return Stacking(members, Wk, edges, scales, record), lam
+
+
+def inner_yardsticks(cv, W, edges, lam) -> dict:
+    """The blend's figures on the inner folds' held-out cases, as a user reads them on a hold-out.
+
+    ``{label: [ratio, standard error]}`` over the held-out demonstrations (:func:`ratio_se`): real time (the
+    next ``cv.horizon`` seconds) and the rest of the movement in seconds, each ÷ the clock and ÷ the mean at the
+    true duration (known in a held-out fold), and the paper's Fig. 7 measure (the whole movement in normalised
+    time from the case nearest 60 % seen of each held-out demonstration) ÷ the mean demonstration.  ``W``,
+    ``edges``: the blend's weights per band; ``lam``: its remaining duration (:func:`refine`); ``cv.mean``: the
+    members placed with it.  Empty when the mean (``prior``) was not compared: its prediction is each inner
+    fold's mean demonstration, the references' shape.
+    """
+    if "prior" not in cv.names or not len(cv.demo):
+        return {}
+    W = np.asarray(W, dtype=np.float64)
+    t = cv.t_ahead
+    per_step = schedule(t, edges, W)
+    blend = _blend(cv.mean, per_step)
+    mean = cv.traj[cv.names.index("prior")]
+    k = np.rint(cv.elapsed / cv.dt).astype(np.int64) + 1
+    n_frames = k + cv.valid.sum(axis=1)
+    clock = place_cases(mean, clock_units(k, t, cv.dt, cv.mean_duration))
+    true = place_cases(mean, true_duration_units(k, n_frames, t, cv.dt))
+    cols = cv.controlled or cv.observed
+    n_rt = max(1, int(round(cv.horizon / cv.dt)))
+    rt = np.zeros_like(cv.valid)
+    rt[:, :n_rt] = True
+    out = {}
+    for label, mask in (("real time", rt), ("rest of the movement", cv.valid)):
+        err = case_rms(blend, cv.truth, mask, cols, cv.point_dim)
+        for ref, ref_pred in (("clock", clock), ("mean at the true duration", true)):
+            out[f"{label} ÷ {ref}"] = list(ratio_se(err, case_rms(ref_pred, cv.truth, mask, cols, cv.point_dim),
+                                                    cv.demo))
+    # the paper's measure: per held-out demonstration, the case nearest 60 % seen, on normalised time
+    frac = (k - 1) / np.maximum(n_frames - 1, 1)
+    G = mean.shape[1]
+    u = np.linspace(0.0, 1.0, G)
+    w_now = W[0] / W[0].sum()
+    wm_blend, wm_mean = [], []
+    for j in np.unique(cv.demo):
+        c = np.flatnonzero(cv.demo == j)[np.argmin(np.abs(frac[cv.demo == j] - 0.6))]
+        sm, Dm = cv.phase[:, c], cv.duration[:, c]
+        s, D = float(w_now @ sm), float(w_now @ Dm)
+        R = None
+        if lam is not None:
+            R = float(remaining_duration(sm[:, None], Dm[:, None], [cv.elapsed[c]], cv.mean_duration[c], w_now,
+                                         lam)[0])
+            D = R / (1.0 - s) if s < 1.0 - 1e-9 else D
+        ahead = np.clip((u - s) * D, 0.0, None)
+        Wu = np.clip(interp_columns(ahead, t, per_step), 0.0, None)
+        Wu = Wu / np.maximum(Wu.sum(axis=1, keepdims=True), 1e-300)
+        Y = np.zeros((G, mean.shape[2]))
+        for i in range(len(cv.names)):
+            future = (np.clip(sm[i] + ahead / Dm[i], 0.0, 1.0) if R is None
+                      else member_units([sm[i]], [Dm[i]], ahead, [R], cv.horizon)[0])
+            um = np.where(u >= s, future, u * (sm[i] / s if s > 0 else 1.0))
+            Y += Wu[:, i:i + 1] * place_cases(cv.traj[i, c][None], um[None])[0]
+        truth = cv.unit_truth[int(j)]
+        wm_blend.append(case_rms(Y[None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
+        wm_mean.append(case_rms(mean[c][None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
+    out["whole movement at 60 % ÷ the mean demonstration"] = list(ratio_se(wm_blend, wm_mean))
+    return out
+
+
+def summary_lines(record: dict) -> list:
+    """Lines of :meth:`~interprim.models.auto.AutoInteraction.summary` about the long-range choice (``record``: its
+    ``selection_``)."""
+    lr = record.get("long_range")
+    if not lr:
+        return []
+    rem = lr["remaining"]
+    timing = ("each member at its own duration" if rem == "own" else
+              f"one shared end, the members' remaining duration shrunk {1 - float(rem):.0%} toward the clock's")
+    out = [f"beyond the real-time band: {lr['beyond']} (chosen on the rest of the movement, one-standard-error "
+           f"rule from the {'fitted' if lr.get('prefer') == 'fitted' else 'simplest'} end); timing: {timing}"]
+    ys = record.get("inner_yardsticks") or {}
+    if ys:
+        out.append("inner folds: " + "; ".join(f"{k} {v[0]:.2f} ± {v[1]:.2f}" for k, v in ys.items()))
+    return out

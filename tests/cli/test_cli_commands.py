@@ -297,7 +297,7 @@ def test_fit_frame_budget_option(tmp_path, capsys):
     assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--frame-budget", "1.5",
                  "-o", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "streamed frame (modelled)" in text and "budget 1.5x" in text
+    assert "streamed frame (modelled)" in text and "the larger of 1.5x and 2.00 ms" in text
     import interprim as ip
 
     assert ip.load_any(out).frame_budget == 1.5

@@ -422,7 +422,8 @@ def _modelled_frame(auto, demos):
 @pytest.fixture(scope="module")
 def tied():
     demos = _tied()
-    return demos, ip.AutoInteraction([0, 1, 2]).fit(demos, dt=0.02)
+    # the budget purely relative (no floor), so that it binds on these small data
+    return demos, ip.AutoInteraction([0, 1, 2], frame_budget_floor=0.0).fit(demos, dt=0.02)
 
 
 def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_budget(tied, blend):
@@ -508,3 +509,24 @@ def test_inner_fold_messages_name_the_users_demonstrations(task):
 def test_frame_budget_is_checked():
     with pytest.raises(ValueError, match="frame_budget"):
         ip.AutoInteraction([0, 1], frame_budget=0).fit(_tied(4, 1, 1, 30), dt=0.02)
+    for bad in (-0.001, float("nan"), True, "2ms"):
+        with pytest.raises(ValueError, match="frame_budget_floor"):
+            ip.AutoInteraction([0, 1], frame_budget_floor=bad).fit(_tied(4, 1, 1, 30), dt=0.02)
+
+
+def test_frame_budget_has_a_floor_in_milliseconds(tied):
+    """The budget is the larger of 3x the Interaction Primitive's modelled frame and the floor (2 ms by default):
+    on small data, where the IP's frame is a fraction of a millisecond, the families that carry the accuracy are
+    not left out for a saving no control loop needs; the floor changes nothing else."""
+    from interprim.models.auto import DEFAULT_FRAME_BUDGET_FLOOR
+
+    demos, relative = tied
+    auto = ip.AutoInteraction([0, 1, 2]).fit(demos, dt=0.02)
+    c, r = auto.selection_["cost"], relative.selection_["cost"]
+    assert c["ip_frame"] == r["ip_frame"]
+    assert c["budget"] == pytest.approx(max(3.0 * c["ip_frame"], DEFAULT_FRAME_BUDGET_FLOOR))
+    assert c["frame"] <= c["budget"] and set(c["left_out"]) <= set(r["left_out"])
+    assert "the larger of 3x and 2.00 ms" in auto.summary()
+    assert c["budget"] >= r["budget"] and c["budget"] == pytest.approx(DEFAULT_FRAME_BUDGET_FLOOR)  # tiny IP here
+    # the blend within the floor may be dearer than within 3x the IP, never beyond the floor
+    assert r["frame"] <= r["budget"] < c["budget"]

@@ -33,7 +33,7 @@ from . import registry
 from .base import CheckedStream, Predictor, uniform_demonstrations
 from .blend import Blend, member_from_state
 
-__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET"]
+__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR"]
 
 #: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
 CANDIDATES = registry.CANDIDATES
@@ -41,6 +41,9 @@ CANDIDATES = registry.CANDIDATES
 #: The default frame budget: a blend's modelled streamed frame at most this many times the Interaction Primitive's
 #: (issue 37's target: a frame at most 3x the IP's, on any data).
 DEFAULT_FRAME_BUDGET = 3.0
+#: seconds (modelled) a streamed frame may always cost, however cheap the Interaction Primitive is on the data: a
+#: robot's control loop plans in milliseconds, and on small data sets 3x the IP's frame is a fraction of one
+DEFAULT_FRAME_BUDGET_FLOOR = 0.002
 
 
 class AutoInteraction(Predictor):
@@ -84,7 +87,8 @@ class AutoInteraction(Predictor):
         turns it on.
     frame_budget : float or None, default DEFAULT_FRAME_BUDGET (3.0)
         The most a streamed frame (``stream.update`` + ``trajectory(100)``) may cost, as a multiple of the
-        Interaction Primitive's on the same data (None: no bound).  Costs come from a deterministic cost model
+        Interaction Primitive's on the same data, or ``frame_budget_floor`` seconds if that is more (None: no
+        bound).  Costs come from a deterministic cost model
         (:func:`interprim.models.registry.frame_cost`, :meth:`~interprim.models.blend.Blend.frame_overhead`: a
         formula per family in the sizes of the data -- demonstrations, frames, DoFs, basis -- whose constants were
         calibrated once in ``benchmarks/auto.py``), not from timings taken during the fit: one input gives one
@@ -94,6 +98,11 @@ class AutoInteraction(Predictor):
         :meth:`summary` say what the model's frame costs and what was left out for the budget.  A user's own
         family (a ``(name, factory)`` pair not named after a registry family) has no cost model: it is not counted,
         and said so.
+    frame_budget_floor : float, default DEFAULT_FRAME_BUDGET_FLOOR (0.002)
+        Seconds (modelled) a streamed frame may always cost: the budget is the larger of ``frame_budget`` times the
+        Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a millisecond (small data
+        sets, few DoFs), a multiple of it would leave out the families that carry the accuracy, for a saving no
+        control loop needs; 0 makes the budget purely relative.
 
     Attributes
     ----------
@@ -125,7 +134,8 @@ class AutoInteraction(Predictor):
 
     def __init__(self, observed_dofs, candidates=CANDIDATES, combine: str = "blend", folds: int = 3,
                  horizon: float = DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
-                 point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET):
+                 point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET,
+                 frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -137,6 +147,7 @@ class AutoInteraction(Predictor):
         self.point_dim = point_dim
         self.progress = progress
         self.frame_budget = frame_budget
+        self.frame_budget_floor = frame_budget_floor
 
     def _check(self):
         known = list(registry.FAMILIES)
@@ -164,6 +175,10 @@ class AutoInteraction(Predictor):
                                    and np.isfinite(fb) and fb > 0):
             raise ValueError(f"frame_budget must be a positive multiple of the Interaction Primitive's frame, or "
                              f"None (no budget), got {fb!r}")
+        fl = self.frame_budget_floor
+        if not (isinstance(fl, (int, float, np.integer, np.floating)) and not isinstance(fl, bool)
+                and np.isfinite(fl) and fl >= 0):
+            raise ValueError(f"frame_budget_floor must be a number of seconds >= 0, got {fl!r}")
 
     def frame_costs(self, sizes: registry.FrameSizes) -> dict:
         """``{candidate: modelled seconds of one streamed frame}`` on data of ``sizes``
@@ -237,7 +252,8 @@ class AutoInteraction(Predictor):
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
             costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
         ip_frame = registry.frame_cost("ip", sizes)
-        budget = None if self.frame_budget is None else float(self.frame_budget) * ip_frame
+        budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
+                                                            float(self.frame_budget_floor))
 
         def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
             if m == "ip" and ref is not None and "ip" in self.candidates:
@@ -293,6 +309,7 @@ class AutoInteraction(Predictor):
         members = [m for m, w in weights.items()]
         record = selection.pop("cost", {})
         selection["cost"] = {"frame": cost(members), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
+                             "frame_budget_floor": float(self.frame_budget_floor),
                              "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
                              "not_costed": [m for m in members if costs.get(m) is None]}
         progress.close()
@@ -400,7 +417,10 @@ class AutoInteraction(Predictor):
         line = (f"streamed frame (modelled): {1e3 * c['frame']:.2f} ms, {c['frame'] / ip_frame:.1f}x the "
                 f"Interaction Primitive's {1e3 * ip_frame:.2f} ms on these data")
         if c.get("budget") is not None:
-            line += f" (budget {c['frame_budget']:g}x: {1e3 * c['budget']:.2f} ms)"
+            floor = c.get("frame_budget_floor")
+            rule = f"{c['frame_budget']:g}x" if floor is None else \
+                f"the larger of {c['frame_budget']:g}x and {1e3 * floor:.2f} ms"
+            line += f" (budget, {rule}: {1e3 * c['budget']:.2f} ms)"
         out = [line]
         if c.get("left_out"):
             out.append("left out for the budget: " + ", ".join(

@@ -21,9 +21,9 @@ __all__ = ["evaluate_demonstrations"]
 def _trainable(make, demos, k, dt, log=None) -> dict:
     """``make`` without the methods that cannot be fitted on the smallest training set of the folds.
 
-    With few demonstrations (training sets under :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` - 1), each method is fitted once on
-    the first demonstrations as a probe; one that refuses them (``ValueError``: too few for its
-    cross-validation) is left out, and ``log`` (if given) receives a one-line note naming it and why.
+    With few demonstrations (training sets under :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` - 1),
+    each method is fitted once on the first demonstrations as a probe; one that refuses them (``ValueError``: too
+    few for its cross-validation) is left out, and ``log`` (if given) receives a one-line note naming it and why.
     """
     n_train = len(demos) - max(len(f) for f in rt.folds(len(demos), k))
     if n_train >= rt.ALL_METHODS_FROM - 1:
@@ -44,16 +44,19 @@ def _trainable(make, demos, k, dt, log=None) -> dict:
 
 
 def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
-                            cfg: rt.RealTimeConfig = rt.RealTimeConfig(), smoothing_window=None, n_basis: int = 20,
+                            cfg: rt.RealTimeConfig | None = None, smoothing_window=None, n_basis: int = 20,
                             methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False, log=None,
                             nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS"):
     """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
 
-    Returns ``(records, summary, verdict_sentence)``; see :func:`~interprim.evaluation.realtime.realtime_sweep`, :func:`~interprim.evaluation.realtime.summarise_realtime`
-    and :func:`~interprim.evaluation.realtime.nested_verdict`.  ``methods``: names among ``ip``, ``learned``, ``ip-paper``, ``kernel``, ``nn``,
-    ``prior`` (default all).  ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples
-    (causal prefixes).  Needs at least :data:`~interprim.evaluation.realtime.MIN_DEMONSTRATIONS` (3) demonstrations; with fewer than
-    :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` (5; leave-one-out) a method that cannot be fitted on a training fold (``ip`` needs
+    Returns ``(records, summary, verdict_sentence)``; see
+    :func:`~interprim.evaluation.realtime.realtime_sweep`, :func:`~interprim.evaluation.realtime.summarise_realtime`
+    and :func:`~interprim.evaluation.realtime.nested_verdict`.  ``methods``: names among ``ip``, ``learned``,
+    ``ip-paper``, ``kernel``, ``nn``, ``prior`` (default all).  ``demos`` may be a
+    :class:`~interprim.datasets.Demonstrations` with raw samples (causal prefixes).  Needs at least
+    :data:`~interprim.evaluation.realtime.MIN_DEMONSTRATIONS` (3) demonstrations; with fewer than
+    :data:`~interprim.evaluation.realtime.ALL_METHODS_FROM` (5; leave-one-out) a method that cannot be fitted on a
+    training fold (``ip`` needs
     3 demonstrations to train on, ``learned`` 4) is left out, with a note to ``log`` (a callable taking one
     line).
 
@@ -61,6 +64,7 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
     and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
     """
+    cfg = rt.RealTimeConfig() if cfg is None else cfg
     source = demos
     prefixes = Prefixes(demos, observed_dofs)
     demos = prefixes.demos
@@ -120,7 +124,7 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
             auto.fit(fold, dt=dt)
             best = auto.chosen_
         except ValueError:  # no family could be fitted on every inner training fold
-            best, auto = next(iter(make)), None
+            best, auto = next(iter(make)), None  # type: ignore[assignment]  # no fitted default on this fold
         for j in held:
             choices[j] = best
         if auto is None or auto.selection_.get("combine") != "blend":

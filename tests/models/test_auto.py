@@ -341,7 +341,8 @@ def _user_family():
     """A user's own family in a few lines (the public contract only): the mean demonstration in normalised time,
     shifted so that its observed agent passes through the last observed frame at the clock's phase."""
     from interprim.core.preprocessing import time_normalise
-    from interprim.models.base import GridPrediction, Predictor
+    from interprim.models.base import Predictor
+    from interprim.models.grid import GridPrediction
 
     class ShiftedMean(Predictor):
         _FITTED = "mean_"

@@ -5,8 +5,8 @@ import pytest
 
 from interprim.core.errors import NotFittedError
 from interprim.core.preprocessing import time_normalise
-from interprim.models.base import GridPrediction
 from interprim.models.coupling import CouplingModel
+from interprim.models.grid import GridPrediction
 
 T = 40
 OBS = [0, 1]

@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.nested import HOLDOUT, measure_fitted, split_holdout, standard_error_ratio, yardstick_table
-from ..models.registry import FAMILIES
-from ..model_selection.prefixes import Prefixes
 from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_realtime
+from ..model_selection.prefixes import Prefixes
+from ..models.registry import FAMILIES
 
 __all__ = ["holdout_tasks", "run_task", "tables", "yardstick_tables", "readme_table", "main"]
 
@@ -92,7 +92,7 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
-    records = {p: [] for p in prefixes}
+    records: dict[str, list] = {p: [] for p in prefixes}
 
     def models():
         for m, factory in make.items():

@@ -31,8 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.preprocessing import interp_columns
-from .yardsticks import (case_rms, clock_units, one_se_choice, place_cases, ratio_se,
-                         true_duration_units)
+from .yardsticks import case_rms, clock_units, one_se_choice, place_cases, ratio_se, true_duration_units
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
            "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",

@@ -112,7 +112,7 @@ class Prefixes:
             return self.demos[j][:k, self.observed_dofs]
         return causal_prefix(self._times[j], self._raw[j], k, self.observed_dofs)
 
-    def subset(self, indices) -> "Prefixes":
+    def subset(self, indices) -> Prefixes:
         """The prefixes of the demonstrations ``indices`` only (renumbered from 0)."""
         idx = list(indices)
         if not self.causal:

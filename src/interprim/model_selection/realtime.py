@@ -10,19 +10,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ..core.cv import DEFAULT_HORIZON, folds as cv_folds
+from ..core.cv import DEFAULT_HORIZON
+from ..core.cv import folds as cv_folds
 from ..core.preprocessing import interp_columns, time_normalise
 from ..core.progress import Progress
 from .metrics import Z90, coverage, point_rms, z_ratio
 from .prefixes import Prefixes, observed_frames
 
-__all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold", "folds",
-           "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
+__all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold",
+           "folds", "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
 
-#: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at least 2)
+#: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at
+#: least 2)
 MIN_DEMONSTRATIONS = 3
 #: from this many demonstrations (leave-one-out), every default method can be fitted on every training fold
 ALL_METHODS_FROM = 5
@@ -285,15 +288,16 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     """
     if test is not None:
         train = [np.asarray(d, dtype=np.float64) for d in demos]
-        prefixes = test if isinstance(test, Prefixes) else Prefixes(test, observed_dofs)
-        demos = train + prefixes.demos
+        given = test if isinstance(test, Prefixes) else Prefixes(test, observed_dofs)
+        demos = train + given.demos
         n_train = len(train)
-        prefixes = _Offset(prefixes, n_train)
+        prefixes: Prefixes | _Offset = _Offset(given, n_train)
         sets = [list(range(n_train, len(demos)))]
         oracles = None if oracles is None else [None] * n_train + list(oracles)
     else:
-        prefixes = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
-        demos = prefixes.demos
+        whole = demos if isinstance(demos, Prefixes) else Prefixes(demos, observed_dofs)
+        demos = whole.demos
+        prefixes = whole
         sets = None
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
@@ -345,8 +349,8 @@ PHASE_ERROR_FLOOR = 1e-6
 def summarise_realtime(records) -> dict:
     """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
     the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
-    by = {}
-    whole = {}
+    by: dict[Any, list] = {}
+    whole: dict[Any, list] = {}
     for r in records:
         if r.get("protocol") == "whole":
             whole.setdefault(r["method"], []).append(r)
@@ -367,9 +371,9 @@ def summarise_realtime(records) -> dict:
                     out[m][f"{key}_vs_clock"] = out[m][key] / clock[key]
             if clock.get("phase_err", np.nan) <= PHASE_ERROR_FLOOR:  # a ratio to ~0 is a meaningless huge number
                 out[m].pop("phase_err_vs_clock", None)
-                out[m]["phase_err_vs_clock_why"] = (
-                    f"the clock's phase error is {clock['phase_err']:.1g}: the demonstrations last (almost) equally "
-                    "long, so elapsed time alone gives the phase and a ratio to it says nothing")
+                why: Any = (f"the clock's phase error is {clock['phase_err']:.1g}: the demonstrations last (almost) "
+                            "equally long, so elapsed time alone gives the phase and a ratio to it says nothing")
+                out[m]["phase_err_vs_clock_why"] = why
         if oracle and oracle.get("rt_ctrl", 0) > 0:
             out[m]["rt_ctrl_vs_oracle"] = out[m]["rt_ctrl"] / oracle["rt_ctrl"]
     prior = whole.get("prior")

@@ -95,7 +95,7 @@ class Stacking:
         return self.record["band_weights"]
 
 
-def stack(cv: "CrossValidation", horizon: float, cost=None, budget: float | None = None) -> Stacking:
+def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None = None) -> Stacking:
     """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
 
     Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
@@ -110,8 +110,8 @@ def stack(cv: "CrossValidation", horizon: float, cost=None, budget: float | None
     family never raises a band's smallest loss, so no smaller set can do better.  The record's ``cost`` says what
     the blend costs and which families were left out for the budget.
     """
-    edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
-    steps = [s for i, s in enumerate(cv.band_steps(edges)) if i == 0 or cv.valid[:, s].any()]
+    all_edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
+    steps = [s for i, s in enumerate(cv.band_steps(all_edges)) if i == 0 or cv.valid[:, s].any()]
     edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the bands with held-out frames, up to their last step
     names, W = _members(cv, cv.names, steps)
     left_out = {}
@@ -132,7 +132,7 @@ def stack(cv: "CrossValidation", horizon: float, cost=None, budget: float | None
     return Stacking(names, W, edges, scales, record)
 
 
-def _members(cv: "CrossValidation", names, steps) -> tuple:
+def _members(cv: CrossValidation, names, steps) -> tuple:
     """``(members, W (bands, members))``: the weights per band of the families ``names``, without those that carry
     less than :data:`MIN_WEIGHT` of every band (fitted again without them until none is left)."""
     sub = cv.subset(names)
@@ -148,7 +148,7 @@ def _members(cv: "CrossValidation", names, steps) -> tuple:
         W = np.array([sub.blend_weights(s) for s in steps])
 
 
-def _within_budget(cv: "CrossValidation", steps, cost, budget: float) -> tuple:
+def _within_budget(cv: CrossValidation, steps, cost, budget: float) -> tuple:
     """``(members, W, left_out)`` of the best blend whose modelled frame fits ``budget`` (see :func:`stack`)."""
     from itertools import combinations
 
@@ -270,7 +270,7 @@ class CrossValidation:
         G = self.traj.shape[2] if self.traj.ndim == 4 else 0
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
 
-    def cases(self, idx) -> "CrossValidation":
+    def cases(self, idx) -> CrossValidation:
         """The same families restricted to the cases ``idx``."""
         idx = np.asarray(idx)
         out = object.__new__(type(self))
@@ -304,7 +304,7 @@ class CrossValidation:
             lo = e
         return out
 
-    def subset(self, names) -> "CrossValidation":
+    def subset(self, names) -> CrossValidation:
         """The same cases restricted to the families ``names`` (those with finite errors, in this order)."""
         keep = [i for i, m in enumerate(self.names) if m in set(names)]
         out = object.__new__(type(self))
@@ -463,7 +463,7 @@ def choice_record(chosen: str, errors: dict) -> dict:
     ``cv_errors``, ``runner_up``, ``margin`` (its error / the chosen one's) and ``vs_prior``."""
     finite = {m: e for m, e in errors.items() if np.isfinite(e)}
     others = {m: e for m, e in finite.items() if m != chosen}
-    runner = min(others, key=others.get) if others else None
+    runner = min(others, key=lambda m: others[m]) if others else None
     best = finite.get(chosen, float("nan"))
     return {"chosen": chosen, "cv_errors": {m: float(e) for m, e in errors.items()},
             "runner_up": runner, "margin": float(others[runner] / best) if runner and best > 0 else float("nan"),

@@ -30,7 +30,7 @@ from ..core.input_range import fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, stacking
 from . import registry
-from .base import CheckedStream, Predictor, uniform_demonstrations
+from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
 
 __all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR"]
@@ -207,7 +207,7 @@ class AutoInteraction(Predictor):
                                  smoothing_window=self.smoothing_window, horizon=float(self.horizon))
 
     @one_blas_thread
-    def fit(self, demos, dt: float | None = None):
+    def fit(self, demos, dt: float | None = None, times=None, columns=None):
         """Compare the candidate families on held-out folds of ``demos``, then fit the blend (or the best) on all.
 
         Parameters
@@ -217,6 +217,9 @@ class AutoInteraction(Predictor):
             cross-validation causal prefixes).
         dt : float, optional
             Sampling interval in seconds (default: the Demonstrations' ``dt``, else 0.01).
+        times, columns : optional
+            Time stamps per demonstration and column names, as :meth:`interprim.models.base.Predictor.fit` takes
+            them (read by :func:`~interprim.models.training.training_set`).
 
         Returns
         -------
@@ -225,13 +228,15 @@ class AutoInteraction(Predictor):
         """
         self._check()
         source = demos
-        train, dt, cols = uniform_demonstrations(demos, dt)
+        data = training_set(demos, dt, times=times, columns=columns)
+        train, dt, cols = list(data.arrays), data.dt, None if data.columns is None else list(data.columns)
         n = len(train)
         if n < 3:
             raise ValueError(f"AutoInteraction needs at least 3 demonstrations to compare families, got {n}")
         # a Demonstrations sampled at a common interval keeps its raw samples (causal prefixes in the inner CV);
         # irregular stamps were resampled above and the CV sees the resampled frames
-        cv_demos = source if getattr(source, "dt", None) is not None and hasattr(source, "times") else train
+        cv_demos = source if (getattr(source, "dt", None) is not None and hasattr(source, "times")
+                              and getattr(source, "times", None) is not None and times is None) else train
         make = self.factories()
         sizes = registry.FrameSizes(n, float(np.mean([len(d) for d in train])), len(self.observed_dofs),
                                     int(train[0].shape[1]), int(self.n_basis))
@@ -252,6 +257,7 @@ class AutoInteraction(Predictor):
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
             costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
         ip_frame = registry.frame_cost("ip", sizes)
+        assert ip_frame is not None  # the registry's ip has a cost model
         budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
                                                             float(self.frame_budget_floor))
 
@@ -306,12 +312,12 @@ class AutoInteraction(Predictor):
             progress.step(f"fitted {chosen}")
             weights = {chosen: 1.0}
             selection.update(combine="best", weights=weights)
-        members = [m for m, w in weights.items()]
+        kept = list(weights)
         record = selection.pop("cost", {})
-        selection["cost"] = {"frame": cost(members), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
+        selection["cost"] = {"frame": cost(kept), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
                              "frame_budget_floor": float(self.frame_budget_floor),
                              "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
-                             "not_costed": [m for m in members if costs.get(m) is None]}
+                             "not_costed": [m for m in kept if costs.get(m) is None]}
         progress.close()
         dt = float(dt)
         self.chosen_ = chosen

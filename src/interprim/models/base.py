@@ -1,7 +1,8 @@
 """The prediction contract shared by every model of the package.
 
-Every model -- :class:`~interprim.models.primitive.estimator.InteractionPrimitive`, :class:`~interprim.models.learned.LearnedInteraction`
-and the peer methods of :mod:`interprim.models.demonstrations` -- is a :class:`Predictor`:
+Every model -- :class:`~interprim.models.primitive.estimator.InteractionPrimitive`,
+:class:`~interprim.models.learned.LearnedInteraction` and the peer methods of :mod:`interprim.models.demonstrations`
+-- is a :class:`Predictor`:
 
 * ``fit(demos, dt=None, times=None, columns=None)`` returns the model (``demos``: a list of arrays, a
   :class:`~interprim.datasets.Demonstrations` or a :class:`~interprim.models.training.TrainingSet`);
@@ -46,24 +47,14 @@ import warnings
 import numpy as np
 
 from ..core.blas import limit_methods, one_blas_thread
-from ..core.params import Params
-from ..core.validation import as_2d_finite, as_frame
 from ..core.errors import NotFittedError, OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
+from ..core.params import Params
+from ..core.validation import as_2d_finite, as_frame
 from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
 
 __all__ = ["BasePrediction", "BaseStream", "Predictor", "PrefixStream", "CheckedStream", "TrajectoryColumns",
            "TrainingSet", "training_set", "uniform_demonstrations", "DEFAULT_DT"]
-
-
-def __getattr__(name: str):
-    # ``from interprim.models.base import GridPrediction`` of code written before the grid prediction got its own
-    # module (interprim.models.grid); imported on first use, as grid imports this module
-    if name == "GridPrediction":
-        from .grid import GridPrediction
-
-        return GridPrediction
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
@@ -138,7 +129,8 @@ class BasePrediction:
         of the same model (a server or controller that needs the same columns on the same grid at every frame).
 
         This default calls :meth:`trajectory`; a model may return something cheaper that gives the same values
-        (the Interaction Primitive's :class:`~interprim.models.primitive.prediction.MeanRollout` builds the grid's design once).
+        (the Interaction Primitive's :class:`~interprim.models.primitive.prediction.MeanRollout` builds the grid's
+        design once).
         """
         return TrajectoryColumns(n, columns)
 

@@ -16,7 +16,8 @@ from ..model_selection.long_range import member_units, remaining_duration
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
 from . import registry
-from .base import BaseStream, GridPrediction, Predictor, uniform_demonstrations
+from .base import BaseStream, Predictor, training_set
+from .grid import GridPrediction
 
 __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state"]
 
@@ -129,9 +130,11 @@ class Blend(Predictor):
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
         self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
 
-    def fit(self, demos, dt: float | None = None):
-        """Fit every member on ``demos`` (the weights and scales are kept)."""
-        train, dt, _ = uniform_demonstrations(demos, dt)
+    def fit(self, demos, dt: float | None = None, times=None, columns=None):
+        """Fit every member on ``demos`` (the weights and scales are kept); ``dt``, ``times`` and ``columns`` as
+        :meth:`interprim.models.base.Predictor.fit` takes them."""
+        data = training_set(demos, dt, times=times, columns=columns)
+        train, dt = list(data.arrays), data.dt
         bad = [m for m in self.weights if m not in registry.FAMILIES]
         if bad or not self.weights:
             raise ValueError(f"weights must name some of {list(registry.FAMILIES)}, got {list(self.weights)!r}")
@@ -161,7 +164,7 @@ class Blend(Predictor):
 
     def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
         """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
-        (a :class:`~interprim.models.base.GridPrediction` whose std is computed when first asked for)."""
+        (a :class:`~interprim.models.grid.GridPrediction` whose std is computed when first asked for)."""
         n_grid = self.N_GRID if n_grid is None else int(n_grid)
         names = self._names
         w0 = self._w_now

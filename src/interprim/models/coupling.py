@@ -74,13 +74,15 @@ import numpy as np
 
 from ..core.blas import one_blas_thread
 from ..core.cache import DerivedCache
+from ..core.cv import folds as cv_folds
+from ..core.cv import n_folds as cv_n_folds
+from ..core.cv import paired_gain
+from ..core.errors import NotFittedError
 from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite
 from .conditioners import PPCA, Blend, Conditioner, Context, Kernel, Mean, Ridge, conditioner, target_block
 from .grid import GridPrediction
 from .training import training_set
-from ..core.cv import folds as cv_folds, n_folds as cv_n_folds, paired_gain
-from ..core.errors import NotFittedError
 
 __all__ = ["CouplingModel", "METHODS", "DEFAULT_RIDGE_GRID", "DEFAULT_RANK_GRID",
            "DEFAULT_BANDWIDTH_GRID"]
@@ -92,6 +94,8 @@ DEFAULT_RIDGE_GRID = tuple(float(v) for v in 10.0 ** np.arange(-3.0, 3.01, 0.5))
 DEFAULT_RANK_GRID = (1, 2, 3, 4, 6, 8)
 #: bandwidths of ``"kernel"``, relative to the root median squared distance of the query to the rows
 DEFAULT_BANDWIDTH_GRID = (0.25, 0.35, 0.5, 0.7, 1.0, 1.5, 2.5)
+#: the fractions of the movement at which the coupling is cross-validated (0.1, 0.2, ..., 1.0)
+DEFAULT_FRACTIONS = tuple(float(f) for f in np.round(np.arange(0.1, 1.01, 0.1), 2))
 
 _Z = {0.5: 0.6744897501960817, 0.8: 1.2815515655446004, 0.9: 1.6448536269514722, 0.95: 1.959963984540054}
 
@@ -211,7 +215,7 @@ class CouplingModel:
 
     def __init__(self, observed_dofs, n_in: int = 10, n_out: int = 50, methods=("ridge", "ppca", "kernel"),
                  ridge_grid=DEFAULT_RIDGE_GRID, rank_grid=DEFAULT_RANK_GRID, bandwidth_grid=DEFAULT_BANDWIDTH_GRID,
-                 phase_std="clock", n_jitter: int = 5, fractions=tuple(np.round(np.arange(0.1, 1.01, 0.1), 2)),
+                 phase_std="clock", n_jitter: int = 5, fractions=DEFAULT_FRACTIONS,
                  n_folds: int = 10, coverage: float = 0.9, features: str = "position",
                  blend_weights=(0.25, 0.5, 0.75), smooth_window: int = 5, score: str = "normalised"):
         self.observed_dofs = observed_dofs
@@ -644,7 +648,7 @@ class CouplingModel:
         return arrays, meta
 
     @classmethod
-    def from_state(cls, arrays, meta, phase_std=None) -> "CouplingModel":
+    def from_state(cls, arrays, meta, phase_std=None) -> CouplingModel:
         """The model saved by :meth:`to_state` (``phase_std``: the callable it was fitted with, if any)."""
         params = dict(meta["params"])
         if phase_std is not None:

@@ -22,12 +22,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..base import Predictor
-from ..training import TrainingSet
 from ...core.blas import one_blas_thread
-from ...core.validation import check_positive
 from ...core.dmp import warn_representation
 from ...core.errors import NotFittedError
+from ...core.validation import check_positive
+from ..base import Predictor
+from ..training import TrainingSet
 from .fitted import FittedPrimitive
 from .prediction import Prediction
 from .stream import Stream
@@ -105,7 +105,8 @@ class InteractionPrimitive(Predictor):
         Observation noise variance of Eq. 16.  ``"cv"`` (the default) chooses ``sigma2`` and (with
         ``covariance="shrinkage"``) the shrinkage intensity and a damping of the cross-agent covariance by
         K-fold cross-validation (the observed agent's completion within its noise, then the controlled
-        agent's response) on the training demonstrations (:func:`interprim.models.primitive.selection.select_hyperparameters`);
+        agent's response) on the training demonstrations
+        (:func:`interprim.models.primitive.selection.select_hyperparameters`);
         the choice is reported in ``selection_``.  When conditioning does not
         help on held-out training folds it falls back towards the prior mean, at the price of a slower
         ``fit`` (about 3 s at 7+7 DoF, 25 basis functions, 30 demonstrations).
@@ -182,7 +183,8 @@ class InteractionPrimitive(Predictor):
     Attributes
     ----------
     fitted_ : FittedPrimitive
-        The fitted state (:class:`interprim.models.primitive.fitted.FittedPrimitive`), made anew by every :meth:`fit` (and by
+        The fitted state (:class:`interprim.models.primitive.fitted.FittedPrimitive`), made anew by every
+        :meth:`fit` (and by
         :meth:`load`); it computes the predictions.  The attributes below are read-only views of it;
         :meth:`with_fitted` gives a copy with some of them replaced.
     observed_dofs_, controlled_dofs_ : list of int
@@ -435,10 +437,10 @@ class InteractionPrimitive(Predictor):
         if "fitted_" not in self.__dict__:
             raise NotFittedError(f"this InteractionPrimitive is not fitted yet; call fit(demos) before {what}")
 
-    def load_fitted(self, fitted) -> "InteractionPrimitive":
-        """Take the fitted state ``fitted``: a :class:`~interprim.models.primitive.fitted.FittedPrimitive`, or a dict of fitted
-        attributes (names ending in ``_``, as :mod:`interprim.io` reads them from a model file) from which one is
-        built with this estimator's parameters; returns ``self``."""
+    def load_fitted(self, fitted) -> InteractionPrimitive:
+        """Take the fitted state ``fitted``: a :class:`~interprim.models.primitive.fitted.FittedPrimitive`, or a
+        dict of fitted attributes (names ending in ``_``, as :mod:`interprim.io` reads them from a model file) from
+        which one is built with this estimator's parameters; returns ``self``."""
         if not isinstance(fitted, FittedPrimitive):
             fitted = FittedPrimitive(self.json_params(), fitted)
         self.fitted_ = fitted
@@ -452,10 +454,10 @@ class InteractionPrimitive(Predictor):
             new.fitted_ = self.fitted_.with_fitted()
         return new
 
-    def with_fitted(self, **fitted) -> "InteractionPrimitive":
+    def with_fitted(self, **fitted) -> InteractionPrimitive:
         """A copy of this fitted model with some fitted attributes (names ending in ``_``) replaced
-        (:meth:`FittedPrimitive.with_fitted <interprim.models.primitive.fitted.FittedPrimitive.with_fitted>`); ``self`` is
-        unchanged."""
+        (:meth:`FittedPrimitive.with_fitted <interprim.models.primitive.fitted.FittedPrimitive.with_fitted>`);
+        ``self`` is unchanged."""
         self._check_fitted("with_fitted")
         new = copy.copy(self)
         new.fitted_ = self.fitted_.with_fitted(**fitted)
@@ -476,8 +478,8 @@ class InteractionPrimitive(Predictor):
 
     # ------------------------------------------------------------------ prediction
     @one_blas_thread
-    def predict(self, partial, robot_state=None, dt: float | None = None, times=None,
-                phase: float | None = None) -> Prediction:
+    def predict(self, partial, robot_state=None, dt: float | None = None, times=None,  # type: ignore[override]
+                phase: float | None = None) -> Prediction:  # (the options it names; an unknown one is a TypeError)
         """Predict the interaction from a partial observation of the observed agent.
 
         Parameters
@@ -501,7 +503,8 @@ class InteractionPrimitive(Predictor):
         Returns
         -------
         Prediction
-            Computed by the fitted state (:meth:`FittedPrimitive.predict <interprim.models.primitive.fitted.FittedPrimitive.predict>`).
+            Computed by the fitted state
+            (:meth:`FittedPrimitive.predict <interprim.models.primitive.fitted.FittedPrimitive.predict>`).
         """
         self._check_fitted("predict")
         return self._state().predict(partial, robot_state, dt, times, phase)
@@ -528,7 +531,7 @@ class InteractionPrimitive(Predictor):
         return self._state().to_state()
 
     @classmethod
-    def from_state(cls, arrays: dict, meta: dict, source="<state>") -> "InteractionPrimitive":
+    def from_state(cls, arrays: dict, meta: dict, source="<state>") -> InteractionPrimitive:
         """The model of :meth:`to_state`'s ``(arrays, meta)`` (or of a model file's); raises
         :class:`~interprim.ModelFileError` naming ``source`` when they are inconsistent."""
         from .state_io import model_from_state
@@ -536,7 +539,7 @@ class InteractionPrimitive(Predictor):
         return model_from_state(arrays, meta, cls, source)
 
     @classmethod
-    def load(cls, path) -> "InteractionPrimitive":
+    def load(cls, path) -> InteractionPrimitive:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
         from .state_io import load_model
 
@@ -575,12 +578,12 @@ def choose_n_basis(params: dict, arrays, dt: float, columns, obs, ctrl, kk, grid
     For each candidate ``K`` (at most half the shortest demonstration's frames), the DMPs of every
     demonstration are fitted (Eq. 3-4; the paper's residual sigma2, no calibration: only the parameters matter
     here).  Each demonstration ``j`` is then held out in turn: the mean of the *other* demonstrations' parameters
-    is rolled out (Eq. 1) from the mean start (of all of them) and compared with demonstration ``j`` on a normalised-time grid of
-    ``n`` points (every column divided by its spread over all frames).  This is the error of the model's own mean
-    on a movement it did not see: it falls while more basis functions remove the representation's bias (a
-    periodic movement that 20 cannot follow) and stops falling once the spread between demonstrations dominates.
-    The smallest ``K`` within one paired standard error of the best (:func:`interprim.core.cv.within_one_se`), or within
-    1 % of it, is kept.
+    is rolled out (Eq. 1) from the mean start (of all of them) and compared with demonstration ``j`` on a
+    normalised-time grid of ``n`` points (every column divided by its spread over all frames).  This is the error
+    of the model's own mean on a movement it did not see: it falls while more basis functions remove the
+    representation's bias (a periodic movement that 20 cannot follow) and stops falling once the spread between
+    demonstrations dominates.  The smallest ``K`` within one paired standard error of the best
+    (:func:`interprim.core.cv.within_one_se`), or within 1 % of it, is kept.
 
     Returns
     -------

@@ -77,7 +77,9 @@ class OverRos2:
         import signal
 
         self.proc.send_signal(signal.SIGINT)
-        out, _ = self.proc.communicate(timeout=30)
+        # the bridge answers the frames it has received before it prints its counts: on a busy machine that takes
+        # a while, so the wait is generous (a hang still ends the example with an error)
+        out, _ = self.proc.communicate(timeout=180)
         print("  bridge:", out.strip().splitlines()[-1])
 
 

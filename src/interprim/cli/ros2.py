@@ -94,6 +94,9 @@ def run(args) -> int:
     stop = []
     if threading.current_thread() is threading.main_thread():  # a service manager's SIGTERM: stop, exit 0
         signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+        # Ctrl-C (SIGINT) stops it even when started from a script's background job, which starts with SIGINT
+        # ignored (Python then leaves it ignored, and `kill -INT` did nothing)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         while not stop and (args.duration is None or time.monotonic() - start < args.duration):
             bridge.spin_once(0.05)

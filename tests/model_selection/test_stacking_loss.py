@@ -1,0 +1,82 @@
+"""The stacking loss of the default model's inner cross-validation (interprim.model_selection.stacking): computed
+from the held-out errors' products, it equals the direct sum over every prediction, on every band, family subset
+and case subset, and follows a replaced set of placed predictions."""
+
+import numpy as np
+import pytest
+
+from interprim.model_selection.stacking import CrossValidation
+
+
+def _cv(rng, M=3, n_case=30, H=12, D=3):
+    cv = object.__new__(CrossValidation)
+    cv.names = [f"f{i}" for i in range(M)]
+    cv.truth = rng.normal(size=(n_case, H, D)) + 2.0
+    cv.mean = cv.truth[None] + rng.normal(0.0, 0.3, (M, n_case, H, D)) * rng.uniform(0.5, 2.0, (M, 1, 1, 1))
+    cv.valid = np.arange(H)[None, :] < rng.integers(1, H + 1, n_case)[:, None]
+    cv.observed, cv.controlled = [0], [1, 2]
+    cv.horizon, cv.dt, cv.point_dim = 0.2, 0.05, 1
+    cv.t_ahead = np.arange(1, H + 1) * cv.dt
+    cv.errors = {m: 0.0 for m in cv.names}
+    return cv
+
+
+def _direct(cv, steps, w):
+    """The loss and gradient as a sum over every case, step and column (what the products stand for)."""
+    c = cv.controlled
+    sel = np.arange(cv.truth.shape[1]) if steps is None else np.asarray(steps)
+    n_rt = max(1, int(round(cv.horizon / cv.dt)))
+    mask = (cv.valid[:, sel] | (sel < n_rt)[None, :])
+    keep = mask.any(axis=1)
+    P = cv.mean[:, keep][:, :, sel][..., c]
+    T = cv.truth[keep][:, sel][..., c]
+    scale = np.sqrt(np.mean(T * T))
+    P, T = P / scale, T / scale
+    W = mask[keep][:, :, None].astype(float)
+    count = W.sum(axis=(1, 2)) * len(c)
+    e = (np.tensordot(w, P, axes=1) - T) * W
+    r = np.sqrt(np.sum(e * e, axis=(1, 2)) / count) + 1e-12
+    grad = np.einsum("mcsj,csj->m", P, e / (r * count)[:, None, None]) / len(r)
+    return float(np.mean(r)), grad
+
+
+@pytest.mark.parametrize("steps", [None, np.arange(0, 4), np.arange(4, 12), np.array([2, 7, 11])])
+def test_the_loss_from_products_equals_the_direct_sum(steps):
+    rng = np.random.default_rng(7)
+    cv = _cv(rng)
+    sets = [(cv, "all"), (cv.subset(["f0", "f2"]), "subset"), (cv.cases(np.arange(5, 25)), "cases"),
+            (cv.cases(np.arange(3, 28)).subset(["f1", "f2"]).cases(np.arange(2, 20)), "nested")]
+    for sub, _ in sets:
+        loss = sub._loss(steps)
+        M = len(sub.names)
+        for w in [np.full(M, 1.0 / M), np.eye(M)[0], rng.dirichlet(np.ones(M)), rng.uniform(0, 1, M)]:
+            got, grad = loss(w)
+            want, want_grad = _direct(sub, steps, w)  # off the simplex too (the solver may step there)
+            assert got == pytest.approx(want, rel=1e-10)
+            np.testing.assert_allclose(grad, want_grad, rtol=1e-8, atol=1e-12)
+
+
+def test_replaced_predictions_are_not_read_from_stale_products():
+    rng = np.random.default_rng(8)
+    cv = _cv(rng)
+    w = np.array([0.2, 0.5, 0.3])
+    before = cv._loss(None)(w)[0]
+    placed = cv.cases(np.arange(len(cv.truth)))
+    placed.mean = cv.mean + 0.5  # as the long-range choice re-places the members
+    got = placed._loss(None)(w)[0]
+    assert got == pytest.approx(_direct(placed, None, w)[0], rel=1e-10) and got != pytest.approx(before)
+    assert cv._loss(None)(w)[0] == before
+
+
+def test_the_weights_are_those_of_the_direct_loss():
+    """The solver on the products reaches the weights the direct sum's minimiser reaches (float noise)."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(9)
+    cv = _cv(rng, M=4)
+    w = cv.blend_weights()
+    res = minimize(lambda x: _direct(cv, None, x), np.full(4, 0.25), jac=True, bounds=[(0.0, 1.0)] * 4,
+                   method="SLSQP", constraints=({"type": "eq", "fun": lambda x: x.sum() - 1.0},),
+                   options={"ftol": 1e-12, "maxiter": 300})
+    assert _direct(cv, None, w)[0] <= res.fun + 1e-9
+    np.testing.assert_allclose(w, np.clip(res.x, 0, None) / np.clip(res.x, 0, None).sum(), atol=1e-4)

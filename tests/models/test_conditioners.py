@@ -65,3 +65,22 @@ def test_the_leverage_of_the_mean_is_one_over_n(ctx):
 def test_a_given_target_block_gives_the_same_ppca(ctx):
     given = Context(ctx.Xc, ctx.xc, ctx.P, ctx.ybar, ctx.Ydc, target_block(ctx.P, ctx.Ydc, ctx.R))
     np.testing.assert_array_equal(PPCA(3).weights(given), PPCA(3).weights(Context.from_mapping(dict(ctx))))
+
+
+@pytest.mark.parametrize("R, p", [(60, 12), (12, 40)])
+def test_ridge_weights_by_a_cholesky_solve_equal_the_svd_formula(R, p):
+    """The ridge's weights, solved on the smaller Gram matrix, are ``x_c V diag(S / (S^2 + R sigma^2)) U^T`` of the
+    rows' thin SVD (rounding apart), over the whole grid of ``lambda``, on smooth (ill-conditioned) rows too."""
+    from interprim.models.coupling import DEFAULT_RIDGE_GRID
+
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 1.0, p)
+    X = np.sin(np.outer(rng.uniform(1, 3, R), t) + rng.uniform(0, 1, (R, 1))) + 1e-4 * rng.normal(size=(R, p))
+    groups = np.repeat(np.arange(R // 2 if R % 2 == 0 else R), 2 if R % 2 == 0 else 1)
+    ctx = Context.of(X, groups, rng.normal(size=(len(np.unique(groups)), 3)), rng.normal(size=(3, p)))
+    U, S, Vt = np.linalg.svd(ctx.Xc, full_matrices=False)
+    for lam in DEFAULT_RIDGE_GRID:
+        sigma2 = lam * float(np.sum(S**2)) / (R * p)
+        want = (ctx.xc @ Vt.T * (S / (S**2 + R * sigma2))) @ U.T
+        got = Ridge(lam).weights(ctx)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())

@@ -68,6 +68,14 @@ _HOOK: list[Callable[[], object] | None] = [None]
 
 def _controllers() -> list[Any]:
     """The BLAS/OpenMP pools of the loaded libraries, inspected again only after new imports."""
+    if _STATE.ctrl is None:
+        # scipy's own BLAS is loaded with scipy.linalg: loaded here, it is limited from the first call on (loaded
+        # later, inside a call, it would run every scipy solve of that call on all cores -- 15 ms instead of
+        # 0.03 ms for a small Cholesky solve on a loaded machine -- until the next outermost call re-inspects)
+        try:
+            import scipy.linalg  # noqa: F401
+        except ImportError:  # pragma: no cover - scipy is a dependency
+            pass
     key = len(sys.modules)
     if _STATE.ctrl is None or key != _STATE.key:
         from threadpoolctl import ThreadpoolController

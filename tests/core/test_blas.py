@@ -235,3 +235,19 @@ def test_every_family_limits_its_numeric_calls(family):
             for name in names:
                 if name in sub.__dict__ and not isinstance(sub.__dict__[name], property):
                     assert getattr(sub.__dict__[name], "__interprim_one_blas__", False), (sub, name)
+
+
+def test_scipys_blas_is_limited_from_the_first_call_of_a_process():
+    """scipy's own BLAS (loaded with scipy.linalg) runs on one thread inside the very first call of a process, even
+    when nothing had loaded scipy.linalg before: a fresh interpreter enters the limiter, then imports it."""
+    import subprocess
+    import sys
+
+    code = ("import sys, interprim\n"
+            "from interprim.core.blas import single_thread\n"
+            "from threadpoolctl import threadpool_info\n"
+            "with single_thread():\n"
+            "    import scipy.linalg\n"
+            "    print(sorted({i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas'}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[1]"

@@ -80,3 +80,27 @@ def test_bad_inputs():
     inc = IncrementalDTW(np.zeros((5, 2)))
     with pytest.raises(ValueError, match="shape"):
         inc.update([1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
+def test_incremental_dtw_takes_a_block_as_frame_by_frame(path):
+    """``IncrementalDTW.extend`` of blocks of any size leaves the alignment exactly where ``update`` of each frame
+    leaves it, which is the batch open-end DTW of the frames seen, on either path of the kernels."""
+    from interprim.core._compiled import registry
+
+    rng = np.random.default_rng(5)
+    u = np.cumsum(rng.normal(size=(60, 3)), axis=0)
+    v = np.ascontiguousarray(u[::2][:25] + 0.1 * rng.normal(size=(25, 3)))
+    with registry.forced(path):
+        one, blocks = IncrementalDTW(u), IncrementalDTW(u)
+        for sizes in ([1, 3], [4, 1, 2], [7, 7]):
+            one.reset()
+            blocks.reset()
+            start = 0
+            for k in sizes:
+                for f in v[start:start + k]:
+                    want = one.update(f)
+                assert blocks.extend(v[start:start + k]) == want
+                start += k
+                ref = open_end_dtw(u, v[:start], return_path=False)
+                assert (blocks.n_star, blocks.cost) == (ref.n_star, ref.cost) and blocks.n_frames == start

@@ -122,9 +122,8 @@ class AlignedStream(BaseStream):
         self._warned = False
 
     def _advance(self, block):
-        for f in block:
-            for d in self._dtw:
-                d.update(f, check=False)
+        for d in self._dtw:  # the frames are checked: each alignment takes the block at once
+            d.extend(block)
         self._n += block.shape[0]
         n_star = np.array([d.n_star for d in self._dtw], dtype=np.int64)
         # the batch's normalisation D(n*, M) / (n* + 1 + M), with the same scalar operations

@@ -236,6 +236,31 @@ class IncrementalDTW:
         self.cost = float(self._col[n])
         return n, self.cost
 
+    def extend(self, block) -> tuple[int, float]:
+        """Add the checked, finite query frames ``block`` ``(k, D)`` (float64, C order) one after the other, as
+        ``update(frame, check=False)`` of each would, with one look-up of the compiled kernel for the block;
+        returns ``(n_star, cost)`` after the last."""
+        step = kernels.kernel("dtw.incremental_step")
+        if step is None:
+            for f in block:
+                self.update(f, check=False)
+            return self.n_star, self.cost
+        prev, col, cost, uT = self._prev, self._col, self._cost, self._uT
+        n = self.n_star
+        for f in block:
+            first = self.n_frames == 0
+            if not first:
+                prev, col = col, prev
+            n = step(uT, f, prev, col, cost, first)
+            if n < 0:  # non-finite frame: the kernel touched nothing; raise the usual message
+                self._prev, self._col = prev, col
+                raise ValueError("frame contains NaN or inf")
+            self.n_frames += 1
+        self._prev, self._col = prev, col
+        self.n_star = int(n)
+        self.cost = float(col[n])
+        return self.n_star, self.cost
+
     def _step_np(self, v, first):
         u = self.reference
         c = np.zeros(u.shape[0])

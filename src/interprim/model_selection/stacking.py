@@ -462,7 +462,7 @@ class CrossValidation:
             if cols and z.shape[0]:
                 q = np.ones(z.shape[1]) * Z90
                 for h in np.flatnonzero(has):
-                    q[h] = np.quantile(z[valid[:, h]][:, h][:, cols], 0.9, method="higher")
+                    q[h] = np.quantile(z[:, h][valid[:, h]][:, cols], 0.9, method="higher")  # step h alone
                 q[~has] = q[last]
                 r2 = (np.maximum(q, 1e-6) / Z90)[:, None] ** 2
                 a[:, cols] *= r2

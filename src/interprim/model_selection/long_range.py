@@ -305,12 +305,13 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     sub = placed.subset(members)
     per_step = schedule(cv.t_ahead, edges, Wk)
     scales = sub.blend_scales(per_step)
+    level = scales.pop("level")
     scales["t"] = cv.t_ahead
     band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
     record = dict(fitted.record)
     record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam)
     record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
-                   "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+                   "bands": edges, "blend_cv_error": sub.blend_error(per_step), "band_level": level,
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
                    "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
                                   "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import interprim as ip
-from interprim.model_selection import stacking
 from interprim.evaluation.realtime import RealTimeConfig, choose_method, default_methods
+from interprim.model_selection import stacking
 from interprim.synthetic import benchmark_tasks
 
 

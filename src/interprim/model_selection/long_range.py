@@ -295,7 +295,7 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     if lam is not None:
         placed = cv.cases(np.arange(len(cv.demo)))
         placed.mean = replaced(cv, lam)
-        fitted = stack(placed, horizon, cost=cost, budget=budget)
+        fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
         W = full(fitted)
     Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
     keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]

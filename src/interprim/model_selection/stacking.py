@@ -80,8 +80,9 @@ class Stacking:
         Their weights per band (rows on the simplex).
     edges : list of float
         Upper edges (s) of the bands.
-    scales : dict
-        The variance model ``{"a", "b", "t"}`` (:meth:`CrossValidation.blend_scales`, ``t``: seconds ahead).
+    scales : dict or None
+        The variance model ``{"a", "b", "t"}`` (:meth:`CrossValidation.blend_scales`, ``t``: seconds ahead; None
+        when :func:`stack` was asked not to fit it).
     record : dict
         ``weights`` (the real-time band's), ``band_weights``, ``bands``, ``blend_cv_error`` (real-time band,
         in-sample for the weights) and ``variance_model``.
@@ -96,7 +97,8 @@ class Stacking:
         return self.record["band_weights"]
 
 
-def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None = None) -> Stacking:
+def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None = None,
+          scales: bool = True) -> Stacking:
     """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
 
     Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
@@ -110,6 +112,10 @@ def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None =
     :meth:`CrossValidation.band_loss` is blended (ties: the cheaper, then the earlier in ``cv.names``).  Adding a
     family never raises a band's smallest loss, so no smaller set can do better.  The record's ``cost`` says what
     the blend costs and which families were left out for the budget.
+
+    ``scales=False`` skips the variance model (``scales`` None; no ``variance_model``, ``band_level`` in the
+    record): for a caller that fits it again after changing the weights
+    (:func:`interprim.model_selection.long_range.refine`).
     """
     all_edges = look_ahead_bands(float(horizon), float(cv.t_ahead[-1]))
     steps = [s for i, s in enumerate(cv.band_steps(all_edges)) if i == 0 or cv.valid[:, s].any()]
@@ -121,17 +127,19 @@ def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None =
     sub = cv.subset(names)
     W = W / W.sum(axis=1, keepdims=True)
     per_step = weights_at(cv.t_ahead, edges, W)
-    scales = sub.blend_scales(per_step)
-    level = scales.pop("level")
-    scales["t"] = cv.t_ahead
     band_weights = {m: [float(x) for x in W[:, i]] for i, m in enumerate(names)}
     record = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)}, "band_weights": band_weights,
-              "bands": edges, "blend_cv_error": sub.blend_error(per_step), "band_level": level,
-              "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()}}
+              "bands": edges, "blend_cv_error": sub.blend_error(per_step)}
+    model = None
+    if scales:
+        model = sub.blend_scales(per_step)
+        record["band_level"] = model.pop("level")
+        model["t"] = cv.t_ahead
+        record["variance_model"] = {k: np.asarray(v).tolist() for k, v in model.items()}
     if cost is not None:
         record["cost"] = {"frame": float(cost(names)), "budget": None if budget is None else float(budget),
                           "left_out": left_out}
-    return Stacking(names, W, edges, scales, record)
+    return Stacking(names, W, edges, model, record)
 
 
 def _members(cv: CrossValidation, names, steps) -> tuple:

@@ -292,7 +292,8 @@ class AutoInteraction(Predictor):
             if cv.why:
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
-            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget)
+            # the variance model is fitted once, after the long-range choice has set the weights
+            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
             # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
             fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
             info = fitted.record

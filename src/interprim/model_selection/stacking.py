@@ -388,7 +388,7 @@ class CrossValidation:
 
         return loss
 
-    def blend_scales(self, w) -> dict:
+    def blend_scales(self, w, level: float | None = None) -> dict:
         """The blend's variance model over the look-ahead, fitted to its held-out errors: per step ahead ``h`` and
         column ``j``, ``var = a[h, j] * spread^2 + b[h, j]`` with ``spread^2`` the weighted disagreement of the
         members, ``sum_m w_m (y_m - mean)^2``.  Where the spread alone is narrower than the held-out error,
@@ -408,6 +408,8 @@ class CrossValidation:
         the final fit (``LearnedInteraction``'s was 4x its error when fitted on 9 NuiSI demonstrations, about
         right on 13), whereas their disagreement and the residual do.
 
+        ``level``: a fixed quantile level for both agents instead (e.g. 0.9, the level before the cross-fitting).
+
         Returns ``{"a": (H, D), "b": (H, D), "level": {"controlled": L, "observed": L}}``.
         """
         w = np.asarray(w, dtype=np.float64)
@@ -416,9 +418,10 @@ class CrossValidation:
         valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
         agents = {k: c for k, c in (("controlled", self.controlled), ("observed", self.observed)) if c}
         groups = self.demo if hasattr(self, "demo") else np.arange(len(valid))
-        level = {k: band_level(self.mean, self.truth, valid, w, cols, groups) for k, cols in agents.items()}
-        a, b = variance_model(self.mean, self.truth, valid, w, agents, level)
-        return {"a": a, "b": b, "level": level}
+        levels = {k: float(level) if level is not None else band_level(self.mean, self.truth, valid, w, cols, groups)
+                  for k, cols in agents.items()}
+        a, b = variance_model(self.mean, self.truth, valid, w, agents, levels)
+        return {"a": a, "b": b, "level": levels}
 
     def blend_error(self, w) -> float:
         """The blend's mean real-time error of the controlled agent over the cases, as :attr:`errors` measures it

@@ -266,7 +266,8 @@ def candidate_cases(cv, fitted, cost=None, budget: float | None = None):
     return out
 
 
-def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budget: float | None = None) -> tuple:
+def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budget: float | None = None,
+           level: float | None = None) -> tuple:
     """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
     ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
     movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
@@ -277,7 +278,10 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     keeps the members carrying weight in some band, its variance model fitted again with the chosen weights, and
     its ``record`` says what was chosen (``long_range``: ``remaining``, ``beyond`` and both choices' tables).
 
-    ``cost``, ``budget``: the frame budget of :func:`~interprim.model_selection.stacking.stack`.  The choice is
+    ``level``: the band's quantile level fixed
+    (:meth:`~interprim.model_selection.stacking.CrossValidation.blend_scales`; default: chosen by cross-fitting).
+    ``cost``, ``budget``: the frame budget of
+    :func:`~interprim.model_selection.stacking.stack`.  The choice is
     made among the members ``fitted`` kept (within the budget) and the mean (``prior``, when compared and, with a
     budget, when it fits in it); a re-stacking keeps the budget; the record's ``cost`` is that of the members kept.
     """
@@ -295,7 +299,7 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     if lam is not None:
         placed = cv.cases(np.arange(len(cv.demo)))
         placed.mean = replaced(cv, lam)
-        fitted = stack(placed, horizon, cost=cost, budget=budget)
+        fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
         W = full(fitted)
     Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
     keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]
@@ -304,13 +308,14 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     Wk = Wk / Wk.sum(axis=1, keepdims=True)
     sub = placed.subset(members)
     per_step = schedule(cv.t_ahead, edges, Wk)
-    scales = sub.blend_scales(per_step)
+    scales = sub.blend_scales(per_step, level=level)
+    band_level = scales.pop("level")
     scales["t"] = cv.t_ahead
     band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
     record = dict(fitted.record)
     record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam)
     record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
-                   "bands": edges, "blend_cv_error": sub.blend_error(per_step),
+                   "bands": edges, "blend_cv_error": sub.blend_error(per_step), "band_level": band_level,
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
                    "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
                                   "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})

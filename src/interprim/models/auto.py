@@ -119,8 +119,10 @@ class AutoInteraction(Predictor):
         ``chosen``, ``cv_errors`` (``{family: mean held-out real-time error}``, ``inf`` when a family could not be
         fitted on a fold), ``runner_up`` and ``margin`` (its error / the chosen one's), ``vs_prior`` (the chosen
         one's error / the mean demonstration's at the mean speed), ``combine``, ``weights`` and, for a blend,
-        ``blend_cv_error`` (in-sample for its weights), ``blend_vs_best`` and ``variance_model`` (``a``, ``b`` of
-        :meth:`interprim.model_selection.stacking.CrossValidation.blend_scales`); ``cost``: ``frame`` (the
+        ``blend_cv_error`` (in-sample for its weights), ``blend_vs_best``, ``variance_model`` (``a``, ``b`` of
+        :meth:`interprim.model_selection.stacking.CrossValidation.blend_scales`) and ``band_level`` (its quantile
+        level per agent, chosen by cross-fitting: :func:`interprim.model_selection.stacking.band_level`);
+        ``cost``: ``frame`` (the
         model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
         ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
         for the budget) and ``not_costed``.
@@ -290,7 +292,8 @@ class AutoInteraction(Predictor):
             if cv.why:
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
-            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget)
+            # the variance model is fitted once, after the long-range choice has set the weights
+            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
             # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
             fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
             info = fitted.record
@@ -410,6 +413,11 @@ class AutoInteraction(Predictor):
             lines.append(f"blend: {w} -> {s['blend_cv_error']:.4g} ({s['blend_vs_best']:.2f}x the best family; "
                          f"in-sample for its weights)")
             lines += long_range.summary_lines(s)
+            lv = s.get("band_level")
+            if lv:
+                lines.append("90 % band: the held-out errors' quantile at " + ", ".join(
+                    f"{lv[k]:.0%} for the {'robot' if k == 'controlled' else 'partner'}" for k in lv if k in lv)
+                    + " (the smallest level that covers 90 % of demonstrations left out of its calibration)")
         else:
             lines.append(f"using {self.chosen_} alone")
         return "\n".join(lines + self._cost_lines())

@@ -1,0 +1,221 @@
+"""The default's choices replayed in nested folds of the development recordings, from the members' predictions.
+
+What :class:`~interprim.models.auto.AutoInteraction` chooses on its inner folds (the stacked weights, the long-range
+choice, the band's variance model) is a function of the inner cross-validation's held-out predictions
+(:class:`~interprim.model_selection.stacking.CrossValidation`).  This experiment computes, for each development task
+(NuiSI's first two thirds, the synthetic benchmark drawn with seed 0: never the hold-out,
+:data:`interprim.evaluation.nested.HOLDOUT`):
+
+* the **outer** predictions: a 3-fold cross-validation of every candidate family over the development recordings
+  (members fitted on two thirds, predicting the causal prefixes of the third), what a blend fitted on those two
+  thirds combines;
+* the **inner** cross-validation of each outer fold's training recordings, what ``AutoInteraction.fit`` sees there;
+
+then applies a rule to each inner cross-validation, composes its blend from the outer predictions (the members
+placed in time as :class:`~interprim.models.blend.Blend` places them) and scores it on the outer fold with the
+yardsticks of :func:`interprim.model_selection.long_range.inner_yardsticks` (real time and the rest of the movement
+÷ the clock and ÷ the mean at the true duration, the whole movement at 60 % ÷ the mean demonstration) and the 90 %
+band's coverage over the rest of the movement, for each agent.  A rule is replayed in seconds, so rules can be
+compared on the same folds (the whole fit is not repeated: the figures are those of the composition, with the frame
+budget of ``AutoInteraction``'s defaults).
+
+Rules: ``default`` (as ``AutoInteraction.fit`` chooses), ``band at 90 %`` (the variance model's quantile level fixed
+at the nominal 90 %, as before it was chosen by cross-fitting), each family alone (at its own timing), and ``true
+end`` (the default's weights with every member placed to the held-out recording's true end: a bound that needs the
+future, to show how much a perfect remaining duration would give).
+
+Run (about 3 minutes on a 2-core machine)::
+
+    python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..model_selection import long_range, stacking
+from ..model_selection.realtime import folds
+from ..model_selection.yardsticks import place_cases
+from ..models import registry
+from ..models.auto import DEFAULT_FRAME_BUDGET, DEFAULT_FRAME_BUDGET_FLOOR, AutoInteraction
+from ..models.blend import Blend
+
+__all__ = ["task_folds", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
+
+Z90 = 1.6448536269514722
+
+
+def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
+    """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
+    development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
+    its frame budget is computed from (the Interaction Primitive fitted on them for its phase, as the fit does)."""
+    auto = AutoInteraction(obs, point_dim=point_dim)
+    make = auto.factories()
+    arrays = [np.asarray(x, dtype=np.float64) for x in dev]
+    cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim)
+    outer = stacking.CrossValidation(make, dev, obs, dt, cfg, k=k, horizon=0.25)
+    inner = []
+    for held in folds(len(dev), k):
+        keep = [i for i in range(len(dev)) if i not in set(held)]
+        d = dev.take(keep) if hasattr(dev, "take") else [dev[i] for i in keep]
+        tr = [np.asarray(x, dtype=np.float64) for x in d]
+        c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim)
+        phase = registry.family("ip").build(auto.settings()).fit(tr, dt=dt).phase_method_used()
+        sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
+                                    int(auto.n_basis), phase=phase)
+        inner.append((held, stacking.CrossValidation(make, d, obs, dt, c, k=k, horizon=0.25), sizes))
+    return outer, inner
+
+
+def _budget(cv, sizes: registry.FrameSizes) -> tuple:
+    """``(cost, budget)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of ``sizes``."""
+    n_dofs = sizes.n_dofs
+    costs = {m: registry.frame_cost(m, sizes) for m in cv.names}
+    ip_frame = registry.frame_cost("ip", sizes) or 0.0
+    budget = max(DEFAULT_FRAME_BUDGET * ip_frame, DEFAULT_FRAME_BUDGET_FLOOR)
+
+    def cost(names) -> float:
+        return float(sum(costs[m] or 0.0 for m in names)) + Blend.frame_overhead(len(names), n_dofs)
+
+    return cost, budget
+
+
+def default_rule(level: float | None = None):
+    """The rule ``AutoInteraction.fit`` applies to its inner cross-validation (``level``: the band's quantile level
+    fixed, instead of chosen by cross-fitting)."""
+    def rule(cv, cost, budget) -> dict:
+        fitted = stacking.stack(cv, 0.25, cost=cost, budget=budget, scales=False)
+        fitted, lam = long_range.refine(cv, fitted, 0.25, cost=cost, budget=budget, level=level)
+        return {"names": list(fitted.names), "W": np.asarray(fitted.W), "edges": list(fitted.edges),
+                "scales": fitted.scales, "lam": lam}
+    return rule
+
+
+def single_rule(family: str):
+    """One family alone, at its own timing, with its variance model fitted as the blend's."""
+    def rule(cv, cost, budget) -> dict | None:
+        if family not in cv.names:
+            return None
+        sub = cv.subset([family])
+        scales = sub.blend_scales(np.ones((len(sub.t_ahead), 1)))
+        scales.pop("level")
+        return {"names": [family], "W": np.ones((1, 1)), "edges": [0.25], "scales": scales, "lam": None}
+    return rule
+
+
+def coverage(placed, W, edges, scales) -> dict:
+    """``{agent: fraction}`` of the rest of the movement's frames inside the blend's 90 % band."""
+    per_step = long_range.schedule(placed.t_ahead, edges, W)
+    mix = np.einsum("hm,mchd->chd", per_step, placed.mean)
+    spread = np.einsum("hm,mchd->chd", per_step, (placed.mean - mix[None]) ** 2)
+    H = mix.shape[1]
+    a, b = (np.asarray(scales[k], dtype=np.float64) for k in ("a", "b"))
+    a = np.vstack([a, np.repeat(a[-1:], max(0, H - len(a)), axis=0)])[:H]  # held after the inner folds' last step
+    b = np.vstack([b, np.repeat(b[-1:], max(0, H - len(b)), axis=0)])[:H]
+    inside = np.abs(mix - placed.truth) <= Z90 * np.sqrt(np.maximum(a[None] * spread + b[None], 1e-300))
+    return {agent: float(inside[..., cols][placed.valid].mean())
+            for agent, cols in (("robot", placed.controlled), ("human", placed.observed)) if cols}
+
+
+def _outer(outer, held, choice: dict, true_end: bool = False) -> dict:
+    """The yardsticks and band coverage of the blend ``choice`` composed from the outer predictions of ``held``."""
+    idx = np.flatnonzero(np.isin(outer.demo, held))
+    names = choice["names"]
+    allowed = names + [m for m in ("prior",) if m in outer.names and m not in names]
+    sub = outer.subset([m for m in outer.names if m in allowed]).cases(idx)
+    W = np.zeros((choice["W"].shape[0], len(sub.names)))
+    for i, m in enumerate(names):
+        W[:, sub.names.index(m)] = choice["W"][:, i]
+    sub.w0 = W[0]
+    placed = sub.cases(np.arange(len(sub.demo)))
+    lam = choice["lam"]
+    if true_end:  # every member to the held-out recording's true end (a bound: needs the future)
+        R = sub.valid.sum(axis=1) * sub.dt
+        placed.mean = np.stack([place_cases(sub.traj[i], long_range.member_units(
+            sub.phase[i], sub.duration[i], sub.t_ahead, R, sub.horizon)) for i in range(len(sub.names))])
+    else:
+        placed.mean = long_range.replaced(sub, lam)
+    out = {k: v[0] for k, v in long_range.inner_yardsticks(placed, W, choice["edges"], lam).items()}
+    if true_end:  # the whole movement's timing is the blend's own: only the seconds-based yardsticks are bounds
+        out = {k: v for k, v in out.items() if not k.startswith("whole")}
+    out.update({f"band over the rest, {a}": c for a, c in coverage(placed, W, choice["edges"],
+                                                                     choice["scales"]).items()})
+    return out
+
+
+def replay(outer, inner, rules: dict) -> dict:
+    """``{rule: {yardstick: mean over the outer folds}}`` for one task (``outer``, ``inner``: :func:`task_folds`; a
+    rule named ``"true end"`` is the default's weights placed to the true end)."""
+    res: dict = {}
+    for rname, rule in rules.items():
+        rows = []
+        for held, cv, sizes in inner:
+            cost, budget = _budget(cv, sizes)
+            if rname == "true end":
+                rows.append(_outer(outer, held, default_rule()(cv, cost, budget), true_end=True))
+                continue
+            choice = rule(cv, cost, budget)
+            if choice is None:
+                break
+            rows.append(_outer(outer, held, choice))
+        else:
+            res[rname] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    return res
+
+
+def tables(results: dict) -> str:
+    """Markdown tables, one per yardstick: rules by task, with the geometric mean (the mean for coverages)."""
+    tasks = list(results)
+    rules = list(dict.fromkeys(r for t in tasks for r in results[t]))
+    keys = list(dict.fromkeys(k for t in tasks for r in results[t].values() for k in r))
+    out = []
+    for k in keys:
+        cov = k.startswith("band")
+        out += [f"**{k}**", "", "| rule | " + " | ".join(tasks) + (" | mean |" if cov else " | geo-mean |"),
+                "|---" * (len(tasks) + 2) + "|"]
+        for r in rules:
+            vals = [results[t].get(r, {}).get(k, float("nan")) for t in tasks]
+            ok = [v for v in vals if np.isfinite(v)]
+            agg = (np.mean(ok) if cov else float(np.exp(np.mean(np.log(ok))))) if ok else float("nan")
+            out.append(f"| {r} | " + " | ".join("—" if not np.isfinite(v) else f"{v:.2f}" for v in vals)
+                       + f" | {agg:.2f} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    """The command line of this module (see the module docstring); returns the exit status."""
+    from ..core.blas import single_thread
+    from .holdout import holdout_tasks
+
+    ap = argparse.ArgumentParser(prog="python -m interprim.experiments.selection_replay",
+                                 description=__doc__.split("\n")[0])
+    ap.add_argument("--tasks", default="nuisi,synthetic", help="nuisi, synthetic or both")
+    ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
+    ap.add_argument("--out", default=None, help="folder for replay.json and replay.md (outside the repository)")
+    args = ap.parse_args(argv)
+    rules = {"default": default_rule(), "band at 90 %": default_rule(level=0.9), "true end": None,
+             **{m: single_rule(m) for m in registry.CANDIDATES}}
+    results = {}
+    with single_thread():
+        for name, dev, _hold, obs, dt, pdim, _orc in holdout_tasks(tuple(args.tasks.split(",")), args.data):
+            outer, inner = task_folds(dev, obs, dt, pdim)
+            results[name] = replay(outer, inner, rules)
+            print(f"{name}: replayed", flush=True)
+    md = tables(results)
+    print(md)
+    if args.out is not None:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "replay.json").write_text(json.dumps(results))
+        (out / "replay.md").write_text(md + "\n")
+        print(f"wrote {out / 'replay.json'} and {out / 'replay.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,50 @@
+"""The default's choices replayed from the members' held-out predictions (interprim.experiments.selection_replay)."""
+
+import numpy as np
+import pytest
+
+import interprim as ip
+from interprim.experiments import selection_replay as sr
+from interprim.synthetic import benchmark_tasks
+
+
+@pytest.fixture(scope="module")
+def folds():
+    task = benchmark_tasks(9, seed=4)["handover"]
+    demos = [np.asarray(d) for d in task.demos]
+    return demos, task, sr.task_folds(demos, task.observed_dofs, task.dt, 1)
+
+
+def test_the_replayed_default_is_what_the_fit_chooses(folds):
+    """The rule applied to an outer fold's inner cross-validation gives the weights, bands and timing that
+    ``AutoInteraction.fit`` chooses on that fold's training recordings (same folds, same budget)."""
+    demos, task, (outer, inner) = folds
+    held, cv, sizes = inner[0]
+    train = [d for i, d in enumerate(demos) if i not in set(held)]
+    auto = ip.AutoInteraction(task.observed_dofs).fit(train, dt=task.dt)
+    cost, budget = sr._budget(cv, sizes)
+    got = sr.default_rule()(cv, cost, budget)
+    s = auto.selection_
+    assert got["names"] == list(s["band_weights"])
+    for i, m in enumerate(got["names"]):
+        assert got["W"][:, i] == pytest.approx(s["band_weights"][m], abs=1e-9)
+    assert got["edges"] == pytest.approx(s["bands"])
+    assert ("own" if got["lam"] is None else got["lam"]) == s["long_range"]["remaining"]
+    assert budget == pytest.approx(s["cost"]["budget"])
+
+
+def test_the_mean_alone_is_the_clock_and_the_true_end_helps_only_the_seconds(folds):
+    """References: the mean demonstration alone, composed from the outer predictions, is exactly the clock in real
+    time and over the rest of the movement (its ratios are 1), and its whole movement is the mean demonstration's.
+    The true-end rule keeps the default's real-time figures and reports no whole-movement figure."""
+    _, _, (outer, inner) = folds
+    res = sr.replay(outer, inner, {"prior": sr.single_rule("prior"), "default": sr.default_rule(),
+                                   "true end": None})
+    p = res["prior"]
+    for k in ("real time ÷ clock", "rest of the movement ÷ clock", "whole movement at 60 % ÷ the mean demonstration"):
+        assert p[k] == pytest.approx(1.0, abs=1e-9)
+    assert res["true end"]["real time ÷ clock"] == pytest.approx(res["default"]["real time ÷ clock"], rel=1e-9)
+    assert not any(k.startswith("whole") for k in res["true end"])
+    for rule in res.values():
+        assert 0.0 < rule["band over the rest, robot"] <= 1.0
+    assert "| default |" in sr.tables({"t": res})

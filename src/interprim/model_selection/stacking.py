@@ -26,7 +26,7 @@ from .metrics import Z90, point_rms
 from .realtime import RealTimeConfig, folds, realtime_sweep
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
-           "crossfit_coverage", "band_level",
+           "crossfit_coverage", "crossfit_coverages", "band_level",
            "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
@@ -482,11 +482,10 @@ class CrossValidation:
 BAND_LEVELS = tuple(np.round(np.arange(0.90, 0.9801, 0.01), 2))
 
 
-def variance_model(mean, truth, valid, w, agents: dict, level: dict) -> tuple:
-    """``(a, b)``, each ``(H, D)``: the variance model of :meth:`CrossValidation.blend_scales` fitted on the cases
-    given (``mean`` ``(M, cases, H, D)``, ``truth`` and ``valid`` of those cases, ``w`` the blend's weights
-    broadcastable to ``mean``), its standardised errors' quantile at ``level[agent]`` for the columns
-    ``agents[agent]``."""
+def _matched_variance(mean, truth, valid, w) -> tuple:
+    """``(a, b, mix, case_spread, has, last)``: the variance model matched to the held-out squared error step by step
+    (before its quantile scaling; :meth:`CrossValidation.blend_scales`) on the cases given, the blend ``mix`` and the
+    members' weighted disagreement per case, the steps with valid cases and the last of them."""
     mix = np.sum(w * mean, axis=0)
     n_valid = valid.sum(axis=0)
     has = n_valid > 0
@@ -504,27 +503,47 @@ def variance_model(mean, truth, valid, w, agents: dict, level: dict) -> tuple:
     wide = spread > err2
     a = np.where(wide, err2 / np.where(spread > 0, spread, 1.0), 1.0)
     b = np.where(wide, 0.0, err2 - spread)
-    sd = np.sqrt(np.maximum(a * case_spread + b, 1e-300))
-    z = np.abs(mix - truth) / sd
+    return a, b, mix, case_spread, has, last
+
+
+def _step_quantiles(z, valid, cols, levels, has, last) -> np.ndarray:
+    """``(len(levels), H)``: per step, the quantiles at ``levels`` of the standardised errors ``z`` of the columns
+    ``cols`` over the step's valid cases (the nominal ``Z90`` where none, held from the last step that has any)."""
+    q = np.full((len(levels), z.shape[1]), Z90)
+    for h in np.flatnonzero(has):
+        q[:, h] = np.quantile(z[:, h][valid[:, h]][:, cols], levels, method="higher")  # step h alone
+    q[:, ~has] = q[:, [last]]
+    return q
+
+
+def variance_model(mean, truth, valid, w, agents: dict, level: dict) -> tuple:
+    """``(a, b)``, each ``(H, D)``: the variance model of :meth:`CrossValidation.blend_scales` fitted on the cases
+    given (``mean`` ``(M, cases, H, D)``, ``truth`` and ``valid`` of those cases, ``w`` the blend's weights
+    broadcastable to ``mean``), its standardised errors' quantile at ``level[agent]`` for the columns
+    ``agents[agent]``."""
+    a, b, mix, case_spread, has, last = _matched_variance(mean, truth, valid, w)
+    z = np.abs(mix - truth) / np.sqrt(np.maximum(a * case_spread + b, 1e-300))
     for agent, cols in agents.items():
         if cols and z.shape[0]:
-            q = np.ones(z.shape[1]) * Z90
-            for h in np.flatnonzero(has):
-                q[h] = np.quantile(z[:, h][valid[:, h]][:, cols], level[agent], method="higher")  # step h alone
-            q[~has] = q[last]
+            q = _step_quantiles(z, valid, cols, [level[agent]], has, last)[0]
             r2 = (np.maximum(q, 1e-6) / Z90)[:, None] ** 2
             a[:, cols] *= r2
             b[:, cols] *= r2
     return a, b
 
 
-def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int = 3) -> float:
-    """The 90 % band's coverage of the columns ``cols`` on held-out demonstrations when its variance model
-    (:func:`variance_model`, quantile ``level``) is fitted on the others: the cases split into ``k`` groups of
-    whole demonstrations (``groups``: each case's demonstration), each group covered by the model of the other
-    groups' cases; the mean over demonstrations of the fraction of valid steps inside the band."""
+def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, k: int = 3) -> np.ndarray:
+    """``(len(levels),)``: the 90 % band's coverage of the columns ``cols`` on held-out demonstrations when its
+    variance model (:func:`variance_model`, quantile at each of ``levels``) is fitted on the others: the cases split
+    into ``k`` groups of whole demonstrations (``groups``: each case's demonstration), each group covered by the
+    model of the other groups' cases; the mean over demonstrations of the fraction of valid steps inside the band.
+
+    The level only scales the matched model: a frame is inside the band of level ``L`` when its error over the
+    matched std is at most that step's ``L``-quantile of the training cases' (``1.645 sd`` with ``sd`` scaled by
+    ``q / 1.645``), so every level is read from one fit per group."""
     from .long_range import case_groups
 
+    levels = np.atleast_1d(np.asarray(levels, dtype=np.float64))
     g = case_groups(groups, k)
     mix = np.sum(w * mean, axis=0)
     per_demo = []
@@ -532,30 +551,38 @@ def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int 
         tr, te = g != gi, g == gi
         if not tr.any():
             continue
-        a, b = variance_model(mean[:, tr], truth[tr], valid[tr], w, {"x": cols}, {"x": level})
+        a, b, mix_tr, spread_tr, has, last = _matched_variance(mean[:, tr], truth[tr], valid[tr], w)
+        z_tr = np.abs(mix_tr - truth[tr]) / np.sqrt(np.maximum(a * spread_tr + b, 1e-300))
+        q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
         spread = np.sum(w * (mean[:, te] - mix[te]) ** 2, axis=0)
-        inside = (np.abs(mix[te] - truth[te]) <= Z90 * np.sqrt(np.maximum(a * spread + b, 1e-300)))[..., cols]
+        sd = np.sqrt(np.maximum(a * spread + b, 1e-300))[..., cols]
+        err = np.abs(mix[te] - truth[te])[..., cols]
         v, d = valid[te], np.asarray(groups)[te]
-        per_demo += [float(inside[d == j][v[d == j]].mean()) for j in np.unique(d) if v[d == j].any()]
-    return float(np.mean(per_demo)) if per_demo else 1.0
+        for j in np.unique(d):
+            sel = d == j
+            if not v[sel].any():
+                continue
+            # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
+            r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
+            qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
+            per_demo.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
+    return np.mean(per_demo, axis=0) if per_demo else np.ones(len(levels))
+
+
+def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int = 3) -> float:
+    """:func:`crossfit_coverages` at one ``level``."""
+    return float(crossfit_coverages(mean, truth, valid, w, cols, groups, [level], k)[0])
 
 
 def band_level(mean, truth, valid, w, cols, groups, target: float = 0.9) -> float:
     """The smallest level of :data:`BAND_LEVELS` at which the cross-fitted band covers ``target`` of the held-out
-    demonstrations' frames (:func:`crossfit_coverage`; the last level when none does, the first with fewer than two
-    demonstrations).  Coverage grows with the level, so the levels are bisected."""
+    demonstrations' frames (:func:`crossfit_coverages`; the last level when none does, the first with fewer than
+    two demonstrations)."""
     if len(np.unique(groups)) < 2:
         return float(BAND_LEVELS[0])
-    lo, hi = 0, len(BAND_LEVELS) - 1
-    if crossfit_coverage(mean, truth, valid, w, cols, groups, BAND_LEVELS[lo]) >= target:
-        return float(BAND_LEVELS[lo])
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if crossfit_coverage(mean, truth, valid, w, cols, groups, BAND_LEVELS[mid]) >= target:
-            hi = mid
-        else:
-            lo = mid
-    return float(BAND_LEVELS[hi])
+    cover = crossfit_coverages(mean, truth, valid, w, cols, groups)
+    ok = np.flatnonzero(cover >= target)
+    return float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
 
 
 def choice(cv: CrossValidation, order) -> tuple:

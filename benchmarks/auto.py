@@ -88,6 +88,26 @@ def _frame(model, partial, n, clock=time.perf_counter):
     return float(np.median(runs[1:]))
 
 
+def _overhead(auto, partial) -> float:
+    """The blend's own share of a streamed frame, in CPU time of this thread: placing the members in time, the
+    weights over the look-ahead, reading each member on the common grid and combining (``Blend.combine`` +
+    ``trajectory(100)``), over the whole frame (the members' ``update`` included).  NaN for a single family."""
+    from interprim.models.blend import Blend
+
+    blend = auto.model_
+    if not isinstance(blend, Blend):
+        return float("nan")
+    st, own, total = blend.stream(), 0.0, 0.0
+    for i, f in enumerate(partial):
+        c0 = time.thread_time()
+        preds = {m: s.update(f) for m, s in st.streams.items()}
+        c1 = time.thread_time()
+        blend.combine(preds, i + 1).trajectory(100)
+        c2 = time.thread_time()
+        own, total = own + (c2 - c1), total + (c2 - c0)
+    return own / total if total > 0 else float("nan")
+
+
 def _predict(model, partial, n):
     runs = []
     for _ in range(n + 1):
@@ -128,7 +148,8 @@ def measure(generator, S, Do, Dc, T, quick=False) -> dict:
         n = 3 if quick else 7
         out = {"frame": _frame(auto, partial, n), "frame_ip": _frame(model, partial, n),
                "predict": _predict(auto, partial, 5 * n), "predict_ip": _predict(model, partial, 5 * n),
-               "fit": fit_auto, "fit_ip": fit_ip, "fit_cpu": cpu_auto, "fit_ip_cpu": cpu_ip}
+               "fit": fit_auto, "fit_ip": fit_ip, "fit_cpu": cpu_auto, "fit_ip_cpu": cpu_ip,
+               "overhead": _overhead(auto, partial)}
     members = getattr(auto.model_, "members_", {auto.chosen_: None})
     bw = auto.selection_.get("band_weights", {auto.chosen_: [1.0]})
     out["members"] = ", ".join(f"{m} {bw[m][0]:.2f}" + (f"/{max(bw[m]):.2f}" if max(bw[m]) > bw[m][0] else "")
@@ -143,17 +164,20 @@ def table(quick=False, sizes=SIZES, log=print) -> list:
     """One row per data generator and size; returns the rows (dicts) and prints the table."""
     rows = []
     log("| data | size | frame: default / IP (ratio) | predict (ratio) | fit (ratio; CPU time ratio) | "
-        "modelled frame ratio | members (real-time weight / largest) | left out for the budget |")
-    log("|---|---|---|---|---|---|---|---|")
+        "modelled frame ratio | blend's own share of the frame | members (real-time weight / largest) | "
+        "left out for the budget |")
+    log("|---|---|---|---|---|---|---|---|---|")
     for S, Do, Dc, T in sizes:
         for name, gen in GENERATORS.items():
             r = measure(gen, S, Do, Dc, T, quick)
             r.update(data=name, size=f"{S} x {Do}+{Dc} x {T}")
             rows.append(r)
+            share = "-" if not np.isfinite(r["overhead"]) else f"{100 * r['overhead']:.0f} %"
             log(f"| {name} | {r['size']} | {1e3 * r['frame']:.2f} / {1e3 * r['frame_ip']:.2f} ms "
                 f"({r['frame'] / r['frame_ip']:.1f}x) | {1e3 * r['predict']:.2f} / {1e3 * r['predict_ip']:.2f} ms "
                 f"({r['predict'] / r['predict_ip']:.1f}x) | {r['fit']:.1f} / {r['fit_ip']:.1f} s "
                 f"({r['fit'] / r['fit_ip']:.1f}x; CPU {r['fit_cpu'] / r['fit_ip_cpu']:.1f}x) | {r['modelled']:.1f}x | "
+                f"{share} | "
                 f"{r['members']} | {r['left_out']} |")
     return rows
 

@@ -301,3 +301,15 @@ def test_fit_frame_budget_option(tmp_path, capsys):
     import interprim as ip
 
     assert ip.load_any(out).frame_budget == 1.5
+    # the floor in milliseconds: 0 makes the budget the multiple alone
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--frame-budget", "1.5",
+                 "--frame-budget-floor", "0", "-o", str(out)]) == 0
+    assert "the larger of 1.5x and 0.00 ms" in capsys.readouterr().out
+    assert ip.load_any(out).frame_budget_floor == 0.0
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--model", "nn",
+                 "--frame-budget-floor", "1", "-o", str(out)]) != 0
+    assert "--frame-budget-floor" in capsys.readouterr().err
+    for bad in ("-1", "nan", "inf", "x"):
+        with pytest.raises(SystemExit):
+            main(["fit", str(data), "--frame-budget-floor", bad, "-o", str(out)])
+        assert "milliseconds" in capsys.readouterr().err

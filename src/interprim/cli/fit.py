@@ -102,8 +102,13 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--frame-budget", type=_frame_budget, default=None, metavar="X",
         help="--model auto: the most a streamed frame may cost, as a multiple of the Interaction Primitive's on "
-        "the same data (default 3; 'none': no bound); families that do not fit are left out, and the summary "
-        "says which",
+        "the same data, or --frame-budget-floor milliseconds if that is more (default 3; 'none': no bound); "
+        "families that do not fit are left out, and the summary says which",
+    )
+    p.add_argument(
+        "--frame-budget-floor", type=_milliseconds, default=None, metavar="MS",
+        help="--model auto: milliseconds a streamed frame may always cost, however cheap the Interaction "
+        "Primitive's frame is on the data (default 2; 0: the budget is the multiple alone)",
     )
     p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
     p.add_argument(
@@ -188,6 +193,16 @@ def _frame_budget(text):
     return value
 
 
+def _milliseconds(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of milliseconds >= 0, got {text!r}") from None
+    if not (value >= 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a number of milliseconds >= 0, got {text!r}")
+    return value
+
+
 def _sigma2(text):
     if text in ("residual", "cv"):
         return text
@@ -220,9 +235,10 @@ def cmd_fit(args) -> int:
     if len(ds) < 2:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
                            "distribution. " + SPLIT_HINT)
-    if args.model != "auto" and args.frame_budget is not None:
-        raise CommandError(f"--frame-budget bounds the blend of --model auto; --model {args.model} is one family "
-                           "alone (drop --frame-budget, or use --model auto)")
+    for flag, value in (("--frame-budget", args.frame_budget), ("--frame-budget-floor", args.frame_budget_floor)):
+        if args.model != "auto" and value is not None:
+            raise CommandError(f"{flag} bounds the blend of --model auto; --model {args.model} is one family "
+                               f"alone (drop {flag}, or use --model auto)")
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -272,6 +288,8 @@ def _fit_other(args, ds, obs, n_read) -> int:
     budget: dict[str, Any] = {}  # not given: the library's default budget; "none": no budget
     if args.frame_budget is not None:
         budget["frame_budget"] = None if args.frame_budget == "none" else float(args.frame_budget)
+    if args.frame_budget_floor is not None:
+        budget["frame_budget_floor"] = float(args.frame_budget_floor) / 1e3
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
                            horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon), **budget)

@@ -416,7 +416,7 @@ class AutoInteraction(Predictor):
             lv = s.get("band_level")
             if lv:
                 lines.append("90 % band: the held-out errors' quantile at " + ", ".join(
-                    f"{lv[k]:.0%} for the {'robot' if k == 'controlled' else 'partner'}" for k in lv if k in lv)
+                    f"{100 * lv[k]:.0f} % for the {'robot' if k == 'controlled' else 'partner'}" for k in lv)
                     + " (the smallest level that covers 90 % of demonstrations left out of its calibration)")
         else:
             lines.append(f"using {self.chosen_} alone")

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.preprocessing import interp_columns
-from .yardsticks import case_rms, clock_units, one_se_choice, place_cases, ratio_se, true_duration_units
+from .yardsticks import case_groups, case_rms, clock_units, one_se_choice, place_cases, ratio_se, true_duration_units
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
            "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
@@ -87,16 +87,6 @@ def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndar
     after = uh + (t - h) * (1.0 - uh) / np.maximum(R - h, 1e-9)
     after = np.where(R > h, after, 1.0)  # the shared end at the band's edge: the members hold their end after it
     return np.clip(np.where(t <= h + 1e-12, own, after), 0.0, 1.0)
-
-
-def case_groups(demo, k: int = 3) -> np.ndarray:
-    """``(cases,)`` group labels ``0..k-1``: the held-out demonstrations ``demo`` split into ``k`` contiguous groups
-    (every case of a demonstration in one group)."""
-    demo = np.asarray(demo)
-    u = np.unique(demo)
-    k = max(1, min(int(k), len(u)))
-    g = {d: i * k // len(u) for i, d in enumerate(u)}
-    return np.array([g[d] for d in demo], dtype=np.int64)
 
 
 def schedule(t_ahead, edges, W) -> np.ndarray:

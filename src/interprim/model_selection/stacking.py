@@ -24,6 +24,7 @@ import numpy as np
 from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import RealTimeConfig, folds, realtime_sweep
+from .yardsticks import case_groups
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
            "crossfit_coverage", "crossfit_coverages", "band_level",
@@ -541,8 +542,6 @@ def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, 
     The level only scales the matched model: a frame is inside the band of level ``L`` when its error over the
     matched std is at most that step's ``L``-quantile of the training cases' (``1.645 sd`` with ``sd`` scaled by
     ``q / 1.645``), so every level is read from one fit per group."""
-    from .long_range import case_groups
-
     levels = np.atleast_1d(np.asarray(levels, dtype=np.float64))
     g = case_groups(groups, k)
     mix = np.sum(w * mean, axis=0)

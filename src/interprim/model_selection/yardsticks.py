@@ -21,7 +21,7 @@ import numpy as np
 from ..core.cv import paired_gain
 from ..core.preprocessing import interp_columns
 
-__all__ = ["case_rms", "demo_means", "ratio_se", "one_se_choice", "place_cases", "clock_units",
+__all__ = ["case_rms", "case_groups", "demo_means", "ratio_se", "one_se_choice", "place_cases", "clock_units",
            "true_duration_units", "whole_movement_units"]
 
 
@@ -47,6 +47,16 @@ def case_rms(pred, truth, mask, cols, point_dim: int = 1) -> np.ndarray:
     p2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3).mean(axis=2)  # (cases, H) squared point errors
     m = np.asarray(mask, dtype=np.float64)
     return np.sqrt(np.sum(p2 * m, axis=1) / np.maximum(m.sum(axis=1), 1.0))
+
+
+def case_groups(demo, k: int = 3) -> np.ndarray:
+    """``(cases,)`` group labels ``0..k-1``: the held-out demonstrations ``demo`` split into ``k`` contiguous groups
+    (every case of a demonstration in one group)."""
+    demo = np.asarray(demo)
+    u = np.unique(demo)
+    k = max(1, min(int(k), len(u)))
+    g = {d: i * k // len(u) for i, d in enumerate(u)}
+    return np.array([g[d] for d in demo], dtype=np.int64)
 
 
 def demo_means(values, groups) -> np.ndarray:

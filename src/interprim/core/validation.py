@@ -45,6 +45,20 @@ def as_2d_finite(a: ArrayLike, name: str, n_cols: int | None = None, min_rows: i
     return np.ascontiguousarray(arr)
 
 
+def as_demonstrations(demos: Any, min_rows: int = 1, name: str = "demos") -> list[np.ndarray]:
+    """Return ``demos`` (a sequence of ``(T_j, D)`` arrays) as validated float64 arrays of one width, or raise a
+    clear error: each checked by :func:`as_2d_finite` (``demos[j]`` in messages, at least ``min_rows`` frames), at
+    least one, all with the first one's number of columns."""
+    arrays = [as_2d_finite(d, f"{name}[{j}]", min_rows=min_rows) for j, d in enumerate(demos)]
+    if not arrays:
+        raise ValueError(f"{name} is empty: at least one demonstration is needed")
+    D = arrays[0].shape[1]
+    for j, a in enumerate(arrays):
+        if a.shape[1] != D:
+            raise ValueError(f"{name}[{j}] has {a.shape[1]} columns but {name}[0] has {D}")
+    return arrays
+
+
 def as_frame(frame: ArrayLike, name: str, n_cols: int) -> np.ndarray:
     """Check a single frame of ``n_cols`` finite values."""
     try:

@@ -401,7 +401,7 @@ def save_demonstrations(path, demos, times=None, *, dt=None, columns=None, obser
     Path
         The written file or folder.
     """
-    from ..core.validation import as_2d_finite, check_times
+    from ..core.validation import as_demonstrations, check_times
 
     if isinstance(demos, Demonstrations):
         times = demos.times if times is None else times
@@ -412,13 +412,8 @@ def save_demonstrations(path, demos, times=None, *, dt=None, columns=None, obser
         demos = demos.demos
     if isinstance(demos, np.ndarray) and demos.ndim == 2:
         demos = [demos]
-    arrs = [as_2d_finite(d, f"demos[{i}]") for i, d in enumerate(demos)]
-    if not arrs:
-        raise ValueError("demos is empty; nothing to save")
+    arrs = as_demonstrations(demos)
     D = arrs[0].shape[1]
-    for i, a in enumerate(arrs):
-        if a.shape[1] != D:
-            raise ValueError(f"demos[{i}] has {a.shape[1]} columns, demos[0] has {D}")
     if columns is None:
         columns = [f"dof_{j}" for j in range(D)]
     columns = [str(c) for c in columns]

@@ -41,8 +41,7 @@ from ..model_selection import long_range, stacking
 from ..model_selection.realtime import folds
 from ..model_selection.yardsticks import place_cases
 from ..models import registry
-from ..models.auto import DEFAULT_FRAME_BUDGET, DEFAULT_FRAME_BUDGET_FLOOR, AutoInteraction
-from ..models.blend import Blend
+from ..models.auto import AutoInteraction
 
 __all__ = ["task_folds", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
 
@@ -73,14 +72,7 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
 
 def _budget(cv, sizes: registry.FrameSizes) -> tuple:
     """``(cost, budget)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of ``sizes``."""
-    n_dofs = sizes.n_dofs
-    costs = {m: registry.frame_cost(m, sizes) for m in cv.names}
-    ip_frame = registry.frame_cost("ip", sizes) or 0.0
-    budget = max(DEFAULT_FRAME_BUDGET * ip_frame, DEFAULT_FRAME_BUDGET_FLOOR)
-
-    def cost(names) -> float:
-        return float(sum(costs[m] or 0.0 for m in names)) + Blend.frame_overhead(len(names), n_dofs)
-
+    _, cost, _, budget = AutoInteraction([]).budget_model(sizes, cv.names)
     return cost, budget
 
 

@@ -457,8 +457,7 @@ class CrossValidation:
         n_rt = max(1, int(round(self.horizon / self.dt)))
         valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
         agents = {k: c for k, c in (("controlled", self.controlled), ("observed", self.observed)) if c}
-        groups = self.demo if hasattr(self, "demo") else np.arange(len(valid))
-        levels = {k: float(level) if level is not None else band_level(self.mean, self.truth, valid, w, cols, groups)
+        levels = {k: float(level) if level is not None else band_level(self.mean, self.truth, valid, w, cols, self.demo)
                   for k, cols in agents.items()}
         a, b = variance_model(self.mean, self.truth, valid, w, agents, levels)
         return {"a": a, "b": b, "level": levels}

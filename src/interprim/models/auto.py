@@ -189,6 +189,23 @@ class AutoInteraction(Predictor):
         names = [c if isinstance(c, str) else c[0] for c in self.candidates]
         return {m: registry.frame_cost(m, sizes) for m in names}
 
+    def budget_model(self, sizes: registry.FrameSizes, names) -> tuple:
+        """``(costs, cost, ip_frame, budget)`` of the frame budget on data of ``sizes`` for the candidates ``names``:
+        ``{family: modelled seconds of its frame alone}`` (None: not costed), ``cost(members)`` the modelled frame
+        of a blend of ``members`` (:meth:`~interprim.models.blend.Blend.frame_overhead` included), the Interaction
+        Primitive's frame, and the budget in seconds (None without one): the larger of ``frame_budget`` times the
+        IP's frame and ``frame_budget_floor``."""
+        costs = {m: c for m, c in self.frame_costs(sizes).items() if m in set(names)}
+
+        def cost(members) -> float:
+            return float(sum(costs[m] or 0.0 for m in members)) + Blend.frame_overhead(len(members), sizes.n_dofs)
+
+        ip_frame = registry.frame_cost("ip", sizes)
+        assert ip_frame is not None  # the registry's ip has a cost model
+        budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
+                                                            float(self.frame_budget_floor))
+        return costs, cost, ip_frame, budget
+
     def factories(self) -> dict:
         """``{family: factory of an unfitted estimator}`` of the candidates: a registry name built with this model's
         settings (:meth:`settings`), a ``(name, factory)`` pair as given."""
@@ -242,12 +259,6 @@ class AutoInteraction(Predictor):
         make = self.factories()
         sizes = registry.FrameSizes(n, float(np.mean([len(d) for d in train])), len(self.observed_dofs),
                                     int(train[0].shape[1]), int(self.n_basis))
-        costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
-        n_dofs = int(train[0].shape[1])
-
-        def cost(names) -> float:  # the modelled frame of a blend of ``names`` (or of one family alone)
-            return float(sum(costs[m] or 0.0 for m in names)) + Blend.frame_overhead(len(names), n_dofs)
-
         progress = Progress(self.progress, len(make))
         ref = None
         if self.frame_budget is not None and len(make) > 1:
@@ -257,11 +268,7 @@ class AutoInteraction(Predictor):
             progress.grow(1)
             progress.step("fitted ip (the frame budget's yardstick)")
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
-            costs = {m: c for m, c in self.frame_costs(sizes).items() if m in make}
-        ip_frame = registry.frame_cost("ip", sizes)
-        assert ip_frame is not None  # the registry's ip has a cost model
-        budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
-                                                            float(self.frame_budget_floor))
+        costs, cost, ip_frame, budget = self.budget_model(sizes, list(make))
 
         def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
             if m == "ip" and ref is not None and "ip" in self.candidates:

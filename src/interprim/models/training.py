@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..core.preprocessing import resample_uniform
-from ..core.validation import as_2d_finite, check_positive, check_times
+from ..core.validation import as_demonstrations, check_positive, check_times
 
 __all__ = ["TrainingSet", "training_set", "uniform_demonstrations", "DEFAULT_DT"]
 
@@ -167,13 +167,8 @@ def training_set(demos, dt: float | None = None, times=None, columns=None) -> Tr
         demos = list(demos)
     if not isinstance(demos, (list, tuple)):
         raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
-    arrays = [as_2d_finite(d, f"demos[{j}]") for j, d in enumerate(demos)]
-    if not arrays:
-        raise ValueError("demos is empty: at least one demonstration is needed")
+    arrays = as_demonstrations(demos)
     D = arrays[0].shape[1]
-    for j, a in enumerate(arrays):
-        if a.shape[1] != D:
-            raise ValueError(f"demos[{j}] has {a.shape[1]} columns but demos[0] has {D}")
     if columns is not None:
         columns = tuple(str(c) for c in columns)
         if len(columns) != D:

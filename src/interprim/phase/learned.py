@@ -71,7 +71,7 @@ import numpy as np
 
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
-from ..core.validation import as_2d_finite, as_frame, check_positive, check_times
+from ..core.validation import as_2d_finite, as_demonstrations, as_frame, check_positive, check_times
 from ._learned_features import group_dims, jsonable, kernel_loo, prefix_features, ridge_loo
 from .estimate import PhaseEstimate
 
@@ -250,11 +250,8 @@ class LearnedPhase:
         if len(demos) < 3:
             raise ValueError(f"demos: at least 3 demonstrations are needed (leave-one-out needs 2 to train on), "
                              f"got {len(demos)}")
-        Ys = [as_2d_finite(d, f"demos[{i}]", min_rows=2) for i, d in enumerate(demos)]
+        Ys = as_demonstrations(demos, min_rows=2)
         D = Ys[0].shape[1]
-        for i, y in enumerate(Ys):
-            if y.shape[1] != D:
-                raise ValueError(f"demos[{i}] has {y.shape[1]} columns, demos[0] has {D}")
         if (dt is None) == (times is None):
             raise ValueError("give exactly one of dt (uniform sampling, seconds) or times (one array per demo)")
         if times is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
-from .takes import split_dict
+from .takes import read_marker_take
 
 __all__ = ["C3dReader"]
 
@@ -22,7 +22,4 @@ class C3dReader(Reader):
         """Read ``path`` (see :meth:`Reader.read`)."""
         from ..mocap_c3d import read_c3d
 
-        o = options[MarkerOptions]
-        return Table(*read_c3d(path, markers=o.markers, length_unit=o.length_unit, max_nan_gap=common.max_nan_gap,
-                               min_frames=common.min_frames, split=split_dict(options[TakeOptions]),
-                               min_marker_coverage=o.min_marker_coverage))
+        return read_marker_take(read_c3d, path, common, options)

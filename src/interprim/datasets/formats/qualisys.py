@@ -17,7 +17,7 @@ import numpy as np
 
 from ...core.errors import DataFileError, DataFileWarning
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
-from .takes import split_dict
+from .takes import read_marker_take
 
 __all__ = ["QualisysTsvReader", "read_qualisys_tsv"]
 
@@ -144,8 +144,4 @@ class QualisysTsvReader(Reader):
 
     def read(self, path: Path, common: Common, options: dict) -> Table:
         """Read ``path`` (see :meth:`Reader.read`)."""
-        o = options[MarkerOptions]
-        return Table(*read_qualisys_tsv(path, markers=o.markers, length_unit=o.length_unit,
-                                        max_nan_gap=common.max_nan_gap, min_frames=common.min_frames,
-                                        split=split_dict(options[TakeOptions]),
-                                        min_marker_coverage=o.min_marker_coverage))
+        return read_marker_take(read_qualisys_tsv, path, common, options)

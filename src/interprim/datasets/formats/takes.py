@@ -8,9 +8,18 @@ from pathlib import Path
 import numpy as np
 
 from ...core.errors import DataFileError
-from .base import Common, Table, TakeOptions
+from .base import Common, MarkerOptions, Table, TakeOptions
 
-__all__ = ["split_table", "split_dict"]
+__all__ = ["split_table", "split_dict", "read_marker_take"]
+
+
+def read_marker_take(load, path: Path, common: Common, options: dict) -> Table:
+    """The :class:`Table` of a marker file (C3D, Qualisys TSV, OptiTrack Motive CSV) read by its loader ``load``
+    (``read_c3d``, ...) with the marker options, the common gap and length limits and the take's splitting."""
+    o = options[MarkerOptions]
+    return Table(*load(path, markers=o.markers, length_unit=o.length_unit, max_nan_gap=common.max_nan_gap,
+                       min_frames=common.min_frames, split=split_dict(options[TakeOptions]),
+                       min_marker_coverage=o.min_marker_coverage))
 
 
 def split_dict(take: TakeOptions) -> dict:

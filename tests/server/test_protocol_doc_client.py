@@ -216,10 +216,13 @@ def test_pipelined_frames_first_frames_and_seq(server):
                 assert p["x"] == pytest.approx(math.exp(-model_info(w, "pair")["alpha_x"] * p["phase"]), rel=1e-9)
                 assert p["speed"] == pytest.approx(model_info(w, "pair")["mean_duration"] / p["duration"], rel=1e-9)
                 assert math.isfinite(p["log_likelihood"])
-                phases.append(p["phase"])
+                phases.append((p["frames"], p["phase"]))
         assert sum(p["covers"] for p, _, _ in replies) == n  # nothing dropped
-        # a whole training demonstration: the phase runs to the end, and the time axis agrees with dt
-        assert phases[-1] > 0.9 and (phases[0] < 0.2 or replies[0][0]["covers"] > 1)
+        # a whole training demonstration: the phase runs to the end, and the time axis agrees with dt; the first
+        # conditioned prediction is early in the movement unless a busy server answered it after many frames at once
+        # (how many frames a reply covers depends on the machine's load, so the check reads the frames it answers)
+        first_frames, first_phase = phases[0]
+        assert phases[-1][1] > 0.9 and (first_phase < 0.2 or first_frames > 0.15 * n)
         last = replies[-1][0]
         assert last["duration"] == pytest.approx((n - 1) * replay["dt"] / last["phase"], rel=1e-6)
         r = c.rpc({"type": "reset"})

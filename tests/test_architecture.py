@@ -232,17 +232,12 @@ def demonstration_readers(tree: ast.AST) -> list[str]:
 def test_only_the_adapter_reads_demonstrations():
     """docs/architecture.md: every family reads demonstrations, time stamps and column names through one adapter,
     ``interprim.models.training.training_set``; a family's ``_fit`` receives the validated ``TrainingSet``."""
-    # the blend still asks its source whether it has time stamps (for causal prefixes in its cross-validation);
-    # the TrainingSet carries them (``times``, ``raw``): to go when the blend takes the set from the adapter
-    known = {"models/auto.py hasattr(source, 'times')"}
     bad = []
     for path in sorted((SRC / "models").rglob("*.py")):
         if path.name == "training.py":
             continue
         for line in demonstration_readers(ast.parse(path.read_text())):
-            where = f"{path.relative_to(SRC)} {line.split(' ', 1)[1]}"
-            if where not in known:
-                bad.append(f"{path.relative_to(SRC)}:{line}")
+            bad.append(f"{path.relative_to(SRC)}:{line}")
     assert not bad, "\n".join(bad)
     from interprim.models import registry
     from interprim.models.base import Predictor

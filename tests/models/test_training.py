@@ -123,3 +123,29 @@ def test_a_training_set_keeps_the_raw_samples_for_causal_prefixes():
     for j, k in ((0, 10), (1, 23), (1, 40)):
         np.testing.assert_array_equal(ours(j, k), theirs(j, k))
     assert not np.array_equal(ours(1, 23), data.arrays[3][:23, :2])  # causal: not the interpolated frames
+    assert training_set(ds, dt=0.01).raw is not None  # its own interval, given again: still its raw samples
+    assert training_set(ds, dt=0.02).raw is None  # another interval: the arrays are read on that grid
+
+    # the default's inner cross-validation takes its causal prefixes from the training set
+    from interprim import AutoInteraction
+    from interprim.model_selection import stacking
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(make, cv_demos, *args, **kwargs):
+        seen.append(cv_demos)
+        raise Stop
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(stacking, "CrossValidation", spy)
+    try:
+        for kw in ({}, {"dt": 0.01}):
+            with pytest.raises(Stop):
+                AutoInteraction([0, 1], candidates=["prior", "nn"], frame_budget=None).fit(ds, **kw)
+    finally:
+        mp.undo()
+    assert all(Prefixes(s, [0, 1]).causal for s in seen) and len(seen) == 2
+    np.testing.assert_array_equal(Prefixes(seen[1], [0, 1])(3, 23), Prefixes(ds, [0, 1])(3, 23))

@@ -246,16 +246,15 @@ class AutoInteraction(Predictor):
             ``self``.
         """
         self._check()
-        source = demos
         data = training_set(demos, dt, times=times, columns=columns)
         train, dt, cols = list(data.arrays), data.dt, None if data.columns is None else list(data.columns)
         n = len(train)
         if n < 3:
             raise ValueError(f"AutoInteraction needs at least 3 demonstrations to compare families, got {n}")
-        # a Demonstrations sampled at a common interval keeps its raw samples (causal prefixes in the inner CV);
-        # irregular stamps were resampled above and the CV sees the resampled frames
-        cv_demos = source if (getattr(source, "dt", None) is not None and hasattr(source, "times")
-                              and getattr(source, "times", None) is not None and times is None) else train
+        # a Demonstrations sampled at a common interval keeps its raw samples (the training set's ``raw`` and
+        # ``times``: causal prefixes in the inner CV); irregular stamps were resampled above and the CV sees the
+        # resampled frames
+        cv_demos = data if data.raw is not None and data.times is not None else train
         make = self.factories()
         sizes = registry.FrameSizes(n, float(np.mean([len(d) for d in train])), len(self.observed_dofs),
                                     int(train[0].shape[1]), int(self.n_basis))

@@ -155,7 +155,7 @@ def training_set(demos, dt: float | None = None, times=None, columns=None) -> Tr
         if columns is None:
             columns = getattr(demos, "columns", None)
         observed = getattr(demos, "observed_dofs", None)
-        if dt is None and times is None:
+        if times is None and (dt is None or dt == getattr(demos, "dt", None)):
             if getattr(demos, "dt", None) is not None:
                 dt = demos.dt
                 stamps = demos.times

@@ -63,7 +63,7 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
         d = dev.take(keep) if hasattr(dev, "take") else [dev[i] for i in keep]
         tr = [np.asarray(x, dtype=np.float64) for x in d]
         c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim)
-        phase = registry.family("ip").build(auto.settings()).fit(tr, dt=dt).phase_method_used()
+        phase = registry.yardstick_ip(auto.settings(), tr, dt).phase_method_used()
         sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
                                     int(auto.n_basis), phase=phase)
         inner.append((held, stacking.CrossValidation(make, d, obs, dt, c, k=k, horizon=0.25), sizes))

@@ -263,7 +263,7 @@ class AutoInteraction(Predictor):
         if self.frame_budget is not None and len(make) > 1:
             # the Interaction Primitive of these data, fitted once: the budget's yardstick (its phase, chosen by its
             # own cross-validation, moves its frame by up to 2.5x) and, when the blend keeps it, its ip member
-            ref = registry.family("ip").build(self.settings()).fit(train, dt=dt)
+            ref = registry.yardstick_ip(self.settings(), train, dt)
             progress.grow(1)
             progress.step("fitted ip (the frame budget's yardstick)")
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())

@@ -42,9 +42,13 @@ Interaction Primitive's :class:`~interprim.models.primitive.prediction.Predictio
 
 from __future__ import annotations
 
+import os
 import warnings
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.blas import limit_methods, one_blas_thread
 from ..core.errors import NotFittedError, OutOfRangeWarning
@@ -60,6 +64,9 @@ __all__ = ["BasePrediction", "BaseStream", "Predictor", "PrefixStream", "Checked
 #: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
 _PREDICTION_CALLS = ("trajectory", "std", "samples", "response", "completion", "completion_std", "band")
 
+#: a :class:`Predictor` subclass (``fit`` and ``load`` return the class they are called on)
+P = TypeVar("P", bound="Predictor")
+
 
 class BasePrediction:
     """What every model's prediction offers (see the module docstring); subclasses implement the methods.
@@ -68,7 +75,7 @@ class BasePrediction:
     predictors' ``fit``/``predict`` and the streams' ``update``/``extend`` do.
     """
 
-    def __init_subclass__(cls, **kwargs):
+    def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         limit_methods(cls, _PREDICTION_CALLS)
 
@@ -100,21 +107,23 @@ class BasePrediction:
         """Mean of every data column on ``linspace(0, 1, n)`` (normalised time), shape ``(n, D)``."""
         raise NotImplementedError
 
-    def std(self, n: int = 100, calibrated: bool = True):  # pragma: no cover - interface
+    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray | None:  # pragma: no cover - interface
         """Pointwise standard deviation of :meth:`trajectory`, shape ``(n, D)`` (``None``: no uncertainty);
         ``calibrated=False``: the model's raw std (without calibration or timing terms)."""
         raise NotImplementedError
 
-    def samples(self, n_samples: int = 20, n: int = 100, random_state=None) -> np.ndarray:  # pragma: no cover
+    def samples(self, n_samples: int = 20, n: int = 100,
+                random_state: Any = None) -> np.ndarray:  # pragma: no cover - interface
         """Trajectories drawn from the prediction, shape ``(n_samples, n, D)``."""
         raise NotImplementedError
 
-    def response(self, n: int = 100, state=None):  # pragma: no cover - interface
+    def response(self, n: int = 100,
+                 state: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
         """``(t, y)``: seconds from now and the controlled agent's positions ``(n, n_controlled)`` from the
         current phase to the end of the movement."""
         raise NotImplementedError
 
-    def completion(self, n: int = 100):  # pragma: no cover - interface
+    def completion(self, n: int = 100) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
         """``(s, y)``: normalised times from the current phase to 1 and the observed agent's positions
         ``(n, n_observed)`` there."""
         raise NotImplementedError
@@ -124,7 +133,7 @@ class BasePrediction:
         """The predicted end point (goal) of every data column, shape ``(D,)``."""
         raise NotImplementedError
 
-    def mean_rollout(self, n: int = 100, columns=None):
+    def mean_rollout(self, n: int = 100, columns: Any = None) -> Callable[[Any], np.ndarray]:
         """A callable ``f`` with ``f(pred) == pred.trajectory(n)[:, columns]`` for this and every later prediction
         of the same model (a server or controller that needs the same columns on the same grid at every frame).
 
@@ -141,11 +150,11 @@ class TrajectoryColumns:
 
     __slots__ = ("n", "columns")
 
-    def __init__(self, n: int, columns=None):
+    def __init__(self, n: int, columns: Any = None) -> None:
         self.n = int(n)
         self.columns = slice(None) if columns is None else columns
 
-    def __call__(self, pred) -> np.ndarray:
+    def __call__(self, pred: BasePrediction) -> np.ndarray:
         return np.asarray(pred.trajectory(self.n))[:, self.columns]
 
 
@@ -162,7 +171,7 @@ class BaseStream:
     #: that answers with the model's own ``predict`` of the frames seen)
     marks_input = False
 
-    def __init_subclass__(cls, **kwargs):
+    def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         limit_methods(cls, ("update", "extend"))  # one BLAS thread (see BasePrediction)
 
@@ -171,15 +180,15 @@ class BaseStream:
         """Number of frames received since the stream was created or last :meth:`reset`."""
         raise NotImplementedError
 
-    def reset(self, robot_state=None):  # pragma: no cover - interface
+    def reset(self, robot_state: ArrayLike | None = None) -> None:  # pragma: no cover - interface
         """Forget all frames (start a new interaction)."""
         raise NotImplementedError
 
-    def update(self, frame, need_cov: bool = False) -> BasePrediction:  # pragma: no cover - interface
+    def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:  # pragma: no cover - interface
         """Add one frame of the observed agent, shape ``(n_observed,)``; returns the prediction for all frames seen."""
         raise NotImplementedError
 
-    def extend(self, frames, need_cov: bool = False) -> BasePrediction:
+    def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add several frames of the observed agent at once, shape ``(k, n_observed)`` with ``k >= 1``, oldest first;
         returns what ``k`` calls of :meth:`update` return for the last of them.
 
@@ -208,7 +217,7 @@ class PrefixStream(BaseStream):
 
     marks_input = True  # its answer is the model's predict of every frame seen
 
-    def __init__(self, model):
+    def __init__(self, model: Predictor) -> None:
         self.model = model
         self._n_cols = len(model.observed_dofs_)
         self._buf = np.empty((16, self._n_cols))
@@ -219,11 +228,11 @@ class PrefixStream(BaseStream):
         """Number of frames received since the stream was created or last :meth:`reset`."""
         return self._n
 
-    def reset(self, robot_state=None):
+    def reset(self, robot_state: ArrayLike | None = None) -> None:
         """Forget all frames (start a new interaction)."""
         self._n = 0
 
-    def update(self, frame, need_cov: bool = False):
+    def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns its prediction."""
         f = as_frame(frame, "frame", self._n_cols)
         if self._n == self._buf.shape[0]:
@@ -232,7 +241,7 @@ class PrefixStream(BaseStream):
         self._n += 1
         return self.model.predict(self._buf[: self._n].copy())
 
-    def extend(self, frames, need_cov: bool = False):
+    def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns the prediction for
         all frames seen, as :meth:`update` does for the last of them."""
         block = as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1)
@@ -279,14 +288,16 @@ class Predictor(Params):
     _CHECKS_INPUT = False
     #: ``(mean, std, limit)`` of the observed training frames (None: unknown, e.g. a member inside a blend's file)
     input_range_ = None
+    #: the observed agent's columns, once fitted (every family sets them in ``_fit`` or ``load_state``)
+    observed_dofs_: list[int]
 
-    def __init_subclass__(cls, **kwargs):
+    def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         limit_methods(cls, [n for n in ("fit", "predict") if n in cls.__dict__
                             and not getattr(cls.__dict__[n], "__interprim_one_blas__", False)])
 
     @one_blas_thread
-    def fit(self, demos, dt: float | None = None, times=None, columns=None):
+    def fit(self: P, demos: Any, dt: float | None = None, times: Any = None, columns: Any = None) -> P:
         """Learn the model from demonstrations of both agents; returns the model.
 
         Parameters
@@ -320,7 +331,7 @@ class Predictor(Params):
         raise NotImplementedError
 
     @one_blas_thread
-    def predict(self, partial, **kwargs) -> BasePrediction:
+    def predict(self, partial: ArrayLike, **kwargs: Any) -> BasePrediction:
         """The prediction from the observed agent's frames ``partial`` ``(M, len(observed_dofs))`` since the start
         of the movement, marked with ``input_distance`` and ``out_of_range``; the model is left unchanged."""
         pred = self._predict(partial, **kwargs)
@@ -329,11 +340,11 @@ class Predictor(Params):
             mark(self, pred, self.input_distance(partial))
         return pred
 
-    def _predict(self, partial, **kwargs) -> BasePrediction:  # pragma: no cover - interface
+    def _predict(self, partial: ArrayLike, **kwargs: Any) -> BasePrediction:  # pragma: no cover - interface
         """The family's prediction of :meth:`predict` (unmarked)."""
         raise NotImplementedError
 
-    def stream(self, robot_state=None) -> BaseStream:
+    def stream(self, robot_state: ArrayLike | None = None) -> BaseStream:
         """Online predictor that takes one observed frame at a time; its answers equal :meth:`predict` of the
         frames seen, marked with the largest input distance so far."""
         inner = self._stream(robot_state)
@@ -341,14 +352,14 @@ class Predictor(Params):
             return inner
         return CheckedStream(self, inner)
 
-    def _stream(self, robot_state=None) -> BaseStream:
+    def _stream(self, robot_state: ArrayLike | None = None) -> BaseStream:
         """The family's online predictor of :meth:`stream` (default :class:`PrefixStream`)."""
         self._check_fitted("stream")
         if robot_state is not None:
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         return PrefixStream(self)
 
-    def set_input_range(self, input_range):
+    def set_input_range(self, input_range: Any) -> None:
         """Set ``input_range_`` (``(mean, std, limit)`` or None), e.g. from a model file."""
         if input_range is None:
             self.input_range_ = self.input_limit_ = None
@@ -361,7 +372,7 @@ class Predictor(Params):
         #: the input distance above which a prediction is out of range
         self.input_limit_ = float(limit)
 
-    def input_distance(self, frames) -> float:
+    def input_distance(self, frames: ArrayLike) -> float:
         """Largest standardised distance of observed frames ``(t, len(observed_dofs))`` from the training frames
         (:mod:`interprim.core.input_range`); NaN when the range is unknown."""
         if self.input_range_ is None:
@@ -377,25 +388,26 @@ class Predictor(Params):
     #: every prefix anew (the real-time protocol then streams: :func:`interprim.evaluation.realtime.realtime_fold`)
     exact_stream = False
 
-    def _check_fitted(self, what: str):
+    def _check_fitted(self, what: str) -> None:
         if not hasattr(self, self._FITTED):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit(demos) before {what}")
 
-    def json_params(self) -> dict:
+    def json_params(self) -> dict[str, Any]:
         """:meth:`get_params` (not deep) as stored in a model file (tuples as lists)."""
         import json
 
-        return json.loads(json.dumps(self.get_params(deep=False), default=_jsonable))
+        params: dict[str, Any] = json.loads(json.dumps(self.get_params(deep=False), default=_jsonable))
+        return params
 
-    def to_state(self):  # pragma: no cover - interface
+    def to_state(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:  # pragma: no cover - interface
         """``(arrays, meta)``: the fitted state, numeric arrays apart and the rest JSON-friendly."""
         raise NotImplementedError
 
-    def load_state(self, arrays: dict, meta: dict):  # pragma: no cover - interface
+    def load_state(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:  # pragma: no cover
         """Restore the fitted state written by :meth:`to_state` (used by :func:`interprim.io.load_estimator`)."""
         raise NotImplementedError
 
-    def save(self, path):
+    def save(self, path: str | os.PathLike[str]) -> None:
         """Save to a safe ``.npz`` model file (arrays + JSON metadata, no pickle); see :mod:`interprim.io`."""
         self._check_fitted("save")
         from ..io import save_estimator
@@ -403,14 +415,14 @@ class Predictor(Params):
         save_estimator(self, path)
 
     @classmethod
-    def load(cls, path):
+    def load(cls: type[P], path: str | os.PathLike[str]) -> P:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
         from ..io import load_estimator
 
         return load_estimator(path, cls)
 
 
-def _jsonable(v):
+def _jsonable(v: Any) -> Any:
     if isinstance(v, np.ndarray):
         return v.tolist()
     if isinstance(v, np.generic):
@@ -422,7 +434,7 @@ class CheckedStream(BaseStream):
     """A model's stream whose predictions carry ``input_distance`` and ``out_of_range`` of every frame seen so far
     (the largest distance, :mod:`interprim.core.input_range`), warned once per stream."""
 
-    def __init__(self, model, inner):
+    def __init__(self, model: Predictor, inner: BaseStream) -> None:
         self.model, self.inner = model, inner
         self._max = 0.0
         self._warned = False
@@ -432,27 +444,27 @@ class CheckedStream(BaseStream):
         """Frames received since the stream was created or last reset."""
         return self.inner.n_frames
 
-    def reset(self, robot_state=None):
+    def reset(self, robot_state: ArrayLike | None = None) -> None:
         """Forget all frames (start a new interaction)."""
         self.inner.reset(robot_state)
         self._max = 0.0
         self._warned = False
 
-    def _mark(self, pred, frames):
+    def _mark(self, pred: BasePrediction, frames: ArrayLike) -> BasePrediction:
         d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
         self._max = max(self._max, d) if np.isfinite(d) else d
         mark(self.model, pred, self._max, warn=not self._warned)
         self._warned = self._warned or pred.out_of_range
         return pred
 
-    def update(self, frame, need_cov: bool = False):
+    def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add one observed frame; the inner stream's prediction, marked."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OutOfRangeWarning)
             pred = self.inner.update(frame, need_cov=need_cov)
         return self._mark(pred, frame)
 
-    def extend(self, frames, need_cov: bool = False):
+    def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add several frames; the inner stream's prediction for the last, marked."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OutOfRangeWarning)

@@ -27,7 +27,7 @@ from .primitive.estimator import InteractionPrimitive
 from .promp import InteractionProMP
 
 __all__ = ["Settings", "Family", "FAMILIES", "DEFAULT_HORIZON", "CANDIDATES", "family", "factories",
-           "default_methods", "class_named", "FrameSizes", "frame_cost"]
+           "default_methods", "class_named", "FrameSizes", "frame_cost", "yardstick_ip"]
 
 
 
@@ -195,6 +195,14 @@ def family(name: str) -> Family:
         return FAMILIES[name]
     except KeyError:
         raise ValueError(f"unknown model family {name!r}; known: {', '.join(FAMILIES)}") from None
+
+
+def yardstick_ip(settings: Settings, demos, dt: float) -> InteractionPrimitive:
+    """The registry's ``ip`` built with ``settings`` and fitted on ``demos``: the frame budget's yardstick (its
+    phase, chosen by its own cross-validation, picks its frame's cost model: :class:`FrameSizes`)."""
+    ip = family("ip").build(settings)
+    assert isinstance(ip, InteractionPrimitive)  # the ip row builds an InteractionPrimitive
+    return ip.fit(demos, dt=dt)
 
 
 def factories(names, settings: Settings) -> dict:

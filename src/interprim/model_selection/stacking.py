@@ -28,7 +28,7 @@ from .yardsticks import case_groups
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
            "blend_parts",
-           "crossfit_coverage", "crossfit_coverages", "band_level",
+           "crossfit_coverage", "crossfit_coverages", "band_level", "band_levels",
            "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
@@ -240,7 +240,7 @@ class CrossValidation:
                     warnings.simplefilter("ignore", OutOfRangeWarning)
                     warnings.simplefilter("ignore", RepresentationWarning)
                     recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True,
-                                          std=False, references=False)
+                                          std=False, references=False, metrics=False)
             except ValueError as exc:  # e.g. too few demonstrations in an inner training fold for this family
                 self.errors[name] = float("inf")
                 self.why[name] = fold_message(str(exc).splitlines()[0], len(demos), k)
@@ -495,9 +495,10 @@ class CrossValidation:
         valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
         agents = {k: c for k, c in (("controlled", self.controlled), ("observed", self.observed)) if c}
         parts = blend_parts(self.mean, w)  # the blend and its members' spread, per case: shared by every fit below
-        levels = {k: float(level) if level is not None else band_level(self.mean, self.truth, valid, w, cols, self.demo,
-                                                                        parts=parts)
-                  for k, cols in agents.items()}
+        if level is not None:
+            levels = {k: float(level) for k in agents}
+        else:
+            levels = band_levels(self.mean, self.truth, valid, w, agents, self.demo, parts=parts)
         a, b = variance_model(self.mean, self.truth, valid, w, agents, levels, parts=parts)
         return {"a": a, "b": b, "level": levels}
 
@@ -591,10 +592,16 @@ def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, 
     matched std is at most that step's ``L``-quantile of the training cases' (``1.645 sd`` with ``sd`` scaled by
     ``q / 1.645``), so every level is read from one fit per group (``parts``: :func:`blend_parts` of ``mean`` and
     ``w``, else computed)."""
+    return _crossfit(mean, truth, valid, w, [cols], groups, levels, k, parts)[0]
+
+
+def _crossfit(mean, truth, valid, w, col_sets, groups, levels=BAND_LEVELS, k: int = 3, parts=None) -> list:
+    """:func:`crossfit_coverages` of each of the column sets ``col_sets``, one variance model fitted per group for
+    all of them (what a set's coverage reads of it, its columns, is computed as for that set alone)."""
     levels = np.atleast_1d(np.asarray(levels, dtype=np.float64))
     g = case_groups(groups, k)
     mix, case_spread = blend_parts(mean, w) if parts is None else parts
-    per_demo = []
+    per_demo: list[list] = [[] for _ in col_sets]
     for gi in np.unique(g):
         tr, te = g != gi, g == gi
         if not tr.any():
@@ -602,19 +609,22 @@ def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, 
         a, b, mix_tr, spread_tr, has, last = _matched_variance(None, truth[tr], valid[tr], w,
                                                                (mix[tr], case_spread[tr]))
         z_tr = np.abs(mix_tr - truth[tr]) / np.sqrt(np.maximum(a * spread_tr + b, 1e-300))
-        q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
-        sd = np.sqrt(np.maximum(a * case_spread[te] + b, 1e-300))[..., cols]
-        err = np.abs(mix[te] - truth[te])[..., cols]
+        sd_all = np.sqrt(np.maximum(a * case_spread[te] + b, 1e-300))
+        err_all = np.abs(mix[te] - truth[te])
         v, d = valid[te], np.asarray(groups)[te]
-        for j in np.unique(d):
-            sel = d == j
-            if not v[sel].any():
-                continue
-            # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
-            r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
-            qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
-            per_demo.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
-    return np.mean(per_demo, axis=0) if per_demo else np.ones(len(levels))
+        for cols, out in zip(col_sets, per_demo):
+            q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
+            sd = sd_all[..., cols]
+            err = err_all[..., cols]
+            for j in np.unique(d):
+                sel = d == j
+                if not v[sel].any():
+                    continue
+                # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
+                r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
+                qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
+                out.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
+    return [np.mean(o, axis=0) if o else np.ones(len(levels)) for o in per_demo]
 
 
 def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int = 3) -> float:
@@ -626,11 +636,20 @@ def band_level(mean, truth, valid, w, cols, groups, target: float = 0.9, parts=N
     """The smallest level of :data:`BAND_LEVELS` at which the cross-fitted band covers ``target`` of the held-out
     demonstrations' frames (:func:`crossfit_coverages`; the last level when none does, the first with fewer than
     two demonstrations)."""
+    return band_levels(mean, truth, valid, w, {"cols": cols}, groups, target, parts)["cols"]
+
+
+def band_levels(mean, truth, valid, w, agents: dict, groups, target: float = 0.9, parts=None) -> dict:
+    """:func:`band_level` of each agent's columns (``agents``: ``{name: cols}``), the cross-fitted variance models
+    shared (``{name: level}``, the numbers :func:`band_level` gives each)."""
     if len(np.unique(groups)) < 2:
-        return float(BAND_LEVELS[0])
-    cover = crossfit_coverages(mean, truth, valid, w, cols, groups, parts=parts)
-    ok = np.flatnonzero(cover >= target)
-    return float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
+        return {k: float(BAND_LEVELS[0]) for k in agents}
+    covers = _crossfit(mean, truth, valid, w, list(agents.values()), groups, parts=parts)
+    out = {}
+    for name, cover in zip(agents, covers):
+        ok = np.flatnonzero(cover >= target)
+        out[name] = float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
+    return out
 
 
 def choice(cv: CrossValidation, order) -> tuple:

@@ -275,6 +275,12 @@ def test_a_fit_inside_std_unused_measures_its_calibration_on_first_use_with_the_
     np.testing.assert_array_equal(twin.predict(partial).std(50), model.predict(partial).std(50))
     assert st.__dict__["calibration_"] is twin.calibration_ and "_calibration_pending" not in st.__dict__
     np.testing.assert_array_equal(lazy.predict(partial).std(50), model.predict(partial).std(50))
+    with std_unused():
+        kept = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10).fit(train, dt=0.01)
+    kept.fitted_.measure_deferred()  # what the default does with its yardstick IP when it keeps it as a member
+    assert "calibration_" in kept.fitted_.__dict__ and "_calibration_pending" not in kept.fitted_.__dict__
+    np.testing.assert_array_equal(kept.predict(partial).std(50), model.predict(partial).std(50))
+    model.fitted_.measure_deferred()  # an eager fit deferred nothing
     eager, deferred = model.calibration_.to_arrays(), lazy.calibration_.to_arrays()
     assert eager.keys() == deferred.keys()
     for k, v in eager.items():

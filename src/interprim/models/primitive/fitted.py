@@ -322,6 +322,13 @@ class FittedPrimitive:
             else:
                 self.calibration_ = _PendingCalibration(self, arrays).resolve(self)
 
+    def measure_deferred(self) -> None:
+        """Measure now what a fit inside :func:`interprim.core.cache.std_unused` deferred (the std's calibration),
+        as the fit would have measured it outside; nothing for a state that deferred nothing."""
+        pending = self.__dict__.get("_calibration_pending")
+        if pending is not None:
+            pending.resolve(self)
+
     def __getattr__(self, name: str):
         # ``calibration_`` of a state fitted inside ``interprim.core.cache.std_unused``: measured on first use, on
         # the state as fitted (a copy made meanwhile reads the same value)

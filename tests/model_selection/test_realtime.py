@@ -152,3 +152,18 @@ def test_learned_interaction_places_its_prediction_in_time_and_beats_the_clock_o
     s = summarise_realtime(realtime_sweep({"learned": lambda: ip.LearnedInteraction([0, 1])}, demos, [0, 1], 0.01,
                                           RealTimeConfig(stride=8), k=4))
     assert s["learned"]["rt_ctrl_vs_clock"] < 0.6 and s["learned"]["phase_err_vs_clock"] < 0.8
+
+
+def test_records_without_metrics_hold_the_same_placed_predictions():
+    """``metrics=False`` (a caller that scores the placed means itself) leaves the errors out, nothing else."""
+    demos = _demos(6)
+    kw = dict(k=3, trace=True, std=False, references=False)
+    make = {"prior": lambda: PriorMean([0, 1])}
+    full = realtime_sweep(make, demos, [0, 1], 0.01, RealTimeConfig(stride=5), **kw)
+    lean = realtime_sweep(make, demos, [0, 1], 0.01, RealTimeConfig(stride=5), metrics=False, **kw)
+    assert len(full) == len(lean) > 0
+    for a, b in zip(full, lean):
+        assert "rt_ctrl" in a and not any(key.startswith(("rt_", "cov_", "z_")) for key in b)
+        assert (a["demo"], a["k"], a["phase"]) == (b["demo"], b["k"], b["phase"])
+        np.testing.assert_array_equal(a["mean"], b["mean"])
+        np.testing.assert_array_equal(a["truth"], b["truth"])

@@ -80,3 +80,44 @@ def test_the_weights_are_those_of_the_direct_loss():
                    options={"ftol": 1e-12, "maxiter": 300})
     assert _direct(cv, None, w)[0] <= res.fun + 1e-9
     np.testing.assert_allclose(w, np.clip(res.x, 0, None) / np.clip(res.x, 0, None).sum(), atol=1e-4)
+
+
+def test_subsets_read_their_families_rows_only_when_asked_and_give_the_same_arrays():
+    """A subset of the families copies its rows of the per-family arrays on first read (the solver reads the shared
+    products only); what it then holds is the parent's rows, through any chain of subsets and case selections."""
+    rng = np.random.default_rng(9)
+    cv = _cv(rng, M=4)
+    cv.traj = rng.normal(size=cv.mean.shape[:2] + (7, 3))
+    cv.phase, cv.duration = rng.uniform(0, 1, cv.mean.shape[:2]), rng.uniform(1, 2, cv.mean.shape[:2])
+    sub = cv.subset(["f0", "f2", "f3"]).subset(["f0", "f3"])
+    assert "mean" not in sub.__dict__ and "traj" not in sub.__dict__  # nothing copied yet
+    sub.blend_weights(np.arange(4))  # the solver: the shared products only
+    assert "mean" not in sub.__dict__
+    for a in ("mean", "traj", "phase", "duration"):
+        np.testing.assert_array_equal(getattr(sub, a), getattr(cv, a)[[0, 3]])
+    idx = np.arange(4, 21)
+    nested = cv.subset(["f1", "f2"]).cases(idx)
+    for a in ("mean", "traj", "phase", "duration"):
+        np.testing.assert_array_equal(getattr(nested, a), getattr(cv, a)[1:3][:, idx])
+    with pytest.raises(AttributeError):
+        sub.no_such_array  # noqa: B018
+
+
+def test_the_band_levels_of_both_agents_at_once_are_those_of_each_alone():
+    from interprim.model_selection import stacking
+
+    rng = np.random.default_rng(10)
+    cv = _cv(rng, n_case=60)
+    cv.demo = np.repeat(np.arange(12), 5)
+    w = np.array([0.5, 0.3, 0.2])[:, None, None, None]
+    agents = {"controlled": cv.controlled, "observed": cv.observed}
+    both = stacking.band_levels(cv.mean, cv.truth, cv.valid, w, agents, cv.demo)
+    shared = stacking._crossfit(cv.mean, cv.truth, cv.valid, w, list(agents.values()), cv.demo)
+    for (name, cols), cover in zip(agents.items(), shared):
+        assert both[name] == stacking.band_level(cv.mean, cv.truth, cv.valid, w, cols, cv.demo)
+        np.testing.assert_array_equal(cover, stacking.crossfit_coverages(cv.mean, cv.truth, cv.valid, w, cols, cv.demo))
+    parts = stacking.blend_parts(cv.mean, w)
+    a, b = stacking.variance_model(cv.mean, cv.truth, cv.valid, w, agents, both)
+    a2, b2 = stacking.variance_model(cv.mean, cv.truth, cv.valid, w, agents, both, parts=parts)
+    np.testing.assert_array_equal(a, a2)
+    np.testing.assert_array_equal(b, b2)

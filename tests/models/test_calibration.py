@@ -252,3 +252,36 @@ def test_calibrate_with_cv_means_when_sigma2_is_cross_validated(tmp_path, value)
     few = ip.InteractionPrimitive([0, 1], n_basis=6, calibrate=value).fit(demos[:5], dt=0.01)
     assert few.calibration_ is None  # fewer than 6 demonstrations: no calibration
     assert [_calibrate(t) for t in ("with-cv", "on", "off")] == ["with-cv", True, False]
+
+
+def test_a_fit_inside_std_unused_measures_its_calibration_on_first_use_with_the_same_numbers(noisy):
+    """A cross-validation that scores means only (interprim.core.cache.std_unused) defers the calibration's held-out
+    folds; asked for later (std, a copy's std, a model file), it is the eager fit's, to the bit."""
+    import copy
+
+    from interprim.core.cache import std_deferred, std_unused
+
+    model, train, test = noisy
+    with std_unused():
+        assert std_deferred()
+        lazy = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10).fit(train, dt=0.01)
+    assert not std_deferred()
+    st = lazy.fitted_
+    assert "calibration_" not in st.__dict__ and "_calibration_pending" in st.__dict__  # not measured yet
+    partial = test[0][:40, :2]
+    np.testing.assert_array_equal(lazy.predict(partial).trajectory(50), model.predict(partial).trajectory(50))
+    assert "calibration_" not in st.__dict__  # the mean does not need it
+    twin = copy.copy(lazy)  # a copy made before it is measured reads the same calibration
+    np.testing.assert_array_equal(twin.predict(partial).std(50), model.predict(partial).std(50))
+    assert st.__dict__["calibration_"] is twin.calibration_ and "_calibration_pending" not in st.__dict__
+    np.testing.assert_array_equal(lazy.predict(partial).std(50), model.predict(partial).std(50))
+    with std_unused():
+        kept = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10).fit(train, dt=0.01)
+    kept.fitted_.measure_deferred()  # what the default does with its yardstick IP when it keeps it as a member
+    assert "calibration_" in kept.fitted_.__dict__ and "_calibration_pending" not in kept.fitted_.__dict__
+    np.testing.assert_array_equal(kept.predict(partial).std(50), model.predict(partial).std(50))
+    model.fitted_.measure_deferred()  # an eager fit deferred nothing
+    eager, deferred = model.calibration_.to_arrays(), lazy.calibration_.to_arrays()
+    assert eager.keys() == deferred.keys()
+    for k, v in eager.items():
+        np.testing.assert_array_equal(v, deferred[k])

@@ -9,10 +9,31 @@ starts a new, empty one.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable
+import contextvars
+from collections.abc import Callable, Hashable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["DerivedCache"]
+__all__ = ["DerivedCache", "std_unused", "std_deferred"]
+
+_STD_UNUSED: contextvars.ContextVar[bool] = contextvars.ContextVar("interprim_std_unused", default=False)
+
+
+@contextmanager
+def std_unused() -> Iterator[None]:
+    """Within this block no model fitted in it will be asked for its predictive std (a cross-validation that scores
+    the means alone): a fit may then defer the work only the std needs until the std is asked for, if ever.  The
+    deferred work runs on the same fitted state, so every answer (the std included) is the one an eager fit gives."""
+    token = _STD_UNUSED.set(True)
+    try:
+        yield
+    finally:
+        _STD_UNUSED.reset(token)
+
+
+def std_deferred() -> bool:
+    """Whether the caller is inside :func:`std_unused`."""
+    return _STD_UNUSED.get()
 
 
 class DerivedCache(dict[Hashable, tuple[tuple[Any, ...], Any]]):

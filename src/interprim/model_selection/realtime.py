@@ -106,7 +106,8 @@ def _timing(pred, k, dt, mean_dur_s):
 
 def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                   name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
-                  prefix=None, oracle=None, std: bool = True, references: bool = True) -> list:
+                  prefix=None, oracle=None, std: bool = True, references: bool = True,
+                  metrics: bool = True) -> list:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
@@ -130,6 +131,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     ``std=False`` skips the method's std (``cov_*`` and ``z_*`` are then NaN, ``"std"`` None) and
     ``references=False`` the clock and oracle-duration records, for a caller that needs only the method's errors
     and placed means (:class:`interprim.model_selection.stacking.CrossValidation`); the method's records are unchanged.
+    ``metrics=False`` leaves the errors out of the records (no ``rt_*``, ``cov_*``, ``z_*``), for a caller that
+    scores the placed means itself (with ``trace=True``).
 
     When the estimator's stream gives exactly what ``predict`` gives (``exact_stream = True``, e.g.
     :class:`~interprim.models.kernel.KernelDemonstrations`, whose stream updates its alignments one frame
@@ -187,7 +190,7 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
             err = Yh - truth
             rec = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true, "phase": float(sm),
                    "phase_err": abs(float(sm) - phase_true)}
-            for agent, cols in (("ctrl", ctrl), ("obs", obs)):
+            for agent, cols in (("ctrl", ctrl), ("obs", obs)) if metrics else ():
                 if not cols:
                     continue
                 e = err[:, cols]
@@ -268,7 +271,8 @@ def folds(n: int, k: int | None = None):
 
 def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                    k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
-                   test=None, trace: bool = False, std: bool = True, references: bool = True) -> list:
+                   test=None, trace: bool = False, std: bool = True, references: bool = True,
+                   metrics: bool = True) -> list:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -284,7 +288,8 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     demonstrations (every method is fitted once on all of them) and ``test`` the held-out ones (a
     :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
     ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record); ``std`` and
-    ``references`` as there too (``references=False``: no clock and oracle-duration records at all).
+    ``references`` as there too (``references=False``: no clock and oracle-duration records at all), and
+    ``metrics``.
     """
     if test is not None:
         train = [np.asarray(d, dtype=np.float64) for d in demos]
@@ -315,7 +320,7 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
                 orc = None if oracles is None else oracles[j]
                 for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
                                        prefix=pre, oracle=orc if not first else None, trace=trace, std=std,
-                                       references=references and not first):
+                                       references=references and not first, metrics=metrics):
                     if r["method"] in ("clock", "oracle-duration", "oracle") and first:
                         continue
                     r["demo"] = int(j)

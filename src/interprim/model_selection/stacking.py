@@ -27,7 +27,8 @@ from .realtime import RealTimeConfig, folds, realtime_sweep
 from .yardsticks import case_groups
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
-           "crossfit_coverage", "crossfit_coverages", "band_level",
+           "blend_parts",
+           "crossfit_coverage", "crossfit_coverages", "band_level", "band_levels",
            "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
@@ -191,6 +192,12 @@ def fold_message(why: str, n: int, k) -> str:
             f"{n} demonstrations, holding the others out to score the family)")
 
 
+#: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
+_PER_FAMILY = ("mean", "traj", "phase", "duration")
+#: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
+_LAZY = object()
+
+
 class CrossValidation:
     """What the inner cross-validation of :class:`AutoInteraction` saw, case by case.
 
@@ -214,6 +221,7 @@ class CrossValidation:
     def __init__(self, make, demos, observed_dofs, dt, cfg, k, horizon=None, progress=None):
         import warnings
 
+        from ..core.cache import std_unused
         from ..core.errors import OutOfRangeWarning, RepresentationWarning
 
         self.observed = [int(i) for i in observed_dofs]
@@ -227,11 +235,12 @@ class CrossValidation:
         for name, factory in make.items():
             try:
                 # only the family's errors and placed means are kept: its std and the clock's records are skipped
-                with warnings.catch_warnings():  # about held-out training folds, not the user's data
+                # std_unused: only the means are scored, so a fold's fit may skip what only its std needs
+                with warnings.catch_warnings(), std_unused():  # warnings about held-out folds, not the user's data
                     warnings.simplefilter("ignore", OutOfRangeWarning)
                     warnings.simplefilter("ignore", RepresentationWarning)
                     recs = realtime_sweep({name: factory}, demos, self.observed, dt, cfg, k=k, trace=True,
-                                          std=False, references=False)
+                                          std=False, references=False, metrics=False)
             except ValueError as exc:  # e.g. too few demonstrations in an inner training fold for this family
                 self.errors[name] = float("inf")
                 self.why[name] = fold_message(str(exc).splitlines()[0], len(demos), k)
@@ -281,17 +290,41 @@ class CrossValidation:
         G = self.traj.shape[2] if self.traj.ndim == 4 else 0
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
 
+    def __getattr__(self, name):
+        # a per-family array of a :meth:`subset` not read yet: its families' rows of the parent's array, copied on
+        # first use (a subset whose only use is the stacking solver, which reads the shared products, copies none)
+        lazy = self.__dict__.get("_lazy")
+        if not lazy or name not in lazy:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        src, keep = lazy.pop(name)
+        value = src[keep]
+        self.__dict__[name] = value
+        g = self.__dict__.get("_gram_cache")
+        if name == "mean" and g is not None and g["mean"] is _LAZY:
+            g["mean"] = value
+        return value
+
+    def _family_source(self, name):
+        """``(array, rows)``: where this object's per-family array ``name`` is (``rows`` None: the array itself,
+        else the rows of a parent's array not copied yet); ``(None, None)`` when it has none."""
+        if name in self.__dict__:
+            return self.__dict__[name], None
+        lazy = self.__dict__.get("_lazy") or {}
+        return lazy.get(name, (None, None))
+
     def cases(self, idx) -> CrossValidation:
         """The same families restricted to the cases ``idx``."""
         idx = np.asarray(idx)
         out = object.__new__(type(self))
         out.__dict__.update(self.__dict__)
+        out.__dict__.pop("_lazy", None)
         for a in ("truth", "valid", "demo", "elapsed", "mean_duration"):
             if hasattr(self, a):
                 setattr(out, a, getattr(self, a)[idx])
-        for a in ("mean", "traj", "phase", "duration"):
-            if hasattr(self, a):
-                setattr(out, a, getattr(self, a)[:, idx])
+        for a in _PER_FAMILY:
+            src, rows = self._family_source(a)
+            if src is not None:
+                out.__dict__[a] = src[:, idx] if rows is None else src[np.ix_(rows, idx)]
         g = self._gram()  # the cases' products, shared (not copied): only their rows are chosen
         out.__dict__["_gram_cache"] = dict(g, mean=out.mean, truth=out.truth, rows=g["rows"][idx])
         return out
@@ -324,11 +357,14 @@ class CrossValidation:
         out.__dict__.update(self.__dict__)
         out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
         out.names = [self.names[i] for i in keep]
-        out.mean = self.mean[keep]
-        for a in ("traj", "phase", "duration"):
-            if hasattr(self, a):
-                setattr(out, a, getattr(self, a)[keep])
-        out.__dict__["_gram_cache"] = dict(self._gram(), mean=out.mean)  # shared: its families read by name
+        lazy = {}
+        for a in _PER_FAMILY:  # copied when first read (__getattr__)
+            src, rows = self._family_source(a)
+            out.__dict__.pop(a, None)
+            if src is not None:
+                lazy[a] = (src, np.asarray(keep if rows is None else [rows[i] for i in keep], dtype=np.intp))
+        out.__dict__["_lazy"] = lazy
+        out.__dict__["_gram_cache"] = dict(self._gram(), mean=_LAZY)  # shared: its families read by name
         return out
 
     def _gram(self) -> dict:
@@ -338,7 +374,8 @@ class CrossValidation:
         orders ``m`` and ``rows`` maps this object's cases to ``c``.  Computed once per cross-validation (its
         :meth:`subset` and :meth:`cases` share it) and again only when ``mean`` or ``truth`` is replaced."""
         g = self.__dict__.get("_gram_cache")
-        if g is not None and g["mean"] is self.mean and g["truth"] is self.truth:
+        mean = self.__dict__.get("mean", _LAZY)  # _LAZY: the rows of the parent's, whose products g holds
+        if g is not None and g["mean"] is mean and g["truth"] is self.truth:
             return g
         c = self.controlled or self.observed
         T = np.ascontiguousarray(self.truth[..., c])  # (cases, H, C)
@@ -457,9 +494,12 @@ class CrossValidation:
         n_rt = max(1, int(round(self.horizon / self.dt)))
         valid = self.valid | (np.arange(self.truth.shape[1]) < n_rt)[None, :]  # (cases, H)
         agents = {k: c for k, c in (("controlled", self.controlled), ("observed", self.observed)) if c}
-        levels = {k: float(level) if level is not None else band_level(self.mean, self.truth, valid, w, cols, self.demo)
-                  for k, cols in agents.items()}
-        a, b = variance_model(self.mean, self.truth, valid, w, agents, levels)
+        parts = blend_parts(self.mean, w)  # the blend and its members' spread, per case: shared by every fit below
+        if level is not None:
+            levels = {k: float(level) for k in agents}
+        else:
+            levels = band_levels(self.mean, self.truth, valid, w, agents, self.demo, parts=parts)
+        a, b = variance_model(self.mean, self.truth, valid, w, agents, levels, parts=parts)
         return {"a": a, "b": b, "level": levels}
 
     def blend_error(self, w) -> float:
@@ -482,11 +522,21 @@ class CrossValidation:
 BAND_LEVELS = tuple(np.round(np.arange(0.90, 0.9801, 0.01), 2))
 
 
-def _matched_variance(mean, truth, valid, w) -> tuple:
+def blend_parts(mean, w) -> tuple:
+    """``(mix, case_spread)``, each ``(cases, H, D)``: the blend of the members' predictions ``mean`` ``(M, cases, H,
+    D)`` with the weights ``w`` (broadcastable to ``mean``) and the members' weighted disagreement around it,
+    ``sum_m w_m (y_m - mix)^2``.  Both are computed case by case, so those of a subset of the cases are the
+    subset's rows, to the bit: :func:`crossfit_coverages` and :func:`variance_model` take them once for all."""
+    mix = np.sum(w * mean, axis=0)
+    return mix, np.sum(w * (mean - mix) ** 2, axis=0)
+
+
+def _matched_variance(mean, truth, valid, w, parts=None) -> tuple:
     """``(a, b, mix, case_spread, has, last)``: the variance model matched to the held-out squared error step by step
     (before its quantile scaling; :meth:`CrossValidation.blend_scales`) on the cases given, the blend ``mix`` and the
-    members' weighted disagreement per case, the steps with valid cases and the last of them."""
-    mix = np.sum(w * mean, axis=0)
+    members' weighted disagreement per case, the steps with valid cases and the last of them (``parts``: the
+    cases' :func:`blend_parts`, else computed)."""
+    mix, case_spread = blend_parts(mean, w) if parts is None else parts
     n_valid = valid.sum(axis=0)
     has = n_valid > 0
     last = int(np.flatnonzero(has)[-1]) if has.any() else 0
@@ -497,7 +547,6 @@ def _matched_variance(mean, truth, valid, w) -> tuple:
         m[~has] = m[last]
         return m
 
-    case_spread = np.sum(w * (mean - mix) ** 2, axis=0)  # (cases, H, D)
     spread = step_mean(case_spread)
     err2 = step_mean((mix - truth) ** 2)
     wide = spread > err2
@@ -516,12 +565,12 @@ def _step_quantiles(z, valid, cols, levels, has, last) -> np.ndarray:
     return q
 
 
-def variance_model(mean, truth, valid, w, agents: dict, level: dict) -> tuple:
+def variance_model(mean, truth, valid, w, agents: dict, level: dict, parts=None) -> tuple:
     """``(a, b)``, each ``(H, D)``: the variance model of :meth:`CrossValidation.blend_scales` fitted on the cases
     given (``mean`` ``(M, cases, H, D)``, ``truth`` and ``valid`` of those cases, ``w`` the blend's weights
     broadcastable to ``mean``), its standardised errors' quantile at ``level[agent]`` for the columns
-    ``agents[agent]``."""
-    a, b, mix, case_spread, has, last = _matched_variance(mean, truth, valid, w)
+    ``agents[agent]`` (``parts``: :func:`blend_parts` of ``mean`` and ``w``, else computed)."""
+    a, b, mix, case_spread, has, last = _matched_variance(mean, truth, valid, w, parts)
     z = np.abs(mix - truth) / np.sqrt(np.maximum(a * case_spread + b, 1e-300))
     for agent, cols in agents.items():
         if cols and z.shape[0]:
@@ -532,7 +581,8 @@ def variance_model(mean, truth, valid, w, agents: dict, level: dict) -> tuple:
     return a, b
 
 
-def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, k: int = 3) -> np.ndarray:
+def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, k: int = 3,
+                       parts=None) -> np.ndarray:
     """``(len(levels),)``: the 90 % band's coverage of the columns ``cols`` on held-out demonstrations when its
     variance model (:func:`variance_model`, quantile at each of ``levels``) is fitted on the others: the cases split
     into ``k`` groups of whole demonstrations (``groups``: each case's demonstration), each group covered by the
@@ -540,31 +590,41 @@ def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, 
 
     The level only scales the matched model: a frame is inside the band of level ``L`` when its error over the
     matched std is at most that step's ``L``-quantile of the training cases' (``1.645 sd`` with ``sd`` scaled by
-    ``q / 1.645``), so every level is read from one fit per group."""
+    ``q / 1.645``), so every level is read from one fit per group (``parts``: :func:`blend_parts` of ``mean`` and
+    ``w``, else computed)."""
+    return _crossfit(mean, truth, valid, w, [cols], groups, levels, k, parts)[0]
+
+
+def _crossfit(mean, truth, valid, w, col_sets, groups, levels=BAND_LEVELS, k: int = 3, parts=None) -> list:
+    """:func:`crossfit_coverages` of each of the column sets ``col_sets``, one variance model fitted per group for
+    all of them (what a set's coverage reads of it, its columns, is computed as for that set alone)."""
     levels = np.atleast_1d(np.asarray(levels, dtype=np.float64))
     g = case_groups(groups, k)
-    mix = np.sum(w * mean, axis=0)
-    per_demo = []
+    mix, case_spread = blend_parts(mean, w) if parts is None else parts
+    per_demo: list[list] = [[] for _ in col_sets]
     for gi in np.unique(g):
         tr, te = g != gi, g == gi
         if not tr.any():
             continue
-        a, b, mix_tr, spread_tr, has, last = _matched_variance(mean[:, tr], truth[tr], valid[tr], w)
+        a, b, mix_tr, spread_tr, has, last = _matched_variance(None, truth[tr], valid[tr], w,
+                                                               (mix[tr], case_spread[tr]))
         z_tr = np.abs(mix_tr - truth[tr]) / np.sqrt(np.maximum(a * spread_tr + b, 1e-300))
-        q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
-        spread = np.sum(w * (mean[:, te] - mix[te]) ** 2, axis=0)
-        sd = np.sqrt(np.maximum(a * spread + b, 1e-300))[..., cols]
-        err = np.abs(mix[te] - truth[te])[..., cols]
+        sd_all = np.sqrt(np.maximum(a * case_spread[te] + b, 1e-300))
+        err_all = np.abs(mix[te] - truth[te])
         v, d = valid[te], np.asarray(groups)[te]
-        for j in np.unique(d):
-            sel = d == j
-            if not v[sel].any():
-                continue
-            # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
-            r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
-            qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
-            per_demo.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
-    return np.mean(per_demo, axis=0) if per_demo else np.ones(len(levels))
+        for cols, out in zip(col_sets, per_demo):
+            q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
+            sd = sd_all[..., cols]
+            err = err_all[..., cols]
+            for j in np.unique(d):
+                sel = d == j
+                if not v[sel].any():
+                    continue
+                # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
+                r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
+                qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
+                out.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
+    return [np.mean(o, axis=0) if o else np.ones(len(levels)) for o in per_demo]
 
 
 def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int = 3) -> float:
@@ -572,15 +632,24 @@ def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int 
     return float(crossfit_coverages(mean, truth, valid, w, cols, groups, [level], k)[0])
 
 
-def band_level(mean, truth, valid, w, cols, groups, target: float = 0.9) -> float:
+def band_level(mean, truth, valid, w, cols, groups, target: float = 0.9, parts=None) -> float:
     """The smallest level of :data:`BAND_LEVELS` at which the cross-fitted band covers ``target`` of the held-out
     demonstrations' frames (:func:`crossfit_coverages`; the last level when none does, the first with fewer than
     two demonstrations)."""
+    return band_levels(mean, truth, valid, w, {"cols": cols}, groups, target, parts)["cols"]
+
+
+def band_levels(mean, truth, valid, w, agents: dict, groups, target: float = 0.9, parts=None) -> dict:
+    """:func:`band_level` of each agent's columns (``agents``: ``{name: cols}``), the cross-fitted variance models
+    shared (``{name: level}``, the numbers :func:`band_level` gives each)."""
     if len(np.unique(groups)) < 2:
-        return float(BAND_LEVELS[0])
-    cover = crossfit_coverages(mean, truth, valid, w, cols, groups)
-    ok = np.flatnonzero(cover >= target)
-    return float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
+        return {k: float(BAND_LEVELS[0]) for k in agents}
+    covers = _crossfit(mean, truth, valid, w, list(agents.values()), groups, parts=parts)
+    out = {}
+    for name, cover in zip(agents, covers):
+        ok = np.flatnonzero(cover >= target)
+        out[name] = float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
+    return out
 
 
 def choice(cv: CrossValidation, order) -> tuple:

@@ -41,7 +41,7 @@ def case_rms(pred, truth, mask, cols, point_dim: int = 1) -> np.ndarray:
         :class:`~interprim.model_selection.realtime.RealTimeConfig`).
     """
     cols = list(cols)
-    e = (np.asarray(pred, dtype=np.float64) - np.asarray(truth, dtype=np.float64))[..., cols]
+    e = np.asarray(pred, dtype=np.float64)[..., cols] - np.asarray(truth, dtype=np.float64)[..., cols]
     n_case, H, C = e.shape
     pd = point_dim if C % point_dim == 0 else 1
     p2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3).mean(axis=2)  # (cases, H) squared point errors

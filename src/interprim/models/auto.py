@@ -24,6 +24,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
+from ..core.cache import std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import OutOfRangeWarning
 from ..core.input_range import fit_input_range, mark
@@ -263,7 +264,8 @@ class AutoInteraction(Predictor):
         if self.frame_budget is not None and len(make) > 1:
             # the Interaction Primitive of these data, fitted once: the budget's yardstick (its phase, chosen by its
             # own cross-validation, moves its frame by up to 2.5x) and, when the blend keeps it, its ip member
-            ref = registry.yardstick_ip(self.settings(), train, dt)
+            with std_unused():  # its std's calibration is measured only if it becomes a member (final)
+                ref = registry.yardstick_ip(self.settings(), train, dt)
             progress.grow(1)
             progress.step("fitted ip (the frame budget's yardstick)")
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
@@ -271,6 +273,7 @@ class AutoInteraction(Predictor):
 
         def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
             if m == "ip" and ref is not None and "ip" in self.candidates:
+                ref.fitted_.measure_deferred()  # in the fit, as an eager fit measures it
                 return ref
             return make[m]().fit(train, dt=dt)
 

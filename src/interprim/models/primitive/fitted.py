@@ -29,7 +29,7 @@ import numpy as np
 from ...core._compiled import registry as kernels
 from ...core.basis import Basis
 from ...core.blas import one_blas_thread, single_thread
-from ...core.cache import DerivedCache
+from ...core.cache import DerivedCache, std_deferred
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from ...core.gaussian import Posterior, fit_prior
 from ...core.input_range import fit_input_range, input_distance, mark
@@ -39,6 +39,30 @@ from ...phase import estimate_phase, fit_phase_model, movement_prefix
 from .prediction import Prediction
 
 __all__ = ["FittedPrimitive", "PARAM_NAMES", "FITTED_NAMES"]
+
+
+class _PendingCalibration:
+    """:func:`~interprim.models.primitive.calibration.fit_calibration` of a state as fitted on ``arrays``, measured
+    once (at the end of the fit, or on first use for a fit inside :func:`interprim.core.cache.std_unused`)."""
+
+    def __init__(self, origin, arrays):
+        self.origin, self.arrays, self.done, self.value = origin, arrays, False, None
+
+    def resolve(self, reader):
+        """The calibration (measured now if not yet), also set on ``reader`` (the state or a copy of it)."""
+        if not self.done:
+            from .calibration import fit_calibration  # predictive std scaled to held-out errors
+
+            origin = self.origin
+            origin.__dict__.pop("_calibration_pending", None)
+            origin.__dict__["calibration_"] = None  # as during an eager fit: the folds' copies carry none
+            with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
+                self.value = fit_calibration(origin, self.arrays)
+            self.done, self.origin, self.arrays = True, None, None
+            origin.__dict__["calibration_"] = self.value
+        reader.__dict__["calibration_"] = self.value
+        reader.__dict__.pop("_calibration_pending", None)
+        return self.value
 
 #: the estimator's constructor parameters, kept on the state as fitted with
 PARAM_NAMES = ("observed_dofs", "n_basis", "alpha_y", "beta_y", "alpha_x", "sigma2", "covariance", "ridge",
@@ -292,9 +316,26 @@ class FittedPrimitive:
             np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
         if self.calibrate is True or (self.calibrate == "with-cv" and self.sigma2 == "cv"):
-            from .calibration import fit_calibration  # predictive std scaled to held-out errors
-            with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
-                self.calibration_ = fit_calibration(self, arrays)
+            if std_deferred():  # a cross-validation that reads the means only: measured if the std is ever asked
+                del self.calibration_
+                self._calibration_pending = _PendingCalibration(self, arrays)
+            else:
+                self.calibration_ = _PendingCalibration(self, arrays).resolve(self)
+
+    def measure_deferred(self) -> None:
+        """Measure now what a fit inside :func:`interprim.core.cache.std_unused` deferred (the std's calibration),
+        as the fit would have measured it outside; nothing for a state that deferred nothing."""
+        pending = self.__dict__.get("_calibration_pending")
+        if pending is not None:
+            pending.resolve(self)
+
+    def __getattr__(self, name: str):
+        # ``calibration_`` of a state fitted inside ``interprim.core.cache.std_unused``: measured on first use, on
+        # the state as fitted (a copy made meanwhile reads the same value)
+        pending = self.__dict__.get("_calibration_pending") if name == "calibration_" else None
+        if pending is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return pending.resolve(self)
 
     def to_latent(self, a):
         """A demonstration ``(T, D)`` in the latent columns the DMPs model (PCA scores when fitted with PCA)."""

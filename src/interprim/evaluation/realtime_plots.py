@@ -290,9 +290,9 @@ def nuisi_realtime_figure(action: str = "highfive1", demo: int = 0, out_dir=".",
     if not 0 <= int(demo) < len(ds.demos):
         raise ValueError(f"{action} has {len(ds.demos)} recordings; demo must be in 0..{len(ds.demos) - 1}, got {demo}")
     test = ds.demos[int(demo)]
+    assert ds.observed_dofs is not None and ds.dt is not None  # load_nuisi sets both
     prefixes = Prefixes(ds, ds.observed_dofs)
     train = [d for i, d in enumerate(ds.demos) if i != int(demo)]
-    assert ds.observed_dofs is not None and ds.dt is not None  # load_nuisi sets both
     obs = list(ds.observed_dofs)
     models = {label: InteractionPrimitive(observed_dofs=obs, **kw).fit(train, dt=ds.dt)
               for label, kw in (methods or NUISI_FIGURE_METHODS).items()}

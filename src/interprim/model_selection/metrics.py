@@ -7,6 +7,7 @@ Used by the scorer (:mod:`interprim.model_selection.realtime`), the family compa
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["Z90", "point_rms", "coverage", "z_ratio"]
 
@@ -14,7 +15,7 @@ __all__ = ["Z90", "point_rms", "coverage", "z_ratio"]
 Z90 = 1.6448536269514722
 
 
-def point_rms(err, point_dim: int = 1) -> float:
+def point_rms(err: ArrayLike, point_dim: int = 1) -> float:
     """Root mean square of the point errors: ``err`` ``(n, C)`` with ``C = k * point_dim`` columns (Euclidean
     distances of ``point_dim``-D points; ``point_dim`` that does not divide ``C`` counts columns alone)."""
     err = np.asarray(err, dtype=np.float64)
@@ -23,11 +24,11 @@ def point_rms(err, point_dim: int = 1) -> float:
     return float(np.sqrt(np.mean(np.sum(err.reshape(n, C // pd, pd) ** 2, axis=2))))
 
 
-def coverage(err, std) -> float:
+def coverage(err: ArrayLike, std: ArrayLike) -> float:
     """Fraction of errors inside the pointwise 90 % band ``+- Z90 * std``."""
     return float(np.mean(np.abs(err) <= Z90 * np.asarray(std) + 1e-12))
 
 
-def z_ratio(err, std) -> float:
+def z_ratio(err: ArrayLike, std: ArrayLike) -> float:
     """RMS error / RMS predicted std (1 = calibrated, > 1 over-confident)."""
     return float(np.sqrt(np.mean(np.asarray(err) ** 2)) / max(np.sqrt(np.mean(np.asarray(std) ** 2)), 1e-300))

@@ -16,9 +16,16 @@ Two rules:
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.cv import MIN_OBSERVED_FRAMES, observed_frames
+
+if TYPE_CHECKING:
+    from ..datasets import RawStream
 
 __all__ = ["observed_frames", "MIN_OBSERVED_FRAMES", "causal_prefix", "Prefixes"]
 
@@ -26,7 +33,7 @@ __all__ = ["observed_frames", "MIN_OBSERVED_FRAMES", "causal_prefix", "Prefixes"
 TIME_TOLERANCE = 1e-9
 
 
-def causal_prefix(times, streams, k: int, columns) -> np.ndarray:
+def causal_prefix(times: ArrayLike, streams: Iterable[RawStream], k: int, columns: Sequence[int]) -> np.ndarray:
     """The first ``k`` grid frames of ``columns``, built only from raw samples recorded by frame ``k - 1``'s time.
 
     Parameters
@@ -60,7 +67,7 @@ def causal_prefix(times, streams, k: int, columns) -> np.ndarray:
     k = int(k)
     t_end = times[k - 1] + TIME_TOLERANCE
     out = np.empty((k, len(columns)))
-    where = {}
+    where: dict[int, tuple[RawStream, int]] = {}
     for s in streams:
         for j, c in enumerate(s.columns):
             where[int(c)] = (s, j)
@@ -94,14 +101,17 @@ class Prefixes:
     >>> prefixes(0, 10)        # what a robot had seen of demonstration 0 at its 10th frame
     """
 
-    def __init__(self, demos, observed_dofs):
+    def __init__(self, demos: Iterable[ArrayLike], observed_dofs: Iterable[int]) -> None:
         self.demos = [np.asarray(d, dtype=np.float64) for d in demos]
         self.observed_dofs = [int(i) for i in observed_dofs]
         raw = getattr(demos, "raw", None)
         times = getattr(demos, "times", None)
         self.causal = raw is not None and times is not None
-        self._raw = list(raw) if self.causal else None
-        self._times = [np.asarray(t, dtype=np.float64) for t in times] if self.causal else None
+        # causal: both are given (not None); per demonstration, the raw streams and the grid's time stamps
+        self._raw: list[Sequence[RawStream]] | None = (
+            list(cast("Iterable[Sequence[RawStream]]", raw)) if self.causal else None)
+        self._times: list[np.ndarray] | None = (
+            [np.asarray(t, dtype=np.float64) for t in cast("Iterable[ArrayLike]", times)] if self.causal else None)
 
     def __len__(self) -> int:
         return len(self.demos)
@@ -110,20 +120,23 @@ class Prefixes:
         """The first ``k`` frames of demonstration ``j``'s observed columns, as a robot had them then."""
         if not self.causal:
             return self.demos[j][:k, self.observed_dofs]
-        return causal_prefix(self._times[j], self._raw[j], k, self.observed_dofs)
+        times, raw = cast("list[np.ndarray]", self._times), cast("list[Sequence[RawStream]]", self._raw)
+        return causal_prefix(times[j], raw[j], k, self.observed_dofs)
 
-    def subset(self, indices) -> Prefixes:
+    def subset(self, indices: Iterable[int]) -> Prefixes:
         """The prefixes of the demonstrations ``indices`` only (renumbered from 0)."""
         idx = list(indices)
         if not self.causal:
             return Prefixes([self.demos[i] for i in idx], self.observed_dofs)
-        return Prefixes(_Recorded([self.demos[i] for i in idx], [self._times[i] for i in idx],
-                                  [self._raw[i] for i in idx]), self.observed_dofs)
+        times, raw = cast("list[np.ndarray]", self._times), cast("list[Sequence[RawStream]]", self._raw)
+        return Prefixes(_Recorded([self.demos[i] for i in idx], [times[i] for i in idx],
+                                  [raw[i] for i in idx]), self.observed_dofs)
 
 
-class _Recorded(list):
+class _Recorded(list[np.ndarray]):
     """Demonstrations with their grid times and raw samples (what :class:`Prefixes` reads)."""
 
-    def __init__(self, demos, times, raw):
+    def __init__(self, demos: Iterable[np.ndarray], times: list[np.ndarray],
+                 raw: list[Sequence[RawStream]]) -> None:
         super().__init__(demos)
         self.times, self.raw = times, raw

@@ -9,10 +9,12 @@ the default model's inner cross-validation (:mod:`interprim.model_selection.stac
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Mapping, Sequence, Sized
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.cv import DEFAULT_HORIZON
 from ..core.cv import folds as cv_folds
@@ -20,6 +22,9 @@ from ..core.preprocessing import interp_columns, time_normalise
 from ..core.progress import Progress
 from .metrics import Z90, coverage, point_rms, z_ratio
 from .prefixes import Prefixes, observed_frames
+
+if TYPE_CHECKING:
+    from ..models.base import BasePrediction, Predictor
 
 __all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold",
            "folds", "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
@@ -31,7 +36,7 @@ MIN_DEMONSTRATIONS = 3
 ALL_METHODS_FROM = 5
 
 
-def place_in_time(pred, n_frames: int, dt: float, mean_duration: float):
+def place_in_time(pred: BasePrediction, n_frames: int, dt: float, mean_duration: float) -> tuple[float, float]:
     """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
 
     The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
@@ -83,31 +88,32 @@ class RealTimeConfig:
     point_dim: int = 1
 
 
-def mean_duration(demos) -> float:
+def mean_duration(demos: Iterable[Sized]) -> float:
     """Mean duration of the demonstrations in frames - 1 (the clock's)."""
     return float(np.mean([len(d) - 1 for d in demos]))
 
 
-def mean_demo(demos, n: int = 201):
+def mean_demo(demos: Iterable[np.ndarray], n: int = 201) -> tuple[np.ndarray, float]:
     """``(mean (n, D), mean duration in frames - 1)`` of time-normalised demonstrations."""
     Y = np.stack([time_normalise(np.asarray(d, dtype=np.float64), n) for d in demos])
     return Y.mean(axis=0), mean_duration(demos)
 
 
-def _interp_rows(u, grid, Y):
+def _interp_rows(u: ArrayLike, grid: np.ndarray, Y: ArrayLike) -> np.ndarray:
     """Rows of ``Y`` (on ``grid``) at normalised times ``u`` (clipped to [0, 1])."""
     return interp_columns(np.clip(u, 0.0, 1.0), grid, Y)
 
 
-def _timing(pred, k, dt, mean_dur_s):
+def _timing(pred: BasePrediction, k: int, dt: float, mean_dur_s: float) -> tuple[float, float]:
     """``(phase s at frame k, duration in s)`` of a prediction (:func:`place_in_time`)."""
     return place_in_time(pred, k, dt, mean_dur_s)
 
 
-def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                  name: str = "method", fitted: bool = False, frames=None, trace: bool = False,
-                  prefix=None, oracle=None, std: bool = True, references: bool = True,
-                  metrics: bool = True) -> list:
+def realtime_fold(estimator: Predictor, train: Iterable[np.ndarray], test: ArrayLike, observed_dofs: Iterable[int],
+                  dt: float, cfg: RealTimeConfig = RealTimeConfig(), name: str = "method", fitted: bool = False,
+                  frames: Iterable[int] | None = None, trace: bool = False,
+                  prefix: Callable[[int], ArrayLike] | None = None, oracle: ArrayLike | None = None, std: bool = True,
+                  references: bool = True, metrics: bool = True) -> list[dict[str, Any]]:
     """Fit ``estimator`` on ``train`` (unless ``fitted``) and run the real-time protocol on one held-out demo.
 
     Returns one record per evaluated frame ``k`` for the method, the clock and the oracle-duration mean:
@@ -146,6 +152,7 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     if not fitted:
         estimator.fit(train, dt=dt)
     grid = np.linspace(0.0, 1.0, cfg.n_grid)
+    mean: np.ndarray | None  # None without the references (only the method's records)
     if references:
         mean, mean_dur = mean_demo(train, cfg.n_grid)
     else:
@@ -181,15 +188,16 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
                    None if S is None else _interp_rows(s + t_ahead / dur, grid, S)),
         }
         if references:
-            rows["clock"] = (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid, mean),
-                             None)
-            rows["oracle-duration"] = (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean), None)
+            mean_y = cast(np.ndarray, mean)  # computed with the references
+            rows["clock"] = (min(elapsed / mean_dur_s, 1.0), _interp_rows((elapsed + t_ahead) / mean_dur_s, grid,
+                                                                          mean_y), None)
+            rows["oracle-duration"] = (phase_true, _interp_rows((elapsed + t_ahead) / true_dur_s, grid, mean_y), None)
         if oracle is not None:
             rows["oracle"] = (phase_true, np.asarray(oracle, dtype=np.float64)[idx], None)
         for method, (sm, Yh, Sh) in rows.items():
             err = Yh - truth
-            rec = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true, "phase": float(sm),
-                   "phase_err": abs(float(sm) - phase_true)}
+            rec: dict[str, Any] = {"method": method, "k": int(k), "fraction": k / T, "phase_true": phase_true,
+                                   "phase": float(sm), "phase_err": abs(float(sm) - phase_true)}
             for agent, cols in (("ctrl", ctrl), ("obs", obs)) if metrics else ():
                 if not cols:
                     continue
@@ -210,7 +218,8 @@ def realtime_fold(estimator, train, test, observed_dofs, dt: float, cfg: RealTim
     return out
 
 
-def _prefix_predictions(estimator, test, obs, frames, prefix):
+def _prefix_predictions(estimator: Predictor, test: np.ndarray, obs: list[int], frames: list[int],
+                        prefix: Callable[[int], ArrayLike] | None) -> Callable[[int], BasePrediction]:
     """``predict(k)``: the estimator's prediction from the first ``k`` frames (``prefix(k)``, default
     ``test[:k, obs]``) for the increasing ``frames``, through one stream when that gives the same answers
     (see :func:`realtime_fold`)."""
@@ -227,7 +236,7 @@ def _prefix_predictions(estimator, test, obs, frames, prefix):
     stream = estimator.stream()
     fed = [0]  # frames fed to the stream so far
 
-    def predict(k):
+    def predict(k: int) -> BasePrediction:
         pred = stream.extend(last[fed[0]:k])
         fed[0] = k
         return pred
@@ -235,8 +244,10 @@ def _prefix_predictions(estimator, test, obs, frames, prefix):
     return predict
 
 
-def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8), n: int = 100,
-                        point_dim: int = 1, name: str = "method", prefix=None, oracle=None) -> list:
+def whole_movement_fold(estimator: Predictor, test: ArrayLike, observed_dofs: Iterable[int],
+                        fractions: Iterable[float] = (0.4, 0.6, 0.8), n: int = 100, point_dim: int = 1,
+                        name: str = "method", prefix: Callable[[int], ArrayLike] | None = None,
+                        oracle: ArrayLike | None = None) -> list[dict[str, Any]]:
     """The paper's Fig. 7 protocol for one held-out demonstration and a fitted ``estimator``: observe the first
     ``p`` of the observed agent, predict the whole movement, RMSE of each agent on a normalised-time grid
     (timing errors hidden by construction: compare with :func:`realtime_fold`).  ``prefix`` as in
@@ -254,14 +265,14 @@ def whole_movement_fold(estimator, test, observed_dofs, fractions=(0.4, 0.6, 0.8
             rows.append(("oracle", time_normalise(np.asarray(oracle, dtype=np.float64), n)))
         for method, Y in rows:
             err = Y - truth
-            rec = {"method": method, "fraction": float(p), "wm_obs": point_rms(err[:, obs], point_dim)}
+            rec: dict[str, Any] = {"method": method, "fraction": float(p), "wm_obs": point_rms(err[:, obs], point_dim)}
             if ctrl:
                 rec["wm_ctrl"] = point_rms(err[:, ctrl], point_dim)
             out.append(rec)
     return out
 
 
-def folds(n: int, k: int | None = None):
+def folds(n: int, k: int | None = None) -> list[list[int]]:
     """Held-out index sets (lists of int): leave-one-out (``k`` None or >= n) or ``k`` contiguous folds
     (:func:`interprim.core.cv.folds`, ``order="contiguous"``)."""
     if k is not None and k < n and k < 2:
@@ -269,10 +280,12 @@ def folds(n: int, k: int | None = None):
     return [f.tolist() for f in cv_folds(n, k, "contiguous")]
 
 
-def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTimeConfig = RealTimeConfig(),
-                   k: int | None = None, progress: bool = False, whole_movement=None, oracles=None,
-                   test=None, trace: bool = False, std: bool = True, references: bool = True,
-                   metrics: bool = True) -> list:
+def realtime_sweep(make_estimators: Mapping[str, Callable[[], Predictor]], demos: Prefixes | Iterable[ArrayLike],
+                   observed_dofs: Sequence[int], dt: float, cfg: RealTimeConfig = RealTimeConfig(),
+                   k: int | None = None, progress: bool = False, whole_movement: Iterable[float] | None = None,
+                   oracles: Sequence[ArrayLike | None] | None = None,
+                   test: Prefixes | Iterable[ArrayLike] | None = None, trace: bool = False, std: bool = True,
+                   references: bool = True, metrics: bool = True) -> list[dict[str, Any]]:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -292,7 +305,8 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
     ``metrics``.
     """
     if test is not None:
-        train = [np.asarray(d, dtype=np.float64) for d in demos]
+        # with a hold-out ``test``, ``demos`` are the training demonstrations themselves (arrays, not Prefixes)
+        train = [np.asarray(d, dtype=np.float64) for d in cast("Iterable[ArrayLike]", demos)]
         given = test if isinstance(test, Prefixes) else Prefixes(test, observed_dofs)
         demos = train + given.demos
         n_train = len(train)
@@ -314,7 +328,7 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
         for first, (name, factory) in enumerate(make_estimators.items()):
             est = factory().fit(train, dt=dt)
             for j in held:
-                def pre(k, j=j):
+                def pre(k: int, j: int = j) -> np.ndarray:
                     return prefixes(j, k)
 
                 orc = None if oracles is None else oracles[j]
@@ -340,10 +354,10 @@ def realtime_sweep(make_estimators, demos, observed_dofs, dt: float, cfg: RealTi
 class _Offset:
     """Prefixes of a hold-out numbered after the training demonstrations."""
 
-    def __init__(self, prefixes, n_train):
+    def __init__(self, prefixes: Prefixes, n_train: int) -> None:
         self.prefixes, self.n_train = prefixes, n_train
 
-    def __call__(self, j, k):
+    def __call__(self, j: int, k: int) -> np.ndarray:
         return self.prefixes(j - self.n_train, k)
 
 
@@ -351,17 +365,17 @@ class _Offset:
 PHASE_ERROR_FLOOR = 1e-6
 
 
-def summarise_realtime(records) -> dict:
+def summarise_realtime(records: Iterable[Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per method: means over all evaluated frames of every metric, and ratios of the real-time error and of
     the phase error to the clock's (means of per-demo ratios would overweight easy demos: ratios of means)."""
-    by: dict[Any, list] = {}
-    whole: dict[Any, list] = {}
+    by: dict[Any, list[Mapping[str, Any]]] = {}
+    whole: dict[Any, list[Mapping[str, Any]]] = {}
     for r in records:
         if r.get("protocol") == "whole":
             whole.setdefault(r["method"], []).append(r)
         else:
             by.setdefault(r["method"], []).append(r)
-    out = {}
+    out: dict[str, dict[str, Any]] = {}
     keys = ("phase_err", "rt_ctrl", "rt_obs", "cov_ctrl", "cov_obs", "z_ctrl", "z_obs")
     for m, rs in by.items():
         out[m] = {key: float(np.nanmean([r.get(key, np.nan) for r in rs])) if any(

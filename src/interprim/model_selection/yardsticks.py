@@ -16,7 +16,10 @@ one-standard-error rule of Breiman et al. 1984, *Classification and Regression T
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.cv import paired_gain
 from ..core.preprocessing import interp_columns
@@ -25,7 +28,7 @@ __all__ = ["case_rms", "case_groups", "demo_means", "ratio_se", "one_se_choice",
            "true_duration_units", "whole_movement_units"]
 
 
-def case_rms(pred, truth, mask, cols, point_dim: int = 1) -> np.ndarray:
+def case_rms(pred: ArrayLike, truth: ArrayLike, mask: ArrayLike, cols: Iterable[int], point_dim: int = 1) -> np.ndarray:
     """``(cases,)``: per case, the RMS of the point errors of columns ``cols`` over the steps where ``mask``.
 
     Parameters
@@ -49,7 +52,7 @@ def case_rms(pred, truth, mask, cols, point_dim: int = 1) -> np.ndarray:
     return np.sqrt(np.sum(p2 * m, axis=1) / np.maximum(m.sum(axis=1), 1.0))
 
 
-def case_groups(demo, k: int = 3) -> np.ndarray:
+def case_groups(demo: ArrayLike, k: int = 3) -> np.ndarray:
     """``(cases,)`` group labels ``0..k-1``: the held-out demonstrations ``demo`` split into ``k`` contiguous groups
     (every case of a demonstration in one group)."""
     demo = np.asarray(demo)
@@ -59,7 +62,7 @@ def case_groups(demo, k: int = 3) -> np.ndarray:
     return np.array([g[d] for d in demo], dtype=np.int64)
 
 
-def demo_means(values, groups) -> np.ndarray:
+def demo_means(values: ArrayLike, groups: ArrayLike) -> np.ndarray:
     """Means of ``values`` ``(cases, ...)`` per held-out demonstration (``groups``: ``(cases,)`` labels, in the
     order of ``np.unique``)."""
     values = np.asarray(values, dtype=np.float64)
@@ -67,7 +70,7 @@ def demo_means(values, groups) -> np.ndarray:
     return np.array([values[groups == g].mean(axis=0) for g in np.unique(groups)])
 
 
-def ratio_se(a, b, groups=None) -> tuple:
+def ratio_se(a: ArrayLike, b: ArrayLike, groups: ArrayLike | None = None) -> tuple[float, float]:
     """``(ratio of the means of a and b, its standard error)`` over demonstrations (paired, delta method).
 
     ``a``, ``b``: errors of two methods on the same cases; with ``groups`` (the cases' demonstrations) they are
@@ -87,7 +90,8 @@ def ratio_se(a, b, groups=None) -> tuple:
     return r, float(se) / mb
 
 
-def one_se_choice(errors: dict, groups, order=None) -> tuple:
+def one_se_choice(errors: Mapping[str, ArrayLike], groups: ArrayLike,
+                  order: Iterable[str] | None = None) -> tuple[str, dict[str, dict[str, float]]]:
     """The simplest candidate whose error is within one standard error of the best one's.
 
     Parameters
@@ -110,7 +114,7 @@ def one_se_choice(errors: dict, groups, order=None) -> tuple:
     order = list(errors if order is None else order)
     per = {m: demo_means(errors[m], groups) for m in order}
     best = min(order, key=lambda m: (float(per[m].mean()), order.index(m)))
-    table = {}
+    table: dict[str, dict[str, float]] = {}
     for m in order:
         vs_best, se = paired_gain(per[m], per[best])  # mean of (m - best) over demonstrations, its standard error
         table[m] = {"error": float(per[m].mean()), "vs_best": float(vs_best), "se": float(se)}
@@ -118,7 +122,7 @@ def one_se_choice(errors: dict, groups, order=None) -> tuple:
     return chosen, table
 
 
-def place_cases(Y, u) -> np.ndarray:
+def place_cases(Y: ArrayLike, u: ArrayLike) -> np.ndarray:
     """``(cases, H, D)``: each case's trajectory ``Y[c]`` (``(G, D)`` on a uniform normalised-time grid) read at its
     normalised times ``u[c]`` (``(H,)``, clipped to [0, 1])."""
     Y = np.asarray(Y, dtype=np.float64)
@@ -127,7 +131,7 @@ def place_cases(Y, u) -> np.ndarray:
     return np.stack([interp_columns(u[c], grid, Y[c]) for c in range(Y.shape[0])])
 
 
-def clock_units(k, t_ahead, dt: float, mean_duration: float) -> np.ndarray:
+def clock_units(k: ArrayLike, t_ahead: ArrayLike, dt: float, mean_duration: float) -> np.ndarray:
     """``(cases, H)``: the clock's normalised time ``t_ahead`` seconds after the last of ``k`` frames seen (the
     mean played from the first frame at the mean duration, ``mean_duration`` seconds, one or one per case)."""
     elapsed = (np.asarray(k, dtype=np.float64) - 1.0) * float(dt)
@@ -135,7 +139,7 @@ def clock_units(k, t_ahead, dt: float, mean_duration: float) -> np.ndarray:
     return (elapsed[:, None] + np.asarray(t_ahead, dtype=np.float64)[None, :]) / md[:, None]
 
 
-def true_duration_units(k, n_frames, t_ahead, dt: float) -> np.ndarray:
+def true_duration_units(k: ArrayLike, n_frames: ArrayLike, t_ahead: ArrayLike, dt: float) -> np.ndarray:
     """``(cases, H)``: normalised time of the mean stretched to the held-out recording's true duration
     (``n_frames`` frames), ``t_ahead`` seconds after the last of ``k`` frames seen."""
     k = np.asarray(k, dtype=np.float64)
@@ -143,7 +147,8 @@ def true_duration_units(k, n_frames, t_ahead, dt: float) -> np.ndarray:
     return ((k - 1.0) * float(dt))[:, None] / dur[:, None] + np.asarray(t_ahead)[None, :] / dur[:, None]
 
 
-def whole_movement_units(u, phase, member_phase, duration, member_duration) -> np.ndarray:
+def whole_movement_units(u: ArrayLike, phase: float, member_phase: ArrayLike, duration: float,
+                         member_duration: ArrayLike) -> np.ndarray:
     """``(members, G)``: where each member is read for the blend's normalised time ``u`` ``(G,)`` when the blend
     places "now" at ``phase`` with the duration ``duration`` and member ``m`` at ``member_phase[m]``,
     ``member_duration[m]`` (the rule of :class:`interprim.models.blend.Blend`: the same instant in seconds

@@ -19,12 +19,21 @@ and the training demonstrations, and returns what the comparison saw and chose.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence, Sized
+from typing import TYPE_CHECKING, Any, cast
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import RealTimeConfig, folds, realtime_sweep
 from .yardsticks import case_groups
+
+if TYPE_CHECKING:
+    from ..core.progress import Progress
+    from ..models.base import Predictor
+    from .prefixes import Prefixes
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
            "blend_parts",
@@ -46,7 +55,7 @@ def look_ahead_bands(horizon: float, longest: float) -> np.ndarray:
     return np.array(edges)
 
 
-def weights_at(ahead, edges, W) -> np.ndarray:
+def weights_at(ahead: ArrayLike, edges: ArrayLike, W: ArrayLike) -> np.ndarray:
     """Blend weights ``(len(ahead), families)`` at ``ahead`` seconds after now, from the weights ``W`` ``(bands,
     families)`` fitted per look-ahead band (upper edges ``edges``): linear between the bands' middles, held beyond
     the first and the last, renormalised onto the simplex (so the blend moves smoothly from the real-time weights
@@ -62,7 +71,7 @@ def weights_at(ahead, edges, W) -> np.ndarray:
     return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
 
 
-def scoring_config(horizon: float, train, dt: float, **kw) -> RealTimeConfig:
+def scoring_config(horizon: float, train: Iterable[Sized], dt: float, **kw: Any) -> RealTimeConfig:
     """The inner cross-validation's protocol: every case scored from the next frame to the end of the longest
     training movement, so that the blend's weights and variance are fitted for every look-ahead, not only for the
     real-time ``horizon`` (``kw``: other :class:`~interprim.model_selection.realtime.RealTimeConfig` fields)."""
@@ -90,16 +99,18 @@ class Stacking:
         in-sample for the weights) and ``variance_model``.
     """
 
-    def __init__(self, names, W, edges, scales, record):
+    def __init__(self, names: list[str], W: np.ndarray, edges: list[float], scales: dict[str, Any] | None,
+                 record: dict[str, Any]) -> None:
         self.names, self.W, self.edges, self.scales, self.record = names, W, edges, scales, record
 
     @property
-    def band_weights(self) -> dict:
+    def band_weights(self) -> dict[str, list[float]]:
         """``{member: [weight per band]}``."""
         return self.record["band_weights"]
 
 
-def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None = None,
+def stack(cv: CrossValidation, horizon: float, cost: Callable[[list[str]], float] | None = None,
+          budget: float | None = None,
           scales: bool = True) -> Stacking:
     """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
 
@@ -123,16 +134,16 @@ def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None =
     steps = [s for i, s in enumerate(cv.band_steps(all_edges)) if i == 0 or cv.valid[:, s].any()]
     edges = [float(cv.t_ahead[s[-1]]) for s in steps]  # the bands with held-out frames, up to their last step
     names, W = _members(cv, cv.names, steps)
-    left_out = {}
+    left_out: dict[str, float] = {}
     if cost is not None and budget is not None and cost(names) > budget:
         names, W, left_out = _within_budget(cv, steps, cost, float(budget))
     sub = cv.subset(names)
     W = W / W.sum(axis=1, keepdims=True)
     per_step = weights_at(cv.t_ahead, edges, W)
     band_weights = {m: [float(x) for x in W[:, i]] for i, m in enumerate(names)}
-    record = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)}, "band_weights": band_weights,
-              "bands": edges, "blend_cv_error": sub.blend_error(per_step)}
-    model = None
+    record: dict[str, Any] = {"weights": {m: float(W[0, i]) for i, m in enumerate(names)},
+                              "band_weights": band_weights, "bands": edges, "blend_cv_error": sub.blend_error(per_step)}
+    model: dict[str, Any] | None = None
     if scales:
         model = sub.blend_scales(per_step)
         record["band_level"] = model.pop("level")
@@ -144,7 +155,7 @@ def stack(cv: CrossValidation, horizon: float, cost=None, budget: float | None =
     return Stacking(names, W, edges, model, record)
 
 
-def _members(cv: CrossValidation, names, steps) -> tuple:
+def _members(cv: CrossValidation, names: Collection[str], steps: Sequence[np.ndarray]) -> tuple[list[str], np.ndarray]:
     """``(members, W (bands, members))``: the weights per band of the families ``names``, without those that carry
     less than :data:`MIN_WEIGHT` of every band (fitted again without them until none is left)."""
     sub = cv.subset(names)
@@ -160,7 +171,8 @@ def _members(cv: CrossValidation, names, steps) -> tuple:
         W = np.array([sub.blend_weights(s) for s in steps])
 
 
-def _within_budget(cv: CrossValidation, steps, cost, budget: float) -> tuple:
+def _within_budget(cv: CrossValidation, steps: Sequence[np.ndarray], cost: Callable[[list[str]], float],
+                   budget: float) -> tuple[list[str], np.ndarray, dict[str, float]]:
     """``(members, W, left_out)`` of the best blend whose modelled frame fits ``budget`` (see :func:`stack`)."""
     from itertools import combinations
 
@@ -171,7 +183,7 @@ def _within_budget(cv: CrossValidation, steps, cost, budget: float) -> tuple:
         fits = [{cheapest}]
     maximal = [f for f in fits if not any(f < g for g in fits)]
 
-    def score(fam):
+    def score(fam: set[str]) -> float:
         sub = cv.subset([m for m in names if m in fam])
         return sum(sub.band_loss(s) for s in steps)
 
@@ -183,7 +195,7 @@ def _within_budget(cv: CrossValidation, steps, cost, budget: float) -> tuple:
     return members, W, left_out
 
 
-def fold_message(why: str, n: int, k) -> str:
+def fold_message(why: str, n: int, k: int | None) -> str:
     """``why`` a family could not be fitted on an inner training fold, said of the user's data: how many of the
     ``n`` demonstrations a ``k``-fold cross-validation's smallest training fold holds, and why it is smaller."""
     sets = folds(n, k)
@@ -218,7 +230,9 @@ class CrossValidation:
         Columns of the two agents.
     """
 
-    def __init__(self, make, demos, observed_dofs, dt, cfg, k, horizon=None, progress=None):
+    def __init__(self, make: Mapping[str, Callable[[], Predictor]], demos: Prefixes | Sequence[ArrayLike],
+                 observed_dofs: Iterable[int], dt: float, cfg: RealTimeConfig, k: int | None,
+                 horizon: float | None = None, progress: Progress | None = None) -> None:
         import warnings
 
         from ..core.cache import std_unused
@@ -229,9 +243,11 @@ class CrossValidation:
         self.dt = float(dt)
         #: seconds of the real-time band (the protocol's look-ahead; ``cfg.horizon`` may reach further)
         self.horizon = float(cfg.horizon if horizon is None else horizon)
+        self.errors: dict[str, float]
+        per: dict[str, dict[tuple[int, int], dict[str, Any]]]  # per family: the records by (demo, k)
         self.errors, per = {}, {}
         #: ``{family: why it could not be compared}`` for the families with an infinite error
-        self.why = {}
+        self.why: dict[str, str] = {}
         for name, factory in make.items():
             try:
                 # only the family's errors and placed means are kept: its std and the clock's records are skipped
@@ -267,7 +283,8 @@ class CrossValidation:
         self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
         self._keep_timing(per, cases, demos, k)
 
-    def _keep_timing(self, per, cases, demos, k):
+    def _keep_timing(self, per: dict[str, dict[tuple[int, int], dict[str, Any]]], cases: list[tuple[int, int]],
+                     demos: Prefixes | Sequence[ArrayLike], k: int | None) -> None:
         """What the blend's long-range choice (:mod:`interprim.model_selection.long_range`) re-places: per case,
         ``demo`` (the held-out demonstration), ``elapsed`` (s), ``mean_duration`` (s, of the inner training fold),
         and per family ``traj`` (the prediction on normalised time), ``phase`` and ``duration`` (as placed)."""
@@ -278,7 +295,7 @@ class CrossValidation:
         self.elapsed = np.array([(c[1] - 1) * self.dt for c in cases], dtype=np.float64)
         ds = (demos if isinstance(demos, Prefixes) else Prefixes(demos, self.observed)).demos
         lengths = np.array([len(d) for d in ds], dtype=np.float64)
-        fold_mean = {}
+        fold_mean: dict[int, float] = {}
         for held in folds(len(ds), k):
             rest = np.delete(lengths, held)
             fold_mean.update({j: float(np.mean(rest - 1.0)) * self.dt for j in held})
@@ -290,7 +307,7 @@ class CrossValidation:
         G = self.traj.shape[2] if self.traj.ndim == 4 else 0
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         # a per-family array of a :meth:`subset` not read yet: its families' rows of the parent's array, copied on
         # first use (a subset whose only use is the stacking solver, which reads the shared products, copies none)
         lazy = self.__dict__.get("_lazy")
@@ -304,7 +321,7 @@ class CrossValidation:
             g["mean"] = value
         return value
 
-    def _family_source(self, name):
+    def _family_source(self, name: str) -> tuple[np.ndarray | None, np.ndarray | None]:
         """``(array, rows)``: where this object's per-family array ``name`` is (``rows`` None: the array itself,
         else the rows of a parent's array not copied yet); ``(None, None)`` when it has none."""
         if name in self.__dict__:
@@ -312,7 +329,7 @@ class CrossValidation:
         lazy = self.__dict__.get("_lazy") or {}
         return lazy.get(name, (None, None))
 
-    def cases(self, idx) -> CrossValidation:
+    def cases(self, idx: ArrayLike) -> CrossValidation:
         """The same families restricted to the cases ``idx``."""
         idx = np.asarray(idx)
         out = object.__new__(type(self))
@@ -329,19 +346,20 @@ class CrossValidation:
         out.__dict__["_gram_cache"] = dict(g, mean=out.mean, truth=out.truth, rows=g["rows"][idx])
         return out
 
-    def _rt_error(self, mean, truth):
+    def _rt_error(self, mean: ArrayLike, truth: ArrayLike) -> float:
         """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
         n = max(1, int(round(self.horizon / self.dt)))
         cols = self.controlled_cols(np.asarray(truth).shape[-1])
         return point_rms((np.asarray(mean) - np.asarray(truth))[:n][:, cols], self.point_dim)
 
-    def controlled_cols(self, D):
+    def controlled_cols(self, D: int) -> list[int]:
         """The controlled agent's columns (the observed ones for a single-agent model)."""
         ctrl = [i for i in range(D) if i not in set(self.observed)]
         return ctrl or self.observed
 
-    def band_steps(self, edges) -> list:
+    def band_steps(self, edges: Iterable[float]) -> list[np.ndarray]:
         """Step indices of each look-ahead band (upper edges ``edges`` in seconds; each band non-empty)."""
+        out: list[np.ndarray]
         out, lo = [], 0.0
         for e in edges:
             idx = np.flatnonzero((self.t_ahead > lo + 1e-12) & (self.t_ahead <= e + 1e-12))
@@ -350,14 +368,14 @@ class CrossValidation:
             lo = e
         return out
 
-    def subset(self, names) -> CrossValidation:
+    def subset(self, names: Collection[str]) -> CrossValidation:
         """The same cases restricted to the families ``names`` (those with finite errors, in this order)."""
         keep = [i for i, m in enumerate(self.names) if m in set(names)]
         out = object.__new__(type(self))
         out.__dict__.update(self.__dict__)
         out.errors = {m: e for m, e in self.errors.items() if m in set(names)}
         out.names = [self.names[i] for i in keep]
-        lazy = {}
+        lazy: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for a in _PER_FAMILY:  # copied when first read (__getattr__)
             src, rows = self._family_source(a)
             out.__dict__.pop(a, None)
@@ -367,7 +385,7 @@ class CrossValidation:
         out.__dict__["_gram_cache"] = dict(self._gram(), mean=_LAZY)  # shared: its families read by name
         return out
 
-    def _gram(self) -> dict:
+    def _gram(self) -> dict[str, Any]:
         """The products of the families' held-out errors from which every stacking loss is computed, per case
         ``c`` and step ahead ``h`` over the controlled columns ``j``: ``G[c, h, m, n] = sum_j E_mchj E_nchj``
         (``E = mean - truth``), ``u[c, h, m] = sum_j E_mchj T_chj`` and ``t[c, h] = sum_j T_chj^2``; ``names``
@@ -390,7 +408,7 @@ class CrossValidation:
         self.__dict__["_gram_cache"] = g
         return g
 
-    def blend_weights(self, steps=None) -> np.ndarray:
+    def blend_weights(self, steps: ArrayLike | None = None) -> np.ndarray:
         """Weights on the simplex (one per family of :attr:`names`) that minimise the blend's mean error of the
         controlled agent over the cases at the look-ahead ``steps`` (default: every step): the RMS over the case's
         steps inside its held-out movement (:attr:`valid`; the real-time band counts every step, as the protocol
@@ -402,12 +420,12 @@ class CrossValidation:
             return np.ones(1)
         return self._solve(steps)[0]
 
-    def band_loss(self, steps=None) -> float:
+    def band_loss(self, steps: ArrayLike | None = None) -> float:
         """The smallest mean error :meth:`blend_weights` reaches over the look-ahead ``steps`` (its own loss, on
         the truth's scale; what a set of families can do in that band, used to compare sets under a budget)."""
         return self._solve(steps)[1]
 
-    def _solve(self, steps):
+    def _solve(self, steps: ArrayLike | None) -> tuple[np.ndarray, float]:
         """``(weights, their loss in units of the truth's RMS)`` of :meth:`blend_weights`."""
         from scipy.optimize import minimize
 
@@ -427,7 +445,7 @@ class CrossValidation:
         lw, lv = loss(w)[0], loss(vertex)[0]
         return (w, lw) if lw <= lv else (vertex, lv)
 
-    def _loss(self, steps):
+    def _loss(self, steps: ArrayLike | None) -> Callable[[np.ndarray], tuple[float, np.ndarray]]:
         """The stacking loss of weights ``w`` over ``steps`` and its gradient (a closure over the band's arrays).
 
         Per case, the blend's squared error over the band is a quadratic in ``w`` whose coefficients are sums of
@@ -454,7 +472,7 @@ class CrossValidation:
         t = np.einsum("cs,cs->c", Wm, tt) / scale / scale
         count = Wm.sum(axis=1) * C
 
-        def loss(w):
+        def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
             d = float(np.sum(w)) - 1.0
             Kw = K @ w
             hw = h @ w
@@ -465,7 +483,7 @@ class CrossValidation:
 
         return loss
 
-    def blend_scales(self, w, level: float | None = None) -> dict:
+    def blend_scales(self, w: ArrayLike, level: float | None = None) -> dict[str, Any]:
         """The blend's variance model over the look-ahead, fitted to its held-out errors: per step ahead ``h`` and
         column ``j``, ``var = a[h, j] * spread^2 + b[h, j]`` with ``spread^2`` the weighted disagreement of the
         members, ``sum_m w_m (y_m - mean)^2``.  Where the spread alone is narrower than the held-out error,
@@ -502,12 +520,12 @@ class CrossValidation:
         a, b = variance_model(self.mean, self.truth, valid, w, agents, levels, parts=parts)
         return {"a": a, "b": b, "level": levels}
 
-    def blend_error(self, w) -> float:
+    def blend_error(self, w: ArrayLike) -> float:
         """The blend's mean real-time error of the controlled agent over the cases, as :attr:`errors` measures it
         (in-sample for the weights: an optimistic figure)."""
         w = np.asarray(w, dtype=np.float64)
         if w.ndim == 2:  # per-step weights (H, M): the real-time band's
-            w = w[0]
+            w = cast(np.ndarray, w[0])
         n = max(1, int(round(self.horizon / self.dt)))
         mix = np.tensordot(w, self.mean[:, :, :n], axes=1)
         e = (mix - self.truth[:, :n])[..., self.controlled or self.observed]
@@ -522,7 +540,7 @@ class CrossValidation:
 BAND_LEVELS = tuple(np.round(np.arange(0.90, 0.9801, 0.01), 2))
 
 
-def blend_parts(mean, w) -> tuple:
+def blend_parts(mean: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(mix, case_spread)``, each ``(cases, H, D)``: the blend of the members' predictions ``mean`` ``(M, cases, H,
     D)`` with the weights ``w`` (broadcastable to ``mean``) and the members' weighted disagreement around it,
     ``sum_m w_m (y_m - mix)^2``.  Both are computed case by case, so those of a subset of the cases are the
@@ -531,18 +549,22 @@ def blend_parts(mean, w) -> tuple:
     return mix, np.sum(w * (mean - mix) ** 2, axis=0)
 
 
-def _matched_variance(mean, truth, valid, w, parts=None) -> tuple:
+def _matched_variance(mean: np.ndarray | None, truth: np.ndarray, valid: np.ndarray, w: np.ndarray,
+                      parts: tuple[np.ndarray, np.ndarray] | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """``(a, b, mix, case_spread, has, last)``: the variance model matched to the held-out squared error step by step
     (before its quantile scaling; :meth:`CrossValidation.blend_scales`) on the cases given, the blend ``mix`` and the
     members' weighted disagreement per case, the steps with valid cases and the last of them (``parts``: the
     cases' :func:`blend_parts`, else computed)."""
-    mix, case_spread = blend_parts(mean, w) if parts is None else parts
+    # ``mean`` is given whenever ``parts`` is not
+    mix, case_spread = blend_parts(cast(np.ndarray, mean), w) if parts is None else parts
     n_valid = valid.sum(axis=0)
     has = n_valid > 0
     last = int(np.flatnonzero(has)[-1]) if has.any() else 0
     vw = valid[:, :, None].astype(np.float64)
 
-    def step_mean(x):  # mean over the valid cases of every step, held from the last step that has any
+    # mean over the valid cases of every step, held from the last step that has any
+    def step_mean(x: np.ndarray) -> np.ndarray:
         m = np.sum(x * vw, axis=0) / np.maximum(n_valid, 1)[:, None]
         m[~has] = m[last]
         return m
@@ -555,7 +577,8 @@ def _matched_variance(mean, truth, valid, w, parts=None) -> tuple:
     return a, b, mix, case_spread, has, last
 
 
-def _step_quantiles(z, valid, cols, levels, has, last) -> np.ndarray:
+def _step_quantiles(z: np.ndarray, valid: np.ndarray, cols: Sequence[int], levels: Sequence[float] | np.ndarray,
+                    has: np.ndarray, last: int) -> np.ndarray:
     """``(len(levels), H)``: per step, the quantiles at ``levels`` of the standardised errors ``z`` of the columns
     ``cols`` over the step's valid cases (the nominal ``Z90`` where none, held from the last step that has any)."""
     q = np.full((len(levels), z.shape[1]), Z90)
@@ -565,7 +588,9 @@ def _step_quantiles(z, valid, cols, levels, has, last) -> np.ndarray:
     return q
 
 
-def variance_model(mean, truth, valid, w, agents: dict, level: dict, parts=None) -> tuple:
+def variance_model(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray,
+                   agents: Mapping[str, Sequence[int]], level: Mapping[str, float],
+                   parts: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(a, b)``, each ``(H, D)``: the variance model of :meth:`CrossValidation.blend_scales` fitted on the cases
     given (``mean`` ``(M, cases, H, D)``, ``truth`` and ``valid`` of those cases, ``w`` the blend's weights
     broadcastable to ``mean``), its standardised errors' quantile at ``level[agent]`` for the columns
@@ -581,8 +606,9 @@ def variance_model(mean, truth, valid, w, agents: dict, level: dict, parts=None)
     return a, b
 
 
-def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, k: int = 3,
-                       parts=None) -> np.ndarray:
+def crossfit_coverages(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray, cols: Sequence[int],
+                       groups: ArrayLike, levels: ArrayLike = BAND_LEVELS, k: int = 3,
+                       parts: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``(len(levels),)``: the 90 % band's coverage of the columns ``cols`` on held-out demonstrations when its
     variance model (:func:`variance_model`, quantile at each of ``levels``) is fitted on the others: the cases split
     into ``k`` groups of whole demonstrations (``groups``: each case's demonstration), each group covered by the
@@ -595,13 +621,15 @@ def crossfit_coverages(mean, truth, valid, w, cols, groups, levels=BAND_LEVELS, 
     return _crossfit(mean, truth, valid, w, [cols], groups, levels, k, parts)[0]
 
 
-def _crossfit(mean, truth, valid, w, col_sets, groups, levels=BAND_LEVELS, k: int = 3, parts=None) -> list:
+def _crossfit(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray, col_sets: Sequence[Sequence[int]],
+              groups: ArrayLike, levels: ArrayLike = BAND_LEVELS, k: int = 3,
+              parts: tuple[np.ndarray, np.ndarray] | None = None) -> list[np.ndarray]:
     """:func:`crossfit_coverages` of each of the column sets ``col_sets``, one variance model fitted per group for
     all of them (what a set's coverage reads of it, its columns, is computed as for that set alone)."""
     levels = np.atleast_1d(np.asarray(levels, dtype=np.float64))
     g = case_groups(groups, k)
     mix, case_spread = blend_parts(mean, w) if parts is None else parts
-    per_demo: list[list] = [[] for _ in col_sets]
+    per_demo: list[list[np.ndarray]] = [[] for _ in col_sets]
     for gi in np.unique(g):
         tr, te = g != gi, g == gi
         if not tr.any():
@@ -627,32 +655,36 @@ def _crossfit(mean, truth, valid, w, col_sets, groups, levels=BAND_LEVELS, k: in
     return [np.mean(o, axis=0) if o else np.ones(len(levels)) for o in per_demo]
 
 
-def crossfit_coverage(mean, truth, valid, w, cols, groups, level: float, k: int = 3) -> float:
+def crossfit_coverage(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray, cols: Sequence[int],
+                      groups: ArrayLike, level: float, k: int = 3) -> float:
     """:func:`crossfit_coverages` at one ``level``."""
     return float(crossfit_coverages(mean, truth, valid, w, cols, groups, [level], k)[0])
 
 
-def band_level(mean, truth, valid, w, cols, groups, target: float = 0.9, parts=None) -> float:
+def band_level(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray, cols: Sequence[int],
+               groups: ArrayLike, target: float = 0.9, parts: tuple[np.ndarray, np.ndarray] | None = None) -> float:
     """The smallest level of :data:`BAND_LEVELS` at which the cross-fitted band covers ``target`` of the held-out
     demonstrations' frames (:func:`crossfit_coverages`; the last level when none does, the first with fewer than
     two demonstrations)."""
     return band_levels(mean, truth, valid, w, {"cols": cols}, groups, target, parts)["cols"]
 
 
-def band_levels(mean, truth, valid, w, agents: dict, groups, target: float = 0.9, parts=None) -> dict:
+def band_levels(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndarray,
+                agents: Mapping[str, Sequence[int]], groups: ArrayLike, target: float = 0.9,
+                parts: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, float]:
     """:func:`band_level` of each agent's columns (``agents``: ``{name: cols}``), the cross-fitted variance models
     shared (``{name: level}``, the numbers :func:`band_level` gives each)."""
     if len(np.unique(groups)) < 2:
         return {k: float(BAND_LEVELS[0]) for k in agents}
     covers = _crossfit(mean, truth, valid, w, list(agents.values()), groups, parts=parts)
-    out = {}
+    out: dict[str, float] = {}
     for name, cover in zip(agents, covers):
         ok = np.flatnonzero(cover >= target)
         out[name] = float(BAND_LEVELS[ok[0]] if ok.size else BAND_LEVELS[-1])
     return out
 
 
-def choice(cv: CrossValidation, order) -> tuple:
+def choice(cv: CrossValidation, order: Sequence[str]) -> tuple[str, dict[str, Any]]:
     """``(best family, selection record)`` from a :class:`CrossValidation` (ties: the earlier in ``order``)."""
     errors = cv.errors
     finite = {m: e for m, e in errors.items() if np.isfinite(e)}
@@ -664,7 +696,7 @@ def choice(cv: CrossValidation, order) -> tuple:
     return chosen, choice_record(chosen, errors)
 
 
-def choice_record(chosen: str, errors: dict) -> dict:
+def choice_record(chosen: str, errors: dict[str, float]) -> dict[str, Any]:
     """The selection record of ``chosen`` among ``errors`` (``{family: held-out error}``): ``chosen``,
     ``cv_errors``, ``runner_up``, ``margin`` (its error / the chosen one's) and ``vs_prior``."""
     finite = {m: e for m, e in errors.items() if np.isfinite(e)}

@@ -28,10 +28,17 @@ cross-fitted (fitted on the other demonstrations' cases), the others need no fit
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.preprocessing import interp_columns
 from .yardsticks import case_groups, case_rms, clock_units, one_se_choice, place_cases, ratio_se, true_duration_units
+
+if TYPE_CHECKING:
+    from .stacking import CrossValidation, Stacking
 
 __all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
            "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
@@ -46,7 +53,8 @@ LAMBDAS = (0.0, 0.5, 1.0)
 PREFER = ("simple", "fitted")
 
 
-def remaining_duration(phase, duration, elapsed, mean_duration: float, w0, lam) -> np.ndarray:
+def remaining_duration(phase: ArrayLike, duration: ArrayLike, elapsed: ArrayLike, mean_duration: ArrayLike,
+                       w0: ArrayLike, lam: float) -> np.ndarray:
     """``(cases,)`` seconds left of the movement, ``R_c + lam (R_b - R_c)`` (module docstring).
 
     Parameters
@@ -70,7 +78,8 @@ def remaining_duration(phase, duration, elapsed, mean_duration: float, w0, lam) 
     return np.clip(Rc + float(lam) * (Rb - Rc), 0.0, None)
 
 
-def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndarray:
+def member_units(phase: ArrayLike, duration: ArrayLike, t_ahead: ArrayLike, remaining: ArrayLike | None,
+                 horizon: float) -> np.ndarray:
     """``(cases, H)``: a member's normalised time ``t_ahead`` seconds from now, at its own speed ``1 / D_m`` up to
     ``horizon`` and then linearly to its end (1) at ``remaining`` seconds from now, at least ``horizon``
     (``remaining`` None: its own speed throughout).  ``phase``, ``duration``: ``(cases,)`` of the member;
@@ -89,7 +98,7 @@ def member_units(phase, duration, t_ahead, remaining, horizon: float) -> np.ndar
     return np.clip(np.where(t <= h + 1e-12, own, after), 0.0, 1.0)
 
 
-def schedule(t_ahead, edges, W) -> np.ndarray:
+def schedule(t_ahead: ArrayLike, edges: ArrayLike, W: ArrayLike) -> np.ndarray:
     """``(H, members)`` per-step weights of the per-band weights ``W`` (upper edges ``edges``), moved smoothly
     between the bands' middles as the blend moves them (:func:`~interprim.model_selection.stacking.weights_at`)."""
     from .stacking import weights_at
@@ -97,14 +106,14 @@ def schedule(t_ahead, edges, W) -> np.ndarray:
     return weights_at(t_ahead, edges, W)
 
 
-def held(W, w, n_first: int = 1) -> np.ndarray:
+def held(W: ArrayLike, w: ArrayLike, n_first: int = 1) -> np.ndarray:
     """``(bands, M)``: the first ``n_first`` bands' weights of ``W``, then ``w`` in every later band."""
     out = np.tile(np.asarray(w, dtype=np.float64), (np.shape(W)[0], 1))
     out[:n_first] = np.asarray(W, dtype=np.float64)[:n_first]
     return out
 
 
-def keep_real_time(W, edges, dt: float) -> tuple:
+def keep_real_time(W: ArrayLike, edges: Iterable[float], dt: float) -> tuple[np.ndarray, list[float], int]:
     """``(W, edges, n_first)``: the per-band weights with a band ``dt`` long added after the real-time band,
     carrying the weights the per-band schedule has at the real-time band's edge; a candidate that changes the
     bands after the first ``n_first`` then moves the blend only after the real-time band, whose weights stay (to a
@@ -117,19 +126,19 @@ def keep_real_time(W, edges, dt: float) -> tuple:
     return np.vstack([W[:1], w_edge, W[1:]]), [edges[0], edges[0] + float(dt)] + edges[1:], 2
 
 
-def _blend(mean, per_step):
+def _blend(mean: np.ndarray, per_step: np.ndarray) -> np.ndarray:
     """``(cases, H, D)``: the blend of the members' placed predictions ``mean`` ``(M, cases, H, D)``."""
     return np.einsum("hm,mchd->chd", per_step, mean)
 
 
-def _rest(cv, pred, idx=None):
+def _rest(cv: CrossValidation, pred: np.ndarray, idx: np.ndarray | slice | None = None) -> np.ndarray:
     """``(cases,)``: the rest-of-the-movement error of the controlled agent (every step inside the held-out
     movement) of ``pred`` ``(cases, H, D)`` on the cases ``idx`` of ``cv``."""
     idx = slice(None) if idx is None else idx
     return case_rms(pred, cv.truth[idx], cv.valid[idx], cv.controlled or cv.observed, cv.point_dim)
 
 
-def replaced(cv, lam) -> np.ndarray:
+def replaced(cv: CrossValidation, lam: float | None) -> np.ndarray:
     """``(M, cases, H, D)``: the members' predictions of ``cv`` placed with the shared remaining duration of
     ``lam`` (``None``: their own timing, ``cv.mean`` itself) and the real-time weights ``cv.w0``."""
     if lam is None:
@@ -139,7 +148,7 @@ def replaced(cv, lam) -> np.ndarray:
                      for i in range(len(cv.names))])
 
 
-def _order(names, prefer: str) -> list:
+def _order(names: Iterable[str], prefer: str) -> list[str]:
     """The candidates in the order :func:`one_se_choice` tries them: from the simplest (``prefer="simple"``) or
     from the fitted, most complex one (``prefer="fitted"``)."""
     if prefer not in PREFER:
@@ -148,7 +157,8 @@ def _order(names, prefer: str) -> list:
     return names if prefer == "simple" else names[::-1]
 
 
-def timing_choice(cv, per_step, lambdas=LAMBDAS, prefer: str = PREFER[0]) -> tuple:
+def timing_choice(cv: CrossValidation, per_step: np.ndarray, lambdas: Iterable[float] = LAMBDAS,
+                  prefer: str = PREFER[0]) -> tuple[float | None, dict[str, dict[str, float]]]:
     """``(lam, table)``: the blend's remaining duration beyond the real-time band, chosen on the rest of the movement.
 
     Candidates, from the simplest: the shared remaining duration of each ``lam`` of :data:`LAMBDAS`
@@ -158,15 +168,17 @@ def timing_choice(cv, per_step, lambdas=LAMBDAS, prefer: str = PREFER[0]) -> tup
     demonstrations) of the best, trying them from the simplest (``prefer="simple"``, the default: the clock's
     remaining duration unless the members' is better by more than its noise) or from the members' own timing
     (``prefer="fitted"``)."""
-    cands = {f"{lam:g}": lam for lam in lambdas}
+    cands: dict[str, float | None] = {f"{lam:g}": lam for lam in lambdas}
     cands["own"] = None
     errors = {name: _rest(cv, _blend(replaced(cv, lam), per_step)) for name, lam in cands.items()}
     name, table = one_se_choice(errors, cv.demo, _order(cands, prefer))
     return cands[name], table
 
 
-def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0], singles: bool = False) -> tuple:
-    """``(W, name, table)``: the blend's weights beyond the real-time band, chosen on the rest of the movement.
+def long_range_choice(cv: CrossValidation, W: ArrayLike, edges: Sequence[float], groups: int = 3,
+                      prefer: str = PREFER[0], singles: bool = False
+                      ) -> tuple[np.ndarray, list[float], str, dict[str, dict[str, float]]]:
+    """``(W, edges, name, table)``: the blend's weights beyond the real-time band, chosen on the rest of the movement.
 
     Parameters
     ----------
@@ -235,7 +247,7 @@ def long_range_choice(cv, W, edges, groups: int = 3, prefer: str = PREFER[0], si
     return cands[name], e_rt, name, table
 
 
-def _full(st, names) -> np.ndarray:
+def _full(st: Stacking, names: list[str]) -> np.ndarray:
     """``(bands, len(names))``: the weights of the stacking ``st`` over ``names`` (0 for the others)."""
     W = np.zeros((st.W.shape[0], len(names)))
     for i, m in enumerate(st.names):
@@ -243,7 +255,8 @@ def _full(st, names) -> np.ndarray:
     return W
 
 
-def candidate_cases(cv, fitted, cost=None, budget: float | None = None):
+def candidate_cases(cv: CrossValidation, fitted: Stacking, cost: Callable[[list[str]], float] | None = None,
+                    budget: float | None = None) -> CrossValidation:
     """The cross-validation ``cv`` restricted to the families the long-range choice may use: the members the
     stacking ``fitted`` kept and the mean (``prior``, when compared and within the budget), with ``w0``, the
     real-time weights over them (what :func:`replaced` places the shared end with)."""
@@ -256,8 +269,9 @@ def candidate_cases(cv, fitted, cost=None, budget: float | None = None):
     return out
 
 
-def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budget: float | None = None,
-           level: float | None = None) -> tuple:
+def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = PREFER[0],
+           cost: Callable[[list[str]], float] | None = None, budget: float | None = None,
+           level: float | None = None) -> tuple[Stacking, float | None]:
     """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
     ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
     movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
@@ -280,7 +294,7 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     cv = candidate_cases(cv, fitted, cost, budget)
     names = list(cv.names)
 
-    def full(st):
+    def full(st: Stacking) -> np.ndarray:
         return _full(st, names)
 
     W = full(fitted)
@@ -314,7 +328,7 @@ def refine(cv, fitted, horizon: float, prefer: str = PREFER[0], cost=None, budge
     return Stacking(members, Wk, edges, scales, record), lam
 
 
-def inner_yardsticks(cv, W, edges, lam) -> dict:
+def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: float | None) -> dict[str, list[float]]:
     """The blend's figures on the inner folds' held-out cases, as a user reads them on a hold-out.
 
     ``{label: [ratio, standard error]}`` over the held-out demonstrations (:func:`ratio_se`): real time (the
@@ -340,7 +354,7 @@ def inner_yardsticks(cv, W, edges, lam) -> dict:
     n_rt = max(1, int(round(cv.horizon / cv.dt)))
     rt = np.zeros_like(cv.valid)
     rt[:, :n_rt] = True
-    out = {}
+    out: dict[str, list[float]] = {}
     for label, mask in (("real time", rt), ("rest of the movement", cv.valid)):
         err = case_rms(blend, cv.truth, mask, cols, cv.point_dim)
         for ref, ref_pred in (("clock", clock), ("mean at the true duration", true)):
@@ -351,6 +365,8 @@ def inner_yardsticks(cv, W, edges, lam) -> dict:
     G = mean.shape[1]
     u = np.linspace(0.0, 1.0, G)
     w_now = W[0] / W[0].sum()
+    wm_blend: list[float]
+    wm_mean: list[float]
     wm_blend, wm_mean = [], []
     for j in np.unique(cv.demo):
         c = np.flatnonzero(cv.demo == j)[np.argmin(np.abs(frac[cv.demo == j] - 0.6))]
@@ -377,7 +393,7 @@ def inner_yardsticks(cv, W, edges, lam) -> dict:
     return out
 
 
-def summary_lines(record: dict) -> list:
+def summary_lines(record: Mapping[str, Any]) -> list[str]:
     """Lines of :meth:`~interprim.models.auto.AutoInteraction.summary` about the long-range choice (``record``: its
     ``selection_``)."""
     lr = record.get("long_range")

@@ -230,6 +230,10 @@ class CrossValidation:
         Columns of the two agents.
     """
 
+    #: ``(members,)``: the real-time weights over the members, set on the cases the long-range choice places
+    #: (:func:`interprim.model_selection.long_range.candidate_cases`)
+    w0: np.ndarray
+
     def __init__(self, make: Mapping[str, Callable[[], Predictor]], demos: Prefixes | Sequence[ArrayLike],
                  observed_dofs: Iterable[int], dt: float, cfg: RealTimeConfig, k: int | None,
                  horizon: float | None = None, progress: Progress | None = None) -> None:

@@ -131,7 +131,7 @@ def place_cases(Y: ArrayLike, u: ArrayLike) -> np.ndarray:
     return np.stack([interp_columns(u[c], grid, Y[c]) for c in range(Y.shape[0])])
 
 
-def clock_units(k: ArrayLike, t_ahead: ArrayLike, dt: float, mean_duration: float) -> np.ndarray:
+def clock_units(k: ArrayLike, t_ahead: ArrayLike, dt: float, mean_duration: ArrayLike) -> np.ndarray:
     """``(cases, H)``: the clock's normalised time ``t_ahead`` seconds after the last of ``k`` frames seen (the
     mean played from the first frame at the mean duration, ``mean_duration`` seconds, one or one per case)."""
     elapsed = (np.asarray(k, dtype=np.float64) - 1.0) * float(dt)

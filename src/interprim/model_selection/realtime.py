@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence, Sized
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,11 +23,40 @@ from ..core.progress import Progress
 from .metrics import Z90, coverage, point_rms, z_ratio
 from .prefixes import Prefixes, observed_frames
 
-if TYPE_CHECKING:
-    from ..models.base import BasePrediction, Predictor
-
 __all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "realtime_fold", "whole_movement_fold",
-           "folds", "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90"]
+           "folds", "realtime_sweep", "summarise_realtime", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM", "Z90",
+           "PredictionLike", "StreamLike", "EstimatorLike"]
+
+
+class PredictionLike(Protocol):
+    """What the protocol reads of a prediction: any :class:`~interprim.models.base.PredictionLike` (the package's
+    contract, which this layer below the models names only through this structural type)."""
+
+    @property
+    def normalised_time(self) -> float: ...
+
+    @property
+    def duration(self) -> float: ...
+
+    def trajectory(self, n: int = 100) -> np.ndarray: ...
+
+    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray | None: ...
+
+
+class StreamLike(Protocol):
+    """What the protocol uses of an online predictor (:class:`~interprim.models.base.BaseStream`)."""
+
+    def extend(self, frames: ArrayLike, need_cov: bool = False) -> PredictionLike: ...
+
+
+class EstimatorLike(Protocol):
+    """What the protocol uses of an estimator: any :class:`~interprim.models.base.Predictor`."""
+
+    def fit(self, demos: Any, dt: float | None = None) -> Any: ...
+
+    def predict(self, partial: ArrayLike) -> PredictionLike: ...
+
+    def stream(self) -> StreamLike: ...
 
 #: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at
 #: least 2)
@@ -36,7 +65,7 @@ MIN_DEMONSTRATIONS = 3
 ALL_METHODS_FROM = 5
 
 
-def place_in_time(pred: BasePrediction, n_frames: int, dt: float, mean_duration: float) -> tuple[float, float]:
+def place_in_time(pred: PredictionLike, n_frames: int, dt: float, mean_duration: float) -> tuple[float, float]:
     """``(s, D)``: where a prediction puts "now" in its normalised time and how long it thinks the movement lasts.
 
     The one rule by which a prediction on normalised time is placed in seconds (the real-time protocol of
@@ -104,12 +133,12 @@ def _interp_rows(u: ArrayLike, grid: np.ndarray, Y: ArrayLike) -> np.ndarray:
     return interp_columns(np.clip(u, 0.0, 1.0), grid, Y)
 
 
-def _timing(pred: BasePrediction, k: int, dt: float, mean_dur_s: float) -> tuple[float, float]:
+def _timing(pred: PredictionLike, k: int, dt: float, mean_dur_s: float) -> tuple[float, float]:
     """``(phase s at frame k, duration in s)`` of a prediction (:func:`place_in_time`)."""
     return place_in_time(pred, k, dt, mean_dur_s)
 
 
-def realtime_fold(estimator: Predictor, train: Iterable[np.ndarray], test: ArrayLike, observed_dofs: Iterable[int],
+def realtime_fold(estimator: EstimatorLike, train: Iterable[np.ndarray], test: ArrayLike, observed_dofs: Iterable[int],
                   dt: float, cfg: RealTimeConfig = RealTimeConfig(), name: str = "method", fitted: bool = False,
                   frames: Iterable[int] | None = None, trace: bool = False,
                   prefix: Callable[[int], ArrayLike] | None = None, oracle: ArrayLike | None = None, std: bool = True,
@@ -218,8 +247,8 @@ def realtime_fold(estimator: Predictor, train: Iterable[np.ndarray], test: Array
     return out
 
 
-def _prefix_predictions(estimator: Predictor, test: np.ndarray, obs: list[int], frames: list[int],
-                        prefix: Callable[[int], ArrayLike] | None) -> Callable[[int], BasePrediction]:
+def _prefix_predictions(estimator: EstimatorLike, test: np.ndarray, obs: list[int], frames: list[int],
+                        prefix: Callable[[int], ArrayLike] | None) -> Callable[[int], PredictionLike]:
     """``predict(k)``: the estimator's prediction from the first ``k`` frames (``prefix(k)``, default
     ``test[:k, obs]``) for the increasing ``frames``, through one stream when that gives the same answers
     (see :func:`realtime_fold`)."""
@@ -236,7 +265,7 @@ def _prefix_predictions(estimator: Predictor, test: np.ndarray, obs: list[int], 
     stream = estimator.stream()
     fed = [0]  # frames fed to the stream so far
 
-    def predict(k: int) -> BasePrediction:
+    def predict(k: int) -> PredictionLike:
         pred = stream.extend(last[fed[0]:k])
         fed[0] = k
         return pred
@@ -244,7 +273,7 @@ def _prefix_predictions(estimator: Predictor, test: np.ndarray, obs: list[int], 
     return predict
 
 
-def whole_movement_fold(estimator: Predictor, test: ArrayLike, observed_dofs: Iterable[int],
+def whole_movement_fold(estimator: EstimatorLike, test: ArrayLike, observed_dofs: Iterable[int],
                         fractions: Iterable[float] = (0.4, 0.6, 0.8), n: int = 100, point_dim: int = 1,
                         name: str = "method", prefix: Callable[[int], ArrayLike] | None = None,
                         oracle: ArrayLike | None = None) -> list[dict[str, Any]]:
@@ -280,7 +309,7 @@ def folds(n: int, k: int | None = None) -> list[list[int]]:
     return [f.tolist() for f in cv_folds(n, k, "contiguous")]
 
 
-def realtime_sweep(make_estimators: Mapping[str, Callable[[], Predictor]], demos: Prefixes | Iterable[ArrayLike],
+def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], demos: Prefixes | Iterable[ArrayLike],
                    observed_dofs: Sequence[int], dt: float, cfg: RealTimeConfig = RealTimeConfig(),
                    k: int | None = None, progress: bool = False, whole_movement: Iterable[float] | None = None,
                    oracles: Sequence[ArrayLike | None] | None = None,

@@ -27,12 +27,11 @@ from numpy.typing import ArrayLike
 
 from ..core.preprocessing import interp_columns, time_normalise
 from .metrics import Z90, point_rms
-from .realtime import RealTimeConfig, folds, realtime_sweep
+from .realtime import EstimatorLike, RealTimeConfig, folds, realtime_sweep
 from .yardsticks import case_groups
 
 if TYPE_CHECKING:
     from ..core.progress import Progress
-    from ..models.base import Predictor
     from .prefixes import Prefixes
 
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "look_ahead_bands", "variance_model",
@@ -234,7 +233,7 @@ class CrossValidation:
     #: (:func:`interprim.model_selection.long_range.candidate_cases`)
     w0: np.ndarray
 
-    def __init__(self, make: Mapping[str, Callable[[], Predictor]], demos: Prefixes | Sequence[ArrayLike],
+    def __init__(self, make: Mapping[str, Callable[[], EstimatorLike]], demos: Prefixes | Sequence[ArrayLike],
                  observed_dofs: Iterable[int], dt: float, cfg: RealTimeConfig, k: int | None,
                  horizon: float | None = None, progress: Progress | None = None) -> None:
         import warnings

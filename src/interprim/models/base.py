@@ -45,7 +45,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -472,3 +472,9 @@ class CheckedStream(BaseStream):
         return self._mark(pred, frames)
 
 
+if TYPE_CHECKING:
+    from ..model_selection.realtime import EstimatorLike, PredictionLike, StreamLike
+
+    def _conforms(p: Predictor, b: BasePrediction, s: BaseStream) -> tuple[EstimatorLike, PredictionLike, StreamLike]:
+        """The contract's classes are what the real-time protocol reads (its structural types; checked by mypy)."""
+        return p, b, s

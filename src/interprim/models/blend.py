@@ -234,7 +234,7 @@ class Blend(Predictor):
     def _weights_on(self, ahead) -> np.ndarray:
         """:func:`~interprim.model_selection.stacking.weights_at` of the fitted weights at ``ahead`` (the same
         operations, with the bands' middles computed once)."""
-        if self._mids is None:
+        if self._mids is None or self._W.shape[1] == 1:  # one set of weights (a single member's: 1 everywhere)
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
         out = np.clip(interp_columns(ahead, self._mids, self._W), 0.0, None)
         return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)

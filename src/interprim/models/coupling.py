@@ -636,7 +636,8 @@ class CouplingModel:
             c[self.controlled_dofs_] = self.scale_["controlled"]
             return c[None, :]
 
-        c = self._derived.get_or_build("std_scale", (self.scale_,), scales)
+        c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"], self.scale_["controlled"],
+                                                     self.observed_dofs_, self.controlled_dofs_), scales)
         std = c * np.sqrt(var * (1.0 + h))
         return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,

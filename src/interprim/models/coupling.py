@@ -543,7 +543,7 @@ class CouplingModel:
 
     # ------------------------------------------------------------------ predict
     @one_blas_thread
-    def predict(self, partial, phase, phase_std=None) -> GridPrediction:
+    def predict(self, partial, phase, phase_std=None, check: bool = True) -> GridPrediction:
         """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
 
         Parameters
@@ -556,6 +556,9 @@ class CouplingModel:
         phase_std : float, optional
             Standard deviation of ``phase``; default the model's ``phase_std`` at ``phase``.
             ``0`` when the phase is known.
+        check : bool
+            ``False``: ``partial`` is already a finite float64 array of that shape, checked by the caller (a stream
+            checks each frame once, as it enters), and is not scanned again; ``phase`` and ``phase_std`` still are.
 
         Returns
         -------
@@ -565,7 +568,7 @@ class CouplingModel:
         if not hasattr(self, "method_"):
             raise NotFittedError("this CouplingModel is not fitted yet: call fit(demos) before predict")
         Do = len(self.observed_dofs_)
-        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=1)  # one frame: a prefix that has not moved
+        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=1) if check else partial  # one frame: not moved
         if isinstance(phase, (bool, np.bool_)) or not isinstance(phase, numbers.Real) or not math.isfinite(phase) \
                 or not 0.0 < float(phase) <= 1.0:
             raise ValueError(f"phase must be a number in (0, 1] (the fraction of the movement seen), got {phase!r}")

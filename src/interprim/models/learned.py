@@ -25,8 +25,6 @@ features) and ``n_in`` resampled points (the coupling's observation); :meth:`Lea
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..core.input_range import mark
@@ -215,13 +213,9 @@ class LearnedStream(BaseStream):
         v = self._raw[: self._n]
         est = model.phase_.estimate(v)
         s = float(np.clip(est.phase, 1e-3, 1.0))
-        sig = float(est.std)
-        if math.isfinite(sig) and sig >= 0.0:  # what CouplingModel.predict checks of its arguments
-            cp = model.coupling_._predict_prefix(v, s, sig)
-        else:
-            cp = model.coupling_.predict(v, s, phase_std=sig)
+        cp = model.coupling_.predict(v, s, phase_std=float(est.std), check=False)
         pred = _Prediction(cp, est)
-        if not model._CHECKS_INPUT and model.input_range_ is not None:
+        if model.input_range_ is not None:  # marked as Predictor.predict marks it (this model does not check)
             self._max = max(self._max, model.input_distance(block))
             mark(model, pred, self._max, warn=not self._warned)
             self._warned = self._warned or pred.out_of_range

@@ -21,7 +21,7 @@ from .grid import GridPrediction
 __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
-_OVERHEAD_US = (40.8, 98.4, 2.62)
+_OVERHEAD_US = (0.0, 102.0, 3.54)
 
 
 def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):

@@ -81,17 +81,17 @@ class FrameSizes:
 # Deterministic: one input gives one cost whatever the machine's load (a choice made from timings taken during a fit
 # would not be).  The constants are least-squares fits (non-negative) to the process time of 50-150 streamed frames
 # at six sizes (10-40 demonstrations, 5-18 DoFs, 100-300 frames; one BLAS thread) on the project's 2-core machine
-# while other jobs ran (load 5-10: the absolute figures are high, the ratios are what the budget uses), measured by
-# ``python -m benchmarks.auto --calibrate``; within 15-30 % of the measurement at most sizes.  The Interaction
-# Primitive has one formula per phase (its own cross-validation chooses it; the learned phase's frame is 2-3x
-# cheaper).
+# while other jobs ran (load about 2; the absolute figures depend on it, the ratios are what the budget uses),
+# measured by ``python -m benchmarks.auto --calibrate``; within 15-30 % of the measurement at most sizes.  The
+# Interaction Primitive has one formula per phase (its own cross-validation chooses it; the learned phase's frame is
+# 2-3x cheaper).
 _COSTS_US = {
-    "ip": (185.5, 1.0987, 0.0385),        # 1, n_dofs x n_demos, n_dofs x n_frames (likelihood or DTW phase)
-    "ip-learned": (113.9, 0.3898, 0.0),   # the same with the learned phase
-    "learned": (317.9, 2.4492, 0.0198),   # 1, n_dofs x n_demos, n_dofs x n_frames
-    "kernel": (328.4, 0.00594, 0.00632),  # 1, n_demos x n_frames x n_observed, n_demos x 201 x n_dofs
-    "nn": (91.1, 0.00159),                # 1, n_demos x n_frames x n_observed
-    "prior": (43.0, 0.7096),              # 1, n_dofs
+    "ip": (181.7, 1.1153, 0.0416),        # 1, n_dofs x n_demos, n_dofs x n_frames (likelihood or DTW phase)
+    "ip-learned": (127.2, 0.2753, 0.0),   # the same with the learned phase
+    "learned": (175.0, 2.2124, 0.0),      # 1, n_dofs x n_demos, n_dofs x n_frames
+    "kernel": (216.6, 0.0019, 0.00583),   # 1, n_demos x n_frames x n_observed, n_demos x 201 x n_dofs
+    "nn": (90.7, 0.00165),                # 1, n_demos x n_frames x n_observed
+    "prior": (42.6, 0.5750),              # 1, n_dofs
 }
 
 

@@ -58,3 +58,37 @@ def test_the_shared_timing_is_saved_and_restored(parts, tmp_path):
     assert back.remaining == 0.0
     x = demos[2][:25, [0, 1]]
     assert back.predict(x).trajectory(50) == pytest.approx(shared.predict(x).trajectory(50))
+
+
+@pytest.mark.parametrize("lam", [None, 0.0, 0.5, 1.0])
+def test_the_blend_places_its_members_by_the_long_range_formulas(parts, lam):
+    """Blend.combine repeats, on scalars, what long_range.remaining_duration and member_units compute for the
+    inner cross-validation's cases: the two must place every member alike (the selection scores what is run)."""
+    from interprim.core.preprocessing import interp_columns
+    from interprim.model_selection.long_range import member_units, remaining_duration
+
+    demos, dt, members, own, _ = parts
+    weights = {"nn": [0.7, 0.2, 0.1], "prior": [0.3, 0.8, 0.9]}
+    blend = Blend.from_fitted([0, 1], members, weights, None, demos, dt, horizon=0.25, bands=[0.25, 0.5, 4.0],
+                              remaining=lam)
+    test = demos[4]
+    for k in (6, 25, 50, 70):
+        preds = {m: members[m].predict(test[:k, [0, 1]]) for m in blend._names}
+        got = blend.combine(preds, k)
+        _, Y, W, ahead = got._parts
+        timing = np.array([place_in_time(preds[m], k, dt, blend.mean_duration_) for m in blend._names])
+        w0 = blend._w_now
+        s, D = float(w0 @ timing[:, 0]), float(w0 @ timing[:, 1])
+        R = None
+        if lam is not None:
+            R = max(float(remaining_duration(timing[:, :1], timing[:, 1:], (k - 1) * dt, blend.mean_duration_, w0,
+                                             lam)[0]), 0.25)
+            D = R / (1.0 - s) if s < 1.0 - 1e-9 else D
+        u = np.linspace(0.0, 1.0, Y.shape[1])
+        np.testing.assert_allclose(ahead, np.clip((u - s) * D, 0.0, None), rtol=0, atol=1e-12)
+        for j, m in enumerate(blend._names):
+            sm, Dm = timing[j]
+            future = member_units([sm], [Dm], ahead, None if R is None else [R], 0.25)[0]
+            um = np.clip(np.where(u >= s, future, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
+            want = interp_columns(um, u, preds[m].trajectory(len(u)))
+            np.testing.assert_allclose(Y[j], want, rtol=0, atol=1e-12)

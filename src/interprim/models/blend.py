@@ -12,7 +12,6 @@ import numpy as np
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
 from ..io import estimator_from_state
-from ..model_selection.long_range import member_units, remaining_duration
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
 from . import registry
@@ -33,6 +32,16 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
         raise ValueError(f"a blend member of class {cls_name!r}, which is not a family of interprim's registry "
                          f"(known: {', '.join(f.cls.__name__ for f in registry.FAMILIES.values())})")
     return estimator_from_state(cls, params, arrays, state)
+
+
+def _on_grid(pred, u) -> np.ndarray:
+    """``pred.trajectory(len(u))`` on the grid ``u`` (``linspace(0, 1, n)``): a tabulated prediction whose own times
+    are that grid is read as it is (interpolating at its own sample points gives its values)."""
+    times = getattr(pred, "times", None)
+    if type(pred).trajectory is GridPrediction.trajectory and times is not None and times.shape == u.shape and (
+            times is u or np.array_equal(times, u)):
+        return pred.mean
+    return pred.trajectory(u.shape[0])
 
 
 class Blend(Predictor):
@@ -164,49 +173,68 @@ class Blend(Predictor):
 
     def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
         """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
-        (a :class:`~interprim.models.grid.GridPrediction` whose std is computed when first asked for)."""
+        (a :class:`~interprim.models.grid.GridPrediction` whose std is computed when first asked for).
+
+        Called after every streamed frame, so it works on scalars where it can and reads a member tabulated on the
+        grid itself without interpolating it (the same numbers as the general formulas, see the comments)."""
         n_grid = self.N_GRID if n_grid is None else int(n_grid)
         names = self._names
         w0 = self._w_now
-        timing = [place_in_time(preds[m], n_frames, self.dt_, self.mean_duration_) for m in names]
-        s = float(np.dot(w0, [t[0] for t in timing]))
-        D = float(np.dot(w0, [t[1] for t in timing]))
+        dt, mean_dur = self.dt_, self.mean_duration_
+        timing = [place_in_time(preds[m], n_frames, dt, mean_dur) for m in names]
+        sv = [t[0] for t in timing]
+        dv = [t[1] for t in timing]
+        s = float(np.dot(w0, sv))
+        D = float(np.dot(w0, dv))
         R = None
         if self.remaining is not None:  # one shared end beyond the real-time band (long_range.remaining_duration)
-            R = float(remaining_duration(np.array([[t[0]] for t in timing]), np.array([[t[1]] for t in timing]),
-                                         (n_frames - 1) * self.dt_, self.mean_duration_, w0,
-                                         float(self.remaining))[0])
+            # remaining_duration's operations for one case: Rb = w0 . (max(1 - s_m, 0) D_m), Rc = max(mean - t, 0)
+            Rb = float(np.dot(w0, [max(1.0 - a, 0.0) * b for a, b in timing]))
+            Rc = max(mean_dur - (n_frames - 1) * dt, 0.0)
+            R = max(Rc + float(self.remaining) * (Rb - Rc), 0.0)
             R = max(R, float(self.horizon))  # the real-time band is the members' own (long_range.member_units)
             if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
                 D = R / (1.0 - s)
         u = unit_grid(n_grid)
-        ahead = np.clip((u - s) * D, 0.0, None)
+        ahead = (u - s) * D
+        np.maximum(ahead, 0.0, out=ahead)
         W = self._weights_on(ahead)  # (n_grid, M)
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
         on = W.any(axis=0)
-        active = np.flatnonzero(on)
-        if len(active) < len(names):
-            W = W[:, active]
-        # every active member's normalised time at each grid point, all at once: ``s_m + a / D_m`` ahead of now
-        # (with a shared end, ``long_range.member_units`` beyond the real-time band), ``u s_m / s`` before it
-        sm = np.array([timing[i][0] for i in active])[:, None]
-        Dm = np.array([timing[i][1] for i in active])[:, None]
-        if R is None:
-            future = sm + ahead / Dm
+        if on.all():
+            active = range(len(names))
         else:
-            future = member_units(sm[:, 0], Dm[:, 0], ahead, np.full(len(active), R), float(self.horizon))
-        um = np.clip(np.where(u >= s, future, u * (sm / s if s > 0 else 1.0)), 0.0, 1.0)
+            active = np.flatnonzero(on).tolist()
+            W = W[:, active]
+        # every active member's normalised time at each grid point: ``s_m + a / D_m`` ahead of now (with a shared
+        # end, ``long_range.member_units`` beyond the real-time band), ``u s_m / s`` before it
+        past = u < s
         Y = np.empty((len(active), n_grid, self.n_dofs_))
+        h = float(self.horizon)
         for j, i in enumerate(active):
-            Y[j] = interp_columns(um[j], u, preds[names[i]].trajectory(n_grid))
+            sm, Dm = sv[i], dv[i]
+            um = ahead / Dm
+            um += sm  # own = s_m + t / D_m
+            if R is not None:  # long_range.member_units of one member, the same operations
+                Rm = max(R, h)
+                uh = min(sm + h / Dm, 1.0)
+                if Rm > h:
+                    after = (ahead - h) * (1.0 - uh) / max(Rm - h, 1e-9) + uh
+                else:
+                    after = np.ones_like(ahead)
+                um = np.where(ahead <= h + 1e-12, um, after)
+            np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
+            um[past] = u[past] * (sm / s if s > 0 else 1.0)
+            np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
+            Y[j] = interp_columns(um, u, _on_grid(preds[names[i]], u))
         mean = np.einsum("gm,mgd->gd", W, Y)
         return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
 
     def _weights_on(self, ahead) -> np.ndarray:
         """:func:`~interprim.model_selection.stacking.weights_at` of the fitted weights at ``ahead`` (the same
         operations, with the bands' middles computed once)."""
-        if self._mids is None:
+        if self._mids is None or self._W.shape[1] == 1:  # one set of weights (a single member's: 1 everywhere)
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
         out = np.clip(interp_columns(ahead, self._mids, self._W), 0.0, None)
         return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)

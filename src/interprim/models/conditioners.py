@@ -37,6 +37,37 @@ def target_block(P, Ydc, R):
     return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
 
 
+def _median_rows(d2: np.ndarray) -> np.ndarray:
+    """``numpy.median(d2, axis=1, keepdims=True)`` of finite ``d2`` (Q, R): the same partition and the same mean of
+    the two middle values, without the wrapper's checks (called once per streamed frame)."""
+    R = d2.shape[1]
+    k = R // 2
+    if R % 2:
+        return np.partition(d2, k, axis=1)[:, k:k + 1]
+    part = np.partition(d2, (k - 1, k), axis=1)
+    return (part[:, k - 1:k] + part[:, k:k + 1]) / 2.0
+
+
+_LAPACK: dict = {}
+
+
+def _cho_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``cho_solve(cho_factor(A, lower=True), B)`` of a symmetric positive definite float64 ``A`` (overwritten) by
+    LAPACK's ``potrf`` / ``potrs`` themselves, the routines scipy's wrappers call, without their checks (``A`` and
+    ``B`` are finite here by construction); a clear error when ``A`` is not positive definite."""
+    if not _LAPACK:
+        from scipy.linalg.lapack import get_lapack_funcs
+
+        _LAPACK["potrf"], _LAPACK["potrs"] = get_lapack_funcs(("potrf", "potrs"), (np.zeros((1, 1)),))
+    c, info = _LAPACK["potrf"](A, lower=1, overwrite_a=1, clean=0)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"the ridge's Gram matrix is not positive definite (potrf info {info})")
+    x, info = _LAPACK["potrs"](c, B, lower=1)
+    if info != 0:
+        raise ValueError(f"potrs: illegal argument {-info}")
+    return x
+
+
 class Context:
     """What every conditioner of one training set and one batch of queries shares; the base fields can also be
     read as a mapping (``ctx["Xc"]``, ``dict(ctx)``).
@@ -118,7 +149,7 @@ class Context:
             xc, Xc = self.xc, self.Xc
             d2 = (np.sum(xc**2, axis=1)[:, None] + np.sum(Xc**2, axis=1)[None, :] - 2.0 * xc @ Xc.T)
             d2 = np.maximum(d2, 0.0)
-            self._distances = (d2, np.maximum(np.median(d2, axis=1, keepdims=True), 1e-300))
+            self._distances = (d2, np.maximum(_median_rows(d2), 1e-300))
         return self._distances
 
     def pca(self) -> tuple:
@@ -211,8 +242,6 @@ class Ridge(Conditioner):
         R sigma^2 I)^-1``), solved by a Cholesky factorisation of the smaller Gram matrix (:meth:`Context.gram`):
         the same weights up to rounding (the ridge keeps the system well conditioned: ``cond <= 1 + p /
         lambda``) at a fraction of an SVD's cost; the SVD when ``sigma^2 = 0``."""
-        from scipy.linalg import cho_factor, cho_solve
-
         R = ctx.R
         A, tr = ctx.gram()
         c = float(self.param) * tr / ctx.Xc.shape[1]  # R sigma^2 = lambda tr(X_c^T X_c) / p
@@ -222,10 +251,9 @@ class Ridge(Conditioner):
             return (xv * (S / (S**2 + R * sigma2))) @ U.T
         A = A.copy()
         A[np.diag_indices_from(A)] += c
-        f = cho_factor(A, lower=True, check_finite=False)
         if A.shape[0] == ctx.Xc.shape[1]:  # p <= R: (Q, p) solves, then onto the rows
-            return cho_solve(f, ctx.xc.T, check_finite=False).T @ ctx.Xc.T
-        return cho_solve(f, (ctx.xc @ ctx.Xc.T).T, check_finite=False).T
+            return _cho_solve(A, ctx.xc.T).T @ ctx.Xc.T
+        return _cho_solve(A, (ctx.xc @ ctx.Xc.T).T).T
 
 
 class Kernel(Conditioner):

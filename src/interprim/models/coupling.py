@@ -135,6 +135,16 @@ def _resample(frames, stop, n):
     return out[0] if scalar else out
 
 
+def _resample_one(frames, stop, n):
+    """:func:`_resample` at one scalar ``stop`` (n, D): the same operations without the batch's reshaping."""
+    T = frames.shape[0]
+    pos = np.minimum(np.maximum(float(stop) * unit_grid(int(n)), 0.0), T - 1.0)  # np.clip's numbers
+    i0 = np.minimum(np.floor(pos).astype(np.intp), T - 2 if T > 1 else 0)
+    w = (pos - i0)[:, None]
+    i1 = np.minimum(i0 + 1, T - 1)
+    return frames[i0] * (1.0 - w) + frames[i1] * w
+
+
 def _smooth_time(v, w):
     """Moving average of ``v`` (..., n_out, D) over ``w`` neighbouring time points (axis -2)."""
     if w <= 1:
@@ -533,7 +543,7 @@ class CouplingModel:
 
     # ------------------------------------------------------------------ predict
     @one_blas_thread
-    def predict(self, partial, phase, phase_std=None) -> GridPrediction:
+    def predict(self, partial, phase, phase_std=None, check: bool = True) -> GridPrediction:
         """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
 
         Parameters
@@ -546,6 +556,9 @@ class CouplingModel:
         phase_std : float, optional
             Standard deviation of ``phase``; default the model's ``phase_std`` at ``phase``.
             ``0`` when the phase is known.
+        check : bool
+            ``False``: ``partial`` is already a finite float64 array of that shape, checked by the caller (a stream
+            checks each frame once, as it enters), and is not scanned again; ``phase`` and ``phase_std`` still are.
 
         Returns
         -------
@@ -555,7 +568,7 @@ class CouplingModel:
         if not hasattr(self, "method_"):
             raise NotFittedError("this CouplingModel is not fitted yet: call fit(demos) before predict")
         Do = len(self.observed_dofs_)
-        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=1)  # one frame: a prefix that has not moved
+        v = as_2d_finite(partial, "partial", n_cols=Do, min_rows=1) if check else partial  # one frame: not moved
         if isinstance(phase, (bool, np.bool_)) or not isinstance(phase, numbers.Real) or not math.isfinite(phase) \
                 or not 0.0 < float(phase) <= 1.0:
             raise ValueError(f"phase must be a number in (0, 1] (the fraction of the movement seen), got {phase!r}")
@@ -572,7 +585,7 @@ class CouplingModel:
     def _predict_prefix(self, v, s: float, sig: float) -> GridPrediction:
         """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
         # the prefix enters only through its resampled points (_resample reads n_in of its frames)
-        x = self._feat(_resample(v, v.shape[0] - 1, int(self.n_in)))[None, :]
+        x = self._feat(_resample_one(v, v.shape[0] - 1, int(self.n_in)))[None, :]
         mean, h = self._condition(x, s, sig)
         return self._grid_prediction(mean, h, s, sig, v.shape[0])
 
@@ -587,7 +600,8 @@ class CouplingModel:
         X, g = self._rows(np.arange(n), s, sig)
         st = self._static(X.shape[0])
         mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
-        cond = conditioner(self.method_, self.param_)
+        cond = self._derived.get_or_build(("conditioner", self.method_, str(self.param_)), (),
+                                          lambda: conditioner(self.method_, self.param_))
         ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, st.ylow if isinstance(cond, PPCA) else None)
         mean, h = cond.predict(ctx)
         return mean[0].reshape(self.n_out, D), float(h[0])
@@ -619,10 +633,15 @@ class CouplingModel:
             k = int(np.searchsorted(fr, s)) - 1
             w = (s - fr[k]) / (fr[k + 1] - fr[k])
             var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
-        c = np.ones(D)
-        c[self.observed_dofs_] = self.scale_["observed"]
-        c[self.controlled_dofs_] = self.scale_["controlled"]
-        std = c[None, :] * np.sqrt(var * (1.0 + h))
+        def scales():
+            c = np.ones(D)
+            c[self.observed_dofs_] = self.scale_["observed"]
+            c[self.controlled_dofs_] = self.scale_["controlled"]
+            return c[None, :]
+
+        c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"], self.scale_["controlled"],
+                                                     self.observed_dofs_, self.controlled_dofs_), scales)
+        std = c * np.sqrt(var * (1.0 + h))
         return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
                               self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
                               n_observed=n_observed, conditioned=not self.fallback_to_mean_)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.preprocessing import interp_columns
+from ..core.preprocessing import interp_columns, unit_grid
 from .base import BasePrediction
 
 __all__ = ["GridPrediction"]
@@ -98,7 +98,7 @@ class GridPrediction(BasePrediction):
 
     def trajectory(self, n: int = 100) -> np.ndarray:
         """Predictive mean of all DoFs, shape ``(n, D)`` on ``linspace(0, 1, n)`` (linear interpolation)."""
-        return self._at(self.mean, np.linspace(0.0, 1.0, int(n)))
+        return self._at(self.mean, unit_grid(n))
 
     @one_blas_thread
     def std(self, n: int = 100, calibrated: bool = True, timing: bool | None = None):
@@ -112,11 +112,11 @@ class GridPrediction(BasePrediction):
         """
         if self.std_values is None:
             return None
-        sd = self._at(self.std_values, np.linspace(0.0, 1.0, int(n)))
+        sd = self._at(self.std_values, unit_grid(n))
         use_timing = (self.timing and calibrated) if timing is None else bool(timing)
         if not use_timing or not self.phase > 0.0 or self.phase_std <= 0.0:
             return sd
-        u = np.linspace(0.0, 1.0, int(n))
+        u = unit_grid(n)
         slope = np.gradient(self.trajectory(n), u, axis=0)
         e = min(self.phase_std / self.phase, 1.0)
         return np.sqrt(sd * sd + (slope * (u * e)[:, None]) ** 2)

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
+from ..core.preprocessing import unit_grid
 from ..model_selection.prefixes import observed_frames
 from .demonstrations import AlignedBaseline
 from .grid import GridPrediction
@@ -111,15 +112,22 @@ class KernelDemonstrations(AlignedBaseline):
 
         padded, lengths = self._derived.get_or_build("padded", (self.demos_,), build)
         idx = np.asarray(idx, dtype=np.intp)
-        A = padded[idx][..., cols]
         k = np.floor(f).astype(np.intp)
         frac = f - k
-        J = np.arange(idx.size)[:, None]
-        lo = A[J, k]
-        out = (A[J, k + 1] - lo) * frac[..., None] + lo
+        # gathered by flat row index from the padded frames (no copy of the selected demonstrations): the values of
+        # padded[idx][J, k] and [J, k + 1]
+        rows = padded.reshape(-1, padded.shape[2])
+        flat = k + (idx * padded.shape[1])[:, None]
+        lo = np.take(rows, flat, axis=0)
+        hi = np.take(rows, flat + 1, axis=0)
+        if not (isinstance(cols, slice) and cols == slice(None)):
+            lo, hi = lo[..., cols], hi[..., cols]
+        hi -= lo
+        hi *= frac[..., None]
+        hi += lo  # (y[k+1] - y[k]) * (f - k) + y[k]
         exact = frac == 0.0  # on a sample (also the last one, whose successor is padding)
-        out[exact] = lo[exact]
-        return out
+        hi[exact] = lo[exact]
+        return hi
 
     def _cost_scale(self):
         """The median DTW cost between halves of different training demonstrations (the weights' unit)."""
@@ -234,23 +242,25 @@ class KernelDemonstrations(AlignedBaseline):
         """The weighted demonstrations given the prefix's alignments (steps 2 and 3 of the module docstring;
         :meth:`~interprim.models.demonstrations.AlignedBaseline.predict_from_alignment`; the prediction's
         ``weights``: ``{demonstration: weight}``)."""
-        idx = list(range(len(self.demos_)))
+        J = len(self.demos_)
+        idx = range(J)
         w = self._weights(cost, self.bandwidth_)
         elapsed = (M - 1) * self.dt_
-        rem = np.array([len(self.demos_[j]) - 1 - n for j, n in zip(idx, n_star)], dtype=np.float64)
+        T = self._derived.get_or_build("lengths", (self.demos_,),
+                                       lambda: np.array([len(a) for a in self.demos_])[:, None])
+        n = np.asarray(n_star)[:, None]
+        rem = (T[:, 0] - 1 - n[:, 0]).astype(np.float64)
         R = float(w @ rem) * self.dt_
         dur = max(elapsed + R, self.dt_)
         s = elapsed / dur
-        u = np.linspace(0.0, 1.0, int(self.n))
-        n = np.asarray(n_star)[:, None]
-        T = np.array([len(a) for a in self.demos_])[:, None]
+        u = unit_grid(int(self.n))
         past = u <= s
         f = np.where(past, (u / max(s, 1e-12))[None, :] * n, n + ((u - s) / max(1 - s, 1e-12))[None, :] * (T - 1 - n))
-        Y = self._frames_at(idx, np.clip(f, 0, T - 1), slice(None))
+        Y = self._frames_at(np.arange(J), np.clip(f, 0, T - 1), slice(None))
         mean = np.einsum("j,jkd->kd", w, Y)
         spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
-        pred = GridPrediction(u, mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
+        pred = GridPrediction(u.copy(), mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
                               duration=dur, mean_duration=self.mean_duration_, n_observed=M)
         pred.weights = dict(zip(idx, (float(x) for x in w)))
         return pred

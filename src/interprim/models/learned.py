@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.input_range import mark
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
 from .base import BasePrediction, BaseStream, Predictor
@@ -175,6 +176,8 @@ class LearnedStream(BaseStream):
         self._n_cols = len(model.observed_dofs_)
         self._raw = np.empty((64, self._n_cols))
         self._n = 0
+        self._max = 0.0
+        self._warned = False
 
     @property
     def n_frames(self) -> int:
@@ -186,6 +189,8 @@ class LearnedStream(BaseStream):
         if robot_state is not None:
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         self._n = 0
+        self._max = 0.0
+        self._warned = False
 
     def _append(self, block):
         need = self._n + block.shape[0]
@@ -199,14 +204,29 @@ class LearnedStream(BaseStream):
         self._raw[self._n:need] = block
         self._n = need
 
+    def _predict(self, block) -> BasePrediction:
+        """:meth:`LearnedInteraction.predict` of every frame seen, the new (checked) ``block`` appended: the same
+        steps on frames checked once, as they entered, and marked with the largest input distance so far (the
+        largest of every frame's, as ``predict`` finds it over the prefix; warned once per stream)."""
+        self._append(block)
+        model = self.model
+        v = self._raw[: self._n]
+        est = model.phase_.estimate(v)
+        s = float(np.clip(est.phase, 1e-3, 1.0))
+        cp = model.coupling_.predict(v, s, phase_std=float(est.std), check=False)
+        pred = _Prediction(cp, est)
+        if model.input_range_ is not None:  # marked as Predictor.predict marks it (this model does not check)
+            self._max = max(self._max, model.input_distance(block))
+            mark(model, pred, self._max, warn=not self._warned)
+            self._warned = self._warned or pred.out_of_range
+        return pred
+
     def update(self, frame, need_cov: bool = False) -> BasePrediction:
         """Add one frame of the observed agent, shape ``(len(observed_dofs),)``; returns ``predict`` of all frames
         seen."""
-        self._append(as_frame(frame, "frame", self._n_cols)[None, :])
-        return self.model.predict(self._raw[: self._n])
+        return self._predict(as_frame(frame, "frame", self._n_cols)[None, :])
 
     def extend(self, frames, need_cov: bool = False) -> BasePrediction:
         """Add frames ``(k, len(observed_dofs))`` at once (checked before any enters); returns what :meth:`update`
         returns for the last of them (one prediction, since it depends on the frames only)."""
-        self._append(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))
-        return self.model.predict(self._raw[: self._n])
+        return self._predict(as_2d_finite(frames, "frames", n_cols=self._n_cols, min_rows=1))

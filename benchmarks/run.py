@@ -205,6 +205,7 @@ def ref_likelihood_phase(model, z, s_init, n_grid=40):
 
     from interprim.phase import likelihood as PL
 
+    model = getattr(model, "fitted_", model)  # the phase reads the fitted state (an estimator's fitted_)
     M = z.shape[0]
     lo = max(PL.S_MIN, min(1.0, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_)))))
     grid = np.unique(np.append(np.exp(np.linspace(np.log(lo), 0.0, n_grid)), np.clip(s_init, lo, 1.0)))

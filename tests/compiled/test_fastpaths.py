@@ -474,3 +474,19 @@ def test_stream_equals_predict_at_benchmark_size():
             for key, v in _compare_stream_batch(p, m.predict(test[: i + 1, :7]), i, STREAM_TOL["benchmark"]).items():
                 worst[key] = max(worst.get(key, 0.0), v)
     print(worst)
+
+
+def test_the_benchmarks_per_candidate_likelihood_phase_finds_the_library_phase():
+    """``benchmarks.run.ref_likelihood_phase`` (the likelihood phase as one reference evaluation per candidate, the
+    peer row of the benchmark table) runs on a fitted estimator and finds the phase the batched kernel finds, on the
+    benchmark's data at a smaller size."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    from benchmarks.run import fitted_model, ref_likelihood_phase
+
+    m, test = fitted_model(Do=3, Dc=3, n_basis=10, S=12, T=200, phase_method="likelihood")
+    partial = test[:100, :3]
+    s = m.predict(partial).normalised_time
+    assert ref_likelihood_phase(m, partial, s) == pytest.approx(s, abs=2e-3)

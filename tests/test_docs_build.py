@@ -66,7 +66,11 @@ def test_reference_pages_render_the_api(site, page, symbols):
         # a heading with the symbol's anchor, followed by its rendered docstring
         m = re.search(rf'id="{re.escape(sym)}"', html)
         assert m, f"{sym} is not rendered on {page}"
-        assert 'class="doc doc-contents' in html[m.end():m.end() + 4000], f"{sym} has no rendered contents"
+        # its contents come before the next symbol's heading (a typed signature can run to many kilobytes of markup)
+        own = html.find('class="doc doc-heading"', m.end())  # the symbol's own heading (its anchor opens it)
+        nxt = html.find('class="doc doc-heading"', own + 1) if own >= 0 else -1
+        entry = html[m.end():nxt if nxt >= 0 else len(html)]
+        assert 'class="doc doc-contents' in entry, f"{sym} has no rendered contents"
 
 
 def test_predict_entry_has_signature_and_parameters(site):

@@ -29,34 +29,50 @@ __all__ = ["place_in_time", "RealTimeConfig", "mean_duration", "mean_demo", "rea
 
 
 class PredictionLike(Protocol):
-    """What the protocol reads of a prediction: any :class:`~interprim.models.base.PredictionLike` (the package's
+    """What the protocol reads of a prediction: any :class:`~interprim.models.base.BasePrediction` (the package's
     contract, which this layer below the models names only through this structural type)."""
 
     @property
-    def normalised_time(self) -> float: ...
+    def normalised_time(self) -> float:
+        """Normalised time of the last observed frame (NaN: played by the clock, :func:`place_in_time`)."""
+        ...
 
     @property
-    def duration(self) -> float: ...
+    def duration(self) -> float:
+        """Predicted duration of the whole movement in seconds (NaN: not estimated)."""
+        ...
 
-    def trajectory(self, n: int = 100) -> np.ndarray: ...
+    def trajectory(self, n: int = 100) -> np.ndarray:
+        """Mean of every column on ``linspace(0, 1, n)``, shape ``(n, D)``."""
+        ...
 
-    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray | None: ...
+    def std(self, n: int = 100, calibrated: bool = True) -> np.ndarray | None:
+        """Pointwise standard deviation of :meth:`trajectory` (``None``: no uncertainty)."""
+        ...
 
 
 class StreamLike(Protocol):
     """What the protocol uses of an online predictor (:class:`~interprim.models.base.BaseStream`)."""
 
-    def extend(self, frames: ArrayLike, need_cov: bool = False) -> PredictionLike: ...
+    def extend(self, frames: ArrayLike, need_cov: bool = False) -> PredictionLike:
+        """Add observed frames ``(k, n_observed)``; the prediction after the last of them."""
+        ...
 
 
 class EstimatorLike(Protocol):
     """What the protocol uses of an estimator: any :class:`~interprim.models.base.Predictor`."""
 
-    def fit(self, demos: Any, dt: float | None = None) -> Any: ...
+    def fit(self, demos: Any, dt: float | None = None) -> Any:
+        """Learn from demonstrations sampled every ``dt`` seconds; returns the estimator."""
+        ...
 
-    def predict(self, partial: ArrayLike) -> PredictionLike: ...
+    def predict(self, partial: ArrayLike) -> PredictionLike:
+        """The prediction from the observed frames ``partial`` since the start of the movement."""
+        ...
 
-    def stream(self) -> StreamLike: ...
+    def stream(self) -> StreamLike:
+        """An online predictor whose answers equal :meth:`predict` of the frames seen."""
+        ...
 
 #: the fewest demonstrations :func:`interprim.assessment.evaluate_demonstrations` takes (every fold trains on at
 #: least 2)

@@ -57,8 +57,8 @@ from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
 
-__all__ = ["BasePrediction", "BaseStream", "Predictor", "PrefixStream", "CheckedStream", "TrajectoryColumns",
-           "TrainingSet", "training_set", "uniform_demonstrations", "DEFAULT_DT"]
+__all__ = ["BasePrediction", "BaseStream", "Predictor", "PrefixStream", "CheckedStream", "InputMarks",
+           "TrajectoryColumns", "TrainingSet", "training_set", "uniform_demonstrations", "DEFAULT_DT"]
 
 
 #: the prediction accessors run on one BLAS thread (:func:`interprim.core.blas.limit_methods`)
@@ -430,14 +430,40 @@ def _jsonable(v: Any) -> Any:
     raise TypeError(f"parameter value {v!r} cannot be stored in a model file")
 
 
+class InputMarks:
+    """A stream's running input check: each prediction is marked with the largest ``input_distance`` of the frames
+    seen so far and ``out_of_range`` (:func:`interprim.core.input_range.mark`), warned once per stream.
+
+    Used by :class:`CheckedStream` and by the streams that mark their own predictions (``marks_input``)."""
+
+    __slots__ = ("model", "largest", "warned")
+
+    def __init__(self, model: Predictor) -> None:
+        self.model = model
+        self.largest = 0.0
+        self.warned = False
+
+    def reset(self) -> None:
+        """Forget the frames seen (a new interaction)."""
+        self.largest = 0.0
+        self.warned = False
+
+    def mark(self, pred: BasePrediction, frames: ArrayLike) -> BasePrediction:
+        """``pred`` marked after the new ``frames`` (one frame or ``(k, n_observed)``) entered the stream."""
+        d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
+        self.largest = max(self.largest, d) if np.isfinite(d) else d
+        mark(self.model, pred, self.largest, warn=not self.warned)
+        self.warned = self.warned or pred.out_of_range
+        return pred
+
+
 class CheckedStream(BaseStream):
     """A model's stream whose predictions carry ``input_distance`` and ``out_of_range`` of every frame seen so far
     (the largest distance, :mod:`interprim.core.input_range`), warned once per stream."""
 
     def __init__(self, model: Predictor, inner: BaseStream) -> None:
         self.model, self.inner = model, inner
-        self._max = 0.0
-        self._warned = False
+        self._marks = InputMarks(model)
 
     @property
     def n_frames(self) -> int:
@@ -447,29 +473,21 @@ class CheckedStream(BaseStream):
     def reset(self, robot_state: ArrayLike | None = None) -> None:
         """Forget all frames (start a new interaction)."""
         self.inner.reset(robot_state)
-        self._max = 0.0
-        self._warned = False
-
-    def _mark(self, pred: BasePrediction, frames: ArrayLike) -> BasePrediction:
-        d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
-        self._max = max(self._max, d) if np.isfinite(d) else d
-        mark(self.model, pred, self._max, warn=not self._warned)
-        self._warned = self._warned or pred.out_of_range
-        return pred
+        self._marks.reset()
 
     def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add one observed frame; the inner stream's prediction, marked."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OutOfRangeWarning)
             pred = self.inner.update(frame, need_cov=need_cov)
-        return self._mark(pred, frame)
+        return self._marks.mark(pred, frame)
 
     def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add several frames; the inner stream's prediction for the last, marked."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OutOfRangeWarning)
             pred = self.inner.extend(frames, need_cov=need_cov)
-        return self._mark(pred, frames)
+        return self._marks.mark(pred, frames)
 
 
 if TYPE_CHECKING:

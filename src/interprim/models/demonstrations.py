@@ -20,10 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from ..core.input_range import mark
 from ..core.preprocessing import time_normalise
 from ..core.validation import as_2d_finite, as_frame
-from .base import BaseStream, Predictor
+from .base import BaseStream, InputMarks, Predictor
 from .grid import GridPrediction
 from .training import TrainingSet
 
@@ -105,8 +104,7 @@ class AlignedStream(BaseStream):
         self._n_cols = len(model.observed_dofs_)
         self._dtw = [IncrementalDTW(o) for o in model.observed_]
         self._n = 0
-        self._max = 0.0
-        self._warned = False
+        self._marks = InputMarks(model)
 
     @property
     def n_frames(self) -> int:
@@ -118,8 +116,7 @@ class AlignedStream(BaseStream):
         for d in self._dtw:
             d.reset()
         self._n = 0
-        self._max = 0.0
-        self._warned = False
+        self._marks.reset()
 
     def _advance(self, block):
         for d in self._dtw:  # the frames are checked: each alignment takes the block at once
@@ -130,9 +127,7 @@ class AlignedStream(BaseStream):
         cost = np.array([d.cost / (d.n_star + 1 + self._n) for d in self._dtw])
         pred = self.model.predict_from_alignment(self._n, n_star, cost)
         if self.model.input_range_ is not None:
-            self._max = max(self._max, self.model.input_distance(block))
-            mark(self.model, pred, self._max, warn=not self._warned)
-            self._warned = self._warned or pred.out_of_range
+            self._marks.mark(pred, block)
         return pred
 
     def update(self, frame, need_cov: bool = False):

@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.input_range import mark
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
-from .base import BasePrediction, BaseStream, Predictor
+from .base import BasePrediction, BaseStream, InputMarks, Predictor
 from .coupling import CouplingModel
 from .grid import GridPrediction
 from .training import TrainingSet
@@ -112,10 +111,14 @@ class LearnedInteraction(Predictor):
     def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """Phase of the prefix (learned), then the whole movement of both agents given it (coupling)."""
         self._check_fitted("predict")
-        partial = as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
+        return self.predict_checked(as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1))
+
+    def predict_checked(self, partial: np.ndarray) -> GridPrediction:
+        """The prediction of frames already checked -- a finite float64 array ``(M, len(observed_dofs))``, not scanned
+        again (:class:`LearnedStream` checks each frame once, as it enters) -- unmarked (``predict`` marks it)."""
         est = self.phase_.estimate(partial)
         s = float(np.clip(est.phase, 1e-3, 1.0))
-        cp = self.coupling_.predict(partial, s, phase_std=float(est.std))
+        cp = self.coupling_.predict(partial, s, phase_std=float(est.std), check=False)
         return _Prediction(cp, est)
 
     def _stream(self, robot_state=None) -> LearnedStream:
@@ -176,8 +179,7 @@ class LearnedStream(BaseStream):
         self._n_cols = len(model.observed_dofs_)
         self._raw = np.empty((64, self._n_cols))
         self._n = 0
-        self._max = 0.0
-        self._warned = False
+        self._marks = InputMarks(model)
 
     @property
     def n_frames(self) -> int:
@@ -189,8 +191,7 @@ class LearnedStream(BaseStream):
         if robot_state is not None:
             raise ValueError("robot_state: this model does not roll out from a robot state; pass None")
         self._n = 0
-        self._max = 0.0
-        self._warned = False
+        self._marks.reset()
 
     def _append(self, block):
         need = self._n + block.shape[0]
@@ -205,20 +206,12 @@ class LearnedStream(BaseStream):
         self._n = need
 
     def _predict(self, block) -> BasePrediction:
-        """:meth:`LearnedInteraction.predict` of every frame seen, the new (checked) ``block`` appended: the same
-        steps on frames checked once, as they entered, and marked with the largest input distance so far (the
-        largest of every frame's, as ``predict`` finds it over the prefix; warned once per stream)."""
+        """:meth:`LearnedInteraction.predict` of every frame seen, the new (checked) ``block`` appended, marked with
+        the largest input distance so far (what ``predict`` finds over the prefix; warned once per stream)."""
         self._append(block)
-        model = self.model
-        v = self._raw[: self._n]
-        est = model.phase_.estimate(v)
-        s = float(np.clip(est.phase, 1e-3, 1.0))
-        cp = model.coupling_.predict(v, s, phase_std=float(est.std), check=False)
-        pred = _Prediction(cp, est)
-        if model.input_range_ is not None:  # marked as Predictor.predict marks it (this model does not check)
-            self._max = max(self._max, model.input_distance(block))
-            mark(model, pred, self._max, warn=not self._warned)
-            self._warned = self._warned or pred.out_of_range
+        pred = self.model.predict_checked(self._raw[: self._n])
+        if self.model.input_range_ is not None:  # marked as Predictor.predict marks it (this model does not check)
+            self._marks.mark(pred, block)
         return pred
 
     def update(self, frame, need_cov: bool = False) -> BasePrediction:

@@ -24,7 +24,7 @@ log-likelihood); at the largest (``kappa ~ 1``) they are a few ``eps``.  The dif
 import numpy as np
 import pytest
 
-from interprim.core.gaussian import LowRankPrior, compress_observation, lowrank_case
+from interprim.core.gaussian import LowRankPrior, compress_observation, lowrank_case, lowrank_cases
 
 EPS = np.finfo(float).eps
 
@@ -72,6 +72,32 @@ CASES = [  # (seed, n_o, n_c, q, M, S, method, lam)
     (4, 4, 1, 7, 12, 6, "empirical", None),
     (5, 1, 3, 8, 15, 9, "shrinkage", 0.95),
 ]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_lowrank_cases_equal_each_case_bit_for_bit(case):
+    # several observations of one prior at once: each case's means and log-likelihoods are those of its own
+    # lowrank_case call exactly (the same routines per matrix), for designs of every case's own length
+    seed, n_o, n_c, q, M, S, method, lam = case
+    pr, _, _ = _case(seed, n_o, n_c, q, M, S, method, lam)
+    rng = np.random.default_rng(seed + 100)
+    obs = []
+    M = max(M, q)  # full-rank designs: one compressed size
+    for m in (M, M + 3, M + 3, 2 * M):
+        X = rng.standard_normal((m, q))
+        obs.append((X, rng.standard_normal((m, n_o)) + X @ pr.mean[: n_o * q].reshape(n_o, q).T))
+    comps = [compress_observation(X, Y) for X, Y in obs]
+    assert len({c[0].shape[0] for c in comps}) == 1  # one compressed size (lowrank_cases' contract)
+    s2 = np.array([1e-4, 1e-2, 1.0, 1e2])
+    means, ll = lowrank_cases(pr, n_o, q, comps, s2, need_ll=True, observations=obs)
+    assert means.shape == (len(obs), s2.size, pr.mean.size) and ll.shape == (len(obs), s2.size)
+    for b, ((X, Y), comp) in enumerate(zip(obs, comps)):
+        m1, l1 = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True, compressed=comp)
+        assert np.array_equal(means[b], m1) and np.array_equal(ll[b], l1)
+    only_ll = lowrank_cases(pr, n_o, q, comps, s2, need_mean=False, need_ll=True, observations=obs)
+    assert only_ll[0] is None and np.array_equal(only_ll[1], ll)
+    with pytest.raises(ValueError, match="observations"):
+        lowrank_cases(pr, n_o, q, comps, s2, need_ll=True)
 
 
 @pytest.mark.parametrize("case", CASES)

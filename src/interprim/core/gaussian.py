@@ -698,3 +698,63 @@ def lowrank_case(pr: GaussianPrior, n_o: int, q: int, X: np.ndarray, Y: np.ndarr
         logdet = np.sum(np.log(e[None, :] + s2[:, None]), axis=1) + np.linalg.slogdet(C)[1]
         ll = -0.5 * (n_obs * LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2 + at @ rt)
     return means, ll
+
+
+def lowrank_cases(pr: GaussianPrior, n_o: int, q: int, compressed: list[tuple[np.ndarray, np.ndarray]],
+                  s2: np.ndarray, need_mean: bool = True, need_ll: bool = False,
+                  observations: list[tuple[np.ndarray, np.ndarray]] | None = None,
+                  ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """:func:`lowrank_case` of several observations conditioned on one prior, at once: ``(B, len(s2), P)`` means
+    and/or ``(B, len(s2))`` log-likelihoods of the ``B`` compressed observations ``compressed``
+    (:func:`compress_observation`; each with the same number of rows ``k``).
+
+    The same operations as :func:`lowrank_case` on arrays with a leading case axis: the matrix products,
+    eigendecompositions, solves and log-determinants of stacked arrays apply the same routine to each case's
+    matrices, so every case's numbers are those of its own :func:`lowrank_case` call, bit for bit (tested); only
+    the per-call overhead is shared.  ``observations``: the cases' ``(X, Y)``, needed for the log-likelihood.
+    """
+    L = np.stack([c[0] for c in compressed])  # (B, k, q)
+    zc = np.stack([c[1] for c in compressed])  # (B, k, n_o)
+    B, k = L.shape[0], L.shape[1]
+    no_q = n_o * q
+    mu_o = pr.mean[:no_q].reshape(n_o, q)
+    d_o = pr.d[:no_q].reshape(n_o, q)
+    Wt_o = pr.W[:, :no_q].T.reshape(n_o, q, -1)  # (n_o, q, n): W_i^T
+    Lt = L.transpose(0, 2, 1)[:, None]  # (B, 1, q, k): each case's L.T
+    E, V = np.linalg.eigh((L[:, None, :, :] * d_o[None, :, None, :]) @ Lt)  # (B, n_o, k), (B, n_o, k, k)
+    E = np.clip(E, 0.0, None)
+    Vt = V.transpose(0, 1, 3, 2)
+    VL = Vt @ L[:, None]  # (B, n_o, k, q)
+    Ut = (VL @ Wt_o).reshape(B, n_o * k, -1)  # (B, n_o k, n)
+    r = (zc - L @ mu_o.T).transpose(0, 2, 1)  # (B, n_o, k)
+    rt = (Vt @ r[:, :, :, None]).reshape(B, -1)  # (B, n_o k)
+    e = E.reshape(B, -1)
+    s2 = np.asarray(s2, dtype=np.float64)
+    ns = s2.shape[0]
+    g = 1.0 / (e[:, None, :] + s2[None, :, None])  # (B, S2, n_o k)
+    nW = Ut.shape[2]
+    UtT = Ut.transpose(0, 2, 1)  # (B, n, n_o k)
+    C = (UtT[:, None, :, :] * g[:, :, None, :]) @ Ut[:, None]  # (B, S2, n, n)
+    C[:, :, np.arange(nW), np.arange(nW)] += 1.0
+    gr = g * rt[:, None, :]
+    sol = np.linalg.solve(C, (gr @ Ut)[:, :, :, None])[:, :, :, 0]  # (B, S2, n)
+    at = gr - g * (sol @ UtT)  # (B, S2, n_o k)
+    means = ll = None
+    if need_mean:
+        v = (VL.transpose(0, 1, 3, 2) @ at.reshape(B, ns, n_o, k).transpose(0, 2, 3, 1))  # (B, n_o, q, S2)
+        v = v.transpose(0, 3, 1, 2).reshape(B, ns, no_q)
+        means = pr.mean[None, None, :] + (at @ Ut) @ pr.W
+        means[:, :, :no_q] += v * pr.d[None, None, :no_q]
+    if need_ll:
+        if observations is None:
+            raise ValueError("lowrank_cases needs the observations (X, Y) for the log-likelihood")
+        ll = np.empty((B, ns))
+        logdet_C = np.linalg.slogdet(C)[1]  # (B, S2)
+        for b, (X, Y) in enumerate(observations):
+            resid_total = float(np.sum((Y - X @ mu_o.T) ** 2))
+            rb = r[b].reshape(-1)
+            resid_perp = max(resid_total - float(rb @ rb), 0.0)
+            n_obs, dk = Y.size, n_o * k
+            logdet = np.sum(np.log(e[b][None, :] + s2[:, None]), axis=1) + logdet_C[b]
+            ll[b] = -0.5 * (n_obs * LOG2PI + (n_obs - dk) * np.log(s2) + logdet + resid_perp / s2 + at[b] @ rt[b])
+    return means, ll

@@ -68,6 +68,7 @@ from ...core.gaussian import (
     compress_observation,
     fit_prior,
     lowrank_case,
+    lowrank_cases,
     shrink_cross,
     shrinkage_intensity,
 )
@@ -219,16 +220,18 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
             held = [c for c in cases if fold[c[0]] == f]
             if select_sigma2:
                 pm_shift = H @ prior.mean.reshape(n_lat, q).T  # prior mean's positions minus the start's
+                # every held-out case conditioned at once (lowrank_cases: each case's numbers as its own call's)
+                outs = _conditioned(prior, n_o, q, [(c[3][kind0], c[1][kind0]) for c in held], s2_grid[kind0],
+                                    need_ll=kind0 == "position")
                 for c0 in range(0, len(held), _SCORE_CHUNK):  # several held-out cases scored at once
                     chunk = held[c0:c0 + _SCORE_CHUNK]
-                    outs = [lowrank_case(prior, n_o, q, *designs[kind0], s2_grid[kind0], need_ll=kind0 == "position",
-                                         compressed=comp[kind0]) for _, designs, _, comp in chunk]
-                    e_o, e_c, p_o, p_c = _score(np.stack([o[0] for o in outs]), np.stack([c[2] for c in chunk]),
+                    outs_c = outs[c0:c0 + _SCORE_CHUNK]
+                    e_o, e_c, p_o, p_c = _score(np.stack([o[0] for o in outs_c]), np.stack([c[2] for c in chunk]),
                                                 np.stack([truths[c[0]] for c in chunk]), pm_shift, H, n_o, q, w_d, gam)
                     for b in range(len(chunk)):
                         per_case.setdefault(a, []).append((e_o[b], e_c[b], p_o[b], p_c[b]))
                         if kind0 == "position":
-                            ll[a] += outs[b][1]
+                            ll[a] += outs_c[b][1]
             if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                 for _j, designs, _base, comp in held:
                     X, Y = designs["position"]
@@ -298,6 +301,22 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
 
 
 _SCORE_CHUNK = 4  # held-out cases scored together (their (cases, sigma2, frames, DoF) arrays stay in cache)
+
+
+def _conditioned(prior, n_o, q, cases, s2, need_mean=True, need_ll=False):
+    """``[(means (S2, P) or None, log-likelihoods (S2,) or None)]``: :func:`~interprim.core.gaussian.lowrank_case` of
+    each case ``(compressed observation, (X, Y))`` on ``prior``, the cases with the same compressed size conditioned
+    together (:func:`~interprim.core.gaussian.lowrank_cases`: the same numbers, less overhead)."""
+    out: list = [None] * len(cases)
+    by_k: dict[int, list[int]] = {}
+    for i, (comp, _) in enumerate(cases):
+        by_k.setdefault(comp[0].shape[0], []).append(i)
+    for idx in by_k.values():
+        means, lls = lowrank_cases(prior, n_o, q, [cases[i][0] for i in idx], s2, need_mean=need_mean,
+                                   need_ll=need_ll, observations=[cases[i][1] for i in idx] if need_ll else None)
+        for j, i in enumerate(idx):
+            out[i] = (None if means is None else means[j], None if lls is None else lls[j])
+    return out
 
 
 def _criteria(per_case, n_lam, n_o, n_lat):
@@ -383,10 +402,11 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         lo = max(S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
         grid = np.exp(np.linspace(np.log(lo), 0.0, n_phase))
         curves = np.empty((grid.size, len(s2_grid)))
+        designs = [observation_design(model, z[:M, :n_o], float(s), "position") for s in grid]
+        lls = _conditioned(prior, n_o, q, [(compress_observation(X, Y), (X, Y)) for X, Y in designs], s2_grid,
+                           need_mean=False, need_ll=True)
         for i, s in enumerate(grid):
-            X, Y = observation_design(model, z[:M, :n_o], float(s), "position")
-            curves[i] = (lowrank_case(prior, n_o, q, X, Y, s2_grid, need_mean=False, need_ll=True)[1]
-                         + log_speed_prior(model, M, s))
+            curves[i] = lls[i][1] + log_speed_prior(model, M, s)
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
         kept.append((prior, z[:M, :n_o], M, s_true, grid, curves))
     return errs / len(cases), kept

@@ -203,6 +203,15 @@ def fold_message(why: str, n: int, k: int | None) -> str:
             f"{n} demonstrations, holding the others out to score the family)")
 
 
+def _columns(cols: Sequence[int]) -> slice | list[int]:
+    """``cols`` as a slice when they are consecutive (indexing then gives a view with the same values), else as a
+    list."""
+    cols = [int(i) for i in cols]
+    if cols and cols == list(range(cols[0], cols[-1] + 1)):
+        return slice(cols[0], cols[-1] + 1)
+    return cols
+
+
 #: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
 _PER_FAMILY = ("mean", "traj", "phase", "duration")
 #: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
@@ -398,7 +407,7 @@ class CrossValidation:
         mean = self.__dict__.get("mean", _LAZY)  # _LAZY: the rows of the parent's, whose products g holds
         if g is not None and g["mean"] is mean and g["truth"] is self.truth:
             return g
-        c = self.controlled or self.observed
+        c = _columns(self.controlled or self.observed)  # a slice when contiguous: no copy of the members' arrays
         T = np.ascontiguousarray(self.truth[..., c])  # (cases, H, C)
         E = self.mean[..., c] - T[None]  # (M, cases, H, C)
         M = E.shape[0]
@@ -548,8 +557,24 @@ def blend_parts(mean: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray
     D)`` with the weights ``w`` (broadcastable to ``mean``) and the members' weighted disagreement around it,
     ``sum_m w_m (y_m - mix)^2``.  Both are computed case by case, so those of a subset of the cases are the
     subset's rows, to the bit: :func:`crossfit_coverages` and :func:`variance_model` take them once for all."""
-    mix = np.sum(w * mean, axis=0)
-    return mix, np.sum(w * (mean - mix) ** 2, axis=0)
+    # np.sum(w * mean, axis=0) and np.sum(w * (mean - mix) ** 2, axis=0) member by member: the same products,
+    # added in the same order to the same zero start (numpy's sum over the first axis adds its rows in turn), without
+    # the (M, cases, H, D) temporaries
+    full = np.broadcast_shapes(np.shape(w), mean.shape)
+    w, mean = np.broadcast_to(w, full), np.broadcast_to(mean, full)  # views
+    shape = full[1:]
+    tmp = np.empty(shape)
+    mix = np.zeros(shape)
+    for m in range(full[0]):
+        np.multiply(w[m], mean[m], out=tmp)
+        mix += tmp
+    spread = np.zeros(shape)
+    for m in range(full[0]):
+        np.subtract(mean[m], mix, out=tmp)
+        np.square(tmp, out=tmp)
+        np.multiply(w[m], tmp, out=tmp)
+        spread += tmp
+    return mix, spread
 
 
 def _matched_variance(mean: np.ndarray | None, truth: np.ndarray, valid: np.ndarray, w: np.ndarray,

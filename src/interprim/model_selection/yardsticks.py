@@ -43,8 +43,10 @@ def case_rms(pred: ArrayLike, truth: ArrayLike, mask: ArrayLike, cols: Iterable[
         Columns per point (3 for 3-D positions; as in
         :class:`~interprim.model_selection.realtime.RealTimeConfig`).
     """
-    cols = list(cols)
-    e = np.asarray(pred, dtype=np.float64)[..., cols] - np.asarray(truth, dtype=np.float64)[..., cols]
+    cols = [int(i) for i in cols]
+    # consecutive columns by a slice: views instead of two copies, the same differences
+    sel = slice(cols[0], cols[-1] + 1) if cols and cols == list(range(cols[0], cols[-1] + 1)) else cols
+    e = np.asarray(pred, dtype=np.float64)[..., sel] - np.asarray(truth, dtype=np.float64)[..., sel]
     n_case, H, C = e.shape
     pd = point_dim if C % point_dim == 0 else 1
     p2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3).mean(axis=2)  # (cases, H) squared point errors

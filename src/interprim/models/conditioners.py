@@ -250,7 +250,7 @@ class Ridge(Conditioner):
             sigma2 = float(self.param) * float(np.sum(S**2)) / (R * ctx.Xc.shape[1])  # lambda tr(S_xx) / p
             return (xv * (S / (S**2 + R * sigma2))) @ U.T
         A = A.copy()
-        A[np.diag_indices_from(A)] += c
+        A.reshape(-1)[:: A.shape[0] + 1] += c  # the diagonal (a view of the fresh copy)
         if A.shape[0] == ctx.Xc.shape[1]:  # p <= R: (Q, p) solves, then onto the rows
             return _cho_solve(A, ctx.xc.T).T @ ctx.Xc.T
         return _cho_solve(A, (ctx.xc @ ctx.Xc.T).T).T

@@ -433,6 +433,9 @@ class CouplingModel:
         resid = np.zeros((len(fr), n, nj, self.n_out, D)) if keep is not None else None
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
+        # the controlled columns as a slice when they are contiguous (a view instead of a copy; the same values)
+        ctrl_cols = (slice(ctrl[0], ctrl[-1] + 1) if ctrl and list(ctrl) == list(range(ctrl[0], ctrl[-1] + 1))
+                     else ctrl)
         # what depends only on the fold and the phase (training rows, held-out queries and the smoothers' shared
         # context) is computed once per fit and reused by every pass (_cross_validate makes up to three)
         cache = getattr(self, "_cv_cache", None)
@@ -454,16 +457,28 @@ class CouplingModel:
                     xq = np.concatenate([self._feat(_resample(self.obs_frames_[j],
                                                               s_true * (self.obs_frames_[j].shape[0] - 1),
                                                               int(self.n_in))) for j in hold])
-                    cache[key] = self._context(X, g, Yflat, xq)
+                    ctx = self._context(X, g, Yflat, xq)
+                    # PPCA's target block depends on the fold's rows' grouping and demonstrations only: one per fold
+                    # (and number of rows), whatever the phase (the same numbers as the context's own)
+                    yk = ("ylow", key[0], ctx.R)
+                    if yk not in cache:
+                        cache[yk] = target_block(ctx.P, ctx.Ydc, ctx.R)
+                    ctx.ylow = cache[yk]
+                    cache[key] = ctx
                 ctx = cache[key]
-                truth = np.repeat(Yflat[hold], nj, axis=0)
+                nh = len(hold)
+                # the controlled columns of the truth, broadcast over the jitter (the values of the repeated rows)
+                truth_c = Yflat[hold].reshape(nh, 1, self.n_out, D)[..., ctrl_cols]
                 for c, cand in enumerate(cands):
                     mean, h = cand.predict(ctx)
-                    e = (mean - truth).reshape(len(hold), nj, self.n_out, D)
-                    loss[c, a, hold] = np.mean(np.sum(e[..., ctrl] ** 2 * w_ctrl, axis=-1), axis=(1, 2))
                     if keep is not None and c == keep:
+                        e = (mean - np.repeat(Yflat[hold], nj, axis=0)).reshape(nh, nj, self.n_out, D)
                         resid[a, hold] = e
-                        lev[a, hold] = h.reshape(len(hold), nj)
+                        lev[a, hold] = h.reshape(nh, nj)
+                        ec = e[..., ctrl]
+                    else:  # only the controlled columns' errors (each the same difference as in e)
+                        ec = mean.reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
+                    loss[c, a, hold] = np.mean(np.sum(ec ** 2 * w_ctrl, axis=-1), axis=(1, 2))
         return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):

@@ -22,6 +22,7 @@ import interprim as ip
 from interprim.core._compiled import registry
 from interprim.core.gaussian import LowRankConditioner
 from interprim.core.preprocessing import derivatives
+from interprim.models.kernel import KernelDemonstrations
 from interprim.phase import likelihood as PL
 from interprim.phase.dtw import IncrementalDTW
 from interprim.synthetic import two_agent_demos
@@ -50,6 +51,7 @@ MEASURED = {
     # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/compiled/test_fastpaths.py)
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
     "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
+    "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
 
@@ -297,6 +299,49 @@ def check_resample_interp_columns():
     return worst
 
 
+# ------------------------------------------------------------------------------------------ kernel-weighted demos
+
+def check_weighted_weighted_frames():
+    """The kernel against its reference (interpolated frames, then numpy's einsum), bit for bit: demonstrations of
+    different lengths, on and between samples and at each one's last frame, every column or some, zero weights;
+    and KernelDemonstrations' predictions (which use the kernel once the kernels are loaded) on both paths."""
+    rng = np.random.default_rng(11)
+    comp, ref = registry.compiled("weighted.weighted_frames"), registry.reference("weighted.weighted_frames")
+    worst = 0.0
+    for trial in range(200):
+        nd, D, n = int(rng.integers(2, 25)), int(rng.integers(1, 12)), int(rng.integers(2, 120))
+        L = rng.integers(3, 150, nd)
+        padded = np.zeros((nd, int(L.max()) + 1, D))
+        for j in range(nd):
+            padded[j, :L[j]] = rng.normal(size=(L[j], D)) * 10.0 ** rng.integers(-3, 3)
+        J = int(rng.integers(1, nd + 1))
+        idx = rng.choice(nd, J, replace=False).astype(np.intp)
+        f = rng.uniform(0.0, 1.0, (J, n)) * (L[idx] - 1)[:, None]
+        f[:, ::4] = np.floor(f[:, ::4])  # on samples
+        f[:, -1] = L[idx] - 1  # each one's last frame
+        cols = (np.arange(D, dtype=np.intp) if trial % 2 else
+                np.sort(rng.choice(D, max(1, D // 2), replace=False)).astype(np.intp))
+        w = rng.random(J)
+        w[0] = 0.0 if trial % 5 == 0 else w[0]
+        w /= w.sum()
+        got = [np.empty((n, cols.size)) for _ in range(4)]
+        comp(padded, idx, f, cols, w, got[0], got[1])
+        ref(padded, idx, f, cols, w, got[2], got[3])
+        for a, b in ((got[0], got[2]), (got[1], got[3])):
+            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
+                worst = max(worst, rel(a, b) or np.inf)
+    demos = two_agent_demos(6, seed=3, frames=60)
+    m = KernelDemonstrations([0, 1], bandwidth=0.3).fit(demos, dt=0.01)
+    for M in (5, 30, 59):
+        out = {}
+        for which in ("compiled", "numpy"):
+            with registry.forced(which):
+                p = m.predict(demos[0][:M, :2])
+                out[which] = (p.trajectory(50), p.std(50))
+        worst = max(worst, rel(out["compiled"][0], out["numpy"][0]), rel(out["compiled"][1], out["numpy"][1]))
+    return worst
+
+
 # ------------------------------------------------------------------------------------------ the likelihood phase
 
 def check_phase_likelihood_phase_loglik_batch(models, demos):
@@ -347,6 +392,7 @@ CHECKS = {
     "phase_likelihood.phase_loglik_batch": check_phase_likelihood_phase_loglik_batch,
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
+    "weighted.weighted_frames": check_weighted_weighted_frames,
 }
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import unit_grid
@@ -29,7 +30,49 @@ from .demonstrations import AlignedBaseline
 from .grid import GridPrediction
 from .training import TrainingSet
 
-__all__ = ["KernelDemonstrations"]
+__all__ = ["KernelDemonstrations", "frames_from_padded", "weighted_frames_np"]
+
+
+def frames_from_padded(padded, idx, f, cols):
+    """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` of the zero-padded ``padded``
+    ``(n_demos, T_max + 1, D)`` at fractional frames ``f`` ``(len(idx), n)`` within ``[0, T_j - 1]``, i.e.
+    ``interp_columns(f[i], arange(T_j), demo_j[:, cols])``.
+
+    All demonstrations at once, with :func:`numpy.interp`'s own operations on a unit grid (``y[k]`` at an integer
+    ``f = k``, else ``(y[k+1] - y[k]) * (f - k) + y[k]``), so the numbers are those of one ``interp_columns`` per
+    demonstration.
+    """
+    idx = np.asarray(idx, dtype=np.intp)
+    k = np.floor(f).astype(np.intp)
+    frac = f - k
+    # gathered by flat row index from the padded frames (no copy of the selected demonstrations): the values of
+    # padded[idx][J, k] and [J, k + 1]
+    rows = padded.reshape(-1, padded.shape[2])
+    flat = k + (idx * padded.shape[1])[:, None]
+    lo = np.take(rows, flat, axis=0)
+    hi = np.take(rows, flat + 1, axis=0)
+    if not (isinstance(cols, slice) and cols == slice(None)):
+        lo, hi = lo[..., cols], hi[..., cols]
+    hi -= lo
+    hi *= frac[..., None]
+    hi += lo  # (y[k+1] - y[k]) * (f - k) + y[k]
+    exact = frac == 0.0  # on a sample (also the last one, whose successor is padding)
+    hi[exact] = lo[exact]
+    return hi
+
+
+def weighted_frames_np(padded, idx, f, cols, w, mean, spread) -> None:
+    """The numpy reference of the compiled ``weighted.weighted_frames``: ``mean`` ``(n, C)`` = the ``w``-weighted
+    sum over ``j`` of :func:`frames_from_padded` of ``(padded, idx, f, cols)`` (``cols`` an index array), ``spread``
+    = the weighted sum of the squared differences from it (the weighted spread, not square-rooted).  On the frames'
+    C-contiguous array :func:`numpy.einsum` adds the demonstrations in turn to a zero start, as the kernel does
+    (with ``n C > 1``: for a single point of a single column it sums over the demonstrations in its own order)."""
+    D = padded.shape[2]
+    Y = frames_from_padded(padded, idx, f, slice(None))  # (J, n, D), C-contiguous
+    if not (len(cols) == D and np.array_equal(cols, np.arange(D))):
+        Y = np.ascontiguousarray(Y[..., cols])
+    mean[...] = np.einsum("j,jkd->kd", w, Y)
+    spread[...] = np.einsum("j,jkd->kd", w, (Y - mean) ** 2)
 
 BANDWIDTHS = (0.03, 0.1, 0.3, 1.0, 3.0, 1e6)
 
@@ -95,14 +138,9 @@ class KernelDemonstrations(AlignedBaseline):
         self.cost_scale_ = self._cost_scale()
         self.bandwidth_ = self._choose_bandwidth()
 
-    def _frames_at(self, idx, f, cols):
-        """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
-        ``(len(idx), n)`` within ``[0, T_j - 1]``, i.e. ``interp_columns(f[i], arange(T_j), demos_[j][:, cols])``.
-
-        All demonstrations at once on their zero-padded frames, with :func:`numpy.interp`'s own operations on a
-        unit grid (``y[k]`` at an integer ``f = k``, else ``(y[k+1] - y[k]) * (f - k) + y[k]``), so the numbers
-        are those of one ``interp_columns`` per demonstration.
-        """
+    def _padded(self):
+        """``(padded (n_demos, T_max + 1, D), lengths)``: the demonstrations zero-padded (one row more than the
+        longest: the successor of a last sample), built once per fit or load."""
         def build():
             lengths = np.array([len(a) for a in self.demos_], dtype=np.intp)
             padded = np.zeros((len(lengths), int(lengths.max()) + 1, self.demos_[0].shape[1]))
@@ -110,24 +148,29 @@ class KernelDemonstrations(AlignedBaseline):
                 padded[j, : len(a)] = a
             return padded, lengths
 
-        padded, lengths = self._derived.get_or_build("padded", (self.demos_,), build)
-        idx = np.asarray(idx, dtype=np.intp)
-        k = np.floor(f).astype(np.intp)
-        frac = f - k
-        # gathered by flat row index from the padded frames (no copy of the selected demonstrations): the values of
-        # padded[idx][J, k] and [J, k + 1]
-        rows = padded.reshape(-1, padded.shape[2])
-        flat = k + (idx * padded.shape[1])[:, None]
-        lo = np.take(rows, flat, axis=0)
-        hi = np.take(rows, flat + 1, axis=0)
-        if not (isinstance(cols, slice) and cols == slice(None)):
-            lo, hi = lo[..., cols], hi[..., cols]
-        hi -= lo
-        hi *= frac[..., None]
-        hi += lo  # (y[k+1] - y[k]) * (f - k) + y[k]
-        exact = frac == 0.0  # on a sample (also the last one, whose successor is padding)
-        hi[exact] = lo[exact]
-        return hi
+        return self._derived.get_or_build("padded", (self.demos_,), build)
+
+    def _frames_at(self, idx, f, cols):
+        """``(len(idx), n, C)``: columns ``cols`` of the demonstrations ``idx`` at fractional frames ``f``
+        ``(len(idx), n)`` within ``[0, T_j - 1]``, i.e. ``interp_columns(f[i], arange(T_j), demos_[j][:, cols])``
+        (:func:`frames_from_padded`)."""
+        return frames_from_padded(self._padded()[0], idx, f, cols)
+
+    def _weighted(self, f, w):
+        """``(mean (n, D), spread (n, D))``: the ``w``-weighted mean of every demonstration's frames at ``f``
+        ``(n_demos, n)`` (:meth:`_frames_at`) and the weighted spread around it (not square-rooted):
+        :func:`weighted_frames_np`, or its compiled kernel (the same numbers bit for bit) when the kernels are
+        loaded."""
+        padded = self._padded()[0]
+        J, n, D = len(self.demos_), f.shape[1], padded.shape[2]
+        idx, cols = np.arange(J, dtype=np.intp), np.arange(D, dtype=np.intp)
+        mean, spread = np.empty((n, D)), np.empty((n, D))
+        # (one point of one column: numpy's einsum then sums over the demonstrations in its own order)
+        kernel = _registry.loaded_kernel("weighted.weighted_frames") if n * D > 1 else None
+        (weighted_frames_np if kernel is None else kernel)(padded, idx, np.ascontiguousarray(f, dtype=np.float64),
+                                                           cols, np.ascontiguousarray(w, dtype=np.float64), mean,
+                                                           spread)
+        return mean, spread
 
     def _cost_scale(self):
         """The median DTW cost between halves of different training demonstrations (the weights' unit)."""
@@ -256,9 +299,8 @@ class KernelDemonstrations(AlignedBaseline):
         u = unit_grid(int(self.n))
         past = u <= s
         f = np.where(past, (u / max(s, 1e-12))[None, :] * n, n + ((u - s) / max(1 - s, 1e-12))[None, :] * (T - 1 - n))
-        Y = self._frames_at(np.arange(J), np.clip(f, 0, T - 1), slice(None))
-        mean = np.einsum("j,jkd->kd", w, Y)
-        spread = np.sqrt(np.maximum(np.einsum("j,jkd->kd", w, (Y - mean) ** 2), 0.0))
+        mean, spread = self._weighted(np.clip(f, 0, T - 1), w)
+        spread = np.sqrt(np.maximum(spread, 0.0))
         std = np.sqrt((self.std_scale_ * spread) ** 2 + self.std_floor_ ** 2)
         pred = GridPrediction(u.copy(), mean, std, phase=s, observed_dofs=self.observed_dofs_, method="kernel",
                               duration=dur, mean_duration=self.mean_duration_, n_observed=M)

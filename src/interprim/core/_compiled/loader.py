@@ -63,6 +63,7 @@ def _compile_all() -> None:
     from . import phase_likelihood as kp
     from . import resample as ks
     from . import rollout as kr
+    from . import weighted as kw
 
     rng = np.random.default_rng(0)
     u = rng.normal(size=(6, 2))
@@ -94,6 +95,7 @@ def _compile_all() -> None:
     ks.interp_columns_into(np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 4), u[:4], np.empty((3, 2)))
     kp.warm_batch(kp.phase_loglik_batch)
     kp.warm_track(kp.track_step)
+    kw.warm_up()
 
 
 def _fill_cache() -> None:

@@ -77,6 +77,9 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),
+    Kernel("weighted.weighted_frames", "weighted:weighted_frames", "interprim.models.kernel:weighted_frames_np", True,
+           "the weighted mean and spread of demonstrations read at fractional frames (KernelDemonstrations' "
+           "prediction), without the (demonstrations, n, D) array of the frames; bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

@@ -42,11 +42,13 @@ def weighted_frames(padded, idx, f, cols, w, mean, spread):
             fk = f[jj, i]
             k = np.intp(np.floor(fk))
             frac = fk - k
-            for c in range(C):
-                d = cols[c]
-                lo = padded[j, k, d]
-                y = lo if frac == 0.0 else (padded[j, k + 1, d] - lo) * frac + lo
-                mean[i, c] += wj * y
+            if frac == 0.0:  # on a sample (the frame itself)
+                for c in range(C):
+                    mean[i, c] += wj * padded[j, k, cols[c]]
+            else:
+                for c in range(C):
+                    lo = padded[j, k, cols[c]]
+                    mean[i, c] += wj * ((padded[j, k + 1, cols[c]] - lo) * frac + lo)
     for jj in range(J):
         j = idx[jj]
         wj = w[jj]
@@ -54,12 +56,15 @@ def weighted_frames(padded, idx, f, cols, w, mean, spread):
             fk = f[jj, i]
             k = np.intp(np.floor(fk))
             frac = fk - k
-            for c in range(C):
-                d = cols[c]
-                lo = padded[j, k, d]
-                y = lo if frac == 0.0 else (padded[j, k + 1, d] - lo) * frac + lo
-                t = y - mean[i, c]
-                spread[i, c] += wj * (t * t)
+            if frac == 0.0:
+                for c in range(C):
+                    t = padded[j, k, cols[c]] - mean[i, c]
+                    spread[i, c] += wj * (t * t)
+            else:
+                for c in range(C):
+                    lo = padded[j, k, cols[c]]
+                    t = ((padded[j, k + 1, cols[c]] - lo) * frac + lo) - mean[i, c]
+                    spread[i, c] += wj * (t * t)
 
 
 def warm_up() -> None:

@@ -71,3 +71,20 @@ def test_the_mean_at_the_true_duration_reproduces_a_recording_that_is_the_mean_s
     uc = clock_units(k, t, dt, mean_duration=2.0)
     assert uc[1, -1] == pytest.approx((39 * dt + 1.0) / 2.0)
     assert np.allclose(place_cases(np.stack([mean, mean]), uc)[1, -5:], mean[-1])
+
+
+def test_place_cases_reads_each_case_as_interp_columns_on_either_path():
+    # the compiled path writes every case into one array; the numpy path stacks interp_columns: the same numbers
+    from interprim.core._compiled import registry
+    from interprim.core.preprocessing import interp_columns
+
+    rng = np.random.default_rng(4)
+    Y = rng.normal(size=(6, 21, 3))
+    u = rng.uniform(-0.2, 1.2, size=(6, 15))
+    u[:, ::4] = np.linspace(0.0, 1.0, 21)[rng.integers(0, 21, size=(6, 4))]  # on the grid
+    grid = np.linspace(0.0, 1.0, 21)
+    want = np.stack([interp_columns(np.clip(u[c], 0.0, 1.0), grid, Y[c]) for c in range(6)])
+    for which in ("compiled", "numpy"):
+        with registry.forced(which):
+            got = place_cases(Y, u)
+        assert got.shape == (6, 15, 3) and np.array_equal(got, want)

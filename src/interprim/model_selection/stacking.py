@@ -361,8 +361,9 @@ class CrossValidation:
     def _rt_error(self, mean: ArrayLike, truth: ArrayLike) -> float:
         """Real-time error of one case: RMS point error of the controlled agent over the real-time band."""
         n = max(1, int(round(self.horizon / self.dt)))
-        cols = self.controlled_cols(np.asarray(truth).shape[-1])
-        return point_rms((np.asarray(mean) - np.asarray(truth))[:n][:, cols], self.point_dim)
+        mean, truth = np.asarray(mean), np.asarray(truth)
+        cols = self.controlled_cols(truth.shape[-1])
+        return point_rms((mean[:n] - truth[:n])[:, cols], self.point_dim)  # the band's rows of the difference
 
     def controlled_cols(self, D: int) -> list[int]:
         """The controlled agent's columns (the observed ones for a single-agent model)."""

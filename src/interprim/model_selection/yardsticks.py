@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..core._compiled import registry as _kernels
 from ..core.cv import paired_gain
 from ..core.preprocessing import interp_columns
 
@@ -49,7 +50,9 @@ def case_rms(pred: ArrayLike, truth: ArrayLike, mask: ArrayLike, cols: Iterable[
     e = np.asarray(pred, dtype=np.float64)[..., sel] - np.asarray(truth, dtype=np.float64)[..., sel]
     n_case, H, C = e.shape
     pd = point_dim if C % point_dim == 0 else 1
-    p2 = np.sum(e.reshape(n_case, H, C // pd, pd) ** 2, axis=3).mean(axis=2)  # (cases, H) squared point errors
+    sq = e ** 2
+    # (cases, H) squared point errors; one column per point: the squares themselves (a sum of one term, 0 + x)
+    p2 = (sq if pd == 1 else np.sum(sq.reshape(n_case, H, C // pd, pd), axis=3)).mean(axis=2)
     m = np.asarray(mask, dtype=np.float64)
     return np.sqrt(np.sum(p2 * m, axis=1) / np.maximum(m.sum(axis=1), 1.0))
 
@@ -130,6 +133,15 @@ def place_cases(Y: ArrayLike, u: ArrayLike) -> np.ndarray:
     Y = np.asarray(Y, dtype=np.float64)
     u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
     grid = np.linspace(0.0, 1.0, Y.shape[1])
+    if u.ndim == 2 and Y.ndim == 3 and Y.shape[0] and Y.shape[1] > 1 and Y.shape[2] > 1:
+        # interp_columns' compiled kernel, case by case into one array, when the kernels are loaded (the numbers
+        # of interp_columns, which calls it, without its per-call conversions and the copy of np.stack)
+        kernel = _kernels.loaded_kernel("resample.interp_columns")
+        if kernel is not None:
+            u, Yc = np.ascontiguousarray(u), np.ascontiguousarray(Y)
+            out = np.empty((Y.shape[0], u.shape[1], Y.shape[2]))
+            if all(kernel(u[c], grid, Yc[c], out[c]) for c in range(Y.shape[0])):
+                return out
     return np.stack([interp_columns(u[c], grid, Y[c]) for c in range(Y.shape[0])])
 
 

@@ -148,6 +148,23 @@ def replaced(cv: CrossValidation, lam: float | None) -> np.ndarray:
                      for i in range(len(cv.names))])
 
 
+def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray) -> np.ndarray:
+    """``_blend(replaced(cv, lam), per_step)`` member by member: each member's placed predictions weighted and added
+    to the blend in turn, from zeros (the sums of :func:`_blend`'s einsum, in its order), without the ``(M, cases,
+    H, D)`` array of all members."""
+    if lam is None:
+        return _blend(cv.mean, per_step)
+    R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
+    out = None
+    for i in range(len(cv.names)):
+        placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
+        placed *= per_step[:, i][None, :, None]
+        if out is None:
+            out = np.zeros(placed.shape)
+        out += placed
+    return _blend(replaced(cv, lam), per_step) if out is None else out
+
+
 def _order(names: Iterable[str], prefer: str) -> list[str]:
     """The candidates in the order :func:`one_se_choice` tries them: from the simplest (``prefer="simple"``) or
     from the fitted, most complex one (``prefer="fitted"``)."""
@@ -170,7 +187,7 @@ def timing_choice(cv: CrossValidation, per_step: np.ndarray, lambdas: Iterable[f
     (``prefer="fitted"``)."""
     cands: dict[str, float | None] = {f"{lam:g}": lam for lam in lambdas}
     cands["own"] = None
-    errors = {name: _rest(cv, _blend(replaced(cv, lam), per_step)) for name, lam in cands.items()}
+    errors = {name: _rest(cv, _blend_replaced(cv, lam, per_step)) for name, lam in cands.items()}
     name, table = one_se_choice(errors, cv.demo, _order(cands, prefer))
     return cands[name], table
 

@@ -320,8 +320,9 @@ class CrossValidation:
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
 
     def __getattr__(self, name: str) -> Any:
-        # a per-family array of a :meth:`subset` not read yet: its families' rows of the parent's array, copied on
-        # first use (a subset whose only use is the stacking solver, which reads the shared products, copies none)
+        # a per-family array of a :meth:`subset` (or :meth:`cases`) not read yet: its families' rows (its cases) of
+        # the parent's array, copied on first use (a subset whose only use is the stacking solver, which reads the
+        # shared products, copies none)
         lazy = self.__dict__.get("_lazy")
         if not lazy or name not in lazy:
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
@@ -339,6 +340,8 @@ class CrossValidation:
         if name in self.__dict__:
             return self.__dict__[name], None
         lazy = self.__dict__.get("_lazy") or {}
+        if isinstance(lazy.get(name, (None, None))[1], tuple):  # cases of a parent's array (cases): copied now
+            return getattr(self, name), None
         return lazy.get(name, (None, None))
 
     def cases(self, idx: ArrayLike) -> CrossValidation:
@@ -350,12 +353,15 @@ class CrossValidation:
         for a in ("truth", "valid", "demo", "elapsed", "mean_duration"):
             if hasattr(self, a):
                 setattr(out, a, getattr(self, a)[idx])
-        for a in _PER_FAMILY:
+        lazy: dict[str, tuple[np.ndarray, tuple[Any, ...]]] = {}
+        for a in _PER_FAMILY:  # copied when first read (__getattr__; the long-range choice's folds read none)
             src, rows = self._family_source(a)
+            out.__dict__.pop(a, None)
             if src is not None:
-                out.__dict__[a] = src[:, idx] if rows is None else src[np.ix_(rows, idx)]
+                lazy[a] = (src, (slice(None), idx) if rows is None else np.ix_(rows, idx))
+        out.__dict__["_lazy"] = lazy
         g = self._gram()  # the cases' products, shared (not copied): only their rows are chosen
-        out.__dict__["_gram_cache"] = dict(g, mean=out.mean, truth=out.truth, rows=g["rows"][idx])
+        out.__dict__["_gram_cache"] = dict(g, mean=_LAZY, truth=out.truth, rows=g["rows"][idx])
         return out
 
     def _rt_error(self, mean: ArrayLike, truth: ArrayLike) -> float:

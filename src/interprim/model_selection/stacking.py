@@ -669,16 +669,17 @@ def _crossfit(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndar
         tr, te = g != gi, g == gi
         if not tr.any():
             continue
-        a, b, mix_tr, spread_tr, has, last = _matched_variance(None, truth[tr], valid[tr], w,
+        truth_tr = truth[tr]
+        a, b, mix_tr, spread_tr, has, last = _matched_variance(None, truth_tr, valid[tr], w,
                                                                (mix[tr], case_spread[tr]))
-        z_tr = np.abs(mix_tr - truth[tr]) / np.sqrt(np.maximum(a * spread_tr + b, 1e-300))
+        z_tr = np.abs(mix_tr - truth_tr) / np.sqrt(np.maximum(a * spread_tr + b, 1e-300))
         sd_all = np.sqrt(np.maximum(a * case_spread[te] + b, 1e-300))
         err_all = np.abs(mix[te] - truth[te])
         v, d = valid[te], np.asarray(groups)[te]
         for cols, out in zip(col_sets, per_demo):
             q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
-            sd = sd_all[..., cols]
-            err = err_all[..., cols]
+            sd = sd_all[..., _columns(cols)]  # views of consecutive columns
+            err = err_all[..., _columns(cols)]
             for j in np.unique(d):
                 sel = d == j
                 if not v[sel].any():

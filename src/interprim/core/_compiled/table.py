@@ -77,6 +77,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),
+    Kernel("prefix_rows.prefix_rows_into", "prefix_rows:prefix_rows_into",
+           "interprim.models.coupling:prefix_rows_np", True,
+           "the prefix coupling's training rows (each demonstration resampled on [0, s] at n_in points, Eq. 17-18's "
+           "observation), written into out; bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

@@ -26,8 +26,10 @@ data (forcing values of Eq. 15 change with ``s`` through their derivatives).
 ``(M - 1) dt / s`` is log-normal with the mean and spread of the training
 demonstrations' durations.
 
-The search evaluates a grid of candidates (plus the DTW estimate, when given),
-then refines the best one by a bounded scalar search.  Streams track the same maximum frame by frame
+The search (:func:`_search`) evaluates a grid of candidates (plus the DTW estimate, when given), adds
+candidates inside the grid intervals next to its three best points, and refines the two highest local
+maxima of those by a bounded scalar search: the log posterior can have several peaks closer together than
+the grid's spacing.  Streams track a maximum frame by frame by local search
 (:class:`interprim.phase.tracking.Tracker`).
 
 All candidates of a search are evaluated in one batched computation

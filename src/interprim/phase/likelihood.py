@@ -389,8 +389,9 @@ def speed_prior_params(model, M):
 
 
 def _search(grid, scores, refine, lo=S_MIN, hi=1.0):
-    """Grid search, then (``refine``) the grid made finer around its best points (:func:`_densify`) and each of
-    the best ``_N_PEAKS`` local maxima of those candidates refined (:func:`_refine_peak`); the highest wins.
+    """Grid search, then (``refine``) the grid made finer around its best points (:func:`_densify`), Brent's
+    method on each of the ``_N_PEAKS`` highest local maxima of those candidates (:func:`_brent_peak`) and the last
+    steps (:func:`_polish`) on the highest result.
 
     A log posterior can have several peaks closer together than the grid's spacing (NuiSI and the noisy two-agent
     set: peaks 0.05-0.15 apart in ``s``, a 12-point grid's spacing is 20-40 % of ``s``): refining only the best
@@ -404,12 +405,13 @@ def _search(grid, scores, refine, lo=S_MIN, hi=1.0):
                              curve=lp)
     cand, clp = _densify(grid, lp, scores)
     best = None
-    for j in _local_maxima(clp, _N_PEAKS):
-        r = _refine_peak(cand, clp, j, scores, lo, hi)
+    for j in _local_maxima(clp, _N_PEAKS):  # Brent's method on each peak; the last steps on the highest only
+        r = _brent_peak(cand, clp, j, scores)
         if best is None or r[1] > best[1]:
             best = r
     assert best is not None  # a sequence always has a local maximum
-    return PhaseEstimate(best[0], log_likelihood=best[2], log_posterior=best[1], grid=cand, curve=clp)
+    s, lp1, ll1 = _polish(best[0], scores, lo, hi)
+    return PhaseEstimate(s, log_likelihood=ll1, log_posterior=lp1, grid=cand, curve=clp)
 
 
 _N_DENSE = 3  # grid points around which the grid is made finer (_densify)
@@ -442,11 +444,9 @@ def _local_maxima(v, k):
     return sorted(idx, key=lambda i: -v[i])[:k]
 
 
-def _refine_peak(grid, lp, i, scores, lo, hi):
-    """``(s, log posterior, log likelihood)`` of the peak at candidate ``i``: Brent's method between its neighbours
-    to ``1e-3 s``, then three points ``_POLISH`` apart around it (moved towards the maximum while it is not the
-    middle one) and :func:`finish` on them: the same last step as the stream's tracker, whose lattice has that
-    spacing."""
+def _brent_peak(grid, lp, i, scores):
+    """``(s, log posterior)`` of the peak at candidate ``i`` of ``grid`` (increasing, log posteriors ``lp``):
+    Brent's method between its neighbours to ``1e-3 s``."""
     best_s, best_lp = float(grid[i]), float(lp[i])
     a = float(grid[max(i - 1, 0)])
     b = float(grid[min(i + 1, grid.size - 1)])
@@ -457,6 +457,13 @@ def _refine_peak(grid, lp, i, scores, lo, hi):
         s, neg = brent_min(f, a, b, best_s, -best_lp, xatol=1e-3 * max(b, 1e-3), maxiter=20)
         if -neg > best_lp:
             best_s, best_lp = s, -neg
+    return best_s, best_lp
+
+
+def _polish(best_s, scores, lo, hi):
+    """``(s, log posterior, log likelihood)`` at the maximum near ``best_s``: three points ``_POLISH`` apart around
+    it (moved towards the maximum while it is not the middle one) and :func:`finish` on them: the same last step
+    as the stream's tracker, whose lattice has that spacing."""
     ss = np.unique(np.clip(best_s * np.exp(np.array([-_POLISH, 0.0, _POLISH])), lo, hi))
     lps = scores(ss)[0]
     k = int(np.argmax(lps))

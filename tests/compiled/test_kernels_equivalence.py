@@ -52,6 +52,7 @@ MEASURED = {
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
     "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
     "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
+    "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
 
@@ -378,6 +379,46 @@ def check_phase_likelihood_track_step(models, demos):
     return worst
 
 
+# ------------------------------------------------------------------------------------------ the prefix coupling
+
+def check_prefix_rows_prefix_rows_into():
+    """The coupling's training rows, compiled against numpy, bit for bit: demonstrations of different lengths (one
+    of a single frame), phases at the clip's ends and between, both feature kinds; and LearnedInteraction's
+    predictions on both paths."""
+    from interprim.models import registry as families
+    from interprim.models.coupling import _jitter_nodes
+
+    rng = np.random.default_rng(12)
+    comp, ref = both("prefix_rows.prefix_rows_into")
+    worst = 0.0
+    for trial in range(100):
+        n, Do, n_in = int(rng.integers(2, 20)), int(rng.integers(1, 8)), int(rng.integers(2, 16))
+        L = rng.integers(1, 90, n).astype(np.intp)
+        frames = np.zeros((n, int(L.max()), Do))
+        for j in range(n):
+            frames[j, :L[j]] = rng.normal(size=(L[j], Do)) * 10.0 ** rng.integers(-3, 3)
+        idx = np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)).astype(np.intp)
+        s_true = np.minimum(np.maximum(rng.uniform(-0.2, 1.2) + 0.1 * _jitter_nodes(int(rng.integers(1, 6))), 0.02),
+                            1.0)
+        lin = np.linspace(0.0, 1.0, n_in)
+        scale = rng.uniform(0.1, 3.0, Do)
+        got = [np.full((idx.size * s_true.size, n_in * Do), np.nan) for _ in range(2)]
+        comp(frames, L, idx, s_true, lin, scale, bool(trial % 2), got[0])
+        ref(frames, L, idx, s_true, lin, scale, bool(trial % 2), got[1])
+        if not (np.array_equal(got[0], got[1]) and np.array_equal(np.signbit(got[0]), np.signbit(got[1]))):
+            worst = max(worst, rel(got[0], got[1]) or np.inf)
+    demos = two_agent_demos(8, seed=4, frames=70)
+    m = families.family("learned").build(families.Settings((0, 1))).fit(demos, dt=0.01)
+    for M in (3, 30, 69):
+        out = {}
+        for which in ("compiled", "numpy"):
+            with registry.forced(which):
+                p = m.predict(demos[1][:M, :2])
+                out[which] = (p.trajectory(40), p.std(40))
+        worst = max(worst, rel(out["compiled"][0], out["numpy"][0]), rel(out["compiled"][1], out["numpy"][1]))
+    return worst
+
+
 CHECKS = {
     "dtw.accumulate": check_dtw_accumulate,
     "dtw.open_end": check_dtw_open_end,
@@ -393,6 +434,7 @@ CHECKS = {
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,
+    "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,
 }
 
 

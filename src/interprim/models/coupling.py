@@ -72,6 +72,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from ..core._compiled import registry as kernels
 from ..core.blas import one_blas_thread
 from ..core.cache import DerivedCache
 from ..core.cv import folds as cv_folds
@@ -143,6 +144,33 @@ def _resample_one(frames, stop, n):
     w = (pos - i0)[:, None]
     i1 = np.minimum(i0 + 1, T - 1)
     return frames[i0] * (1.0 - w) + frames[i1] * w
+
+
+def prefix_rows_np(frames, lengths, idx, s_true, lin, scale, displacement, out):
+    """``out[(j, r), (k, d)]``: demonstration ``idx[j]`` (zero-padded ``frames`` ``(n, T_max, Do)``, true lengths
+    ``lengths``) resampled at the fractional frames ``s_true[r] (T - 1) lin[k]`` (as :func:`_resample`), divided
+    by ``scale[d]`` (minus its first point's with ``displacement``): the coupling's training rows
+    (:meth:`CouplingModel._rows`), ordered by demonstration, then phase.  The numpy reference of the compiled
+    ``prefix_rows.prefix_rows_into`` (the same operations per element, so the same numbers)."""
+    T = lengths[idx]
+    stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
+    pos = np.minimum(np.maximum(stops[:, :, None] * lin[None, None, :], 0.0), (T - 1.0)[:, None, None])
+    i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
+    w = (pos - i0)[..., None]
+    i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
+    # gathered from the padded frames directly (no copy of the selected demonstrations), by flat row index
+    # (np.take on the (n T_max, Do) rows: the values of frames[J, i0], in a fraction of the time)
+    flat = frames.reshape(-1, frames.shape[2])
+    start = (idx * frames.shape[1])[:, None, None]
+    pts = np.take(flat, start + i0, axis=0)
+    pts *= 1.0 - w
+    right = np.take(flat, start + i1, axis=0)
+    right *= w
+    pts += right  # frames[J, i0] (1 - w) + frames[J, i1] w, (J, R, n_in, Do)
+    x = pts / scale
+    if displacement:
+        x = x - x[..., :1, :]
+    out[...] = x.reshape(out.shape)
 
 
 def _smooth_time(v, w):
@@ -353,33 +381,21 @@ class CouplingModel:
         return x.reshape(*x.shape[:-2], -1)
 
     def _rows(self, idx, s_hat, sig):
-        """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``."""
+        """Training rows of demonstrations ``idx`` for estimated phase ``s_hat`` with error ``sig``: each
+        demonstration's prefix up to every jittered phase, resampled at ``n_in`` points and scaled as the features
+        (:func:`prefix_rows_np`, or its compiled kernel once the kernels are loaded: the same numbers)."""
         z = _jitter_nodes(int(self.n_jitter)) if sig > 0 else np.zeros(1)
         s_true = np.minimum(np.maximum(s_hat + sig * z, 0.02), 1.0)  # np.clip's numbers, without its overhead
         idx = np.asarray(idx, dtype=np.intp)
+        Do = len(self.observed_dofs_)
         if idx.size == 0:
-            return np.empty((0, int(self.n_in) * len(self.observed_dofs_))), np.empty(0, dtype=np.intp)
-        # _resample of every demonstration at once, on its frames padded to a common length (the same elementwise
-        # operations per demonstration, so the same numbers as one _resample per demonstration)
+            return np.empty((0, int(self.n_in) * Do)), np.empty(0, dtype=np.intp)
         frames, T = self._padded_obs()
-        T = T[idx]
-        lin = unit_grid(int(self.n_in))
-        stops = s_true[None, :] * (T - 1)[:, None]  # (J, R)
-        pos = np.minimum(np.maximum(stops[:, :, None] * lin[None, None, :], 0.0), (T - 1.0)[:, None, None])
-        i0 = np.minimum(np.floor(pos).astype(np.intp), np.where(T > 1, T - 2, 0)[:, None, None])
-        w = (pos - i0)[..., None]
-        i1 = np.minimum(i0 + 1, (T - 1)[:, None, None])
-        # gathered from the padded frames directly (no copy of the selected demonstrations), by flat row index
-        # (np.take on the (n T_max, Do) rows: the values of frames[J, i0], in a fraction of the time)
-        rows = frames.reshape(-1, frames.shape[2])
-        start = (idx * frames.shape[1])[:, None, None]
-        pts = np.take(rows, start + i0, axis=0)
-        pts *= 1.0 - w
-        right = np.take(rows, start + i1, axis=0)
-        right *= w
-        pts += right  # frames[J, i0] (1 - w) + frames[J, i1] w, (J, R, n_in, Do)
-        X = self._feat(pts)
-        return X.reshape(-1, X.shape[-1]), np.repeat(idx, s_true.size)
+        out = np.empty((idx.size * s_true.size, int(self.n_in) * Do))
+        rows = kernels.loaded_kernel("prefix_rows.prefix_rows_into") or prefix_rows_np
+        rows(frames, T, idx, s_true, unit_grid(int(self.n_in)), self.feature_scale_,
+             self.features == "displacement", out)
+        return out, np.repeat(idx, s_true.size)
 
     def _padded_obs(self):
         """``(frames (n, T_max, Do), lengths (n,))``: the observed frames of the demonstrations, zero-padded

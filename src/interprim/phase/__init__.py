@@ -62,8 +62,8 @@ def estimate_phase(model, z, method: str = "dtw", *, dtw=None, tracker=None):
     if method == "likelihood" and z.shape[0] >= 2:
         from .likelihood import estimate_phase as likelihood_phase
 
-        # no DTW seed: the 12-point grid + Brent finds the same maximiser as a 20-point grid seeded with
-        # the DTW phase (within 3e-4 on 720 partial observations); D(n*, M) is computed only if asked for
+        # no DTW seed: the search finds the maximum of the log posterior (checked against a brute-force search,
+        # see likelihood.estimate_phase); D(n*, M) is computed only if asked for
         N1 = model.reference_.shape[0] - 1
         est = likelihood_phase(model, z)
         ref, zc = model.reference_, z.copy()  # a copy: z may be the caller's array, reused after the call

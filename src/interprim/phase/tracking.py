@@ -4,7 +4,8 @@
 estimate on a fixed lattice of speeds, so the compiled step
 (:func:`interprim.core._compiled.phase_likelihood.track_step`) extends each lattice point's statistics by the new
 frame instead of recomputing them; it scores with :mod:`interprim.phase.likelihood` and ends where the batch
-search ends.
+search ends when the log posterior has one peak (with several, it stays on the peak it tracks, which need not
+be the highest one the batch search finds).
 """
 
 from __future__ import annotations
@@ -95,7 +96,8 @@ class Tracker:
         :func:`~interprim.phase.likelihood.finish` then takes the phase to the maximum of the log posterior
         by the same last step as :func:`~interprim.phase.likelihood.estimate_phase`, so that a stream's
         phase is the batch phase of the same frames (within ``1e-3`` of the movement, tested; measured
-        ``~1e-6``), not a lattice point ``exp(dlog / 2)`` away.
+        ``~1e-6``), not a lattice point ``exp(dlog / 2)`` away, as long as the log posterior has one peak near
+        the tracked one: the lattice step is a local search, so it does not jump to a higher peak elsewhere.
         """
         M = z.shape[0]
         if M < 2:

@@ -61,6 +61,7 @@ def _compile_all() -> None:
     from . import dtw as dk
     from . import observation as ko
     from . import phase_likelihood as kp
+    from . import prefix_rows as kq
     from . import resample as ks
     from . import rollout as kr
     from . import weighted as kw
@@ -96,6 +97,8 @@ def _compile_all() -> None:
     kp.warm_batch(kp.phase_loglik_batch)
     kp.warm_track(kp.track_step)
     kw.warm_up()
+    kq.prefix_rows_into(np.zeros((2, 3, 2)), np.array([3, 2], dtype=np.intp), np.array([1], dtype=np.intp),
+                        np.array([0.5]), np.linspace(0.0, 1.0, 3), np.ones(2), False, np.empty((1, 6)))
 
 
 def _fill_cache() -> None:

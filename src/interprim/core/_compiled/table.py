@@ -80,6 +80,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("weighted.weighted_frames", "weighted:weighted_frames", "interprim.models.kernel:weighted_frames_np", True,
            "the weighted mean and spread of demonstrations read at fractional frames (KernelDemonstrations' "
            "prediction), without the (demonstrations, n, D) array of the frames; bitwise equal"),
+    Kernel("prefix_rows.prefix_rows_into", "prefix_rows:prefix_rows_into",
+           "interprim.models.coupling:prefix_rows_np", True,
+           "the prefix coupling's training rows (each demonstration resampled on [0, s] at n_in points, Eq. 17-18's "
+           "observation), written into out; bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

@@ -145,9 +145,10 @@ class InteractionPrimitive(Predictor):
 
         * ``"likelihood"``: the maximum of the marginal likelihood of the observed positions under the learned
           prior over candidate phases, with a log-normal prior on the partner's speed learned from the
-          demonstrations (:mod:`interprim.phase.likelihood`; a stream tracks it and ends where the batch search
-          ends).  On demonstrations that differ in goal, DTW confuses "further along" with "aiming further"
-          (phase errors 0.1-0.2 of the movement on the built-in data), the likelihood does not (0.003-0.016).
+          demonstrations (:mod:`interprim.phase.likelihood`; a stream tracks it by local search and ends where
+          the batch search ends unless the log posterior has several peaks).  On demonstrations that differ in
+          goal, DTW confuses "further along" with "aiming further" (phase errors 0.1-0.2 of the movement on the
+          built-in data), the likelihood does not (0.003-0.016).
         * ``"learned"``: regressed on features of the observed prefix, trained on the demonstrations' own
           prefixes (:class:`~interprim.phase.learned.LearnedPhase`, ``phase_model_``): better than a clock on
           recordings of people (NuiSI: 0.71x its error), where the likelihood phase is not; worse on clean

@@ -2,8 +2,9 @@
 
 :class:`Stream` keeps the frames seen and the incremental open-end DTW (Eq. 5-8) or the
 likelihood phase tracker (:class:`interprim.phase.tracking.Tracker`, which ends where the batch
-search ends), conditions on all frames seen at the phase found (Eq. 15-18), and returns a
-:class:`~interprim.models.primitive.prediction.Prediction` per frame: the one ``predict`` gives for the same frames.
+search ends on a single-peaked log posterior), conditions on all frames seen at the phase found (Eq. 15-18), and
+returns a :class:`~interprim.models.primitive.prediction.Prediction` per frame: the one ``predict`` gives for the
+same frames (at the same phase).
 """
 
 from __future__ import annotations

@@ -288,3 +288,28 @@ def test_learned_phase_loo_regressions_equal_explicit_refits():
                 ref = float(w @ s[k, keep] / w.sum())
                 tol = 2.0 * (4.0 * EPS * zmax2 / (2.0 * h * h)) * spread + 4.0 * n * EPS
                 assert abs(got[b, k, i] - ref) <= tol, (b, k, i, got[b, k, i] - ref, tol)
+
+
+def test_fading_design_under_a_wide_prior_is_not_truncated():
+    """Early in a movement the design's last columns are nearly zero (basis functions not yet reached: here 1e-6 of
+    the others) while the prior's variance of their weights is 1e10 times the others' (weights in forcing units):
+    those columns still move the observation by about the noise.  A compression that dropped the directions of
+    ``X^T X`` below 1e-10 of its largest eigenvalue missed them (the likelihood phase's cases: 0.3-82 in
+    log-likelihood).  Here the reference's ``A`` stays well conditioned (``kappa`` about 1e4)."""
+    rng = np.random.default_rng(11)
+    n_o, n_c, q, M, S = 2, 1, 8, 30, 40
+    U = np.linalg.qr(rng.standard_normal((M, q)))[0]
+    sv = np.array([1.0, 0.8, 0.6, 0.5, 0.4, 1e-6, 1e-6, 1e-6])
+    X = U * sv  # the last three columns fade
+    scale = np.tile(np.where(sv < 1e-3, 1e5, 1.0), n_o + n_c)
+    P = (n_o + n_c) * q
+    pr = LowRankPrior(rng.standard_normal((S, P)) * scale, "shrinkage", 1e-3, 0.3)
+    theta = pr.mean + pr.W.T @ rng.standard_normal(pr.W.shape[0])
+    Y = X @ theta[: n_o * q].reshape(n_o, q).T + 0.1 * rng.standard_normal((M, n_o))
+    cov, Omega = _dense(pr, n_o, q, X)
+    s2 = np.array([1e-2, 1.0])
+    means, ll = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True)
+    for i, v in enumerate(s2):
+        ref_mean, ref_ll = _reference(pr.mean, cov, Omega, Y.T.reshape(-1), float(v))
+        assert ll[i] == pytest.approx(ref_ll, rel=1e-9, abs=1e-9)
+        np.testing.assert_allclose(means[i], ref_mean, rtol=1e-7, atol=1e-7 * np.abs(ref_mean).max())

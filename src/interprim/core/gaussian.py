@@ -15,9 +15,10 @@ paper's forcing observation, Eq. 13) shared by all observed DoFs, so
 ``Omega = blockdiag(X, ..., X)`` and ``Omega~ = [Omega, 0]`` (Sec. III-D).
 The Gaussian likelihood (Eq. 16) depends on the data only through
 ``G = X^T X`` (size ``q x q``, ``q = n_basis + 1``) and ``b_i = X^T f_i``.
-With the eigendecomposition ``G = V diag(e) V^T`` and ``L = diag(sqrt e) V^T``
-the likelihood equals that of the compressed observation
-``z_i = diag(1/sqrt e) V^T b_i = L theta_i + noise`` (noise ``sigma^2 I``), so
+With any ``L`` such that ``L^T L = G`` (a thin QR ``X = Q L`` for the hyper-parameter selection's
+:func:`compress_observation`) the likelihood equals that of
+the compressed observation ``z_i = L theta_i + noise`` (``L^T z_i = b_i``, noise ``sigma^2 I``), up to the
+residual outside ``X``'s columns, so
 Eq. 18 is applied with ``L`` in place of ``Omega`` and a matrix ``A`` of size
 at most ``q N_o`` instead of ``T N_o``.  This is exact, not an approximation.
 """
@@ -315,16 +316,6 @@ class Posterior:
     mean: np.ndarray
     cov: np.ndarray | None  # None when the covariance was not asked for (need_cov=False)
     log_likelihood: float
-
-
-def _compress(G: np.ndarray, B: np.ndarray, tol: float = 1e-14) -> tuple[np.ndarray, np.ndarray]:
-    e, V = np.linalg.eigh(0.5 * (G + G.T))
-    keep = e > tol * max(float(e[-1]), 1e-300)
-    e, V = e[keep], V[:, keep]
-    se = np.sqrt(e)
-    L = se[:, None] * V.T  # (k, q)
-    z = (V.T @ B) / se[:, None]  # (k, D_o)
-    return L, z
 
 
 def condition(mean: np.ndarray, cov: np.ndarray, obs_index: np.ndarray, G: np.ndarray, B: np.ndarray, sigma2: float,
@@ -627,9 +618,18 @@ def LowRankPrior(thetas: ArrayLike, method: str, ridge: float, lam: float | None
 
 
 def compress_observation(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(L, z)`` of the compressed observation of :func:`lowrank_case` (``G = X^T X = L^T L``, ``z = L^-T X^T Y``):
-    depends on the design only, so it can be computed once and passed to every prior it is conditioned on."""
-    return _compress(X.T @ X, X.T @ Y, tol=1e-10)
+    """``(L, z)`` of the compressed observation of :func:`lowrank_case`: ``X = Q L`` (thin QR), ``z = Q^T Y``, so
+    ``L^T L = X^T X`` and ``L^T z = X^T Y``.  It depends on the observation only, so it can be computed once and
+    passed to every prior it is conditioned on.
+
+    No direction of the design is dropped.  A direction where ``X`` is nearly singular (the basis functions not yet
+    reached at a small phase) can still carry a prior variance many times the noise (weights in forcing units).
+    Dropping such directions by a tolerance on ``X^T X``'s eigenvalues (``1e-10`` of the largest, as this function
+    once did) moved the marginal log-likelihood of a partial observation by 0.3-82 (57 frames at phases 0.2-1).
+    """
+    X = np.asarray(X, dtype=np.float64)
+    Q, L = np.linalg.qr(X)
+    return L, Q.T @ np.asarray(Y, dtype=np.float64)
 
 
 def lowrank_case(pr: GaussianPrior, n_o: int, q: int, X: np.ndarray, Y: np.ndarray, s2: np.ndarray,

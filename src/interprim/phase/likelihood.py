@@ -313,14 +313,26 @@ def estimate_phase(model, z, s_init: float | None = None, n_grid: int = 12, refi
     if M < 2:
         s = float(np.clip(s_init if s_init is not None else lo, lo, hi))
         return PhaseEstimate(s, log_likelihood=0.0, log_posterior=0.0, grid=np.array([s]), curve=np.array([0.0]))
-    grid = np.exp(np.linspace(np.log(lo), np.log(hi), int(n_grid)))
-    if s_init is not None and np.isfinite(s_init):
-        grid = np.unique(np.append(grid, np.clip(float(s_init), lo, hi)))
     s2 = phase_noise(model) if sigma2 is None else float(sigma2)
     scores = make_scorer(model, z, s2, speed_prior)
     if scores.dense:
         with single_thread():
-            return _search(grid, scores, refine, lo, hi)
+            return maximise(scores, lo, hi, n_grid, s_init, refine)
+    return maximise(scores, lo, hi, n_grid, s_init, refine)
+
+
+def maximise(scores, lo: float, hi: float, n_grid: int = 12, s_init: float | None = None,
+             refine: bool = True) -> PhaseEstimate:
+    """The search of :func:`estimate_phase` on any objective: ``n_grid`` phases evenly in ``log s`` over
+    ``[lo, hi]`` (and ``s_init``), then, with ``refine``, :func:`_search`'s refinement.
+
+    ``scores(s_values)`` returns ``(log posteriors, log likelihoods)`` at the candidate phases (``(C,)`` each).
+    The likelihood phase's cross-validation (:mod:`interprim.models.primitive.selection`) scores its held-out
+    cases with this same search, on each fold's prior.
+    """
+    grid = np.exp(np.linspace(np.log(lo), np.log(hi), int(n_grid)))
+    if s_init is not None and np.isfinite(s_init):
+        grid = np.unique(np.append(grid, np.clip(float(s_init), lo, hi)))
     return _search(grid, scores, refine, lo, hi)
 
 

@@ -266,7 +266,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         # (the held-out marginal likelihood at the true phase favours too small a noise for this)
         bp = int(np.argmin(phase_err + 1e-9 * np.arange(len(phase_err))[::-1]))
         if model.phase_method == "cv":
-            phase_err_refined = _refined_phase_error(model, kept, float(s2_grid["position"][bp]), bp)
+            phase_err_refined = _refined_phase_error(model, kept, float(s2_grid["position"][bp]))
     else:
         bp = int(np.argmax(ll[a]))
     phase_sigma2 = float(s2_grid["position"][bp])
@@ -412,29 +412,26 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
     return errs / len(cases), kept
 
 
-def _refined_phase_error(model, kept, s2, b) -> float:
-    """Held-out mean absolute error of the likelihood phase at the chosen noise ``s2`` (column ``b`` of the
-    cases' grid curves), each estimate refined as :func:`interprim.phase.likelihood.estimate_phase` refines
-    its grid maximum (Brent between the grid neighbours): the figure ``phase_method="cv"`` compares with the
-    learned phase's cross-validated error (the grid maximum alone is off by up to half a grid step, ~8 %)."""
-    from ...phase.likelihood import brent_min, log_speed_prior
+def _refined_phase_error(model, kept, s2) -> float:
+    """Held-out mean absolute error of the likelihood phase at the chosen noise ``s2``, each case's phase found by
+    the search :func:`interprim.phase.likelihood.estimate_phase` runs at prediction time
+    (:func:`~interprim.phase.likelihood.maximise`: 12 phases evenly in ``log s``, the grid made finer around its
+    best points, Brent's method on the two highest peaks) on its fold's prior: the figure ``phase_method="cv"``
+    compares with the learned phase's cross-validated error."""
+    from ...phase.likelihood import log_speed_prior, maximise
 
     n_o, q = model.n_observed_latent_, model.params_per_dof_
     s2a = np.array([s2])
     errs = []
-    for prior, zo, M, s_true, grid, curves in kept:
-        def f(s, prior=prior, zo=zo, M=M):  # this case's arrays (f is minimised within the iteration)
-            X, Y = observation_design(model, zo, float(s), "position")
-            return -float(lowrank_case(prior, n_o, q, X, Y, s2a, need_mean=False, need_ll=True)[1][0]
-                          + log_speed_prior(model, M, s))
+    for prior, zo, M, s_true, grid, _curves in kept:
+        def scores(s_values, prior=prior, zo=zo, M=M):  # this case's (log posteriors, log likelihoods)
+            s_values = np.asarray(s_values, dtype=np.float64)
+            designs = [observation_design(model, zo, float(s), "position") for s in s_values]
+            outs = _conditioned(prior, n_o, q, [(compress_observation(X, Y), (X, Y)) for X, Y in designs], s2a,
+                                need_mean=False, need_ll=True)
+            ll = np.array([float(o[1][0]) for o in outs])
+            return ll + log_speed_prior(model, M, s_values), ll
 
-        c = curves[:, b]
-        i = int(np.argmax(c))
-        lo, hi = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, grid.size - 1)])
-        x = float(grid[i])
-        if hi - lo > 1e-4:
-            x, fx = brent_min(f, lo, hi, x, -float(c[i]), xatol=1e-3 * hi, maxiter=20)
-            if -fx < c[i]:
-                x = float(grid[i])
-        errs.append(abs(x - s_true))
+        est = maximise(scores, float(grid[0]), float(grid[-1]))
+        errs.append(abs(est.phase - s_true))
     return float(np.mean(errs))

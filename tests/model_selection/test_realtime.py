@@ -167,3 +167,20 @@ def test_records_without_metrics_hold_the_same_placed_predictions():
         assert (a["demo"], a["k"], a["phase"]) == (b["demo"], b["k"], b["phase"])
         np.testing.assert_array_equal(a["mean"], b["mean"])
         np.testing.assert_array_equal(a["truth"], b["truth"])
+
+
+@pytest.mark.parametrize("T, stride, cap, expected_step", [(60, 3, 24, 3), (400, 3, 24, 12), (400, 1, None, 1),
+                                                           (41, 1, 5, 6)])
+def test_max_frames_bounds_the_evaluated_frames_of_a_long_movement(T, stride, cap, expected_step):
+    """``max_frames`` caps the evaluated frames of one held-out movement (0.2-0.9 of it): the stride grows with the
+    movement's length beyond ``stride * max_frames`` frames, else it is ``stride``; the frames stay evenly spaced
+    from the first one."""
+    rng = np.random.default_rng(3)
+    test = np.cumsum(rng.normal(size=(T, 3)), axis=0)
+    recs = realtime_fold(_Truth(test, 0.02), [test], test, [0, 1], 0.02,
+                         RealTimeConfig(stride=stride, max_frames=cap), fitted=True, references=False)
+    ks = [r["k"] for r in recs]
+    k0, k1 = int(np.ceil(0.2 * T)), int(np.floor(0.9 * T))
+    assert ks == list(range(k0, k1 + 1, expected_step))
+    if cap is not None:
+        assert len(ks) <= cap

@@ -30,7 +30,8 @@ def blend(task):
 def test_chooses_the_family_with_the_smallest_held_out_error(auto, task):
     dev, _ = task
     make = {m: f for m, f in default_methods([0, 1]).items() if m in ("kernel", "nn", "prior")}
-    chosen, errors = choose_method(make, dev.demos, [0, 1], dev.dt, RealTimeConfig(stride=3), k=3)
+    cfg = RealTimeConfig(stride=3, max_frames=auto.max_prefixes)  # the fit's protocol
+    chosen, errors = choose_method(make, dev.demos, [0, 1], dev.dt, cfg, k=3)
     assert auto.chosen_ == chosen == min(errors, key=errors.get)
     s = auto.selection_
     assert s["cv_errors"] == pytest.approx(errors) and s["margin"] >= 1.0
@@ -78,7 +79,7 @@ def test_blend_weights_minimise_the_held_out_error_and_never_lose_to_the_best_fa
     # ... and no other point of the simplex does better in the real-time band, nor in any later look-ahead band
     from interprim.model_selection import stacking as ensemble
 
-    cfg = ensemble.scoring_config(0.25, list(dev.demos), dev.dt, stride=3)
+    cfg = ensemble.scoring_config(0.25, list(dev.demos), dev.dt, stride=3, max_frames=blend.max_prefixes)
     cv = ensemble.CrossValidation(blend.factories(), dev.demos, [0, 1], dev.dt, cfg, k=3, horizon=0.25)
     for m, e in s["cv_errors"].items():
         assert cv.errors[m] == pytest.approx(e)
@@ -270,7 +271,7 @@ def test_fast_inner_cross_validation_equals_the_plain_protocol(task):
     dev, _ = task
     fams = ("kernel", "nn", "prior")
     make = {m: f for m, f in default_methods([0, 1]).items() if m in fams}
-    cfg = RealTimeConfig(stride=3)
+    cfg = RealTimeConfig(stride=3, max_frames=ip.AutoInteraction([0, 1]).max_prefixes)  # the fit's protocol
     cv = CrossValidation(make, dev.demos, [0, 1], dev.dt, cfg, k=3)
 
     def plain(factory):  # the same family with the stream shortcut off
@@ -541,6 +542,32 @@ def test_frame_budget_is_checked():
     for bad in (-0.001, float("nan"), True, "2ms"):
         with pytest.raises(ValueError, match="frame_budget_floor"):
             ip.AutoInteraction([0, 1], frame_budget_floor=bad).fit(_tied(4, 1, 1, 30), dt=0.02)
+
+
+def test_max_prefixes_bounds_the_inner_cross_validation(monkeypatch):
+    """The fit scores at most ``max_prefixes`` prefixes of each held-out demonstration, however long: the inner
+    cross-validation's protocol carries the cap, and the scored frames of a 300-frame demonstration are capped while
+    a short one keeps every third frame."""
+    from interprim.model_selection import realtime, stacking
+
+    seen = []
+    real = realtime.realtime_fold
+
+    def spy(*a, **kw):
+        recs = real(*a, **kw)
+        seen.append((len(a[2]), sorted({r["k"] for r in recs})))
+        return recs
+
+    monkeypatch.setattr(realtime, "realtime_fold", spy)
+    demos = _tied(6, 1, 1, 300) + _tied(3, 1, 1, 40, seed=1)
+    ip.AutoInteraction([0], candidates=("nn", "prior"), max_prefixes=10).fit(demos, dt=0.02)
+    assert seen and all(len(ks) <= 10 for _, ks in seen)
+    short = [ks for T, ks in seen if T < 50]
+    assert short and all(np.all(np.diff(ks) == 3) for ks in short)  # 0.7 x 40 frames / 3 < 10: the stride alone
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="max_prefixes"):
+            ip.AutoInteraction([0], max_prefixes=bad).fit(demos, dt=0.02)
+    assert stacking.scoring_config(0.25, demos, 0.02, max_frames=10).max_frames == 10
 
 
 def test_frame_budget_has_a_floor_in_milliseconds(tied):

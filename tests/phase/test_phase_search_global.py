@@ -154,22 +154,25 @@ def test_search_finds_the_highest_peak_on_nuisi():
 
 @pytest.mark.parametrize("test_index, M", [(0, 57), (0, 60), (0, 66), (1, 75)])
 def test_cross_validation_scores_the_phase_predict_finds(small_model, test_index, M):
-    """``phase_method="cv"`` compares the likelihood phase's held-out error with the learned phase's; the
-    likelihood phase's error is measured with the search ``predict`` runs (:func:`~interprim.phase.likelihood.
-    maximise`), on the fold's prior through the structured conditioning.  Given the model's own prior, a case's
-    phase is ``estimate_phase``'s, also on the multi-peak prefixes (the first three), where the former
-    single-peak refinement ended 0.11-0.12 of the movement away."""
-    from interprim.models.primitive.selection import _refined_phase_error
+    """``phase_method="cv"`` compares the likelihood phase's held-out error with the learned phase's, and the phase
+    noise is chosen by the likelihood phase's held-out accuracy: both score a case with the objective and the search
+    ``predict`` runs, on the prior of the case's fold.  Given all of the model's training parameters, that prior is
+    the model's and a case's phase is ``estimate_phase``'s, also on the multi-peak prefixes (the first three), where
+    the former single-peak refinement ended 0.11-0.12 of the movement away; the noise curves are the model's log
+    posterior."""
+    from interprim.models.primitive.selection import _fold_scorer, _fold_state, _refined_phase_error
 
     m, test = small_model
     f = m.fitted_
-    n_o, q = f.n_observed_latent_, f.params_per_dof_
     z = f.observed_to_latent(test[test_index][:M, [0, 1]])
     lo, hi = PL.search_bounds(f, M)
     grid = np.exp(np.linspace(np.log(lo), np.log(hi), 24))
     s2 = PL.phase_noise(f)
-    prior = f.prior_.marginal(n_o * q)
+    state = _fold_state(f, f.thetas_, f.prior_.shrinkage)  # every training demonstration: the model's prior
     est = PL.estimate_phase(f, z, sigma2=s2)
     for s_true in (0.0, 0.5, 1.0):  # the error is |phase - s_true|: three truths pin the phase itself
-        err = _refined_phase_error(f, [(prior, z, M, s_true, grid, None)], s2)
-        assert err == pytest.approx(abs(est.s_end - s_true), abs=2e-5)
+        err = _refined_phase_error(f, [(state, z, M, s_true, grid, None)], s2)
+        assert err == pytest.approx(abs(est.s_end - s_true), abs=1e-9)
+    lp_cv = _fold_scorer(f, state, z, 10.0 * s2)(grid)[0]
+    lp_model = PL.make_scorer(f, z, 10.0 * s2, True)(grid)[0]
+    np.testing.assert_allclose(lp_cv, lp_model, rtol=1e-10, atol=1e-8)

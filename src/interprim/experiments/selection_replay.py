@@ -55,14 +55,14 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     auto = AutoInteraction(obs, point_dim=point_dim)
     make = auto.factories()
     arrays = [np.asarray(x, dtype=np.float64) for x in dev]
-    cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim)
+    cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim, max_frames=auto.max_prefixes)
     outer = stacking.CrossValidation(make, dev, obs, dt, cfg, k=k, horizon=0.25)
     inner = []
     for held in folds(len(dev), k):
         keep = [i for i in range(len(dev)) if i not in set(held)]
         d = dev.take(keep) if hasattr(dev, "take") else [dev[i] for i in keep]
         tr = [np.asarray(x, dtype=np.float64) for x in d]
-        c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim)
+        c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim, max_frames=auto.max_prefixes)
         phase = registry.yardstick_ip(auto.settings(), tr, dt).phase_method_used()
         sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
                                     int(auto.n_basis), phase=phase)

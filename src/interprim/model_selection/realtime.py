@@ -123,6 +123,10 @@ class RealTimeConfig:
         Points of the normalised-time grid on which predictions are interpolated.
     point_dim : int
         Columns per point (3 for 3-D positions: errors are Euclidean distances of points), 1 for scalars.
+    max_frames : int or None
+        At most this many evaluated frames per held-out movement: a longer movement is evaluated every
+        ``ceil(frames in range / max_frames)``-th frame if that is more than ``stride``, so the protocol's cost does
+        not grow with the sampling rate (None: every ``stride``-th frame, however many).
     """
 
     horizon: float = DEFAULT_HORIZON
@@ -131,6 +135,7 @@ class RealTimeConfig:
     stride: int = 1
     n_grid: int = 201
     point_dim: int = 1
+    max_frames: int | None = None
 
 
 def mean_duration(demos: Iterable[Sized]) -> float:
@@ -166,7 +171,8 @@ def realtime_fold(estimator: EstimatorLike, train: Iterable[np.ndarray], test: A
     "cov_obs", "z_ctrl", "z_obs"}`` (``z_*``: RMS error / RMS std over the horizon; NaN without a std).
 
     ``frames``: the numbers of frames seen ``k`` to evaluate instead of the protocol's (``cfg.start`` to
-    ``cfg.stop``, every ``cfg.stride``-th), e.g. every frame for a figure.  ``trace=True`` adds what the
+    ``cfg.stop``, every ``cfg.stride``-th, at most ``cfg.max_frames``), e.g. every frame for a figure.
+    ``trace=True`` adds what the
     numbers were computed from to every record (for figures; not JSON-serialisable): ``"t_ahead"`` (seconds
     after frame ``k``, ``(H,)``), ``"truth"`` (the held-out frames there, ``(H, D)``), ``"mean"`` and ``"std"``
     (the prediction placed in time there, ``(H, D)``; ``std`` None without one); the method's records also
@@ -210,7 +216,10 @@ def realtime_fold(estimator: EstimatorLike, train: Iterable[np.ndarray], test: A
     if frames is None:
         k0 = max(3, int(math.ceil(cfg.start * T)))
         k1 = max(k0, int(math.floor(cfg.stop * T)))
-        frames = range(k0, k1 + 1, max(1, int(cfg.stride)))
+        step = max(1, int(cfg.stride))
+        if cfg.max_frames is not None:
+            step = max(step, -(-(k1 - k0 + 1) // max(1, int(cfg.max_frames))))
+        frames = range(k0, k1 + 1, step)
     frames = [int(k) for k in frames]
     for k in frames:
         if not 1 <= k <= T:

@@ -76,6 +76,10 @@ class AutoInteraction(Predictor):
         Seconds ahead scored by the real-time protocol (and over which the blend's std is calibrated).
     stride : int, default 3
         Score every ``stride``-th frame (speed).
+    max_prefixes : int or None, default 24
+        Score at most this many prefixes of each held-out demonstration (the stride grows for long demonstrations:
+        :class:`~interprim.model_selection.realtime.RealTimeConfig` ``max_frames``), so that the fit's cost does not
+        grow with the sampling rate; None: every ``stride``-th frame.
     n_basis : int, default 20
         Basis functions of the Interaction Primitive candidates.
     smoothing_window : int or None
@@ -138,7 +142,7 @@ class AutoInteraction(Predictor):
     def __init__(self, observed_dofs, candidates=CANDIDATES, combine: str = "blend", folds: int = 3,
                  horizon: float = DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
                  point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET,
-                 frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR):
+                 frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR, max_prefixes: int | None = 24):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -151,6 +155,7 @@ class AutoInteraction(Predictor):
         self.progress = progress
         self.frame_budget = frame_budget
         self.frame_budget_floor = frame_budget_floor
+        self.max_prefixes = max_prefixes
 
     def _check(self):
         known = list(registry.FAMILIES)
@@ -171,6 +176,9 @@ class AutoInteraction(Predictor):
             raise ValueError(f"horizon must be a positive number of seconds, got {self.horizon!r}")
         if not (isinstance(self.stride, (int, np.integer)) and self.stride >= 1):
             raise ValueError(f"stride must be an integer >= 1, got {self.stride!r}")
+        mp = self.max_prefixes
+        if mp is not None and not (isinstance(mp, (int, np.integer)) and not isinstance(mp, bool) and mp >= 1):
+            raise ValueError(f"max_prefixes must be an integer >= 1 or None, got {mp!r}")
         if not (isinstance(self.point_dim, (int, np.integer)) and self.point_dim >= 1):
             raise ValueError(f"point_dim must be an integer >= 1, got {self.point_dim!r}")
         fb = self.frame_budget
@@ -288,7 +296,8 @@ class AutoInteraction(Predictor):
             make = {m: f for m, f in make.items() if m not in over}
             progress.grow(-len(over))  # not compared: fewer steps than announced
         cfg = stacking.scoring_config(float(self.horizon), train, dt, stride=int(self.stride),
-                                      point_dim=int(self.point_dim))
+                                      point_dim=int(self.point_dim),
+                                      max_frames=None if self.max_prefixes is None else int(self.max_prefixes))
         if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
             cv = None
             chosen = next(iter(make))

@@ -218,6 +218,13 @@ class _FastState:
             return _loglik_batch_numpy(self.Zh, Rg, z, s_values, self.sq, self.Uh, self.K0, float(s2))
 
 
+def prior_state(model, prior):
+    """The precomputed state of the batched log-likelihood for ``model`` with ``prior`` (the observed block, diagonal
+    plus low rank: :meth:`~interprim.core.gaussian.GaussianPrior.factored`, ``marginal``) in place of its own: the
+    model's hyper-parameter selection scores a fold's held-out phase with it (pass it to :class:`make_scorer`)."""
+    return _FastState(model, prior)
+
+
 def fast_state(model):
     """The :class:`_FastState` of ``model`` (``None`` when the prior is not diagonal plus low rank)."""
     def build():

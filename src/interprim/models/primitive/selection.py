@@ -375,41 +375,53 @@ def _score(Th, base, truth, pm_shift, H, n_o, q, w_d, gam):
 
 
 def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, max_cases=24, n_phase=24):
-    """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate."""
-    from ...phase.likelihood import S_MIN, log_speed_prior
+    """Mean absolute phase error of the likelihood estimator on held-out cases, per noise candidate.
+
+    Each case's log posterior is the one :func:`interprim.phase.likelihood.estimate_phase` maximises at prediction
+    time, evaluated by the same code (:func:`_fold_scorer`) on the prior of the case's fold."""
+    from ...phase.likelihood import S_MIN
 
     if max_cases <= 0:
         return None
-    n_o, q = model.n_observed_latent_, model.params_per_dof_
     S = len(latent)
     all_cases = [(j, p) for p in fractions for j in range(S)]
     pick = np.unique(np.linspace(0, len(all_cases) - 1, min(max_cases, len(all_cases))).round().astype(int))
     cases = [all_cases[i] for i in pick]
     errs = np.zeros(len(s2_grid))
-    priors = {}
+    states = {}
     kept = []
     for j, p in cases:
         f = fold[j]
-        if f not in priors:
-            pr = GaussianPrior.factored(model.thetas_[fold != f], model.covariance, model.ridge, lam)
-            pr = pr.marginal(n_o * q)  # observed block
-            priors[f] = pr
-        prior = priors[f]
+        if f not in states:
+            states[f] = _fold_state(model, model.thetas_[fold != f], lam)
         z = latent[j]
         T = z.shape[0]
         M = observed_frames(T, p, max(3, model.min_observed))
         s_true = (M - 1) / (T - 1)
         lo = max(S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
         grid = np.exp(np.linspace(np.log(lo), 0.0, n_phase))
-        curves = np.empty((grid.size, len(s2_grid)))
-        designs = [observation_design(model, z[:M, :n_o], float(s), "position") for s in grid]
-        lls = _conditioned(prior, n_o, q, [(compress_observation(X, Y), (X, Y)) for X, Y in designs], s2_grid,
-                           need_mean=False, need_ll=True)
-        for i, s in enumerate(grid):
-            curves[i] = lls[i][1] + log_speed_prior(model, M, s)
+        zo = z[:M, :model.n_observed_latent_]
+        curves = np.stack([_fold_scorer(model, states[f], zo, float(v))(grid)[0] for v in s2_grid], axis=1)
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
-        kept.append((prior, z[:M, :n_o], M, s_true, grid, curves))
+        kept.append((states[f], zo, M, s_true, grid, curves))
     return errs / len(cases), kept
+
+
+def _fold_state(model, thetas, lam):
+    """The likelihood phase's precomputed state (:func:`interprim.phase.likelihood.prior_state`) for the prior of a
+    fold's training parameters ``thetas`` (its observed block, diagonal plus low rank)."""
+    from ...phase.likelihood import prior_state
+
+    pr = GaussianPrior.factored(thetas, model.covariance, model.ridge, lam)
+    return prior_state(model, pr.marginal(model.n_observed_latent_ * model.params_per_dof_))
+
+
+def _fold_scorer(model, state, zo, s2):
+    """``s -> (log posterior, log likelihood)`` of the observed latent frames ``zo`` on a fold's prior (``state``):
+    :class:`interprim.phase.likelihood.make_scorer` with that prior in place of the model's."""
+    from ...phase.likelihood import make_scorer, speed_prior_params
+
+    return make_scorer(model, zo, s2, True, _parts=(state, speed_prior_params(model, zo.shape[0])))
 
 
 def _refined_phase_error(model, kept, s2) -> float:
@@ -418,20 +430,10 @@ def _refined_phase_error(model, kept, s2) -> float:
     (:func:`~interprim.phase.likelihood.maximise`: 12 phases evenly in ``log s``, the grid made finer around its
     best points, Brent's method on the two highest peaks) on its fold's prior: the figure ``phase_method="cv"``
     compares with the learned phase's cross-validated error."""
-    from ...phase.likelihood import log_speed_prior, maximise
+    from ...phase.likelihood import maximise
 
-    n_o, q = model.n_observed_latent_, model.params_per_dof_
-    s2a = np.array([s2])
     errs = []
-    for prior, zo, M, s_true, grid, _curves in kept:
-        def scores(s_values, prior=prior, zo=zo, M=M):  # this case's (log posteriors, log likelihoods)
-            s_values = np.asarray(s_values, dtype=np.float64)
-            designs = [observation_design(model, zo, float(s), "position") for s in s_values]
-            outs = _conditioned(prior, n_o, q, [(compress_observation(X, Y), (X, Y)) for X, Y in designs], s2a,
-                                need_mean=False, need_ll=True)
-            ll = np.array([float(o[1][0]) for o in outs])
-            return ll + log_speed_prior(model, M, s_values), ll
-
-        est = maximise(scores, float(grid[0]), float(grid[-1]))
+    for state, zo, _M, s_true, grid, _curves in kept:
+        est = maximise(_fold_scorer(model, state, zo, s2), float(grid[0]), float(grid[-1]))
         errs.append(abs(est.phase - s_true))
     return float(np.mean(errs))

@@ -283,6 +283,33 @@ def test_evaluate_with_a_horizon_prints_a_fit_command_for_that_horizon(tmp_path,
     assert model.horizon == 0.5 and model.model_.horizon == 0.5
 
 
+def test_fit_max_prefixes_option(tmp_path, capsys):
+    """``interprim fit --max-prefixes N`` caps the prefixes the default scores per held-out demonstration and is
+    stored with the model (``none``: no cap); refused for one family alone and for a value that is not a whole
+    number >= 1, before anything is written."""
+    data = _csv_with_observed_line(tmp_path / "demos.csv")
+    out = tmp_path / "m.npz"
+    import interprim as ip
+
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--max-prefixes", "8",
+                 "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert ip.load_any(out).max_prefixes == 8
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--max-prefixes", "none",
+                 "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert ip.load_any(out).max_prefixes is None
+    out.unlink()
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--model", "nn",
+                 "--max-prefixes", "8", "-o", str(out)]) != 0
+    assert "--max-prefixes" in capsys.readouterr().err and not out.exists()
+    for bad in ("0", "-3", "2.5", "x"):
+        with pytest.raises(SystemExit):
+            main(["fit", str(data), "--max-prefixes", bad, "-o", str(out)])
+        assert "whole number of prefixes" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_fit_frame_budget_option(tmp_path, capsys):
     """``interprim fit --frame-budget X`` bounds the default's frame (``none``: no bound), is refused for one family
     alone and for a value that is not a positive number, and the printed summary says what the frame costs."""

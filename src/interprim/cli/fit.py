@@ -110,6 +110,12 @@ def add_parser(subparsers) -> None:
         help="--model auto: milliseconds a streamed frame may always cost, however cheap the Interaction "
         "Primitive's frame is on the data (default 2; 0: the budget is the multiple alone)",
     )
+    p.add_argument(
+        "--max-prefixes", type=_max_prefixes, default=None, metavar="N",
+        help="--model auto: score at most N prefixes of each held-out demonstration when comparing the families (a "
+        "long demonstration is scored every k-th frame, so the fit's time does not grow with the sampling rate; "
+        "default 24; 'none': every third frame, however many)",
+    )
     p.add_argument("--n-basis", type=int, default=20, help="Gaussian basis functions per DoF (default 20)")
     p.add_argument(
         "--observation",
@@ -193,6 +199,18 @@ def _frame_budget(text):
     return value
 
 
+def _max_prefixes(text):
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of prefixes >= 1 or 'none', got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of prefixes >= 1 or 'none', got {text!r}")
+    return value
+
+
 def _milliseconds(text):
     try:
         value = float(text)
@@ -235,10 +253,11 @@ def cmd_fit(args) -> int:
     if len(ds) < 2:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
                            "distribution. " + SPLIT_HINT)
-    for flag, value in (("--frame-budget", args.frame_budget), ("--frame-budget-floor", args.frame_budget_floor)):
+    for flag, value in (("--frame-budget", args.frame_budget), ("--frame-budget-floor", args.frame_budget_floor),
+                        ("--max-prefixes", args.max_prefixes)):
         if args.model != "auto" and value is not None:
-            raise CommandError(f"{flag} bounds the blend of --model auto; --model {args.model} is one family "
-                               f"alone (drop {flag}, or use --model auto)")
+            raise CommandError(f"{flag} sets how --model auto compares and blends the families; --model "
+                               f"{args.model} is one family alone (drop {flag}, or use --model auto)")
     if args.model != "ip":
         given = [flag for key, flag in IP_ONLY if getattr(args, key) is not None]
         if given:
@@ -290,6 +309,8 @@ def _fit_other(args, ds, obs, n_read) -> int:
         budget["frame_budget"] = None if args.frame_budget == "none" else float(args.frame_budget)
     if args.frame_budget_floor is not None:
         budget["frame_budget_floor"] = float(args.frame_budget_floor) / 1e3
+    if args.max_prefixes is not None:
+        budget["max_prefixes"] = None if args.max_prefixes == "none" else int(args.max_prefixes)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),
                            n_basis=args.n_basis, smoothing_window=args.smoothing_window, progress=True,
                            horizon=DEFAULT_HORIZON if args.horizon is None else float(args.horizon), **budget)

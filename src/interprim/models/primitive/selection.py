@@ -311,12 +311,19 @@ def _conditioned(prior, n_o, q, cases, s2, need_mean=True, need_ll=False):
     by_k: dict[int, list[int]] = {}
     for i, (comp, _) in enumerate(cases):
         by_k.setdefault(comp[0].shape[0], []).append(i)
-    for idx in by_k.values():
-        means, lls = lowrank_cases(prior, n_o, q, [cases[i][0] for i in idx], s2, need_mean=need_mean,
-                                   need_ll=need_ll, observations=[cases[i][1] for i in idx] if need_ll else None)
-        for j, i in enumerate(idx):
-            out[i] = (None if means is None else means[j], None if lls is None else lls[j])
+    for group in by_k.values():
+        for c0 in range(0, len(group), _CONDITION_CHUNK):  # bounded memory: (cases, S2, n, D_o k) arrays
+            idx = group[c0:c0 + _CONDITION_CHUNK]
+            means, lls = lowrank_cases(prior, n_o, q, [cases[i][0] for i in idx], s2, need_mean=need_mean,
+                                       need_ll=need_ll, observations=[cases[i][1] for i in idx] if need_ll else None)
+            for j, i in enumerate(idx):
+                out[i] = (None if means is None else means[j], None if lls is None else lls[j])
     return out
+
+
+#: cases conditioned in one lowrank_cases call: its largest array holds (cases, sigma2 candidates, rank, D_o q)
+#: floats (8 cases of 100 demonstrations x 7 observed DoF x 26 parameters at 25 candidates: about 30 MB)
+_CONDITION_CHUNK = 8
 
 
 def _criteria(per_case, n_lam, n_o, n_lat):

@@ -10,6 +10,7 @@ is used.  ``window=None`` falls back to plain central differences
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from functools import lru_cache
 from typing import Any
 
@@ -20,7 +21,16 @@ from ._compiled import registry as _registry
 from .validation import as_2d_finite, check_times
 
 __all__ = ["resample_uniform", "resample_step", "step_count", "step_grid", "interp_columns", "unit_grid",
-           "start_position", "derivatives", "PCA", "time_normalise"]
+           "start_position", "derivatives", "PCA", "time_normalise", "column_index"]
+
+
+def column_index(cols: Iterable[int]) -> slice | list[int]:
+    """``cols`` (column numbers) as a slice when they are consecutive and increasing, else as a list: indexing the
+    last axis with it gives the same values, as a view instead of a copy when it is a slice."""
+    cols = [int(i) for i in cols]
+    if cols and cols == list(range(cols[0], cols[-1] + 1)):
+        return slice(cols[0], cols[-1] + 1)
+    return cols
 
 
 def interp_columns(x_new: ArrayLike, x: ArrayLike, y: ArrayLike) -> np.ndarray:

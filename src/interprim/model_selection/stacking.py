@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.preprocessing import interp_columns, time_normalise
+from ..core.preprocessing import column_index, interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import EstimatorLike, RealTimeConfig, folds, realtime_sweep
 from .yardsticks import case_groups
@@ -201,15 +201,6 @@ def fold_message(why: str, n: int, k: int | None) -> str:
     n_train = n - max(len(f) for f in sets)
     return (f"{why} (in an inner training fold: the {len(sets)}-fold cross-validation trains on {n_train} of your "
             f"{n} demonstrations, holding the others out to score the family)")
-
-
-def _columns(cols: Sequence[int]) -> slice | list[int]:
-    """``cols`` as a slice when they are consecutive (indexing then gives a view with the same values), else as a
-    list."""
-    cols = [int(i) for i in cols]
-    if cols and cols == list(range(cols[0], cols[-1] + 1)):
-        return slice(cols[0], cols[-1] + 1)
-    return cols
 
 
 #: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
@@ -414,7 +405,7 @@ class CrossValidation:
         mean = self.__dict__.get("mean", _LAZY)  # _LAZY: the rows of the parent's, whose products g holds
         if g is not None and g["mean"] is mean and g["truth"] is self.truth:
             return g
-        c = _columns(self.controlled or self.observed)  # a slice when contiguous: no copy of the members' arrays
+        c = column_index(self.controlled or self.observed)  # a slice when contiguous: no copy of the members' arrays
         T = np.ascontiguousarray(self.truth[..., c])  # (cases, H, C)
         E = self.mean[..., c] - T[None]  # (M, cases, H, C)
         M = E.shape[0]
@@ -678,8 +669,8 @@ def _crossfit(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: np.ndar
         v, d = valid[te], np.asarray(groups)[te]
         for cols, out in zip(col_sets, per_demo):
             q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
-            sd = sd_all[..., _columns(cols)]  # views of consecutive columns
-            err = err_all[..., _columns(cols)]
+            sd = sd_all[..., column_index(cols)]  # views of consecutive columns
+            err = err_all[..., column_index(cols)]
             for j in np.unique(d):
                 sel = d == j
                 if not v[sel].any():

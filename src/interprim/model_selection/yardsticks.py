@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from ..core._compiled import registry as _kernels
 from ..core.cv import paired_gain
-from ..core.preprocessing import interp_columns
+from ..core.preprocessing import column_index, interp_columns
 
 __all__ = ["case_rms", "case_groups", "demo_means", "ratio_se", "one_se_choice", "place_cases", "clock_units",
            "true_duration_units", "whole_movement_units"]
@@ -44,9 +44,7 @@ def case_rms(pred: ArrayLike, truth: ArrayLike, mask: ArrayLike, cols: Iterable[
         Columns per point (3 for 3-D positions; as in
         :class:`~interprim.model_selection.realtime.RealTimeConfig`).
     """
-    cols = [int(i) for i in cols]
-    # consecutive columns by a slice: views instead of two copies, the same differences
-    sel = slice(cols[0], cols[-1] + 1) if cols and cols == list(range(cols[0], cols[-1] + 1)) else cols
+    sel = column_index(cols)  # consecutive columns by a slice: views instead of two copies, the same differences
     e = np.asarray(pred, dtype=np.float64)[..., sel] - np.asarray(truth, dtype=np.float64)[..., sel]
     n_case, H, C = e.shape
     pd = point_dim if C % point_dim == 0 else 1

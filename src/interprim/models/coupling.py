@@ -79,7 +79,7 @@ from ..core.cv import folds as cv_folds
 from ..core.cv import n_folds as cv_n_folds
 from ..core.cv import paired_gain
 from ..core.errors import NotFittedError
-from ..core.preprocessing import unit_grid
+from ..core.preprocessing import column_index, unit_grid
 from ..core.validation import as_2d_finite
 from .conditioners import PPCA, Blend, Conditioner, Context, Kernel, Mean, Ridge, conditioner, target_block
 from .grid import GridPrediction
@@ -450,9 +450,7 @@ class CouplingModel:
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
         n_mean = np.intp(nj * int(self.n_out))  # the count np.mean divides by (jitter x output points)
-        # the controlled columns as a slice when they are contiguous (a view instead of a copy; the same values)
-        ctrl_cols = (slice(ctrl[0], ctrl[-1] + 1) if ctrl and list(ctrl) == list(range(ctrl[0], ctrl[-1] + 1))
-                     else ctrl)
+        ctrl_cols = column_index(ctrl)  # a slice when contiguous: a view instead of a copy, the same values
         # what depends only on the fold and the phase (training rows, held-out queries and the smoothers' shared
         # context) is computed once per fit and reused by every pass (_cross_validate makes up to three)
         cache = getattr(self, "_cv_cache", None)

@@ -22,12 +22,22 @@ _OUT2 = types.Array(types.float64, 2, "C")
 _SIGNATURE = types.void(_IN3, _IDX, _IN2, _IDX, _IN1, _OUT2, _OUT2)
 
 
+@njit(cache=True, fastmath=False, inline="always")
+def _value(padded, j, k, frac, col):
+    """Column ``col`` of demonstration ``j`` at the fractional frame ``k + frac``: the sample itself when ``frac`` is
+    0 (the last sample's successor is padding), else ``(y[k+1] - y[k]) frac + y[k]`` (numpy.interp's operations)."""
+    lo = padded[j, k, col]
+    if frac == 0.0:
+        return lo
+    return (padded[j, k + 1, col] - lo) * frac + lo
+
+
 @njit(_SIGNATURE, cache=True, fastmath=False)
 def weighted_frames(padded, idx, f, cols, w, mean, spread):
     """``mean[i, c] = sum_j w[j] Y[j, i, c]`` and ``spread[i, c] = sum_j w[j] (Y[j, i, c] - mean[i, c])^2`` with
     ``Y[j, i, c]`` demonstration ``idx[j]`` of the zero-padded ``padded`` (n_demos, T_max + 1, D) at the fractional
     frame ``f[j, i]`` (within ``[0, T_j - 1]``), column ``cols[c]``; the sums start at zero and add the
-    demonstrations in order."""
+    demonstrations in order (two passes: the spread needs the whole mean)."""
     J = idx.shape[0]
     n = f.shape[1]
     C = cols.shape[0]
@@ -35,36 +45,21 @@ def weighted_frames(padded, idx, f, cols, w, mean, spread):
         for c in range(C):
             mean[i, c] = 0.0
             spread[i, c] = 0.0
-    for jj in range(J):
-        j = idx[jj]
-        wj = w[jj]
-        for i in range(n):
-            fk = f[jj, i]
-            k = np.intp(np.floor(fk))
-            frac = fk - k
-            if frac == 0.0:  # on a sample (the frame itself)
+    for second in (False, True):
+        for jj in range(J):
+            j = idx[jj]
+            wj = w[jj]
+            for i in range(n):
+                fk = f[jj, i]
+                k = np.intp(np.floor(fk))
+                frac = fk - k
                 for c in range(C):
-                    mean[i, c] += wj * padded[j, k, cols[c]]
-            else:
-                for c in range(C):
-                    lo = padded[j, k, cols[c]]
-                    mean[i, c] += wj * ((padded[j, k + 1, cols[c]] - lo) * frac + lo)
-    for jj in range(J):
-        j = idx[jj]
-        wj = w[jj]
-        for i in range(n):
-            fk = f[jj, i]
-            k = np.intp(np.floor(fk))
-            frac = fk - k
-            if frac == 0.0:
-                for c in range(C):
-                    t = padded[j, k, cols[c]] - mean[i, c]
-                    spread[i, c] += wj * (t * t)
-            else:
-                for c in range(C):
-                    lo = padded[j, k, cols[c]]
-                    t = ((padded[j, k + 1, cols[c]] - lo) * frac + lo) - mean[i, c]
-                    spread[i, c] += wj * (t * t)
+                    v = _value(padded, j, k, frac, cols[c])
+                    if second:
+                        t = v - mean[i, c]
+                        spread[i, c] += wj * (t * t)
+                    else:
+                        mean[i, c] += wj * v
 
 
 def warm_up() -> None:

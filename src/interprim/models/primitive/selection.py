@@ -386,7 +386,7 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
 
     Each case's log posterior is the one :func:`interprim.phase.likelihood.estimate_phase` maximises at prediction
     time, evaluated by the same code (:func:`_fold_scorer`) on the prior of the case's fold."""
-    from ...phase.likelihood import S_MIN
+    from ...phase.likelihood import search_bounds
 
     if max_cases <= 0:
         return None
@@ -405,8 +405,8 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         T = z.shape[0]
         M = observed_frames(T, p, max(3, model.min_observed))
         s_true = (M - 1) / (T - 1)
-        lo = max(S_MIN, (M - 1) * model.dt_ / (4.0 * float(np.max(model.durations_))))
-        grid = np.exp(np.linspace(np.log(lo), 0.0, n_phase))
+        lo, hi = search_bounds(model, M)  # the phases estimate_phase searches
+        grid = np.exp(np.linspace(np.log(lo), np.log(hi), n_phase))
         zo = z[:M, :model.n_observed_latent_]
         curves = np.stack([_fold_scorer(model, states[f], zo, float(v))(grid)[0] for v in s2_grid], axis=1)
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)

@@ -22,16 +22,15 @@ def test_the_replayed_default_is_what_the_fit_chooses(folds):
     held, cv, sizes = inner[0]
     train = [d for i, d in enumerate(demos) if i not in set(held)]
     auto = ip.AutoInteraction(task.observed_dofs).fit(train, dt=task.dt)
-    cost, budget, earn = sr._budget(cv, sizes)
-    got = sr.default_rule()(cv, cost, budget, earn)
+    cost, budget = sr._budget(cv, sizes)
+    got = sr.default_rule()(cv, cost, budget)
     s = auto.selection_
     assert got["names"] == list(s["band_weights"])
     for i, m in enumerate(got["names"]):
         assert got["W"][:, i] == pytest.approx(s["band_weights"][m], abs=1e-9)
     assert got["edges"] == pytest.approx(s["bands"])
     assert ("own" if got["lam"] is None else got["lam"]) == s["long_range"]["remaining"]
-    assert got["budget"] == pytest.approx(s["cost"]["budget"])
-    assert earn == s["cost"].get("earn_above")
+    assert budget == pytest.approx(s["cost"]["budget"])
 
 
 def test_the_mean_alone_is_the_clock_and_the_true_end_helps_only_the_seconds(folds):

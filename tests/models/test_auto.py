@@ -512,60 +512,6 @@ def test_the_budget_picks_the_best_set_of_families_within_it(task):
     assert set(got.names) <= best
 
 
-def _budget_cv(task):
-    dev, _ = task
-    fams = ("kernel", "nn", "prior")
-    make = {m: f for m, f in default_methods([0, 1]).items() if m in fams}
-    cfg = stacking.scoring_config(0.25, list(dev.demos), dev.dt, stride=3)
-    return stacking.CrossValidation(make, dev.demos, [0, 1], dev.dt, cfg, k=3, horizon=0.25)
-
-
-def test_case_losses_average_to_the_band_loss(task):
-    """:meth:`CrossValidation.case_losses` at the stacked weights are the per-case terms whose mean over the
-    band's cases is :meth:`band_loss` (the same quadratic form, case by case)."""
-    cv = _budget_cv(task)
-    edges = stacking.look_ahead_bands(0.25, float(cv.t_ahead[-1]))
-    for s in cv.band_steps(edges)[:3]:
-        w = cv.blend_weights(s)
-        per = cv.case_losses(w, s)
-        assert per.shape == (len(cv.demo),) and np.all(np.isnan(per) | (per >= 0))
-        assert np.nanmean(per) == pytest.approx(cv.band_loss(s), rel=1e-9, abs=1e-10)
-
-
-def test_a_blend_dearer_than_the_relative_budget_must_earn_its_place(task):
-    """``stack(..., earn_above=...)``: a blend costing more than ``earn_above`` (but within ``budget``) is kept only
-    when it beats the best blend within ``earn_above`` by more than one standard error over the held-out
-    demonstrations.  A dear family that predicts the truth earns its place; one that is a copy of a cheap family
-    (the same errors) does not, and the cheaper blend is made, with the budget that applied."""
-    cv = _budget_cv(task)
-    price = {"kernel": 5.0, "nn": 2.0, "prior": 1.0}
-
-    def cost(names):
-        return sum(price[m] for m in names) + (0.5 if len(names) > 1 else 0.0)
-
-    k, n = cv.names.index("kernel"), cv.names.index("nn")
-    good = cv.cases(np.arange(len(cv.demo)))
-    mean = cv.mean.copy()
-    mean[k] = cv.truth[None] + 1e-4 * np.random.default_rng(0).standard_normal(cv.truth.shape)
-    good.mean = mean
-    got = stacking.stack(good, 0.25, cost=cost, budget=100.0, earn_above=4.0)
-    c = got.record["cost"]
-    assert "kernel" in got.names and c["earned"] is True and c["budget"] == 100.0
-    assert c["earn_table"]["within"]["vs_best"] > c["earn_table"]["within"]["se"]
-
-    copy = cv.cases(np.arange(len(cv.demo)))
-    mean = cv.mean.copy()
-    mean[k] = cv.mean[n]
-    copy.mean = mean
-    got = stacking.stack(copy, 0.25, cost=cost, budget=100.0, earn_above=4.0)
-    c = got.record["cost"]
-    assert "kernel" not in got.names and c["earned"] is False and c["budget"] == 4.0
-    assert cost(got.names) <= 4.0 and c["left_out"] == {"kernel": 5.0}
-    # without the rule (or when the blend is within earn_above), nothing changes
-    assert stacking.stack(copy, 0.25, cost=cost, budget=100.0).band_weights == stacking.stack(
-        copy, 0.25, cost=cost, budget=100.0, earn_above=1000.0).band_weights
-
-
 def test_the_blend_stream_is_the_weighted_combination_of_its_members_streamed_alone(blend, task):
     """After every frame, the blend's stream equals (to rounding) the combination of each member's own stream run
     alone on the same frames: the blend adds the weights, never another member computation."""
@@ -634,13 +580,9 @@ def test_frame_budget_has_a_floor_in_milliseconds(tied):
     auto = ip.AutoInteraction([0, 1, 2]).fit(demos, dt=0.02)
     c, r = auto.selection_["cost"], relative.selection_["cost"]
     assert c["ip_frame"] == r["ip_frame"]
-    assert 3.0 * c["ip_frame"] < DEFAULT_FRAME_BUDGET_FLOOR  # a tiny IP here: the floor is the larger
-    assert c["earn_above"] == pytest.approx(3.0 * c["ip_frame"])
+    assert c["budget"] == pytest.approx(max(3.0 * c["ip_frame"], DEFAULT_FRAME_BUDGET_FLOOR))
+    assert c["frame"] <= c["budget"] and set(c["left_out"]) <= set(r["left_out"])
     assert "the larger of 3x and 2.00 ms" in auto.summary()
-    # between 3x the IP and the floor, a dearer blend must be better by more than one standard error over the
-    # held-out demonstrations; on these tied data it is not, and the default is the blend within 3x the IP
-    t = c["earn_table"]
-    assert c["earned"] is False and t["within"]["vs_best"] <= t["within"]["se"]
-    assert c["budget"] == pytest.approx(3.0 * c["ip_frame"]) == r["budget"] and c["frame"] <= c["budget"]
-    assert set(auto.model_.members_) == set(relative.model_.members_)
-    assert "not better by more than its noise" in auto.summary()
+    assert c["budget"] >= r["budget"] and c["budget"] == pytest.approx(DEFAULT_FRAME_BUDGET_FLOOR)  # tiny IP here
+    # the blend within the floor may be dearer than within 3x the IP, never beyond the floor
+    assert r["frame"] <= r["budget"] < c["budget"]

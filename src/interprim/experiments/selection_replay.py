@@ -71,28 +71,25 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
 
 
 def _budget(cv, sizes: registry.FrameSizes) -> tuple:
-    """``(cost, budget, earn_above)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of
-    ``sizes``."""
-    auto = AutoInteraction([])
-    _, cost, ip_frame, budget = auto.budget_model(sizes, cv.names)
-    return cost, budget, auto.earn_above(ip_frame, budget)
+    """``(cost, budget)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of ``sizes``."""
+    _, cost, _, budget = AutoInteraction([]).budget_model(sizes, cv.names)
+    return cost, budget
 
 
 def default_rule(level: float | None = None):
     """The rule ``AutoInteraction.fit`` applies to its inner cross-validation (``level``: the band's quantile level
     fixed, instead of chosen by cross-fitting)."""
-    def rule(cv, cost, budget, earn_above=None) -> dict:
-        fitted = stacking.stack(cv, 0.25, cost=cost, budget=budget, scales=False, earn_above=earn_above)
-        budget = fitted.record.get("cost", {}).get("budget", budget)  # the budget that applied
+    def rule(cv, cost, budget) -> dict:
+        fitted = stacking.stack(cv, 0.25, cost=cost, budget=budget, scales=False)
         fitted, lam = long_range.refine(cv, fitted, 0.25, cost=cost, budget=budget, level=level)
         return {"names": list(fitted.names), "W": np.asarray(fitted.W), "edges": list(fitted.edges),
-                "scales": fitted.scales, "lam": lam, "budget": budget}
+                "scales": fitted.scales, "lam": lam}
     return rule
 
 
 def single_rule(family: str):
     """One family alone, at its own timing, with its variance model fitted as the blend's."""
-    def rule(cv, cost, budget, earn_above=None) -> dict | None:
+    def rule(cv, cost, budget) -> dict | None:
         if family not in cv.names:
             return None
         sub = cv.subset([family])
@@ -149,11 +146,11 @@ def replay(outer, inner, rules: dict) -> dict:
     for rname, rule in rules.items():
         rows = []
         for held, cv, sizes in inner:
-            cost, budget, earn = _budget(cv, sizes)
+            cost, budget = _budget(cv, sizes)
             if rname == "true end":
-                rows.append(_outer(outer, held, default_rule()(cv, cost, budget, earn), true_end=True))
+                rows.append(_outer(outer, held, default_rule()(cv, cost, budget), true_end=True))
                 continue
-            choice = rule(cv, cost, budget, earn)
+            choice = rule(cv, cost, budget)
             if choice is None:
                 break
             rows.append(_outer(outer, held, choice))

@@ -320,10 +320,7 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     if lam is not None:
         placed = cv.cases(np.arange(len(cv.demo)))
         placed.mean = replaced(cv, lam)
-        before = fitted.record.get("cost", {})
         fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
-        if "cost" in fitted.record:  # the first stacking's rule for a dearer blend (``budget`` is what it left)
-            fitted.record["cost"].update({k: v for k, v in before.items() if k.startswith("earn")})
         W = full(fitted)
     Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
     keep = [i for i in range(len(names)) if Wc[:, i].max() >= MIN_WEIGHT] or [int(np.argmax(Wc.max(axis=0)))]

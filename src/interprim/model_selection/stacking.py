@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 from ..core.preprocessing import column_index, interp_columns, time_normalise
 from .metrics import Z90, point_rms
 from .realtime import EstimatorLike, RealTimeConfig, folds, realtime_sweep
-from .yardsticks import case_groups, one_se_choice
+from .yardsticks import case_groups
 
 if TYPE_CHECKING:
     from ..core.progress import Progress
@@ -110,7 +110,7 @@ class Stacking:
 
 def stack(cv: CrossValidation, horizon: float, cost: Callable[[list[str]], float] | None = None,
           budget: float | None = None,
-          scales: bool = True, earn_above: float | None = None) -> Stacking:
+          scales: bool = True) -> Stacking:
     """The blend of the families compared by ``cv``: weights per look-ahead band, members and variance model.
 
     Weights are fitted per look-ahead band (:func:`look_ahead_bands`: ``horizon``, then doubling to the longest
@@ -125,13 +125,6 @@ def stack(cv: CrossValidation, horizon: float, cost: Callable[[list[str]], float
     family never raises a band's smallest loss, so no smaller set can do better.  The record's ``cost`` says what
     the blend costs and which families were left out for the budget.
 
-    ``earn_above`` (seconds, below ``budget``): a blend whose frame costs more than this must earn it.  It is kept
-    only when its held-out loss (:meth:`CrossValidation.case_losses` summed over the bands, per case) is smaller
-    than that of the best blend within ``earn_above`` by more than one standard error over the held-out
-    demonstrations (:func:`~interprim.model_selection.yardsticks.one_se_choice`); otherwise the cheaper blend is
-    made.  The record's ``cost`` then has ``earn_above``, ``earned`` (whether the dearer blend was kept) and
-    ``earn_table`` (the rule's table: ``within``, ``dearer``), and its ``budget`` is the one that applied.
-
     ``scales=False`` skips the variance model (``scales`` None; no ``variance_model``, ``band_level`` in the
     record): for a caller that fits it again after changing the weights
     (:func:`interprim.model_selection.long_range.refine`).
@@ -143,16 +136,6 @@ def stack(cv: CrossValidation, horizon: float, cost: Callable[[list[str]], float
     left_out: dict[str, float] = {}
     if cost is not None and budget is not None and cost(names) > budget:
         names, W, left_out = _within_budget(cv, steps, cost, float(budget))
-    earned: dict[str, Any] = {}
-    if cost is not None and earn_above is not None and cost(names) > earn_above:
-        # the dearer blend against the best one within earn_above, on the same held-out cases: the cheaper answer
-        # unless the dearer one is better by more than its noise (Breiman et al.'s one-standard-error rule)
-        cheap, Wc, left_c = _within_budget(cv, steps, cost, float(earn_above))
-        pick, table = one_se_choice({"within": _case_score(cv, cheap, Wc, steps),
-                                     "dearer": _case_score(cv, names, W, steps)}, cv.demo, ["within", "dearer"])
-        earned = {"earn_above": float(earn_above), "earned": pick == "dearer", "earn_table": table}
-        if pick == "within":
-            names, W, left_out, budget = cheap, Wc, left_c, float(earn_above)
     sub = cv.subset(names)
     W = W / W.sum(axis=1, keepdims=True)
     per_step = weights_at(cv.t_ahead, edges, W)
@@ -167,7 +150,7 @@ def stack(cv: CrossValidation, horizon: float, cost: Callable[[list[str]], float
         record["variance_model"] = {k: np.asarray(v).tolist() for k, v in model.items()}
     if cost is not None:
         record["cost"] = {"frame": float(cost(names)), "budget": None if budget is None else float(budget),
-                          "left_out": left_out, **earned}
+                          "left_out": left_out}
     return Stacking(names, W, edges, model, record)
 
 
@@ -185,13 +168,6 @@ def _members(cv: CrossValidation, names: Collection[str], steps: Sequence[np.nda
             return list(sub.names), W
         sub = sub.subset([sub.names[i] for i in keep])
         W = np.array([sub.blend_weights(s) for s in steps])
-
-
-def _case_score(cv: CrossValidation, names: list[str], W: np.ndarray, steps: Sequence[np.ndarray]) -> np.ndarray:
-    """``(cases,)``: the blend of ``names`` with the weights ``W`` (bands, members) scored per case -- its
-    :meth:`CrossValidation.case_losses` summed over the bands ``steps`` (a band a case has no frame in adds 0)."""
-    sub = cv.subset(names)
-    return np.sum([np.nan_to_num(sub.case_losses(W[b], s), nan=0.0) for b, s in enumerate(steps)], axis=0)
 
 
 def _within_budget(cv: CrossValidation, steps: Sequence[np.ndarray], cost: Callable[[list[str]], float],
@@ -479,40 +455,6 @@ class CrossValidation:
         lw, lv = loss(w)[0], loss(vertex)[0]
         return (w, lw) if lw <= lv else (vertex, lv)
 
-    def case_losses(self, w: ArrayLike, steps: ArrayLike | None = None) -> np.ndarray:
-        """``(cases,)``: each case's term of :meth:`band_loss`'s mean for the weights ``w`` over ``steps`` (its RMS
-        error over the band's steps inside its held-out movement, on the truth's scale), NaN for a case with no
-        such step.  What :func:`stack` compares sets of families with, case by case, for the one-standard-error
-        rule."""
-        K, h, t, count, keep = self._band(steps)
-        w = np.asarray(w, dtype=np.float64)
-        d = float(np.sum(w)) - 1.0
-        q = np.maximum(np.einsum("cmn,m,n->c", K, w, w) + 2.0 * d * (h @ w) + d * d * t, 0.0)
-        out = np.full(keep.shape[0], np.nan)
-        out[keep] = np.sqrt(q / count)
-        return out
-
-    def _band(self, steps: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(K, h, t, count, keep)`` of :meth:`_loss` over ``steps``: the cases' quadratic forms summed over the
-        band's steps inside their held-out movements (the cases ``keep`` that have one)."""
-        g = self._gram()
-        C = len(self.controlled or self.observed)
-        H = self.truth.shape[1]
-        sel = np.arange(H) if steps is None else np.asarray(steps)
-        n_rt = max(1, int(round(self.horizon / self.dt)))
-        mask = self.valid[:, sel] | (sel < n_rt)[None, :]  # (cases, S)
-        keep = np.asarray(mask.any(axis=1), dtype=bool)
-        mask = mask[keep]
-        rows = g["rows"][keep]
-        cols = [g["names"].index(m) for m in self.names]
-        tt = g["t"][np.ix_(rows, sel)]  # (cases, S)
-        scale = max(float(np.sqrt(np.sum(tt) / max(tt.size * C, 1))), 1e-300)  # the truth's RMS
-        Wm = mask.astype(np.float64)
-        K = np.einsum("cs,csmn->cmn", Wm, g["G"][np.ix_(rows, sel, cols, cols)]) / scale / scale
-        h = np.einsum("cs,csm->cm", Wm, g["u"][np.ix_(rows, sel, cols)]) / scale / scale
-        t = np.einsum("cs,cs->c", Wm, tt) / scale / scale
-        return K, h, t, Wm.sum(axis=1) * C, keep
-
     def _loss(self, steps: ArrayLike | None) -> Callable[[np.ndarray], tuple[float, np.ndarray]]:
         """The stacking loss of weights ``w`` over ``steps`` and its gradient (a closure over the band's arrays).
 
@@ -522,7 +464,23 @@ class CrossValidation:
         steps inside the held-out movement).  The sums are formed once per band, and each evaluation costs
         ``O(cases M^2)`` instead of a pass over every prediction; the values are those of the direct sum up to
         rounding (no cancellation: ``K`` holds the members' own errors)."""
-        K, h, t, count, _ = self._band(steps)
+        g = self._gram()
+        C = len(self.controlled or self.observed)
+        H = self.truth.shape[1]
+        sel = np.arange(H) if steps is None else np.asarray(steps)
+        n_rt = max(1, int(round(self.horizon / self.dt)))
+        mask = self.valid[:, sel] | (sel < n_rt)[None, :]  # (cases, S)
+        keep = mask.any(axis=1)
+        mask = mask[keep]
+        rows = g["rows"][keep]
+        cols = [g["names"].index(m) for m in self.names]
+        tt = g["t"][np.ix_(rows, sel)]  # (cases, S)
+        scale = max(float(np.sqrt(np.sum(tt) / max(tt.size * C, 1))), 1e-300)  # the truth's RMS
+        Wm = mask.astype(np.float64)
+        K = np.einsum("cs,csmn->cmn", Wm, g["G"][np.ix_(rows, sel, cols, cols)]) / scale / scale
+        h = np.einsum("cs,csm->cm", Wm, g["u"][np.ix_(rows, sel, cols)]) / scale / scale
+        t = np.einsum("cs,cs->c", Wm, tt) / scale / scale
+        count = Wm.sum(axis=1) * C
 
         def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
             d = float(np.sum(w)) - 1.0

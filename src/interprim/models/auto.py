@@ -107,10 +107,7 @@ class AutoInteraction(Predictor):
         Seconds (modelled) a streamed frame may always cost: the budget is the larger of ``frame_budget`` times the
         Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a millisecond (small data
         sets, few DoFs), a multiple of it would leave out the families that carry the accuracy, for a saving no
-        control loop needs; 0 makes the budget purely relative.  Above ``frame_budget`` times the IP's frame a blend
-        must earn its cost: it is kept only when its held-out loss beats the best blend within that multiple by
-        more than one standard error over the held-out demonstrations (``stack``'s ``earn_above``); otherwise the
-        cheaper blend is made.
+        control loop needs; 0 makes the budget purely relative.
 
     Attributes
     ----------
@@ -132,9 +129,8 @@ class AutoInteraction(Predictor):
         level per agent, chosen by cross-fitting: :func:`interprim.model_selection.stacking.band_level`);
         ``cost``: ``frame`` (the
         model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
-        ``frame_budget``, ``budget`` (s, the one that applied), ``left_out`` (``{family: its modelled frame}`` of
-        the families left out for the budget), ``not_costed`` and, when the floor is above the multiple,
-        ``earn_above``, ``earned`` and ``earn_table`` (the one-standard-error comparison of the dearer blend).
+        ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
+        for the budget) and ``not_costed``.
     """
 
     _FITTED = "model_"
@@ -218,15 +214,6 @@ class AutoInteraction(Predictor):
         budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
                                                             float(self.frame_budget_floor))
         return costs, cost, ip_frame, budget
-
-    def earn_above(self, ip_frame: float, budget: float | None) -> float | None:
-        """Seconds above which a blend must earn its cost (``frame_budget`` times the IP's frame ``ip_frame``, when
-        the floor lifts the ``budget`` above it; None otherwise): :func:`~interprim.model_selection.stacking.stack`'s
-        ``earn_above``."""
-        if budget is None or self.frame_budget is None:
-            return None
-        relative = float(self.frame_budget) * float(ip_frame)
-        return relative if relative < budget else None
 
     def factories(self) -> dict:
         """``{family: factory of an unfitted estimator}`` of the candidates: a registry name built with this model's
@@ -324,10 +311,7 @@ class AutoInteraction(Predictor):
                 selection["not_compared"] = dict(cv.why)
         if self.combine == "blend" and cv is not None and len(cv.names) > 1:
             # the variance model is fitted once, after the long-range choice has set the weights
-            # above frame_budget x the IP's frame (up to the floor), a blend must be better by more than its noise
-            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False,
-                                    earn_above=self.earn_above(ip_frame, budget))
-            budget = fitted.record.get("cost", {}).get("budget", budget)  # the budget that applied
+            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
             # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
             fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
             info = fitted.record
@@ -354,8 +338,7 @@ class AutoInteraction(Predictor):
         selection["cost"] = {"frame": cost(kept), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
                              "frame_budget_floor": float(self.frame_budget_floor),
                              "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
-                             "not_costed": [m for m in kept if costs.get(m) is None],
-                             **{k: record[k] for k in ("earn_above", "earned", "earn_table") if k in record}}
+                             "not_costed": [m for m in kept if costs.get(m) is None]}
         progress.close()
         dt = float(dt)
         self.chosen_ = chosen
@@ -471,12 +454,6 @@ class AutoInteraction(Predictor):
                 f"the larger of {c['frame_budget']:g}x and {1e3 * floor:.2f} ms"
             line += f" (budget, {rule}: {1e3 * c['budget']:.2f} ms)"
         out = [line]
-        if "earned" in c:  # the floor's dearer blend against the best within frame_budget x the IP's frame
-            t = c["earn_table"]["within"]
-            out.append(f"a blend dearer than {1e3 * c['earn_above']:.2f} ms ({c['frame_budget']:g}x the IP's) "
-                       + (f"was kept: better by {t['vs_best']:.3g} (one standard error {t['se']:.3g})" if c["earned"]
-                          else f"was not kept: not better by more than its noise ({t['vs_best']:.3g}, one standard "
-                               f"error {t['se']:.3g})"))
         if c.get("left_out"):
             out.append("left out for the budget: " + ", ".join(
                 f"{m} ({1e3 * v:.2f} ms a frame)" for m, v in sorted(c["left_out"].items(), key=lambda kv: kv[1])))

@@ -48,3 +48,11 @@ def test_the_mean_alone_is_the_clock_and_the_true_end_helps_only_the_seconds(fol
     for rule in res.values():
         assert 0.0 < rule["band over the rest, robot"] <= 1.0
     assert "| default |" in sr.tables({"t": res})
+    # the latest third: the outer fold fitted on the earlier recordings, one of the three whose mean is given
+    for rule in res.values():
+        for k in ("real time ÷ clock", "rest of the movement ÷ clock"):
+            assert f"{k} (latest third)" in rule
+    assert p["rest of the movement ÷ clock (latest third)"] == pytest.approx(1.0, abs=1e-9)
+    one = sr.replay(outer, [inner[-1]], {"default": sr.default_rule()})["default"]
+    assert res["default"]["real time ÷ clock (latest third)"] == pytest.approx(one["real time ÷ clock"], rel=1e-12)
+    assert max(inner[-1][0]) == max(max(h) for h, _, _ in inner)  # the last fold holds out the latest recordings

@@ -18,6 +18,7 @@ from .core.errors import (
     ModelFileError,
     NotFittedError,
     OutOfRangeWarning,
+    PaceWarning,
     RepresentationWarning,
 )
 
@@ -49,6 +50,7 @@ __all__ = [
     "NotFittedError",
     "ModelFileError",
     "OutOfRangeWarning",
+    "PaceWarning",
     "RepresentationWarning",
     "DataFileError",
     "__version__",

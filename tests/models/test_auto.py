@@ -425,14 +425,15 @@ def test_a_users_own_family_joins_the_blend(task, tmp_path):
         ip.AutoInteraction([0, 1], candidates=("nn", ("shifted",))).fit(dev.demos, dt=dev.dt)
 
 
-def _tied(n=12, Do=3, Dc=3, T=80, seed=0):
+def _tied(n=12, Do=3, Dc=3, T=80, seed=0, scale=None):
     """Sines of random amplitude, frequency and phase for the observed agent and a fixed quadratic map of them for
-    the controlled one: data on which the families tie (issue 37's second benchmark set, smaller)."""
+    the controlled one: data on which the families tie (issue 37's second benchmark set, smaller).  ``scale``: each
+    demonstration's length as a multiple of ``T`` (default: 0.9-1.1 at random)."""
     rng = np.random.default_rng(seed)
     A, B = rng.normal(size=(Do, Dc)) / np.sqrt(Do), rng.normal(size=(Do, Dc)) / np.sqrt(Do)
     out = []
-    for _ in range(n):
-        s = np.linspace(0, 1, int(round(T * rng.uniform(0.9, 1.1))))[:, None]
+    for i in range(n):
+        s = np.linspace(0, 1, int(round(T * (rng.uniform(0.9, 1.1) if scale is None else scale[i]))))[:, None]
         x = rng.uniform(0.7, 1.3, Do) * np.sin(2 * np.pi * rng.uniform(0.8, 1.2, Do) * s + rng.uniform(-.3, .3, Do))
         out.append(np.hstack([x, x @ A + (x ** 2) @ B]) + 0.01 * rng.standard_normal((len(s), Do + Dc)))
     return out
@@ -586,3 +587,54 @@ def test_frame_budget_has_a_floor_in_milliseconds(tied):
     assert c["budget"] >= r["budget"] and c["budget"] == pytest.approx(DEFAULT_FRAME_BUDGET_FLOOR)  # tiny IP here
     # the blend within the floor may be dearer than within 3x the IP, never beyond the floor
     assert r["frame"] <= r["budget"] < c["budget"]
+
+
+def _paced(n=15, faster=0.3, seed=3):
+    """``n`` demonstrations of the tied data whose durations fall by ``faster`` (a fraction) from the first to the
+    last, with a little jitter: a partner speeding up over a session."""
+    jitter = np.random.default_rng(seed + 100).uniform(0.97, 1.03, n)
+    return _tied(n, T=60, seed=seed, scale=(1.0 - faster * np.arange(n) / (n - 1)) * jitter)
+
+
+def test_pace_trend_measures_a_drift_in_duration_with_the_order():
+    """``pace_trend``: Spearman's rank correlation of duration with position, the first and last thirds' means and
+    whether the trend is significant (p < PACE_P and a change of at least PACE_CHANGE); nothing to measure for fewer
+    than 6 demonstrations or equal durations."""
+    from scipy.stats import spearmanr
+
+    from interprim.models.training import PACE_CHANGE, PACE_P, pace_trend
+
+    d = [2.6, 2.55, 2.5, 2.52, 2.4, 2.35, 2.3, 2.25, 2.2]
+    t = pace_trend(d)
+    assert t["n"] == 9 and t["rho"] == pytest.approx(spearmanr(range(9), d)[0]) and t["rho"] < -0.9
+    assert t["first"] == pytest.approx(np.mean(d[:3])) and t["last"] == pytest.approx(np.mean(d[-3:]))
+    assert t["change"] == pytest.approx(np.mean(d[-3:]) / np.mean(d[:3]) - 1.0)
+    assert t["significant"] and t["p"] < PACE_P and abs(t["change"]) >= PACE_CHANGE
+    small = pace_trend([2.0 + 0.001 * i for i in range(9)])  # a monotone trend, but a 0.3 % change
+    assert small["p"] < PACE_P and not small["significant"]
+    mixed = pace_trend(np.random.default_rng(0).permutation(d))
+    assert not mixed["significant"]
+    assert pace_trend(d[:5]) is None and pace_trend([2.0] * 8) is None
+
+
+def test_a_default_fitted_on_demonstrations_that_speed_up_warns_once_and_says_so():
+    """Demonstrations that get shorter with their order: the fit raises one ``PaceWarning`` naming the trend,
+    records it in ``selection_["pace"]`` and ``summary()`` says it; the same demonstrations shuffled give no warning
+    and no line."""
+    import warnings
+
+    demos = _paced()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        auto = ip.AutoInteraction([0, 1, 2], candidates=("nn", "prior")).fit(demos, dt=0.02)
+    paced = [w for w in caught if issubclass(w.category, ip.PaceWarning)]
+    assert len(paced) == 1 and "shorter than the first" in str(paced[0].message)
+    p = auto.selection_["pace"]
+    assert p["significant"] and p["change"] < -0.2 and p["n"] == 15
+    assert "durations change with their order" in auto.summary()
+    order = np.random.default_rng(1).permutation(len(demos))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mixed = ip.AutoInteraction([0, 1, 2], candidates=("nn", "prior")).fit([demos[i] for i in order], dt=0.02)
+    assert not [w for w in caught if issubclass(w.category, ip.PaceWarning)]
+    assert not mixed.selection_["pace"]["significant"] and "durations change" not in mixed.summary()

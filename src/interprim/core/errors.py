@@ -55,3 +55,11 @@ class RepresentationWarning(UserWarning):
     """The DMPs cannot represent the demonstrations well enough (e.g. a periodic movement with too few basis
     functions): their reconstruction or their mean is far from the recorded movements, relative to the spread
     between demonstrations.  The numbers are in ``InteractionPrimitive.representation_``."""
+
+
+class PaceWarning(UserWarning):
+    """The demonstrations' durations change with their order (people change pace over a session): a
+    cross-validation that mixes early and late demonstrations then measures a partner at the session's average pace,
+    and its figures may be optimistic for a partner at a new pace.  The numbers are in
+    ``AutoInteraction.selection_["pace"]`` (:func:`interprim.models.training.pace_trend`)."""
+

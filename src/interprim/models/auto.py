@@ -26,13 +26,14 @@ import numpy as np
 from ..core.blas import one_blas_thread
 from ..core.cache import std_unused
 from ..core.cv import DEFAULT_HORIZON
-from ..core.errors import OutOfRangeWarning
+from ..core.errors import OutOfRangeWarning, PaceWarning
 from ..core.input_range import fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, stacking
 from . import registry
 from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
+from .training import pace_trend
 
 __all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR"]
 
@@ -130,7 +131,9 @@ class AutoInteraction(Predictor):
         ``cost``: ``frame`` (the
         model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
         ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
-        for the budget) and ``not_costed``.
+        for the budget) and ``not_costed``.  ``pace``: how the demonstrations' durations change with
+        their order (:func:`~interprim.models.training.pace_trend`; a significant trend raises a
+        :class:`~interprim.core.errors.PaceWarning` once and :meth:`summary` says it).
     """
 
     _FITTED = "model_"
@@ -340,6 +343,10 @@ class AutoInteraction(Predictor):
                              "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
                              "not_costed": [m for m in kept if costs.get(m) is None]}
         progress.close()
+        pace = pace_trend([(len(d) - 1) * dt for d in train])
+        selection["pace"] = pace
+        if pace is not None and pace["significant"]:
+            warnings.warn(PaceWarning(pace_message(pace)), stacklevel=2)
         dt = float(dt)
         self.chosen_ = chosen
         self.weights_ = weights
@@ -438,6 +445,9 @@ class AutoInteraction(Predictor):
                     + " (the smallest level that covers 90 % of demonstrations left out of its calibration)")
         else:
             lines.append(f"using {self.chosen_} alone")
+        pace = s.get("pace")
+        if pace is not None and pace.get("significant"):
+            lines.append(pace_message(pace))
         return "\n".join(lines + self._cost_lines())
 
     def _cost_lines(self) -> list:
@@ -460,4 +470,14 @@ class AutoInteraction(Predictor):
         if c.get("not_costed"):
             out.append("not costed (no cost model): " + ", ".join(c["not_costed"]))
         return out
+
+
+def pace_message(pace: dict) -> str:
+    """What :func:`~interprim.models.training.pace_trend`'s significant trend means for the fitted model."""
+    return (f"the demonstrations' durations change with their order (Spearman rho {pace['rho']:+.2f} over "
+            f"{pace['n']} demonstrations, "
+            f"p = {pace['p']:.2g}; the last third {abs(100 * pace['change']):.0f} % "
+            f"{'shorter' if pace['change'] < 0 else 'longer'} than the first, {pace['last']:.2f} s against "
+            f"{pace['first']:.2f} s): the cross-validation mixes early and late demonstrations, so its figures may be "
+            "optimistic for a partner at a new pace; check the model on recordings made after these")
 

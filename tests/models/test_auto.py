@@ -629,6 +629,7 @@ def test_a_default_fitted_on_demonstrations_that_speed_up_warns_once_and_says_so
         auto = ip.AutoInteraction([0, 1, 2], candidates=("nn", "prior")).fit(demos, dt=0.02)
     paced = [w for w in caught if issubclass(w.category, ip.PaceWarning)]
     assert len(paced) == 1 and "shorter than the first" in str(paced[0].message)
+    assert paced[0].filename == __file__  # said of the caller's line
     p = auto.selection_["pace"]
     assert p["significant"] and p["change"] < -0.2 and p["n"] == 15
     assert "durations change with their order" in auto.summary()

@@ -346,7 +346,7 @@ class AutoInteraction(Predictor):
         pace = pace_trend([(len(d) - 1) * dt for d in train])
         selection["pace"] = pace
         if pace is not None and pace["significant"]:
-            warnings.warn(PaceWarning(pace_message(pace)), stacklevel=2)
+            warnings.warn(PaceWarning(pace_message(pace)), stacklevel=3)  # the caller of fit (past its wrapper)
         dt = float(dt)
         self.chosen_ = chosen
         self.weights_ = weights
@@ -474,10 +474,10 @@ class AutoInteraction(Predictor):
 
 def pace_message(pace: dict) -> str:
     """What :func:`~interprim.models.training.pace_trend`'s significant trend means for the fitted model."""
+    p = "p < 0.001" if pace["p"] < 0.001 else f"p = {pace['p']:.3f}"
+    way = "shorter" if pace["change"] < 0 else "longer"
     return (f"the demonstrations' durations change with their order (Spearman rho {pace['rho']:+.2f} over "
-            f"{pace['n']} demonstrations, "
-            f"p = {pace['p']:.2g}; the last third {abs(100 * pace['change']):.0f} % "
-            f"{'shorter' if pace['change'] < 0 else 'longer'} than the first, {pace['last']:.2f} s against "
-            f"{pace['first']:.2f} s): the cross-validation mixes early and late demonstrations, so its figures may be "
-            "optimistic for a partner at a new pace; check the model on recordings made after these")
-
+            f"{pace['n']} demonstrations, {p}; the last third {abs(100 * pace['change']):.0f} % {way} than the "
+            f"first, {pace['last']:.2f} s against {pace['first']:.2f} s): the cross-validation mixes early and late "
+            "demonstrations, so its figures may be optimistic for a partner at a new pace; check the model on "
+            "recordings made after these")

@@ -205,7 +205,8 @@ def uniform_demonstrations(demos, dt: float | None = None):
 
 def pace_trend(durations: Sequence[float]) -> dict[str, Any] | None:
     """How the demonstrations' durations change with their order: people repeating an interaction speed up or slow
-    down over a session (on NuiSI's fist bump the last third of the development recordings is 12 % shorter than the first).
+    down over a session (on NuiSI's fist bump the last third of the development recordings is 13 % shorter than
+    the first).
 
     Parameters
     ----------

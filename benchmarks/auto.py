@@ -123,9 +123,13 @@ def warm_up() -> None:
     import interprim as ip
     from interprim.core._compiled.loader import warmup
 
+    import warnings
+
     warmup()
     demos = shared_factors(6, 2, 2, 40, seed=3)
-    ip.AutoInteraction([0, 1], frame_budget=None).fit(demos, dt=0.01).predict(demos[0][:20, :2])
+    with warnings.catch_warnings():  # about this tiny warm-up set, not the measured data
+        warnings.simplefilter("ignore", ip.PaceWarning)
+        ip.AutoInteraction([0, 1], frame_budget=None).fit(demos, dt=0.01).predict(demos[0][:20, :2])
 
 
 def measure(generator, S, Do, Dc, T, quick=False) -> dict:

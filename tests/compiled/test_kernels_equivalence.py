@@ -47,6 +47,8 @@ MEASURED = {
     "conditioning.lowrank_condition_mean": (2.6e-11, 3.1e-10, 3e-9),  # sigma2 = 1e-3: condition number ~1e6
     "rollout.response_positions": (2.3e-15, 8.6e-16, 1e-13),
     "phase_likelihood.phase_loglik_batch": (1.9e-13, 1.5e-13, 2e-12),
+    # the noises 0.1-10x the model's (each row bit for bit phase_loglik_batch's at its noise, asserted there)
+    "phase_likelihood.phase_loglik_noise_grid": (1.6e-12, 2.1e-12, 2e-11),
     # whole stream (phase + trajectory per frame); the phase ends with a parabolic step through the best three
     # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/compiled/test_fastpaths.py)
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
@@ -360,6 +362,28 @@ def check_phase_likelihood_phase_loglik_batch(models, demos):
     return worst
 
 
+def check_phase_likelihood_phase_loglik_noise_grid(models, demos):
+    """Every noise's row against the numpy reference, and against phase_loglik_batch at that noise bit for bit (the
+    noise selection's numbers are those of one call per noise)."""
+    comp, ref = both("phase_likelihood.phase_loglik_noise_grid")
+    batch = registry.compiled("phase_likelihood.phase_loglik_batch")
+    m = models["likelihood"]
+    fs = PL.fast_state(m.fitted_)
+    s2 = PL.phase_noise(m.fitted_) * np.array([1e-3, 0.1, 1.0, 10.0, 1e3])
+    worst = 0.0
+    for M in (2, 5, 40, 70):
+        z = np.ascontiguousarray(m.fitted_.observed_to_latent(_prefix(demos, M)))
+        Rg = fs.mean_path(z[0])
+        s = np.linspace(0.05, 1.0, 7)
+        a = comp(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, s2, np.empty((s2.size, s.size)))
+        one = np.stack([batch(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, float(v), np.empty(s.size)) for v in s2])
+        assert np.array_equal(a, one), "phase_loglik_noise_grid differs from phase_loglik_batch noise by noise"
+        # against numpy at the noises near the model's (at 1e-3 of it the problem's conditioning, not the kernel,
+        # sets the difference, as for phase_loglik_batch)
+        worst = max(worst, rel(a[1:4], ref(fs.Zh, Rg, z, s, fs.sq, fs.Uh, fs.K0, s2[1:4])))
+    return worst
+
+
 def check_phase_likelihood_track_step(models, demos):
     """The stream's lattice search, compiled (track_step) against numpy (the reference's scores of the same
     lattice), frame by frame: the phases and the predictions."""
@@ -431,6 +455,7 @@ CHECKS = {
     "conditioning.lowrank_condition_mean": check_conditioning_lowrank_condition_mean,
     "rollout.response_positions": check_rollout_response_positions,
     "phase_likelihood.phase_loglik_batch": check_phase_likelihood_phase_loglik_batch,
+    "phase_likelihood.phase_loglik_noise_grid": check_phase_likelihood_phase_loglik_noise_grid,
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,

@@ -74,6 +74,11 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "log-likelihood of the observation at many candidate phases (the likelihood phase); the reference "
            "takes the same arrays without M and out"),
+    Kernel("phase_likelihood.phase_loglik_noise_grid", "phase_likelihood:phase_loglik_noise_grid",
+           "interprim.phase.likelihood:_loglik_noise_grid_numpy", False,
+           "phase_loglik_batch at several position noises, each phase's statistics once (the likelihood phase's "
+           "noise selection); its rows equal phase_loglik_batch's bit for bit; the reference takes the same arrays "
+           "without M and out"),
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),

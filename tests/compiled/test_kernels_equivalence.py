@@ -40,6 +40,7 @@ MEASURED = {
     "dtw.open_end": (0.0, 0.0, 0.0),
     "dtw.backtrack": (0.0, 0.0, 0.0),
     "dtw.incremental_step": (0.0, 0.0, 0.0),
+    "dtw.incremental_block": (0.0, 0.0, 0.0),
     "observation.forcing_values_into": (9.0e-15, 0.0, 1e-13),
     "observation.design_stats": (1.9e-16, 1.9e-16, 1e-14),
     "observation.position_stats": (3.7e-15, 4.8e-16, 1e-13),
@@ -127,6 +128,41 @@ def check_dtw_backtrack():
         Dm = acc(rng.normal(size=(N, D)), rng.normal(size=(M, D)))
         for n_end in {0, N // 2, N - 1}:
             np.testing.assert_array_equal(comp(Dm, n_end), ref(Dm, n_end))
+    return 0.0
+
+
+def check_dtw_incremental_block():
+    """Blocks of query frames through the compiled loop against the numpy steps frame by frame, bit for bit: the last
+    column and n* after every block (IncrementalDTW.extend on both paths), the first frame alone or inside a block; on
+    the compiled path a NaN frame stops the block there and raises, the frames before it counted."""
+    rng = np.random.default_rng(9)
+    for N, M, D in SHAPES:
+        u, v = rng.normal(size=(N, D)), rng.normal(size=(M, D))
+        cuts = np.unique(np.concatenate([[0, M], rng.integers(1, max(M, 2), 4)]))
+        for which in ("compiled", "numpy"):
+            with registry.forced(which):
+                inc = IncrementalDTW(u)
+                out = []
+                for a, b in zip(cuts[:-1], cuts[1:]):
+                    n, c = inc.extend(np.ascontiguousarray(v[a:b]))
+                    out.append((n, c, inc.column.copy(), inc.n_frames))
+            if which == "compiled":
+                got = out
+        for (n1, c1, col1, k1), (n2, c2, col2, k2) in zip(got, out):
+            assert (n1, k1) == (n2, k2) and c1 == c2 and np.array_equal(col1, col2)
+        bad = rng.normal(size=(3, D))
+        bad[2, 0] = np.nan
+        with registry.forced("compiled"):  # (extend takes checked frames: the numpy steps do not look)
+            inc = IncrementalDTW(u)
+            with pytest.raises(ValueError, match="NaN or inf"):
+                inc.extend(bad)
+            assert inc.n_frames == 2  # the frames before the NaN entered
+    comp = registry.compiled("dtw.incremental_block")
+    u, v = rng.normal(size=(7, 2)), rng.normal(size=(4, 2))
+    a, b, cost = np.empty(7), np.empty(7), np.empty(7)
+    v[2, 1] = np.inf
+    n, done, _ = comp(np.ascontiguousarray(u.T), v, a, b, cost, 0)
+    assert (n, done) == (-1, 2)
     return 0.0
 
 
@@ -448,6 +484,7 @@ CHECKS = {
     "dtw.open_end": check_dtw_open_end,
     "dtw.backtrack": check_dtw_backtrack,
     "dtw.incremental_step": check_dtw_incremental_step,
+    "dtw.incremental_block": check_dtw_incremental_block,
     "observation.forcing_values_into": check_observation_forcing_values_into,
     "observation.design_stats": check_observation_design_stats,
     "observation.position_stats": check_observation_position_stats,

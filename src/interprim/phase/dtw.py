@@ -240,25 +240,22 @@ class IncrementalDTW:
         """Add the checked, finite query frames ``block`` ``(k, D)`` (float64, C order) one after the other, as
         ``update(frame, check=False)`` of each would, with one look-up of the compiled kernel for the block;
         returns ``(n_star, cost)`` after the last."""
-        step = kernels.kernel("dtw.incremental_step")
-        if step is None:
+        steps = kernels.kernel("dtw.incremental_block")
+        if steps is None:
             for f in block:
                 self.update(f, check=False)
             return self.n_star, self.cost
-        prev, col, cost, uT = self._prev, self._col, self._cost, self._uT
-        n = self.n_star
-        for f in block:
-            first = self.n_frames == 0
-            if not first:
-                prev, col = col, prev
-            n = step(uT, f, prev, col, cost, first)
-            if n < 0:  # non-finite frame: the kernel touched nothing; raise the usual message
-                self._prev, self._col = prev, col
-                raise ValueError("frame contains NaN or inf")
-            self.n_frames += 1
-        self._prev, self._col = prev, col
+        if block.shape[0] == 0:
+            return self.n_star, self.cost
+        # every frame by the per-frame kernel's step, inside one compiled loop (no Python call per frame)
+        n, done, swapped = steps(self._uT, block, self._col, self._prev, self._cost, self.n_frames)
+        if swapped:
+            self._prev, self._col = self._col, self._prev
+        self.n_frames += int(done)
+        if n < 0:  # non-finite frame: the kernel stopped before it; raise the usual message
+            raise ValueError("frame contains NaN or inf")
         self.n_star = int(n)
-        self.cost = float(col[n])
+        self.cost = float(self._col[n])
         return self.n_star, self.cost
 
     def _step_np(self, v, first):

@@ -184,6 +184,28 @@ def _incremental_step(uT, vm, prev, col, cost, first):
 
 
 @njit(cache=True, fastmath=False)
+def _incremental_block(uT, block, a, b, cost, n_frames):
+    """Add the query frames ``block`` ``(k, D)`` one after the other, each by :func:`_incremental_step` (the same
+    numbers): the two column buffers ``a`` (the last column after the frames seen so far, ``n_frames`` of them)
+    and ``b`` swap roles at every frame after the first, as the per-frame calls of
+    :meth:`interprim.phase.dtw.IncrementalDTW.extend` swap them.  Returns ``(n*, frames added, swapped)``:
+    ``swapped`` says whether the roles are now swapped (the last column in ``b``, ``a`` the previous one); a frame
+    with a NaN or inf stops the block at it, untouched (``n*`` -1, the roles as the per-frame calls leave them)."""
+    prev, col = b, a
+    swapped = False
+    n = -1
+    for i in range(block.shape[0]):
+        first = n_frames + i == 0
+        if not first:
+            prev, col = col, prev
+            swapped = not swapped
+        n = _incremental_step(uT, block[i], prev, col, cost, first)
+        if n < 0:
+            return -1, i, swapped
+    return n, block.shape[0], swapped
+
+
+@njit(cache=True, fastmath=False)
 def _backtrack(Dm, n_end):
     M = Dm.shape[0]
     path = np.empty((M + n_end + 1, 2), dtype=np.int64)
@@ -219,4 +241,5 @@ def warm_up(u, v) -> None:
     N = u.shape[0]
     _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
     _incremental_step(uT, v[0], np.zeros(N), np.empty(N), np.empty(N), True)
+    _incremental_block(uT, v, np.zeros(N), np.empty(N), np.empty(N), 0)
     _backtrack(_accumulate(u, v), 2)

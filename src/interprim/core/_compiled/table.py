@@ -50,6 +50,9 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "the alignment path from D (Eq. 5-8); equal"),
     Kernel("dtw.incremental_step", "dtw:_incremental_step", "interprim.phase.dtw:IncrementalDTW._step_np", False,
            "one query frame of the open-end DTW (the new last column and n*); bitwise equal"),
+    Kernel("dtw.incremental_block", "dtw:_incremental_block", "interprim.phase.dtw:IncrementalDTW._step_np", False,
+           "several query frames of the open-end DTW, each by dtw.incremental_step in one compiled loop (the last "
+           "column and n* after each); bitwise equal"),
     Kernel("observation.forcing_values_into", "observation:forcing_values_into",
            "interprim.models.primitive.fitted:FittedPrimitive.observation_design", False,
            "forcing values of Eq. 15 (np.gradient derivatives); the reference's targets Y"),

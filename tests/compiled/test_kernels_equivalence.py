@@ -41,6 +41,7 @@ MEASURED = {
     "dtw.backtrack": (0.0, 0.0, 0.0),
     "dtw.incremental_step": (0.0, 0.0, 0.0),
     "dtw.incremental_block": (0.0, 0.0, 0.0),
+    "dtw.incremental_set": (0.0, 0.0, 0.0),
     "observation.forcing_values_into": (9.0e-15, 0.0, 1e-13),
     "observation.design_stats": (1.9e-16, 1.9e-16, 1e-14),
     "observation.position_stats": (3.7e-15, 4.8e-16, 1e-13),
@@ -163,6 +164,35 @@ def check_dtw_incremental_block():
     v[2, 1] = np.inf
     n, done, _ = comp(np.ascontiguousarray(u.T), v, a, b, cost, 0)
     assert (n, done) == (-1, 2)
+    return 0.0
+
+
+def check_dtw_incremental_set():
+    """Several references of different lengths advanced together, in blocks, on the compiled path, on the numpy
+    path and switching between them mid-query: after every block each reference's n* and D(n*, M) equal those of
+    its own IncrementalDTW fed frame by frame, bit for bit; reset starts a new query."""
+    from interprim.phase.dtw import IncrementalDTWSet
+
+    rng = np.random.default_rng(10)
+    for D in (1, 3):
+        refs = [rng.normal(size=(N, D)) for N in (1, 9, 40, 23)]
+        v = rng.normal(size=(30, D))
+        cuts = [0, 1, 2, 9, 10, 25, 30]
+        for paths in (["compiled"] * 6, ["numpy"] * 6, ["compiled", "numpy"] * 3):
+            st = IncrementalDTWSet(refs)
+            for _query in range(2):  # the second after reset()
+                singles = [IncrementalDTW(r) for r in refs]
+                for (a, b), which in zip(zip(cuts[:-1], cuts[1:]), paths):
+                    with registry.forced(which):
+                        n, c = st.extend(np.ascontiguousarray(v[a:b]))
+                    with registry.forced("numpy"):
+                        for f in v[a:b]:
+                            for inc in singles:
+                                inc.update(f)
+                    assert np.array_equal(n, [inc.n_star for inc in singles])
+                    assert np.array_equal(c, [inc.cost for inc in singles])
+                    assert st.n_frames == b
+                st.reset()
     return 0.0
 
 
@@ -485,6 +515,7 @@ CHECKS = {
     "dtw.backtrack": check_dtw_backtrack,
     "dtw.incremental_step": check_dtw_incremental_step,
     "dtw.incremental_block": check_dtw_incremental_block,
+    "dtw.incremental_set": check_dtw_incremental_set,
     "observation.forcing_values_into": check_observation_forcing_values_into,
     "observation.design_stats": check_observation_design_stats,
     "observation.position_stats": check_observation_position_stats,

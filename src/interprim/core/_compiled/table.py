@@ -53,6 +53,9 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("dtw.incremental_block", "dtw:_incremental_block", "interprim.phase.dtw:IncrementalDTW._step_np", False,
            "several query frames of the open-end DTW, each by dtw.incremental_step in one compiled loop (the last "
            "column and n* after each); bitwise equal"),
+    Kernel("dtw.incremental_set", "dtw:_incremental_set", "interprim.phase.dtw:_step_np", False,
+           "query frames against several references in one call, each reference's columns by dtw.incremental_step "
+           "(IncrementalDTWSet); the reference is one step of one reference; bitwise equal"),
     Kernel("observation.forcing_values_into", "observation:forcing_values_into",
            "interprim.models.primitive.fitted:FittedPrimitive.observation_design", False,
            "forcing values of Eq. 15 (np.gradient derivatives); the reference's targets Y"),

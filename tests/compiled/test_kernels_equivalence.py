@@ -40,6 +40,8 @@ MEASURED = {
     "dtw.open_end": (0.0, 0.0, 0.0),
     "dtw.backtrack": (0.0, 0.0, 0.0),
     "dtw.incremental_step": (0.0, 0.0, 0.0),
+    "dtw.incremental_block": (0.0, 0.0, 0.0),
+    "dtw.incremental_set": (0.0, 0.0, 0.0),
     "observation.forcing_values_into": (9.0e-15, 0.0, 1e-13),
     "observation.design_stats": (1.9e-16, 1.9e-16, 1e-14),
     "observation.position_stats": (3.7e-15, 4.8e-16, 1e-13),
@@ -47,6 +49,8 @@ MEASURED = {
     "conditioning.lowrank_condition_mean": (2.6e-11, 3.1e-10, 3e-9),  # sigma2 = 1e-3: condition number ~1e6
     "rollout.response_positions": (2.3e-15, 8.6e-16, 1e-13),
     "phase_likelihood.phase_loglik_batch": (1.9e-13, 1.5e-13, 2e-12),
+    # the noises 0.1-10x the model's (each row bit for bit phase_loglik_batch's at its noise, asserted there)
+    "phase_likelihood.phase_loglik_noise_grid": (1.6e-12, 2.1e-12, 2e-11),
     # whole stream (phase + trajectory per frame); the phase ends with a parabolic step through the best three
     # scores, so a last-digit change in a score moves it by ~1e-8 at most (tests/compiled/test_fastpaths.py)
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
@@ -125,6 +129,70 @@ def check_dtw_backtrack():
         Dm = acc(rng.normal(size=(N, D)), rng.normal(size=(M, D)))
         for n_end in {0, N // 2, N - 1}:
             np.testing.assert_array_equal(comp(Dm, n_end), ref(Dm, n_end))
+    return 0.0
+
+
+def check_dtw_incremental_block():
+    """Blocks of query frames through the compiled loop against the numpy steps frame by frame, bit for bit: the last
+    column and n* after every block (IncrementalDTW.extend on both paths), the first frame alone or inside a block; on
+    the compiled path a NaN frame stops the block there and raises, the frames before it counted."""
+    rng = np.random.default_rng(9)
+    for N, M, D in SHAPES:
+        u, v = rng.normal(size=(N, D)), rng.normal(size=(M, D))
+        cuts = np.unique(np.concatenate([[0, M], rng.integers(1, max(M, 2), 4)]))
+        for which in ("compiled", "numpy"):
+            with registry.forced(which):
+                inc = IncrementalDTW(u)
+                out = []
+                for a, b in zip(cuts[:-1], cuts[1:]):
+                    n, c = inc.extend(np.ascontiguousarray(v[a:b]))
+                    out.append((n, c, inc.column.copy(), inc.n_frames))
+            if which == "compiled":
+                got = out
+        for (n1, c1, col1, k1), (n2, c2, col2, k2) in zip(got, out):
+            assert (n1, k1) == (n2, k2) and c1 == c2 and np.array_equal(col1, col2)
+        bad = rng.normal(size=(3, D))
+        bad[2, 0] = np.nan
+        with registry.forced("compiled"):  # (extend takes checked frames: the numpy steps do not look)
+            inc = IncrementalDTW(u)
+            with pytest.raises(ValueError, match="NaN or inf"):
+                inc.extend(bad)
+            assert inc.n_frames == 2  # the frames before the NaN entered
+    comp = registry.compiled("dtw.incremental_block")
+    u, v = rng.normal(size=(7, 2)), rng.normal(size=(4, 2))
+    a, b, cost = np.empty(7), np.empty(7), np.empty(7)
+    v[2, 1] = np.inf
+    n, done, _ = comp(np.ascontiguousarray(u.T), v, a, b, cost, 0)
+    assert (n, done) == (-1, 2)
+    return 0.0
+
+
+def check_dtw_incremental_set():
+    """Several references of different lengths advanced together, in blocks, on the compiled path, on the numpy
+    path and switching between them mid-query: after every block each reference's n* and D(n*, M) equal those of
+    its own IncrementalDTW fed frame by frame, bit for bit; reset starts a new query."""
+    from interprim.phase.dtw import IncrementalDTWSet
+
+    rng = np.random.default_rng(10)
+    for D in (1, 3):
+        refs = [rng.normal(size=(N, D)) for N in (1, 9, 40, 23)]
+        v = rng.normal(size=(30, D))
+        cuts = [0, 1, 2, 9, 10, 25, 30]
+        for paths in (["compiled"] * 6, ["numpy"] * 6, ["compiled", "numpy"] * 3):
+            st = IncrementalDTWSet(refs)
+            for _query in range(2):  # the second after reset()
+                singles = [IncrementalDTW(r) for r in refs]
+                for (a, b), which in zip(zip(cuts[:-1], cuts[1:]), paths):
+                    with registry.forced(which):
+                        n, c = st.extend(np.ascontiguousarray(v[a:b]))
+                    with registry.forced("numpy"):
+                        for f in v[a:b]:
+                            for inc in singles:
+                                inc.update(f)
+                    assert np.array_equal(n, [inc.n_star for inc in singles])
+                    assert np.array_equal(c, [inc.cost for inc in singles])
+                    assert st.n_frames == b
+                st.reset()
     return 0.0
 
 
@@ -360,6 +428,28 @@ def check_phase_likelihood_phase_loglik_batch(models, demos):
     return worst
 
 
+def check_phase_likelihood_phase_loglik_noise_grid(models, demos):
+    """Every noise's row against the numpy reference, and against phase_loglik_batch at that noise bit for bit (the
+    noise selection's numbers are those of one call per noise)."""
+    comp, ref = both("phase_likelihood.phase_loglik_noise_grid")
+    batch = registry.compiled("phase_likelihood.phase_loglik_batch")
+    m = models["likelihood"]
+    fs = PL.fast_state(m.fitted_)
+    s2 = PL.phase_noise(m.fitted_) * np.array([1e-3, 0.1, 1.0, 10.0, 1e3])
+    worst = 0.0
+    for M in (2, 5, 40, 70):
+        z = np.ascontiguousarray(m.fitted_.observed_to_latent(_prefix(demos, M)))
+        Rg = fs.mean_path(z[0])
+        s = np.linspace(0.05, 1.0, 7)
+        a = comp(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, s2, np.empty((s2.size, s.size)))
+        one = np.stack([batch(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, float(v), np.empty(s.size)) for v in s2])
+        assert np.array_equal(a, one), "phase_loglik_noise_grid differs from phase_loglik_batch noise by noise"
+        # against numpy at the noises near the model's (at 1e-3 of it the problem's conditioning, not the kernel,
+        # sets the difference, as for phase_loglik_batch)
+        worst = max(worst, rel(a[1:4], ref(fs.Zh, Rg, z, s, fs.sq, fs.Uh, fs.K0, s2[1:4])))
+    return worst
+
+
 def check_phase_likelihood_track_step(models, demos):
     """The stream's lattice search, compiled (track_step) against numpy (the reference's scores of the same
     lattice), frame by frame: the phases and the predictions."""
@@ -424,6 +514,8 @@ CHECKS = {
     "dtw.open_end": check_dtw_open_end,
     "dtw.backtrack": check_dtw_backtrack,
     "dtw.incremental_step": check_dtw_incremental_step,
+    "dtw.incremental_block": check_dtw_incremental_block,
+    "dtw.incremental_set": check_dtw_incremental_set,
     "observation.forcing_values_into": check_observation_forcing_values_into,
     "observation.design_stats": check_observation_design_stats,
     "observation.position_stats": check_observation_position_stats,
@@ -431,6 +523,7 @@ CHECKS = {
     "conditioning.lowrank_condition_mean": check_conditioning_lowrank_condition_mean,
     "rollout.response_positions": check_rollout_response_positions,
     "phase_likelihood.phase_loglik_batch": check_phase_likelihood_phase_loglik_batch,
+    "phase_likelihood.phase_loglik_noise_grid": check_phase_likelihood_phase_loglik_noise_grid,
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,

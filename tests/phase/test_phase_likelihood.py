@@ -491,3 +491,22 @@ def test_scorer_prior_and_shared_parts_are_the_same_numbers(compiled, monkeypatc
     lp3, ll3 = PL.make_scorer(model, z, s2, speed_prior=False)(s)  # no prior: the log-likelihood itself
     np.testing.assert_array_equal(lp3, ll)
     np.testing.assert_array_equal(ll3, ll)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("speed_prior", [True, False])
+def test_noise_curves_equal_one_scorer_per_noise(compiled, speed_prior, monkeypatch):
+    """``make_scorer.noise_curves`` (the likelihood phase's noise selection: every noise on one grid of phases, each
+    phase's statistics once) gives, column by column, exactly (bit for bit) what a scorer of that noise gives, on the
+    compiled and the numpy path, over noises 12 decades apart (the selection's grid) and with or without the prior."""
+    model = _small_model("position", None, "shrinkage").fitted_
+    if not compiled:
+        _numpy_phase_kernels(monkeypatch)
+    z = _demos(1, seed=5)[0][:60, model.observed_dofs_]
+    s2 = PL.phase_noise(model) * 10.0 ** np.arange(-6.0, 6.01, 1.5)
+    s = np.exp(np.linspace(np.log(PL.S_MIN), 0.0, 24))
+    curves = PL.make_scorer(model, z, 1.0, speed_prior=speed_prior).noise_curves(s, s2)
+    assert curves.shape == (s.size, s2.size)
+    one = np.stack([PL.make_scorer(model, z, float(v), speed_prior=speed_prior)(s)[0] for v in s2], axis=1)
+    np.testing.assert_array_equal(curves, one)
+    assert np.all(np.isfinite(curves))

@@ -87,8 +87,9 @@ class AlignedStream(BaseStream):
     """Online prediction of a model that aligns the observed prefix to every training demonstration by open-end
     DTW (:class:`NearestNeighbour`, :class:`~interprim.models.kernel.KernelDemonstrations`).
 
-    One :class:`~interprim.phase.dtw.IncrementalDTW` per training demonstration takes each frame in ``O(N)``
-    (one new column of Eq. 7) instead of re-aligning the whole prefix, and gives exactly the batch alignment;
+    An :class:`~interprim.phase.dtw.IncrementalDTWSet` of the training demonstrations takes each frame in ``O(N)``
+    per demonstration (one new column of Eq. 7) instead of re-aligning the whole prefix, and gives exactly the
+    batch alignment;
     the model then predicts from the alignments (``model.predict_from_alignment``), so :meth:`update` returns exactly
     what ``model.predict`` returns for all frames seen, and :meth:`extend` advances the alignments by several
     frames and predicts once.  ``need_cov`` is accepted for the interface and has no effect.  Every prediction
@@ -98,11 +99,11 @@ class AlignedStream(BaseStream):
     marks_input = True
 
     def __init__(self, model):
-        from ..phase.dtw import IncrementalDTW
+        from ..phase.dtw import IncrementalDTWSet
 
         self.model = model
         self._n_cols = len(model.observed_dofs_)
-        self._dtw = [IncrementalDTW(o) for o in model.observed_]
+        self._dtw = IncrementalDTWSet(model.observed_)  # every demonstration's alignment, advanced in one call
         self._n = 0
         self._marks = InputMarks(model)
 
@@ -113,18 +114,16 @@ class AlignedStream(BaseStream):
 
     def reset(self, robot_state=None):
         """Forget all frames (start a new interaction)."""
-        for d in self._dtw:
-            d.reset()
+        self._dtw.reset()
         self._n = 0
         self._marks.reset()
 
     def _advance(self, block):
-        for d in self._dtw:  # the frames are checked: each alignment takes the block at once
-            d.extend(block)
+        n_star, cost = self._dtw.extend(block)  # the frames are checked: every alignment takes the block at once
         self._n += block.shape[0]
-        n_star = np.array([d.n_star for d in self._dtw], dtype=np.int64)
-        # the batch's normalisation D(n*, M) / (n* + 1 + M), with the same scalar operations
-        cost = np.array([d.cost / (d.n_star + 1 + self._n) for d in self._dtw])
+        n_star = n_star.copy()
+        # the batch's normalisation D(n*, M) / (n* + 1 + M): the same float divisions, element by element
+        cost = cost / (n_star + 1 + self._n)
         pred = self.model.predict_from_alignment(self._n, n_star, cost)
         if self.model.input_range_ is not None:
             self._marks.mark(pred, block)

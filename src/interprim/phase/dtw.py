@@ -31,7 +31,8 @@ import numpy as np
 from ..core._compiled import registry as kernels
 from ..core.validation import as_2d_finite, as_frame
 
-__all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "phase_from_index"]
+__all__ = ["DTWResult", "open_end_dtw", "accumulated_cost", "IncrementalDTW", "IncrementalDTWSet",
+           "phase_from_index"]
 
 
 # ----------------------------------------------------------------------------- numpy equivalents
@@ -240,49 +241,26 @@ class IncrementalDTW:
         """Add the checked, finite query frames ``block`` ``(k, D)`` (float64, C order) one after the other, as
         ``update(frame, check=False)`` of each would, with one look-up of the compiled kernel for the block;
         returns ``(n_star, cost)`` after the last."""
-        step = kernels.kernel("dtw.incremental_step")
-        if step is None:
+        steps = kernels.kernel("dtw.incremental_block")
+        if steps is None:
             for f in block:
                 self.update(f, check=False)
             return self.n_star, self.cost
-        prev, col, cost, uT = self._prev, self._col, self._cost, self._uT
-        n = self.n_star
-        for f in block:
-            first = self.n_frames == 0
-            if not first:
-                prev, col = col, prev
-            n = step(uT, f, prev, col, cost, first)
-            if n < 0:  # non-finite frame: the kernel touched nothing; raise the usual message
-                self._prev, self._col = prev, col
-                raise ValueError("frame contains NaN or inf")
-            self.n_frames += 1
-        self._prev, self._col = prev, col
+        if block.shape[0] == 0:
+            return self.n_star, self.cost
+        # every frame by the per-frame kernel's step, inside one compiled loop (no Python call per frame)
+        n, done, swapped = steps(self._uT, block, self._col, self._prev, self._cost, self.n_frames)
+        if swapped:
+            self._prev, self._col = self._col, self._prev
+        self.n_frames += int(done)
+        if n < 0:  # non-finite frame: the kernel stopped before it; raise the usual message
+            raise ValueError("frame contains NaN or inf")
         self.n_star = int(n)
-        self.cost = float(col[n])
+        self.cost = float(self._col[n])
         return self.n_star, self.cost
 
     def _step_np(self, v, first):
-        u = self.reference
-        c = np.zeros(u.shape[0])
-        for d in range(u.shape[1]):
-            diff = u[:, d] - v[d]
-            c += diff * diff
-        col = self._col
-        if first:
-            np.cumsum(c, out=col)
-        else:
-            prev = self._prev
-            col[0] = prev[0] + c[0]
-            tmp = np.minimum(prev[:-1], prev[1:]).tolist()
-            cl = c.tolist()
-            x = col[0]
-            out = [x]
-            for n in range(1, len(cl)):
-                t = tmp[n - 1]
-                x = (t if t < x else x) + cl[n]
-                out.append(x)
-            col[:] = out
-        return _argmin_first_np(col)
+        return _step_np(self.reference, v, self._prev, self._col, first)
 
     @property
     def column(self) -> np.ndarray:
@@ -290,3 +268,91 @@ class IncrementalDTW:
         c = self._col.view()
         c.flags.writeable = False
         return c
+
+
+def _step_np(u, v, prev, col, first):
+    """One query frame ``v`` against the reference ``u`` ``(N, D)`` in numpy: the new last column into ``col``
+    (``prev`` the old one; the operations of the compiled step, bitwise equal); returns n*."""
+    c = np.zeros(u.shape[0])
+    for d in range(u.shape[1]):
+        diff = u[:, d] - v[d]
+        c += diff * diff
+    if first:
+        np.cumsum(c, out=col)
+    else:
+        col[0] = prev[0] + c[0]
+        tmp = np.minimum(prev[:-1], prev[1:]).tolist()
+        cl = c.tolist()
+        x = col[0]
+        out = [x]
+        for n in range(1, len(cl)):
+            t = tmp[n - 1]
+            x = (t if t < x else x) + cl[n]
+            out.append(x)
+        col[:] = out
+    return _argmin_first_np(col)
+
+
+class IncrementalDTWSet:
+    """Open-end DTW of one query against several references, frames taken in blocks: after ``M`` frames its
+    ``n_star[j]`` and ``cost[j]`` equal those of ``IncrementalDTW(references[j])`` fed the same frames (and so
+    of ``open_end_dtw(references[j], v[:M])``), bit for bit.
+
+    One compiled call per block advances every reference (:func:`interprim.core._compiled.dtw._incremental_set`,
+    each reference's columns by the per-frame step), instead of one Python call per reference; the numpy steps
+    (before the kernels are loaded) work on the same buffers.  Memory: two columns per reference.
+
+    Parameters
+    ----------
+    references : sequence of array_like, shape (N_j, D)
+    """
+
+    def __init__(self, references):
+        refs = [as_2d_finite(r, "reference", min_rows=1) for r in references]
+        if not refs:
+            raise ValueError("IncrementalDTWSet needs at least one reference")
+        D = refs[0].shape[1]
+        if any(r.shape[1] != D for r in refs):
+            raise ValueError(f"every reference must have {D} columns, got {[r.shape[1] for r in refs]}")
+        self.references = refs
+        J = len(refs)
+        self._lengths = np.array([r.shape[0] for r in refs], dtype=np.int64)
+        self._starts = np.concatenate([[0], np.cumsum(self._lengths)[:-1]]).astype(np.int64)
+        total = int(self._lengths.sum())
+        # flat storage: each reference transposed, (D, N_j) in C order, one after the other; its columns likewise
+        self._uT = np.concatenate([np.ascontiguousarray(r.T).ravel() for r in refs])
+        self._A, self._B, self._work = np.zeros(total), np.zeros(total), np.zeros(total)
+        self._swapped = np.zeros(J, dtype=np.bool_)  # the last column of reference j in B
+        self.n_frames = 0
+        self.n_star = np.full(J, -1, dtype=np.int64)
+        self.cost = np.full(J, np.inf)
+
+    def reset(self):
+        """Forget all query frames."""
+        self.n_frames = 0
+        self.n_star[:] = -1
+        self.cost[:] = np.inf
+
+    def extend(self, block) -> tuple[np.ndarray, np.ndarray]:
+        """Add the checked, finite query frames ``block`` ``(k, D)`` (float64, C order, ``k >= 1``); returns
+        ``(n_star, cost)`` after the last, arrays over the references (``D(n*, M)``, as
+        :attr:`IncrementalDTW.cost`)."""
+        steps = kernels.kernel("dtw.incremental_set")
+        if steps is not None:
+            if steps(self._uT, self._starts, self._lengths, block, self._A, self._B, self._work, self._swapped,
+                     self.n_frames, self.n_star, self.cost) < 0:
+                raise ValueError("frame contains NaN or inf")
+        else:
+            for j, u in enumerate(self.references):
+                s, N = int(self._starts[j]), u.shape[0]
+                a, b = self._A[s:s + N], self._B[s:s + N]
+                for i, f in enumerate(block):
+                    first = self.n_frames + i == 0
+                    if not first:
+                        self._swapped[j] = not self._swapped[j]
+                    prev, col = (a, b) if self._swapped[j] else (b, a)
+                    n = _step_np(u, f, prev, col, first)
+                self.n_star[j] = n
+                self.cost[j] = col[n]
+        self.n_frames += block.shape[0]
+        return self.n_star, self.cost

@@ -272,6 +272,12 @@ def _loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2):
     return -0.5 * (N * LOG2PI + logdet + (rr - cTc) / s2 - tKt)
 
 
+def _loglik_noise_grid_numpy(Zh, Rg, z, s_values, sq, Uh, K0, s2_values):
+    """Numpy equivalent of :func:`interprim.core._compiled.phase_likelihood.phase_loglik_noise_grid`: ``(S2, C)``,
+    :func:`_loglik_batch_numpy` at each noise."""
+    return np.stack([_loglik_batch_numpy(Zh, Rg, z, s_values, sq, Uh, K0, float(v)) for v in s2_values])
+
+
 def log_speed_prior(model, M: int, s):
     """Log-normal prior on the implied duration ``(M - 1) dt / s`` (density in ``s``)."""
     d = np.log(np.asarray(model.durations_, dtype=np.float64))
@@ -383,8 +389,12 @@ class make_scorer:
             else:
                 with single_thread():
                     ll = _loglik_batch_numpy(fs.Zh, self.Rg, self.z, s_values, fs.sq, fs.Uh, fs.K0, self.s2)
+        return self._posterior(ll, s_values), ll
+
+    def _posterior(self, ll, s_values):
+        """The log posteriors of the log-likelihoods ``ll`` at ``s_values`` (``ll`` itself without the prior)."""
         if self.prior is None:
-            return ll, ll
+            return ll
         logel, mu, sd = self.prior
         # the log-normal prior of log_speed_prior, element by element in floats (a few candidates: cheaper than
         # six numpy operations on arrays of three, and the same IEEE operations in the same order)
@@ -392,7 +402,26 @@ class make_scorer:
         for l_i, ls_i in zip(ll.tolist(), np.log(s_values).tolist()):
             d = ((logel - ls_i) - mu) / sd
             lp.append(l_i + (-0.5 * (d * d) - ls_i))
-        return np.array(lp), ll
+        return np.array(lp)
+
+    def noise_curves(self, s_values, s2_values):
+        """``(C, S2)``: the log posteriors at the phases ``s_values`` under each position noise of ``s2_values``,
+        column ``v`` what ``make_scorer(model, z, s2_values[v], ...)(s_values)[0]`` gives, bit for bit (this
+        scorer's own noise is not used).  With the compiled kernels, one call of
+        :func:`~interprim.core._compiled.phase_likelihood.phase_loglik_noise_grid` computes each phase's statistics
+        once for all the noises; the likelihood phase's noise selection (:mod:`interprim.models.primitive.selection`)
+        scores its held-out cases so."""
+        s_values = np.ascontiguousarray(s_values, dtype=np.float64)
+        s2_values = np.ascontiguousarray(s2_values, dtype=np.float64)
+        kern = None if self.dense else kernels.kernel("phase_likelihood.phase_loglik_noise_grid")
+        if kern is None:
+            parts = None if self.dense else (self.fs, self.prior)
+            return np.stack([make_scorer(self.model, self.z, float(v), self.prior is not None, _parts=parts)(
+                s_values)[0] for v in s2_values], axis=1)
+        fs = self.fs
+        ll = kern(fs.Zh, self.Rg, self.z, self.M, s_values, fs.sq, fs.Uh, fs.K0, s2_values,
+                  np.empty((s2_values.shape[0], s_values.shape[0])))
+        return np.stack([self._posterior(row, s_values) for row in ll], axis=1)
 
 
 def speed_prior_params(model, M):

@@ -184,6 +184,63 @@ def _incremental_step(uT, vm, prev, col, cost, first):
 
 
 @njit(cache=True, fastmath=False)
+def _incremental_block(uT, block, a, b, cost, n_frames):
+    """Add the query frames ``block`` ``(k, D)`` one after the other, each by :func:`_incremental_step` (the same
+    numbers): the two column buffers ``a`` (the last column after the frames seen so far, ``n_frames`` of them)
+    and ``b`` swap roles at every frame after the first, as the per-frame calls of
+    :meth:`interprim.phase.dtw.IncrementalDTW.extend` swap them.  Returns ``(n*, frames added, swapped)``:
+    ``swapped`` says whether the roles are now swapped (the last column in ``b``, ``a`` the previous one); a frame
+    with a NaN or inf stops the block at it, untouched (``n*`` -1, the roles as the per-frame calls leave them)."""
+    prev, col = b, a
+    swapped = False
+    n = -1
+    for i in range(block.shape[0]):
+        first = n_frames + i == 0
+        if not first:
+            prev, col = col, prev
+            swapped = not swapped
+        n = _incremental_step(uT, block[i], prev, col, cost, first)
+        if n < 0:
+            return -1, i, swapped
+    return n, block.shape[0], swapped
+
+
+@njit(cache=True, fastmath=False)
+def _incremental_set(uT, starts, lengths, block, A, B, cost, swapped, n_frames, n_star, last_cost):
+    """:func:`_incremental_block` of the query frames ``block`` ``(k, D)`` against every reference ``j`` of a set
+    (:class:`interprim.phase.dtw.IncrementalDTWSet`), in one call.  The set is stored flat: reference ``j`` (``N_j =
+    lengths[j]`` frames) is ``uT[D s_j : D (s_j + N_j)]`` read as its transposed ``(D, N_j)`` array, its two
+    column buffers ``A[s_j : s_j + N_j]`` and ``B[...]`` (the last column in ``B`` when ``swapped[j]``, updated
+    here) and its workspace ``cost[...]``, with ``s_j = starts[j]``; ``n_frames`` frames were seen before.  Each
+    reference's columns are those of its own :func:`_incremental_step` calls on contiguous arrays (the same
+    operations on the same numbers); writes ``n_star[j]`` and ``last_cost[j] = D(n*, M)``.  Returns 0, or -1 at a
+    frame with a NaN or inf (the caller passes checked frames)."""
+    D = block.shape[1]
+    for j in range(lengths.shape[0]):
+        N = lengths[j]
+        s = starts[j]
+        u = uT[D * s: D * (s + N)].reshape((D, N))
+        a = A[s: s + N]
+        b = B[s: s + N]
+        c = cost[s: s + N]
+        if swapped[j]:
+            prev, col = a, b
+        else:
+            prev, col = b, a
+        n = -1
+        for i in range(block.shape[0]):
+            if n_frames + i > 0:
+                prev, col = col, prev
+                swapped[j] = not swapped[j]
+            n = _incremental_step(u, block[i], prev, col, c, n_frames + i == 0)
+            if n < 0:
+                return -1
+        n_star[j] = n
+        last_cost[j] = col[n]
+    return 0
+
+
+@njit(cache=True, fastmath=False)
 def _backtrack(Dm, n_end):
     M = Dm.shape[0]
     path = np.empty((M + n_end + 1, 2), dtype=np.int64)
@@ -219,4 +276,7 @@ def warm_up(u, v) -> None:
     N = u.shape[0]
     _open_end_strips(uT, v, np.empty(N), np.empty(N), np.empty((4, N)))
     _incremental_step(uT, v[0], np.zeros(N), np.empty(N), np.empty(N), True)
+    _incremental_block(uT, v, np.zeros(N), np.empty(N), np.empty(N), 0)
+    _incremental_set(uT.ravel(), np.zeros(1, dtype=np.int64), np.array([N], dtype=np.int64), v, np.zeros(N),
+                     np.zeros(N), np.empty(N), np.zeros(1, dtype=np.bool_), 0, np.empty(1, dtype=np.int64), np.empty(1))
     _backtrack(_accumulate(u, v), 2)

@@ -95,6 +95,7 @@ def _compile_all() -> None:
     ko.forcing_targets_batch(Zs, 0.2, 25.0, 6.25, np.empty((M, Do)), np.empty_like(Zs), np.empty((2, Do)))
     ks.interp_columns_into(np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 4), u[:4], np.empty((3, 2)))
     kp.warm_batch(kp.phase_loglik_batch)
+    kp.warm_noise_grid(kp.phase_loglik_noise_grid)
     kp.warm_track(kp.track_step)
     kw.warm_up()
     kq.prefix_rows_into(np.zeros((2, 3, 2)), np.array([3, 2], dtype=np.intp), np.array([1], dtype=np.intp),

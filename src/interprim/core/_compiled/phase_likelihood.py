@@ -292,6 +292,106 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     return out
 
 
+@njit(cache=True, fastmath=_FM)
+def phase_loglik_noise_grid(Zh, Rg, z, M, s_values, sq, Uh, K0, s2_values, out):
+    """:func:`phase_loglik_batch` at every position noise of ``s2_values`` (``out`` ``(S2, C)``: row ``v`` is
+    ``phase_loglik_batch(..., s2_values[v], ...)``, the same numbers bit for bit).
+
+    The statistics of a candidate phase (``H^T H``, ``H^T r``, ``|r|^2``: :func:`_stats`) do not depend on the
+    noise, so they are computed once per phase instead of once per (phase, noise); the rest is
+    :func:`phase_loglik_batch`'s loop, verbatim, run once per noise with that noise fixed (the layout in which the
+    compiler emits the same arithmetic).  The likelihood phase's noise selection
+    (:mod:`interprim.models.primitive.selection`) scores every held-out case at every candidate noise on one grid
+    of phases.  Workspaces ``O(C q4 (q4 + D_o))`` for the statistics of the ``C`` phases.
+    """
+    q = Zh.shape[1]
+    n_o = Rg.shape[1]
+    n = Uh.shape[2]
+    q4 = (q + 3) // 4 * 4
+    r = n + 1
+    r4 = (r + 3) // 4 * 4
+    n4 = (n + 3) // 4 * 4
+    P = q4 + (n_o + 1) // 2 * 2
+    ET = np.zeros((P, BLOCK))
+    T = np.zeros((q, q))
+    Ub = np.zeros((q, r4))
+    V = np.zeros((q, r4))
+    VT = np.zeros((r4, n_o * q))
+    Kacc = np.zeros((r4, r4))
+    F = np.zeros((n4, n4 + 4))
+    C = s_values.shape[0]
+    Gs = np.zeros((C, q4, P))
+    rrs = np.zeros(C)
+    for ci in range(C):
+        rrs[ci] = _stats(Zh, Rg, z, M, s_values[ci], q4, ET, Gs[ci])
+    for vi in range(s2_values.shape[0]):
+        s2 = s2_values[vi]
+        log_s2 = np.log(s2)
+        for ci in range(C):
+            rr = rrs[ci]
+            G = Gs[ci]
+            ld_T = 0.0
+            ok = True
+            for i in range(n_o):
+                si = sq[i]
+                Ui = Uh[i]
+                for a in range(q):
+                    sa = si[a]
+                    Ta = T[a]
+                    for c in range(a + 1):
+                        Ta[c] = sa * G[c, a] * si[c]
+                    Ta[a] += s2
+                ld = chol_inplace(T, q)
+                if not np.isfinite(ld):
+                    ok = False
+                    break
+                ld_T += ld
+                for a in range(q):
+                    Ua = Ui[a]
+                    Uba = Ub[a]
+                    for c in range(n):
+                        Uba[c] = Ua[c]
+                    Uba[n] = si[a] * G[a, q4 + i]
+                forward_rows(T, Ub, V)
+                off = i * q
+                for a in range(q):
+                    Va = V[a]
+                    for c in range(r4):
+                        VT[c, off + a] = Va[c]
+            if not ok:
+                out[vi, ci] = -np.inf
+                continue
+            _syrk_T(VT, n_o * q, Kacc)
+            for a in range(n):
+                Fa = F[a]
+                K0a = K0[a]
+                for c in range(a + 1):
+                    Fa[c] = K0a[c] - s2 * Kacc[a, c]
+                for c in range(a + 1, n):
+                    Fa[c] = K0a[c] - s2 * Kacc[c, a]
+                for c in range(n, n4 + 4):
+                    Fa[c] = 0.0
+                Fa[n4] = Kacc[n, a]
+            for a in range(n, n4):
+                Fa = F[a]
+                for c in range(n4 + 4):
+                    Fa[c] = 0.0
+                Fa[a] = 1.0
+            cTc = Kacc[n, n]
+            ld_K = _chol_aug(F, n4, n4 + 4)
+            if not np.isfinite(ld_K):
+                out[vi, ci] = -np.inf
+                continue
+            tKt = 0.0
+            for a in range(n4):
+                tKt += F[a, n4] * F[a, n4]
+            N = M * n_o
+            logdet = n_o * (M - q) * log_s2 + ld_T + ld_K
+            quad = (rr - cTc) / s2 - tKt
+            out[vi, ci] = -0.5 * (N * _LOG2PI + logdet + quad)
+    return out
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # online tracking on a lattice of speeds (interprim.phase.tracking.Tracker)
 #
@@ -646,6 +746,17 @@ def warm_batch(fn: Callable[..., Any]) -> None:
     K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
     fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
        np.array([0.5, 1.0]), sq, Uh, K0, 1.0, np.empty(2))
+
+
+def warm_noise_grid(fn: Callable[..., Any]) -> None:
+    """Compile (or load from numba's cache) :func:`phase_loglik_noise_grid` with tiny inputs of the real types."""
+    rng = np.random.default_rng(0)
+    K, q, n_o, n, M = 8, 3, 2, 2, 4
+    sq = np.ones((n_o, q))
+    Uh = rng.normal(size=(n_o, q, n))
+    K0 = np.eye(n) + np.einsum("iqa,iqb->ab", Uh, Uh)
+    fn(rng.normal(size=(K + 1, q)), rng.normal(size=(K + 1, n_o)), rng.normal(size=(M, n_o)), M,
+       np.array([0.5, 1.0]), sq, Uh, K0, np.array([1.0, 2.0]), np.empty((2, 2)))
 
 
 def warm_track(fn: Callable[..., Any], s_min: float = 0.02) -> None:

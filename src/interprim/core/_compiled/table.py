@@ -50,6 +50,12 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "the alignment path from D (Eq. 5-8); equal"),
     Kernel("dtw.incremental_step", "dtw:_incremental_step", "interprim.phase.dtw:IncrementalDTW._step_np", False,
            "one query frame of the open-end DTW (the new last column and n*); bitwise equal"),
+    Kernel("dtw.incremental_block", "dtw:_incremental_block", "interprim.phase.dtw:IncrementalDTW._step_np", False,
+           "several query frames of the open-end DTW, each by dtw.incremental_step in one compiled loop (the last "
+           "column and n* after each); bitwise equal"),
+    Kernel("dtw.incremental_set", "dtw:_incremental_set", "interprim.phase.dtw:_step_np", False,
+           "query frames against several references in one call, each reference's columns by dtw.incremental_step "
+           "(IncrementalDTWSet); the reference is one step of one reference; bitwise equal"),
     Kernel("observation.forcing_values_into", "observation:forcing_values_into",
            "interprim.models.primitive.fitted:FittedPrimitive.observation_design", False,
            "forcing values of Eq. 15 (np.gradient derivatives); the reference's targets Y"),
@@ -74,6 +80,11 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "log-likelihood of the observation at many candidate phases (the likelihood phase); the reference "
            "takes the same arrays without M and out"),
+    Kernel("phase_likelihood.phase_loglik_noise_grid", "phase_likelihood:phase_loglik_noise_grid",
+           "interprim.phase.likelihood:_loglik_noise_grid_numpy", False,
+           "phase_loglik_batch at several position noises, each phase's statistics once (the likelihood phase's "
+           "noise selection); its rows equal phase_loglik_batch's bit for bit; the reference takes the same arrays "
+           "without M and out"),
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),

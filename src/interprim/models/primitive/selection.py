@@ -408,7 +408,8 @@ def _phase_noise_by_accuracy(model, latent, fold, K, lam, s2_grid, fractions, ma
         lo, hi = search_bounds(model, M)  # the phases estimate_phase searches
         grid = np.exp(np.linspace(np.log(lo), np.log(hi), n_phase))
         zo = z[:M, :model.n_observed_latent_]
-        curves = np.stack([_fold_scorer(model, states[f], zo, float(v))(grid)[0] for v in s2_grid], axis=1)
+        # (phases, noises): every noise's log posteriors on the grid, each phase's statistics computed once
+        curves = _fold_scorer(model, states[f], zo, float(s2_grid[0])).noise_curves(grid, s2_grid)
         errs += np.abs(grid[np.argmax(curves, axis=0)] - s_true)
         kept.append((states[f], zo, M, s_true, grid, curves))
     return errs / len(cases), kept

@@ -429,8 +429,8 @@ def check_phase_likelihood_phase_loglik_batch(models, demos):
 
 
 def check_phase_likelihood_phase_loglik_noise_grid(models, demos):
-    """Every noise's row against the numpy reference, and against phase_loglik_batch at that noise bit for bit (the
-    noise selection's numbers are those of one call per noise)."""
+    """Every noise's row against the numpy reference, and against phase_loglik_batch at that noise (to rounding; bit
+    for bit on the project's machine: the noise selection's numbers are those of one call per noise)."""
     comp, ref = both("phase_likelihood.phase_loglik_noise_grid")
     batch = registry.compiled("phase_likelihood.phase_loglik_batch")
     m = models["likelihood"]
@@ -443,7 +443,10 @@ def check_phase_likelihood_phase_loglik_noise_grid(models, demos):
         s = np.linspace(0.05, 1.0, 7)
         a = comp(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, s2, np.empty((s2.size, s.size)))
         one = np.stack([batch(fs.Zh, Rg, z, M, s, fs.sq, fs.Uh, fs.K0, float(v), np.empty(s.size)) for v in s2])
-        assert np.array_equal(a, one), "phase_loglik_noise_grid differs from phase_loglik_batch noise by noise"
+        # bit for bit on this machine; a compiler may order the two kernels' sums differently elsewhere, and the
+        # selection only needs them equal to rounding
+        np.testing.assert_allclose(a, one, rtol=1e-13, atol=0,
+                                   err_msg="phase_loglik_noise_grid differs from phase_loglik_batch noise by noise")
         # against numpy at the noises near the model's (at 1e-3 of it the problem's conditioning, not the kernel,
         # sets the difference, as for phase_loglik_batch)
         worst = max(worst, rel(a[1:4], ref(fs.Zh, Rg, z, s, fs.sq, fs.Uh, fs.K0, s2[1:4])))

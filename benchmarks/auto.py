@@ -120,10 +120,10 @@ def _predict(model, partial, n):
 def warm_up() -> None:
     """The compiled kernels loaded and every family fitted once on a tiny set before anything is timed, so that no
     row (the first above all) carries the process's one-time costs, and the default and the IP start alike."""
+    import warnings
+
     import interprim as ip
     from interprim.core._compiled.loader import warmup
-
-    import warnings
 
     warmup()
     demos = shared_factors(6, 2, 2, 40, seed=3)

@@ -194,6 +194,71 @@ def _stats(Zh, Rg, z, M, s, q4, ET, G):
         _gram_block(ET, nb, q4, P, G)
     return rr
 
+@njit(cache=True, fastmath=_FM, inline="always")
+def _loglik_at(G, rr, M, sq, Uh, K0, s2, log_s2, T, Ub, V, VT, Kacc, F):
+    """The marginal log-likelihood at one phase from its statistics ``G``, ``rr`` (:func:`_stats`) at the noise
+    ``s2`` (``log_s2`` its log): the per-phase part shared by :func:`phase_loglik_batch` and
+    :func:`phase_loglik_noise_grid` (``-inf`` where a factorisation failed; the rest are workspaces)."""
+    q = T.shape[0]
+    n_o = sq.shape[0]
+    n = Uh.shape[2]
+    r4 = Ub.shape[1]
+    n4 = F.shape[0]
+    ld_T = 0.0
+    for i in range(n_o):
+        si = sq[i]
+        Ui = Uh[i]
+        for a in range(q):
+            sa = si[a]
+            Ta = T[a]
+            for c in range(a + 1):
+                Ta[c] = sa * G[c, a] * si[c]
+            Ta[a] += s2
+        ld = chol_inplace(T, q)
+        if not np.isfinite(ld):
+            return -np.inf
+        ld_T += ld
+        for a in range(q):
+            Ua = Ui[a]
+            Uba = Ub[a]
+            for c in range(n):
+                Uba[c] = Ua[c]
+            Uba[n] = si[a] * G[a, G.shape[0] + i]
+        forward_rows(T, Ub, V)
+        off = i * q
+        for a in range(q):
+            Va = V[a]
+            for c in range(r4):
+                VT[c, off + a] = Va[c]
+    _syrk_T(VT, n_o * q, Kacc)
+    for a in range(n):
+        Fa = F[a]
+        K0a = K0[a]
+        for c in range(a + 1):
+            Fa[c] = K0a[c] - s2 * Kacc[a, c]
+        for c in range(a + 1, n):
+            Fa[c] = K0a[c] - s2 * Kacc[c, a]
+        for c in range(n, n4 + 4):
+            Fa[c] = 0.0
+        Fa[n4] = Kacc[n, a]
+    for a in range(n, n4):
+        Fa = F[a]
+        for c in range(n4 + 4):
+            Fa[c] = 0.0
+        Fa[a] = 1.0
+    cTc = Kacc[n, n]
+    ld_K = _chol_aug(F, n4, n4 + 4)
+    if not np.isfinite(ld_K):
+        return -np.inf
+    tKt = 0.0
+    for a in range(n4):
+        tKt += F[a, n4] * F[a, n4]
+    N = M * n_o
+    logdet = n_o * (M - q) * log_s2 + ld_T + ld_K
+    quad = (rr - cTc) / s2 - tKt
+    return -0.5 * (N * _LOG2PI + logdet + quad)
+
+
 @njit(cache=True, fastmath=_FM)
 def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     """Marginal log-likelihood of ``z[:M]`` (positions of the observed DoFs) at every phase in ``s_values``.
@@ -230,65 +295,7 @@ def phase_loglik_batch(Zh, Rg, z, M, s_values, sq, Uh, K0, s2, out):
     log_s2 = np.log(s2)
     for ci in range(s_values.shape[0]):
         rr = _stats(Zh, Rg, z, M, s_values[ci], q4, ET, G)
-        ld_T = 0.0
-        ok = True
-        for i in range(n_o):
-            si = sq[i]
-            Ui = Uh[i]
-            for a in range(q):
-                sa = si[a]
-                Ta = T[a]
-                for c in range(a + 1):
-                    Ta[c] = sa * G[c, a] * si[c]
-                Ta[a] += s2
-            ld = chol_inplace(T, q)
-            if not np.isfinite(ld):
-                ok = False
-                break
-            ld_T += ld
-            for a in range(q):
-                Ua = Ui[a]
-                Uba = Ub[a]
-                for c in range(n):
-                    Uba[c] = Ua[c]
-                Uba[n] = si[a] * G[a, q4 + i]
-            forward_rows(T, Ub, V)
-            off = i * q
-            for a in range(q):
-                Va = V[a]
-                for c in range(r4):
-                    VT[c, off + a] = Va[c]
-        if not ok:
-            out[ci] = -np.inf
-            continue
-        _syrk_T(VT, n_o * q, Kacc)
-        for a in range(n):
-            Fa = F[a]
-            K0a = K0[a]
-            for c in range(a + 1):
-                Fa[c] = K0a[c] - s2 * Kacc[a, c]
-            for c in range(a + 1, n):
-                Fa[c] = K0a[c] - s2 * Kacc[c, a]
-            for c in range(n, n4 + 4):
-                Fa[c] = 0.0
-            Fa[n4] = Kacc[n, a]
-        for a in range(n, n4):
-            Fa = F[a]
-            for c in range(n4 + 4):
-                Fa[c] = 0.0
-            Fa[a] = 1.0
-        cTc = Kacc[n, n]
-        ld_K = _chol_aug(F, n4, n4 + 4)
-        if not np.isfinite(ld_K):
-            out[ci] = -np.inf
-            continue
-        tKt = 0.0
-        for a in range(n4):
-            tKt += F[a, n4] * F[a, n4]
-        N = M * n_o
-        logdet = n_o * (M - q) * log_s2 + ld_T + ld_K
-        quad = (rr - cTc) / s2 - tKt
-        out[ci] = -0.5 * (N * _LOG2PI + logdet + quad)
+        out[ci] = _loglik_at(G, rr, M, sq, Uh, K0, s2, log_s2, T, Ub, V, VT, Kacc, F)
     return out
 
 
@@ -299,10 +306,9 @@ def phase_loglik_noise_grid(Zh, Rg, z, M, s_values, sq, Uh, K0, s2_values, out):
 
     The statistics of a candidate phase (``H^T H``, ``H^T r``, ``|r|^2``: :func:`_stats`) do not depend on the
     noise, so they are computed once per phase instead of once per (phase, noise); the rest is
-    :func:`phase_loglik_batch`'s loop, verbatim, run once per noise with that noise fixed (the layout in which the
-    compiler emits the same arithmetic).  The likelihood phase's noise selection
-    (:mod:`interprim.models.primitive.selection`) scores every held-out case at every candidate noise on one grid
-    of phases.  Workspaces ``O(C q4 (q4 + D_o))`` for the statistics of the ``C`` phases.
+    :func:`_loglik_at`, as in :func:`phase_loglik_batch`, run once per noise with that noise fixed.  The likelihood
+    phase's noise selection (:mod:`interprim.models.primitive.selection`) scores every held-out case at every
+    candidate noise on one grid of phases.  Workspaces ``O(C q4 (q4 + D_o))`` for the statistics of the ``C`` phases.
     """
     q = Zh.shape[1]
     n_o = Rg.shape[1]
@@ -328,67 +334,7 @@ def phase_loglik_noise_grid(Zh, Rg, z, M, s_values, sq, Uh, K0, s2_values, out):
         s2 = s2_values[vi]
         log_s2 = np.log(s2)
         for ci in range(C):
-            rr = rrs[ci]
-            G = Gs[ci]
-            ld_T = 0.0
-            ok = True
-            for i in range(n_o):
-                si = sq[i]
-                Ui = Uh[i]
-                for a in range(q):
-                    sa = si[a]
-                    Ta = T[a]
-                    for c in range(a + 1):
-                        Ta[c] = sa * G[c, a] * si[c]
-                    Ta[a] += s2
-                ld = chol_inplace(T, q)
-                if not np.isfinite(ld):
-                    ok = False
-                    break
-                ld_T += ld
-                for a in range(q):
-                    Ua = Ui[a]
-                    Uba = Ub[a]
-                    for c in range(n):
-                        Uba[c] = Ua[c]
-                    Uba[n] = si[a] * G[a, q4 + i]
-                forward_rows(T, Ub, V)
-                off = i * q
-                for a in range(q):
-                    Va = V[a]
-                    for c in range(r4):
-                        VT[c, off + a] = Va[c]
-            if not ok:
-                out[vi, ci] = -np.inf
-                continue
-            _syrk_T(VT, n_o * q, Kacc)
-            for a in range(n):
-                Fa = F[a]
-                K0a = K0[a]
-                for c in range(a + 1):
-                    Fa[c] = K0a[c] - s2 * Kacc[a, c]
-                for c in range(a + 1, n):
-                    Fa[c] = K0a[c] - s2 * Kacc[c, a]
-                for c in range(n, n4 + 4):
-                    Fa[c] = 0.0
-                Fa[n4] = Kacc[n, a]
-            for a in range(n, n4):
-                Fa = F[a]
-                for c in range(n4 + 4):
-                    Fa[c] = 0.0
-                Fa[a] = 1.0
-            cTc = Kacc[n, n]
-            ld_K = _chol_aug(F, n4, n4 + 4)
-            if not np.isfinite(ld_K):
-                out[vi, ci] = -np.inf
-                continue
-            tKt = 0.0
-            for a in range(n4):
-                tKt += F[a, n4] * F[a, n4]
-            N = M * n_o
-            logdet = n_o * (M - q) * log_s2 + ld_T + ld_K
-            quad = (rr - cTc) / s2 - tKt
-            out[vi, ci] = -0.5 * (N * _LOG2PI + logdet + quad)
+            out[vi, ci] = _loglik_at(Gs[ci], rrs[ci], M, sq, Uh, K0, s2, log_s2, T, Ub, V, VT, Kacc, F)
     return out
 
 

@@ -633,6 +633,10 @@ def test_a_default_fitted_on_demonstrations_that_speed_up_warns_once_and_says_so
     p = auto.selection_["pace"]
     assert p["significant"] and p["change"] < -0.2 and p["n"] == 15
     assert "durations change with their order" in auto.summary()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ip.PaceWarning)
+        alone = ip.AutoInteraction([0, 1, 2], candidates=("nn",)).fit(demos, dt=0.02)
+    assert "durations change with their order" in alone.summary()  # one family alone says it too
     order = np.random.default_rng(1).permutation(len(demos))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -187,28 +187,23 @@ IP_ONLY = (("observation", "--observation"), ("covariance", "--covariance"), ("s
            ("calibrate", "--calibrate"))
 
 
-def _frame_budget(text):
-    if text.strip().lower() == "none":
-        return "none"
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}") from None
-    if not value > 0 or value != value or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number or 'none', got {text!r}")
-    return value
+def _positive_or_none(convert, expected):
+    """An argparse type: ``'none'`` (kept as the string: no bound) or a finite value of ``convert`` above 0."""
+    def parse(text):
+        if text.strip().lower() == "none":
+            return "none"
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected} or 'none', got {text!r}") from None
+        if not 0 < value < float("inf"):  # NaN fails too
+            raise argparse.ArgumentTypeError(f"expected {expected} or 'none', got {text!r}")
+        return value
+    return parse
 
 
-def _max_prefixes(text):
-    if text.strip().lower() == "none":
-        return "none"
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of prefixes >= 1 or 'none', got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number of prefixes >= 1 or 'none', got {text!r}")
-    return value
+_frame_budget = _positive_or_none(float, "a positive number")
+_max_prefixes = _positive_or_none(int, "a whole number of prefixes >= 1")
 
 
 def _milliseconds(text):

@@ -149,6 +149,8 @@ def replay(outer, inner, rules: dict) -> dict:
     """``{rule: {yardstick: mean over the outer folds}}`` for one task (``outer``, ``inner``: :func:`task_folds`; a
     rule named ``"true end"`` is the default's weights placed to the true end)."""
     res: dict = {}
+    # the fold that holds out the latest recordings (folds are contiguous, in recording order)
+    latest = max(range(len(inner)), key=lambda i: max(inner[i][0]))
     for rname, rule in rules.items():
         rows = []
         for held, cv, sizes in inner:
@@ -162,8 +164,6 @@ def replay(outer, inner, rules: dict) -> dict:
             rows.append(_outer(outer, held, choice))
         else:
             res[rname] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
-            # the fold that holds out the latest recordings (folds are contiguous, in recording order)
-            latest = max(range(len(inner)), key=lambda i: max(inner[i][0]))
             res[rname].update({f"{k} (latest third)": float(rows[latest][k]) for k in rows[0]})
     return res
 

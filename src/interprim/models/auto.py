@@ -424,7 +424,8 @@ class AutoInteraction(Predictor):
         """A few lines: what was compared, what was chosen, and by how much."""
         s = self.selection_
         if s.get("runner_up") is None:
-            return "\n".join([f"model: {self.chosen_} alone ({type(self.model_).__name__})", *self._cost_lines()])
+            return "\n".join([f"model: {self.chosen_} alone ({type(self.model_).__name__})", *self._pace_lines(),
+                              *self._cost_lines()])
         lines = ["held-out real-time error of the controlled agent, by family (inner cross-validation):"]
         why = s.get("not_compared", {})
         for m, e in sorted(s["cv_errors"].items(), key=lambda kv: kv[1]):
@@ -445,10 +446,12 @@ class AutoInteraction(Predictor):
                     + " (the smallest level that covers 90 % of demonstrations left out of its calibration)")
         else:
             lines.append(f"using {self.chosen_} alone")
-        pace = s.get("pace")
-        if pace is not None and pace.get("significant"):
-            lines.append(pace_message(pace))
-        return "\n".join(lines + self._cost_lines())
+        return "\n".join(lines + self._pace_lines() + self._cost_lines())
+
+    def _pace_lines(self) -> list:
+        """The demonstrations' pace drift, when significant (:func:`~interprim.models.training.pace_trend`)."""
+        pace = self.selection_.get("pace")
+        return [pace_message(pace)] if pace is not None and pace.get("significant") else []
 
     def _cost_lines(self) -> list:
         """What the model's streamed frame costs (modelled) against the budget, and what was left out for it."""

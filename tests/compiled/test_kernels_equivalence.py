@@ -56,6 +56,7 @@ MEASURED = {
     "phase_likelihood.track_step": (3.2e-11, 3.8e-11, 1e-8),
     "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
     "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
+    "blend.place_members": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
     "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
@@ -411,6 +412,56 @@ def check_weighted_weighted_frames():
     return worst
 
 
+# ------------------------------------------------------------------------------------------ a blend's members
+
+def check_blend_place_members():
+    """The kernel against its reference, bit for bit: one to five members at phases and durations anywhere (the
+    blend's phase before, between or after theirs, zero), with and without a shared end (before, inside and beyond
+    the real-time band), zero weights; and a fitted blend's combination of its members' streamed predictions (mean
+    and std) on both paths."""
+    rng = np.random.default_rng(12)
+    comp, ref = registry.compiled("blend.place_members"), registry.reference("blend.place_members")
+    worst = 0.0
+    for trial in range(300):
+        A, n, D = int(rng.integers(1, 6)), int(rng.integers(2, 202)), int(rng.integers(1, 15))
+        u = np.linspace(0.0, 1.0, n)
+        sv = rng.uniform(0.0, 1.1, A)
+        dv = rng.uniform(0.2, 4.0, A)
+        s = 0.0 if trial % 13 == 0 else float(rng.uniform(0.0, 1.0))
+        ahead = np.maximum((u - s) * rng.uniform(0.5, 4.0), 0.0)
+        h = 0.25
+        R = np.nan if trial % 3 == 0 else float(rng.choice([0.1, 0.25, rng.uniform(0.0, 5.0)]))
+        grids = rng.normal(size=(A, n, D)) * 10.0 ** rng.integers(-3, 3)
+        W = rng.random((n, A))
+        W[:, 0] = 0.0 if trial % 4 == 0 else W[:, 0]
+        W /= np.maximum(W.sum(axis=1, keepdims=True), 1e-300)
+        Y, mean = np.empty_like(grids), np.empty((n, D))
+        assert comp(u, ahead, sv, dv, s, R, h, grids, W, Y, mean, np.empty(n))
+        Y_ref, mean_ref = ref(u, ahead, sv, dv, s, R, h, grids, W)
+        for a, b in ((Y, Y_ref), (mean, mean_ref)):
+            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
+                worst = max(worst, rel(a, b) or np.inf)
+    demos = two_agent_demos(12, seed=5, frames=60)
+    blend = ip.models.blend.Blend.from_fitted(
+        [0, 1], {m: f.build(ip.models.registry.Settings((0, 1))).fit(demos, dt=0.01)
+                 for m, f in ip.models.registry.FAMILIES.items() if m in ("ip", "learned", "nn")},
+        {"ip": [0.5, 0.2], "learned": [0.3, 0.5], "nn": [0.2, 0.3]}, None, demos, 0.01, bands=[0.25, 1.0],
+        remaining=0.5)
+    st = blend.stream()
+    for M, f in enumerate(demos[0][:59, :2], start=1):
+        preds = {m: s.update(f) for m, s in st.streams.items()}  # the members once: their own kernels aside
+        if M in (5, 30, 59):
+            out = {}
+            for which in ("compiled", "numpy"):
+                with registry.forced(which):
+                    p = blend.combine(preds, M)
+                    out[which] = (p.mean, p.std(50))
+            for a, b in zip(out["compiled"], out["numpy"]):
+                if not np.array_equal(a, b):
+                    worst = max(worst, rel(a, b) or np.inf)
+    return worst
+
+
 # ------------------------------------------------------------------------------------------ the likelihood phase
 
 def check_phase_likelihood_phase_loglik_batch(models, demos):
@@ -530,6 +581,7 @@ CHECKS = {
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,
+    "blend.place_members": check_blend_place_members,
     "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,
 }
 

@@ -311,5 +311,7 @@ def test_fading_design_under_a_wide_prior_is_not_truncated():
     means, ll = lowrank_case(pr, n_o, q, X, Y, s2, need_ll=True)
     for i, v in enumerate(s2):
         ref_mean, ref_ll = _reference(pr.mean, cov, Omega, Y.T.reshape(-1), float(v))
-        assert ll[i] == pytest.approx(ref_ll, rel=1e-9, abs=1e-9)
+        # 2.2e-9 relative apart on an AVX-512 machine (the dense reference's sums ordered by another BLAS kernel),
+        # within 1e-9 on the machines CI has run on: 1e-8 is still 1e-7 of the smallest error the truncation made (0.3)
+        assert ll[i] == pytest.approx(ref_ll, rel=1e-8, abs=1e-9)
         np.testing.assert_allclose(means[i], ref_mean, rtol=1e-7, atol=1e-7 * np.abs(ref_mean).max())

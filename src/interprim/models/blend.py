@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core._compiled import registry as _registry
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
 from ..io import estimator_from_state
@@ -18,7 +19,7 @@ from . import registry
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
-__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state"]
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -42,6 +43,35 @@ def _on_grid(pred, u) -> np.ndarray:
             times is u or np.array_equal(times, u)):
         return pred.mean
     return pred.trajectory(u.shape[0])
+
+
+def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -> tuple:
+    """``(Y, mean)``: every member's values read at its own normalised time on the common grid ``u`` and their
+    weighted sum ``mean = sum_j W[:, j] Y[j]`` (the numpy reference of the compiled ``blend.place_members``).
+
+    Member ``j`` (phase ``sv[j]``, duration ``dv[j]``; ``grids[j]`` its values on ``u``) is at ``s_j + a / D_j``
+    at ``a = ahead`` seconds after now; with a shared end (``R`` seconds from now, NaN for none) beyond the
+    real-time band of ``h`` seconds it runs there by :func:`interprim.model_selection.long_range.member_units`'s
+    operations for one member; before now (``u < s``, the blend's phase) at ``u s_j / s``."""
+    Y = np.empty_like(grids)
+    for j in range(len(sv)):
+        sm, Dm = float(sv[j]), float(dv[j])
+        um = ahead / Dm
+        um += sm  # own = s_m + t / D_m
+        if not np.isnan(R):  # long_range.member_units of one member, the same operations
+            Rm = max(R, h)
+            uh = min(sm + h / Dm, 1.0)
+            if Rm > h:
+                after = (ahead - h) * (1.0 - uh) / max(Rm - h, 1e-9) + uh
+            else:
+                after = np.ones_like(ahead)
+            um = np.where(ahead <= h + 1e-12, um, after)
+        np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
+        past = u < s
+        um[past] = u[past] * (sm / s if s > 0 else 1.0)
+        np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
+        Y[j] = interp_columns(um, u, grids[j])
+    return Y, np.einsum("gm,mgd->gd", W, Y)
 
 
 class Blend(Predictor):
@@ -207,28 +237,17 @@ class Blend(Predictor):
         else:
             active = np.flatnonzero(on).tolist()
             W = W[:, active]
-        # every active member's normalised time at each grid point: ``s_m + a / D_m`` ahead of now (with a shared
-        # end, ``long_range.member_units`` beyond the real-time band), ``u s_m / s`` before it
-        past = u < s
-        Y = np.empty((len(active), n_grid, self.n_dofs_))
+        grids = np.stack([_on_grid(preds[names[i]], u) for i in active])
+        sa = np.array([sv[i] for i in active])
+        da = np.array([dv[i] for i in active])
         h = float(self.horizon)
-        for j, i in enumerate(active):
-            sm, Dm = sv[i], dv[i]
-            um = ahead / Dm
-            um += sm  # own = s_m + t / D_m
-            if R is not None:  # long_range.member_units of one member, the same operations
-                Rm = max(R, h)
-                uh = min(sm + h / Dm, 1.0)
-                if Rm > h:
-                    after = (ahead - h) * (1.0 - uh) / max(Rm - h, 1e-9) + uh
-                else:
-                    after = np.ones_like(ahead)
-                um = np.where(ahead <= h + 1e-12, um, after)
-            np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
-            um[past] = u[past] * (sm / s if s > 0 else 1.0)
-            np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
-            Y[j] = interp_columns(um, u, _on_grid(preds[names[i]], u))
-        mean = np.einsum("gm,mgd->gd", W, Y)
+        Rv = np.nan if R is None else float(R)
+        kernel = _registry.kernel("blend.place_members")
+        Y = np.empty_like(grids)
+        mean = np.empty((n_grid, self.n_dofs_))
+        if kernel is None or not kernel(u, ahead, sa, da, s, Rv, h, grids, np.ascontiguousarray(W), Y, mean,
+                                        np.empty(n_grid)):
+            Y, mean = place_members_np(u, ahead, sa, da, s, Rv, h, grids, W)
         return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
 
     def _weights_on(self, ahead) -> np.ndarray:
@@ -236,7 +255,8 @@ class Blend(Predictor):
         operations, with the bands' middles computed once)."""
         if self._mids is None or self._W.shape[1] == 1:  # one set of weights (a single member's: 1 everywhere)
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
-        out = np.clip(interp_columns(ahead, self._mids, self._W), 0.0, None)
+        out = interp_columns(ahead, self._mids, self._W)
+        np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
         return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
 
     @staticmethod

@@ -57,6 +57,7 @@ def _mode() -> str:
 
 def _compile_all() -> None:
     """Import numba and compile (or load from the cache) every kernel once, with tiny inputs of the real types."""
+    from . import blend as kb
     from . import conditioning as k
     from . import dtw as dk
     from . import observation as ko
@@ -98,6 +99,7 @@ def _compile_all() -> None:
     kp.warm_noise_grid(kp.phase_loglik_noise_grid)
     kp.warm_track(kp.track_step)
     kw.warm_up()
+    kb.warm_up()
     kq.prefix_rows_into(np.zeros((2, 3, 2)), np.array([3, 2], dtype=np.intp), np.array([1], dtype=np.intp),
                         np.array([0.5]), np.linspace(0.0, 1.0, 3), np.ones(2), False, np.empty((1, 6)))
 

@@ -18,11 +18,9 @@ _IN2 = types.Array(types.float64, 2, "C", readonly=True)
 _SIGNATURE = types.boolean(_IN1, _IN1, _IN2, types.Array(types.float64, 2, "C"))
 
 
-@njit(_SIGNATURE, cache=True, fastmath=False)
-def interp_columns_into(x_new, x, y, out):
-    """``out[i, d] = numpy.interp(x_new[i], x, y[:, d])`` for C-contiguous float64 ``x_new`` (n,), ``x`` (T,),
-    ``y`` (T, D) and ``out`` (n, D); returns False (``out`` undefined) when ``x`` is not strictly increasing or has
-    fewer than two points, where numpy's search among equal positions is not reproduced (the caller then uses numpy)."""
+@njit(cache=True, fastmath=False, inline="always")
+def interp_into(x_new, x, y, out):
+    """The body of :func:`interp_columns_into`, for other kernels to call on their own arrays."""
     T = x.shape[0]
     D = y.shape[1]
     if T < 2:
@@ -70,3 +68,11 @@ def interp_columns_into(x_new, x, y, out):
                     r = y[j, d]
             out[i, d] = r
     return True
+
+
+@njit(_SIGNATURE, cache=True, fastmath=False)
+def interp_columns_into(x_new, x, y, out):
+    """``out[i, d] = numpy.interp(x_new[i], x, y[:, d])`` for C-contiguous float64 ``x_new`` (n,), ``x`` (T,),
+    ``y`` (T, D) and ``out`` (n, D); returns False (``out`` undefined) when ``x`` is not strictly increasing or has
+    fewer than two points, where numpy's search among equal positions is not reproduced (the caller then uses numpy)."""
+    return interp_into(x_new, x, y, out)

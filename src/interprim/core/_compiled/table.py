@@ -88,6 +88,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),
+    Kernel("blend.place_members", "blend:place_members_into", "interprim.models.blend:place_members_np", False,
+           "a blend's members read at their own normalised times on the common grid (each at its own speed, then "
+           "to the shared end of long_range.member_units) and their weighted sum; the reference returns the arrays "
+           "the kernel writes into Y and mean; bitwise equal"),
     Kernel("weighted.weighted_frames", "weighted:weighted_frames", "interprim.models.kernel:weighted_frames_np", True,
            "the weighted mean and spread of demonstrations read at fractional frames (KernelDemonstrations' "
            "prediction), without the (demonstrations, n, D) array of the frames; bitwise equal"),

@@ -129,7 +129,7 @@ class Prediction(BasePrediction):
         """Positions ``(..., n, d)`` of DoFs with parameters ``Th (..., d, q)`` from start state ``y0, v0``
         (``design``: ``rollout_.design(s0, s_out)`` when the caller has it)."""
         free, H = self._m.rollout_.design(s0, s_out) if design is None else design
-        return free @ np.vstack([y0, v0]) + np.einsum("nq,...dq->...nd", H, Th)
+        return free @ np.vstack([y0, v0]) + H @ np.swapaxes(Th, -1, -2)  # (n, q) x (..., q, d): one BLAS product
 
     def theta(self, flat=None):
         """Posterior mean DMP parameters (or the flat vectors ``flat``) as ``(..., n_latent, n_basis + 1)``."""

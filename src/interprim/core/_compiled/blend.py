@@ -1,0 +1,80 @@
+"""Compiled placing in time of a blend's members (:meth:`interprim.models.blend.Blend.combine`).
+
+:func:`place_members_into` performs the operations of its numpy reference
+(:func:`interprim.models.blend.place_members_np`) in the same order: each member's normalised time at every point
+of the common grid (its own speed up to the real-time band, then the shared end of
+:func:`interprim.model_selection.long_range.member_units`, ``u s_m / s`` before now), its values read there by
+:func:`numpy.interp`'s operations (:func:`interprim.core._compiled.resample.interp_into`), and the weighted sum of
+the members added to a zero start, member after member (``einsum("gm,mgd->gd", W, Y)``'s order).  Compiled without
+fastmath, so its results equal the reference's bit for bit.  It saves the per-member array operations of a streamed
+frame (about 25 us a member).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+
+from .resample import interp_into
+
+_IN1 = types.Array(types.float64, 1, "C", readonly=True)
+_IN2 = types.Array(types.float64, 2, "C", readonly=True)
+_IN3 = types.Array(types.float64, 3, "C", readonly=True)
+_OUT1 = types.Array(types.float64, 1, "C")
+_OUT2 = types.Array(types.float64, 2, "C")
+_OUT3 = types.Array(types.float64, 3, "C")
+_SIGNATURE = types.boolean(_IN1, _IN1, _IN1, _IN1, types.float64, types.float64, types.float64, _IN3, _IN2,
+                           _OUT3, _OUT2, _OUT1)
+
+
+@njit(_SIGNATURE, cache=True, fastmath=False, error_model="numpy")
+def place_members_into(u, ahead, sv, dv, s, R, h, grids, W, Y, mean, um):
+    """``Y[j]``: member ``j``'s values ``grids[j]`` (on the grid ``u``) read at its normalised time for every point
+    of ``u`` (phase ``sv[j]``, duration ``dv[j]``; ``ahead`` seconds after now, the blend's phase ``s``; a shared
+    end ``R`` seconds from now beyond the real-time band of ``h`` seconds, NaN for none); ``mean = sum_j W[:, j]
+    Y[j]``.  ``um`` (n,) is a workspace.  Returns False (outputs undefined) when ``u`` is not strictly increasing."""
+    n = u.shape[0]
+    A = sv.shape[0]
+    D = grids.shape[2]
+    shared = not np.isnan(R)
+    for j in range(A):
+        sm = sv[j]
+        Dm = dv[j]
+        uh = 0.0
+        Rm = 0.0
+        if shared:
+            Rm = max(R, h)
+            uh = min(sm + h / Dm, 1.0)
+        past_scale = sm / s if s > 0 else 1.0
+        for g in range(n):
+            a = ahead[g]
+            v = a / Dm
+            v += sm
+            if shared and not a <= h + 1e-12:
+                if Rm > h:
+                    v = (a - h) * (1.0 - uh) / max(Rm - h, 1e-9) + uh
+                else:
+                    v = 1.0
+            v = min(max(v, 0.0), 1.0)
+            if u[g] < s:
+                v = min(max(u[g] * past_scale, 0.0), 1.0)
+            um[g] = v
+        if not interp_into(um, u, grids[j], Y[j]):
+            return False
+    for g in range(n):
+        for d in range(D):
+            mean[g, d] = 0.0
+    for j in range(A):
+        for g in range(n):
+            w = W[g, j]
+            for d in range(D):
+                mean[g, d] += w * Y[j, g, d]
+    return True
+
+
+def warm_up() -> None:
+    """Compile (or load) :func:`place_members_into` with tiny inputs of the real types."""
+    u = np.linspace(0.0, 1.0, 4)
+    place_members_into(u, np.array([0.0, 0.0, 0.1, 0.3]), np.array([0.4, 0.5]), np.array([1.0, 1.2]), 0.45, 0.8,
+                       0.25, np.zeros((2, 4, 2)), np.full((4, 2), 0.5), np.empty((2, 4, 2)), np.empty((4, 2)),
+                       np.empty(4))

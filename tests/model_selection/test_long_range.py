@@ -142,3 +142,114 @@ def test_inner_yardsticks_have_the_known_answers_of_the_truth_and_of_the_clock()
     assert mean_only["rest of the movement ÷ clock"][0] == pytest.approx(1.0)  # the mean, played by the clock
     assert mean_only["real time ÷ clock"][0] == pytest.approx(1.0)
     assert mean_only["whole movement at 60 % ÷ the mean demonstration"][0] == pytest.approx(1.0)
+
+
+def _own_timing_cv(seed=5):
+    """One member "m", the truth's shape placed at each recording's own duration (the case's true timing)."""
+    dt, H, G = 0.05, 40, 201
+    grid = np.linspace(0.0, 1.0, G)
+    rng = np.random.default_rng(seed)
+    n_demo, per = 10, 3
+    n_case = n_demo * per
+    durations = np.repeat(rng.uniform(1.5, 3.0, n_demo), per)
+    elapsed = np.tile([0.3, 0.5, 0.7], n_demo) * durations
+    shape = np.stack([grid, np.sin(np.pi * grid)], axis=1)
+    t = np.arange(1, H + 1) * dt
+    u_true = (elapsed[:, None] + t[None, :]) / durations[:, None]
+    truth = np.stack([np.stack([np.interp(np.clip(u, 0, 1), grid, shape[:, j]) for j in range(2)], axis=1)
+                      for u in u_true])
+    cv = _cv({"m": truth}, truth, n_demo, dt=dt)
+    cv.traj = np.broadcast_to(shape, (1, n_case, G, 2)).copy()
+    cv.phase = (elapsed / durations)[None, :]
+    cv.duration = durations[None, :]
+    cv.elapsed = elapsed
+    cv.mean_duration = np.full(n_case, 2.2)
+    cv.valid = u_true <= 1.0
+    cv.w0 = np.ones(1)
+    return cv, durations - elapsed
+
+
+def test_the_shared_end_of_a_named_member_is_its_own_remaining_duration():
+    from interprim.model_selection.long_range import pace_remaining, shared_end
+
+    assert pace_remaining([0.25, 0.5, 1.2], [2.0, 3.0, 2.0]) == pytest.approx([1.5, 1.5, 0.0])  # none past the end
+    cv, R_true = _own_timing_cv()
+    assert shared_end(cv, None) is None
+    assert shared_end(cv, "m") == pytest.approx(R_true)  # the member's own timing is the truth's here
+    assert shared_end(cv, 0.0) == pytest.approx(np.clip(2.2 - cv.elapsed, 0.0, None))  # the clock's
+    with pytest.raises(ValueError, match="names no member"):
+        shared_end(cv, "learned")
+
+
+def test_timing_choice_takes_the_partners_pace_first_unless_it_is_worse_by_more_than_its_noise():
+    cv, R_true = _own_timing_cv()
+    per_step = np.ones((cv.truth.shape[1], 1))
+    lam, table = timing_choice(cv, per_step, pace=("p", R_true))
+    assert lam == "p"  # the pace's end is the truth's: tried first, and the best
+    assert list(table)[0] == "p" and table["p"]["error"] == pytest.approx(0.0, abs=1e-3)
+    # a pace 60 % too slow: worse than the members' own end by more than its noise, so not taken
+    lam, table = timing_choice(cv, per_step, pace=("p", 1.6 * R_true))
+    assert lam in (1.0, None)
+    assert table["p"]["error"] > 0.05 and table["p"]["vs_best"] > table["p"]["se"]
+    # without a pace the candidates are the former ones
+    lam, table = timing_choice(cv, per_step)
+    assert list(table) == ["0", "0.5", "1", "own"] and lam in (1.0, None)
+
+
+def test_refine_keeps_the_pace_family_at_weight_0_when_it_times_the_blend_better_than_the_clock():
+    """A member "a" of the right shape played by the clock, and "learned" of a wrong shape (no weight in any band)
+    whose phase and duration are each recording's true ones: the blend keeps "a" alone for its shape and "learned"
+    at weight 0 for its timing; with a budget that cannot afford both, the pace is not a candidate."""
+    from interprim.model_selection.long_range import refine, replaced
+    from interprim.model_selection.stacking import stack
+
+    dt, H, G = 0.05, 60, 201
+    grid = np.linspace(0.0, 1.0, G)
+    rng = np.random.default_rng(7)
+    n_demo, per = 12, 3
+    n_case = n_demo * per
+    durations = np.repeat(rng.uniform(1.5, 3.0, n_demo), per)
+    elapsed = np.tile([0.3, 0.5, 0.7], n_demo) * durations
+    t = np.arange(1, H + 1) * dt
+    u_true = (elapsed[:, None] + t[None, :]) / durations[:, None]
+
+    def placed(Y, u):
+        return np.stack([np.stack([np.interp(np.clip(v, 0, 1), grid, Y[:, j]) for j in range(2)], axis=1)
+                         for v in u])
+
+    shape = np.stack([grid, np.sin(np.pi * grid)], axis=1)
+    wrong = shape + np.array([0.0, 50.0])
+    md = float(np.mean(durations))
+    truth = placed(shape, u_true)
+    cv = _cv({"a": placed(shape, (elapsed[:, None] + t[None, :]) / md), "learned": placed(wrong, u_true)}, truth,
+             n_demo, dt=dt)
+    cv.traj = np.stack([np.broadcast_to(shape, (n_case, G, 2)), np.broadcast_to(wrong, (n_case, G, 2))]).copy()
+    cv.phase = np.stack([np.minimum(elapsed / md, 1.0), elapsed / durations])
+    cv.duration = np.stack([np.full(n_case, md), durations])
+    cv.elapsed, cv.mean_duration = elapsed, np.full(n_case, md)
+    cv.valid = u_true <= 1.0
+    cv.unit_truth = {j: shape for j in range(n_demo)}
+    fitted = stack(cv, 0.25, scales=False)
+    assert fitted.names == ["a"]  # the wrong shape carries no weight
+    st, lam = refine(cv, fitted, 0.25)
+    assert lam == "learned" and st.names == ["a", "learned"]
+    assert np.all(st.W[:, 0] == 1.0) and np.all(st.W[:, 1] == 0.0)
+    assert st.record["long_range"]["remaining"] == "learned"
+    assert st.record["band_weights"]["learned"] == [0.0] * len(st.edges)
+    table = st.record["long_range"]["remaining_table"]
+    assert list(table)[0] == "learned" and table["learned"]["error"] < 0.5 * table["0"]["error"]
+    # "a" placed with the pace's end (R = each recording's true remaining duration): at its shape's end from the
+    # first step after the recording's end, not before it
+    one = cv.subset(["a"])
+    one.mean = replaced(one, "learned", durations - elapsed)
+    after = cv.valid.sum(axis=1)  # the first step past the held-out movement
+    rows = np.flatnonzero(after < H)
+    assert len(rows) > n_case // 2
+    assert one.mean[0, rows, after[rows]] == pytest.approx(np.tile(shape[-1], (len(rows), 1)), abs=1e-12)
+    assert np.all(np.abs(one.mean[0, rows, after[rows] - 2, 0] - 1.0) > 1e-3)
+    # a budget that affords "a" but not "a" with "learned": the clock's or the members' own timing, no pace
+    st, lam = refine(cv, fitted, 0.25, cost=lambda names: float(len(names)), budget=1.5)
+    assert not isinstance(lam, str) and st.names == ["a"]
+    assert "learned" not in st.record["long_range"]["remaining_table"]
+    st, lam = refine(cv, fitted, 0.25, pace=None)
+    assert not isinstance(lam, str) and "learned" not in st.record["long_range"]["remaining_table"]

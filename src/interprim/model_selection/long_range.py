@@ -20,6 +20,16 @@ real-time weights) toward the clock's ``R_c``; ``lam`` in :data:`LAMBDAS` (0: th
 own speed (the real-time band is unchanged); after it, member ``m`` moves from where it is then,
 ``u_h = s_m + horizon / D_m``, linearly to its end at ``R`` seconds from now (:func:`member_units`).
 
+**The partner's pace** (:data:`PACE`).  One more candidate, tried first: the shared end read from one family alone,
+``R = max(1 - s_p, 0) D_p`` (:func:`pace_remaining`), the family whose phase and duration are read from the
+partner's own movement so far (``LearnedInteraction``: its phase extrapolates the partner's current speed), as a
+member of the blend or, when the stacking gave it no weight, as a member of weight 0 that only times the others
+(when the frame budget affords it).  People repeating an interaction change their pace over a session, so that the
+last recordings are faster or slower than the mean of the earlier ones; inside the demonstrations the pace barely
+drifts, so the inner folds cannot show the clock's error on a later session, and the one-standard-error rule keeps
+the partner's pace unless a simpler timing is better by more than its noise (docs/evaluation-history.md, "A
+remaining duration read from the partner's pace").
+
 **Weights beyond the real-time band** (:func:`long_range_choice`).  Candidates, from the simplest: the mean
 demonstration (``prior``) alone, (optionally each single family,) the real-time weights held at every look-ahead,
 the weights fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
@@ -40,12 +50,17 @@ from .yardsticks import case_groups, case_rms, clock_units, one_se_choice, place
 if TYPE_CHECKING:
     from .stacking import CrossValidation, Stacking
 
-__all__ = ["LAMBDAS", "remaining_duration", "member_units", "timing_choice", "long_range_choice", "case_groups",
-           "schedule", "held", "replaced", "PREFER", "refine", "inner_yardsticks",
-           "summary_lines", "keep_real_time", "candidate_cases"]
+__all__ = ["LAMBDAS", "PACE", "remaining_duration", "pace_remaining", "shared_end", "member_units",
+           "timing_choice", "long_range_choice", "case_groups", "schedule", "held", "replaced", "PREFER", "refine",
+           "inner_yardsticks", "summary_lines", "keep_real_time", "candidate_cases"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
+#: The family whose own remaining duration is the first timing candidate (module docstring: the partner's pace).
+#: On the replayed development folds (:mod:`interprim.experiments.selection_replay`, 9 tasks) it took the rest of
+#: the movement from 0.725x the clock to 0.719x over the three outer folds and from 0.735x to 0.719x on the fold that
+#: predicts the latest third of the recordings (NuiSI alone: 0.950 → 0.937 and 0.925 → 0.895).
+PACE = "learned"
 #: How :func:`one_se_choice` orders the candidates: from the simplest (the default) or from the fitted one.  On the
 #: development recordings, in outer folds with the whole fit inside (6 NuiSI tasks, docs/evaluation.md), starting
 #: from the simplest gave 0.95x the clock over the rest of the movement and 0.96x the mean on the whole movement,
@@ -76,6 +91,28 @@ def remaining_duration(phase: ArrayLike, duration: ArrayLike, elapsed: ArrayLike
     Rb = np.asarray(w0, dtype=np.float64) @ (np.clip(1.0 - phase, 0.0, None) * duration)
     Rc = np.clip(np.asarray(mean_duration, dtype=np.float64) - np.asarray(elapsed, dtype=np.float64), 0.0, None)
     return np.clip(Rc + float(lam) * (Rb - Rc), 0.0, None)
+
+
+def pace_remaining(phase: ArrayLike, duration: ArrayLike) -> np.ndarray:
+    """Seconds left of the movement by one member's own timing, ``max(1 - s_p, 0) D_p`` (``phase``, ``duration``:
+    its ``s_p`` and ``D_p``, any shape): the shared end of the timing named by a member (:data:`PACE`), the
+    ``R_b`` of :func:`remaining_duration` with all the weight on that member and ``lam = 1``."""
+    phase = np.asarray(phase, dtype=np.float64)
+    return np.clip(1.0 - phase, 0.0, None) * np.asarray(duration, dtype=np.float64)
+
+
+def shared_end(cv: CrossValidation, lam: float | str | None) -> np.ndarray | None:
+    """``(cases,)`` the shared remaining duration of the timing ``lam`` on the cases of ``cv``: ``None`` for
+    ``None`` (each member at its own duration), :func:`remaining_duration` with the real-time weights ``cv.w0``
+    for a number, :func:`pace_remaining` of the member of that name (one of ``cv.names``) for a string."""
+    if lam is None:
+        return None
+    if isinstance(lam, str):
+        if lam not in cv.names:
+            raise ValueError(f"the timing {lam!r} names no member of the cross-validation ({cv.names})")
+        i = cv.names.index(lam)
+        return pace_remaining(cv.phase[i], cv.duration[i])
+    return remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
 
 
 def member_units(phase: ArrayLike, duration: ArrayLike, t_ahead: ArrayLike, remaining: ArrayLike | None,
@@ -138,23 +175,25 @@ def _rest(cv: CrossValidation, pred: np.ndarray, idx: np.ndarray | slice | None 
     return case_rms(pred, cv.truth[idx], cv.valid[idx], cv.controlled or cv.observed, cv.point_dim)
 
 
-def replaced(cv: CrossValidation, lam: float | None) -> np.ndarray:
+def replaced(cv: CrossValidation, lam: float | str | None, remaining: ArrayLike | None = None) -> np.ndarray:
     """``(M, cases, H, D)``: the members' predictions of ``cv`` placed with the shared remaining duration of
-    ``lam`` (``None``: their own timing, ``cv.mean`` itself) and the real-time weights ``cv.w0``."""
+    ``lam`` (:func:`shared_end`; ``None``: their own timing, ``cv.mean`` itself), or with ``remaining``
+    ``(cases,)`` when given (e.g. a pace read from a family that is not among ``cv``'s)."""
     if lam is None:
         return cv.mean
-    R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
+    R = shared_end(cv, lam) if remaining is None else np.asarray(remaining, dtype=np.float64)
     return np.stack([place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
                      for i in range(len(cv.names))])
 
 
-def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray) -> np.ndarray:
-    """``_blend(replaced(cv, lam), per_step)`` member by member: each member's placed predictions weighted and added
-    to the blend in turn, from zeros (the sums of :func:`_blend`'s einsum, in its order), without the ``(M, cases,
-    H, D)`` array of all members."""
+def _blend_replaced(cv: CrossValidation, lam: float | str | None, per_step: np.ndarray,
+                    remaining: ArrayLike | None = None) -> np.ndarray:
+    """``_blend(replaced(cv, lam, remaining), per_step)`` member by member: each member's placed predictions weighted
+    and added to the blend in turn, from zeros (the sums of :func:`_blend`'s einsum, in its order), without the
+    ``(M, cases, H, D)`` array of all members."""
     if lam is None:
         return _blend(cv.mean, per_step)
-    R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
+    R = shared_end(cv, lam) if remaining is None else np.asarray(remaining, dtype=np.float64)
     out = None
     for i in range(len(cv.names)):
         placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
@@ -162,7 +201,7 @@ def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray
         if out is None:
             out = np.zeros(placed.shape)
         out += placed
-    return _blend(replaced(cv, lam), per_step) if out is None else out
+    return _blend(replaced(cv, lam, remaining), per_step) if out is None else out
 
 
 def _order(names: Iterable[str], prefer: str) -> list[str]:
@@ -175,19 +214,27 @@ def _order(names: Iterable[str], prefer: str) -> list[str]:
 
 
 def timing_choice(cv: CrossValidation, per_step: np.ndarray, lambdas: Iterable[float] = LAMBDAS,
-                  prefer: str = PREFER[0]) -> tuple[float | None, dict[str, dict[str, float]]]:
+                  prefer: str = PREFER[0], pace: tuple[str, ArrayLike] | None = None
+                  ) -> tuple[float | str | None, dict[str, dict[str, float]]]:
     """``(lam, table)``: the blend's remaining duration beyond the real-time band, chosen on the rest of the movement.
 
-    Candidates, from the simplest: the shared remaining duration of each ``lam`` of :data:`LAMBDAS`
-    (:func:`remaining_duration`), then ``None`` (each member at its own duration).  The blend (per-step weights
-    ``per_step`` ``(H, M)``) of each is scored on the rest of the movement in seconds over the held-out cases of
-    ``cv``; :func:`one_se_choice` takes the first candidate within one standard error (over the held-out
-    demonstrations) of the best, trying them from the simplest (``prefer="simple"``, the default: the clock's
-    remaining duration unless the members' is better by more than its noise) or from the members' own timing
-    (``prefer="fitted"``)."""
-    cands: dict[str, float | None] = {f"{lam:g}": lam for lam in lambdas}
+    Candidates, from the simplest: with ``pace = (name, R)``, the partner's pace, the shared end ``R`` ``(cases,)``
+    read from the family ``name`` alone (:func:`pace_remaining`; returned as ``lam = name``); the shared remaining
+    duration of each ``lam`` of :data:`LAMBDAS` (:func:`remaining_duration`), then ``None`` (each member at its own
+    duration).  The blend (per-step weights ``per_step`` ``(H, M)``) of each is scored on the rest of the movement
+    in seconds over the held-out cases of ``cv``; :func:`one_se_choice` takes the first candidate within one
+    standard error (over the held-out demonstrations) of the best, trying them from the simplest
+    (``prefer="simple"``, the default: the partner's pace, else the clock's remaining duration, unless another is
+    better by more than its noise) or from the members' own timing (``prefer="fitted"``)."""
+    cands: dict[str, float | str | None] = {}
+    errors: dict[str, np.ndarray] = {}
+    if pace is not None:
+        cands[pace[0]] = pace[0]
+        errors[pace[0]] = _rest(cv, _blend_replaced(cv, pace[0], per_step, pace[1]))
+    cands.update({f"{lam:g}": lam for lam in lambdas})
     cands["own"] = None
-    errors = {name: _rest(cv, _blend_replaced(cv, lam, per_step)) for name, lam in cands.items()}
+    errors.update({name: _rest(cv, _blend_replaced(cv, lam, per_step)) for name, lam in cands.items()
+                   if name not in errors})
     name, table = one_se_choice(errors, cv.demo, _order(cands, prefer))
     return cands[name], table
 
@@ -288,16 +335,22 @@ def candidate_cases(cv: CrossValidation, fitted: Stacking, cost: Callable[[list[
 
 def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = PREFER[0],
            cost: Callable[[list[str]], float] | None = None, budget: float | None = None,
-           level: float | None = None) -> tuple[Stacking, float | None]:
+           level: float | None = None, pace: str | None = PACE) -> tuple[Stacking, float | str | None]:
     """``(Stacking, remaining)``: the stacked blend ``fitted`` (:func:`~interprim.model_selection.stacking.stack` of
     ``cv``) with its remaining duration and its weights beyond the real-time band chosen on the rest of the
     movement (:func:`timing_choice`, then :func:`long_range_choice` on the predictions placed with that timing; the
     per-band weights are fitted again on them when the timing changed).
 
-    ``remaining``: the chosen ``lam`` of :func:`remaining_duration` (``None``: each member at its own duration),
-    for :class:`~interprim.models.blend.Blend`.  The returned :class:`~interprim.model_selection.stacking.Stacking`
-    keeps the members carrying weight in some band, its variance model fitted again with the chosen weights, and
-    its ``record`` says what was chosen (``long_range``: ``remaining``, ``beyond`` and both choices' tables).
+    ``remaining``: the chosen ``lam`` of :func:`remaining_duration` (``None``: each member at its own duration; a
+    family's name: the shared end is that family's own remaining duration, the partner's pace of
+    :func:`timing_choice`), for :class:`~interprim.models.blend.Blend`.  The returned
+    :class:`~interprim.model_selection.stacking.Stacking` keeps the members carrying weight in some band (and the
+    pace's family, of weight 0 in every band when it carries none, when it times the blend), its variance model
+    fitted again with the chosen weights, and its ``record`` says what was chosen (``long_range``: ``remaining``,
+    ``beyond`` and both choices' tables).
+
+    ``pace``: the family whose own remaining duration is the first timing candidate (:data:`PACE`; None: no such
+    candidate), offered when it was compared and, with a budget, when the blend's families and it fit in it.
 
     ``level``: the band's quantile level fixed
     (:meth:`~interprim.model_selection.stacking.CrossValidation.blend_scales`; default: chosen by cross-fitting).
@@ -308,18 +361,26 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     """
     from .stacking import MIN_WEIGHT, Stacking, stack
 
+    full_cv = cv
     cv = candidate_cases(cv, fitted, cost, budget)
     names = list(cv.names)
 
     def full(st: Stacking) -> np.ndarray:
         return _full(st, names)
 
+    pace_R = None  # the partner's pace: the shared end read from the family ``pace`` alone (maybe not a candidate)
+    if pace is not None and pace in full_cv.names and (
+            cost is None or budget is None or cost(sorted(set(names) | {pace})) <= budget):
+        i = full_cv.names.index(pace)
+        pace_R = pace_remaining(full_cv.phase[i], full_cv.duration[i])  # the cases of ``cv``, in its order
     W = full(fitted)
-    lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer)
+    lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer,
+                                 pace=None if pace_R is None else (str(pace), pace_R))
+    R = pace_R if isinstance(lam, str) else None
     placed = cv
     if lam is not None:
         placed = cv.cases(np.arange(len(cv.demo)))
-        placed.mean = replaced(cv, lam)
+        placed.mean = replaced(cv, lam, R)
         fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
         W = full(fitted)
     Wc, edges, beyond, b_table = long_range_choice(placed, W, list(fitted.edges), prefer=prefer)
@@ -332,29 +393,36 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     scales = sub.blend_scales(per_step, level=level)
     band_level = scales.pop("level")
     scales["t"] = cv.t_ahead
+    blend_error = sub.blend_error(per_step)
+    if isinstance(lam, str) and lam not in members:  # the pace's family times the blend at weight 0
+        members.append(lam)
+        Wk = np.hstack([Wk, np.zeros((Wk.shape[0], 1))])
     band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
     record = dict(fitted.record)
-    record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam)
+    record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam, R)
     record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
-                   "bands": edges, "blend_cv_error": sub.blend_error(per_step), "band_level": band_level,
+                   "bands": edges, "blend_cv_error": blend_error, "band_level": band_level,
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
-                   "long_range": {"remaining": "own" if lam is None else float(lam), "beyond": beyond,
-                                  "prefer": prefer, "remaining_table": t_table, "beyond_table": b_table}})
+                   "long_range": {"remaining": "own" if lam is None else lam if isinstance(lam, str)
+                                  else float(lam), "beyond": beyond, "prefer": prefer,
+                                  "remaining_table": t_table, "beyond_table": b_table}})
     if cost is not None and "cost" in record:
         record["cost"] = dict(record["cost"], frame=float(cost(members)))
     return Stacking(members, Wk, edges, scales, record), lam
 
 
-def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: float | None) -> dict[str, list[float]]:
+def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: float | str | None,
+                     remaining: ArrayLike | None = None) -> dict[str, list[float]]:
     """The blend's figures on the inner folds' held-out cases, as a user reads them on a hold-out.
 
     ``{label: [ratio, standard error]}`` over the held-out demonstrations (:func:`ratio_se`): real time (the
     next ``cv.horizon`` seconds) and the rest of the movement in seconds, each ÷ the clock and ÷ the mean at the
     true duration (known in a held-out fold), and the paper's Fig. 7 measure (the whole movement in normalised
     time from the case nearest 60 % seen of each held-out demonstration) ÷ the mean demonstration.  ``W``,
-    ``edges``: the blend's weights per band; ``lam``: its remaining duration (:func:`refine`); ``cv.mean``: the
-    members placed with it.  Empty when the mean (``prior``) was not compared: its prediction is each inner
-    fold's mean demonstration, the references' shape.
+    ``edges``: the blend's weights per band; ``lam``: its remaining duration (:func:`refine`; ``remaining``: its
+    shared end per case when given, else :func:`shared_end`); ``cv.mean``: the members placed with it.  Empty when
+    the mean (``prior``) was not compared: its prediction is each inner fold's mean demonstration, the references'
+    shape.
     """
     if "prior" not in cv.names or not len(cv.demo):
         return {}
@@ -382,6 +450,11 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
     G = mean.shape[1]
     u = np.linspace(0.0, 1.0, G)
     w_now = W[0] / W[0].sum()
+    R_all = None  # a shared end per case, when it is not the members' of the weights w_now (below)
+    if remaining is not None:
+        R_all = np.asarray(remaining, dtype=np.float64)
+    elif isinstance(lam, str):
+        R_all = shared_end(cv, lam)
     wm_blend: list[float]
     wm_mean: list[float]
     wm_blend, wm_mean = [], []
@@ -391,8 +464,8 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
         s, D = float(w_now @ sm), float(w_now @ Dm)
         R = None
         if lam is not None:
-            R = float(remaining_duration(sm[:, None], Dm[:, None], [cv.elapsed[c]], cv.mean_duration[c], w_now,
-                                         lam)[0])
+            R = float(R_all[c]) if R_all is not None else float(remaining_duration(
+                sm[:, None], Dm[:, None], [cv.elapsed[c]], cv.mean_duration[c], w_now, float(lam))[0])
             D = R / (1.0 - s) if s < 1.0 - 1e-9 else D
         ahead = np.clip((u - s) * D, 0.0, None)
         Wu = np.clip(interp_columns(ahead, t, per_step), 0.0, None)
@@ -418,6 +491,8 @@ def summary_lines(record: Mapping[str, Any]) -> list[str]:
         return []
     rem = lr["remaining"]
     timing = ("each member at its own duration" if rem == "own" else
+              f"one shared end, {rem}'s own remaining duration (the partner's pace)"
+              if isinstance(rem, str) else
               f"one shared end, the members' remaining duration shrunk {1 - float(rem):.0%} toward the clock's")
     out = [f"beyond the real-time band: {lr['beyond']} (chosen on the rest of the movement, one-standard-error "
            f"rule from the {'fitted' if lr.get('prefer') == 'fitted' else 'simplest'} end); timing: {timing}"]

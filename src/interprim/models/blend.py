@@ -110,12 +110,15 @@ class Blend(Predictor):
         None: every member runs at its own duration ``D_m``.  A number ``lam``: beyond ``horizon`` the members run
         to one shared end, ``R`` seconds from now, the members' remaining duration shrunk toward the clock's by
         ``lam`` (:func:`interprim.model_selection.long_range.remaining_duration`, chosen on the inner folds' rest
-        of the movement); up to ``horizon`` each keeps its own speed.
+        of the movement); up to ``horizon`` each keeps its own speed.  A member's name ``p`` (the partner's pace,
+        :data:`interprim.model_selection.long_range.PACE`): the shared end is that member's own remaining duration
+        ``max(1 - s_p, 0) D_p`` (:func:`interprim.model_selection.long_range.pace_remaining`); the member may carry
+        weight 0 in every band, timing the others only.
     """
 
     _FITTED = "members_"
-    #: 2: weights per look-ahead band, the variance model's own time axis
-    STATE_VERSION = 2
+    #: 2: weights per look-ahead band, the variance model's own time axis; 3: ``remaining`` may name a member
+    STATE_VERSION = 3
     #: points of the normalised-time grid on which the members' predictions are read
     N_GRID = 201
 
@@ -138,7 +141,7 @@ class Blend(Predictor):
         sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
         blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
                     None if bands is None else [float(b) for b in bands],
-                    None if remaining is None else float(remaining))
+                    None if remaining is None else remaining if isinstance(remaining, str) else float(remaining))
         blend.adopt(members, demos, dt)
         return blend
 
@@ -158,6 +161,9 @@ class Blend(Predictor):
         names, W, edges = self._weight_table()
         if np.any(W < 0) or not np.all(np.isfinite(W)) or np.any(W.sum(axis=1) <= 0):
             raise ValueError("weights must be finite, non-negative and not all zero in any band")
+        if isinstance(self.remaining, str) and self.remaining not in names:
+            raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
+                             "shared end is read from a member's own timing, so that member must be in weights")
         self.members_ = {m: members[m] for m in names}
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
@@ -217,11 +223,15 @@ class Blend(Predictor):
         s = float(np.dot(w0, sv))
         D = float(np.dot(w0, dv))
         R = None
-        if self.remaining is not None:  # one shared end beyond the real-time band (long_range.remaining_duration)
+        if isinstance(self.remaining, str):  # one shared end: a member's own (long_range.pace_remaining)
+            sp, Dp = timing[names.index(self.remaining)]
+            R = max(1.0 - sp, 0.0) * Dp
+        elif self.remaining is not None:  # one shared end beyond the real-time band (long_range.remaining_duration)
             # remaining_duration's operations for one case: Rb = w0 . (max(1 - s_m, 0) D_m), Rc = max(mean - t, 0)
             Rb = float(np.dot(w0, [max(1.0 - a, 0.0) * b for a, b in timing]))
             Rc = max(mean_dur - (n_frames - 1) * dt, 0.0)
             R = max(Rc + float(self.remaining) * (Rb - Rc), 0.0)
+        if R is not None:
             R = max(R, float(self.horizon))  # the real-time band is the members' own (long_range.member_units)
             if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
                 D = R / (1.0 - s)

@@ -203,6 +203,77 @@ def fold_message(why: str, n: int, k: int | None) -> str:
             f"{n} demonstrations, holding the others out to score the family)")
 
 
+class _CaseTable:
+    """The compared families' records of the inner cross-validation gathered family by family into the arrays of
+    :class:`CrossValidation` (``(families, cases, ...)``, the cases in sorted order): each family's records are
+    copied into the arrays as soon as its sweep ends and can then be dropped, so that the fit holds one family's
+    records at a time, not every family's (the placed predictions of five families on 30 demonstrations of 200
+    frames: about 270 MB).  The arrays hold the records' values, as ``np.array`` of them would.
+
+    A family whose cases or array shapes differ from the first one's keeps its records, and :meth:`arrays` then
+    builds the arrays from every family's records (those of the families already copied read back from the
+    arrays), on the cases all the families share."""
+
+    #: the per-family fields of a record, in the arrays :meth:`arrays` returns
+    FIELDS = ("mean", "trajectory", "phase", "duration")
+
+    def __init__(self, n_families: int) -> None:
+        self.n = int(n_families)
+        self.names: list[str] = []
+        self.keys: list[tuple[int, int]] | None = None  # the first family's cases, sorted
+        self.buf: dict[str, np.ndarray] = {}
+        self.first: dict[str, Any] = {}  # the first family's truth and fractions
+        self.kept: dict[str, dict[tuple[int, int], dict[str, Any]]] = {}  # families whose records are kept
+
+    def add(self, name: str, by: dict[tuple[int, int], dict[str, Any]]) -> None:
+        """Add the family ``name``'s records ``by`` (``{(demo, k): record}``, non-empty)."""
+        keys = sorted(by)
+        if self.keys is None:
+            self.keys = keys
+            r0 = by[keys[0]]
+            self.buf = {f: np.empty((self.n, len(keys)) + np.shape(r0[f])) for f in self.FIELDS}
+            self.first = {"truth": np.array([by[c]["truth"] for c in keys], dtype=np.float64),
+                          "fraction": [by[c]["fraction"] for c in keys]}
+        slot = len(self.names) - len(self.kept)
+        shapes = {f: self.buf[f].shape[2:] for f in self.FIELDS}
+        if self.kept or keys != self.keys or slot >= self.n or any(
+                np.shape(r[f]) != shapes[f] for r in by.values() for f in ("mean", "trajectory")):
+            self.kept[name] = by
+        else:
+            for f in self.FIELDS:
+                out = self.buf[f][slot]
+                for i, c in enumerate(keys):
+                    out[i] = by[c][f]
+        self.names.append(name)
+
+    def _records(self, name: str) -> dict[tuple[int, int], dict[str, Any]]:
+        """The records of ``name`` (those of a copied family read back from the arrays)."""
+        if name in self.kept:
+            return self.kept[name]
+        assert self.keys is not None  # a family was copied
+        slot = self.names.index(name)  # the copied families come first
+        out = {c: {f: self.buf[f][slot, i] for f in self.FIELDS} for i, c in enumerate(self.keys)}
+        if slot == 0:
+            for i, c in enumerate(self.keys):
+                out[c].update(truth=self.first["truth"][i], fraction=self.first["fraction"][i])
+        return out
+
+    def arrays(self) -> tuple[list[tuple[int, int]], list[float], np.ndarray, dict[str, np.ndarray]]:
+        """``(cases, fractions, truth, {field: (families, cases, ...)})`` over the cases every family has (sorted):
+        the first family's held-out fraction seen and truth of each case, and the families' arrays of
+        :data:`FIELDS`."""
+        if self.keys is not None and not self.kept:  # every family copied: the arrays as they are
+            m = len(self.names)
+            return self.keys, self.first["fraction"], self.first["truth"], {f: self.buf[f][:m] for f in self.FIELDS}
+        per = {m: self._records(m) for m in self.names}
+        cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
+        first = per[self.names[0]] if self.names else {}
+        truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
+        arrays = {f: np.array([[per[m][c][f] for c in cases] for m in self.names], dtype=np.float64)
+                  for f in self.FIELDS}
+        return cases, [first[c]["fraction"] for c in cases], truth, arrays
+
+
 #: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
 _PER_FAMILY = ("mean", "traj", "phase", "duration")
 #: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
@@ -247,8 +318,8 @@ class CrossValidation:
         #: seconds of the real-time band (the protocol's look-ahead; ``cfg.horizon`` may reach further)
         self.horizon = float(cfg.horizon if horizon is None else horizon)
         self.errors: dict[str, float]
-        per: dict[str, dict[tuple[int, int], dict[str, Any]]]  # per family: the records by (demo, k)
-        self.errors, per = {}, {}
+        self.errors = {}
+        table = _CaseTable(len(make))  # the compared families' cases, gathered family by family
         #: ``{family: why it could not be compared}`` for the families with an infinite error
         self.why: dict[str, str] = {}
         for name, factory in make.items():
@@ -267,14 +338,16 @@ class CrossValidation:
             finally:
                 if progress is not None:
                     progress.step(f"compared {name}")
-            per[name] = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
-            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in per[name].values()])
-                                      ) if per[name] else float("inf")
-        self.names = [m for m in per if np.isfinite(self.errors[m])]
-        cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
-        first = per[self.names[0]] if self.names else {}
-        self.truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
-        self.mean = np.array([[per[m][c]["mean"] for c in cases] for m in self.names], dtype=np.float64)
+            by = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
+            del recs
+            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in by.values()])
+                                      ) if by else float("inf")
+            if np.isfinite(self.errors[name]):
+                table.add(name, by)  # copied into the table's arrays: this family's records are dropped here
+            del by
+        self.names = list(table.names)
+        cases, fraction, self.truth, arrays = table.arrays()
+        self.mean = arrays["mean"]
         D = self.truth.shape[-1] if self.truth.size else len(self.observed)
         self.controlled = [i for i in range(D) if i not in set(self.observed)]
         H = self.truth.shape[1] if self.truth.ndim == 3 else 0
@@ -282,11 +355,11 @@ class CrossValidation:
         self.t_ahead = np.arange(1, H + 1) * self.dt
         #: ``(cases, H)``: whether the step is a frame of the held-out movement (not past its end, where the
         #: protocol holds the last frame); the weights and the band beyond the real-time horizon are fitted on these
-        n_left = np.array([int(round(c[1] / first[c]["fraction"])) - c[1] for c in cases], dtype=np.int64)
+        n_left = np.array([int(round(c[1] / f)) - c[1] for c, f in zip(cases, fraction)], dtype=np.int64)
         self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
-        self._keep_timing(per, cases, demos, k)
+        self._keep_timing(arrays, cases, demos, k)
 
-    def _keep_timing(self, per: dict[str, dict[tuple[int, int], dict[str, Any]]], cases: list[tuple[int, int]],
+    def _keep_timing(self, arrays: dict[str, np.ndarray], cases: list[tuple[int, int]],
                      demos: Prefixes | Sequence[ArrayLike], k: int | None) -> None:
         """What the blend's long-range choice (:mod:`interprim.model_selection.long_range`) re-places: per case,
         ``demo`` (the held-out demonstration), ``elapsed`` (s), ``mean_duration`` (s, of the inner training fold),
@@ -303,9 +376,7 @@ class CrossValidation:
             rest = np.delete(lengths, held)
             fold_mean.update({j: float(np.mean(rest - 1.0)) * self.dt for j in held})
         self.mean_duration = np.array([fold_mean[j] for j in self.demo], dtype=np.float64)
-        self.traj = np.array([[per[m][c]["trajectory"] for c in cases] for m in self.names], dtype=np.float64)
-        self.phase = np.array([[per[m][c]["phase"] for c in cases] for m in self.names], dtype=np.float64)
-        self.duration = np.array([[per[m][c]["duration"] for c in cases] for m in self.names], dtype=np.float64)
+        self.traj, self.phase, self.duration = arrays["trajectory"], arrays["phase"], arrays["duration"]
         #: ``{demo: (G, D)}``: each held-out demonstration on the normalised-time grid (the paper's Fig. 7 measure)
         G = self.traj.shape[2] if self.traj.ndim == 4 else 0
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}

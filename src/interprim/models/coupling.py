@@ -456,7 +456,8 @@ class CouplingModel:
         cache = getattr(self, "_cv_cache", None)
         cache = {} if cache is None else cache
         for hold in folds:
-            train = np.setdiff1d(np.arange(n), hold)
+            in_train = np.ones(n, dtype=bool)
+            in_train[hold] = False  # the fold's training demonstrations (np.isin(g, train) of every row by a lookup)
             for a, s in enumerate(fr):
                 key = (tuple(int(j) for j in hold), a)
                 if key not in cache:
@@ -464,7 +465,7 @@ class CouplingModel:
                     if ("rows", a) not in cache:  # every demonstration's training rows at this phase (_rows)
                         cache["rows", a] = self._rows(np.arange(n), s, sig)
                     X_all, g_all = cache["rows", a]
-                    sel = np.isin(g_all, train)
+                    sel = in_train[g_all]
                     X, g = X_all[sel], g_all[sel]
                     # held-out prefixes: true phases spread around the estimate s by the phase error
                     z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
@@ -485,14 +486,14 @@ class CouplingModel:
                 # the controlled columns of the truth, broadcast over the jitter (the values of the repeated rows)
                 truth_c = Yflat[hold].reshape(nh, 1, self.n_out, D)[..., ctrl_cols]
                 for c, cand in enumerate(cands):
-                    mean, h = cand.predict(ctx)
                     if keep is not None and c == keep:
+                        mean, h = cand.predict(ctx)
                         e = (mean - np.repeat(Yflat[hold], nj, axis=0)).reshape(nh, nj, self.n_out, D)
                         resid[a, hold] = e
                         lev[a, hold] = h.reshape(nh, nj)
                         ec = e[..., ctrl]
-                    else:  # only the controlled columns' errors (each the same difference as in e)
-                        ec = mean.reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
+                    else:  # only the controlled columns' errors (each the same difference as in e); no leverage
+                        ec = cand.mean(ctx).reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
                     # np.mean(np.sum(ec ** 2 * w_ctrl, axis=-1), axis=(1, 2)) by the reductions np.sum and np.mean
                     # call (the same sums, divided by the count), without their wrappers' overhead (called ~10^4
                     # times per fit)

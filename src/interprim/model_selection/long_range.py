@@ -144,8 +144,10 @@ def replaced(cv: CrossValidation, lam: float | None) -> np.ndarray:
     if lam is None:
         return cv.mean
     R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
-    return np.stack([place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
-                     for i in range(len(cv.names))])
+    out = np.empty((len(cv.names), len(cv.elapsed), len(cv.t_ahead), cv.traj.shape[-1]))
+    for i in range(len(cv.names)):  # each member placed into its rows (np.stack's values, without its copy)
+        place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon), out=out[i])
+    return out
 
 
 def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray) -> np.ndarray:
@@ -155,9 +157,10 @@ def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray
     if lam is None:
         return _blend(cv.mean, per_step)
     R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
-    out = None
-    for i in range(len(cv.names)):
-        placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
+    out = placed = None
+    for i in range(len(cv.names)):  # each member placed into one buffer in turn
+        placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon),
+                             out=placed)
         placed *= per_step[:, i][None, :, None]
         if out is None:
             out = np.zeros(placed.shape)

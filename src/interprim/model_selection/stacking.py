@@ -274,6 +274,8 @@ class _CaseTable:
         return cases, [first[c]["fraction"] for c in cases], truth, arrays
 
 
+#: Floats of a block of cases that :meth:`CrossValidation._gram` and :func:`blend_parts` hold at a time (about 4 MB).
+_CASE_BLOCK = 1 << 19
 #: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
 _PER_FAMILY = ("mean", "traj", "phase", "duration")
 #: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
@@ -478,14 +480,25 @@ class CrossValidation:
             return g
         c = column_index(self.controlled or self.observed)  # a slice when contiguous: no copy of the members' arrays
         T = np.ascontiguousarray(self.truth[..., c])  # (cases, H, C)
-        E = self.mean[..., c] - T[None]  # (M, cases, H, C)
-        M = E.shape[0]
-        G = np.empty(T.shape[:2] + (M, M))
-        for m in range(M):  # one pass over the cases per pair of families (faster than tiny batched products)
-            for n in range(m + 1):
-                G[:, :, m, n] = G[:, :, n, m] = np.einsum("chj,chj->ch", E[m], E[n])
-        g = {"mean": self.mean, "truth": self.truth, "names": list(self.names), "rows": np.arange(T.shape[0]),
-             "G": G, "u": np.moveaxis(np.einsum("mchj,chj->mch", E, T), 0, 2), "t": np.einsum("chj,chj->ch", T, T)}
+        n_case, H, C = T.shape
+        M = self.mean.shape[0]
+        G = np.empty((n_case, H, M, M))
+        U = np.empty((M, n_case, H))
+        # the errors E = mean - truth a block of cases at a time, into one small buffer: every product is a sum over
+        # the columns of one case and step, the same numbers as from the whole (M, cases, H, C) array of errors,
+        # without its memory (tens of MB, new pages for every cross-validation)
+        step = max(1, min(n_case, _CASE_BLOCK // max(M * H * C, 1)))
+        E = np.empty((M, step, H, C))
+        for c0 in range(0, n_case, step):
+            c1 = min(c0 + step, n_case)
+            Eb, Tb = E[:, :c1 - c0], T[c0:c1]
+            np.subtract(self.mean[:, c0:c1, :, c], Tb[None], out=Eb)
+            for m in range(M):  # one pass over the cases per pair of families (faster than tiny batched products)
+                for n in range(m + 1):
+                    G[c0:c1, :, m, n] = G[c0:c1, :, n, m] = np.einsum("chj,chj->ch", Eb[m], Eb[n])
+            U[:, c0:c1] = np.einsum("mchj,chj->mch", Eb, Tb)
+        g = {"mean": self.mean, "truth": self.truth, "names": list(self.names), "rows": np.arange(n_case),
+             "G": G, "u": np.moveaxis(U, 0, 2), "t": np.einsum("chj,chj->ch", T, T)}
         self.__dict__["_gram_cache"] = g
         return g
 
@@ -632,17 +645,24 @@ def blend_parts(mean: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray
     full = np.broadcast_shapes(np.shape(w), mean.shape)
     w, mean = np.broadcast_to(w, full), np.broadcast_to(mean, full)  # views
     shape = full[1:]
-    tmp = np.empty(shape)
     mix = np.zeros(shape)
-    for m in range(full[0]):
-        np.multiply(w[m], mean[m], out=tmp)
-        mix += tmp
     spread = np.zeros(shape)
-    for m in range(full[0]):
-        np.subtract(mean[m], mix, out=tmp)
-        np.square(tmp, out=tmp)
-        np.multiply(w[m], tmp, out=tmp)
-        spread += tmp
+    # a block of cases at a time (every number is of one case, step and column), through one small buffer
+    n = shape[0] if shape else 1
+    step = max(1, _CASE_BLOCK // max(int(np.prod(shape[1:])), 1))
+    tmp = np.empty((min(step, n),) + tuple(shape[1:])) if shape else np.empty(())
+    for c0 in range(0, n, step):
+        b = slice(c0, c0 + step) if shape else ...
+        mb, sb = mix[b], spread[b]  # views
+        t = tmp[: mb.shape[0]] if shape else tmp
+        for m in range(full[0]):
+            np.multiply(w[m][b], mean[m][b], out=t)
+            mb += t
+        for m in range(full[0]):
+            np.subtract(mean[m][b], mb, out=t)
+            np.square(t, out=t)
+            np.multiply(w[m][b], t, out=t)
+            sb += t
     return mix, spread
 
 

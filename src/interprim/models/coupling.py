@@ -74,7 +74,7 @@ import numpy as np
 
 from ..core._compiled import registry as kernels
 from ..core.blas import one_blas_thread
-from ..core.cache import DerivedCache
+from ..core.cache import DerivedCache, std_deferred
 from ..core.cv import folds as cv_folds
 from ..core.cv import n_folds as cv_n_folds
 from ..core.cv import paired_gain
@@ -544,8 +544,30 @@ class CouplingModel:
             "error_mean": float(scores[0]), "error_best": float(scores[best]), "paired_se": se,
             "n_folds": K,
         }
-        _, resid, lev, _ = self._cv_pass([cands[choice]], 0)
+        if std_deferred():  # a cross-validation that reads the means only: measured when the std is first read
+            self._variance_pending = cands[choice]
+            return
+        self._measure_variance(cands[choice])
+
+    def _measure_variance(self, cand: Conditioner) -> None:
+        """The residual variance and calibration (:meth:`_fit_variance`) of the chosen candidate ``cand`` from its
+        held-out residuals (one more pass of the cross-validation)."""
+        _, resid, lev, _ = self._cv_pass([cand], 0)
         self._fit_variance(resid, lev)
+
+    def __getattr__(self, name):
+        # the residual variance of a fit inside std_unused (interprim.core.cache), measured when first read: the
+        # same pass on the same folds as an eager fit makes, so the same numbers
+        pending = self.__dict__.get("_variance_pending") if name in ("residual_var_", "scale_") else None
+        if pending is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self._cv_cache = {}
+        try:
+            self._measure_variance(pending)
+        finally:
+            del self._cv_cache
+        del self._variance_pending
+        return self.__dict__[name]
 
     def _fit_variance(self, e, h):
         """Residual variance per (phase, t, dof) and the calibration factors (jackknife over demos)."""
@@ -658,28 +680,36 @@ class CouplingModel:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
         D = self.n_dofs_
-        # residual variance at this phase (linear interpolation over the CV phases, constant outside)
-        fr = self.fractions_
-        if s <= fr[0] or fr.size == 1:
-            var = self.residual_var_[0]
-        elif s >= fr[-1]:
-            var = self.residual_var_[-1]
-        else:
-            k = int(np.searchsorted(fr, s)) - 1
-            w = (s - fr[k]) / (fr[k + 1] - fr[k])
-            var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
-        def scales():
-            c = np.ones(D)
-            c[self.observed_dofs_] = self.scale_["observed"]
-            c[self.controlled_dofs_] = self.scale_["controlled"]
-            return c[None, :]
 
-        c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"], self.scale_["controlled"],
-                                                     self.observed_dofs_, self.controlled_dofs_), scales)
-        std = c * np.sqrt(var * (1.0 + h))
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
-                              self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
-                              n_observed=n_observed, conditioned=not self.fallback_to_mean_)
+        def std():
+            # residual variance at this phase (linear interpolation over the CV phases, constant outside)
+            fr = self.fractions_
+            if s <= fr[0] or fr.size == 1:
+                var = self.residual_var_[0]
+            elif s >= fr[-1]:
+                var = self.residual_var_[-1]
+            else:
+                k = int(np.searchsorted(fr, s)) - 1
+                w = (s - fr[k]) / (fr[k + 1] - fr[k])
+                var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
+
+            def scales():
+                c = np.ones(D)
+                c[self.observed_dofs_] = self.scale_["observed"]
+                c[self.controlled_dofs_] = self.scale_["controlled"]
+                return c[None, :]
+
+            c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"],
+                                                         self.scale_["controlled"], self.observed_dofs_,
+                                                         self.controlled_dofs_), scales)
+            return c * np.sqrt(var * (1.0 + h))
+
+        # a fit whose residual variance is not measured yet (inside std_unused): the std when first read
+        lazy = "_variance_pending" in self.__dict__
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std if lazy else std(), s, sig,
+                              self.observed_dofs_, self.controlled_dofs_, self.method_, h,
+                              mean_duration=self.mean_duration_, n_observed=n_observed,
+                              conditioned=not self.fallback_to_mean_)
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")

@@ -159,3 +159,20 @@ def test_the_blend_parts_computed_block_by_block_equal_the_sums_over_the_members
         want = np.sum(w * cv.mean, axis=0)
         np.testing.assert_array_equal(mix, want)
         np.testing.assert_array_equal(spread, np.sum(w * (cv.mean - want) ** 2, axis=0))
+
+
+def test_a_familys_rows_are_read_from_the_parent_without_copying_every_familys():
+    """``family_array`` gives a family's rows of a per-family array, equal to the subset's own array's row; for a
+    subset that has not copied its array yet, a view of the parent's (no copy of every family's rows)."""
+    rng = np.random.default_rng(13)
+    cv = _cv(rng, M=4)
+    cv.traj = rng.normal(size=(4, cv.truth.shape[0], 9, 3))
+    sub = cv.subset(["f1", "f3"])
+    nested = cv.subset(["f0", "f2", "f3"]).subset(["f0", "f3"])
+    for s, rows in ((cv, [0, 1, 2, 3]), (sub, [1, 3]), (nested, [0, 3])):
+        for i, r in enumerate(rows):
+            got = s.family_array("traj", i)
+            assert np.shares_memory(got, cv.traj)  # read from the parent, not copied
+            np.testing.assert_array_equal(got, cv.traj[r])
+    assert "traj" not in sub.__dict__ and "traj" not in nested.__dict__
+    np.testing.assert_array_equal(sub.traj[1], sub.family_array("traj", 1))  # and once copied, the copy's rows

@@ -144,9 +144,11 @@ def replaced(cv: CrossValidation, lam: float | None) -> np.ndarray:
     if lam is None:
         return cv.mean
     R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
-    out = np.empty((len(cv.names), len(cv.elapsed), len(cv.t_ahead), cv.traj.shape[-1]))
+    D = cv.family_array("traj", 0).shape[-1] if cv.names else 0
+    out = np.empty((len(cv.names), len(cv.elapsed), len(cv.t_ahead), D))
     for i in range(len(cv.names)):  # each member placed into its rows (np.stack's values, without its copy)
-        place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon), out=out[i])
+        place_cases(cv.family_array("traj", i), member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R,
+                                                             cv.horizon), out=out[i])
     return out
 
 
@@ -159,8 +161,8 @@ def _blend_replaced(cv: CrossValidation, lam: float | None, per_step: np.ndarray
     R = remaining_duration(cv.phase, cv.duration, cv.elapsed, cv.mean_duration, cv.w0, lam)
     out = placed = None
     for i in range(len(cv.names)):  # each member placed into one buffer in turn
-        placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon),
-                             out=placed)
+        placed = place_cases(cv.family_array("traj", i),
+                             member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon), out=placed)
         placed *= per_step[:, i][None, :, None]
         if out is None:
             out = np.zeros(placed.shape)
@@ -321,7 +323,7 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     lam, t_table = timing_choice(cv, schedule(cv.t_ahead, fitted.edges, W), prefer=prefer)
     placed = cv
     if lam is not None:
-        placed = cv.cases(np.arange(len(cv.demo)))
+        placed = cv.subset(names)  # every case and family: the cases' arrays shared, not copied
         placed.mean = replaced(cv, lam)
         fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
         W = full(fitted)
@@ -365,7 +367,7 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
     t = cv.t_ahead
     per_step = schedule(t, edges, W)
     blend = _blend(cv.mean, per_step)
-    mean = cv.traj[cv.names.index("prior")]
+    mean = cv.family_array("traj", cv.names.index("prior"))
     k = np.rint(cv.elapsed / cv.dt).astype(np.int64) + 1
     n_frames = k + cv.valid.sum(axis=1)
     clock = place_cases(mean, clock_units(k, t, cv.dt, cv.mean_duration))
@@ -405,7 +407,7 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
             future = (np.clip(sm[i] + ahead / Dm[i], 0.0, 1.0) if R is None
                       else member_units([sm[i]], [Dm[i]], ahead, [R], cv.horizon)[0])
             um = np.where(u >= s, future, u * (sm[i] / s if s > 0 else 1.0))
-            Y += Wu[:, i:i + 1] * place_cases(cv.traj[i, c][None], um[None])[0]
+            Y += Wu[:, i:i + 1] * place_cases(cv.family_array("traj", i)[c][None], um[None])[0]
         truth = cv.unit_truth[int(j)]
         wm_blend.append(case_rms(Y[None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
         wm_mean.append(case_rms(mean[c][None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])

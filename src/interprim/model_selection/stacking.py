@@ -408,6 +408,15 @@ class CrossValidation:
             return getattr(self, name), None
         return lazy.get(name, (None, None))
 
+    def family_array(self, field: str, i: int) -> np.ndarray:
+        """Family ``i``'s rows (of :attr:`names`) of the per-family array ``field`` (``"traj"``, ``"mean"``, ...): a
+        view of the array a :meth:`subset` reads them from while it has not copied its own (the same values, without
+        a copy of every family's rows)."""
+        src, rows = self._family_source(field)
+        if src is None:
+            return getattr(self, field)[i]
+        return src[i] if rows is None else src[rows[i]]
+
     def cases(self, idx: ArrayLike) -> CrossValidation:
         """The same families restricted to the cases ``idx``."""
         idx = np.asarray(idx)

@@ -121,3 +121,58 @@ def test_the_band_levels_of_both_agents_at_once_are_those_of_each_alone():
     a2, b2 = stacking.variance_model(cv.mean, cv.truth, cv.valid, w, agents, both, parts=parts)
     np.testing.assert_array_equal(a, a2)
     np.testing.assert_array_equal(b, b2)
+
+
+@pytest.mark.parametrize("block", [1, 7 * 12 * 2 * 3, 1 << 19])  # one case, 7 cases, every case per block
+def test_the_products_computed_block_by_block_equal_those_of_all_the_errors(monkeypatch, block):
+    """The products are computed a block of cases at a time (no array of every error); each is a sum over one
+    case's and step's columns, so they equal, bit for bit, those of the whole array of errors."""
+    from interprim.model_selection import stacking
+
+    monkeypatch.setattr(stacking, "_CASE_BLOCK", block)
+    rng = np.random.default_rng(11)
+    for controlled in ([1, 2], [0, 2]):  # consecutive columns (a view) and not (a copy)
+        cv = _cv(rng, M=3, n_case=30)
+        cv.controlled, cv.observed = controlled, [1] if controlled == [0, 2] else [0]
+        g = cv._gram()
+        T = cv.truth[..., controlled]
+        E = cv.mean[..., controlled] - T[None]
+        for m in range(3):
+            for n in range(3):
+                np.testing.assert_array_equal(g["G"][:, :, m, n], np.einsum("chj,chj->ch", E[m], E[n]))
+        np.testing.assert_array_equal(g["u"], np.moveaxis(np.einsum("mchj,chj->mch", E, T), 0, 2))
+        np.testing.assert_array_equal(g["t"], np.einsum("chj,chj->ch", T, T))
+
+
+@pytest.mark.parametrize("block", [1, 12 * 3 * 4, 1 << 19])  # one case, 4 cases, every case per block
+def test_the_blend_parts_computed_block_by_block_equal_the_sums_over_the_members(monkeypatch, block):
+    """:func:`blend_parts` adds the members' weighted predictions (and their weighted squared disagreement) a
+    block of cases at a time: the numbers of numpy's sums over the members (which add them in turn), bit for bit,
+    for weights per member or per member and step."""
+    from interprim.model_selection import stacking
+
+    monkeypatch.setattr(stacking, "_CASE_BLOCK", block)
+    rng = np.random.default_rng(12)
+    cv = _cv(rng, M=3, n_case=30)
+    for w in (np.array([0.5, 0.3, 0.2])[:, None, None, None], rng.dirichlet(np.ones(3), 12).T[:, None, :, None]):
+        mix, spread = stacking.blend_parts(cv.mean, w)
+        want = np.sum(w * cv.mean, axis=0)
+        np.testing.assert_array_equal(mix, want)
+        np.testing.assert_array_equal(spread, np.sum(w * (cv.mean - want) ** 2, axis=0))
+
+
+def test_a_familys_rows_are_read_from_the_parent_without_copying_every_familys():
+    """``family_array`` gives a family's rows of a per-family array, equal to the subset's own array's row; for a
+    subset that has not copied its array yet, a view of the parent's (no copy of every family's rows)."""
+    rng = np.random.default_rng(13)
+    cv = _cv(rng, M=4)
+    cv.traj = rng.normal(size=(4, cv.truth.shape[0], 9, 3))
+    sub = cv.subset(["f1", "f3"])
+    nested = cv.subset(["f0", "f2", "f3"]).subset(["f0", "f3"])
+    for s, rows in ((cv, [0, 1, 2, 3]), (sub, [1, 3]), (nested, [0, 3])):
+        for i, r in enumerate(rows):
+            got = s.family_array("traj", i)
+            assert np.shares_memory(got, cv.traj)  # read from the parent, not copied
+            np.testing.assert_array_equal(got, cv.traj[r])
+    assert "traj" not in sub.__dict__ and "traj" not in nested.__dict__
+    np.testing.assert_array_equal(sub.traj[1], sub.family_array("traj", 1))  # and once copied, the copy's rows

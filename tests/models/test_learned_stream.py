@@ -192,3 +192,38 @@ def test_reduced_ppca_is_the_svd_of_the_scaled_rows(five, rank):
         assert got.shape == (1, X.shape[0]) and X.shape[0] == n * (cm.n_jitter if sig > 0 else 1)
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
         assert np.abs(ref).max() > 1e-6  # the coupling does something here
+
+
+def test_a_fit_inside_std_unused_measures_its_residual_variance_when_the_std_is_first_read(five):
+    """A cross-validation that scores means only (interprim.core.cache.std_unused) leaves the coupling's residual
+    pass for later: the predictions' means are the eager fit's, their std (read later, through the stream, a copy
+    or a model file) too, to the bit, and the pass runs once, when a std is first read."""
+    import copy
+
+    from interprim.core.cache import std_unused
+
+    model, test = five
+    demos = two_agent_demos(31, seed=0)[:30]
+    with std_unused():
+        lazy = LearnedInteraction(OBS5).fit(demos, dt=0.01)
+    cp = lazy.coupling_
+    assert "residual_var_" not in cp.__dict__ and "_variance_pending" in cp.__dict__
+    preds = [lazy.predict(test[:k, :2]) for k in (20, 45, 80)]
+    stream = lazy.stream()
+    streamed = [stream.extend(test[:20, :2]), stream.extend(test[20:45, :2])]
+    for p, k in zip(preds, (20, 45, 80)):
+        np.testing.assert_array_equal(p.trajectory(60), model.predict(test[:k, :2]).trajectory(60))
+    assert "residual_var_" not in cp.__dict__  # the means do not need it
+    twin = copy.copy(lazy)
+    for p, k in zip(preds, (20, 45, 80)):  # read after the fit: the eager fit's std
+        np.testing.assert_array_equal(p.std(60), model.predict(test[:k, :2]).std(60))
+    assert "residual_var_" in cp.__dict__ and "_variance_pending" not in cp.__dict__
+    for p, k in zip(streamed, (20, 45)):
+        np.testing.assert_array_equal(p.std(60), model.predict(test[:k, :2]).std(60))
+    np.testing.assert_array_equal(twin.coupling_.residual_var_, model.coupling_.residual_var_)
+    assert cp.scale_ == model.coupling_.scale_
+    arrays, meta = lazy.to_state()
+    want, want_meta = model.to_state()
+    assert arrays.keys() == want.keys() and meta == want_meta
+    for k, v in want.items():
+        np.testing.assert_array_equal(arrays[k], v)

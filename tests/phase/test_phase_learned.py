@@ -186,3 +186,39 @@ def test_a_tracking_glitch_is_not_extrapolated():
         glitch = lp.estimate(q).phase
         assert 0.0 <= glitch <= 1.0
         assert abs(glitch - clean) < 0.15
+
+
+def test_shared_fits_learn_the_same_timing_once():
+    """Inside ``shared_fits`` (the default model's fit) a second LearnedPhase with equal settings on bit-equal
+    demonstrations (other arrays, e.g. the IP's latent copy of the observed columns) takes the first fit's state
+    instead of fitting again; its estimates are those of a separate fit; other data or settings fit anew."""
+    from interprim.core.cache import shared_fits
+
+    demos = [d + 0.02 * np.random.default_rng(i).standard_normal(d.shape)
+             for i, d in enumerate(_ramps(np.linspace(1.5, 3.0, 10), n_dofs=3))]
+    alone = LearnedPhase().fit(demos, dt=DT)
+    learned = []
+    orig = LearnedPhase._learn
+
+    def spy(self, *args, **kwargs):
+        learned.append(self)
+        return orig(self, *args, **kwargs)
+
+    LearnedPhase._learn = spy
+    try:
+        with shared_fits():
+            a = LearnedPhase().fit(demos, dt=DT)
+            b = LearnedPhase().fit([np.array(d[:, :], order="F") for d in demos], dt=DT)  # equal values, new arrays
+            c = LearnedPhase().fit(demos[1:], dt=DT)  # other data
+            d = LearnedPhase(history=2).fit(demos, dt=DT)  # other settings
+            e = LearnedPhase().fit(demos, dt=2 * DT)  # another sampling interval
+        f = LearnedPhase().fit(demos, dt=DT)  # outside: fitted again
+    finally:
+        LearnedPhase._learn = orig
+    assert learned == [a, c, d, e, f]
+    assert b.std_grid_ is a.std_grid_ and b.history == 3
+    for model in (a, b, f):
+        np.testing.assert_array_equal(model.std_grid_, alone.std_grid_)
+        for q in (demos[2][:15], demos[5][:30]):
+            assert model.estimate(q) == alone.estimate(q)
+    assert d.history == 2 and not np.array_equal(c.durations_, a.durations_)

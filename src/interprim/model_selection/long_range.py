@@ -182,8 +182,12 @@ def replaced(cv: CrossValidation, lam: float | str | None, remaining: ArrayLike 
     if lam is None:
         return cv.mean
     R = shared_end(cv, lam) if remaining is None else np.asarray(remaining, dtype=np.float64)
-    return np.stack([place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
-                     for i in range(len(cv.names))])
+    D = cv.family_array("traj", 0).shape[-1] if cv.names else 0
+    out = np.empty((len(cv.names), len(cv.elapsed), len(cv.t_ahead), D))
+    for i in range(len(cv.names)):  # each member placed into its rows (np.stack's values, without its copy)
+        place_cases(cv.family_array("traj", i), member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R,
+                                                             cv.horizon), out=out[i])
+    return out
 
 
 def _blend_replaced(cv: CrossValidation, lam: float | str | None, per_step: np.ndarray,
@@ -194,9 +198,10 @@ def _blend_replaced(cv: CrossValidation, lam: float | str | None, per_step: np.n
     if lam is None:
         return _blend(cv.mean, per_step)
     R = shared_end(cv, lam) if remaining is None else np.asarray(remaining, dtype=np.float64)
-    out = None
-    for i in range(len(cv.names)):
-        placed = place_cases(cv.traj[i], member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon))
+    out = placed = None
+    for i in range(len(cv.names)):  # each member placed into one buffer in turn
+        placed = place_cases(cv.family_array("traj", i),
+                             member_units(cv.phase[i], cv.duration[i], cv.t_ahead, R, cv.horizon), out=placed)
         placed *= per_step[:, i][None, :, None]
         if out is None:
             out = np.zeros(placed.shape)
@@ -379,7 +384,7 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     R = pace_R if isinstance(lam, str) else None
     placed = cv
     if lam is not None:
-        placed = cv.cases(np.arange(len(cv.demo)))
+        placed = cv.subset(names)  # every case and family: the cases' arrays shared, not copied
         placed.mean = replaced(cv, lam, R)
         fitted = stack(placed, horizon, cost=cost, budget=budget, scales=False)
         W = full(fitted)
@@ -430,7 +435,7 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
     t = cv.t_ahead
     per_step = schedule(t, edges, W)
     blend = _blend(cv.mean, per_step)
-    mean = cv.traj[cv.names.index("prior")]
+    mean = cv.family_array("traj", cv.names.index("prior"))
     k = np.rint(cv.elapsed / cv.dt).astype(np.int64) + 1
     n_frames = k + cv.valid.sum(axis=1)
     clock = place_cases(mean, clock_units(k, t, cv.dt, cv.mean_duration))
@@ -475,7 +480,7 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
             future = (np.clip(sm[i] + ahead / Dm[i], 0.0, 1.0) if R is None
                       else member_units([sm[i]], [Dm[i]], ahead, [R], cv.horizon)[0])
             um = np.where(u >= s, future, u * (sm[i] / s if s > 0 else 1.0))
-            Y += Wu[:, i:i + 1] * place_cases(cv.traj[i, c][None], um[None])[0]
+            Y += Wu[:, i:i + 1] * place_cases(cv.family_array("traj", i)[c][None], um[None])[0]
         truth = cv.unit_truth[int(j)]
         wm_blend.append(case_rms(Y[None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])
         wm_mean.append(case_rms(mean[c][None], truth[None], np.ones((1, G), bool), cols, cv.point_dim)[0])

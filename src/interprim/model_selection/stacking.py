@@ -203,6 +203,79 @@ def fold_message(why: str, n: int, k: int | None) -> str:
             f"{n} demonstrations, holding the others out to score the family)")
 
 
+class _CaseTable:
+    """The compared families' records of the inner cross-validation gathered family by family into the arrays of
+    :class:`CrossValidation` (``(families, cases, ...)``, the cases in sorted order): each family's records are
+    copied into the arrays as soon as its sweep ends and can then be dropped, so that the fit holds one family's
+    records at a time, not every family's (the placed predictions of five families on 30 demonstrations of 200
+    frames: about 270 MB).  The arrays hold the records' values, as ``np.array`` of them would.
+
+    A family whose cases or array shapes differ from the first one's keeps its records, and :meth:`arrays` then
+    builds the arrays from every family's records (those of the families already copied read back from the
+    arrays), on the cases all the families share."""
+
+    #: the per-family fields of a record, in the arrays :meth:`arrays` returns
+    FIELDS = ("mean", "trajectory", "phase", "duration")
+
+    def __init__(self, n_families: int) -> None:
+        self.n = int(n_families)
+        self.names: list[str] = []
+        self.keys: list[tuple[int, int]] | None = None  # the first family's cases, sorted
+        self.buf: dict[str, np.ndarray] = {}
+        self.first: dict[str, Any] = {}  # the first family's truth and fractions
+        self.kept: dict[str, dict[tuple[int, int], dict[str, Any]]] = {}  # families whose records are kept
+
+    def add(self, name: str, by: dict[tuple[int, int], dict[str, Any]]) -> None:
+        """Add the family ``name``'s records ``by`` (``{(demo, k): record}``, non-empty)."""
+        keys = sorted(by)
+        if self.keys is None:
+            self.keys = keys
+            r0 = by[keys[0]]
+            self.buf = {f: np.empty((self.n, len(keys)) + np.shape(r0[f])) for f in self.FIELDS}
+            self.first = {"truth": np.array([by[c]["truth"] for c in keys], dtype=np.float64),
+                          "fraction": [by[c]["fraction"] for c in keys]}
+        slot = len(self.names) - len(self.kept)
+        shapes = {f: self.buf[f].shape[2:] for f in self.FIELDS}
+        if self.kept or keys != self.keys or slot >= self.n or any(
+                np.shape(r[f]) != shapes[f] for r in by.values() for f in ("mean", "trajectory")):
+            self.kept[name] = by
+        else:
+            for f in self.FIELDS:
+                out = self.buf[f][slot]
+                for i, c in enumerate(keys):
+                    out[i] = by[c][f]
+        self.names.append(name)
+
+    def _records(self, name: str) -> dict[tuple[int, int], dict[str, Any]]:
+        """The records of ``name`` (those of a copied family read back from the arrays)."""
+        if name in self.kept:
+            return self.kept[name]
+        assert self.keys is not None  # a family was copied
+        slot = self.names.index(name)  # the copied families come first
+        out = {c: {f: self.buf[f][slot, i] for f in self.FIELDS} for i, c in enumerate(self.keys)}
+        if slot == 0:
+            for i, c in enumerate(self.keys):
+                out[c].update(truth=self.first["truth"][i], fraction=self.first["fraction"][i])
+        return out
+
+    def arrays(self) -> tuple[list[tuple[int, int]], list[float], np.ndarray, dict[str, np.ndarray]]:
+        """``(cases, fractions, truth, {field: (families, cases, ...)})`` over the cases every family has (sorted):
+        the first family's held-out fraction seen and truth of each case, and the families' arrays of
+        :data:`FIELDS`."""
+        if self.keys is not None and not self.kept:  # every family copied: the arrays as they are
+            m = len(self.names)
+            return self.keys, self.first["fraction"], self.first["truth"], {f: self.buf[f][:m] for f in self.FIELDS}
+        per = {m: self._records(m) for m in self.names}
+        cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
+        first = per[self.names[0]] if self.names else {}
+        truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
+        arrays = {f: np.array([[per[m][c][f] for c in cases] for m in self.names], dtype=np.float64)
+                  for f in self.FIELDS}
+        return cases, [first[c]["fraction"] for c in cases], truth, arrays
+
+
+#: Floats of a block of cases that :meth:`CrossValidation._gram` and :func:`blend_parts` hold at a time (about 4 MB).
+_CASE_BLOCK = 1 << 19
 #: The arrays of :class:`CrossValidation` with one row per family (axis 0), chosen by :meth:`CrossValidation.subset`.
 _PER_FAMILY = ("mean", "traj", "phase", "duration")
 #: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
@@ -247,8 +320,8 @@ class CrossValidation:
         #: seconds of the real-time band (the protocol's look-ahead; ``cfg.horizon`` may reach further)
         self.horizon = float(cfg.horizon if horizon is None else horizon)
         self.errors: dict[str, float]
-        per: dict[str, dict[tuple[int, int], dict[str, Any]]]  # per family: the records by (demo, k)
-        self.errors, per = {}, {}
+        self.errors = {}
+        table = _CaseTable(len(make))  # the compared families' cases, gathered family by family
         #: ``{family: why it could not be compared}`` for the families with an infinite error
         self.why: dict[str, str] = {}
         for name, factory in make.items():
@@ -267,14 +340,16 @@ class CrossValidation:
             finally:
                 if progress is not None:
                     progress.step(f"compared {name}")
-            per[name] = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
-            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in per[name].values()])
-                                      ) if per[name] else float("inf")
-        self.names = [m for m in per if np.isfinite(self.errors[m])]
-        cases = sorted(set.intersection(*(set(per[m]) for m in self.names))) if self.names else []
-        first = per[self.names[0]] if self.names else {}
-        self.truth = np.array([first[c]["truth"] for c in cases], dtype=np.float64)
-        self.mean = np.array([[per[m][c]["mean"] for c in cases] for m in self.names], dtype=np.float64)
+            by = {(r["demo"], r["k"]): r for r in recs if r["method"] == name}
+            del recs
+            self.errors[name] = float(np.mean([self._rt_error(r["mean"], r["truth"]) for r in by.values()])
+                                      ) if by else float("inf")
+            if np.isfinite(self.errors[name]):
+                table.add(name, by)  # copied into the table's arrays: this family's records are dropped here
+            del by
+        self.names = list(table.names)
+        cases, fraction, self.truth, arrays = table.arrays()
+        self.mean = arrays["mean"]
         D = self.truth.shape[-1] if self.truth.size else len(self.observed)
         self.controlled = [i for i in range(D) if i not in set(self.observed)]
         H = self.truth.shape[1] if self.truth.ndim == 3 else 0
@@ -282,11 +357,11 @@ class CrossValidation:
         self.t_ahead = np.arange(1, H + 1) * self.dt
         #: ``(cases, H)``: whether the step is a frame of the held-out movement (not past its end, where the
         #: protocol holds the last frame); the weights and the band beyond the real-time horizon are fitted on these
-        n_left = np.array([int(round(c[1] / first[c]["fraction"])) - c[1] for c in cases], dtype=np.int64)
+        n_left = np.array([int(round(c[1] / f)) - c[1] for c, f in zip(cases, fraction)], dtype=np.int64)
         self.valid = np.arange(H)[None, :] < n_left[:, None] if H else np.zeros((len(cases), 0), dtype=bool)
-        self._keep_timing(per, cases, demos, k)
+        self._keep_timing(arrays, cases, demos, k)
 
-    def _keep_timing(self, per: dict[str, dict[tuple[int, int], dict[str, Any]]], cases: list[tuple[int, int]],
+    def _keep_timing(self, arrays: dict[str, np.ndarray], cases: list[tuple[int, int]],
                      demos: Prefixes | Sequence[ArrayLike], k: int | None) -> None:
         """What the blend's long-range choice (:mod:`interprim.model_selection.long_range`) re-places: per case,
         ``demo`` (the held-out demonstration), ``elapsed`` (s), ``mean_duration`` (s, of the inner training fold),
@@ -303,9 +378,7 @@ class CrossValidation:
             rest = np.delete(lengths, held)
             fold_mean.update({j: float(np.mean(rest - 1.0)) * self.dt for j in held})
         self.mean_duration = np.array([fold_mean[j] for j in self.demo], dtype=np.float64)
-        self.traj = np.array([[per[m][c]["trajectory"] for c in cases] for m in self.names], dtype=np.float64)
-        self.phase = np.array([[per[m][c]["phase"] for c in cases] for m in self.names], dtype=np.float64)
-        self.duration = np.array([[per[m][c]["duration"] for c in cases] for m in self.names], dtype=np.float64)
+        self.traj, self.phase, self.duration = arrays["trajectory"], arrays["phase"], arrays["duration"]
         #: ``{demo: (G, D)}``: each held-out demonstration on the normalised-time grid (the paper's Fig. 7 measure)
         G = self.traj.shape[2] if self.traj.ndim == 4 else 0
         self.unit_truth = {int(j): time_normalise(np.asarray(ds[j], dtype=np.float64), G) for j in set(self.demo)}
@@ -334,6 +407,15 @@ class CrossValidation:
         if isinstance(lazy.get(name, (None, None))[1], tuple):  # cases of a parent's array (cases): copied now
             return getattr(self, name), None
         return lazy.get(name, (None, None))
+
+    def family_array(self, field: str, i: int) -> np.ndarray:
+        """Family ``i``'s rows (of :attr:`names`) of the per-family array ``field`` (``"traj"``, ``"mean"``, ...): a
+        view of the array a :meth:`subset` reads them from while it has not copied its own (the same values, without
+        a copy of every family's rows)."""
+        src, rows = self._family_source(field)
+        if src is None:
+            return getattr(self, field)[i]
+        return src[i] if rows is None else src[rows[i]]
 
     def cases(self, idx: ArrayLike) -> CrossValidation:
         """The same families restricted to the cases ``idx``."""
@@ -407,14 +489,25 @@ class CrossValidation:
             return g
         c = column_index(self.controlled or self.observed)  # a slice when contiguous: no copy of the members' arrays
         T = np.ascontiguousarray(self.truth[..., c])  # (cases, H, C)
-        E = self.mean[..., c] - T[None]  # (M, cases, H, C)
-        M = E.shape[0]
-        G = np.empty(T.shape[:2] + (M, M))
-        for m in range(M):  # one pass over the cases per pair of families (faster than tiny batched products)
-            for n in range(m + 1):
-                G[:, :, m, n] = G[:, :, n, m] = np.einsum("chj,chj->ch", E[m], E[n])
-        g = {"mean": self.mean, "truth": self.truth, "names": list(self.names), "rows": np.arange(T.shape[0]),
-             "G": G, "u": np.moveaxis(np.einsum("mchj,chj->mch", E, T), 0, 2), "t": np.einsum("chj,chj->ch", T, T)}
+        n_case, H, C = T.shape
+        M = self.mean.shape[0]
+        G = np.empty((n_case, H, M, M))
+        U = np.empty((M, n_case, H))
+        # the errors E = mean - truth a block of cases at a time, into one small buffer: every product is a sum over
+        # the columns of one case and step, the same numbers as from the whole (M, cases, H, C) array of errors,
+        # without its memory (tens of MB, new pages for every cross-validation)
+        step = max(1, min(n_case, _CASE_BLOCK // max(M * H * C, 1)))
+        E = np.empty((M, step, H, C))
+        for c0 in range(0, n_case, step):
+            c1 = min(c0 + step, n_case)
+            Eb, Tb = E[:, :c1 - c0], T[c0:c1]
+            np.subtract(self.mean[:, c0:c1, :, c], Tb[None], out=Eb)
+            for m in range(M):  # one pass over the cases per pair of families (faster than tiny batched products)
+                for n in range(m + 1):
+                    G[c0:c1, :, m, n] = G[c0:c1, :, n, m] = np.einsum("chj,chj->ch", Eb[m], Eb[n])
+            U[:, c0:c1] = np.einsum("mchj,chj->mch", Eb, Tb)
+        g = {"mean": self.mean, "truth": self.truth, "names": list(self.names), "rows": np.arange(n_case),
+             "G": G, "u": np.moveaxis(U, 0, 2), "t": np.einsum("chj,chj->ch", T, T)}
         self.__dict__["_gram_cache"] = g
         return g
 
@@ -561,17 +654,24 @@ def blend_parts(mean: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray
     full = np.broadcast_shapes(np.shape(w), mean.shape)
     w, mean = np.broadcast_to(w, full), np.broadcast_to(mean, full)  # views
     shape = full[1:]
-    tmp = np.empty(shape)
     mix = np.zeros(shape)
-    for m in range(full[0]):
-        np.multiply(w[m], mean[m], out=tmp)
-        mix += tmp
     spread = np.zeros(shape)
-    for m in range(full[0]):
-        np.subtract(mean[m], mix, out=tmp)
-        np.square(tmp, out=tmp)
-        np.multiply(w[m], tmp, out=tmp)
-        spread += tmp
+    # a block of cases at a time (every number is of one case, step and column), through one small buffer
+    n = shape[0] if shape else 1
+    step = max(1, _CASE_BLOCK // max(int(np.prod(shape[1:])), 1))
+    tmp = np.empty((min(step, n),) + tuple(shape[1:])) if shape else np.empty(())
+    for c0 in range(0, n, step):
+        b = slice(c0, c0 + step) if shape else ...
+        mb, sb = mix[b], spread[b]  # views
+        t = tmp[: mb.shape[0]] if shape else tmp
+        for m in range(full[0]):
+            np.multiply(w[m][b], mean[m][b], out=t)
+            mb += t
+        for m in range(full[0]):
+            np.subtract(mean[m][b], mb, out=t)
+            np.square(t, out=t)
+            np.multiply(w[m][b], t, out=t)
+            sb += t
     return mix, spread
 
 

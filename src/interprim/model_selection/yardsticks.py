@@ -125,9 +125,10 @@ def one_se_choice(errors: Mapping[str, ArrayLike], groups: ArrayLike,
     return chosen, table
 
 
-def place_cases(Y: ArrayLike, u: ArrayLike) -> np.ndarray:
+def place_cases(Y: ArrayLike, u: ArrayLike, out: np.ndarray | None = None) -> np.ndarray:
     """``(cases, H, D)``: each case's trajectory ``Y[c]`` (``(G, D)`` on a uniform normalised-time grid) read at its
-    normalised times ``u[c]`` (``(H,)``, clipped to [0, 1])."""
+    normalised times ``u[c]`` (``(H,)``, clipped to [0, 1]); written into ``out`` when given (a C-contiguous float
+    array of that shape, e.g. one member's rows of the members' array: no copy of the placed cases)."""
     Y = np.asarray(Y, dtype=np.float64)
     u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
     grid = np.linspace(0.0, 1.0, Y.shape[1])
@@ -137,10 +138,14 @@ def place_cases(Y: ArrayLike, u: ArrayLike) -> np.ndarray:
         kernel = _kernels.loaded_kernel("resample.interp_columns")
         if kernel is not None:
             u, Yc = np.ascontiguousarray(u), np.ascontiguousarray(Y)
-            out = np.empty((Y.shape[0], u.shape[1], Y.shape[2]))
-            if all(kernel(u[c], grid, Yc[c], out[c]) for c in range(Y.shape[0])):
-                return out
-    return np.stack([interp_columns(u[c], grid, Y[c]) for c in range(Y.shape[0])])
+            res = np.empty((Y.shape[0], u.shape[1], Y.shape[2])) if out is None else out
+            if all(kernel(u[c], grid, Yc[c], res[c]) for c in range(Y.shape[0])):
+                return res
+    placed = np.stack([interp_columns(u[c], grid, Y[c]) for c in range(Y.shape[0])])
+    if out is None:
+        return placed
+    out[...] = placed
+    return out
 
 
 def clock_units(k: ArrayLike, t_ahead: ArrayLike, dt: float, mean_duration: ArrayLike) -> np.ndarray:

@@ -24,7 +24,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.cache import std_unused
+from ..core.cache import shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import OutOfRangeWarning, PaceWarning
 from ..core.input_range import fit_input_range, mark
@@ -257,6 +257,11 @@ class AutoInteraction(Predictor):
         AutoInteraction
             ``self``.
         """
+        with shared_fits():  # a fit two families make on the same data is made once (the observed agent's timing)
+            return self._fit_families(demos, dt, times, columns)
+
+    def _fit_families(self, demos, dt, times, columns):
+        """:meth:`fit`'s work (inside :func:`~interprim.core.cache.shared_fits`)."""
         self._check()
         data = training_set(demos, dt, times=times, columns=columns)
         train, dt, cols = list(data.arrays), data.dt, None if data.columns is None else list(data.columns)
@@ -346,7 +351,8 @@ class AutoInteraction(Predictor):
         pace = pace_trend([(len(d) - 1) * dt for d in train])
         selection["pace"] = pace
         if pace is not None and pace["significant"]:
-            warnings.warn(PaceWarning(pace_message(pace)), stacklevel=3)  # the caller of fit (past its wrapper)
+            # said of the caller of fit (past its wrapper and fit itself)
+            warnings.warn(PaceWarning(pace_message(pace)), stacklevel=4)
         dt = float(dt)
         self.chosen_ = chosen
         self.weights_ = weights

@@ -206,11 +206,18 @@ class Conditioner:
     def predict(self, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
         """Mean (Q, q) and leverage ``h`` (Q,) of the linear smoother (module docstring of
         :mod:`interprim.models.coupling`: ``h = sum_j (sum_{i in demo j} alpha_i + 1/N)^2``)."""
-        A = self.weights(ctx)
-        G = A @ ctx.P  # per demonstration: the sum of its rows' weights
-        mean = ctx.ybar + G @ ctx.Ydc
+        mean, G = self._mean(ctx)
         G += 1.0 / ctx.P.shape[1]  # the weights of the mean itself
         return mean, np.sum(G**2, axis=1)
+
+    def mean(self, ctx: Context) -> np.ndarray:
+        """The mean of :meth:`predict` alone (the same numbers), for a caller that does not read the leverage."""
+        return self._mean(ctx)[0]
+
+    def _mean(self, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean (Q, q), G (Q, n))``: the smoother's mean and each demonstration's sum of its rows' weights."""
+        G = self.weights(ctx) @ ctx.P  # per demonstration: the sum of its rows' weights
+        return ctx.ybar + G @ ctx.Ydc, G
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.param!r})"

@@ -74,7 +74,7 @@ import numpy as np
 
 from ..core._compiled import registry as kernels
 from ..core.blas import one_blas_thread
-from ..core.cache import DerivedCache
+from ..core.cache import DerivedCache, std_deferred
 from ..core.cv import folds as cv_folds
 from ..core.cv import n_folds as cv_n_folds
 from ..core.cv import paired_gain
@@ -456,7 +456,8 @@ class CouplingModel:
         cache = getattr(self, "_cv_cache", None)
         cache = {} if cache is None else cache
         for hold in folds:
-            train = np.setdiff1d(np.arange(n), hold)
+            in_train = np.ones(n, dtype=bool)
+            in_train[hold] = False  # the fold's training demonstrations (np.isin(g, train) of every row by a lookup)
             for a, s in enumerate(fr):
                 key = (tuple(int(j) for j in hold), a)
                 if key not in cache:
@@ -464,7 +465,7 @@ class CouplingModel:
                     if ("rows", a) not in cache:  # every demonstration's training rows at this phase (_rows)
                         cache["rows", a] = self._rows(np.arange(n), s, sig)
                     X_all, g_all = cache["rows", a]
-                    sel = np.isin(g_all, train)
+                    sel = in_train[g_all]
                     X, g = X_all[sel], g_all[sel]
                     # held-out prefixes: true phases spread around the estimate s by the phase error
                     z = _jitter_nodes(nj) if sig > 0 else np.zeros(nj)
@@ -485,14 +486,14 @@ class CouplingModel:
                 # the controlled columns of the truth, broadcast over the jitter (the values of the repeated rows)
                 truth_c = Yflat[hold].reshape(nh, 1, self.n_out, D)[..., ctrl_cols]
                 for c, cand in enumerate(cands):
-                    mean, h = cand.predict(ctx)
                     if keep is not None and c == keep:
+                        mean, h = cand.predict(ctx)
                         e = (mean - np.repeat(Yflat[hold], nj, axis=0)).reshape(nh, nj, self.n_out, D)
                         resid[a, hold] = e
                         lev[a, hold] = h.reshape(nh, nj)
                         ec = e[..., ctrl]
-                    else:  # only the controlled columns' errors (each the same difference as in e)
-                        ec = mean.reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
+                    else:  # only the controlled columns' errors (each the same difference as in e); no leverage
+                        ec = cand.mean(ctx).reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
                     # np.mean(np.sum(ec ** 2 * w_ctrl, axis=-1), axis=(1, 2)) by the reductions np.sum and np.mean
                     # call (the same sums, divided by the count), without their wrappers' overhead (called ~10^4
                     # times per fit)
@@ -543,8 +544,30 @@ class CouplingModel:
             "error_mean": float(scores[0]), "error_best": float(scores[best]), "paired_se": se,
             "n_folds": K,
         }
-        _, resid, lev, _ = self._cv_pass([cands[choice]], 0)
+        if std_deferred():  # a cross-validation that reads the means only: measured when the std is first read
+            self._variance_pending = cands[choice]
+            return
+        self._measure_variance(cands[choice])
+
+    def _measure_variance(self, cand: Conditioner) -> None:
+        """The residual variance and calibration (:meth:`_fit_variance`) of the chosen candidate ``cand`` from its
+        held-out residuals (one more pass of the cross-validation)."""
+        _, resid, lev, _ = self._cv_pass([cand], 0)
         self._fit_variance(resid, lev)
+
+    def __getattr__(self, name):
+        # the residual variance of a fit inside std_unused (interprim.core.cache), measured when first read: the
+        # same pass on the same folds as an eager fit makes, so the same numbers
+        pending = self.__dict__.get("_variance_pending") if name in ("residual_var_", "scale_") else None
+        if pending is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self._cv_cache = {}
+        try:
+            self._measure_variance(pending)
+        finally:
+            del self._cv_cache
+        del self._variance_pending
+        return self.__dict__[name]
 
     def _fit_variance(self, e, h):
         """Residual variance per (phase, t, dof) and the calibration factors (jackknife over demos)."""
@@ -657,28 +680,36 @@ class CouplingModel:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
         D = self.n_dofs_
-        # residual variance at this phase (linear interpolation over the CV phases, constant outside)
-        fr = self.fractions_
-        if s <= fr[0] or fr.size == 1:
-            var = self.residual_var_[0]
-        elif s >= fr[-1]:
-            var = self.residual_var_[-1]
-        else:
-            k = int(np.searchsorted(fr, s)) - 1
-            w = (s - fr[k]) / (fr[k + 1] - fr[k])
-            var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
-        def scales():
-            c = np.ones(D)
-            c[self.observed_dofs_] = self.scale_["observed"]
-            c[self.controlled_dofs_] = self.scale_["controlled"]
-            return c[None, :]
 
-        c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"], self.scale_["controlled"],
-                                                     self.observed_dofs_, self.controlled_dofs_), scales)
-        std = c * np.sqrt(var * (1.0 + h))
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig, self.observed_dofs_,
-                              self.controlled_dofs_, self.method_, h, mean_duration=self.mean_duration_,
-                              n_observed=n_observed, conditioned=not self.fallback_to_mean_)
+        def std():
+            # residual variance at this phase (linear interpolation over the CV phases, constant outside)
+            fr = self.fractions_
+            if s <= fr[0] or fr.size == 1:
+                var = self.residual_var_[0]
+            elif s >= fr[-1]:
+                var = self.residual_var_[-1]
+            else:
+                k = int(np.searchsorted(fr, s)) - 1
+                w = (s - fr[k]) / (fr[k + 1] - fr[k])
+                var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
+
+            def scales():
+                c = np.ones(D)
+                c[self.observed_dofs_] = self.scale_["observed"]
+                c[self.controlled_dofs_] = self.scale_["controlled"]
+                return c[None, :]
+
+            c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"],
+                                                         self.scale_["controlled"], self.observed_dofs_,
+                                                         self.controlled_dofs_), scales)
+            return c * np.sqrt(var * (1.0 + h))
+
+        # a fit whose residual variance is not measured yet (inside std_unused): the std when first read
+        lazy = "_variance_pending" in self.__dict__
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std if lazy else std(), s, sig,
+                              self.observed_dofs_, self.controlled_dofs_, self.method_, h,
+                              mean_duration=self.mean_duration_, n_observed=n_observed,
+                              conditioned=not self.fallback_to_mean_)
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")

@@ -31,8 +31,10 @@ class GridPrediction(BasePrediction):
         Normalised times of ``mean`` (and ``std``), increasing from 0 to 1.
     mean : ndarray, shape (K, D)
         Predictive mean, columns in the demonstrations' order.
-    std : ndarray, shape (K, D), optional
-        Predictive standard deviation (kept as ``std_values``); ``None`` when the model gives no uncertainty.
+    std : ndarray, shape (K, D), or callable, optional
+        Predictive standard deviation (kept as ``std_values``); ``None`` when the model gives no uncertainty; a
+        callable returning it when computed on first read (a model fitted for its means only, e.g. in a
+        cross-validation: :func:`interprim.core.cache.std_unused`).
     phase : float
         The phase estimate (fraction of the movement seen) the prediction was made with (NaN: none).
     phase_std : float
@@ -74,7 +76,7 @@ class GridPrediction(BasePrediction):
                  conditioned: bool = True):
         self.times = np.asarray(times, dtype=np.float64)
         self.mean = np.asarray(mean, dtype=np.float64)
-        self.std_values = None if std is None else np.asarray(std, dtype=np.float64)
+        self.std_values = std if std is None or callable(std) else np.asarray(std, dtype=np.float64)
         D = self.mean.shape[1]
         self.phase = float(phase)
         self.normalised_time = self.phase
@@ -92,6 +94,24 @@ class GridPrediction(BasePrediction):
         self.conditioned = bool(conditioned)
         self.input_distance = float("nan")
         self.out_of_range = False
+
+    @property
+    def std_values(self):
+        """The predictive std on the grid, ``(K, D)`` (``None``: no uncertainty), computed on first read when the
+        model gave it as a callable."""
+        v = self.__dict__.get("_std_values")
+        if callable(v):
+            v = self.__dict__["_std_values"] = np.asarray(v(), dtype=np.float64)
+        return v
+
+    @std_values.setter
+    def std_values(self, value):
+        self.__dict__["_std_values"] = value
+
+    def std_source(self):
+        """What :attr:`std_values` reads: the array, ``None`` or the callable not yet called (a prediction made
+        from this one passes it on without computing it)."""
+        return self.__dict__["_std_values"] if "_std_values" in self.__dict__ else self.std_values
 
     def _at(self, Y, s, cols=None):
         return interp_columns(s, self.times, Y if cols is None else Y[:, list(cols)])

@@ -40,7 +40,7 @@ __all__ = ["LearnedInteraction", "LearnedStream"]
 def _Prediction(cp: GridPrediction, est) -> GridPrediction:
     """``cp`` (the coupling's prediction) placed in time by the phase estimate ``est``, with the timing
     uncertainty added to its std (:meth:`~interprim.models.grid.GridPrediction.std`)."""
-    out = GridPrediction(cp.times, cp.mean, cp.std_values, est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
+    out = GridPrediction(cp.times, cp.mean, cp.std_source(), est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
                          cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
                          conditioned=cp.conditioned)
     out.speed = float(est.speed)

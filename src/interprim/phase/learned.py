@@ -69,6 +69,7 @@ import math
 
 import numpy as np
 
+from ..core.cache import fitted_once
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
 from ..core.validation import as_2d_finite, as_demonstrations, as_frame, check_positive, check_times
@@ -262,6 +263,21 @@ class LearnedPhase:
             Ys = [self._resample(y, t - t[0], step) for y, t in zip(Ys, ts)]
             dt = step
         dt = check_positive(dt, "dt")
+        params = self.get_params()
+
+        def learn() -> dict:
+            self._learn(Ys, float(dt), D, feats, bw, al, lo, hi)
+            return {k: v for k, v in vars(self).items() if k not in params}
+
+        # the same fit on the same observed frames within one default model's fit (its IP and its learned
+        # interaction, on one inner training fold) is made once (interprim.core.cache.shared_fits)
+        self.__dict__.update(fitted_once("learned phase", (params, float(dt)), Ys, learn))
+        return self
+
+    def _learn(self, Ys: list, dt: float, D: int, feats: tuple, bw: np.ndarray, al: np.ndarray, lo: float,
+               hi: float) -> None:
+        """:meth:`fit` on the validated demonstrations ``Ys`` sampled every ``dt`` seconds (``feats``, ``bw``,
+        ``al``, ``(lo, hi)``: the checked parameters)."""
         durations = np.array([(y.shape[0] - 1) * dt for y in Ys])
         allY = np.concatenate(Ys, axis=0)
         scale = allY.std(axis=0)
@@ -419,7 +435,6 @@ class LearnedPhase:
                 self._c = ym - np.einsum("kp,kp->k", beta, Zm[:, 0, :])
                 self._beta_raw = beta / sd
                 self._c_raw = self._c - np.einsum("kp,kp->k", self._beta_raw, mu)
-        return self
 
     @staticmethod
     def _resample(y, t, step):

@@ -79,26 +79,8 @@ def test_the_mean_is_kept_when_the_members_are_no_better_than_noise():
 def test_timing_choice_keeps_the_members_own_timing_when_it_is_what_the_truth_does():
     """Members that are the truth placed at their own duration: re-placing them at the clock's remaining duration
     can only be worse, so the members' own timing is kept."""
-    dt, H, G = 0.05, 40, 201
-    grid = np.linspace(0.0, 1.0, G)
-    rng = np.random.default_rng(5)
-    n_demo, per = 10, 3
-    n_case = n_demo * per
-    durations = np.repeat(rng.uniform(1.5, 3.0, n_demo), per)  # each recording its own length
-    elapsed = np.tile([0.3, 0.5, 0.7], n_demo) * durations
-    shape = np.stack([grid, np.sin(np.pi * grid)], axis=1)
-    t = np.arange(1, H + 1) * dt
-    u_true = (elapsed[:, None] + t[None, :]) / durations[:, None]
-    truth = np.stack([np.stack([np.interp(np.clip(u, 0, 1), grid, shape[:, j]) for j in range(2)], axis=1)
-                      for u in u_true])
-    cv = _cv({"m": truth}, truth, n_demo, dt=dt)
-    cv.traj = np.broadcast_to(shape, (1, n_case, G, 2)).copy()
-    cv.phase = (elapsed / durations)[None, :]
-    cv.duration = durations[None, :]
-    cv.elapsed = elapsed
-    cv.mean_duration = np.full(n_case, 2.2)
-    cv.valid = u_true <= 1.0
-    cv.w0 = np.ones(1)
+    cv, _ = _own_timing_cv(5)
+    H = len(cv.t_ahead)
     lam, table = timing_choice(cv, np.ones((H, 1)), prefer="simple")
     assert lam is not None or table["0"]["vs_best"] > table["0"]["se"]
     assert table["own"]["error"] == pytest.approx(0.0, abs=1e-3)

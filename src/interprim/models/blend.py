@@ -54,6 +54,7 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
     real-time band of ``h`` seconds it runs there by :func:`interprim.model_selection.long_range.member_units`'s
     operations for one member; before now (``u < s``, the blend's phase) at ``u s_j / s``."""
     Y = np.empty_like(grids)
+    past = u < s
     for j in range(len(sv)):
         sm, Dm = float(sv[j]), float(dv[j])
         um = ahead / Dm
@@ -67,7 +68,6 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
                 after = np.ones_like(ahead)
             um = np.where(ahead <= h + 1e-12, um, after)
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
-        past = u < s
         um[past] = u[past] * (sm / s if s > 0 else 1.0)
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
         Y[j] = interp_columns(um, u, grids[j])

@@ -156,7 +156,7 @@ def test_band_level_is_the_smallest_that_covers_90_percent_of_unseen_demonstrati
     mean = np.stack([truth + rng.normal(size=truth.shape) * scale * s for s in (0.8, 1.2)])
     valid = np.ones((len(demo), H), dtype=bool)
     w = np.array([0.5, 0.5])[:, None, None, None]
-    level = stacking.band_level(mean, truth, valid, w, [1], demo)
+    level = stacking.band_level(mean, truth, valid, w, [1], demo, floor=0.0)  # the mean's condition alone
     covers = {L: stacking.crossfit_coverage(mean, truth, valid, w, [1], demo, L) for L in stacking.BAND_LEVELS}
     assert covers[level] >= 0.9
     below = [L for L in stacking.BAND_LEVELS if L < level]
@@ -164,6 +164,40 @@ def test_band_level_is_the_smallest_that_covers_90_percent_of_unseen_demonstrati
     assert level > 0.9  # optimistic in-sample: the level had to rise
     # one demonstration: nothing to cross-fit, the nominal level
     assert stacking.band_level(mean[:, :per], truth[:per], valid[:per], w, [1], demo[:per]) == 0.9
+
+
+def test_band_level_also_covers_each_contiguous_third_of_the_recordings():
+    """With the floor, the level is the smallest at which the cross-fitted band covers 90 % of all held-out frames
+    *and* 85 % (``BAND_FLOOR``) of each contiguous third's, checked by brute force over the levels from each
+    demonstration's own coverage; on errors that jump in the last recordings that third is the one short of it, so
+    the level rises above the mean's alone."""
+    from interprim.model_selection.yardsticks import case_groups
+
+    rng = np.random.default_rng(7)
+    n_demo, per, H, D = 12, 10, 8, 2
+    demo = np.repeat(np.arange(n_demo), per)
+    sc = np.exp(rng.normal(0.0, 0.1, n_demo))
+    sc[8:] *= 3.0  # the last third's errors three times larger
+    scale = sc[demo][:, None, None]
+    truth = rng.normal(size=(len(demo), H, D)) * scale
+    mean = np.stack([truth + rng.normal(size=truth.shape) * scale * s for s in (0.8, 1.2)])
+    valid = np.ones((len(demo), H), dtype=bool)
+    w = np.array([0.5, 0.5])[:, None, None, None]
+    assert stacking.BAND_FLOOR == 0.85
+    level = stacking.band_level(mean, truth, valid, w, [1], demo)
+    alone = stacking.band_level(mean, truth, valid, w, [1], demo, floor=0.0)
+    # each demonstration's cross-fitted coverage at every level, and the third it lies in
+    (cover, grp), = stacking._crossfit_demos(mean, truth, valid, w, [[1]], demo)
+    assert cover.shape == (n_demo, len(stacking.BAND_LEVELS))
+    np.testing.assert_array_equal(grp, case_groups(demo)[::per])
+    np.testing.assert_allclose(cover.mean(axis=0), stacking.crossfit_coverages(mean, truth, valid, w, [1], demo),
+                               rtol=0, atol=1e-15)
+    thirds = np.stack([cover[grp == g].mean(axis=0) for g in range(3)])  # (3, levels)
+    ok = (cover.mean(axis=0) >= 0.9) & (thirds >= 0.85).all(axis=0)
+    assert level == stacking.BAND_LEVELS[np.flatnonzero(ok)[0]]
+    assert level > alone  # here the mean alone leaves a third short of 85 %
+    short = thirds[:, stacking.BAND_LEVELS.index(alone)]
+    assert short.min() < 0.85 and np.argmin(short) == 2  # the latest recordings
 
 
 def test_weights_move_smoothly_from_real_time_to_the_whole_movement():

@@ -449,7 +449,8 @@ class AutoInteraction(Predictor):
             if lv:
                 lines.append("90 % band: the held-out errors' quantile at " + ", ".join(
                     f"{100 * lv[k]:.0f} % for the {'robot' if k == 'controlled' else 'partner'}" for k in lv)
-                    + " (the smallest level that covers 90 % of demonstrations left out of its calibration)")
+                    + " (the smallest level that covers 90 % of demonstrations left out of its calibration, and"
+                    + f" {100 * stacking.BAND_FLOOR:.0f} % of each third of them in recording order)")
         else:
             lines.append(f"using {self.chosen_} alone")
         return "\n".join(lines + self._pace_lines() + self._cost_lines())

@@ -116,7 +116,7 @@ class LearnedInteraction(Predictor):
     def predict_checked(self, partial: np.ndarray) -> GridPrediction:
         """The prediction of frames already checked -- a finite float64 array ``(M, len(observed_dofs))``, not scanned
         again (:class:`LearnedStream` checks each frame once, as it enters) -- unmarked (``predict`` marks it)."""
-        est = self.phase_.estimate(partial)
+        est = self.phase_.estimate_checked(partial)
         s = float(np.clip(est.phase, 1e-3, 1.0))
         cp = self.coupling_.predict(partial, s, phase_std=float(est.std), check=False)
         return _Prediction(cp, est)

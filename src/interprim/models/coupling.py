@@ -123,6 +123,7 @@ _ZERO_IDX = np.zeros(1, dtype=np.intp)  # the one prefix of CouplingModel._query
 _ZERO_IDX.setflags(write=False)
 _ONE_PHASE = np.ones(1)  # its stop: the whole prefix (read-only)
 _ONE_PHASE.setflags(write=False)
+_EMPTY = np.empty(0)  # an output a kernel skips
 
 
 def _resample(frames, stop, n):
@@ -674,10 +675,21 @@ class CouplingModel:
         n, D = self.n_demos_, self.n_dofs_
         X, g = self._rows(np.arange(n), s, sig)
         st = self._static(X.shape[0])
-        mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
         cond = self._derived.get_or_build(("conditioner", self.method_, str(self.param_)), (),
                                           lambda: conditioner(self.method_, self.param_))
-        ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, st.ylow if isinstance(cond, PPCA) else None)
+        ylow = st.ylow if isinstance(cond, PPCA) else None
+        centre = kernels.loaded_kernel("prefix_rows.centre_rows_into")
+        if centre is not None and x.flags.c_contiguous:  # X is: _rows' fresh array
+            # the centring and the sums of squares the conditioner reads, in one compiled pass (centre_rows_np's
+            # numbers: those of the lines below and of the context's own sums)
+            Xc, xc = np.empty_like(X), np.empty_like(x)
+            norms = isinstance(cond, (Kernel, Blend))
+            nrm, qnrm = (np.empty(X.shape[0]), np.empty(x.shape[0])) if norms else (_EMPTY, _EMPTY)
+            tr = centre(X, x, Xc, xc, nrm, qnrm)
+            ctx = Context(Xc, xc, st.P, st.ybar, st.Ydc, ylow, (tr, nrm, qnrm) if norms else (tr, None, None))
+        else:
+            mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
+            ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, ylow)
         mean, h = cond.predict(ctx)
         return mean[0].reshape(self.n_out, D), float(h[0])
 

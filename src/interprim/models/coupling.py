@@ -709,6 +709,14 @@ class CouplingModel:
     def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, self._std_source(h, s), s, sig,
+                              self.observed_dofs_, self.controlled_dofs_, self.method_, h,
+                              mean_duration=self.mean_duration_, n_observed=n_observed,
+                              conditioned=not self.fallback_to_mean_)
+
+    def _std_source(self, h: float, s: float):
+        """The calibrated std at phase ``s`` with leverage ``h`` as a callable computed when first read
+        (:func:`_calibrated_std`; a :class:`~interprim.models.grid.GridPrediction` takes it as its std)."""
         if "_variance_pending" in self.__dict__:  # a fit inside std_unused: its variance is measured when first read
             def std():
                 return _calibrated_std(self.fractions_, self.residual_var_, self.scale_, self.observed_dofs_,
@@ -716,10 +724,7 @@ class CouplingModel:
         else:  # computed when first read (a stream's caller often reads the mean only), from this fit's arrays
             std = functools.partial(_calibrated_std, self.fractions_, self.residual_var_, self.scale_,
                                     self.observed_dofs_, self.controlled_dofs_, self.n_dofs_, s, h)
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig,
-                              self.observed_dofs_, self.controlled_dofs_, self.method_, h,
-                              mean_duration=self.mean_duration_, n_observed=n_observed,
-                              conditioned=not self.fallback_to_mean_)
+        return std
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")

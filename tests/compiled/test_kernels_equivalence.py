@@ -58,6 +58,7 @@ MEASURED = {
     "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
     "blend.place_members": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
     "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
+    "prefix_rows.centre_rows_into": (0.0, 0.0, 0.0),  # numpy's reductions in their order (pairwise), no fastmath
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
 
@@ -563,6 +564,47 @@ def check_prefix_rows_prefix_rows_into():
     return worst
 
 
+def check_prefix_rows_centre_rows_into():
+    """The coupling's rows centred with their sums of squares, compiled against numpy, bit for bit (values and
+    signs of zero): sizes below, inside and beyond numpy's pairwise blocks (8, 128 elements; rows of 1 to 300
+    columns, up to 10^5 elements), columns of very different magnitudes and offsets, the norms skipped; and
+    LearnedInteraction's predictions with each conditioning method on both paths."""
+    from interprim.models import registry as families
+
+    rng = np.random.default_rng(13)
+    comp, ref = both("prefix_rows.centre_rows_into")
+    worst = 0.0
+    for trial in range(200):
+        R, p, Q = int(rng.integers(1, 400)), int(rng.integers(1, 300)), int(rng.integers(1, 4))
+        if trial < 3:
+            R, p = ((150, 70), (1, 1), (500, 200))[trial]
+        X = rng.normal(size=(R, p)) * 10.0 ** rng.integers(-4, 4, p) + rng.normal(size=p) * 100.0
+        x = rng.normal(size=(Q, p))
+        norms = trial % 5 != 0
+        got = []
+        for fn in (comp, ref):
+            out = (np.full((R, p), np.nan), np.full((Q, p), np.nan), np.full(R if norms else 0, np.nan),
+                   np.full(Q if norms else 0, np.nan))
+            got.append(out + (np.array([fn(X, x, *out)]),))
+        for a, b in zip(*got):
+            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
+                worst = max(worst, rel(a, b) or np.inf)
+    demos = two_agent_demos(8, seed=4, frames=70)
+    m = families.family("learned").build(families.Settings((0, 1))).fit(demos, dt=0.01)
+    for method, param in (("ridge", 0.1), ("kernel", 0.5), ("ppca", 2), ("blend", (0.1, 0.5, 0.5)), ("mean", None)):
+        m.coupling_.method_, m.coupling_.param_ = method, param  # each conditioner's use of the sums
+        for M in (3, 30, 69):
+            out = {}
+            for which in ("compiled", "numpy"):
+                with registry.forced(which):
+                    p = m.predict(demos[1][:M, :2])
+                    out[which] = (p.trajectory(40), p.std(40))
+            for a, b in zip(out["compiled"], out["numpy"]):
+                if not np.array_equal(a, b):
+                    worst = max(worst, rel(a, b) or np.inf)
+    return worst
+
+
 CHECKS = {
     "dtw.accumulate": check_dtw_accumulate,
     "dtw.open_end": check_dtw_open_end,
@@ -583,6 +625,7 @@ CHECKS = {
     "weighted.weighted_frames": check_weighted_weighted_frames,
     "blend.place_members": check_blend_place_members,
     "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,
+    "prefix_rows.centre_rows_into": check_prefix_rows_centre_rows_into,
 }
 
 

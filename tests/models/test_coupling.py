@@ -89,6 +89,20 @@ def test_std_shrinks_as_more_is_observed(coupled_model):
     assert np.all(np.diff(coupled_model.residual_var_, axis=0) <= 0)
 
 
+def test_std_computed_when_first_read_is_the_fitted_models():
+    """The calibrated std is computed when first read, from the arrays of the fit that made the prediction: a refit
+    of the same model in between does not change it (the numbers of a model fitted on the same data)."""
+    d = linear_demos(1, 6)[0][: T // 2, OBS]
+    m = CouplingModel(OBS, phase_std=0.0, n_folds=5).fit(linear_demos(12, 0))
+    p = m.predict(d, 0.5)
+    q = CouplingModel(OBS, phase_std=0.0, n_folds=5).fit(linear_demos(12, 0)).predict(d, 0.5)
+    m.fit(linear_demos(12, 9, noise=0.3))
+    assert not np.array_equal(m.residual_var_, CouplingModel(OBS, phase_std=0.0, n_folds=5).fit(
+        linear_demos(12, 0)).residual_var_)
+    np.testing.assert_array_equal(p.std_values, q.std_values)
+    np.testing.assert_array_equal(p.mean, q.mean)
+
+
 def test_phase_error_model_is_used_and_prediction_shapes():
     demos = linear_demos(12, 7)
     m = CouplingModel(OBS, phase_std="clock", n_folds=4, methods=("ridge",)).fit(demos)

@@ -95,6 +95,37 @@ def test_tracker_equals_batch_estimate(model, target, features):
     assert tr.update(test[0]).phase == 0.0
 
 
+@pytest.mark.parametrize("model", ["kernel", "ridge"])
+@pytest.mark.parametrize("features", [None, FEATURE_GROUPS])
+def test_estimate_checked_equals_estimate_and_reads_the_scaled_frames(model, features):
+    """``estimate_checked`` (what LearnedInteraction's stream calls) gives ``estimate``'s numbers bit for bit, and
+    the features scale only the frames they read: the same bits as the features of the whole scaled prefix."""
+    demos = _ramps(np.linspace(1.5, 3.0, 10), n_dofs=3)
+    kw = {} if features is None else {"features": features}
+    lp = LearnedPhase(model=model, fallback_se=0.0, **kw).fit(demos, dt=DT)
+    test = _ramps([2.4], n_dofs=3, seed=3)[0] + 0.01 * np.random.default_rng(0).standard_normal((49, 3))
+    for M in range(1, test.shape[0] + 1):
+        Y = np.ascontiguousarray(test[:M])
+        a, b = lp.estimate(Y), lp.estimate_checked(Y)
+        assert (a.phase, a.duration, a.speed, a.std) == (b.phase, b.duration, b.speed, b.std)
+        if M < 2:
+            continue
+        Ys = Y / lp.scale_  # the whole prefix scaled, then read as the features read it
+        k, h = M - 1, lp.history
+        back = max(k - lp.window_, 0)
+        x = np.arange(1, h + 1) / (h + 1) * k
+        lo = x.astype(np.int64)
+        f = (x - lo)[:, None]
+        ref = {"position": Ys[k], "displacement": Ys[k] - Ys[0], "velocity": (Ys[k] - Ys[back]) / ((k - back) * DT),
+               "history": ((1.0 - f) * Ys[lo] + f * Ys[np.minimum(lo + 1, k)] - Ys[0]).ravel()}
+        got = lp._raw_features(Y, lp.scale_)
+        if features is None:
+            assert np.array_equal(got, np.concatenate([ref[g] for g in lp.features_]))
+        else:  # path and peak speed: the batch features of the scaled prefix
+            want = _prefix_features(Ys, DT, lp.window_, lp.features_, h)[-1]
+            assert np.array_equal(got, want)
+
+
 def test_incremental_features_equal_batch_features():
     rng = np.random.default_rng(1)
     Y = np.cumsum(rng.standard_normal((30, 4)), axis=0)

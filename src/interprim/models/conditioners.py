@@ -25,7 +25,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 __all__ = ["Context", "Conditioner", "Mean", "Ridge", "PPCA", "Kernel", "Blend", "CONDITIONERS", "conditioner",
-           "target_block"]
+           "target_block", "centre_rows_np"]
 
 
 def target_block(P, Ydc, R):
@@ -35,6 +35,22 @@ def target_block(P, Ydc, R):
     b2 = max(float(np.sum(np.sum(Ydc * Ydc, axis=1) * P.sum(axis=0))) / R, 1e-300)
     kc = ec > 1e-12 * max(float(ec[-1]), 1e-300)
     return P @ (Vc[:, kc] * (np.sqrt(ec[kc]) / math.sqrt(b2)))
+
+
+def centre_rows_np(X, x, Xc, xc, nrm, qnrm) -> float:
+    """The rows ``X`` (R, p) and queries ``x`` (Q, p) centred by the rows' mean into ``Xc`` and ``xc``, each
+    centred row's squared norm into ``nrm`` (R,) and each query's into ``qnrm`` (Q,) (skipped when they are
+    empty); returns ``sum(Xc ** 2)``: what :class:`Context` reads of its rows (``Context.of``'s centring, the trace
+    of :meth:`Context.gram`, the norms of :meth:`Context.distances`).  The numpy reference of the compiled
+    ``prefix_rows.centre_rows_into`` (the same numbers)."""
+    mu = X.mean(axis=0)
+    np.subtract(X, mu, out=Xc)
+    np.subtract(x, mu, out=xc)
+    if nrm.size == X.shape[0]:
+        nrm[...] = np.sum(Xc**2, axis=1)
+    if qnrm.size == x.shape[0]:
+        qnrm[...] = np.sum(xc**2, axis=1)
+    return float(np.sum(Xc * Xc))
 
 
 def _median_rows(d2: np.ndarray) -> np.ndarray:
@@ -86,14 +102,18 @@ class Context:
         The demonstrations' centred targets.
     ylow : ndarray, optional
         :func:`target_block` of ``P`` and ``Ydc`` when the caller has it (it does not depend on the phase).
+    sq : tuple, optional
+        ``(sum(Xc ** 2), sum(Xc ** 2, axis=1) or None, sum(xc ** 2, axis=1) or None)`` when the caller has them
+        (:func:`centre_rows_np` or its compiled kernel: the same numbers as the context's own).
     """
 
     FIELDS: ClassVar[tuple[str, ...]] = ("R", "Xc", "xc", "P", "ybar", "Ydc")
 
     def __init__(self, Xc: np.ndarray, xc: np.ndarray, P: np.ndarray, ybar: np.ndarray, Ydc: np.ndarray,
-                 ylow: np.ndarray | None = None):
+                 ylow: np.ndarray | None = None, sq: tuple | None = None):
         self.R = Xc.shape[0]
         self.Xc, self.xc, self.P, self.ybar, self.Ydc, self.ylow = Xc, xc, P, ybar, Ydc, ylow
+        self._sq = sq
         self._svd: tuple | None = None
         self._gram: tuple | None = None
         self._distances: tuple | None = None
@@ -139,7 +159,7 @@ class Context:
         if self._gram is None:
             Xc = self.Xc
             A = Xc.T @ Xc if Xc.shape[1] <= Xc.shape[0] else Xc @ Xc.T
-            self._gram = (A, float(np.sum(Xc * Xc)))
+            self._gram = (A, float(np.sum(Xc * Xc)) if self._sq is None else self._sq[0])
         return self._gram
 
     def distances(self) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +167,11 @@ class Context:
         once)."""
         if self._distances is None:
             xc, Xc = self.xc, self.Xc
-            d2 = (np.sum(xc**2, axis=1)[:, None] + np.sum(Xc**2, axis=1)[None, :] - 2.0 * xc @ Xc.T)
+            if self._sq is not None and self._sq[1] is not None and self._sq[2] is not None:
+                nrm, qnrm = self._sq[1], self._sq[2]
+            else:
+                nrm, qnrm = np.sum(Xc**2, axis=1), np.sum(xc**2, axis=1)
+            d2 = (qnrm[:, None] + nrm[None, :] - 2.0 * xc @ Xc.T)
             d2 = np.maximum(d2, 0.0)
             self._distances = (d2, np.maximum(_median_rows(d2), 1e-300))
         return self._distances
@@ -157,7 +181,7 @@ class Context:
         if self._pca is None:
             R, Xc, P, Ydc = self.R, self.Xc, self.P, self.Ydc
             p = Xc.shape[1]
-            a2 = max(float(np.sum(Xc**2)) / R, 1e-300)
+            a2 = max((float(np.sum(Xc**2)) if self._sq is None else self._sq[0]) / R, 1e-300)
             # the target block P L / b of Z below (the caller may pass it: it depends on the training rows' grouping
             # and the demonstrations only, not on the phase or the query)
             PLb = self.ylow if self.ylow is not None else target_block(P, Ydc, R)

@@ -66,6 +66,7 @@ J. Friedman, The Elements of Statistical Learning, Sec. 3.4.1 (ridge), 6.1 (kern
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from statistics import NormalDist
@@ -118,6 +119,11 @@ def _jitter_nodes(k: int) -> np.ndarray:
 
 
 _NODES: dict = {}
+_ZERO_IDX = np.zeros(1, dtype=np.intp)  # the one prefix of CouplingModel._query (read-only)
+_ZERO_IDX.setflags(write=False)
+_ONE_PHASE = np.ones(1)  # its stop: the whole prefix (read-only)
+_ONE_PHASE.setflags(write=False)
+_EMPTY = np.empty(0)  # an output a kernel skips
 
 
 def _resample(frames, stop, n):
@@ -642,9 +648,22 @@ class CouplingModel:
     def _predict_prefix(self, v, s: float, sig: float) -> GridPrediction:
         """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
         # the prefix enters only through its resampled points (_resample reads n_in of its frames)
-        x = self._feat(_resample_one(v, v.shape[0] - 1, int(self.n_in)))[None, :]
-        mean, h = self._condition(x, s, sig)
+        mean, h = self._condition(self._query(v), s, sig)
         return self._grid_prediction(mean, h, s, sig, v.shape[0])
+
+    def _query(self, v) -> np.ndarray:
+        """The features (1, p) of a checked prefix ``v`` (M, Do): :func:`_resample_one` at ``n_in`` points over the
+        whole prefix, scaled by :meth:`_feat`; by the compiled training-rows kernel (``prefix_rows.prefix_rows_into``
+        of the one prefix at phase 1, whose stop ``1.0 (M - 1)`` is the same number) once the kernels are loaded and
+        ``v`` is C-contiguous (the same operations on each element, so the same numbers)."""
+        rows = kernels.loaded_kernel("prefix_rows.prefix_rows_into")
+        M = v.shape[0]
+        if rows is None or not v.flags.c_contiguous:
+            return self._feat(_resample_one(v, M - 1, int(self.n_in)))[None, :]
+        out = np.empty((1, int(self.n_in) * v.shape[1]))
+        rows(v.reshape(1, M, v.shape[1]), np.array([M], dtype=np.intp), _ZERO_IDX, _ONE_PHASE,
+             unit_grid(int(self.n_in)), self.feature_scale_, self.features == "displacement", out)
+        return out
 
     def _condition(self, x, s: float, sig: float):
         """Eq. 18 for one query ``x`` (1, p) at phase ``s`` with error ``sig``: mean (n_out, D) and leverage ``h``.
@@ -656,10 +675,21 @@ class CouplingModel:
         n, D = self.n_demos_, self.n_dofs_
         X, g = self._rows(np.arange(n), s, sig)
         st = self._static(X.shape[0])
-        mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
         cond = self._derived.get_or_build(("conditioner", self.method_, str(self.param_)), (),
                                           lambda: conditioner(self.method_, self.param_))
-        ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, st.ylow if isinstance(cond, PPCA) else None)
+        ylow = st.ylow if isinstance(cond, PPCA) else None
+        centre = kernels.loaded_kernel("prefix_rows.centre_rows_into")
+        if centre is not None and x.flags.c_contiguous:  # X is: _rows' fresh array
+            # the centring and the sums of squares the conditioner reads, in one compiled pass (centre_rows_np's
+            # numbers: those of the lines below and of the context's own sums)
+            Xc, xc = np.empty_like(X), np.empty_like(x)
+            norms = isinstance(cond, (Kernel, Blend))
+            nrm, qnrm = (np.empty(X.shape[0]), np.empty(x.shape[0])) if norms else (_EMPTY, _EMPTY)
+            tr = centre(X, x, Xc, xc, nrm, qnrm)
+            ctx = Context(Xc, xc, st.P, st.ybar, st.Ydc, ylow, (tr, nrm, qnrm) if norms else (tr, None, None))
+        else:
+            mu = X.mean(axis=0)  # what Context.of computes, with its query-free part cached
+            ctx = Context(X - mu, x - mu, st.P, st.ybar, st.Ydc, ylow)
         mean, h = cond.predict(ctx)
         return mean[0].reshape(self.n_out, D), float(h[0])
 
@@ -679,37 +709,22 @@ class CouplingModel:
     def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
-        D = self.n_dofs_
-
-        def std():
-            # residual variance at this phase (linear interpolation over the CV phases, constant outside)
-            fr = self.fractions_
-            if s <= fr[0] or fr.size == 1:
-                var = self.residual_var_[0]
-            elif s >= fr[-1]:
-                var = self.residual_var_[-1]
-            else:
-                k = int(np.searchsorted(fr, s)) - 1
-                w = (s - fr[k]) / (fr[k + 1] - fr[k])
-                var = (1.0 - w) * self.residual_var_[k] + w * self.residual_var_[k + 1]
-
-            def scales():
-                c = np.ones(D)
-                c[self.observed_dofs_] = self.scale_["observed"]
-                c[self.controlled_dofs_] = self.scale_["controlled"]
-                return c[None, :]
-
-            c = self._derived.get_or_build("std_scale", (self.scale_, self.scale_["observed"],
-                                                         self.scale_["controlled"], self.observed_dofs_,
-                                                         self.controlled_dofs_), scales)
-            return c * np.sqrt(var * (1.0 + h))
-
-        # a fit whose residual variance is not measured yet (inside std_unused): the std when first read
-        lazy = "_variance_pending" in self.__dict__
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std if lazy else std(), s, sig,
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, self._std_source(h, s), s, sig,
                               self.observed_dofs_, self.controlled_dofs_, self.method_, h,
                               mean_duration=self.mean_duration_, n_observed=n_observed,
                               conditioned=not self.fallback_to_mean_)
+
+    def _std_source(self, h: float, s: float):
+        """The calibrated std at phase ``s`` with leverage ``h`` as a callable computed when first read
+        (:func:`_calibrated_std`; a :class:`~interprim.models.grid.GridPrediction` takes it as its std)."""
+        if "_variance_pending" in self.__dict__:  # a fit inside std_unused: its variance is measured when first read
+            def std():
+                return _calibrated_std(self.fractions_, self.residual_var_, self.scale_, self.observed_dofs_,
+                                       self.controlled_dofs_, self.n_dofs_, s, h)
+        else:  # computed when first read (a stream's caller often reads the mean only), from this fit's arrays
+            std = functools.partial(_calibrated_std, self.fractions_, self.residual_var_, self.scale_,
+                                    self.observed_dofs_, self.controlled_dofs_, self.n_dofs_, s, h)
+        return std
 
     # ------------------------------------------------------------------ persistence
     _ARRAYS = ("fractions_", "durations_", "Y_", "y_mean_", "dof_scale_", "feature_scale_", "residual_var_")
@@ -749,6 +764,24 @@ class CouplingModel:
         ends = np.cumsum(arrays["obs_lengths"])
         obj.obs_frames_ = [np.ascontiguousarray(f) for f in np.split(np.asarray(arrays["obs_frames"]), ends[:-1])]
         return obj
+
+
+def _calibrated_std(fr, residual_var, scale, observed, controlled, D: int, s: float, h: float) -> np.ndarray:
+    """The calibrated std (n_out, D) at phase ``s`` with leverage ``h``: ``c sqrt(v(s) (1 + h))`` with ``v`` the
+    residual variance ``residual_var`` (F, n_out, D) interpolated linearly over the CV phases ``fr`` (constant
+    outside) and ``c`` the calibration factor ``scale`` of each agent (module docstring)."""
+    if s <= fr[0] or fr.size == 1:
+        var = residual_var[0]
+    elif s >= fr[-1]:
+        var = residual_var[-1]
+    else:
+        k = int(np.searchsorted(fr, s)) - 1
+        w = (s - fr[k]) / (fr[k + 1] - fr[k])
+        var = (1.0 - w) * residual_var[k] + w * residual_var[k + 1]
+    c = np.ones(D)
+    c[observed] = scale["observed"]
+    c[controlled] = scale["controlled"]
+    return c[None, :] * np.sqrt(var * (1.0 + h))
 
 
 def _plain(v):

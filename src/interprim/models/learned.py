@@ -25,8 +25,12 @@ features) and ``n_in`` resampled points (the coupling's observation); :meth:`Lea
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..core.blas import one_blas_thread
+from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
 from .base import BasePrediction, BaseStream, InputMarks, Predictor
@@ -113,13 +117,24 @@ class LearnedInteraction(Predictor):
         self._check_fitted("predict")
         return self.predict_checked(as_2d_finite(partial, "partial", n_cols=len(self.observed_dofs_), min_rows=1))
 
+    @one_blas_thread
     def predict_checked(self, partial: np.ndarray) -> GridPrediction:
         """The prediction of frames already checked -- a finite float64 array ``(M, len(observed_dofs))``, not scanned
         again (:class:`LearnedStream` checks each frame once, as it enters) -- unmarked (``predict`` marks it)."""
-        est = self.phase_.estimate(partial)
-        s = float(np.clip(est.phase, 1e-3, 1.0))
-        cp = self.coupling_.predict(partial, s, phase_std=float(est.std), check=False)
-        return _Prediction(cp, est)
+        est = self.phase_.estimate_checked(partial)
+        c = self.coupling_
+        s, sig = float(est.phase), float(est.std)
+        if not (math.isfinite(s) and math.isfinite(sig) and sig >= 0.0):  # the coupling's checks raise
+            return _Prediction(c.predict(partial, float(np.clip(s, 1e-3, 1.0)), phase_std=sig, check=False), est)
+        s = min(max(s, 1e-3), 1.0)  # np.clip's number
+        # CouplingModel.predict (its checks passed) placed in time by est: one GridPrediction instead of two
+        mean, h = c._condition(c._query(partial), s, sig)
+        out = GridPrediction(unit_grid(int(c.n_out)).copy(), mean, c._std_source(h, s), est.phase, est.std,
+                             c.observed_dofs_, c.controlled_dofs_, c.method_, h, duration=est.duration,
+                             n_observed=partial.shape[0], timing=True, conditioned=not c.fallback_to_mean_)
+        out.speed = float(est.speed)
+        out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
+        return out
 
     def _stream(self, robot_state=None) -> LearnedStream:
         """Online predictor fed one observed frame at a time (:class:`LearnedStream`): after the ``M``-th frame it

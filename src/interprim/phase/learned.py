@@ -468,25 +468,37 @@ class LearnedPhase:
 
             raise NotFittedError("this LearnedPhase is not fitted yet; call fit(demos, dt=...) first")
 
-    def _raw_features(self, Y):
-        """Features (p,) of a scaled, uniformly sampled prefix (T, D) for the selected groups."""
+    def _raw_features(self, Y, scale):
+        """Features (p,) of a uniformly sampled prefix (T, D) divided by ``scale`` (D,), for the selected groups.
+
+        Only the frames the features read are divided (the first and last frames, the frame one velocity window
+        back and two per history point; every frame for ``"path"`` and ``"peak_speed"``): each element is the same
+        quotient as in ``Y / scale``, so the features are those of the scaled prefix, at a cost that does not grow
+        with ``T``."""
         if "path" in self.features_ or "peak_speed" in self.features_:  # these need every frame
-            return prefix_features(Y, self.dt_, self._w, self.features_, self.history)[-1]
+            return prefix_features(Y / scale, self.dt_, self._w, self.features_, self.history)[-1]
         k = Y.shape[0] - 1
         back = max(k - self._w, 0)
+        h = self.history
+        if "history" in self.features_:
+            x = np.arange(1, h + 1) / (h + 1) * k
+            lo = x.astype(np.int64)
+            f = (x - lo)[:, None]
+            rows = np.concatenate([np.array([0, k, back], dtype=np.int64), lo, np.minimum(lo + 1, k)])
+        else:
+            rows = np.array([0, k, back], dtype=np.int64)
+        Ys = Y[rows] / scale  # rows 0, k, back, then the history points' two neighbours
+        first, last = Ys[0], Ys[1]
         parts = []
         for g in self.features_:
             if g == "position":
-                parts.append(Y[k])
+                parts.append(last)
             elif g == "displacement":
-                parts.append(Y[k] - Y[0])
+                parts.append(last - first)
             elif g == "velocity":
-                parts.append((Y[k] - Y[back]) / ((k - back) * self.dt_))
+                parts.append((last - Ys[2]) / ((k - back) * self.dt_))
             else:  # history
-                x = np.arange(1, self.history + 1) / (self.history + 1) * k
-                lo = x.astype(np.int64)
-                f = (x - lo)[:, None]
-                parts.append(((1.0 - f) * Y[lo] + f * Y[np.minimum(lo + 1, k)] - Y[0]).ravel())
+                parts.append(((1.0 - f) * Ys[3:3 + h] + f * Ys[3 + h:] - first).ravel())
         return np.concatenate(parts)
 
     def _predict_at(self, k: int, f) -> float:
@@ -568,7 +580,18 @@ class LearnedPhase:
             elapsed = (Y.shape[0] - 1) * self.dt_
         if self.method_ == "clock" or Y.shape[0] < 2:
             return self._finish(elapsed, None)
-        return self._finish(elapsed, self._raw_features(Y / self.scale_))
+        # only the frames the features read are scaled (each the same quotient as in Y / scale_)
+        return self._finish(elapsed, self._raw_features(Y, self.scale_))
+
+    def estimate_checked(self, partial: np.ndarray) -> PhaseEstimate:
+        """:meth:`estimate` (at the training ``dt_``) of frames already checked: a finite float64 array ``(M,
+        n_dofs_)``, not scanned again (:class:`~interprim.models.learned.LearnedInteraction`'s stream checks each
+        frame once, as it enters); the features read only the frames they need, so the cost does not grow with
+        ``M`` (the same numbers as :meth:`estimate`)."""
+        elapsed = (partial.shape[0] - 1) * self.dt_
+        if self.method_ == "clock" or partial.shape[0] < 2:
+            return self._finish(elapsed, None)
+        return self._finish(elapsed, self._raw_features(partial, self.scale_))
 
     def to_state(self):
         """``(arrays, meta)``: everything of a fitted estimator, arrays apart and the rest JSON-friendly (for the

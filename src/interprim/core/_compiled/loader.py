@@ -102,6 +102,7 @@ def _compile_all() -> None:
     kb.warm_up()
     kq.prefix_rows_into(np.zeros((2, 3, 2)), np.array([3, 2], dtype=np.intp), np.array([1], dtype=np.intp),
                         np.array([0.5]), np.linspace(0.0, 1.0, 3), np.ones(2), False, np.empty((1, 6)))
+    kq.warm_up()
 
 
 def _fill_cache() -> None:

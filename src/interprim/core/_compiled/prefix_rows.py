@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, types
 
 _F1 = types.Array(types.float64, 1, "C", readonly=True)
@@ -50,3 +51,129 @@ def prefix_rows_into(frames, lengths, idx, s_true, lin, scale, displacement, out
                 for k in range(n_in - 1, -1, -1):
                     for d in range(Do):
                         out[row, k * Do + d] = out[row, k * Do + d] - out[row, d]
+
+
+# ------------------------------------------------------------------------------------------ centring the rows
+
+@njit(cache=True, fastmath=False, inline="always")
+def _term(v, square):
+    """``v * v`` (``square``) or ``v``: one term of the sums below."""
+    return v * v if square else v
+
+
+@njit(cache=True, fastmath=False)
+def _block_sq(a, lo, n, square):
+    """``numpy.add.reduce(a[lo:lo + n] ** 2)`` (``square``; else of ``a[lo:lo + n]`` itself) for ``n <= 128`` in
+    numpy's order (the leaves of :func:`_pairwise_sq`): sequential below 8 elements, else eight interleaved partial
+    sums combined pairwise, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += _term(a[lo + i], square)
+        return res
+    r0, r1, r2, r3 = (_term(a[lo], square), _term(a[lo + 1], square), _term(a[lo + 2], square),
+                      _term(a[lo + 3], square))
+    r4, r5, r6, r7 = (_term(a[lo + 4], square), _term(a[lo + 5], square), _term(a[lo + 6], square),
+                      _term(a[lo + 7], square))
+    m = n - n % 8
+    i = 8
+    while i < m:
+        b = lo + i
+        r0 += _term(a[b], square)
+        r1 += _term(a[b + 1], square)
+        r2 += _term(a[b + 2], square)
+        r3 += _term(a[b + 3], square)
+        r4 += _term(a[b + 4], square)
+        r5 += _term(a[b + 5], square)
+        r6 += _term(a[b + 6], square)
+        r7 += _term(a[b + 7], square)
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += _term(a[lo + i], square)
+        i += 1
+    return res
+
+
+@njit(cache=True, fastmath=False)
+def _pairwise_sq(a, lo, n, square=True):
+    """``numpy.add.reduce(a[lo:lo + n] ** 2)`` (``square``; else of ``a[lo:lo + n]``) of a contiguous float64
+    ``a`` in numpy's own order: its pairwise summation (``pairwise_sum`` of numpy's ``loops_utils.h``: blocks of
+    at most 128 elements summed by :func:`_block_sq`, a larger range split in two at a multiple of eight below its
+    half and the halves' sums added).  The recursion is unrolled on a stack of tasks (numba's cache cannot load a
+    recursive function): a range is replaced by the addition of its halves, evaluated after them."""
+    if n <= 128:
+        return _block_sq(a, lo, n, square)
+    task_lo = np.empty(256, dtype=np.int64)  # a range's start, or -1 for "add the last two values"
+    task_n = np.empty(256, dtype=np.int64)
+    vals = np.empty(128)
+    nt = 1
+    task_lo[0] = lo
+    task_n[0] = n
+    nv = 0
+    while nt > 0:
+        nt -= 1
+        t_lo, t_n = task_lo[nt], task_n[nt]
+        if t_lo < 0:  # left + right (the right half's sum is on top)
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+        elif t_n <= 128:
+            vals[nv] = _block_sq(a, t_lo, t_n, square)
+            nv += 1
+        else:
+            n2 = t_n // 2
+            n2 -= n2 % 8
+            task_lo[nt], task_n[nt] = -1, 0  # after both halves
+            task_lo[nt + 1], task_n[nt + 1] = t_lo + n2, t_n - n2  # the right half, evaluated second
+            task_lo[nt + 2], task_n[nt + 2] = t_lo, n2  # the left half, first
+            nt += 3
+    return vals[0]
+
+
+_F2 = types.Array(types.float64, 2, "C", readonly=True)
+_O2 = types.Array(types.float64, 2, "C")
+_O1 = types.Array(types.float64, 1, "C")
+
+
+@njit(types.float64(_F2, _F2, _O2, _O2, _O1, _O1), cache=True, fastmath=False)
+def centre_rows_into(X, x, Xc, xc, nrm, qnrm):
+    """The rows ``X`` (R, p) and queries ``x`` (Q, p) centred by the rows' mean into ``Xc`` and ``xc``, with the
+    squared norms a conditioner reads: each centred row's into ``nrm`` (R,) and each query's into ``qnrm`` (Q,)
+    (skipped when they are empty); returns ``sum(Xc ** 2)``.  The numbers of
+    :func:`interprim.models.conditioners.centre_rows_np` bit for bit: the column sums run over the rows in
+    order (numpy's axis-0 reduction; of one column, its pairwise sum), then divided by ``R`` (``numpy.mean``);
+    the sums of squares are numpy's pairwise sums (:func:`_pairwise_sq`); no fastmath (no fused multiply-add).
+    Called once per streamed frame of :class:`~interprim.models.learned.LearnedInteraction` (Eq. 18's smoother
+    on rows that move with the phase)."""
+    R, p = X.shape
+    Q = x.shape[0]
+    mu = np.zeros(p)
+    if p == 1:  # numpy's axis-0 reduction of one contiguous column: its pairwise sum
+        mu[0] = 0.0 + _pairwise_sq(X.reshape(R), 0, R, False)
+    else:  # of several columns: each summed over the rows in order
+        for i in range(R):
+            for j in range(p):
+                mu[j] += X[i, j]
+    for j in range(p):
+        mu[j] = mu[j] / R
+    for i in range(R):
+        for j in range(p):
+            Xc[i, j] = X[i, j] - mu[j]
+    for i in range(Q):
+        for j in range(p):
+            xc[i, j] = x[i, j] - mu[j]
+    flat = Xc.reshape(R * p)
+    if nrm.shape[0] == R:
+        for i in range(R):
+            nrm[i] = 0.0 + _pairwise_sq(flat, i * p, p)
+    if qnrm.shape[0] == Q:
+        qflat = xc.reshape(Q * p)
+        for i in range(Q):
+            qnrm[i] = 0.0 + _pairwise_sq(qflat, i * p, p)
+    return 0.0 + _pairwise_sq(flat, 0, R * p)
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) :func:`centre_rows_into` with tiny inputs of the real types."""
+    X = np.arange(6.0).reshape(3, 2)
+    centre_rows_into(X, X[:1].copy(), np.empty((3, 2)), np.empty((1, 2)), np.empty(3), np.empty(1))

@@ -99,6 +99,11 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "interprim.models.coupling:prefix_rows_np", True,
            "the prefix coupling's training rows (each demonstration resampled on [0, s] at n_in points, Eq. 17-18's "
            "observation), written into out; bitwise equal"),
+    Kernel("prefix_rows.centre_rows_into", "prefix_rows:centre_rows_into",
+           "interprim.models.conditioners:centre_rows_np", True,
+           "the prefix coupling's rows and query centred by the rows' mean, with the sums of squares its "
+           "conditioners read (Eq. 18's smoother per streamed frame: the ridge's trace, the kernel's norms); "
+           "numpy's reductions in their order, bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

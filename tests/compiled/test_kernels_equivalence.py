@@ -72,6 +72,13 @@ def rel(a, b) -> float:
     return d / scale if scale > 0 else d
 
 
+def bitwise_gap(a, b) -> float:
+    """0 when ``a`` and ``b`` are the same bits (signs of zeros included), else :func:`rel` (inf when that is 0)."""
+    if np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b)):
+        return 0.0
+    return rel(a, b) or np.inf
+
+
 @pytest.fixture(scope="module")
 def demos():
     return two_agent_demos(8, seed=0, frames=80), two_agent_demos(2, seed=5, frames=80)
@@ -399,8 +406,7 @@ def check_weighted_weighted_frames():
         comp(padded, idx, f, cols, w, got[0], got[1])
         ref(padded, idx, f, cols, w, got[2], got[3])
         for a, b in ((got[0], got[2]), (got[1], got[3])):
-            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
-                worst = max(worst, rel(a, b) or np.inf)
+            worst = max(worst, bitwise_gap(a, b))
     demos = two_agent_demos(6, seed=3, frames=60)
     m = KernelDemonstrations([0, 1], bandwidth=0.3).fit(demos, dt=0.01)
     for M in (5, 30, 59):
@@ -440,8 +446,7 @@ def check_blend_place_members():
         assert comp(u, ahead, sv, dv, s, R, h, grids, W, Y, mean, np.empty(n))
         Y_ref, mean_ref = ref(u, ahead, sv, dv, s, R, h, grids, W)
         for a, b in ((Y, Y_ref), (mean, mean_ref)):
-            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
-                worst = max(worst, rel(a, b) or np.inf)
+            worst = max(worst, bitwise_gap(a, b))
     demos = two_agent_demos(12, seed=5, frames=60)
     blend = ip.models.blend.Blend.from_fitted(
         [0, 1], {m: f.build(ip.models.registry.Settings((0, 1))).fit(demos, dt=0.01)
@@ -587,8 +592,7 @@ def check_prefix_rows_centre_rows_into():
                    np.full(Q if norms else 0, np.nan))
             got.append(out + (np.array([fn(X, x, *out)]),))
         for a, b in zip(*got):
-            if not (np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))):
-                worst = max(worst, rel(a, b) or np.inf)
+            worst = max(worst, bitwise_gap(a, b))
     demos = two_agent_demos(8, seed=4, frames=70)
     m = families.family("learned").build(families.Settings((0, 1))).fit(demos, dt=0.01)
     for method, param in (("ridge", 0.1), ("kernel", 0.5), ("ppca", 2), ("blend", (0.1, 0.5, 0.5)), ("mean", None)):

@@ -19,7 +19,7 @@ from . import registry
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
-__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np"]
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "spread_std_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -72,6 +72,16 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
         Y[j] = interp_columns(um, u, grids[j])
     return Y, np.einsum("gm,mgd->gd", W, Y)
+
+
+def spread_std_np(Y, mean, W, ahead, steps, a, b, scaled: bool):
+    """``(std, positive)``: the blend's std ``sqrt(clip(var, 0))`` on the grid with ``var = a(ahead) spread +
+    b(ahead)`` (:meth:`Blend.variance`; ``spread`` alone unless ``scaled``) and the members' weighted disagreement
+    ``spread = sum_j W[:, j] (Y[j] - mean)^2``; ``positive``: the number of points with ``var > 0`` (the numpy
+    reference of the compiled ``blend.spread_std``)."""
+    spread = np.einsum("gm,mgd->gd", W, (Y - mean[None]) ** 2)
+    var = interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b) if scaled else spread
+    return np.sqrt(np.clip(var, 0.0, None)), int(np.count_nonzero(var > 0))
 
 
 class Blend(Predictor):
@@ -197,15 +207,30 @@ class Blend(Predictor):
 
     def variance(self, spread, ahead):
         """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
-        if not self.scales:
+        model = self._variance_model()
+        if model is None:
             return spread
-        a = np.asarray(self.scales["a"], dtype=np.float64)
-        b = np.asarray(self.scales["b"], dtype=np.float64)
-        if "t" in self.scales:
-            steps = np.asarray(self.scales["t"], dtype=np.float64)
-        else:
-            steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+        steps, a, b = model
         return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
+
+    def _variance_model(self):
+        """``(steps, a, b)`` arrays of the variance model (``scales``; None without one), converted from the stored
+        lists once and again only when ``scales`` or ``horizon`` is replaced (a prediction's std reads them)."""
+        key = (self.scales, self.horizon)
+        cached = self.__dict__.get("_variance_arrays")
+        if cached is not None and cached[0][0] is key[0] and cached[0][1] == key[1]:
+            return cached[1]
+        model = None
+        if self.scales:
+            a = np.asarray(self.scales["a"], dtype=np.float64)
+            b = np.asarray(self.scales["b"], dtype=np.float64)
+            if "t" in self.scales:
+                steps = np.asarray(self.scales["t"], dtype=np.float64)
+            else:
+                steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+            model = (np.ascontiguousarray(steps), np.ascontiguousarray(a), np.ascontiguousarray(b))
+        self.__dict__["_variance_arrays"] = (key, model)
+        return model
 
     def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
         """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
@@ -344,15 +369,26 @@ class BlendPrediction(GridPrediction):
         if parts is None:
             return self.__dict__.get("_std")
         blend, Y, W, ahead = parts
-        spread = np.einsum("gm,mgd->gd", W, (Y - self.mean[None]) ** 2)
-        var = blend.variance(spread, ahead)
-        self.__dict__["_std"] = np.sqrt(np.clip(var, 0.0, None)) if np.any(var > 0) else None
+        model = blend._variance_model()
+        steps, a, b = (_NO_STEPS, _NO_SCALE, _NO_SCALE) if model is None else model
+        kernel = _registry.kernel("blend.spread_std")
+        std = np.empty_like(self.mean)
+        positive = -1 if kernel is None else kernel(Y, self.mean, np.ascontiguousarray(W), ahead, steps, a, b,
+                                                    model is not None, std)
+        if positive < 0:
+            std, positive = spread_std_np(Y, self.mean, W, ahead, steps, a, b, model is not None)
+        self.__dict__["_std"] = std if positive > 0 else None
         self.__dict__["_parts"] = None
         return self.__dict__["_std"]
 
     @std_values.setter
     def std_values(self, value):
         self.__dict__["_std"] = value
+
+
+#: the variance model's placeholders for a blend without one (the spread alone)
+_NO_STEPS = np.array([0.0, 1.0])
+_NO_SCALE = np.zeros((2, 1))
 
 
 class BlendStream(BaseStream):

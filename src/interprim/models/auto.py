@@ -26,8 +26,8 @@ import numpy as np
 from ..core.blas import one_blas_thread
 from ..core.cache import shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
-from ..core.errors import OutOfRangeWarning, PaceWarning
-from ..core.input_range import fit_input_range, mark
+from ..core.errors import PaceWarning
+from ..core.input_range import CHECKED_BY_CALLER, fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, stacking
 from . import registry
@@ -371,8 +371,7 @@ class AutoInteraction(Predictor):
         ``out_of_range`` of the frames against the training demonstrations (:mod:`interprim.core.input_range`;
         an :class:`~interprim.OutOfRangeWarning` when out of range)."""
         self._check_fitted("predict")
-        with warnings.catch_warnings():  # the members' own checks: this model warns once, below
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        with CHECKED_BY_CALLER:  # the members' own checks skipped: this model marks and warns once, below
             pred = self.model_.predict(partial, **kwargs)
         return mark(self, pred, self.input_distance(partial))
 

@@ -43,7 +43,6 @@ Interaction Primitive's :class:`~interprim.models.primitive.prediction.Predictio
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -51,8 +50,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.blas import limit_methods, one_blas_thread
-from ..core.errors import NotFittedError, OutOfRangeWarning
-from ..core.input_range import fit_input_range, mark
+from ..core.errors import NotFittedError
+from ..core.input_range import CHECKED_BY_CALLER, checked_by_caller, fit_input_range, mark
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
@@ -335,7 +334,7 @@ class Predictor(Params):
         """The prediction from the observed agent's frames ``partial`` ``(M, len(observed_dofs))`` since the start
         of the movement, marked with ``input_distance`` and ``out_of_range``; the model is left unchanged."""
         pred = self._predict(partial, **kwargs)
-        if not self._CHECKS_INPUT and self.input_range_ is not None and not np.isfinite(
+        if not self._CHECKS_INPUT and self.input_range_ is not None and not checked_by_caller() and not np.isfinite(
                 getattr(pred, "input_distance", float("nan"))):
             mark(self, pred, self.input_distance(partial))
         return pred
@@ -449,7 +448,10 @@ class InputMarks:
         self.warned = False
 
     def mark(self, pred: BasePrediction, frames: ArrayLike) -> BasePrediction:
-        """``pred`` marked after the new ``frames`` (one frame or ``(k, n_observed)``) entered the stream."""
+        """``pred`` marked after the new ``frames`` (one frame or ``(k, n_observed)``) entered the stream (left as it
+        is inside :data:`~interprim.core.input_range.CHECKED_BY_CALLER`: the caller marks it)."""
+        if checked_by_caller():
+            return pred
         d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
         self.largest = max(self.largest, d) if np.isfinite(d) else d
         mark(self.model, pred, self.largest, warn=not self.warned)
@@ -476,16 +478,15 @@ class CheckedStream(BaseStream):
         self._marks.reset()
 
     def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:
-        """Add one observed frame; the inner stream's prediction, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        """Add one observed frame; the inner stream's prediction, marked (the inner models' own checks skipped:
+        :data:`~interprim.core.input_range.CHECKED_BY_CALLER`)."""
+        with CHECKED_BY_CALLER:
             pred = self.inner.update(frame, need_cov=need_cov)
         return self._marks.mark(pred, frame)
 
     def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add several frames; the inner stream's prediction for the last, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        with CHECKED_BY_CALLER:
             pred = self.inner.extend(frames, need_cov=need_cov)
         return self._marks.mark(pred, frames)
 

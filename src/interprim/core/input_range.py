@@ -133,29 +133,36 @@ def duration_range(model: Any) -> tuple[float, float] | None:
     return None
 
 
-def mark_duration(model: Any, prediction: _D) -> _D:
+#: ``span`` not given: :func:`mark_duration` reads it (:func:`duration_range`)
+_READ: Any = object()
+
+
+def mark_duration(model: Any, prediction: _D, span: Any = _READ) -> _D:
     """Set ``prediction.duration_out_of_range``: its duration is more than :data:`DURATION_FACTOR` times the
     longest demonstration, or less than the shortest divided by it (flagged as the input range is); nothing inside
-    :data:`CHECKED_BY_CALLER`."""
+    :data:`CHECKED_BY_CALLER`.  ``span``: ``duration_range(model)`` when the caller has it already (a stream reads it
+    once)."""
     if _CHECKS.depth:
         return prediction
-    span = duration_range(model)
+    if span is _READ:
+        span = duration_range(model)
     duration = float(getattr(prediction, "duration", float("nan")))
     prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
         duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
     return prediction
 
 
-def mark(model: Any, prediction: _P, dist: float, warn: bool = True) -> _P:
+def mark(model: Any, prediction: _P, dist: float, warn: bool = True, span: Any = _READ) -> _P:
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
     at the caller's line: the first frame outside interprim, however many of the library's calls lie between.
-    Nothing inside :data:`CHECKED_BY_CALLER` (the caller marks the prediction itself)."""
+    Nothing inside :data:`CHECKED_BY_CALLER` (the caller marks the prediction itself).  ``span``: as
+    :func:`mark_duration` takes it."""
     if _CHECKS.depth:
         return prediction
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
-    mark_duration(model, prediction)
+    mark_duration(model, prediction, span)
     if prediction.out_of_range and warn:
         import inspect
 

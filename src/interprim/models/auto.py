@@ -27,7 +27,7 @@ from ..core.blas import one_blas_thread
 from ..core.cache import shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import PaceWarning
-from ..core.input_range import CHECKED_BY_CALLER, fit_input_range, mark
+from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, stacking
 from . import registry
@@ -373,7 +373,15 @@ class AutoInteraction(Predictor):
         self._check_fitted("predict")
         with CHECKED_BY_CALLER:  # the members' own checks skipped: this model marks and warns once, below
             pred = self.model_.predict(partial, **kwargs)
-        return mark(self, pred, self.input_distance(partial))
+        return mark(self, pred, self.input_distance(partial), span=self._duration_span())
+
+    def _duration_span(self):
+        """:func:`~interprim.core.input_range.duration_range` of this model, read once per fitted (or loaded)
+        model: the demonstrated durations do not change between predictions."""
+        cached = self.__dict__.get("_span")
+        if cached is None or cached[0] is not self.model_:
+            cached = self.__dict__["_span"] = (self.model_, duration_range(self))
+        return cached[1]
 
     def stream(self, robot_state=None):
         """The model's online predictor, each prediction marked with the largest input distance of the frames

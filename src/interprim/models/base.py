@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike
 
 from ..core.blas import limit_methods, one_blas_thread
 from ..core.errors import NotFittedError
-from ..core.input_range import CHECKED_BY_CALLER, checked_by_caller, fit_input_range, mark
+from ..core.input_range import CHECKED_BY_CALLER, checked_by_caller, duration_range, fit_input_range, mark
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
@@ -429,18 +429,24 @@ def _jsonable(v: Any) -> Any:
     raise TypeError(f"parameter value {v!r} cannot be stored in a model file")
 
 
+_UNREAD: Any = object()
+
+
 class InputMarks:
     """A stream's running input check: each prediction is marked with the largest ``input_distance`` of the frames
     seen so far and ``out_of_range`` (:func:`interprim.core.input_range.mark`), warned once per stream.
 
     Used by :class:`CheckedStream` and by the streams that mark their own predictions (``marks_input``)."""
 
-    __slots__ = ("model", "largest", "warned")
+    __slots__ = ("model", "largest", "warned", "span")
 
     def __init__(self, model: Predictor) -> None:
         self.model = model
         self.largest = 0.0
         self.warned = False
+        #: the model's demonstrated durations (:func:`interprim.core.input_range.duration_range`), read at the first
+        #: mark and kept: the model does not change during a stream
+        self.span: Any = _UNREAD
 
     def reset(self) -> None:
         """Forget the frames seen (a new interaction)."""
@@ -454,7 +460,9 @@ class InputMarks:
             return pred
         d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
         self.largest = max(self.largest, d) if np.isfinite(d) else d
-        mark(self.model, pred, self.largest, warn=not self.warned)
+        if self.span is _UNREAD:
+            self.span = duration_range(self.model)
+        mark(self.model, pred, self.largest, warn=not self.warned, span=self.span)
         self.warned = self.warned or pred.out_of_range
         return pred
 

@@ -266,12 +266,12 @@ class Blend(Predictor):
         W = self._weights_on(ahead)  # (n_grid, M)
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        on = W.any(axis=0)
-        if on.all():
+        if np.count_nonzero(W) == W.size:  # every member weighted at every point (the usual case: one cheap count)
             active = range(len(names))
         else:
-            active = np.flatnonzero(on).tolist()
-            W = W[:, active]
+            active = np.flatnonzero(W.any(axis=0)).tolist()
+            if len(active) < len(names):
+                W = W[:, active]
         grids = np.stack([_on_grid(preds[names[i]], u) for i in active])
         sa = np.array([sv[i] for i in active])
         da = np.array([dv[i] for i in active])
@@ -292,7 +292,9 @@ class Blend(Predictor):
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
         out = interp_columns(ahead, self._mids, self._W)
         np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
-        return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+        total = out.sum(axis=1, keepdims=True)
+        np.maximum(total, 1e-300, out=total)
+        return np.divide(out, total, out=out)  # in place: the same quotients
 
     @staticmethod
     def frame_overhead(n_members: int, n_dofs: int) -> float:

@@ -37,11 +37,13 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
 
 def _on_grid(pred, u) -> np.ndarray:
     """``pred.trajectory(len(u))`` on the grid ``u`` (``linspace(0, 1, n)``): a tabulated prediction whose own times
-    are that grid is read as it is (interpolating at its own sample points gives its values)."""
+    are that grid is read as it is (interpolating at its own sample points gives its values), another one
+    interpolated as its ``trajectory`` does."""
     times = getattr(pred, "times", None)
-    if type(pred).trajectory is GridPrediction.trajectory and times is not None and times.shape == u.shape and (
-            times is u or np.array_equal(times, u)):
-        return pred.mean
+    if type(pred).trajectory is GridPrediction.trajectory and times is not None:
+        if times.shape == u.shape and (times is u or np.array_equal(times, u)):
+            return pred.mean
+        return interp_columns(u, times, pred.mean)  # GridPrediction.trajectory's values, without its wrapper
     return pred.trajectory(u.shape[0])
 
 

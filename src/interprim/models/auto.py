@@ -24,7 +24,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.cache import shared_fits, std_unused
+from ..core.cache import DerivedCache, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import PaceWarning
 from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
@@ -364,6 +364,7 @@ class AutoInteraction(Predictor):
         self.columns_ = cols
         self.selection_ = selection
         self.set_input_range(fit_input_range(np.concatenate([d[:, self.observed_dofs_] for d in train])))
+        self._derived = DerivedCache()  # values derived from the fitted state, filled on first use
         return self
 
     def predict(self, partial, **kwargs):
@@ -378,10 +379,10 @@ class AutoInteraction(Predictor):
     def _duration_span(self):
         """:func:`~interprim.core.input_range.duration_range` of this model, read once per fitted (or loaded)
         model: the demonstrated durations do not change between predictions."""
-        cached = self.__dict__.get("_span")
-        if cached is None or cached[0] is not self.model_:
-            cached = self.__dict__["_span"] = (self.model_, duration_range(self))
-        return cached[1]
+        derived = self.__dict__.get("_derived")
+        if derived is None:  # (a model fitted or loaded by an older release, unpickled... : read it each time)
+            return duration_range(self)
+        return derived.get_or_build("duration_range", (self.model_,), lambda: duration_range(self))
 
     def stream(self, robot_state=None):
         """The model's online predictor, each prediction marked with the largest input distance of the frames
@@ -419,6 +420,7 @@ class AutoInteraction(Predictor):
         self.set_input_range(meta.get("input_range"))
         if self.input_range_ is not None and self.input_range_[0].shape != (len(self.observed_dofs_),):
             raise ValueError("input_range does not match the observed columns")
+        self._derived = DerivedCache()
 
     def __repr__(self):
         if not hasattr(self, "model_"):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core._compiled import registry as _registry
+from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
 from ..io import estimator_from_state
@@ -177,6 +178,7 @@ class Blend(Predictor):
             raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
                              "shared end is read from a member's own timing, so that member must be in weights")
         self.members_ = {m: members[m] for m in names}
+        self._derived = DerivedCache()  # values derived from the fitted state (the variance model's arrays)
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
@@ -218,10 +220,13 @@ class Blend(Predictor):
     def _variance_model(self):
         """``(steps, a, b)`` arrays of the variance model (``scales``; None without one), converted from the stored
         lists once and again only when ``scales`` or ``horizon`` is replaced (a prediction's std reads them)."""
-        key = (self.scales, self.horizon)
-        cached = self.__dict__.get("_variance_arrays")
-        if cached is not None and cached[0][0] is key[0] and cached[0][1] == key[1]:
-            return cached[1]
+        derived = self.__dict__.get("_derived")
+        if derived is None:  # not fitted: nothing kept
+            return self._build_variance_model()
+        return derived.get_or_build("variance_model", (self.scales, self.horizon), self._build_variance_model)
+
+    def _build_variance_model(self):
+        """``(steps, a, b)`` of ``scales`` as contiguous arrays (None without a variance model)."""
         model = None
         if self.scales:
             a = np.asarray(self.scales["a"], dtype=np.float64)
@@ -231,7 +236,6 @@ class Blend(Predictor):
             else:
                 steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
             model = (np.ascontiguousarray(steps), np.ascontiguousarray(a), np.ascontiguousarray(b))
-        self.__dict__["_variance_arrays"] = (key, model)
         return model
 
     def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):

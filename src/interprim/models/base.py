@@ -277,7 +277,9 @@ class Predictor(Params):
     ``input_range_`` and in its model file); every prediction carries ``input_distance`` and ``out_of_range``
     (:func:`interprim.core.input_range.mark`; a stream: the largest distance of the frames seen so far) and warns
     once.  A class that computes them itself sets ``_CHECKS_INPUT = True`` (the Interaction Primitive, whose
-    fitted state marks its predictions, and :class:`~interprim.models.auto.AutoInteraction`).
+    fitted state marks its predictions, and :class:`~interprim.models.auto.AutoInteraction`).  A wrapper that marks
+    the prediction it returns (:class:`~interprim.models.auto.AutoInteraction`, :class:`CheckedStream`) calls the
+    models inside :data:`~interprim.core.input_range.CHECKED_BY_CALLER`, where they skip their own checks.
 
     :meth:`fit` and :meth:`predict` run on one BLAS thread (:func:`interprim.core.blas.one_blas_thread`); a subclass
     that overrides them instead of the hooks gets the same limit around its own.

@@ -57,6 +57,7 @@ MEASURED = {
     "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
     "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
     "blend.place_members": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
+    "blend.spread_std": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
     "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
     "prefix_rows.centre_rows_into": (0.0, 0.0, 0.0),  # numpy's reductions in their order (pairwise), no fastmath
 }
@@ -468,6 +469,62 @@ def check_blend_place_members():
     return worst
 
 
+def check_blend_spread_std():
+    """The kernel against its reference, bit for bit: one to five members, weights with zeros, points where every
+    member agrees (variance 0, and -0.0 from a negative scale), variance models with negative and NaN values and
+    look-aheads before, inside and beyond their steps, with and without a variance model; and a fitted blend's std
+    on both paths (its variance model read by the kernel)."""
+    rng = np.random.default_rng(13)
+    comp, ref = registry.compiled("blend.spread_std"), registry.reference("blend.spread_std")
+    worst = 0.0
+    for trial in range(300):
+        A, n, D, H = int(rng.integers(1, 6)), int(rng.integers(2, 202)), int(rng.integers(1, 15)), \
+            int(rng.integers(2, 40))
+        Y = rng.normal(size=(A, n, D)) * 10.0 ** rng.integers(-3, 3)
+        Y[:, : n // 5] = Y[0, : n // 5]  # every member agrees there: spread 0
+        W = rng.random((n, A))
+        W[:, 0] = 0.0 if trial % 4 == 0 else W[:, 0]
+        W /= np.maximum(W.sum(axis=1, keepdims=True), 1e-300)
+        mean = np.einsum("gm,mgd->gd", W, Y)
+        ahead = np.maximum((np.linspace(0.0, 1.0, n) - rng.uniform(0.0, 1.0)) * rng.uniform(0.5, 4.0), 0.0)
+        steps = np.cumsum(rng.uniform(0.01, 0.3, H))
+        a = rng.normal(1.0, 0.5, (H, D))
+        b = rng.normal(0.0, 1e-3, (H, D))
+        if trial % 7 == 0:
+            a[0], b[0] = -1.0, -0.0  # -0.0 variances where the members agree
+        if trial % 11 == 0:
+            b[H // 2, 0] = np.nan
+        scaled = trial % 5 != 0
+        std = np.empty((n, D))
+        positive = comp(Y, mean, W, ahead, steps, a, b, scaled, std)
+        std_ref, positive_ref = ref(Y, mean, W, ahead, steps, a, b, scaled)
+        if positive != positive_ref:
+            worst = np.inf
+        if not (np.array_equal(std, std_ref, equal_nan=True) and np.array_equal(np.signbit(std),
+                                                                                   np.signbit(std_ref))):
+            worst = max(worst, rel(np.nan_to_num(std), np.nan_to_num(std_ref)) or np.inf)
+    assert comp(Y, mean, W, ahead, np.array([0.0, 0.0]), a[:2], b[:2], True, std) == -1  # steps not increasing
+    demos = two_agent_demos(12, seed=5, frames=60)
+    members = {m: f.build(ip.models.registry.Settings((0, 1))).fit(demos, dt=0.01)
+               for m, f in ip.models.registry.FAMILIES.items() if m in ("ip", "learned")}
+    H, D = 6, demos[0].shape[1]
+    scales = {"a": rng.uniform(0.5, 2.0, (H, D)), "b": rng.uniform(0.0, 1e-3, (H, D)),
+              "t": np.linspace(0.05, 0.6, H)}
+    blend = ip.models.blend.Blend.from_fitted([0, 1], members, {"ip": [0.6, 0.2], "learned": [0.4, 0.8]}, scales,
+                                              demos, 0.01, bands=[0.25, 1.0])
+    st = blend.stream()
+    for M, f in enumerate(demos[0][:59, :2], start=1):
+        preds = {m: s.update(f) for m, s in st.streams.items()}
+        if M in (5, 30, 59):
+            out = {}
+            for which in ("compiled", "numpy"):
+                with registry.forced(which):
+                    out[which] = blend.combine(preds, M).std(50)
+            if not np.array_equal(out["compiled"], out["numpy"]):
+                worst = max(worst, rel(out["compiled"], out["numpy"]) or np.inf)
+    return worst
+
+
 # ------------------------------------------------------------------------------------------ the likelihood phase
 
 def check_phase_likelihood_phase_loglik_batch(models, demos):
@@ -628,6 +685,7 @@ CHECKS = {
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,
     "blend.place_members": check_blend_place_members,
+    "blend.spread_std": check_blend_spread_std,
     "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,
     "prefix_rows.centre_rows_into": check_prefix_rows_centre_rows_into,
 }

@@ -678,3 +678,32 @@ def test_a_default_fitted_on_demonstrations_that_speed_up_warns_once_and_says_so
         mixed = ip.AutoInteraction([0, 1, 2], candidates=("nn", "prior")).fit([demos[i] for i in order], dt=0.02)
     assert not [w for w in caught if issubclass(w.category, ip.PaceWarning)]
     assert not mixed.selection_["pace"]["significant"] and "durations change" not in mixed.summary()
+
+
+def test_the_default_warns_once_for_far_input_and_its_members_still_check_alone(blend, task):
+    """The default marks its prediction and warns once per predict and once per stream; its members, whose checks
+    it skips (``CHECKED_BY_CALLER``), still flag and warn when used alone."""
+    import warnings
+
+    from interprim.core.input_range import checked_by_caller
+    from interprim.models.blend import Blend
+
+    dev, _ = task
+    assert isinstance(blend.model_, Blend)
+    far = np.asarray(dev.demos[0])[:40, [0, 1]] * 1000.0  # millimetres to a model in metres
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        p = blend.predict(far)
+        st = blend.stream()
+        q = [st.update(f) for f in far]
+    assert sum(issubclass(w.category, ip.OutOfRangeWarning) for w in caught) == 2
+    assert not checked_by_caller()
+    assert p.out_of_range and p.input_distance == blend.input_distance(far)
+    assert q[-1].out_of_range and q[-1].input_distance == pytest.approx(blend.input_distance(far), rel=1e-12)
+    checked = 0
+    for member in blend.model_.members_.values():
+        if member.input_range_ is not None or member._CHECKS_INPUT:
+            with pytest.warns(ip.OutOfRangeWarning):
+                assert member.predict(far).out_of_range
+            checked += 1
+    assert checked > 0

@@ -74,3 +74,36 @@ def test_the_warning_points_at_the_callers_line(model_and_demos):
             stream.update(f)
     hits = [w for w in caught if issubclass(w.category, ip.OutOfRangeWarning)]
     assert len(hits) == 2 and all(w.filename == __file__ for w in hits), [(w.filename, w.lineno) for w in hits]
+
+
+def test_a_caller_that_checks_itself_silences_the_inner_checks_in_its_own_thread_only(model_and_demos):
+    """Inside ``CHECKED_BY_CALLER`` (a wrapper that marks the prediction itself) a model neither computes its input
+    distance nor warns; a prediction in another thread at the same time checks as usual; after it, as before."""
+    import threading
+
+    from interprim.core.input_range import CHECKED_BY_CALLER, checked_by_caller
+
+    m, demos = model_and_demos
+    z = demos[0][:60, :2] * 1000.0
+    other = {}
+
+    def elsewhere():
+        other["inside"] = checked_by_caller()
+        other["distance"] = m.input_distance(z)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ip.OutOfRangeWarning)
+        with CHECKED_BY_CALLER:
+            assert checked_by_caller()
+            p = m.predict(z)
+            s = m.stream()
+            for f in z[:5]:
+                s.update(f)
+            t = threading.Thread(target=elsewhere)
+            t.start()
+            t.join()
+    assert np.isnan(p.input_distance) and not p.out_of_range
+    assert other["inside"] is False and other["distance"] > m.input_limit_
+    assert not checked_by_caller()
+    with pytest.warns(ip.OutOfRangeWarning):
+        assert m.predict(z).out_of_range

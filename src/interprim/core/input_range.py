@@ -15,6 +15,7 @@ them, so the check does not claim to catch a column order.
 
 from __future__ import annotations
 
+import threading
 import warnings
 from typing import Any, Protocol, TypeVar
 
@@ -23,12 +24,49 @@ from numpy.typing import ArrayLike
 
 from .errors import OutOfRangeWarning
 
-__all__ = ["fit_input_range", "input_distance", "mark", "mark_duration", "duration_range", "DURATION_FACTOR"]
+__all__ = ["fit_input_range", "input_distance", "mark", "mark_duration", "duration_range", "DURATION_FACTOR",
+           "CHECKED_BY_CALLER", "checked_by_caller"]
 
 #: A predicted duration longer than this many times the longest demonstration, or shorter than the shortest
 #: divided by it, is out of range (``Prediction.duration_out_of_range``): demonstrations of one interaction at
 #: natural speeds differ by less (NuiSI: 1.7-2.7 s, 1.6x), a prediction 2.4x the longest does not follow them.
 DURATION_FACTOR = 1.5
+
+
+class _Checks(threading.local):
+    """Per thread: how many callers around the current call check the input themselves."""
+
+    depth = 0
+
+
+_CHECKS = _Checks()
+
+
+class _CheckedByCaller:
+    """The context of :data:`CHECKED_BY_CALLER`."""
+
+    __slots__ = ()
+
+    def __enter__(self) -> None:
+        _CHECKS.depth += 1
+
+    def __exit__(self, *exc: object) -> None:
+        _CHECKS.depth -= 1
+
+
+#: ``with CHECKED_BY_CALLER:`` the models called inside skip their own input checks: :func:`input_distance` is NaN,
+#: :func:`mark` and :func:`mark_duration` leave the prediction as it is and never warn, and the streams' running
+#: checks (:class:`interprim.models.base.InputMarks`) do nothing.  For a wrapper that marks the prediction it
+#: returns itself, after the call (:class:`interprim.models.auto.AutoInteraction`, a checked stream): the one
+#: warning is its own, and the inner models' checks, whose results it overwrites, are not computed.  Per thread (a
+#: prediction in another thread checks as usual), unlike suppressing the warnings with
+#: :func:`warnings.catch_warnings`, which changes the process's filters.
+CHECKED_BY_CALLER = _CheckedByCaller()
+
+
+def checked_by_caller() -> bool:
+    """Whether a caller around this call checks the input itself (inside :data:`CHECKED_BY_CALLER`)."""
+    return _CHECKS.depth > 0
 
 
 
@@ -61,7 +99,9 @@ def fit_input_range(frames: ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
 
 def input_distance(model: Any, frames: ArrayLike) -> float:
     """Largest standardised distance of frames ``(t, D_o)`` from ``model``'s training frames; NaN for a model
-    (file) without the statistics."""
+    (file) without the statistics, or inside :data:`CHECKED_BY_CALLER`."""
+    if _CHECKS.depth:
+        return float("nan")
     mean = getattr(model, "input_mean_", None)
     if mean is None:
         return float("nan")
@@ -93,23 +133,36 @@ def duration_range(model: Any) -> tuple[float, float] | None:
     return None
 
 
-def mark_duration(model: Any, prediction: _D) -> _D:
+#: ``span`` not given: :func:`mark_duration` reads it (:func:`duration_range`)
+_READ: Any = object()
+
+
+def mark_duration(model: Any, prediction: _D, span: Any = _READ) -> _D:
     """Set ``prediction.duration_out_of_range``: its duration is more than :data:`DURATION_FACTOR` times the
-    longest demonstration, or less than the shortest divided by it (flagged as the input range is)."""
-    span = duration_range(model)
+    longest demonstration, or less than the shortest divided by it (flagged as the input range is); nothing inside
+    :data:`CHECKED_BY_CALLER`.  ``span``: ``duration_range(model)`` when the caller has it already (a stream reads it
+    once)."""
+    if _CHECKS.depth:
+        return prediction
+    if span is _READ:
+        span = duration_range(model)
     duration = float(getattr(prediction, "duration", float("nan")))
     prediction.duration_out_of_range = bool(span is not None and np.isfinite(duration) and (
         duration > DURATION_FACTOR * span[1] or duration < span[0] / DURATION_FACTOR))
     return prediction
 
 
-def mark(model: Any, prediction: _P, dist: float, warn: bool = True) -> _P:
+def mark(model: Any, prediction: _P, dist: float, warn: bool = True, span: Any = _READ) -> _P:
     """Set ``prediction.input_distance`` / ``out_of_range`` and warn (:class:`~interprim.core.errors.OutOfRangeWarning`)
-    at the caller's line: the first frame outside interprim, however many of the library's calls lie between."""
+    at the caller's line: the first frame outside interprim, however many of the library's calls lie between.
+    Nothing inside :data:`CHECKED_BY_CALLER` (the caller marks the prediction itself).  ``span``: as
+    :func:`mark_duration` takes it."""
+    if _CHECKS.depth:
+        return prediction
     prediction.input_distance = dist
     limit = getattr(model, "input_limit_", None)
     prediction.out_of_range = bool(limit is not None and dist > limit)
-    mark_duration(model, prediction)
+    mark_duration(model, prediction, span)
     if prediction.out_of_range and warn:
         import inspect
 

@@ -24,10 +24,10 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.cache import shared_fits, std_unused
+from ..core.cache import DerivedCache, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
-from ..core.errors import OutOfRangeWarning, PaceWarning
-from ..core.input_range import fit_input_range, mark
+from ..core.errors import PaceWarning
+from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, stacking
 from . import registry
@@ -364,6 +364,7 @@ class AutoInteraction(Predictor):
         self.columns_ = cols
         self.selection_ = selection
         self.set_input_range(fit_input_range(np.concatenate([d[:, self.observed_dofs_] for d in train])))
+        self._derived = DerivedCache()  # values derived from the fitted state, filled on first use
         return self
 
     def predict(self, partial, **kwargs):
@@ -371,10 +372,17 @@ class AutoInteraction(Predictor):
         ``out_of_range`` of the frames against the training demonstrations (:mod:`interprim.core.input_range`;
         an :class:`~interprim.OutOfRangeWarning` when out of range)."""
         self._check_fitted("predict")
-        with warnings.catch_warnings():  # the members' own checks: this model warns once, below
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        with CHECKED_BY_CALLER:  # the members' own checks skipped: this model marks and warns once, below
             pred = self.model_.predict(partial, **kwargs)
-        return mark(self, pred, self.input_distance(partial))
+        return mark(self, pred, self.input_distance(partial), span=self._duration_span())
+
+    def _duration_span(self):
+        """:func:`~interprim.core.input_range.duration_range` of this model, read once per fitted (or loaded)
+        model: the demonstrated durations do not change between predictions."""
+        derived = self.__dict__.get("_derived")
+        if derived is None:  # (a model fitted or loaded by an older release, unpickled... : read it each time)
+            return duration_range(self)
+        return derived.get_or_build("duration_range", (self.model_,), lambda: duration_range(self))
 
     def stream(self, robot_state=None):
         """The model's online predictor, each prediction marked with the largest input distance of the frames
@@ -412,6 +420,7 @@ class AutoInteraction(Predictor):
         self.set_input_range(meta.get("input_range"))
         if self.input_range_ is not None and self.input_range_[0].shape != (len(self.observed_dofs_),):
             raise ValueError("input_range does not match the observed columns")
+        self._derived = DerivedCache()
 
     def __repr__(self):
         if not hasattr(self, "model_"):

@@ -43,7 +43,6 @@ Interaction Primitive's :class:`~interprim.models.primitive.prediction.Predictio
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -51,8 +50,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.blas import limit_methods, one_blas_thread
-from ..core.errors import NotFittedError, OutOfRangeWarning
-from ..core.input_range import fit_input_range, mark
+from ..core.errors import NotFittedError
+from ..core.input_range import CHECKED_BY_CALLER, checked_by_caller, duration_range, fit_input_range, mark
 from ..core.params import Params
 from ..core.validation import as_2d_finite, as_frame
 from .training import DEFAULT_DT, TrainingSet, training_set, uniform_demonstrations
@@ -278,7 +277,9 @@ class Predictor(Params):
     ``input_range_`` and in its model file); every prediction carries ``input_distance`` and ``out_of_range``
     (:func:`interprim.core.input_range.mark`; a stream: the largest distance of the frames seen so far) and warns
     once.  A class that computes them itself sets ``_CHECKS_INPUT = True`` (the Interaction Primitive, whose
-    fitted state marks its predictions, and :class:`~interprim.models.auto.AutoInteraction`).
+    fitted state marks its predictions, and :class:`~interprim.models.auto.AutoInteraction`).  A wrapper that marks
+    the prediction it returns (:class:`~interprim.models.auto.AutoInteraction`, :class:`CheckedStream`) calls the
+    models inside :data:`~interprim.core.input_range.CHECKED_BY_CALLER`, where they skip their own checks.
 
     :meth:`fit` and :meth:`predict` run on one BLAS thread (:func:`interprim.core.blas.one_blas_thread`); a subclass
     that overrides them instead of the hooks gets the same limit around its own.
@@ -335,7 +336,7 @@ class Predictor(Params):
         """The prediction from the observed agent's frames ``partial`` ``(M, len(observed_dofs))`` since the start
         of the movement, marked with ``input_distance`` and ``out_of_range``; the model is left unchanged."""
         pred = self._predict(partial, **kwargs)
-        if not self._CHECKS_INPUT and self.input_range_ is not None and not np.isfinite(
+        if not self._CHECKS_INPUT and self.input_range_ is not None and not checked_by_caller() and not np.isfinite(
                 getattr(pred, "input_distance", float("nan"))):
             mark(self, pred, self.input_distance(partial))
         return pred
@@ -430,18 +431,24 @@ def _jsonable(v: Any) -> Any:
     raise TypeError(f"parameter value {v!r} cannot be stored in a model file")
 
 
+_UNREAD: Any = object()
+
+
 class InputMarks:
     """A stream's running input check: each prediction is marked with the largest ``input_distance`` of the frames
     seen so far and ``out_of_range`` (:func:`interprim.core.input_range.mark`), warned once per stream.
 
     Used by :class:`CheckedStream` and by the streams that mark their own predictions (``marks_input``)."""
 
-    __slots__ = ("model", "largest", "warned")
+    __slots__ = ("model", "largest", "warned", "span")
 
     def __init__(self, model: Predictor) -> None:
         self.model = model
         self.largest = 0.0
         self.warned = False
+        #: the model's demonstrated durations (:func:`interprim.core.input_range.duration_range`), read at the first
+        #: mark and kept: the model does not change during a stream
+        self.span: Any = _UNREAD
 
     def reset(self) -> None:
         """Forget the frames seen (a new interaction)."""
@@ -449,10 +456,15 @@ class InputMarks:
         self.warned = False
 
     def mark(self, pred: BasePrediction, frames: ArrayLike) -> BasePrediction:
-        """``pred`` marked after the new ``frames`` (one frame or ``(k, n_observed)``) entered the stream."""
+        """``pred`` marked after the new ``frames`` (one frame or ``(k, n_observed)``) entered the stream (left as it
+        is inside :data:`~interprim.core.input_range.CHECKED_BY_CALLER`: the caller marks it)."""
+        if checked_by_caller():
+            return pred
         d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
         self.largest = max(self.largest, d) if np.isfinite(d) else d
-        mark(self.model, pred, self.largest, warn=not self.warned)
+        if self.span is _UNREAD:
+            self.span = duration_range(self.model)
+        mark(self.model, pred, self.largest, warn=not self.warned, span=self.span)
         self.warned = self.warned or pred.out_of_range
         return pred
 
@@ -476,16 +488,15 @@ class CheckedStream(BaseStream):
         self._marks.reset()
 
     def update(self, frame: ArrayLike, need_cov: bool = False) -> BasePrediction:
-        """Add one observed frame; the inner stream's prediction, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        """Add one observed frame; the inner stream's prediction, marked (the inner models' own checks skipped:
+        :data:`~interprim.core.input_range.CHECKED_BY_CALLER`)."""
+        with CHECKED_BY_CALLER:
             pred = self.inner.update(frame, need_cov=need_cov)
         return self._marks.mark(pred, frame)
 
     def extend(self, frames: ArrayLike, need_cov: bool = False) -> BasePrediction:
         """Add several frames; the inner stream's prediction for the last, marked."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
+        with CHECKED_BY_CALLER:
             pred = self.inner.extend(frames, need_cov=need_cov)
         return self._marks.mark(pred, frames)
 

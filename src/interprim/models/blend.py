@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core._compiled import registry as _registry
+from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
 from ..io import estimator_from_state
@@ -19,7 +20,7 @@ from . import registry
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
-__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np"]
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "spread_std_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -37,11 +38,13 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
 
 def _on_grid(pred, u) -> np.ndarray:
     """``pred.trajectory(len(u))`` on the grid ``u`` (``linspace(0, 1, n)``): a tabulated prediction whose own times
-    are that grid is read as it is (interpolating at its own sample points gives its values)."""
+    are that grid is read as it is (interpolating at its own sample points gives its values), another one
+    interpolated as its ``trajectory`` does."""
     times = getattr(pred, "times", None)
-    if type(pred).trajectory is GridPrediction.trajectory and times is not None and times.shape == u.shape and (
-            times is u or np.array_equal(times, u)):
-        return pred.mean
+    if type(pred).trajectory is GridPrediction.trajectory and times is not None:
+        if times.shape == u.shape and (times is u or np.array_equal(times, u)):
+            return pred.mean
+        return interp_columns(u, times, pred.mean)  # GridPrediction.trajectory's values, without its wrapper
     return pred.trajectory(u.shape[0])
 
 
@@ -72,6 +75,16 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
         Y[j] = interp_columns(um, u, grids[j])
     return Y, np.einsum("gm,mgd->gd", W, Y)
+
+
+def spread_std_np(Y, mean, W, ahead, steps, a, b, scaled: bool):
+    """``(std, positive)``: the blend's std ``sqrt(clip(var, 0))`` on the grid with ``var = a(ahead) spread +
+    b(ahead)`` (:meth:`Blend.variance`; ``spread`` alone unless ``scaled``) and the members' weighted disagreement
+    ``spread = sum_j W[:, j] (Y[j] - mean)^2``; ``positive``: the number of points with ``var > 0`` (the numpy
+    reference of the compiled ``blend.spread_std``)."""
+    spread = np.einsum("gm,mgd->gd", W, (Y - mean[None]) ** 2)
+    var = interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b) if scaled else spread
+    return np.sqrt(np.clip(var, 0.0, None)), int(np.count_nonzero(var > 0))
 
 
 class Blend(Predictor):
@@ -165,6 +178,7 @@ class Blend(Predictor):
             raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
                              "shared end is read from a member's own timing, so that member must be in weights")
         self.members_ = {m: members[m] for m in names}
+        self._derived = DerivedCache()  # values derived from the fitted state (the variance model's arrays)
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
@@ -197,15 +211,32 @@ class Blend(Predictor):
 
     def variance(self, spread, ahead):
         """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
-        if not self.scales:
+        model = self._variance_model()
+        if model is None:
             return spread
-        a = np.asarray(self.scales["a"], dtype=np.float64)
-        b = np.asarray(self.scales["b"], dtype=np.float64)
-        if "t" in self.scales:
-            steps = np.asarray(self.scales["t"], dtype=np.float64)
-        else:
-            steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+        steps, a, b = model
         return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
+
+    def _variance_model(self):
+        """``(steps, a, b)`` arrays of the variance model (``scales``; None without one), converted from the stored
+        lists once and again only when ``scales`` or ``horizon`` is replaced (a prediction's std reads them)."""
+        derived = self.__dict__.get("_derived")
+        if derived is None:  # not fitted: nothing kept
+            return self._build_variance_model()
+        return derived.get_or_build("variance_model", (self.scales, self.horizon), self._build_variance_model)
+
+    def _build_variance_model(self):
+        """``(steps, a, b)`` of ``scales`` as contiguous arrays (None without a variance model)."""
+        model = None
+        if self.scales:
+            a = np.asarray(self.scales["a"], dtype=np.float64)
+            b = np.asarray(self.scales["b"], dtype=np.float64)
+            if "t" in self.scales:
+                steps = np.asarray(self.scales["t"], dtype=np.float64)
+            else:
+                steps = np.arange(1, a.shape[0] + 1) * (float(self.horizon) / a.shape[0])
+            model = (np.ascontiguousarray(steps), np.ascontiguousarray(a), np.ascontiguousarray(b))
+        return model
 
     def combine(self, preds: dict, n_frames: int, n_grid: int | None = None):
         """The blended prediction of the members' predictions ``{family: pred}`` after ``n_frames`` observed frames
@@ -241,12 +272,12 @@ class Blend(Predictor):
         W = self._weights_on(ahead)  # (n_grid, M)
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        on = W.any(axis=0)
-        if on.all():
+        if np.count_nonzero(W) == W.size:  # every member weighted at every point (the usual case: one cheap count)
             active = range(len(names))
         else:
-            active = np.flatnonzero(on).tolist()
-            W = W[:, active]
+            active = np.flatnonzero(W.any(axis=0)).tolist()
+            if len(active) < len(names):
+                W = W[:, active]
         grids = np.stack([_on_grid(preds[names[i]], u) for i in active])
         sa = np.array([sv[i] for i in active])
         da = np.array([dv[i] for i in active])
@@ -267,7 +298,9 @@ class Blend(Predictor):
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
         out = interp_columns(ahead, self._mids, self._W)
         np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
-        return out / np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+        total = out.sum(axis=1, keepdims=True)
+        np.maximum(total, 1e-300, out=total)
+        return np.divide(out, total, out=out)  # in place: the same quotients
 
     @staticmethod
     def frame_overhead(n_members: int, n_dofs: int) -> float:
@@ -344,15 +377,26 @@ class BlendPrediction(GridPrediction):
         if parts is None:
             return self.__dict__.get("_std")
         blend, Y, W, ahead = parts
-        spread = np.einsum("gm,mgd->gd", W, (Y - self.mean[None]) ** 2)
-        var = blend.variance(spread, ahead)
-        self.__dict__["_std"] = np.sqrt(np.clip(var, 0.0, None)) if np.any(var > 0) else None
+        model = blend._variance_model()
+        steps, a, b = (_NO_STEPS, _NO_SCALE, _NO_SCALE) if model is None else model
+        kernel = _registry.kernel("blend.spread_std")
+        std = np.empty_like(self.mean)
+        positive = -1 if kernel is None else kernel(Y, self.mean, np.ascontiguousarray(W), ahead, steps, a, b,
+                                                    model is not None, std)
+        if positive < 0:
+            std, positive = spread_std_np(Y, self.mean, W, ahead, steps, a, b, model is not None)
+        self.__dict__["_std"] = std if positive > 0 else None
         self.__dict__["_parts"] = None
         return self.__dict__["_std"]
 
     @std_values.setter
     def std_values(self, value):
         self.__dict__["_std"] = value
+
+
+#: the variance model's placeholders for a blend without one (the spread alone)
+_NO_STEPS = np.array([0.0, 1.0])
+_NO_SCALE = np.zeros((2, 1))
 
 
 class BlendStream(BaseStream):

@@ -82,8 +82,11 @@ class GridPrediction(BasePrediction):
         self.normalised_time = self.phase
         self.phase_std = float(phase_std)
         self.observed_dofs = [] if observed_dofs is None else [int(i) for i in observed_dofs]
-        self.controlled_dofs = ([i for i in range(D) if i not in set(self.observed_dofs)]
-                                if controlled_dofs is None else [int(i) for i in controlled_dofs])
+        if controlled_dofs is None:
+            seen = set(self.observed_dofs)
+            self.controlled_dofs = [i for i in range(D) if i not in seen]
+        else:
+            self.controlled_dofs = [int(i) for i in controlled_dofs]
         self.method = method
         self.leverage = float(leverage)
         self.log_likelihood = float(log_likelihood)

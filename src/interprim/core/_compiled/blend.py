@@ -8,6 +8,12 @@ of the common grid (its own speed up to the real-time band, then the shared end 
 the members added to a zero start, member after member (``einsum("gm,mgd->gd", W, Y)``'s order).  Compiled without
 fastmath, so its results equal the reference's bit for bit.  It saves the per-member array operations of a streamed
 frame (about 25 us a member).
+
+:func:`spread_std_into` performs the operations of the blend's std (the numpy reference
+:func:`interprim.models.blend.spread_std_np`, what :attr:`interprim.models.blend.BlendPrediction.std_values` reads):
+the members' weighted disagreement ``sum_m W[:, m] (Y_m - mean)^2`` (einsum's order, member after member from a zero
+start), the variance model ``a(ahead) spread + b(ahead)`` with ``a`` and ``b`` read by :func:`numpy.interp`'s
+operations, then ``sqrt(max(var, 0))``, in one pass without the temporaries (about 30 us of a prediction's std).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ _IN3 = types.Array(types.float64, 3, "C", readonly=True)
 _OUT1 = types.Array(types.float64, 1, "C")
 _OUT2 = types.Array(types.float64, 2, "C")
 _OUT3 = types.Array(types.float64, 3, "C")
+_STD_SIGNATURE = types.int64(_IN3, _IN2, _IN2, _IN1, _IN1, _IN2, _IN2, types.boolean, _OUT2)
 _SIGNATURE = types.boolean(_IN1, _IN1, _IN1, _IN1, types.float64, types.float64, types.float64, _IN3, _IN2,
                            _OUT3, _OUT2, _OUT1)
 
@@ -72,9 +79,49 @@ def place_members_into(u, ahead, sv, dv, s, R, h, grids, W, Y, mean, um):
     return True
 
 
+@njit(_STD_SIGNATURE, cache=True, fastmath=False, error_model="numpy")
+def spread_std_into(Y, mean, W, ahead, steps, a, b, scaled, std):
+    """``std = sqrt(max(var, 0))`` with ``var = a(ahead) * spread + b(ahead)`` (``spread`` alone unless ``scaled``)
+    and ``spread = sum_j W[:, j] (Y[j] - mean)^2``; ``a`` and ``b`` ``(H, D)`` are tabulated at ``steps`` ``(H,)``
+    seconds ahead and read at ``ahead`` ``(n,)`` (held at the ends).  Returns -1 (``std`` undefined) when ``steps``
+    is not strictly increasing or has fewer than two points, else the number of points with ``var > 0``."""
+    n = mean.shape[0]
+    D = mean.shape[1]
+    A = Y.shape[0]
+    for g in range(n):
+        for d in range(D):
+            std[g, d] = 0.0
+    for j in range(A):
+        for g in range(n):
+            w = W[g, j]
+            for d in range(D):
+                e = Y[j, g, d] - mean[g, d]
+                std[g, d] += w * (e * e)
+    if scaled:
+        ia = np.empty((n, D))
+        ib = np.empty((n, D))
+        if not interp_into(ahead, steps, a, ia) or not interp_into(ahead, steps, b, ib):
+            return -1
+        for g in range(n):
+            for d in range(D):
+                std[g, d] = ia[g, d] * std[g, d] + ib[g, d]
+    positive = 0
+    for g in range(n):
+        for d in range(D):
+            v = std[g, d]
+            if v > 0.0:
+                positive += 1
+            if v <= 0.0:  # numpy.clip(var, 0, None): -0.0 becomes 0.0, NaN is kept
+                v = 0.0
+            std[g, d] = np.sqrt(v)
+    return positive
+
+
 def warm_up() -> None:
-    """Compile (or load) :func:`place_members_into` with tiny inputs of the real types."""
+    """Compile (or load) :func:`place_members_into` and :func:`spread_std_into` with tiny inputs of the real types."""
     u = np.linspace(0.0, 1.0, 4)
     place_members_into(u, np.array([0.0, 0.0, 0.1, 0.3]), np.array([0.4, 0.5]), np.array([1.0, 1.2]), 0.45, 0.8,
                        0.25, np.zeros((2, 4, 2)), np.full((4, 2), 0.5), np.empty((2, 4, 2)), np.empty((4, 2)),
                        np.empty(4))
+    spread_std_into(np.zeros((2, 4, 2)), np.zeros((4, 2)), np.full((4, 2), 0.5), np.array([0.0, 0.0, 0.1, 0.3]),
+                    np.array([0.1, 0.2]), np.ones((2, 2)), np.zeros((2, 2)), True, np.empty((4, 2)))

@@ -92,6 +92,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "a blend's members read at their own normalised times on the common grid (each at its own speed, then "
            "to the shared end of long_range.member_units) and their weighted sum; the reference returns the arrays "
            "the kernel writes into Y and mean; bitwise equal"),
+    Kernel("blend.spread_std", "blend:spread_std_into", "interprim.models.blend:spread_std_np", False,
+           "a blend's std on the grid: the members' weighted disagreement through the variance model (a(ahead) "
+           "spread + b(ahead)), clipped at 0 and square-rooted; the reference returns the array the kernel writes "
+           "into std and the count of positive variances the kernel returns; bitwise equal"),
     Kernel("weighted.weighted_frames", "weighted:weighted_frames", "interprim.models.kernel:weighted_frames_np", True,
            "the weighted mean and spread of demonstrations read at fractional frames (KernelDemonstrations' "
            "prediction), without the (demonstrations, n, D) array of the frames; bitwise equal"),

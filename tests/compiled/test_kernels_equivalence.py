@@ -73,6 +73,20 @@ def rel(a, b) -> float:
     return d / scale if scale > 0 else d
 
 
+def on_both_paths(fn) -> dict:
+    """``{"compiled": fn(), "numpy": fn()}``, each computed with the kernels' paths forced."""
+    out = {}
+    for which in ("compiled", "numpy"):
+        with registry.forced(which):
+            out[which] = fn()
+    return out
+
+
+def traj_std(p, n: int, grid: bool = False) -> tuple:
+    """A prediction's ``(trajectory(n), std(n))`` (``grid``: its mean on its own grid instead of the trajectory)."""
+    return p.mean if grid else p.trajectory(n), p.std(n)
+
+
 def bitwise_gap(a, b) -> float:
     """0 when ``a`` and ``b`` are the same bits (signs of zeros included), else :func:`rel` (inf when that is 0)."""
     if np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b)):
@@ -411,12 +425,8 @@ def check_weighted_weighted_frames():
     demos = two_agent_demos(6, seed=3, frames=60)
     m = KernelDemonstrations([0, 1], bandwidth=0.3).fit(demos, dt=0.01)
     for M in (5, 30, 59):
-        out = {}
-        for which in ("compiled", "numpy"):
-            with registry.forced(which):
-                p = m.predict(demos[0][:M, :2])
-                out[which] = (p.trajectory(50), p.std(50))
-        worst = max(worst, rel(out["compiled"][0], out["numpy"][0]), rel(out["compiled"][1], out["numpy"][1]))
+        out = on_both_paths(lambda: traj_std(m.predict(demos[0][:M, :2]), 50))  # noqa: B023 (called at once)
+        worst = max(worst, *(rel(a, b) for a, b in zip(out["compiled"], out["numpy"])))
     return worst
 
 
@@ -458,11 +468,7 @@ def check_blend_place_members():
     for M, f in enumerate(demos[0][:59, :2], start=1):
         preds = {m: s.update(f) for m, s in st.streams.items()}  # the members once: their own kernels aside
         if M in (5, 30, 59):
-            out = {}
-            for which in ("compiled", "numpy"):
-                with registry.forced(which):
-                    p = blend.combine(preds, M)
-                    out[which] = (p.mean, p.std(50))
+            out = on_both_paths(lambda: traj_std(blend.combine(preds, M), 50, grid=True))  # noqa: B023
             for a, b in zip(out["compiled"], out["numpy"]):
                 if not np.array_equal(a, b):
                     worst = max(worst, rel(a, b) or np.inf)
@@ -516,10 +522,7 @@ def check_blend_spread_std():
     for M, f in enumerate(demos[0][:59, :2], start=1):
         preds = {m: s.update(f) for m, s in st.streams.items()}
         if M in (5, 30, 59):
-            out = {}
-            for which in ("compiled", "numpy"):
-                with registry.forced(which):
-                    out[which] = blend.combine(preds, M).std(50)
+            out = on_both_paths(lambda: blend.combine(preds, M).std(50))  # noqa: B023 (called at once)
             if not np.array_equal(out["compiled"], out["numpy"]):
                 worst = max(worst, rel(out["compiled"], out["numpy"]) or np.inf)
     return worst
@@ -617,12 +620,8 @@ def check_prefix_rows_prefix_rows_into():
     demos = two_agent_demos(8, seed=4, frames=70)
     m = families.family("learned").build(families.Settings((0, 1))).fit(demos, dt=0.01)
     for M in (3, 30, 69):
-        out = {}
-        for which in ("compiled", "numpy"):
-            with registry.forced(which):
-                p = m.predict(demos[1][:M, :2])
-                out[which] = (p.trajectory(40), p.std(40))
-        worst = max(worst, rel(out["compiled"][0], out["numpy"][0]), rel(out["compiled"][1], out["numpy"][1]))
+        out = on_both_paths(lambda: traj_std(m.predict(demos[1][:M, :2]), 40))  # noqa: B023 (called at once)
+        worst = max(worst, *(rel(a, b) for a, b in zip(out["compiled"], out["numpy"])))
     return worst
 
 
@@ -655,11 +654,7 @@ def check_prefix_rows_centre_rows_into():
     for method, param in (("ridge", 0.1), ("kernel", 0.5), ("ppca", 2), ("blend", (0.1, 0.5, 0.5)), ("mean", None)):
         m.coupling_.method_, m.coupling_.param_ = method, param  # each conditioner's use of the sums
         for M in (3, 30, 69):
-            out = {}
-            for which in ("compiled", "numpy"):
-                with registry.forced(which):
-                    p = m.predict(demos[1][:M, :2])
-                    out[which] = (p.trajectory(40), p.std(40))
+            out = on_both_paths(lambda: traj_std(m.predict(demos[1][:M, :2]), 40))  # noqa: B023 (called at once)
             for a, b in zip(out["compiled"], out["numpy"]):
                 if not np.array_equal(a, b):
                     worst = max(worst, rel(a, b) or np.inf)

@@ -168,15 +168,21 @@ def test_bad_inputs_name_the_problem():
 
 def test_learned_interaction_std_adds_the_timing_uncertainty():
     """``LearnedInteraction``'s std = the coupling's std (+) |dy/du| u std(s)/s, the first-order effect of a
-    relative phase error on a point placed in real time; without phase uncertainty it is the coupling's std."""
-    from interprim.models.learned import _Prediction
-    from interprim.phase.learned import PhaseEstimate
+    relative phase error on a point placed in real time; without phase uncertainty it is the coupling's std.  Its
+    prediction is the coupling's placed in time by the phase estimate (``CouplingModel.predict(timing=...)``)."""
+    from interprim import LearnedInteraction
+    from interprim.synthetic import two_agent_demos
+    from interprim.phase.estimate import PhaseEstimate
 
     u = np.linspace(0.0, 1.0, 11)
     mean = np.stack([2.0 * u, np.sin(np.pi * u), np.ones_like(u)], axis=1)  # slopes 2, pi cos(pi u), 0
+
+    def timed(est):  # a coupling's prediction placed in time by est, as CouplingModel.predict(timing=est) makes it
+        return GridPrediction(u, mean, np.full_like(mean, 0.1), est.phase, est.std, [0], [1, 2], "ridge", 0.0,
+                              duration=est.duration, timing=True)
+
     sd = np.full_like(mean, 0.1)
-    cp = GridPrediction(u, mean, sd, 0.5, 0.05, [0], [1, 2], "ridge", 0.0)
-    p = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.05, 1.0))
+    p = timed(PhaseEstimate(0.5, 2.0, 1.0, 0.05, 1.0))
     got = p.std(11)
     e = 0.05 / 0.5
     slope = np.gradient(mean, u, axis=0)  # the mean's derivative on the grid (exact for the linear column)
@@ -185,8 +191,18 @@ def test_learned_interaction_std_adds_the_timing_uncertainty():
     assert np.allclose(got[:, 2], 0.1)  # a constant column gets no timing term
     assert np.all(got >= sd - 1e-15)
     assert np.allclose(p.std(11, timing=False), sd)
-    still = _Prediction(cp, PhaseEstimate(0.5, 2.0, 1.0, 0.0, 1.0))  # a phase known exactly
+    still = timed(PhaseEstimate(0.5, 2.0, 1.0, 0.0, 1.0))  # a phase known exactly
     assert np.allclose(still.std(11), sd)
+
+    demos = two_agent_demos(10, seed=2)
+    m = LearnedInteraction([0, 1]).fit(demos, dt=0.01)
+    x = demos[0][:40, :2]
+    pred = m.predict(x)
+    est = pred.phase_estimate
+    alone = m.coupling_.predict(x, min(max(est.phase, 1e-3), 1.0), phase_std=est.std)
+    np.testing.assert_array_equal(pred.mean, alone.mean)
+    np.testing.assert_array_equal(pred.std(50, timing=False), alone.std(50, timing=False))
+    assert (pred.phase, pred.duration, pred.speed) == (est.phase, est.duration, est.speed)
 
 
 def test_training_rows_equal_one_resample_per_demonstration():

@@ -211,13 +211,13 @@ class Blend(Predictor):
 
     def variance(self, spread, ahead):
         """``a * spread + b`` with the variance model at ``ahead`` seconds after now (held at the ends)."""
-        model = self._variance_model()
+        model = self.variance_tables()
         if model is None:
             return spread
         steps, a, b = model
         return interp_columns(ahead, steps, a) * spread + interp_columns(ahead, steps, b)
 
-    def _variance_model(self):
+    def variance_tables(self):
         """``(steps, a, b)`` arrays of the variance model (``scales``; None without one), converted from the stored
         lists once and again only when ``scales`` or ``horizon`` is replaced (a prediction's std reads them)."""
         derived = self.__dict__.get("_derived")
@@ -377,7 +377,7 @@ class BlendPrediction(GridPrediction):
         if parts is None:
             return self.__dict__.get("_std")
         blend, Y, W, ahead = parts
-        model = blend._variance_model()
+        model = blend.variance_tables()
         steps, a, b = (_NO_STEPS, _NO_SCALE, _NO_SCALE) if model is None else model
         kernel = _registry.kernel("blend.spread_std")
         std = np.empty_like(self.mean)

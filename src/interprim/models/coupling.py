@@ -606,7 +606,7 @@ class CouplingModel:
 
     # ------------------------------------------------------------------ predict
     @one_blas_thread
-    def predict(self, partial, phase, phase_std=None, check: bool = True) -> GridPrediction:
+    def predict(self, partial, phase, phase_std=None, check: bool = True, timing=None) -> GridPrediction:
         """Condition on the observed prefix at an estimated phase (Eq. 18 with the prefix observation).
 
         Parameters
@@ -622,6 +622,12 @@ class CouplingModel:
         check : bool
             ``False``: ``partial`` is already a finite float64 array of that shape, checked by the caller (a stream
             checks each frame once, as it enters), and is not scanned again; ``phase`` and ``phase_std`` still are.
+        timing : PhaseEstimate, optional
+            A phase estimate (``phase``, ``std``, ``duration``) that places the prediction in time: its phase, std
+            and duration are the prediction's, with the timing uncertainty added to its std
+            (:meth:`~interprim.models.grid.GridPrediction.std`; what
+            :class:`~interprim.models.learned.LearnedInteraction` does), while the conditioning uses ``phase`` and
+            ``phase_std``.
 
         Returns
         -------
@@ -643,13 +649,14 @@ class CouplingModel:
                     or phase_std < 0:
                 raise ValueError(f"phase_std must be a non-negative number, got {phase_std!r}")
             sig = float(phase_std)
-        return self._predict_prefix(v, s, sig)
+        return self._predict_prefix(v, s, sig, timing)
 
-    def _predict_prefix(self, v, s: float, sig: float) -> GridPrediction:
-        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig``."""
+    def _predict_prefix(self, v, s: float, sig: float, timing=None) -> GridPrediction:
+        """:meth:`predict` of a checked prefix ``v`` (M, Do) at phase ``s`` with error ``sig`` (``timing``: that of
+        :meth:`predict`)."""
         # the prefix enters only through its resampled points (_resample reads n_in of its frames)
         mean, h = self._condition(self._query(v), s, sig)
-        return self._grid_prediction(mean, h, s, sig, v.shape[0])
+        return self._grid_prediction(mean, h, s, sig, v.shape[0], timing)
 
     def _query(self, v) -> np.ndarray:
         """The features (1, p) of a checked prefix ``v`` (M, Do): :func:`_resample_one` at ``n_in`` points over the
@@ -706,10 +713,18 @@ class CouplingModel:
 
         return self._derived.get_or_build(("static", R), (self.Y_,), build)
 
-    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int) -> GridPrediction:
+    def _grid_prediction(self, mean, h: float, s: float, sig: float, n_observed: int,
+                         timing=None) -> GridPrediction:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
-        variance replaced by the cross-validated residual variance times ``1 + h``; module docstring)."""
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, self._std_source(h, s), s, sig,
+        variance replaced by the cross-validated residual variance times ``1 + h``; module docstring), placed in
+        time by the phase estimate ``timing`` when given (:meth:`predict`)."""
+        std = self._std_source(h, s)
+        if timing is not None:
+            return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, timing.phase, timing.std,
+                                  self.observed_dofs_, self.controlled_dofs_, self.method_, h,
+                                  duration=timing.duration, n_observed=n_observed, timing=True,
+                                  conditioned=not self.fallback_to_mean_)
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig,
                               self.observed_dofs_, self.controlled_dofs_, self.method_, h,
                               mean_duration=self.mean_duration_, n_observed=n_observed,
                               conditioned=not self.fallback_to_mean_)

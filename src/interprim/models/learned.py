@@ -30,7 +30,6 @@ import math
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.preprocessing import unit_grid
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
 from .base import BasePrediction, BaseStream, InputMarks, Predictor
@@ -39,17 +38,6 @@ from .grid import GridPrediction
 from .training import TrainingSet
 
 __all__ = ["LearnedInteraction", "LearnedStream"]
-
-
-def _Prediction(cp: GridPrediction, est) -> GridPrediction:
-    """``cp`` (the coupling's prediction) placed in time by the phase estimate ``est``, with the timing
-    uncertainty added to its std (:meth:`~interprim.models.grid.GridPrediction.std`)."""
-    out = GridPrediction(cp.times, cp.mean, cp.std_source(), est.phase, est.std, cp.observed_dofs, cp.controlled_dofs,
-                         cp.method, cp.leverage, duration=est.duration, n_observed=cp.n_observed, timing=True,
-                         conditioned=cp.conditioned)
-    out.speed = float(est.speed)
-    out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
-    return out
 
 
 class LearnedInteraction(Predictor):
@@ -122,18 +110,13 @@ class LearnedInteraction(Predictor):
         """The prediction of frames already checked -- a finite float64 array ``(M, len(observed_dofs))``, not scanned
         again (:class:`LearnedStream` checks each frame once, as it enters) -- unmarked (``predict`` marks it)."""
         est = self.phase_.estimate_checked(partial)
-        c = self.coupling_
-        s, sig = float(est.phase), float(est.std)
-        if not (math.isfinite(s) and math.isfinite(sig) and sig >= 0.0):  # the coupling's checks raise
-            return _Prediction(c.predict(partial, float(np.clip(s, 1e-3, 1.0)), phase_std=sig, check=False), est)
-        s = min(max(s, 1e-3), 1.0)  # np.clip's number
-        # CouplingModel.predict (its checks passed) placed in time by est: one GridPrediction instead of two
-        mean, h = c._condition(c._query(partial), s, sig)
-        out = GridPrediction(unit_grid(int(c.n_out)).copy(), mean, c._std_source(h, s), est.phase, est.std,
-                             c.observed_dofs_, c.controlled_dofs_, c.method_, h, duration=est.duration,
-                             n_observed=partial.shape[0], timing=True, conditioned=not c.fallback_to_mean_)
+        # the coupling conditions at the phase clipped to [1e-3, 1] (np.clip's number, NaN kept: the coupling's
+        # checks raise on it) and the prediction is placed in time by the estimate itself
+        s = float(est.phase)
+        out = self.coupling_.predict(partial, s if math.isnan(s) else min(max(s, 1e-3), 1.0),
+                                     phase_std=float(est.std), check=False, timing=est)
         out.speed = float(est.speed)
-        out.phase_estimate = est  # type: ignore[attr-defined]  # an extra the learned model's predictions carry
+        out.phase_estimate = est  # an extra the learned model's predictions carry
         return out
 
     def _stream(self, robot_state=None) -> LearnedStream:

@@ -171,8 +171,8 @@ def test_learned_interaction_std_adds_the_timing_uncertainty():
     relative phase error on a point placed in real time; without phase uncertainty it is the coupling's std.  Its
     prediction is the coupling's placed in time by the phase estimate (``CouplingModel.predict(timing=...)``)."""
     from interprim import LearnedInteraction
-    from interprim.synthetic import two_agent_demos
     from interprim.phase.estimate import PhaseEstimate
+    from interprim.synthetic import two_agent_demos
 
     u = np.linspace(0.0, 1.0, 11)
     mean = np.stack([2.0 * u, np.sin(np.pi * u), np.ones_like(u)], axis=1)  # slopes 2, pi cos(pi u), 0

@@ -380,7 +380,7 @@ class AutoInteraction(Predictor):
         """:func:`~interprim.core.input_range.duration_range` of this model, read once per fitted (or loaded)
         model: the demonstrated durations do not change between predictions."""
         derived = self.__dict__.get("_derived")
-        if derived is None:  # (a model fitted or loaded by an older release, unpickled... : read it each time)
+        if derived is None:  # fitted state set by hand rather than by fit or a model file: read it each time
             return duration_range(self)
         return derived.get_or_build("duration_range", (self.model_,), lambda: duration_range(self))
 

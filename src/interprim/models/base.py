@@ -431,9 +431,6 @@ def _jsonable(v: Any) -> Any:
     raise TypeError(f"parameter value {v!r} cannot be stored in a model file")
 
 
-_UNREAD: Any = object()
-
-
 class InputMarks:
     """A stream's running input check: each prediction is marked with the largest ``input_distance`` of the frames
     seen so far and ``out_of_range`` (:func:`interprim.core.input_range.mark`), warned once per stream.
@@ -446,9 +443,9 @@ class InputMarks:
         self.model = model
         self.largest = 0.0
         self.warned = False
-        #: the model's demonstrated durations (:func:`interprim.core.input_range.duration_range`), read at the first
-        #: mark and kept: the model does not change during a stream
-        self.span: Any = _UNREAD
+        #: the model's demonstrated durations (:func:`interprim.core.input_range.duration_range`), read once: the model
+        #: does not change during a stream
+        self.span = duration_range(model)
 
     def reset(self) -> None:
         """Forget the frames seen (a new interaction)."""
@@ -462,8 +459,6 @@ class InputMarks:
             return pred
         d = self.model.input_distance(np.atleast_2d(np.asarray(frames, dtype=np.float64)))
         self.largest = max(self.largest, d) if np.isfinite(d) else d
-        if self.span is _UNREAD:
-            self.span = duration_range(self.model)
         mark(self.model, pred, self.largest, warn=not self.warned, span=self.span)
         self.warned = self.warned or pred.out_of_range
         return pred

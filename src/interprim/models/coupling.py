@@ -718,16 +718,13 @@ class CouplingModel:
         """The prediction of conditioned ``mean`` and leverage ``h`` at phase ``s`` (calibrated std, Eq. 18's
         variance replaced by the cross-validated residual variance times ``1 + h``; module docstring), placed in
         time by the phase estimate ``timing`` when given (:meth:`predict`)."""
-        std = self._std_source(h, s)
-        if timing is not None:
-            return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, timing.phase, timing.std,
-                                  self.observed_dofs_, self.controlled_dofs_, self.method_, h,
-                                  duration=timing.duration, n_observed=n_observed, timing=True,
-                                  conditioned=not self.fallback_to_mean_)
-        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, std, s, sig,
-                              self.observed_dofs_, self.controlled_dofs_, self.method_, h,
-                              mean_duration=self.mean_duration_, n_observed=n_observed,
-                              conditioned=not self.fallback_to_mean_)
+        if timing is None:
+            phase, phase_std, when = s, sig, {"mean_duration": self.mean_duration_}
+        else:
+            phase, phase_std, when = timing.phase, timing.std, {"duration": timing.duration, "timing": True}
+        return GridPrediction(unit_grid(int(self.n_out)).copy(), mean, self._std_source(h, s), phase, phase_std,
+                              self.observed_dofs_, self.controlled_dofs_, self.method_, h, n_observed=n_observed,
+                              conditioned=not self.fallback_to_mean_, **when)
 
     def _std_source(self, h: float, s: float):
         """The calibrated std at phase ``s`` with leverage ``h`` as a callable computed when first read

@@ -578,20 +578,22 @@ class LearnedPhase:
             Y = self._resample(Y, t, self.dt_)
         else:
             elapsed = (Y.shape[0] - 1) * self.dt_
-        if self.method_ == "clock" or Y.shape[0] < 2:
-            return self._finish(elapsed, None)
-        # only the frames the features read are scaled (each the same quotient as in Y / scale_)
-        return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        return self._estimate_at(Y, elapsed)
 
     def estimate_checked(self, partial: np.ndarray) -> PhaseEstimate:
         """:meth:`estimate` (at the training ``dt_``) of frames already checked: a finite float64 array ``(M,
         n_dofs_)``, not scanned again (:class:`~interprim.models.learned.LearnedInteraction`'s stream checks each
         frame once, as it enters); the features read only the frames they need, so the cost does not grow with
         ``M`` (the same numbers as :meth:`estimate`)."""
-        elapsed = (partial.shape[0] - 1) * self.dt_
-        if self.method_ == "clock" or partial.shape[0] < 2:
+        return self._estimate_at(partial, (partial.shape[0] - 1) * self.dt_)
+
+    def _estimate_at(self, Y: np.ndarray, elapsed: float) -> PhaseEstimate:
+        """The estimate of checked frames ``Y`` sampled at ``dt_``, ``elapsed`` seconds after the first (the clock's
+        phase for a clock model or a single frame); only the frames the features read are scaled (each the same
+        quotient as in ``Y / scale_``)."""
+        if self.method_ == "clock" or Y.shape[0] < 2:
             return self._finish(elapsed, None)
-        return self._finish(elapsed, self._raw_features(partial, self.scale_))
+        return self._finish(elapsed, self._raw_features(Y, self.scale_))
 
     def to_state(self):
         """``(arrays, meta)``: everything of a fitted estimator, arrays apart and the rest JSON-friendly (for the

@@ -54,6 +54,11 @@ __all__ = ["task_folds", "default_rule", "single_rule", "replay", "coverage", "t
 Z90 = 1.6448536269514722
 
 
+#: prefixes scored per held-out recording of the outer folds: the replay's yardstick, fixed (the inner
+#: cross-validations score as the default's fit does, ``AutoInteraction.max_prefixes``)
+OUTER_PREFIXES = 24
+
+
 def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
     development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
@@ -61,7 +66,7 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     auto = AutoInteraction(obs, point_dim=point_dim)
     make = auto.factories()
     arrays = [np.asarray(x, dtype=np.float64) for x in dev]
-    cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim, max_frames=auto.max_prefixes)
+    cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim, max_frames=OUTER_PREFIXES)
     outer = stacking.CrossValidation(make, dev, obs, dt, cfg, k=k, horizon=0.25)
     inner = []
     for held in folds(len(dev), k):

@@ -464,6 +464,20 @@ class InteractionPrimitive(Predictor):
         new.fitted_ = self.fitted_.with_fitted(**fitted)
         return new
 
+    def without_calibration(self) -> InteractionPrimitive:
+        """A copy of this fitted model whose predictive std is not calibrated, and says so (``calibrate=False``,
+        ``calibration_`` None, in the model and in its file; a calibration deferred by a fit inside
+        :func:`interprim.core.cache.std_unused` is dropped, never measured): for a member of a
+        :class:`~interprim.models.blend.Blend`, whose band the blend's variance model gives from the members'
+        means (:meth:`FittedPrimitive.without_calibration
+        <interprim.models.primitive.fitted.FittedPrimitive.without_calibration>`).  Its means are this model's;
+        ``self`` is unchanged."""
+        self._check_fitted("without_calibration")
+        new = copy.copy(self)
+        new.calibrate = False
+        new.fitted_ = self.fitted_.without_calibration()
+        return new
+
     def phase_method_used(self) -> str:
         """The phase method in use: ``phase_method``, or with ``"cv"`` the one ``fit`` chose (``phase_method_``)."""
         if self.phase_method == "cv":

@@ -24,7 +24,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.cache import DerivedCache, shared_fits, std_unused
+from ..core.cache import DerivedCache, records_unused, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import PaceWarning
 from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
@@ -332,9 +332,12 @@ class AutoInteraction(Predictor):
             chosen = next(iter(make))
             selection = stacking.choice_record(chosen, {chosen: float("nan")})
         else:
-            # looked up at call time (the leakage test spies on stacking.CrossValidation)
-            cv = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg, k=min(int(self.folds), n),
-                                          horizon=float(self.horizon), progress=progress)
+            # looked up at call time (the leakage test spies on stacking.CrossValidation); its fits are scored and
+            # discarded: their records of how they chose (selection_) are not read
+            with records_unused():
+                cv = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg,
+                                              k=min(int(self.folds), n), horizon=float(self.horizon),
+                                              progress=progress)
             chosen, selection = stacking.choice(cv, list(make))
             if cv.why:
                 selection["not_compared"] = dict(cv.why)

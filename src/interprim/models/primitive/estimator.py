@@ -228,7 +228,8 @@ class InteractionPrimitive(Predictor):
         its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="cv"``):
         ``phase_error_refined`` (likelihood), ``learned_phase_error``, ``clock_phase_error``.  Candidates and
         their scores: ``*_grid``, ``cv_errors``, ``cv_errors_observed``, ``cv_within_se``,
-        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood``; ``representation`` (as
+        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood`` (``None`` for a fit inside
+        :func:`interprim.core.cache.records_unused`, whose records nobody reads); ``representation`` (as
         ``representation_``).  Keys are left out where they do
         not apply (e.g. ``sigma2="residual"`` has no ``cv_*``).
     phase_method_ : str

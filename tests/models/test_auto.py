@@ -707,3 +707,54 @@ def test_the_default_warns_once_for_far_input_and_its_members_still_check_alone(
                 assert member.predict(far).out_of_range
             checked += 1
     assert checked > 0
+
+
+def test_a_blends_interaction_primitive_is_kept_without_calibration_and_the_band_is_the_same(task, tmp_path):
+    """Inside a blend a member's own std is never read (the band is the blend's variance model over its members'
+    means): the default keeps its Interaction Primitive member without a calibration and says so (``calibrate``
+    False, ``calibration_`` None, nothing deferred to measure later, the same after a model file), and the blend's
+    mean, band, phase and duration, predicted and streamed, equal those of the same blend with a calibrated member.
+    The Interaction Primitive as the whole model keeps its calibration."""
+    import copy
+
+    from interprim.models import registry
+
+    dev, hold = task
+    x = hold.demos[0][:40, :2]
+    auto = ip.AutoInteraction([0, 1], candidates=("ip", "nn", "prior")).fit(dev.demos, dt=dev.dt)
+    assert auto.selection_["combine"] == "blend" and "ip" in auto.model_.members_
+    member = auto.model_.members_["ip"]
+    assert member.calibrate is False and member.calibration_ is None
+    assert member.json_params()["calibrate"] is False and "_calibration_pending" not in member.fitted_.__dict__
+    assert "not calibrated" in member.summary()
+    calibrated = registry.family("ip").build(auto.settings()).fit(dev.demos, dt=dev.dt)  # an eager fit
+    assert calibrated.calibration_ is not None
+    np.testing.assert_array_equal(member.predict(x).trajectory(50), calibrated.predict(x).trajectory(50))
+    twin = copy.copy(auto)
+    twin.model_ = copy.copy(auto.model_)
+    twin.model_.members_ = dict(auto.model_.members_, ip=calibrated)
+    back_path = tmp_path / "default.npz"
+    auto.save(back_path)
+    back = ip.load_any(back_path)
+    loaded = back.model_.members_["ip"]
+    assert loaded.calibrate is False and loaded.calibration_ is None
+    assert "_calibration_pending" not in loaded.fitted_.__dict__
+    for model in (auto, back):
+        p, q = model.predict(x), twin.predict(x)
+        np.testing.assert_array_equal(p.trajectory(50), q.trajectory(50))
+        np.testing.assert_array_equal(p.std(50), q.std(50))
+        assert (p.phase, p.duration) == (q.phase, q.duration)
+        s, t = model.stream(), twin.stream()
+        for f in x[:12]:
+            a, b = s.update(f), t.update(f)
+        np.testing.assert_array_equal(a.trajectory(50), b.trajectory(50))
+        np.testing.assert_array_equal(a.std(50), b.std(50))
+    # fitted afresh (no frame budget, so no yardstick to reuse), the member is kept the same way
+    free = ip.AutoInteraction([0, 1], candidates=("ip", "nn"), frame_budget=None).fit(dev.demos, dt=dev.dt)
+    assert free.model_.members_["ip"].calibrate is False and free.model_.members_["ip"].calibration_ is None
+    # the Interaction Primitive as the whole model: calibrated, as fitted alone
+    for kw in (dict(candidates=("ip",)), dict(candidates=("ip", "nn", "prior"), combine="best")):
+        alone = ip.AutoInteraction([0, 1], **kw).fit(dev.demos, dt=dev.dt)
+        assert alone.chosen_ == "ip" and alone.model_.calibrate == "with-cv"
+        for k, v in alone.model_.calibration_.to_arrays().items():
+            np.testing.assert_array_equal(v, calibrated.calibration_.to_arrays()[k])

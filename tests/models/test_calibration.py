@@ -277,7 +277,12 @@ def test_a_fit_inside_std_unused_measures_its_calibration_on_first_use_with_the_
     np.testing.assert_array_equal(lazy.predict(partial).std(50), model.predict(partial).std(50))
     with std_unused():
         kept = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=10).fit(train, dt=0.01)
-    kept.fitted_.measure_deferred()  # what the default does with its yardstick IP when it keeps it as a member
+    bare = kept.without_calibration()  # what the default does with it as a blend's member: dropped, unmeasured
+    assert bare.calibrate is False and bare.json_params()["calibrate"] is False and bare.calibration_ is None
+    assert "_calibration_pending" not in bare.fitted_.__dict__ and "_calibration_pending" in kept.fitted_.__dict__
+    np.testing.assert_array_equal(bare.predict(partial).trajectory(50), model.predict(partial).trajectory(50))
+    np.testing.assert_array_equal(bare.predict(partial).std(50), model.predict(partial).std(50, calibrated=False))
+    kept.fitted_.measure_deferred()  # what the default does with its yardstick IP when it is the whole model
     assert "calibration_" in kept.fitted_.__dict__ and "_calibration_pending" not in kept.fitted_.__dict__
     np.testing.assert_array_equal(kept.predict(partial).std(50), model.predict(partial).std(50))
     model.fitted_.measure_deferred()  # an eager fit deferred nothing

@@ -166,3 +166,40 @@ def test_selection_criteria_per_agent():
     assert p_o == pytest.approx(np.mean([c[2] for c in per_case[0]]) / 3)
     E1, Eo1, p1, po1 = _criteria(per_case, n_lam, n_o=5, n_lat=5)
     assert E1.shape == (n_cases, n_lam, S2, 1) and np.array_equal(E1[..., 0], Eo1) and p1 == po1
+
+
+def test_a_fit_whose_records_nobody_reads_leaves_out_only_the_log_likelihood_record(small, monkeypatch):
+    """Inside interprim.core.cache.records_unused (the default's inner cross-validation, which scores its fits'
+    means and discards them) the selection skips the held-out marginal log-likelihood, a record when the phase noise
+    is chosen by phase accuracy (the default): that record is None and says so; every other record, the choices
+    and the predictions (mean, std, phase) are the plain fit's, bit for bit."""
+    from interprim.core.cache import records_skipped, records_unused
+    from interprim.model_selection import stacking
+
+    plain = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12).fit(small, dt=0.01)
+    with records_unused():
+        assert records_skipped()
+        quiet = ip.InteractionPrimitive(observed_dofs=[0, 1], n_basis=12).fit(small, dt=0.01)
+    assert not records_skipped()
+    a, b = plain.selection_, quiet.selection_
+    assert b["phase_log_likelihood"] is None and len(a["phase_log_likelihood"]) == len(a["phase_sigma2_grid"])
+    assert {k: v for k, v in a.items() if k != "phase_log_likelihood"} == \
+        {k: v for k, v in b.items() if k != "phase_log_likelihood"}
+    x = two_agent_demos(1, seed=9, frames=100)[0][:55, :2]
+    p, q = plain.predict(x), quiet.predict(x)
+    np.testing.assert_array_equal(p.trajectory(40), q.trajectory(40))
+    np.testing.assert_array_equal(p.std(40), q.std(40))
+    assert p.phase == q.phase
+    # the default's inner cross-validation runs inside records_unused; its final models outside
+    seen = []
+    real = stacking.CrossValidation
+
+    def spy(*args, **kwargs):
+        seen.append(records_skipped())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stacking, "CrossValidation", spy)
+    auto = ip.AutoInteraction([0, 1], candidates=("ip", "prior"), n_basis=12).fit(small[:10], dt=0.01)
+    assert seen == [True] and not records_skipped()
+    member = auto.model_.members_["ip"] if hasattr(auto.model_, "members_") else auto.model_
+    assert member.selection_["phase_log_likelihood"] is not None

@@ -16,9 +16,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DerivedCache", "std_unused", "std_deferred", "shared_fits", "fitted_once"]
+__all__ = ["DerivedCache", "std_unused", "std_deferred", "records_unused", "records_skipped", "shared_fits",
+           "fitted_once"]
 
 _STD_UNUSED: contextvars.ContextVar[bool] = contextvars.ContextVar("interprim_std_unused", default=False)
+_RECORDS_UNUSED: contextvars.ContextVar[bool] = contextvars.ContextVar("interprim_records_unused", default=False)
 #: the fits made within the innermost :func:`shared_fits` (None outside one)
 _SHARED: contextvars.ContextVar[dict[Hashable, Any] | None] = contextvars.ContextVar("interprim_shared_fits",
                                                                                     default=None)
@@ -39,6 +41,24 @@ def std_unused() -> Iterator[None]:
 def std_deferred() -> bool:
     """Whether the caller is inside :func:`std_unused`."""
     return _STD_UNUSED.get()
+
+
+@contextmanager
+def records_unused() -> Iterator[None]:
+    """Within this block the models fitted are scored on their predictions and discarded: nobody reads the records
+    of how a fit made its choices (``selection_``).  A fit may then leave out a record that no choice of its uses,
+    saying so (the entry is ``None``); every prediction, std and choice is the one a fit outside gives.  The default
+    model's inner cross-validation fits its families in one (:class:`~interprim.models.auto.AutoInteraction`)."""
+    token = _RECORDS_UNUSED.set(True)
+    try:
+        yield
+    finally:
+        _RECORDS_UNUSED.reset(token)
+
+
+def records_skipped() -> bool:
+    """Whether the caller is inside :func:`records_unused`."""
+    return _RECORDS_UNUSED.get()
 
 
 @contextmanager

@@ -24,7 +24,7 @@ import warnings
 import numpy as np
 
 from ..core.blas import one_blas_thread
-from ..core.cache import DerivedCache, shared_fits, std_unused
+from ..core.cache import DerivedCache, records_unused, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import PaceWarning
 from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
@@ -33,6 +33,7 @@ from ..model_selection import long_range, stacking
 from . import registry
 from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
+from .primitive.estimator import InteractionPrimitive
 from .training import pace_trend
 
 __all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR"]
@@ -123,6 +124,10 @@ class AutoInteraction(Predictor):
         ``{family: weight}`` of the blend (``{chosen_: 1.0}`` with ``combine="best"``).
     model_ : Predictor
         The model used: a :class:`~interprim.models.blend.Blend` or the chosen family, fitted on all the demonstrations.
+        A blend's band comes from its own variance model and its members' means, never from a member's std: an
+        Interaction Primitive member is kept without a calibration of its std (``calibrate=False``,
+        ``calibration_`` None; measuring it cost a quarter of the Interaction Primitive's own fit), while the
+        Interaction Primitive as the whole model keeps its calibration.
     selection_ : dict
         ``chosen``, ``cv_errors`` (``{family: mean held-out real-time error}``, ``inf`` when a family could not be
         fitted on a fold), ``runner_up`` and ``margin`` (its error / the chosen one's), ``vs_prior`` (the chosen
@@ -289,11 +294,27 @@ class AutoInteraction(Predictor):
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
         costs, cost, ip_frame, budget = self.budget_model(sizes, list(make))
 
-        def final(m):  # a member fitted on all the demonstrations (the yardstick IP when it is the registry's ip)
-            if m == "ip" and ref is not None and "ip" in self.candidates:
-                ref.fitted_.measure_deferred()  # in the fit, as an eager fit measures it
-                return ref
-            return make[m]().fit(train, dt=dt)
+        def final(m, member: bool = False):
+            """Family ``m`` fitted on all the demonstrations (the yardstick IP when it is the registry's ip): the
+            model itself, or with ``member`` a member of the blend.  A blend's band comes from its own variance
+            model and its members' means (:class:`~interprim.models.blend.BlendPrediction`): a member's own std is
+            never read, so an Interaction Primitive member carries no calibration of its std, and says so
+            (:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.without_calibration`:
+            ``calibrate=False``, ``calibration_`` None, in its model file too); its means are the calibrated fit's.
+            The model alone keeps the calibration it is fitted with."""
+            reuse = m == "ip" and ref is not None and "ip" in self.candidates
+            if not member:
+                if reuse:
+                    ref.fitted_.measure_deferred()  # in the fit, as an eager fit measures it
+                    return ref
+                return make[m]().fit(train, dt=dt)
+            est = ref if reuse else make[m]()
+            if not isinstance(est, InteractionPrimitive):
+                return est.fit(train, dt=dt)
+            if not reuse:
+                with std_unused():  # the calibration is deferred, then dropped unmeasured
+                    est.fit(train, dt=dt)
+            return est.without_calibration()
 
         left_out = {}
         if budget is not None and len(make) > 1:
@@ -313,9 +334,12 @@ class AutoInteraction(Predictor):
             chosen = next(iter(make))
             selection = stacking.choice_record(chosen, {chosen: float("nan")})
         else:
-            # looked up at call time (the leakage test spies on stacking.CrossValidation)
-            cv = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg, k=min(int(self.folds), n),
-                                          horizon=float(self.horizon), progress=progress)
+            # looked up at call time (the leakage test spies on stacking.CrossValidation); its fits are scored and
+            # discarded: their records of how they chose (selection_) are not read
+            with records_unused():
+                cv = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg,
+                                              k=min(int(self.folds), n), horizon=float(self.horizon),
+                                              progress=progress)
             chosen, selection = stacking.choice(cv, list(make))
             if cv.why:
                 selection["not_compared"] = dict(cv.why)
@@ -328,7 +352,7 @@ class AutoInteraction(Predictor):
             progress.grow(len(fitted.names))
             members = {}
             for m in fitted.names:
-                members[m] = final(m)
+                members[m] = final(m, member=True)
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,

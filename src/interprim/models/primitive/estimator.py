@@ -228,7 +228,8 @@ class InteractionPrimitive(Predictor):
         its prior mean), ``cv_error_observed`` / ``cv_error_observed_prior``.  Phase (``phase_method="cv"``):
         ``phase_error_refined`` (likelihood), ``learned_phase_error``, ``clock_phase_error``.  Candidates and
         their scores: ``*_grid``, ``cv_errors``, ``cv_errors_observed``, ``cv_within_se``,
-        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood``; ``representation`` (as
+        ``cv_observed_within_se``, ``phase_error``, ``phase_log_likelihood`` (``None`` for a fit inside
+        :func:`interprim.core.cache.records_unused`, whose records nobody reads); ``representation`` (as
         ``representation_``).  Keys are left out where they do
         not apply (e.g. ``sigma2="residual"`` has no ``cv_*``).
     phase_method_ : str
@@ -462,6 +463,20 @@ class InteractionPrimitive(Predictor):
         self._check_fitted("with_fitted")
         new = copy.copy(self)
         new.fitted_ = self.fitted_.with_fitted(**fitted)
+        return new
+
+    def without_calibration(self) -> InteractionPrimitive:
+        """A copy of this fitted model whose predictive std is not calibrated, and says so (``calibrate=False``,
+        ``calibration_`` None, in the model and in its file; a calibration deferred by a fit inside
+        :func:`interprim.core.cache.std_unused` is dropped, never measured): for a member of a
+        :class:`~interprim.models.blend.Blend`, whose band the blend's variance model gives from the members'
+        means (:meth:`FittedPrimitive.without_calibration
+        <interprim.models.primitive.fitted.FittedPrimitive.without_calibration>`).  Its means are this model's;
+        ``self`` is unchanged."""
+        self._check_fitted("without_calibration")
+        new = copy.copy(self)
+        new.calibrate = False
+        new.fitted_ = self.fitted_.without_calibration()
         return new
 
     def phase_method_used(self) -> str:

@@ -155,6 +155,22 @@ class FittedPrimitive:
         new.__dict__.update(params)
         return new
 
+    def without_calibration(self) -> FittedPrimitive:
+        """A copy whose predictive std is not calibrated, and says so: ``calibrate=False`` in its parameters (and
+        so in its model file), ``calibration_`` None, and a calibration a fit inside
+        :func:`interprim.core.cache.std_unused` deferred dropped (never measured, its demonstrations not held).
+
+        For a model whose own std nobody reads: a member of a :class:`~interprim.models.blend.Blend`, whose band
+        comes from the blend's variance model and the members' means alone
+        (:class:`~interprim.models.auto.AutoInteraction` keeps its Interaction Primitive member so).  The
+        calibration scales the std only (:meth:`Prediction.std <interprim.models.primitive.prediction.Prediction.std>`,
+        ``samples``), so every mean, phase and duration is this state's; ``self`` is unchanged.  It shares the
+        store of derived values, which depend on the fitted arrays only."""
+        new = self.with_params(calibrate=False)
+        new.__dict__.pop("_calibration_pending", None)
+        new.__dict__["calibration_"] = None
+        return new
+
     def cached(self, name: str, key: tuple, build):
         """A value derived from the fitted state, computed once by ``build()`` and kept while the objects in
         ``key`` stay the same (compared by identity).

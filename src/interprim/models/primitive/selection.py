@@ -47,9 +47,12 @@ see :mod:`interprim.core.gaussian`) ``= U diag(e) U^T`` the posterior mean for a
 ``sigma^2`` is ``mu + Sigma L^T U diag(1 / (e + sigma^2)) U^T r``.
 
 The same loop gives the held-out marginal likelihood of the *positions* of the
-observation for every ``sigma^2``; its maximiser is the position noise
+observation for every ``sigma^2``; with ``phase_cases=0`` its maximiser is the position noise
 ``phase_sigma2_`` used by the likelihood phase estimator
-(:mod:`interprim.phase.likelihood`).
+(:mod:`interprim.phase.likelihood`).  By default that noise is the one under which the likelihood phase is most
+accurate on held-out cases, and the log-likelihood is a record (``phase_log_likelihood``); a fit inside
+:func:`interprim.core.cache.records_unused` (the default model's inner cross-validation, which discards its fits
+after scoring their means) leaves it out (``None``): its log-determinants were about a tenth of the selection's cost.
 
 The choice is reported in ``model.selection_``.
 """
@@ -61,6 +64,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ...core.blas import single_thread
+from ...core.cache import records_skipped
 from ...core.cv import fold_labels, observed_frames, within_one_se
 from ...core.cv import n_folds as _n_folds
 from ...core.gaussian import (
@@ -208,6 +212,11 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
     s2_grid = {kind: max(scale[kind], 1e-300) * np.asarray(sigma2_factors, dtype=np.float64) for kind in kinds}
 
     kind0 = kinds[0]
+    # the held-out marginal log-likelihood of the positions per (lambda, sigma2): the phase noise's criterion
+    # without ``phase_cases``, else only a record (``phase_log_likelihood``), which a fit whose records nobody
+    # reads leaves out (interprim.core.cache.records_unused: the default model's inner cross-validation); the
+    # means, and so every choice, are the same either way
+    skip_ll = kind0 == "position" and select_sigma2 and phase_cases > 0 and records_skipped()
     gam = np.asarray(cross_grid if n_lat > n_o else (0.0,), dtype=np.float64)
     ll = np.zeros((len(lam_grid), len(sigma2_factors)))
     per_case = {}  # lambda index -> per held-out case: the observed and controlled agents' errors, and the prior's
@@ -222,7 +231,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                 pm_shift = H @ prior.mean.reshape(n_lat, q).T  # prior mean's positions minus the start's
                 # every held-out case conditioned at once (lowrank_cases: each case's numbers as its own call's)
                 outs = _conditioned(prior, n_o, q, [(c[3][kind0], c[1][kind0]) for c in held], s2_grid[kind0],
-                                    need_ll=kind0 == "position")
+                                    need_ll=kind0 == "position" and not skip_ll)
                 for c0 in range(0, len(held), _SCORE_CHUNK):  # several held-out cases scored at once
                     chunk = held[c0:c0 + _SCORE_CHUNK]
                     outs_c = outs[c0:c0 + _SCORE_CHUNK]
@@ -230,7 +239,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
                                                 np.stack([truths[c[0]] for c in chunk]), pm_shift, H, n_o, q, w_d, gam)
                     for b in range(len(chunk)):
                         per_case.setdefault(a, []).append((e_o[b], e_c[b], p_o[b], p_c[b]))
-                        if kind0 == "position":
+                        if kind0 == "position" and not skip_ll:
                             ll[a] += outs_c[b][1]
             if (kind0 != "position" or not select_sigma2) and phase_cases <= 0:
                 for _j, designs, _base, comp in held:
@@ -281,7 +290,7 @@ def _select(model, latent, n_folds, fractions, shrinkage_grid, sigma2_factors, s
         "sigma2_grid": [float(x) for x in s2_grid[kind0]],
         "shrinkage_grid": [None if x is None else float(x) for x in lam_grid],
         "phase_sigma2_grid": [float(x) for x in s2_grid["position"]],
-        "phase_log_likelihood": [float(x) for x in ll[a]],
+        "phase_log_likelihood": None if skip_ll else [float(x) for x in ll[a]],
         "phase_error": None if phase_err is None else [float(x) for x in phase_err],
         "phase_error_refined": phase_err_refined,
     }

@@ -20,7 +20,8 @@ from . import registry
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
-__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "spread_std_np"]
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "share_phase_models",
+           "spread_std_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -34,6 +35,45 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
         raise ValueError(f"a blend member of class {cls_name!r}, which is not a family of interprim's registry "
                          f"(known: {', '.join(f.cls.__name__ for f in registry.FAMILIES.values())})")
     return estimator_from_state(cls, params, arrays, state)
+
+
+def share_phase_models(members: dict) -> int:
+    """Members whose learned phases are equal share one object; returns how many ``phase_`` were replaced.
+
+    The Interaction Primitive with the learned phase (its ``phase_model_``) and
+    :class:`~interprim.models.learned.LearnedInteraction` (its ``phase_``) fit the same
+    :class:`~interprim.phase.learned.LearnedPhase` on the same observed columns with the library's defaults, and
+    both estimate it on the same frames after every frame.  Shared, the estimate is computed once a frame: a phase
+    model keeps its last estimate, a function of the frames its features read
+    (:meth:`~interprim.phase.learned.LearnedPhase.estimate_checked`), so the same numbers come back.  A member's
+    ``phase_`` is replaced by an equal phase model met before it (the same settings and fitted arrays, bit for
+    bit); nothing else changes."""
+    from ..phase.learned import LearnedPhase
+
+    found = [pm for est in members.values()
+             if isinstance(pm := getattr(getattr(est, "fitted_", None), "phase_model_", None), LearnedPhase)]
+    shared = 0
+    for est in members.values():
+        ph = getattr(est, "__dict__", {}).get("phase_")
+        if not isinstance(ph, LearnedPhase):
+            continue
+        same = next((q for q in found if q is ph or _same_phase_model(q, ph)), None)
+        if same is None:
+            found.append(ph)
+        elif same is not ph:
+            est.phase_ = same
+            shared += 1
+    return shared
+
+
+def _same_phase_model(a, b) -> bool:
+    """Whether two fitted :class:`~interprim.phase.learned.LearnedPhase` have the same settings and arrays, bit for
+    bit (their :meth:`~interprim.phase.learned.LearnedPhase.to_state`)."""
+    (xa, ma), (xb, mb) = a.to_state(), b.to_state()
+    if ma != mb or xa.keys() != xb.keys():
+        return False
+    return all(u is v or (u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes())
+               for u, v in ((np.asarray(xa[k]), np.asarray(xb[k])) for k in xa))
 
 
 def _on_grid(pred, u) -> np.ndarray:
@@ -178,6 +218,7 @@ class Blend(Predictor):
             raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
                              "shared end is read from a member's own timing, so that member must be in weights")
         self.members_ = {m: members[m] for m in names}
+        share_phase_models(self.members_)  # one learned phase estimate a frame for the members that read the same
         self._derived = DerivedCache()  # values derived from the fitted state (the variance model's arrays)
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame

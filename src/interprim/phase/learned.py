@@ -174,6 +174,9 @@ class LearnedPhase:
     n_demos_, n_dofs_ : int
     """
 
+    #: ``(key, estimate)`` of the last estimate of :meth:`_estimate_at` (None: none yet); not part of the fitted state
+    _last_estimate: tuple | None = None
+
     def __init__(self, features=DEFAULT_FEATURES, model: str = "auto", target: str = "phase",
                  select_features: bool = False, bandwidths=None, alphas=None, velocity_window: float = 0.15,
                  standardise: str = "time", fallback_se: float = 1.0, cv_range=(0.1, 1.0), history: int = 3):
@@ -244,6 +247,7 @@ class LearnedPhase:
         self
         """
         feats, bw, al, (lo, hi) = self._check_params()
+        self._last_estimate = None  # of the previous fit
         if isinstance(demos, np.ndarray) and demos.ndim == 3:
             demos = list(demos)
         if not isinstance(demos, (list, tuple)):
@@ -267,7 +271,7 @@ class LearnedPhase:
 
         def learn() -> dict:
             self._learn(Ys, float(dt), D, feats, bw, al, lo, hi)
-            return {k: v for k, v in vars(self).items() if k not in params}
+            return {k: v for k, v in vars(self).items() if k not in params and k != "_last_estimate"}
 
         # the same fit on the same observed frames within one default model's fit (its IP and its learned
         # interaction, on one inner training fold) is made once (interprim.core.cache.shared_fits)
@@ -477,7 +481,13 @@ class LearnedPhase:
         with ``T``."""
         if "path" in self.features_ or "peak_speed" in self.features_:  # these need every frame
             return prefix_features(Y / scale, self.dt_, self._w, self.features_, self.history)[-1]
-        k = Y.shape[0] - 1
+        rows, f = self._feature_rows(Y.shape[0] - 1)
+        return self._row_features(Y[rows], scale, Y.shape[0] - 1, f)
+
+    def _feature_rows(self, k: int) -> tuple:
+        """``(rows, f)``: the frames the features of a prefix of ``k + 1`` frames read (0, ``k``, one velocity
+        window back, then each history point's two neighbours) and the history points' interpolation weights
+        (``"path"`` and ``"peak_speed"`` read every frame: not for them)."""
         back = max(k - self._w, 0)
         h = self.history
         if "history" in self.features_:
@@ -486,8 +496,16 @@ class LearnedPhase:
             f = (x - lo)[:, None]
             rows = np.concatenate([np.array([0, k, back], dtype=np.int64), lo, np.minimum(lo + 1, k)])
         else:
+            f = None
             rows = np.array([0, k, back], dtype=np.int64)
-        Ys = Y[rows] / scale  # rows 0, k, back, then the history points' two neighbours
+        return rows, f
+
+    def _row_features(self, G, scale, k: int, f):
+        """The features (p,) of :meth:`_raw_features` from the frames ``G = Y[rows]`` it reads
+        (:meth:`_feature_rows` of ``k``)."""
+        back = max(k - self._w, 0)
+        h = self.history
+        Ys = G / scale  # rows 0, k, back, then the history points' two neighbours
         first, last = Ys[0], Ys[1]
         parts = []
         for g in self.features_:
@@ -593,7 +611,21 @@ class LearnedPhase:
         quotient as in ``Y / scale_``)."""
         if self.method_ == "clock" or Y.shape[0] < 2:
             return self._finish(elapsed, None)
-        return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        if "path" in self.features_ or "peak_speed" in self.features_:  # every frame read: not kept
+            return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        # the estimate is a function of the frames the features read and of the elapsed time: the last one is kept,
+        # so that the models that read the same phase model on the same frames (a blend's Interaction Primitive and
+        # learned members share one, :func:`interprim.models.blend.share_phase_models`) compute it once a frame
+        k = Y.shape[0] - 1
+        rows, f = self._feature_rows(k)
+        G = Y[rows]
+        key = (k, float(elapsed), G.tobytes())
+        last = self._last_estimate
+        if last is not None and last[0] == key:
+            return last[1]
+        est = self._finish(elapsed, self._row_features(G, self.scale_, k, f))
+        self._last_estimate = (key, est)  # one assignment: a stream in another thread reads a whole pair
+        return est
 
     def to_state(self):
         """``(arrays, meta)``: everything of a fitted estimator, arrays apart and the rest JSON-friendly (for the
@@ -601,6 +633,8 @@ class LearnedPhase:
         self._check_fitted()
         arrays, meta = {}, {}
         for k, v in vars(self).items():
+            if k == "_last_estimate":  # the last estimate kept (:meth:`_estimate_at`), not the fitted state
+                continue
             if isinstance(v, np.ndarray):
                 arrays[k] = v
             else:

@@ -85,7 +85,8 @@ def _on_grid(pred, u) -> np.ndarray:
         if times.shape == u.shape and (times is u or np.array_equal(times, u)):
             return pred.mean
         return interp_columns(u, times, pred.mean)  # GridPrediction.trajectory's values, without its wrapper
-    return pred.trajectory(u.shape[0])
+    grid_mean = getattr(pred, "grid_mean", None)  # trajectory's values by a cheaper path (an IP's Prediction)
+    return pred.trajectory(u.shape[0]) if grid_mean is None else grid_mean(u.shape[0])
 
 
 def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -> tuple:

@@ -21,7 +21,7 @@ from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
 __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "share_phase_models",
-           "spread_std_np"]
+           "spread_std_np", "weights_on_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -116,6 +116,21 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
         Y[j] = interp_columns(um, u, grids[j])
     return Y, np.einsum("gm,mgd->gd", W, Y)
+
+
+def weights_on_np(u, s: float, D: float, mids, table) -> tuple:
+    """``(ahead, W, zeros)``: the look-ahead ``max((u - s) D, 0)`` (s) of every point of the grid ``u`` (the blend's
+    phase ``s``, duration ``D``), the weights there (:func:`~interprim.model_selection.stacking.weights_at`'s
+    operations on the bands' weights ``table`` (B, M) at the bands' middles ``mids``) and the number of weights equal
+    to 0 (the numpy reference of the compiled ``blend.weights_on``)."""
+    ahead = (u - s) * D
+    np.maximum(ahead, 0.0, out=ahead)
+    out = interp_columns(ahead, mids, table)
+    np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
+    total = out.sum(axis=1, keepdims=True)
+    np.maximum(total, 1e-300, out=total)
+    W = np.divide(out, total, out=out)  # in place: the same quotients
+    return ahead, W, int(W.size - np.count_nonzero(W))
 
 
 def spread_std_np(Y, mean, W, ahead, steps, a, b, scaled: bool):
@@ -224,6 +239,8 @@ class Blend(Predictor):
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
+        #: the normalised weights C-contiguous, as the compiled ``blend.weights_on`` reads them
+        self._W_table = np.ascontiguousarray(self._W)
         #: the bands' middles, between which :func:`weights_at` interpolates (computed once, not per frame)
         self._mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges) if len(edges) > 1 else None
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
@@ -309,12 +326,22 @@ class Blend(Predictor):
             if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
                 D = R / (1.0 - s)
         u = unit_grid(n_grid)
-        ahead = (u - s) * D
-        np.maximum(ahead, 0.0, out=ahead)
-        W = self._weights_on(ahead)  # (n_grid, M)
+        zeros = -1
+        if self._mids is not None and self._W.shape[1] > 1:  # weights per band: the look-ahead and the weights
+            kernel = _registry.kernel("blend.weights_on")
+            if kernel is not None:
+                ahead, W = np.empty(n_grid), np.empty((n_grid, self._W.shape[1]))
+                zeros = kernel(u, s, D, self._mids, self._W_table, ahead, W)
+            if zeros < 0:
+                ahead, W, zeros = weights_on_np(u, s, D, self._mids, self._W)
+        else:
+            ahead = (u - s) * D
+            np.maximum(ahead, 0.0, out=ahead)
+            W = self._weights_on(ahead)  # (n_grid, M)
+            zeros = int(W.size - np.count_nonzero(W))
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        if np.count_nonzero(W) == W.size:  # every member weighted at every point (the usual case: one cheap count)
+        if zeros == 0:  # every member weighted at every point (the usual case)
             active = range(len(names))
         else:
             active = np.flatnonzero(W.any(axis=0)).tolist()

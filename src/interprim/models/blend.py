@@ -247,6 +247,12 @@ class Blend(Predictor):
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
         self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
+        self._set_controlled()
+
+    def _set_controlled(self) -> None:
+        """``controlled_dofs_``: every column not observed (what each prediction carries, listed once)."""
+        seen = set(self.observed_dofs_)
+        self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in seen]
 
     def fit(self, demos, dt: float | None = None, times=None, columns=None):
         """Fit every member on ``demos`` (the weights and scales are kept); ``dt``, ``times`` and ``columns`` as
@@ -347,9 +353,11 @@ class Blend(Predictor):
             active = np.flatnonzero(W.any(axis=0)).tolist()
             if len(active) < len(names):
                 W = W[:, active]
-        grids = np.stack([_on_grid(preds[names[i]], u) for i in active])
-        sa = np.array([sv[i] for i in active])
-        da = np.array([dv[i] for i in active])
+        grids = np.empty((len(active), n_grid, self.n_dofs_))  # each member read on the grid straight into its row
+        for k, i in enumerate(active):
+            grids[k] = _on_grid(preds[names[i]], u)
+        sa = np.array(sv if zeros == 0 else [sv[i] for i in active])
+        da = np.array(dv if zeros == 0 else [dv[i] for i in active])
         h = float(self.horizon)
         Rv = np.nan if R is None else float(R)
         kernel = _registry.kernel("blend.place_members")
@@ -424,6 +432,7 @@ class Blend(Predictor):
         self.adopt(members, [np.zeros((2, n_dofs))], float(meta["dt"]))
         self.mean_duration_ = float(meta["mean_duration"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+        self._set_controlled()
 
     def __repr__(self):
         w = ", ".join(f"{m} {np.atleast_1d(x)[0]:.2f}" for m, x in self.weights.items())
@@ -435,7 +444,8 @@ class BlendPrediction(GridPrediction):
     variance model) computed when first asked for."""
 
     def __init__(self, blend, u, mean, Y, W, ahead, phase, duration, n_observed):
-        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_, method="blend",
+        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_,
+                         controlled_dofs=blend.controlled_dofs_, method="blend",
                          duration=duration, mean_duration=blend.mean_duration_, n_observed=n_observed)
         self._parts = (blend, Y, W, ahead)
 

@@ -13,6 +13,7 @@ from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
+from ..core.validation import as_2d_finite
 from ..io import estimator_from_state
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
@@ -396,7 +397,16 @@ class Blend(Predictor):
         if kwargs:
             raise TypeError(f"Blend.predict takes only the observed frames, got {sorted(kwargs)}")
         x = np.asarray(partial, dtype=np.float64)
-        return self.combine({m: est.predict(x) for m, est in self.members_.items()}, len(x))
+        preds, checked = {}, None
+        for m, est in self.members_.items():
+            fast = getattr(est, "predict_checked", None)  # a member's prediction of checked frames, unmarked
+            if fast is None:
+                preds[m] = est.predict(x)
+                continue
+            if checked is None:  # checked once, as the members check it (the combination reads no member's mark)
+                checked = as_2d_finite(x, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
+            preds[m] = fast(checked)
+        return self.combine(preds, len(x))
 
     def stream(self, robot_state=None):
         """An online blend: every member's own stream, combined after each frame (equals :meth:`predict`)."""

@@ -174,7 +174,8 @@ class LearnedPhase:
     n_demos_, n_dofs_ : int
     """
 
-    #: ``(key, estimate)`` of the last estimate of :meth:`_estimate_at` (None: none yet); not part of the fitted state
+    #: ``(k, rows, f, key, estimate)`` of the last estimate of :meth:`_estimate_at` (None: none yet): the frames its
+    #: features read for ``k + 1`` frames and the estimate of those frames; not part of the fitted state
     _last_estimate: tuple | None = None
 
     def __init__(self, features=DEFAULT_FEATURES, model: str = "auto", target: str = "phase",
@@ -617,14 +618,15 @@ class LearnedPhase:
         # so that the models that read the same phase model on the same frames (a blend's Interaction Primitive and
         # learned members share one, :func:`interprim.models.blend.share_phase_models`) compute it once a frame
         k = Y.shape[0] - 1
-        rows, f = self._feature_rows(k)
+        last = self._last_estimate  # (k, rows, f, key, estimate)
+        same_k = last is not None and last[0] == k
+        rows, f = (last[1], last[2]) if same_k else self._feature_rows(k)
         G = Y[rows]
-        key = (k, float(elapsed), G.tobytes())
-        last = self._last_estimate
-        if last is not None and last[0] == key:
-            return last[1]
+        key = (float(elapsed), G.tobytes())
+        if same_k and last[3] == key:
+            return last[4]
         est = self._finish(elapsed, self._row_features(G, self.scale_, k, f))
-        self._last_estimate = (key, est)  # one assignment: a stream in another thread reads a whole pair
+        self._last_estimate = (k, rows, f, key, est)  # one assignment: another thread reads a whole tuple
         return est
 
     def to_state(self):

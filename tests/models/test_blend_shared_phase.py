@@ -65,4 +65,4 @@ def test_the_kept_estimate_is_the_estimate_and_is_not_saved(parts):
     assert lp.estimate_checked(y) == fresh.estimate_checked(y)
     assert lp.estimate_checked(y) != lp.estimate_checked(x)
     arrays, meta = lp.to_state()
-    assert "_last_estimate" not in meta and "_last_estimate" not in arrays
+    assert "_kept" not in meta and "_kept" not in arrays

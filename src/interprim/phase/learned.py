@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from ..core.cache import fitted_once
+from ..core.cache import DerivedCache, fitted_once
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
 from ..core.validation import as_2d_finite, as_demonstrations, as_frame, check_positive, check_times
@@ -174,10 +174,6 @@ class LearnedPhase:
     n_demos_, n_dofs_ : int
     """
 
-    #: ``(k, rows, f, key, estimate)`` of the last estimate of :meth:`_estimate_at` (None: none yet): the frames its
-    #: features read for ``k + 1`` frames and the estimate of those frames; not part of the fitted state
-    _last_estimate: tuple | None = None
-
     def __init__(self, features=DEFAULT_FEATURES, model: str = "auto", target: str = "phase",
                  select_features: bool = False, bandwidths=None, alphas=None, velocity_window: float = 0.15,
                  standardise: str = "time", fallback_se: float = 1.0, cv_range=(0.1, 1.0), history: int = 3):
@@ -248,7 +244,6 @@ class LearnedPhase:
         self
         """
         feats, bw, al, (lo, hi) = self._check_params()
-        self._last_estimate = None  # of the previous fit
         if isinstance(demos, np.ndarray) and demos.ndim == 3:
             demos = list(demos)
         if not isinstance(demos, (list, tuple)):
@@ -272,11 +267,14 @@ class LearnedPhase:
 
         def learn() -> dict:
             self._learn(Ys, float(dt), D, feats, bw, al, lo, hi)
-            return {k: v for k, v in vars(self).items() if k not in params and k != "_last_estimate"}
+            return {k: v for k, v in vars(self).items() if k not in params and k != "_kept"}
 
         # the same fit on the same observed frames within one default model's fit (its IP and its learned
         # interaction, on one inner training fold) is made once (interprim.core.cache.shared_fits)
         self.__dict__.update(fitted_once("learned phase", (params, float(dt)), Ys, learn))
+        #: the last estimate, kept by :meth:`_estimate_at` (a store of values derived from the fitted state, not
+        #: part of it: predictions leave the model's state as it was)
+        self._kept = DerivedCache()
         return self
 
     def _learn(self, Ys: list, dt: float, D: int, feats: tuple, bw: np.ndarray, al: np.ndarray, lo: float,
@@ -618,7 +616,8 @@ class LearnedPhase:
         # so that the models that read the same phase model on the same frames (a blend's Interaction Primitive and
         # learned members share one, :func:`interprim.models.blend.share_phase_models`) compute it once a frame
         k = Y.shape[0] - 1
-        last = self._last_estimate  # (k, rows, f, key, estimate)
+        kept = self.__dict__.get("_kept")
+        last = None if kept is None else kept.get("estimate", ((), None))[1]  # (k, rows, f, key, estimate)
         same_k = last is not None and last[0] == k
         rows, f = (last[1], last[2]) if same_k else self._feature_rows(k)
         G = Y[rows]
@@ -626,7 +625,8 @@ class LearnedPhase:
         if same_k and last[3] == key:
             return last[4]
         est = self._finish(elapsed, self._row_features(G, self.scale_, k, f))
-        self._last_estimate = (k, rows, f, key, est)  # one assignment: another thread reads a whole tuple
+        if kept is not None:  # one assignment: a stream in another thread reads a whole tuple
+            kept["estimate"] = ((), (k, rows, f, key, est))
         return est
 
     def to_state(self):
@@ -635,7 +635,7 @@ class LearnedPhase:
         self._check_fitted()
         arrays, meta = {}, {}
         for k, v in vars(self).items():
-            if k == "_last_estimate":  # the last estimate kept (:meth:`_estimate_at`), not the fitted state
+            if k == "_kept":  # the last estimate kept (:meth:`_estimate_at`), not the fitted state
                 continue
             if isinstance(v, np.ndarray):
                 arrays[k] = v
@@ -652,6 +652,7 @@ class LearnedPhase:
         for k, v in arrays.items():
             setattr(obj, k, np.asarray(v))
         cls._check_fitted(obj)
+        obj._kept = DerivedCache()
         return obj
 
     def tracker(self) -> PhaseTracker:

@@ -510,7 +510,8 @@ def check_blend_weights_on():
     big = rng.random((3, 8))
     assert comp(np.linspace(0.0, 1.0, 5), 0.3, 1.0, np.array([0.1, 0.4, 0.9]), big, np.empty(5),
                 np.empty((5, 8))) == -1  # eight members: numpy's pairwise sum, the reference's
-    assert comp(np.linspace(0.0, 1.0, 5), 0.3, 1.0, np.array([0.1, 0.1]), np.ascontiguousarray(big[:2, :2]), np.empty(5),
+    two = np.ascontiguousarray(big[:2, :2])
+    assert comp(np.linspace(0.0, 1.0, 5), 0.3, 1.0, np.array([0.1, 0.1]), two, np.empty(5),
                 np.empty((5, 2))) == -1  # middles not increasing
     return worst
 

@@ -36,7 +36,7 @@ def test_equal_phase_models_are_shared_and_the_blend_gives_the_same_numbers(part
     for m, est in blend.members_.items():
         assert np.array_equal(est.predict(x).trajectory(60), before[m])
     st = blend.stream()
-    for i, f in enumerate(x):
+    for f in x:
         got = st.update(f)
     want = blend.predict(x)
     assert np.array_equal(got.trajectory(100), want.trajectory(100))

@@ -617,8 +617,8 @@ class LearnedPhase:
         # learned members share one, :func:`interprim.models.blend.share_phase_models`) compute it once a frame
         k = Y.shape[0] - 1
         kept = self.__dict__.get("_kept")
-        last = None if kept is None else kept.get("estimate", ((), None))[1]  # (k, rows, f, key, estimate)
-        same_k = last is not None and last[0] == k
+        last: tuple = () if kept is None else kept.get("estimate", ((), ()))[1]  # (k, rows, f, key, estimate)
+        same_k = bool(last) and last[0] == k
         rows, f = (last[1], last[2]) if same_k else self._feature_rows(k)
         G = Y[rows]
         key = (float(elapsed), G.tobytes())

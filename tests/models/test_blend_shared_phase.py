@@ -53,8 +53,11 @@ def test_unequal_phase_models_are_not_shared(parts):
 
 def test_the_kept_estimate_is_the_estimate_and_is_not_saved(parts):
     demos, _, _, learned = parts
-    lp = learned.phase_
+    lp = LearnedPhase.from_state(*learned.phase_.to_state())
     fresh = LearnedPhase.from_state(*lp.to_state())
+    assert fresh.estimate_checked(np.ascontiguousarray(demos[1][:9, [0, 1]])) is not \
+        fresh.estimate_checked(np.ascontiguousarray(demos[1][:9, [0, 1]]))  # nothing kept unless asked
+    lp.keep_last_estimate()
     x = np.ascontiguousarray(demos[1][:, [0, 1]])
     for k in (2, 5, 17, 40, len(x)):
         a, b = lp.estimate_checked(x[:k]), lp.estimate_checked(x[:k].copy())
@@ -66,3 +69,5 @@ def test_the_kept_estimate_is_the_estimate_and_is_not_saved(parts):
     assert lp.estimate_checked(y) != lp.estimate_checked(x)
     arrays, meta = lp.to_state()
     assert "_kept" not in meta and "_kept" not in arrays
+    lp.fit([d[:, [0, 1]] for d in demos], dt=0.05)  # a new fit drops what was kept
+    assert "_kept" not in vars(lp)

@@ -44,9 +44,9 @@ def share_phase_models(members: dict) -> int:
     The Interaction Primitive with the learned phase (its ``phase_model_``) and
     :class:`~interprim.models.learned.LearnedInteraction` (its ``phase_``) fit the same
     :class:`~interprim.phase.learned.LearnedPhase` on the same observed columns with the library's defaults, and
-    both estimate it on the same frames after every frame.  Shared, the estimate is computed once a frame: a phase
-    model keeps its last estimate, a function of the frames its features read
-    (:meth:`~interprim.phase.learned.LearnedPhase.estimate_checked`), so the same numbers come back.  A member's
+    both estimate it on the same frames after every frame.  Shared, the estimate is computed once a frame: the shared
+    phase model keeps its last estimate (:meth:`~interprim.phase.learned.LearnedPhase.keep_last_estimate`), a
+    function of the frames its features read, so the same numbers come back.  A member's
     ``phase_`` is replaced by an equal phase model met before it (the same settings and fitted arrays, bit for
     bit); nothing else changes."""
     from ..phase.learned import LearnedPhase
@@ -63,6 +63,7 @@ def share_phase_models(members: dict) -> int:
             found.append(ph)
         elif same is not ph:
             est.phase_ = same
+            same.keep_last_estimate()
             shared += 1
     return shared
 

@@ -271,11 +271,18 @@ class LearnedPhase:
 
         # the same fit on the same observed frames within one default model's fit (its IP and its learned
         # interaction, on one inner training fold) is made once (interprim.core.cache.shared_fits)
+        self.__dict__.pop("_kept", None)  # estimates of the previous fit
         self.__dict__.update(fitted_once("learned phase", (params, float(dt)), Ys, learn))
-        #: the last estimate, kept by :meth:`_estimate_at` (a store of values derived from the fitted state, not
-        #: part of it: predictions leave the model's state as it was)
-        self._kept = DerivedCache()
         return self
+
+    def keep_last_estimate(self) -> None:
+        """Keep the last estimate from now on (:meth:`estimate`, :meth:`estimate_checked`): an estimate of the same
+        frames (those its features read, at the same elapsed time) is then the kept one, not computed again.  For
+        a phase model that several models read on the same frames after every frame (a blend's members:
+        :func:`interprim.models.blend.share_phase_models`); kept in a
+        :class:`~interprim.core.cache.DerivedCache` (not the fitted state, not saved; a new ``fit`` drops it)."""
+        if "_kept" not in self.__dict__:
+            self._kept = DerivedCache()
 
     def _learn(self, Ys: list, dt: float, D: int, feats: tuple, bw: np.ndarray, al: np.ndarray, lo: float,
                hi: float) -> None:
@@ -612,12 +619,15 @@ class LearnedPhase:
             return self._finish(elapsed, None)
         if "path" in self.features_ or "peak_speed" in self.features_:  # every frame read: not kept
             return self._finish(elapsed, self._raw_features(Y, self.scale_))
-        # the estimate is a function of the frames the features read and of the elapsed time: the last one is kept,
-        # so that the models that read the same phase model on the same frames (a blend's Interaction Primitive and
-        # learned members share one, :func:`interprim.models.blend.share_phase_models`) compute it once a frame
-        k = Y.shape[0] - 1
+        # the estimate is a function of the frames the features read and of the elapsed time: with
+        # keep_last_estimate the last one is kept, so that the models that read the same phase model on the same
+        # frames (a blend's Interaction Primitive and learned members share one,
+        # :func:`interprim.models.blend.share_phase_models`) compute it once a frame
         kept = self.__dict__.get("_kept")
-        last: tuple = () if kept is None else kept.get("estimate", ((), ()))[1]  # (k, rows, f, key, estimate)
+        if kept is None:
+            return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        k = Y.shape[0] - 1
+        last: tuple = kept.get("estimate", ((), ()))[1]  # (k, rows, f, key, estimate)
         same_k = bool(last) and last[0] == k
         rows, f = (last[1], last[2]) if same_k else self._feature_rows(k)
         G = Y[rows]
@@ -625,8 +635,7 @@ class LearnedPhase:
         if same_k and last[3] == key:
             return last[4]
         est = self._finish(elapsed, self._row_features(G, self.scale_, k, f))
-        if kept is not None:  # one assignment: a stream in another thread reads a whole tuple
-            kept["estimate"] = ((), (k, rows, f, key, est))
+        kept["estimate"] = ((), (k, rows, f, key, est))  # one assignment: another thread reads a whole tuple
         return est
 
     def to_state(self):
@@ -652,7 +661,6 @@ class LearnedPhase:
         for k, v in arrays.items():
             setattr(obj, k, np.asarray(v))
         cls._check_fitted(obj)
-        obj._kept = DerivedCache()
         return obj
 
     def tracker(self) -> PhaseTracker:

@@ -39,43 +39,32 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
 
 
 def share_phase_models(members: dict) -> int:
-    """Members whose learned phases are equal share one object; returns how many ``phase_`` were replaced.
+    """Members whose learned phases are the same fit share one object; returns how many took another's.
 
     The Interaction Primitive with the learned phase (its ``phase_model_``) and
     :class:`~interprim.models.learned.LearnedInteraction` (its ``phase_``) fit the same
     :class:`~interprim.phase.learned.LearnedPhase` on the same observed columns with the library's defaults, and
     both estimate it on the same frames after every frame.  Shared, the estimate is computed once a frame: the shared
     phase model keeps its last estimate (:meth:`~interprim.phase.learned.LearnedPhase.keep_last_estimate`), a
-    function of the frames its features read, so the same numbers come back.  A member's
-    ``phase_`` is replaced by an equal phase model met before it (the same settings and fitted arrays, bit for
-    bit); nothing else changes."""
+    function of the frames its features read, so the same numbers come back.  A member that can take another phase
+    model (:meth:`~interprim.models.learned.LearnedInteraction.use_phase_model`) takes an equal one met before it (the
+    same settings and fitted arrays, bit for bit); nothing else changes."""
     from ..phase.learned import LearnedPhase
 
     found = [pm for est in members.values()
              if isinstance(pm := getattr(getattr(est, "fitted_", None), "phase_model_", None), LearnedPhase)]
     shared = 0
     for est in members.values():
-        ph = getattr(est, "__dict__", {}).get("phase_")
-        if not isinstance(ph, LearnedPhase):
+        use, ph = getattr(est, "use_phase_model", None), getattr(est, "phase_", None)
+        if use is None or not isinstance(ph, LearnedPhase):
             continue
-        same = next((q for q in found if q is ph or _same_phase_model(q, ph)), None)
+        same = next((q for q in found if q is ph or q.same_fit(ph)), None)
         if same is None:
             found.append(ph)
-        elif same is not ph:
-            est.phase_ = same
+        elif same is not ph and use(same):
             same.keep_last_estimate()
             shared += 1
     return shared
-
-
-def _same_phase_model(a, b) -> bool:
-    """Whether two fitted :class:`~interprim.phase.learned.LearnedPhase` have the same settings and arrays, bit for
-    bit (their :meth:`~interprim.phase.learned.LearnedPhase.to_state`)."""
-    (xa, ma), (xb, mb) = a.to_state(), b.to_state()
-    if ma != mb or xa.keys() != xb.keys():
-        return False
-    return all(u is v or (u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes())
-               for u, v in ((np.asarray(xa[k]), np.asarray(xb[k])) for k in xa))
 
 
 def _on_grid(pred, u) -> np.ndarray:

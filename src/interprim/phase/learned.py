@@ -275,6 +275,17 @@ class LearnedPhase:
         self.__dict__.update(fitted_once("learned phase", (params, float(dt)), Ys, learn))
         return self
 
+    def same_fit(self, other) -> bool:
+        """Whether ``other`` is a fitted :class:`LearnedPhase` with the same settings and fitted arrays, bit for bit
+        (:meth:`to_state`): the same estimates of any frames."""
+        if not isinstance(other, LearnedPhase):
+            return False
+        (xa, ma), (xb, mb) = self.to_state(), other.to_state()
+        if ma != mb or xa.keys() != xb.keys():
+            return False
+        return all(u is v or (u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes())
+                   for u, v in ((np.asarray(xa[k]), np.asarray(xb[k])) for k in xa))
+
     def keep_last_estimate(self) -> None:
         """Keep the last estimate from now on (:meth:`estimate`, :meth:`estimate_checked`): an estimate of the same
         frames (those its features read, at the same elapsed time) is then the kept one, not computed again.  For

@@ -57,6 +57,7 @@ MEASURED = {
     "resample.interp_columns": (0.0, 0.0, 0.0),  # numpy.interp's operations in its order, without fastmath
     "weighted.weighted_frames": (0.0, 0.0, 0.0),  # einsum's sums in their order, without fastmath
     "blend.place_members": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
+    "blend.weights_on": (0.0, 0.0, 0.0),  # the reference's operations per point, numpy's sum in its order
     "blend.spread_std": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
     "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
     "prefix_rows.centre_rows_into": (0.0, 0.0, 0.0),  # numpy's reductions in their order (pairwise), no fastmath
@@ -475,6 +476,46 @@ def check_blend_place_members():
     return worst
 
 
+def check_blend_weights_on():
+    """The kernel against its reference, bit for bit: one to seven members (more: the kernel declines), one to six
+    bands, weights with zeros (whole members and single bands), negative and NaN weights, the blend's phase before,
+    inside and after the grid, zero durations; and the count of zero weights."""
+    rng = np.random.default_rng(14)
+    comp, ref = registry.compiled("blend.weights_on"), registry.reference("blend.weights_on")
+    worst = 0.0
+    for trial in range(400):
+        M, B, n = int(rng.integers(1, 8)), int(rng.integers(2, 7)), int(rng.integers(2, 202))
+        u = np.linspace(0.0, 1.0, n)
+        s = float(rng.choice([0.0, 1.0, rng.uniform(-0.2, 1.2)]))
+        D = 0.0 if trial % 17 == 0 else float(rng.uniform(0.1, 6.0))
+        edges = np.cumsum(rng.uniform(0.05, 1.5, B))
+        mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges)
+        table = rng.random((B, M)) * 10.0 ** rng.integers(-3, 3)
+        if trial % 3 == 0:
+            table[:, int(rng.integers(M))] = 0.0  # a member without weight
+        if trial % 5 == 0:
+            table[int(rng.integers(B))] = 0.0  # a band without weight: the sum's floor
+        if trial % 7 == 0:
+            table[int(rng.integers(B)), int(rng.integers(M))] = -0.3
+        if trial % 23 == 0:
+            table[int(rng.integers(B)), int(rng.integers(M))] = np.nan
+        ahead, W = np.empty(n), np.empty((n, M))
+        zeros = comp(u, s, D, mids, table, ahead, W)
+        ahead_ref, W_ref, zeros_ref = ref(u, s, D, mids, table)
+        if zeros != zeros_ref:
+            worst = np.inf
+        for a, b in ((ahead, ahead_ref), (W, W_ref)):
+            if not (np.array_equal(a, b, equal_nan=True) and np.array_equal(np.signbit(a), np.signbit(b))):
+                worst = max(worst, rel(np.nan_to_num(a), np.nan_to_num(b)) or np.inf)
+    big = rng.random((3, 8))
+    assert comp(np.linspace(0.0, 1.0, 5), 0.3, 1.0, np.array([0.1, 0.4, 0.9]), big, np.empty(5),
+                np.empty((5, 8))) == -1  # eight members: numpy's pairwise sum, the reference's
+    two = np.ascontiguousarray(big[:2, :2])
+    assert comp(np.linspace(0.0, 1.0, 5), 0.3, 1.0, np.array([0.1, 0.1]), two, np.empty(5),
+                np.empty((5, 2))) == -1  # middles not increasing
+    return worst
+
+
 def check_blend_spread_std():
     """The kernel against its reference, bit for bit: one to five members, weights with zeros, points where every
     member agrees (variance 0, and -0.0 from a negative scale), variance models with negative and NaN values and
@@ -679,6 +720,7 @@ CHECKS = {
     "phase_likelihood.track_step": check_phase_likelihood_track_step,
     "resample.interp_columns": check_resample_interp_columns,
     "weighted.weighted_frames": check_weighted_weighted_frames,
+    "blend.weights_on": check_blend_weights_on,
     "blend.place_members": check_blend_place_members,
     "blend.spread_std": check_blend_spread_std,
     "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,

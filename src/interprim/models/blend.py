@@ -13,6 +13,7 @@ from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import interp_columns, unit_grid
+from ..core.validation import as_2d_finite
 from ..io import estimator_from_state
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
@@ -20,7 +21,8 @@ from . import registry
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
-__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "spread_std_np"]
+__all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "place_members_np", "share_phase_models",
+           "spread_std_np", "weights_on_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
 _OVERHEAD_US = (40.8, 98.4, 2.62)
@@ -36,6 +38,35 @@ def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
     return estimator_from_state(cls, params, arrays, state)
 
 
+def share_phase_models(members: dict) -> int:
+    """Members whose learned phases are the same fit share one object; returns how many took another's.
+
+    The Interaction Primitive with the learned phase (its ``phase_model_``) and
+    :class:`~interprim.models.learned.LearnedInteraction` (its ``phase_``) fit the same
+    :class:`~interprim.phase.learned.LearnedPhase` on the same observed columns with the library's defaults, and
+    both estimate it on the same frames after every frame.  Shared, the estimate is computed once a frame: the shared
+    phase model keeps its last estimate (:meth:`~interprim.phase.learned.LearnedPhase.keep_last_estimate`), a
+    function of the frames its features read, so the same numbers come back.  A member that can take another phase
+    model (:meth:`~interprim.models.learned.LearnedInteraction.use_phase_model`) takes an equal one met before it (the
+    same settings and fitted arrays, bit for bit); nothing else changes."""
+    from ..phase.learned import LearnedPhase
+
+    found = [pm for est in members.values()
+             if isinstance(pm := getattr(getattr(est, "fitted_", None), "phase_model_", None), LearnedPhase)]
+    shared = 0
+    for est in members.values():
+        use, ph = getattr(est, "use_phase_model", None), getattr(est, "phase_", None)
+        if use is None or not isinstance(ph, LearnedPhase):
+            continue
+        same = next((q for q in found if q is ph or q.same_fit(ph)), None)
+        if same is None:
+            found.append(ph)
+        elif same is not ph and use(same):
+            same.keep_last_estimate()
+            shared += 1
+    return shared
+
+
 def _on_grid(pred, u) -> np.ndarray:
     """``pred.trajectory(len(u))`` on the grid ``u`` (``linspace(0, 1, n)``): a tabulated prediction whose own times
     are that grid is read as it is (interpolating at its own sample points gives its values), another one
@@ -45,7 +76,8 @@ def _on_grid(pred, u) -> np.ndarray:
         if times.shape == u.shape and (times is u or np.array_equal(times, u)):
             return pred.mean
         return interp_columns(u, times, pred.mean)  # GridPrediction.trajectory's values, without its wrapper
-    return pred.trajectory(u.shape[0])
+    grid_mean = getattr(pred, "grid_mean", None)  # trajectory's values by a cheaper path (an IP's Prediction)
+    return pred.trajectory(u.shape[0]) if grid_mean is None else grid_mean(u.shape[0])
 
 
 def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -> tuple:
@@ -75,6 +107,21 @@ def place_members_np(u, ahead, sv, dv, s: float, R: float, h: float, grids, W) -
         np.minimum(np.maximum(um, 0.0, out=um), 1.0, out=um)
         Y[j] = interp_columns(um, u, grids[j])
     return Y, np.einsum("gm,mgd->gd", W, Y)
+
+
+def weights_on_np(u, s: float, D: float, mids, table) -> tuple:
+    """``(ahead, W, zeros)``: the look-ahead ``max((u - s) D, 0)`` (s) of every point of the grid ``u`` (the blend's
+    phase ``s``, duration ``D``), the weights there (:func:`~interprim.model_selection.stacking.weights_at`'s
+    operations on the bands' weights ``table`` (B, M) at the bands' middles ``mids``) and the number of weights equal
+    to 0 (the numpy reference of the compiled ``blend.weights_on``)."""
+    ahead = (u - s) * D
+    np.maximum(ahead, 0.0, out=ahead)
+    out = interp_columns(ahead, mids, table)
+    np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
+    total = out.sum(axis=1, keepdims=True)
+    np.maximum(total, 1e-300, out=total)
+    W = np.divide(out, total, out=out)  # in place: the same quotients
+    return ahead, W, int(W.size - np.count_nonzero(W))
 
 
 def spread_std_np(Y, mean, W, ahead, steps, a, b, scaled: bool):
@@ -178,16 +225,25 @@ class Blend(Predictor):
             raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
                              "shared end is read from a member's own timing, so that member must be in weights")
         self.members_ = {m: members[m] for m in names}
+        share_phase_models(self.members_)  # one learned phase estimate a frame for the members that read the same
         self._derived = DerivedCache()  # values derived from the fitted state (the variance model's arrays)
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
+        #: the normalised weights C-contiguous, as the compiled ``blend.weights_on`` reads them
+        self._W_table = np.ascontiguousarray(self._W)
         #: the bands' middles, between which :func:`weights_at` interpolates (computed once, not per frame)
         self._mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges) if len(edges) > 1 else None
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
         self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
+        self._set_controlled()
+
+    def _set_controlled(self) -> None:
+        """``controlled_dofs_``: every column not observed (what each prediction carries, listed once)."""
+        seen = set(self.observed_dofs_)
+        self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in seen]
 
     def fit(self, demos, dt: float | None = None, times=None, columns=None):
         """Fit every member on ``demos`` (the weights and scales are kept); ``dt``, ``times`` and ``columns`` as
@@ -267,20 +323,32 @@ class Blend(Predictor):
             if s < 1.0 - 1e-9:  # the blend's normalised time ends where the members end
                 D = R / (1.0 - s)
         u = unit_grid(n_grid)
-        ahead = (u - s) * D
-        np.maximum(ahead, 0.0, out=ahead)
-        W = self._weights_on(ahead)  # (n_grid, M)
+        zeros = -1
+        if self._mids is not None and self._W.shape[1] > 1:  # weights per band: the look-ahead and the weights
+            kernel = _registry.kernel("blend.weights_on")
+            if kernel is not None:
+                ahead, W = np.empty(n_grid), np.empty((n_grid, self._W.shape[1]))
+                zeros = kernel(u, s, D, self._mids, self._W_table, ahead, W)
+            if zeros < 0:
+                ahead, W, zeros = weights_on_np(u, s, D, self._mids, self._W)
+        else:
+            ahead = (u - s) * D
+            np.maximum(ahead, 0.0, out=ahead)
+            W = self._weights_on(ahead)  # (n_grid, M)
+            zeros = int(W.size - np.count_nonzero(W))
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        if np.count_nonzero(W) == W.size:  # every member weighted at every point (the usual case: one cheap count)
+        if zeros == 0:  # every member weighted at every point (the usual case)
             active = range(len(names))
         else:
             active = np.flatnonzero(W.any(axis=0)).tolist()
             if len(active) < len(names):
                 W = W[:, active]
-        grids = np.stack([_on_grid(preds[names[i]], u) for i in active])
-        sa = np.array([sv[i] for i in active])
-        da = np.array([dv[i] for i in active])
+        grids = np.empty((len(active), n_grid, self.n_dofs_))  # each member read on the grid straight into its row
+        for k, i in enumerate(active):
+            grids[k] = _on_grid(preds[names[i]], u)
+        sa = np.array(sv if zeros == 0 else [sv[i] for i in active])
+        da = np.array(dv if zeros == 0 else [dv[i] for i in active])
         h = float(self.horizon)
         Rv = np.nan if R is None else float(R)
         kernel = _registry.kernel("blend.place_members")
@@ -319,7 +387,16 @@ class Blend(Predictor):
         if kwargs:
             raise TypeError(f"Blend.predict takes only the observed frames, got {sorted(kwargs)}")
         x = np.asarray(partial, dtype=np.float64)
-        return self.combine({m: est.predict(x) for m, est in self.members_.items()}, len(x))
+        preds, checked = {}, None
+        for m, est in self.members_.items():
+            fast = getattr(est, "predict_checked", None)  # a member's prediction of checked frames, unmarked
+            if fast is None:
+                preds[m] = est.predict(x)
+                continue
+            if checked is None:  # checked once, as the members check it (the combination reads no member's mark)
+                checked = as_2d_finite(x, "partial", n_cols=len(self.observed_dofs_), min_rows=1)
+            preds[m] = fast(checked)
+        return self.combine(preds, len(x))
 
     def stream(self, robot_state=None):
         """An online blend: every member's own stream, combined after each frame (equals :meth:`predict`)."""
@@ -355,6 +432,7 @@ class Blend(Predictor):
         self.adopt(members, [np.zeros((2, n_dofs))], float(meta["dt"]))
         self.mean_duration_ = float(meta["mean_duration"])
         self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+        self._set_controlled()
 
     def __repr__(self):
         w = ", ".join(f"{m} {np.atleast_1d(x)[0]:.2f}" for m, x in self.weights.items())
@@ -366,7 +444,8 @@ class BlendPrediction(GridPrediction):
     variance model) computed when first asked for."""
 
     def __init__(self, blend, u, mean, Y, W, ahead, phase, duration, n_observed):
-        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_, method="blend",
+        super().__init__(u, mean, None, phase=phase, observed_dofs=blend.observed_dofs_,
+                         controlled_dofs=blend.controlled_dofs_, method="blend",
                          duration=duration, mean_duration=blend.mean_duration_, n_observed=n_observed)
         self._parts = (blend, Y, W, ahead)
 

@@ -88,6 +88,17 @@ class LearnedInteraction(Predictor):
         self._check_fitted("mean_duration_")
         return float(self.phase_.mean_duration_)
 
+    def use_phase_model(self, phase: LearnedPhase) -> bool:
+        """Take ``phase`` as the timing model when it is the same fit as ``phase_`` (:meth:`LearnedPhase.same_fit
+        <interprim.phase.learned.LearnedPhase.same_fit>`: the same estimates of any frames), so that models fitted on
+        the same frames can share one (:func:`interprim.models.blend.share_phase_models`); returns whether it did.
+        The predictions are unchanged."""
+        self._check_fitted("use_phase_model")
+        if phase is self.phase_ or not self.phase_.same_fit(phase):
+            return False
+        self.phase_ = phase
+        return True
+
     def _coupling_kwargs(self, phase: LearnedPhase) -> dict:
         grid_t = np.arange(len(phase.std_grid_)) * float(phase.dt_)
         std_grid = np.asarray(phase.std_grid_, dtype=np.float64)

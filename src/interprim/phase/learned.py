@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from ..core.cache import fitted_once
+from ..core.cache import DerivedCache, fitted_once
 from ..core.cv import paired_gain
 from ..core.preprocessing import resample_step
 from ..core.validation import as_2d_finite, as_demonstrations, as_frame, check_positive, check_times
@@ -267,12 +267,33 @@ class LearnedPhase:
 
         def learn() -> dict:
             self._learn(Ys, float(dt), D, feats, bw, al, lo, hi)
-            return {k: v for k, v in vars(self).items() if k not in params}
+            return {k: v for k, v in vars(self).items() if k not in params and k != "_kept"}
 
         # the same fit on the same observed frames within one default model's fit (its IP and its learned
         # interaction, on one inner training fold) is made once (interprim.core.cache.shared_fits)
+        self.__dict__.pop("_kept", None)  # estimates of the previous fit
         self.__dict__.update(fitted_once("learned phase", (params, float(dt)), Ys, learn))
         return self
+
+    def same_fit(self, other) -> bool:
+        """Whether ``other`` is a fitted :class:`LearnedPhase` with the same settings and fitted arrays, bit for bit
+        (:meth:`to_state`): the same estimates of any frames."""
+        if not isinstance(other, LearnedPhase):
+            return False
+        (xa, ma), (xb, mb) = self.to_state(), other.to_state()
+        if ma != mb or xa.keys() != xb.keys():
+            return False
+        return all(u is v or (u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes())
+                   for u, v in ((np.asarray(xa[k]), np.asarray(xb[k])) for k in xa))
+
+    def keep_last_estimate(self) -> None:
+        """Keep the last estimate from now on (:meth:`estimate`, :meth:`estimate_checked`): an estimate of the same
+        frames (those its features read, at the same elapsed time) is then the kept one, not computed again.  For
+        a phase model that several models read on the same frames after every frame (a blend's members:
+        :func:`interprim.models.blend.share_phase_models`); kept in a
+        :class:`~interprim.core.cache.DerivedCache` (not the fitted state, not saved; a new ``fit`` drops it)."""
+        if "_kept" not in self.__dict__:
+            self._kept = DerivedCache()
 
     def _learn(self, Ys: list, dt: float, D: int, feats: tuple, bw: np.ndarray, al: np.ndarray, lo: float,
                hi: float) -> None:
@@ -477,7 +498,13 @@ class LearnedPhase:
         with ``T``."""
         if "path" in self.features_ or "peak_speed" in self.features_:  # these need every frame
             return prefix_features(Y / scale, self.dt_, self._w, self.features_, self.history)[-1]
-        k = Y.shape[0] - 1
+        rows, f = self._feature_rows(Y.shape[0] - 1)
+        return self._row_features(Y[rows], scale, Y.shape[0] - 1, f)
+
+    def _feature_rows(self, k: int) -> tuple:
+        """``(rows, f)``: the frames the features of a prefix of ``k + 1`` frames read (0, ``k``, one velocity
+        window back, then each history point's two neighbours) and the history points' interpolation weights
+        (``"path"`` and ``"peak_speed"`` read every frame: not for them)."""
         back = max(k - self._w, 0)
         h = self.history
         if "history" in self.features_:
@@ -486,8 +513,16 @@ class LearnedPhase:
             f = (x - lo)[:, None]
             rows = np.concatenate([np.array([0, k, back], dtype=np.int64), lo, np.minimum(lo + 1, k)])
         else:
+            f = None
             rows = np.array([0, k, back], dtype=np.int64)
-        Ys = Y[rows] / scale  # rows 0, k, back, then the history points' two neighbours
+        return rows, f
+
+    def _row_features(self, G, scale, k: int, f):
+        """The features (p,) of :meth:`_raw_features` from the frames ``G = Y[rows]`` it reads
+        (:meth:`_feature_rows` of ``k``)."""
+        back = max(k - self._w, 0)
+        h = self.history
+        Ys = G / scale  # rows 0, k, back, then the history points' two neighbours
         first, last = Ys[0], Ys[1]
         parts = []
         for g in self.features_:
@@ -593,7 +628,26 @@ class LearnedPhase:
         quotient as in ``Y / scale_``)."""
         if self.method_ == "clock" or Y.shape[0] < 2:
             return self._finish(elapsed, None)
-        return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        if "path" in self.features_ or "peak_speed" in self.features_:  # every frame read: not kept
+            return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        # the estimate is a function of the frames the features read and of the elapsed time: with
+        # keep_last_estimate the last one is kept, so that the models that read the same phase model on the same
+        # frames (a blend's Interaction Primitive and learned members share one,
+        # :func:`interprim.models.blend.share_phase_models`) compute it once a frame
+        kept = self.__dict__.get("_kept")
+        if kept is None:
+            return self._finish(elapsed, self._raw_features(Y, self.scale_))
+        k = Y.shape[0] - 1
+        last: tuple = kept.get("estimate", ((), ()))[1]  # (k, rows, f, key, estimate)
+        same_k = bool(last) and last[0] == k
+        rows, f = (last[1], last[2]) if same_k else self._feature_rows(k)
+        G = Y[rows]
+        key = (float(elapsed), G.tobytes())
+        if same_k and last[3] == key:
+            return last[4]
+        est = self._finish(elapsed, self._row_features(G, self.scale_, k, f))
+        kept["estimate"] = ((), (k, rows, f, key, est))  # one assignment: another thread reads a whole tuple
+        return est
 
     def to_state(self):
         """``(arrays, meta)``: everything of a fitted estimator, arrays apart and the rest JSON-friendly (for the
@@ -601,6 +655,8 @@ class LearnedPhase:
         self._check_fitted()
         arrays, meta = {}, {}
         for k, v in vars(self).items():
+            if k == "_kept":  # the last estimate kept (:meth:`_estimate_at`), not the fitted state
+                continue
             if isinstance(v, np.ndarray):
                 arrays[k] = v
             else:

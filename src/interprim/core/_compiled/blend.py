@@ -9,6 +9,12 @@ the members added to a zero start, member after member (``einsum("gm,mgd->gd", W
 fastmath, so its results equal the reference's bit for bit.  It saves the per-member array operations of a streamed
 frame (about 25 us a member).
 
+:func:`weights_on_into` performs the operations of the weights over the look-ahead (the numpy reference
+:func:`interprim.models.blend.weights_on_np`, what :meth:`interprim.models.blend.Blend.combine` reads after every
+frame): each point's look-ahead, the bands' weights interpolated there, clipped at 0 and divided by their sum (numpy's
+order: one member after another from 0, for up to :data:`MAX_MEMBERS` members), and the count of zero weights, in one
+pass without the temporaries.
+
 :func:`spread_std_into` performs the operations of the blend's std (the numpy reference
 :func:`interprim.models.blend.spread_std_np`, what :attr:`interprim.models.blend.BlendPrediction.std_values` reads):
 the members' weighted disagreement ``sum_m W[:, m] (Y_m - mean)^2`` (einsum's order, member after member from a zero
@@ -32,6 +38,49 @@ _OUT3 = types.Array(types.float64, 3, "C")
 _STD_SIGNATURE = types.int64(_IN3, _IN2, _IN2, _IN1, _IN1, _IN2, _IN2, types.boolean, _OUT2)
 _SIGNATURE = types.boolean(_IN1, _IN1, _IN1, _IN1, types.float64, types.float64, types.float64, _IN3, _IN2,
                            _OUT3, _OUT2, _OUT1)
+
+
+#: the most members whose weights :func:`weights_on_into` normalises: numpy sums up to 7 terms one after another
+#: from 0 (its pairwise summation unrolls 8 or more), the order the kernel follows
+MAX_MEMBERS = 7
+_W_SIGNATURE = types.int64(_IN1, types.float64, types.float64, _IN1, _IN2, _OUT1, _OUT2)
+
+
+@njit(_W_SIGNATURE, cache=True, fastmath=False, error_model="numpy")
+def weights_on_into(u, s, D, mids, table, ahead, W):
+    """``ahead = max((u - s) D, 0)`` seconds after now at every point of the grid ``u`` (the blend's phase ``s``,
+    duration ``D``) and the weights ``W`` (n, M) there: the bands' weights ``table`` (B, M) at the bands' middles
+    ``mids`` (B,) read by :func:`numpy.interp`'s operations, clipped at 0 and divided by their sum (at least
+    1e-300).  Returns the number of weights equal to 0, or -1 (outputs undefined) when ``mids`` is not strictly
+    increasing or there are more than :data:`MAX_MEMBERS` members."""
+    n = u.shape[0]
+    M = table.shape[1]
+    if M > MAX_MEMBERS:
+        return -1
+    for g in range(n):
+        a = (u[g] - s) * D
+        if not (a > 0.0 or np.isnan(a)):  # numpy.maximum(a, 0): NaN kept, -0.0 and below become 0.0
+            a = 0.0
+        ahead[g] = a
+    if not interp_into(ahead, mids, table, W):
+        return -1
+    zeros = 0
+    for g in range(n):
+        total = 0.0
+        for j in range(M):
+            w = W[g, j]
+            if not (w > 0.0 or np.isnan(w)):
+                w = 0.0
+            W[g, j] = w
+            total += w
+        if not (total > 1e-300 or np.isnan(total)):
+            total = 1e-300
+        for j in range(M):
+            w = W[g, j] / total
+            W[g, j] = w
+            if w == 0.0:
+                zeros += 1
+    return zeros
 
 
 @njit(_SIGNATURE, cache=True, fastmath=False, error_model="numpy")
@@ -118,8 +167,11 @@ def spread_std_into(Y, mean, W, ahead, steps, a, b, scaled, std):
 
 
 def warm_up() -> None:
-    """Compile (or load) :func:`place_members_into` and :func:`spread_std_into` with tiny inputs of the real types."""
+    """Compile (or load) :func:`weights_on_into`, :func:`place_members_into` and :func:`spread_std_into` with tiny
+    inputs of the real types."""
     u = np.linspace(0.0, 1.0, 4)
+    weights_on_into(u, 0.4, 1.5, np.array([0.1, 0.5]), np.array([[0.3, 0.7], [0.6, 0.4]]), np.empty(4),
+                    np.empty((4, 2)))
     place_members_into(u, np.array([0.0, 0.0, 0.1, 0.3]), np.array([0.4, 0.5]), np.array([1.0, 1.2]), 0.45, 0.8,
                        0.25, np.zeros((2, 4, 2)), np.full((4, 2), 0.5), np.empty((2, 4, 2)), np.empty((4, 2)),
                        np.empty(4))

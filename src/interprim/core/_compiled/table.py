@@ -88,6 +88,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     Kernel("resample.interp_columns", "resample:interp_columns_into", "interprim.core.preprocessing:interp_columns",
            False, "numpy.interp of every column at the same points (the one resampling rule); the reference returns "
            "the array the kernel writes into out; bitwise equal"),
+    Kernel("blend.weights_on", "blend:weights_on_into", "interprim.models.blend:weights_on_np", False,
+           "a blend's look-ahead at every point of the common grid and its weights there (the bands' weights "
+           "interpolated, clipped at 0, divided by their sum; up to 7 members, else the reference); the reference "
+           "returns the arrays the kernel writes into ahead and W and the count it returns; bitwise equal"),
     Kernel("blend.place_members", "blend:place_members_into", "interprim.models.blend:place_members_np", False,
            "a blend's members read at their own normalised times on the common grid (each at its own speed, then "
            "to the shared end of long_range.member_units) and their weighted sum; the reference returns the arrays "

@@ -32,7 +32,7 @@ from ...core.blas import one_blas_thread, single_thread
 from ...core.cache import DerivedCache, std_deferred
 from ...core.dmp import cached_rollout, fit_weights_stacked, fit_weights_targets, forcing_values, representation_report
 from ...core.gaussian import Posterior, fit_prior
-from ...core.input_range import fit_input_range, input_distance, mark
+from ...core.input_range import checked_by_caller, fit_input_range, input_distance, mark
 from ...core.preprocessing import PCA, derivatives, resample_uniform, time_normalise
 from ...core.validation import as_2d_finite, check_positive, check_times
 from ...phase import estimate_phase, fit_phase_model, movement_prefix
@@ -470,7 +470,8 @@ class FittedPrimitive:
             o = resample_uniform(o, t, dt=self.dt_)[0] if o.shape[0] > 1 else o
         elif dt is not None and abs(check_positive(dt, "dt") - self.dt_) > 1e-12 * self.dt_ and o.shape[0] > 1:
             o = resample_uniform(o, np.arange(o.shape[0]) * dt, dt=self.dt_)[0]
-        dist = input_distance(self, o)
+        # inside CHECKED_BY_CALLER the caller marks the prediction (mark leaves it as it is): no distance to compute
+        dist = float("nan") if checked_by_caller() else input_distance(self, o)
         z = self.observed_to_latent(o)
         if phase is not None:
             ph = float(phase)

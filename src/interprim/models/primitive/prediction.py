@@ -24,6 +24,21 @@ from ..base import BasePrediction
 __all__ = ["Prediction", "MeanRollout"]
 
 
+#: :func:`_selected_columns` of an identity map
+_SAME_COLUMNS = np.empty(0, dtype=np.intp)
+
+
+def _selected_columns(M: np.ndarray, off: np.ndarray):
+    """The latent column of each data column when the latent map ``M`` (D x D_latent) selects one latent DoF per
+    data column (one 1 per row, 0 elsewhere) and the offset is +0 (:meth:`Prediction.grid_mean`);
+    :data:`_SAME_COLUMNS` for the identity; None for another map."""
+    if not (np.all((M == 0.0) | (M == 1.0)) and np.all(np.count_nonzero(M, axis=1) == 1)
+            and not np.any(off) and not np.any(np.signbit(off))):
+        return None
+    cols = np.argmax(M, axis=1).astype(np.intp)
+    return _SAME_COLUMNS if M.shape[0] == M.shape[1] and np.array_equal(cols, np.arange(M.shape[0])) else cols
+
+
 class Prediction(BasePrediction):
     """The model's belief about the whole interaction after a partial observation.
 
@@ -150,6 +165,25 @@ class Prediction(BasePrediction):
         lat = self._latent_traj(self.theta(), None, y0, v0, design=m.rollout_.grid_design(n))
         M, off = m.latent_map()
         return lat @ M.T + off
+
+    def grid_mean(self, n: int) -> np.ndarray:
+        """:meth:`trajectory` ``(n)``'s values, the same numbers, for a caller inside the library's one-thread
+        context that reads this prediction on a grid after every frame (:class:`~interprim.models.blend.Blend`).
+
+        Without PCA the latent map is a 0/1 selection of the latent DoFs with offset 0: its product is each data
+        column's latent column plus the products by 0, which add nothing to a finite value, so the column itself is
+        read (then the offset added, as :meth:`trajectory` adds it); a trajectory with a non-finite value, or a
+        model with PCA, takes the product."""
+        m = self._m
+        y0, v0 = self.start_states()
+        lat = self._latent_traj(self.theta(), None, y0, v0, design=m.rollout_.grid_design(n))
+        M, off = m.latent_map()
+        cols = m.cached("latent_columns", (M, off), lambda: _selected_columns(M, off))
+        if cols is None or not np.isfinite(lat).all():
+            return lat @ M.T + off
+        if cols is not _SAME_COLUMNS:
+            lat = lat[:, cols]
+        return np.add(lat, off, out=lat)
 
     def _calibration_scale(self, n: int):
         """Factors ``(n, D)`` of the calibrated predictive std on the grid ``linspace(0, 1, n)``

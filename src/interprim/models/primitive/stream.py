@@ -13,7 +13,7 @@ import numpy as np
 
 from ...core._compiled import registry as kernels
 from ...core.blas import one_blas_thread
-from ...core.input_range import mark, mark_duration
+from ...core.input_range import checked_by_caller, mark, mark_duration
 from ...core.validation import as_2d_finite, as_frame
 from ...phase import IncrementalDTW, estimate_phase, movement_prefix
 from ..base import BaseStream
@@ -92,7 +92,11 @@ class Stream(BaseStream):
 
     def _check_range(self, p, frames):
         """Mark ``p`` with the largest input distance of the frames seen so far (:mod:`interprim.core.input_range`),
-        warning once when it leaves the training range."""
+        warning once when it leaves the training range; nothing inside
+        :data:`~interprim.core.input_range.CHECKED_BY_CALLER` (a caller that marks the prediction itself: an
+        :class:`~interprim.AutoInteraction` streaming its members)."""
+        if checked_by_caller():
+            return p
         m = self.model
         mean = getattr(m, "input_mean_", None)
         if mean is not None:

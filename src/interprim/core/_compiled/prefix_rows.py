@@ -187,25 +187,34 @@ def cv_loss_into(GY, ybar, truth, ctrl, w, nj, D, n_mean, out):
     loss the weighted squared error of its controlled columns ``ctrl`` (weights ``w``) against ``truth[i]``, summed
     over the columns and averaged over its ``nj`` jittered queries and the ``n_out`` output points (``n_mean`` of
     them).  The numbers of :func:`interprim.models.coupling.cv_loss_np` bit for bit: each error ``(ybar + GY) -
-    truth`` squared then weighted, the sums numpy's (:func:`_pairwise_sq`) over the columns, then over the jitter
-    and the output points; no fastmath (no fused multiply-add)."""
+    truth`` squared then weighted, the sums numpy's over the columns (pairwise, :func:`_pairwise_sq`, for consecutive
+    columns; in turn otherwise), then over the jitter and the output points (pairwise); no fastmath (no fused
+    multiply-add)."""
     C, Q, F = GY.shape
     nh = truth.shape[0]
     n_out = F // D
     nc = ctrl.shape[0]
     terms = np.empty(nc)
     rows = np.empty(nj * n_out)
+    # numpy's sum over the columns: pairwise over a run of consecutive columns (the reference's slice, a view whose
+    # difference with the truth is laid out with the columns innermost), in turn over other columns (a list: numpy's
+    # indexed copy has the columns outermost, and its reduction adds them one after the other); the same below 8
+    run = True
+    for k in range(1, nc):
+        run = run and ctrl[k] == ctrl[k - 1] + 1
     for c in range(C):
         for i in range(nh):
             for j in range(nj):
                 g = GY[c, i * nj + j]
                 for t in range(n_out):
                     b = t * D
+                    acc = 0.0
                     for k in range(nc):
                         f = b + ctrl[k]
                         e = (ybar[f] + g[f]) - truth[i, f]
                         terms[k] = e * e * w[k]
-                    rows[j * n_out + t] = 0.0 + _pairwise_sq(terms, 0, nc, False)
+                        acc += terms[k]
+                    rows[j * n_out + t] = 0.0 + _pairwise_sq(terms, 0, nc, False) if run else acc
             out[c, i] = (0.0 + _pairwise_sq(rows, 0, nj * n_out, False)) / n_mean
 
 

@@ -785,21 +785,14 @@ def _crossfit_demos(mean: np.ndarray, truth: np.ndarray, valid: np.ndarray, w: n
             q = np.maximum(_step_quantiles(z_tr, valid[tr], cols, levels, has, last), 1e-6)  # (L, H)
             sd = sd_all[..., column_index(cols)]  # views of consecutive columns
             err = err_all[..., column_index(cols)]
-            # inside at level L: err <= q_L * sd at a (case, step, column); counted over every valid (case, step) and
-            # column of each demonstration, a level at a time (exact counts: the fraction is the mean of the
-            # demonstration's booleans to the bit)
-            r = err / np.maximum(sd, 1e-300)  # (cases, H, cols)
-            thr = q * (1 + 1e-12)  # (L, H)
-            inside = np.empty((len(levels), r.shape[0]), dtype=np.int64)  # per level and case: frames x cols inside
-            for li in range(len(levels)):
-                np.sum((r <= thr[li][None, :, None]) & v[:, :, None], axis=(1, 2), out=inside[li])
-            frames = v.sum(axis=1)  # valid steps per case
             for j in np.unique(d):
                 sel = d == j
-                n_in = int(frames[sel].sum())
-                if not n_in:
+                if not v[sel].any():
                     continue
-                out.append(np.sum(inside[:, sel], axis=1) / (n_in * r.shape[2]))
+                # inside at level L: err <= q_L * sd at every (case, step, column) of this demonstration
+                r = (err[sel] / np.maximum(sd[sel], 1e-300))[v[sel]]  # (frames, cols)
+                qh = np.broadcast_to(q[:, None, :], (len(levels),) + v[sel].shape)[:, v[sel]]  # (L, frames)
+                out.append(np.mean(r[None] <= qh[:, :, None] * (1 + 1e-12), axis=(1, 2)))
                 grp.append(int(gi))
     return [(np.array(o).reshape(len(o), len(levels)), np.array(gr, dtype=np.int64))
             for o, gr in zip(per_demo, per_group)]

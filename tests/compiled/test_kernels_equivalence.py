@@ -673,7 +673,7 @@ def check_prefix_rows_cv_loss_into():
     rng = np.random.default_rng(14)
     comp, ref = both("prefix_rows.cv_loss_into")
     worst = 0.0
-    for trial in range(200):
+    for _trial in range(200):
         C, nh, nj, n_out = (int(rng.integers(1, 31)), int(rng.integers(1, 5)), int(rng.integers(1, 10)),
                             int(rng.integers(2, 121)))
         D = int(rng.integers(2, 21))

@@ -61,6 +61,7 @@ MEASURED = {
     "blend.spread_std": (0.0, 0.0, 0.0),  # the reference's operations per point, einsum's sums in their order
     "prefix_rows.prefix_rows_into": (0.0, 0.0, 0.0),  # the reference's operations per element, without fastmath
     "prefix_rows.centre_rows_into": (0.0, 0.0, 0.0),  # numpy's reductions in their order (pairwise), no fastmath
+    "prefix_rows.cv_loss_into": (0.0, 0.0, 0.0),  # the reference's operations per element, numpy's sums in order
 }
 TOL = {name: tol for name, (_, _, tol) in MEASURED.items()}
 
@@ -702,6 +703,40 @@ def check_prefix_rows_centre_rows_into():
     return worst
 
 
+def check_prefix_rows_cv_loss_into():
+    """The coupling's cross-validation losses of a batch of conditioners, compiled against numpy, bit for bit: one
+    to thirty candidates, one to four held-out cases, one to nine jittered queries, 2 to 120 output points (sums of
+    the jitter and output points below, inside and beyond numpy's pairwise blocks), 1 to 12 controlled columns
+    anywhere among up to 20 (below and beyond 8), magnitudes far apart; and a CouplingModel's whole cross-validation
+    (selection, scores, residual variance) on both paths."""
+    from interprim.models.coupling import CouplingModel
+
+    rng = np.random.default_rng(14)
+    comp, ref = both("prefix_rows.cv_loss_into")
+    worst = 0.0
+    for _trial in range(200):
+        C, nh, nj, n_out = (int(rng.integers(1, 31)), int(rng.integers(1, 5)), int(rng.integers(1, 10)),
+                            int(rng.integers(2, 121)))
+        D = int(rng.integers(2, 21))
+        ctrl = np.sort(rng.choice(D, size=int(rng.integers(1, min(D, 12) + 1)), replace=False)).astype(np.intp)
+        F = n_out * D
+        scale = 10.0 ** rng.integers(-4, 4, F)
+        GY = rng.normal(size=(C, nh * nj, F)) * scale
+        ybar = rng.normal(size=F) * scale
+        truth = ybar + rng.normal(size=(nh, F)) * scale
+        w = 1.0 / rng.uniform(0.1, 10.0, ctrl.size) ** 2
+        out_c = np.full((C, nh), np.nan)
+        comp(GY, ybar, truth, ctrl, w, nj, D, float(nj * n_out), out_c)
+        out_r = ref(GY, ybar, truth, ctrl, w, nj, D, float(nj * n_out), np.full((C, nh), np.nan))
+        worst = max(worst, bitwise_gap(out_c, out_r))
+    demos = two_agent_demos(10, seed=6, frames=60)
+    fits = on_both_paths(lambda: CouplingModel([0], n_folds=5).fit(demos, dt=0.01))
+    a, b = fits["compiled"], fits["numpy"]
+    if repr(a.selection_) != repr(b.selection_) or not np.array_equal(a.residual_var_, b.residual_var_):
+        worst = max(worst, rel(a.residual_var_, b.residual_var_) or np.inf)
+    return worst
+
+
 CHECKS = {
     "dtw.accumulate": check_dtw_accumulate,
     "dtw.open_end": check_dtw_open_end,
@@ -725,6 +760,7 @@ CHECKS = {
     "blend.spread_std": check_blend_spread_std,
     "prefix_rows.prefix_rows_into": check_prefix_rows_prefix_rows_into,
     "prefix_rows.centre_rows_into": check_prefix_rows_centre_rows_into,
+    "prefix_rows.cv_loss_into": check_prefix_rows_cv_loss_into,
 }
 
 

@@ -456,7 +456,8 @@ class CouplingModel:
         lev = np.zeros((len(fr), n, nj)) if keep is not None else None
         Yflat = self.Y_.reshape(n, -1)
         n_mean = np.intp(nj * int(self.n_out))  # the count np.mean divides by (jitter x output points)
-        ctrl_cols = column_index(ctrl)  # a slice when contiguous: a view instead of a copy, the same values
+        ctrl_idx = np.asarray(ctrl, dtype=np.intp)
+        score = kernels.loaded_kernel("prefix_rows.cv_loss_into") or cv_loss_np
         # what depends only on the fold and the phase (training rows, held-out queries and the smoothers' shared
         # context) is computed once per fit and reused by every pass (_cross_validate makes up to three)
         cache = getattr(self, "_cv_cache", None)
@@ -489,22 +490,25 @@ class CouplingModel:
                     cache[key] = ctx
                 ctx = cache[key]
                 nh = len(hold)
-                # the controlled columns of the truth, broadcast over the jitter (the values of the repeated rows)
-                truth_c = Yflat[hold].reshape(nh, 1, self.n_out, D)[..., ctrl_cols]
-                for c, cand in enumerate(cands):
-                    if keep is not None and c == keep:
-                        mean, h = cand.predict(ctx)
-                        e = (mean - np.repeat(Yflat[hold], nj, axis=0)).reshape(nh, nj, self.n_out, D)
-                        resid[a, hold] = e
-                        lev[a, hold] = h.reshape(nh, nj)
-                        ec = e[..., ctrl]
-                    else:  # only the controlled columns' errors (each the same difference as in e); no leverage
-                        ec = cand.mean(ctx).reshape(nh, nj, self.n_out, D)[..., ctrl_cols] - truth_c
-                    # np.mean(np.sum(ec ** 2 * w_ctrl, axis=-1), axis=(1, 2)) by the reductions np.sum and np.mean
-                    # call (the same sums, divided by the count), without their wrappers' overhead (called ~10^4
-                    # times per fit)
-                    loss[c, a, hold] = np.true_divide(np.add.reduce(np.add.reduce(ec ** 2 * w_ctrl, axis=-1),
-                                                                    axis=(1, 2)), n_mean)
+                if keep is not None:
+                    mean, h = cands[keep].predict(ctx)
+                    e = (mean - np.repeat(Yflat[hold], nj, axis=0)).reshape(nh, nj, self.n_out, D)
+                    resid[a, hold] = e
+                    lev[a, hold] = h.reshape(nh, nj)
+                    loss[keep, a, hold] = _sq_loss(e[..., ctrl], w_ctrl, n_mean)
+                others = [c for c in range(len(cands)) if c != keep]
+                if not others:
+                    continue
+                # every other candidate's losses at once: each candidate's Conditioner._mean (its row weights summed
+                # per demonstration, times the demonstrations' centred targets: the same products, one per
+                # candidate) into one buffer, then the losses of _sq_loss from ybar + the products in one call
+                # (cv_loss_np, or its compiled kernel once the kernels are loaded: the same numbers)
+                GY = np.empty((len(others), ctx.xc.shape[0], ctx.Ydc.shape[1]))
+                for i, c in enumerate(others):
+                    np.matmul(cands[c].weights(ctx) @ ctx.P, ctx.Ydc, out=GY[i])
+                out = np.empty((len(others), nh))
+                score(GY, ctx.ybar, Yflat[hold], ctrl_idx, w_ctrl, nj, D, float(n_mean), out)
+                loss[np.asarray(others)[:, None], a, np.asarray(hold)[None, :]] = out
         return loss, resid, lev, K  # loss: (candidates, fractions, demos)
 
     def _cross_validate(self):
@@ -776,6 +780,30 @@ class CouplingModel:
         ends = np.cumsum(arrays["obs_lengths"])
         obj.obs_frames_ = [np.ascontiguousarray(f) for f in np.split(np.asarray(arrays["obs_frames"]), ends[:-1])]
         return obj
+
+
+def _sq_loss(ec: np.ndarray, w_ctrl: np.ndarray, n_mean) -> np.ndarray:
+    """The weighted squared error of the held-out errors ``ec`` ``(..., n_jitter, n_out, n_ctrl)``, averaged over the
+    jitter and the output points (``n_mean`` of them): ``np.mean(np.sum(ec ** 2 * w_ctrl, axis=-1), axis=(-2, -1))``
+    by the reductions np.sum and np.mean call (the same sums, divided by the count), without their wrappers'
+    overhead; the leading axes (held-out demonstrations, candidates) are independent rows of the same sums."""
+    return np.true_divide(np.add.reduce(np.add.reduce(ec ** 2 * w_ctrl, axis=-1), axis=(-2, -1)), n_mean)
+
+
+def cv_loss_np(GY, ybar, truth, ctrl, w, nj: int, D: int, n_mean: float, out):
+    """The held-out losses ``out`` (C, nh) of a batch of conditioners on one fold and phase of the coupling's
+    cross-validation (:meth:`CouplingModel._cv_pass`): candidate ``c``'s mean is ``ybar + GY[c]`` (``GY`` (C, nh nj,
+    n_out D): Eq. 18's smoother, its row weights summed per demonstration times the demonstrations' centred
+    targets), case ``i``'s loss :func:`_sq_loss` of its errors against ``truth[i]`` (n_out D) in the controlled
+    columns ``ctrl`` (weights ``w``) over its ``nj`` jittered queries and the output points (``n_mean`` of them).
+    The numpy reference of the compiled ``prefix_rows.cv_loss_into`` (the same numbers); returns ``out``."""
+    C, F = GY.shape[0], GY.shape[2]
+    nh = truth.shape[0]
+    n_out = F // D
+    cols = column_index([int(k) for k in ctrl])
+    ec = (ybar + GY).reshape(C, nh, nj, n_out, D)[..., cols] - truth.reshape(nh, 1, n_out, D)[..., cols]
+    out[...] = _sq_loss(ec, w, n_mean)
+    return out
 
 
 def _calibrated_std(fr, residual_var, scale, observed, controlled, D: int, s: float, h: float) -> np.ndarray:

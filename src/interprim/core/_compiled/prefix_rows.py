@@ -173,7 +173,55 @@ def centre_rows_into(X, x, Xc, xc, nrm, qnrm):
     return 0.0 + _pairwise_sq(flat, 0, R * p)
 
 
+
+_F3 = types.Array(types.float64, 3, "C", readonly=True)
+_F1 = types.Array(types.float64, 1, "C", readonly=True)
+_I1 = types.Array(types.intp, 1, "C", readonly=True)
+
+
+@njit(types.void(_F3, _F1, _F2, _I1, _F1, types.intp, types.intp, types.float64, _O2), cache=True, fastmath=False)
+def cv_loss_into(GY, ybar, truth, ctrl, w, nj, D, n_mean, out):
+    """The held-out losses of a batch of conditioners on one fold and phase of the coupling's cross-validation into
+    ``out`` (C, nh): candidate ``c``'s mean is ``ybar + GY[c]`` (``GY[c]`` (nh nj, n_out D): its row weights summed
+    per demonstration times the demonstrations' centred targets, Eq. 18 as a linear smoother), held-out case ``i``'s
+    loss the weighted squared error of its controlled columns ``ctrl`` (weights ``w``) against ``truth[i]``, summed
+    over the columns and averaged over its ``nj`` jittered queries and the ``n_out`` output points (``n_mean`` of
+    them).  The numbers of :func:`interprim.models.coupling.cv_loss_np` bit for bit: each error ``(ybar + GY) -
+    truth`` squared then weighted, the sums numpy's over the columns (pairwise, :func:`_pairwise_sq`, for consecutive
+    columns; in turn otherwise), then over the jitter and the output points (pairwise); no fastmath (no fused
+    multiply-add)."""
+    C, Q, F = GY.shape
+    nh = truth.shape[0]
+    n_out = F // D
+    nc = ctrl.shape[0]
+    terms = np.empty(nc)
+    rows = np.empty(nj * n_out)
+    # numpy's sum over the columns: pairwise over a run of consecutive columns (the reference's slice, a view whose
+    # difference with the truth is laid out with the columns innermost), in turn over other columns (a list: numpy's
+    # indexed copy has the columns outermost, and its reduction adds them one after the other); the same below 8
+    run = True
+    for k in range(1, nc):
+        run = run and ctrl[k] == ctrl[k - 1] + 1
+    for c in range(C):
+        for i in range(nh):
+            for j in range(nj):
+                g = GY[c, i * nj + j]
+                for t in range(n_out):
+                    b = t * D
+                    acc = 0.0
+                    for k in range(nc):
+                        f = b + ctrl[k]
+                        e = (ybar[f] + g[f]) - truth[i, f]
+                        terms[k] = e * e * w[k]
+                        acc += terms[k]
+                    rows[j * n_out + t] = 0.0 + _pairwise_sq(terms, 0, nc, False) if run else acc
+            out[c, i] = (0.0 + _pairwise_sq(rows, 0, nj * n_out, False)) / n_mean
+
+
 def warm_up() -> None:
-    """Compile (or load from the cache) :func:`centre_rows_into` with tiny inputs of the real types."""
+    """Compile (or load from the cache) :func:`centre_rows_into` and :func:`cv_loss_into` with tiny inputs of the
+    real types."""
     X = np.arange(6.0).reshape(3, 2)
     centre_rows_into(X, X[:1].copy(), np.empty((3, 2)), np.empty((1, 2)), np.empty(3), np.empty(1))
+    cv_loss_into(np.zeros((1, 2, 4)), np.zeros(4), np.zeros((1, 4)), np.array([1], dtype=np.intp), np.ones(1), 2, 2,
+                 4.0, np.empty((1, 1)))

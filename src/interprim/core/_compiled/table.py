@@ -112,6 +112,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
            "the prefix coupling's rows and query centred by the rows' mean, with the sums of squares its "
            "conditioners read (Eq. 18's smoother per streamed frame: the ridge's trace, the kernel's norms); "
            "numpy's reductions in their order, bitwise equal"),
+    Kernel("prefix_rows.cv_loss_into", "prefix_rows:cv_loss_into", "interprim.models.coupling:cv_loss_np", True,
+           "the coupling's cross-validation losses of a batch of conditioners on one fold and phase (Eq. 18's "
+           "smoother: ybar plus each candidate's product, its controlled columns' weighted squared error over the "
+           "held-out queries); numpy's reductions in their order, bitwise equal"),
     Kernel("phase_likelihood.track_step", "phase_likelihood:track_step",
            "interprim.phase.likelihood:_loglik_batch_numpy", False,
            "one frame of the stream's lattice search: each lattice point's statistics extended by the frame; its "

@@ -76,16 +76,28 @@ GENERATORS = {"shared factors": shared_factors, "sines, quadratic coupling (ties
               "min-jerk reaches": reaches}
 
 
+def _frame_pass(model, partial, clock=time.perf_counter) -> float:
+    """Seconds of one streamed frame (``update`` + ``trajectory(100)``), averaged over one pass of ``partial``."""
+    st = model.stream()
+    t0 = clock()
+    for f in partial:
+        st.update(f).trajectory(100)
+    return (clock() - t0) / len(partial)
+
+
 def _frame(model, partial, n, clock=time.perf_counter):
     """Median seconds of one streamed frame (``update`` + ``trajectory(100)``) over ``n`` passes of ``partial``."""
-    runs = []
-    for _ in range(n + 1):
-        st = model.stream()
-        t0 = clock()
-        for f in partial:
-            st.update(f).trajectory(100)
-        runs.append((clock() - t0) / len(partial))
-    return float(np.median(runs[1:]))
+    return float(np.median([_frame_pass(model, partial, clock) for _ in range(n + 1)][1:]))
+
+
+def _alternating(one_a, one_b, n: int) -> tuple[float, float]:
+    """Medians of ``one_a(i)`` and ``one_b(i)`` over ``i = 1 .. n``, the two taken in turn (after one untimed
+    round): a slow spell of the machine falls on both sides, so their ratio does not swing with it."""
+    a, b = [], []
+    for i in range(n + 1):
+        a.append(one_a(i))
+        b.append(one_b(i))
+    return float(np.median(a[1:])), float(np.median(b[1:]))
 
 
 def _overhead(auto, partial) -> float:
@@ -108,17 +120,14 @@ def _overhead(auto, partial) -> float:
     return own / total if total > 0 else float("nan")
 
 
-def _predict(model, partial, n):
-    """Median seconds of ``predict`` + ``trajectory(100)`` over ``n`` prefixes of ``partial``, each one frame shorter
-    than the last (every call sees a new prefix, as a controller's calls do: nothing a model kept from the previous
-    call's frames is reused)."""
-    runs = []
-    for i in range(n + 1):
-        x = partial[:max(len(partial) - i, 2)]
-        t0 = time.perf_counter()
-        model.predict(x).trajectory(100)
-        runs.append(time.perf_counter() - t0)
-    return float(np.median(runs[1:]))
+def _predict_once(model, partial, i: int) -> float:
+    """Seconds of ``predict`` + ``trajectory(100)`` on the prefix of ``partial`` ``i`` frames shorter than it (every
+    call sees a new prefix, as a controller's calls do: nothing a model kept from the previous call's frames is
+    reused)."""
+    x = partial[:max(len(partial) - i, 2)]
+    t0 = time.perf_counter()
+    model.predict(x).trajectory(100)
+    return time.perf_counter() - t0
 
 
 def warm_up() -> None:
@@ -154,8 +163,11 @@ def measure(generator, S, Do, Dc, T, quick=False) -> dict:
         model = ip.InteractionPrimitive(obs).fit(demos, dt=0.01)
         fit_ip, cpu_ip = time.perf_counter() - t0, time.thread_time() - c0
         n = 3 if quick else 7
-        out = {"frame": _frame(auto, partial, n), "frame_ip": _frame(model, partial, n),
-               "predict": _predict(auto, partial, 5 * n), "predict_ip": _predict(model, partial, 5 * n),
+        # the default and the IP measured in turn, pass by pass and call by call (_alternating)
+        frame, frame_ip = _alternating(lambda i: _frame_pass(auto, partial), lambda i: _frame_pass(model, partial), n)
+        predict, predict_ip = _alternating(lambda i: _predict_once(auto, partial, i),
+                                           lambda i: _predict_once(model, partial, i), 5 * n)
+        out = {"frame": frame, "frame_ip": frame_ip, "predict": predict, "predict_ip": predict_ip,
                "fit": fit_auto, "fit_ip": fit_ip, "fit_cpu": cpu_auto, "fit_ip_cpu": cpu_ip,
                "overhead": _overhead(auto, partial)}
     members = getattr(auto.model_, "members_", {auto.chosen_: None})

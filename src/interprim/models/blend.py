@@ -116,12 +116,19 @@ def weights_on_np(u, s: float, D: float, mids, table) -> tuple:
     to 0 (the numpy reference of the compiled ``blend.weights_on``)."""
     ahead = (u - s) * D
     np.maximum(ahead, 0.0, out=ahead)
+    W = _band_weights(ahead, mids, table)
+    return ahead, W, int(W.size - np.count_nonzero(W))
+
+
+def _band_weights(ahead, mids, table) -> np.ndarray:
+    """:func:`~interprim.model_selection.stacking.weights_at`'s operations on the bands' weights ``table`` (B, M) at
+    their middles ``mids``, read at ``ahead`` (n,) seconds: ``(n, M)`` (without numpy.clip's wrapper; the quotients
+    in place)."""
     out = interp_columns(ahead, mids, table)
-    np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
+    np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values
     total = out.sum(axis=1, keepdims=True)
     np.maximum(total, 1e-300, out=total)
-    W = np.divide(out, total, out=out)  # in place: the same quotients
-    return ahead, W, int(W.size - np.count_nonzero(W))
+    return np.divide(out, total, out=out)
 
 
 def spread_std_np(Y, mean, W, ahead, steps, a, b, scaled: bool):
@@ -364,11 +371,7 @@ class Blend(Predictor):
         operations, with the bands' middles computed once)."""
         if self._mids is None or self._W.shape[1] == 1:  # one set of weights (a single member's: 1 everywhere)
             return np.broadcast_to(self._W[0], (ahead.size, self._W.shape[1])).copy()
-        out = interp_columns(ahead, self._mids, self._W)
-        np.maximum(out, 0.0, out=out)  # numpy.clip(out, 0, None)'s values, without its wrapper
-        total = out.sum(axis=1, keepdims=True)
-        np.maximum(total, 1e-300, out=total)
-        return np.divide(out, total, out=out)  # in place: the same quotients
+        return _band_weights(ahead, self._mids, self._W)
 
     @staticmethod
     def frame_overhead(n_members: int, n_dofs: int) -> float:

@@ -139,7 +139,7 @@ def test_a_member_of_weight_0_can_time_the_blend_with_its_own_remaining_duration
     path = tmp_path / "paced.npz"
     blend.save(path)
     back = ip.load_any(path)
-    assert back.remaining == "nn" and Blend.STATE_VERSION == 3
+    assert back.remaining == "nn" and back.past is None and Blend.STATE_VERSION == 4
     np.testing.assert_allclose(back.predict(x).mean, pred.mean, rtol=0, atol=1e-12)
 
 

@@ -94,7 +94,7 @@ def default_rule(level: float | None = None):
         fitted = stacking.stack(cv, 0.25, cost=cost, budget=budget, scales=False)
         fitted, lam = long_range.refine(cv, fitted, 0.25, cost=cost, budget=budget, level=level)
         return {"names": list(fitted.names), "W": np.asarray(fitted.W), "edges": list(fitted.edges),
-                "scales": fitted.scales, "lam": lam}
+                "scales": fitted.scales, "lam": lam, "past": fitted.record.get("past_weights")}
     return rule
 
 
@@ -142,7 +142,9 @@ def _outer(outer, held, choice: dict, true_end: bool = False) -> dict:
             sub.phase[i], sub.duration[i], sub.t_ahead, R, sub.horizon)) for i in range(len(sub.names))])
     else:
         placed.mean = long_range.replaced(sub, lam)
-    out = {k: v[0] for k, v in long_range.inner_yardsticks(placed, W, choice["edges"], lam).items()}
+    past = choice.get("past")
+    out = {k: v[0] for k, v in long_range.inner_yardsticks(
+        placed, W, choice["edges"], lam, past=None if past is None else [past.get(m, 0.0) for m in sub.names]).items()}
     if true_end:  # the whole movement's timing is the blend's own: only the seconds-based yardsticks are bounds
         out = {k: v for k, v in out.items() if not k.startswith("whole")}
     out.update({f"band over the rest, {a}": c for a, c in coverage(placed, W, choice["edges"],

@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 
 __all__ = ["LAMBDAS", "PACE", "remaining_duration", "pace_remaining", "shared_end", "member_units",
            "timing_choice", "long_range_choice", "case_groups", "schedule", "held", "replaced", "PREFER", "refine",
-           "inner_yardsticks", "summary_lines", "keep_real_time", "candidate_cases"]
+           "inner_yardsticks", "summary_lines", "keep_real_time", "candidate_cases", "past_cases", "past_choice"]
 
 #: The shrinkage factors of the members' remaining duration toward the clock's, from the simplest.
 LAMBDAS = (0.0, 0.5, 1.0)
@@ -316,6 +316,90 @@ def long_range_choice(cv: CrossValidation, W: ArrayLike, edges: Sequence[float],
     return cands[name], e_rt, name, table
 
 
+def past_cases(cv: CrossValidation, w_now: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(P, T, mask)``: the robot's past as the blend reconstructs it on the cases of ``cv``.
+
+    On the normalised-time grid ``u`` of the members' predictions (``cv.traj``), the blend's past is ``u < s``
+    with ``s = w_now . s_m`` (its phase, the members' weighted with the real-time weights ``w_now``), where member
+    ``m`` is read at ``u s_m / s`` (:class:`~interprim.models.blend.Blend`).  ``P`` (members, cases, G, C): each
+    member there, the controlled agent's ``C`` columns; ``T`` (cases, G, C): the held-out demonstration on the
+    grid (``cv.unit_truth``); ``mask`` (cases, G): the points before now."""
+    w_now = np.asarray(w_now, dtype=np.float64)
+    cols = cv.controlled or cv.observed
+    G = cv.family_array("traj", 0).shape[1]
+    u = np.linspace(0.0, 1.0, G)
+    s = w_now @ cv.phase  # (cases,)
+    mask = u[None, :] < s[:, None]
+    scale = np.divide(cv.phase, s[None, :], out=np.ones_like(cv.phase), where=s[None, :] > 0)  # (M, cases)
+    P = np.stack([place_cases(cv.family_array("traj", i)[..., cols], u[None, :] * scale[i][:, None])
+                  for i in range(len(cv.names))])
+    T = np.stack([cv.unit_truth[int(j)][:, cols] for j in cv.demo]) if len(cv.demo) else np.zeros((0, G, len(cols)))
+    return P, T, mask
+
+
+def _past_errors(P: np.ndarray, T: np.ndarray, mask: np.ndarray, w: np.ndarray, point_dim: int) -> np.ndarray:
+    """``(cases,)``: the RMS point error over the past (``mask``) of the members ``P`` weighted with ``w``."""
+    return case_rms(np.tensordot(w, P, axes=1), T, mask, range(T.shape[-1]), point_dim)
+
+
+def _past_fit(P: np.ndarray, T: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Weights on the simplex minimising the mean over cases of the RMS error over the past
+    (:func:`~interprim.model_selection.stacking.simplex_minimum` of
+    :func:`~interprim.model_selection.stacking.case_rms_loss`, the stacking's loss on the past's points)."""
+    from .stacking import case_rms_loss, simplex_minimum
+
+    m = mask.astype(np.float64)
+    E = P - T[None]  # (M, cases, G, C)
+    K = np.einsum("cg,mcgk,ncgk->cmn", m, E, E)
+    h = np.einsum("cg,mcgk,cgk->cm", m, E, T)
+    t = np.einsum("cg,cgk->c", m, T * T)
+    count = m.sum(axis=1) * T.shape[-1]
+    keep = count > 0
+    return simplex_minimum(case_rms_loss(K[keep], h[keep], t[keep], count[keep]), P.shape[0])[0]
+
+
+def past_choice(cv: CrossValidation, w_now: ArrayLike, groups: int = 3
+                ) -> tuple[np.ndarray | None, str, dict[str, dict[str, float]]]:
+    """``(w, name, table)``: the blend's weights for the robot's past (before now, in normalised time).
+
+    The paper's measure (Fig. 7) reads the robot's whole movement, most of which, from 60 % seen, is its past: what
+    its partner's movement so far says it has done.  No look-ahead band scores it, and the real-time weights that
+    place it otherwise may favour a member that follows the next quarter second well and reconstructs the past
+    badly (the nearest demonstration on a periodic task).  Candidates: the real-time weights ``w_now`` (tried
+    first: kept unless another candidate is better by more than its noise), the mean (``prior``, when among the
+    members of ``cv``) and the weights fitted on the past (:func:`_past_fit`, scored cross-fitted: fitted on the
+    cases of the other ``groups - 1`` groups of held-out demonstrations).  Each is scored by the RMS error over the
+    past of every held-out case (:func:`past_cases`), and :func:`one_se_choice` takes the first within one
+    standard error of the best, over the held-out demonstrations.
+
+    Returns ``w`` None for the real-time weights (the blend as before), else ``(members,)`` on the simplex over
+    ``cv.names``; ``name`` (``"real-time weights"``, ``"prior"`` or ``"fitted"``) and the choice's table.
+    """
+    w_now = np.asarray(w_now, dtype=np.float64)
+    P, T, mask = past_cases(cv, w_now)
+    rows = np.flatnonzero(mask.any(axis=1))
+    name = "real-time weights"
+    if len(cv.names) < 2 or len(np.unique(cv.demo[rows])) < 2:
+        return None, name, {}
+    P, T, mask, demo = P[:, rows], T[rows], mask[rows], cv.demo[rows]
+    M = len(cv.names)
+    cands: dict[str, np.ndarray] = {name: w_now}
+    if "prior" in cv.names:
+        cands["prior"] = np.eye(M)[cv.names.index("prior")]
+    errors = {m: _past_errors(P, T, mask, w, cv.point_dim) for m, w in cands.items()}
+    g = case_groups(demo, groups)
+    crossed = np.zeros(len(g))
+    for gi in np.unique(g):
+        train, test = np.flatnonzero(g != gi), np.flatnonzero(g == gi)
+        crossed[test] = _past_errors(P[:, test], T[test], mask[test], _past_fit(P[:, train], T[train], mask[train]),
+                                     cv.point_dim)
+    errors["fitted"] = crossed
+    name, table = one_se_choice(errors, demo, list(errors))
+    if name == "real-time weights":
+        return None, name, table
+    return (cands[name] if name in cands else _past_fit(P, T, mask)), name, table
+
+
 def _full(st: Stacking, names: list[str]) -> np.ndarray:
     """``(bands, len(names))``: the weights of the stacking ``st`` over ``names`` (0 for the others)."""
     W = np.zeros((st.W.shape[0], len(names)))
@@ -402,22 +486,39 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     if isinstance(lam, str) and lam not in members:  # the pace's family times the blend at weight 0
         members.append(lam)
         Wk = np.hstack([Wk, np.zeros((Wk.shape[0], 1))])
+    # the robot's past: the real-time weights unless another set is better by more than its noise (past_choice);
+    # the mean may join at weight 0 in every band when it fits the budget
+    offered = [m for m in names if m in members or (m == "prior" and (
+        cost is None or budget is None or cost(members + ["prior"]) <= budget))]
+    past_cv = placed.subset(offered)
+    w_rt = np.array([Wk[0, members.index(m)] if m in members else 0.0 for m in past_cv.names])
+    w_past, past_name, p_table = past_choice(past_cv, w_rt)
+    past = None
+    if w_past is not None:
+        past = {m: float(w) for m, w in zip(past_cv.names, w_past) if w > 0.0}
+        for m in past:
+            if m not in members:  # a member for the past alone: weight 0 in every band
+                members.append(m)
+                Wk = np.hstack([Wk, np.zeros((Wk.shape[0], 1))])
     band_weights = {m: [float(x) for x in Wk[:, i]] for i, m in enumerate(members)}
     record = dict(fitted.record)
-    record["inner_yardsticks"] = inner_yardsticks(placed, Wc, edges, lam, R)
+    record["inner_yardsticks"] = inner_yardsticks(
+        placed, Wc, edges, lam, R, past=None if past is None else [past.get(m, 0.0) for m in names])
+    record["past_weights"] = past
     record.update({"weights": {m: float(Wk[0, i]) for i, m in enumerate(members)}, "band_weights": band_weights,
                    "bands": edges, "blend_cv_error": blend_error, "band_level": band_level,
                    "variance_model": {k: np.asarray(v).tolist() for k, v in scales.items()},
                    "long_range": {"remaining": "own" if lam is None else lam if isinstance(lam, str)
                                   else float(lam), "beyond": beyond, "prefer": prefer,
-                                  "remaining_table": t_table, "beyond_table": b_table}})
+                                  "remaining_table": t_table, "beyond_table": b_table,
+                                  "past": past_name, "past_table": p_table}})
     if cost is not None and "cost" in record:
         record["cost"] = dict(record["cost"], frame=float(cost(members)))
     return Stacking(members, Wk, edges, scales, record), lam
 
 
 def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: float | str | None,
-                     remaining: ArrayLike | None = None) -> dict[str, list[float]]:
+                     remaining: ArrayLike | None = None, past: ArrayLike | None = None) -> dict[str, list[float]]:
     """The blend's figures on the inner folds' held-out cases, as a user reads them on a hold-out.
 
     ``{label: [ratio, standard error]}`` over the held-out demonstrations (:func:`ratio_se`): real time (the
@@ -425,7 +526,8 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
     true duration (known in a held-out fold), and the paper's Fig. 7 measure (the whole movement in normalised
     time from the case nearest 60 % seen of each held-out demonstration) ÷ the mean demonstration.  ``W``,
     ``edges``: the blend's weights per band; ``lam``: its remaining duration (:func:`refine`; ``remaining``: its
-    shared end per case when given, else :func:`shared_end`); ``cv.mean``: the members placed with it.  Empty when
+    shared end per case when given, else :func:`shared_end`); ``past``: its weights for the robot's past
+    (:func:`past_choice`; None: the real-time weights); ``cv.mean``: the members placed with it.  Empty when
     the mean (``prior``) was not compared: its prediction is each inner fold's mean demonstration, the references'
     shape.
     """
@@ -475,6 +577,8 @@ def inner_yardsticks(cv: CrossValidation, W: ArrayLike, edges: ArrayLike, lam: f
         ahead = np.clip((u - s) * D, 0.0, None)
         Wu = np.clip(interp_columns(ahead, t, per_step), 0.0, None)
         Wu = Wu / np.maximum(Wu.sum(axis=1, keepdims=True), 1e-300)
+        if past is not None:
+            Wu[u < s] = np.asarray(past, dtype=np.float64)
         Y = np.zeros((G, mean.shape[2]))
         for i in range(len(cv.names)):
             future = (np.clip(sm[i] + ahead / Dm[i], 0.0, 1.0) if R is None
@@ -501,6 +605,11 @@ def summary_lines(record: Mapping[str, Any]) -> list[str]:
               f"one shared end, the members' remaining duration shrunk {1 - float(rem):.0%} toward the clock's")
     out = [f"beyond the real-time band: {lr['beyond']} (chosen on the rest of the movement, one-standard-error "
            f"rule from the {'fitted' if lr.get('prefer') == 'fitted' else 'simplest'} end); timing: {timing}"]
+    if "past" in lr:
+        pw = record.get("past_weights")
+        out.append(f"the robot's past: {lr['past']}" + ("" if not pw else " (" + ", ".join(
+            f"{m} {w:.2f}" for m, w in pw.items()) + ")") + " (chosen on the past's error, one-standard-error rule "
+            "from the real-time weights)")
     ys = record.get("inner_yardsticks") or {}
     if ys:
         out.append("inner folds: " + "; ".join(f"{k} {v[0]:.2f} ± {v[1]:.2f}" for k, v in ys.items()))

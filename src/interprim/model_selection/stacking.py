@@ -37,7 +37,8 @@ if TYPE_CHECKING:
 __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS", "BAND_FLOOR", "look_ahead_bands",
            "variance_model", "blend_parts",
            "crossfit_coverage", "crossfit_coverages", "band_level", "band_levels",
-           "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message"]
+           "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message", "case_rms_loss",
+           "simplex_minimum"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
 COMBINE = ("blend", "best")
@@ -280,6 +281,47 @@ _CASE_BLOCK = 1 << 19
 _PER_FAMILY = ("mean", "traj", "phase", "duration")
 #: Marks a :meth:`CrossValidation.subset`'s products as those of its parent's ``mean`` rows, not copied yet.
 _LAZY = object()
+
+
+def case_rms_loss(K: np.ndarray, h: np.ndarray, t: np.ndarray,
+                  count: np.ndarray) -> Callable[[np.ndarray], tuple[float, np.ndarray]]:
+    """The mean over cases of a blend's RMS error, and its gradient, as a function of the weights ``w`` (M,).
+
+    Per case ``c`` the blend's squared error summed over its scored values is ``w' K_c w + 2 d (w' h_c) + d^2 t_c``
+    with ``d = sum(w) - 1`` (:meth:`CrossValidation._loss`: ``K_c`` the members' error products, ``h_c`` their
+    products with the truth, ``t_c`` the truth's squared sum), over ``count_c`` values.  ``K`` (cases, M, M), ``h``
+    (cases, M), ``t``, ``count`` (cases,)."""
+    def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
+        d = float(np.sum(w)) - 1.0
+        Kw = K @ w
+        hw = h @ w
+        q = np.maximum(Kw @ w + 2.0 * d * hw + d * d * t, 0.0)
+        r = np.sqrt(q / count) + 1e-12
+        grad = ((Kw + d * h + (hw + d * t)[:, None]) / (r * count)[:, None]).mean(axis=0)
+        return float(np.mean(r)), grad
+
+    return loss
+
+
+def simplex_minimum(loss: Callable[[np.ndarray], tuple[float, np.ndarray]], M: int) -> tuple[np.ndarray, float]:
+    """``(w, loss(w))``: weights on the simplex of ``M`` members minimising ``loss`` (a convex function returning its
+    value and gradient), by SLSQP from the uniform weights; weights under 1e-3 are set to 0, and the best single
+    member (a vertex) is returned instead when it is no worse."""
+    from scipy.optimize import minimize
+
+    if M == 1:
+        return np.ones(1), loss(np.ones(1))[0]
+    start = np.full(M, 1.0 / M)
+    best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
+    res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
+                   constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
+                   options={"ftol": 1e-10, "maxiter": 300})
+    w = np.clip(res.x, 0.0, None)
+    w[w < 1e-3] = 0.0
+    w = w / w.sum()
+    vertex = np.eye(M)[best]
+    lw, lv = loss(w)[0], loss(vertex)[0]
+    return (w, lw) if lw <= lv else (vertex, lv)
 
 
 class CrossValidation:
@@ -530,23 +572,7 @@ class CrossValidation:
 
     def _solve(self, steps: ArrayLike | None) -> tuple[np.ndarray, float]:
         """``(weights, their loss in units of the truth's RMS)`` of :meth:`blend_weights`."""
-        from scipy.optimize import minimize
-
-        M = len(self.names)
-        loss = self._loss(steps)
-        if M == 1:
-            return np.ones(1), loss(np.ones(1))[0]
-        start = np.full(M, 1.0 / M)
-        best = min(range(M), key=lambda m: loss(np.eye(M)[m])[0])
-        res = minimize(loss, start, jac=True, bounds=[(0.0, 1.0)] * M, method="SLSQP",
-                       constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0},),
-                       options={"ftol": 1e-10, "maxiter": 300})
-        w = np.clip(res.x, 0.0, None)
-        w[w < 1e-3] = 0.0
-        w = w / w.sum()
-        vertex = np.eye(M)[best]
-        lw, lv = loss(w)[0], loss(vertex)[0]
-        return (w, lw) if lw <= lv else (vertex, lv)
+        return simplex_minimum(self._loss(steps), len(self.names))
 
     def _loss(self, steps: ArrayLike | None) -> Callable[[np.ndarray], tuple[float, np.ndarray]]:
         """The stacking loss of weights ``w`` over ``steps`` and its gradient (a closure over the band's arrays).
@@ -574,17 +600,7 @@ class CrossValidation:
         h = np.einsum("cs,csm->cm", Wm, g["u"][np.ix_(rows, sel, cols)]) / scale / scale
         t = np.einsum("cs,cs->c", Wm, tt) / scale / scale
         count = Wm.sum(axis=1) * C
-
-        def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
-            d = float(np.sum(w)) - 1.0
-            Kw = K @ w
-            hw = h @ w
-            q = np.maximum(Kw @ w + 2.0 * d * hw + d * d * t, 0.0)
-            r = np.sqrt(q / count) + 1e-12
-            grad = ((Kw + d * h + (hw + d * t)[:, None]) / (r * count)[:, None]).mean(axis=0)
-            return float(np.mean(r)), grad
-
-        return loss
+        return case_rms_loss(K, h, t, count)
 
     def blend_scales(self, w: ArrayLike, level: float | None = None) -> dict[str, Any]:
         """The blend's variance model over the look-ahead, fitted to its held-out errors: per step ahead ``h`` and

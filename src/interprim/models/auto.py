@@ -356,7 +356,8 @@ class AutoInteraction(Predictor):
                 progress.step(f"fitted {m}")
             self.model_ = Blend.from_fitted(self.observed_dofs, members, fitted.band_weights, fitted.scales, train,
                                             dt, float(self.horizon), bands=fitted.edges, n_basis=self.n_basis,
-                                            smoothing_window=self.smoothing_window, remaining=remaining)
+                                            smoothing_window=self.smoothing_window, remaining=remaining,
+                                            past=info.get("past_weights"))
             weights = info["weights"]
             selection.update(combine="blend", **info)
             best = selection["cv_errors"][chosen]

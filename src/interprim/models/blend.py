@@ -181,17 +181,23 @@ class Blend(Predictor):
         :data:`interprim.model_selection.long_range.PACE`): the shared end is that member's own remaining duration
         ``max(1 - s_p, 0) D_p`` (:func:`interprim.model_selection.long_range.pace_remaining`); the member may carry
         weight 0 in every band, timing the others only.
+    past : dict, optional
+        ``{family: weight}``: the weights of the robot's past (the grid before now, ``u < s``; chosen on the inner
+        folds by :func:`interprim.model_selection.long_range.past_choice`); None: the real-time weights there.  A
+        family may carry weight here alone (weight 0 in every band).
     """
 
     _FITTED = "members_"
-    #: 2: weights per look-ahead band, the variance model's own time axis; 3: ``remaining`` may name a member
-    STATE_VERSION = 3
+    #: 2: weights per look-ahead band, the variance model's own time axis; 3: ``remaining`` may name a member;
+    #: 4: ``past``, the weights of the robot's past
+    STATE_VERSION = 4
     #: points of the normalised-time grid on which the members' predictions are read
     N_GRID = 201
 
     def __init__(self, observed_dofs, weights, scales=None, horizon: float = DEFAULT_HORIZON,
-                 n_basis: int = 20, smoothing_window=None, bands=None, remaining=None):
+                 n_basis: int = 20, smoothing_window=None, bands=None, remaining=None, past=None):
         self.observed_dofs = observed_dofs
+        self.past = past
         self.remaining = remaining
         self.weights = weights
         self.scales = scales
@@ -203,12 +209,13 @@ class Blend(Predictor):
     @classmethod
     def from_fitted(cls, observed_dofs, members: dict, weights: dict, scales, demos, dt: float,
                     horizon: float = DEFAULT_HORIZON, bands=None, n_basis: int = 20,
-                    smoothing_window=None, remaining=None) -> Blend:
+                    smoothing_window=None, remaining=None, past=None) -> Blend:
         """A blend of already fitted ``members`` (``{family: model}``) trained on ``demos`` at ``dt``."""
         sc = None if scales is None else {k: np.asarray(v, dtype=np.float64).tolist() for k, v in scales.items()}
         blend = cls(list(observed_dofs), dict(weights), sc, horizon, n_basis, smoothing_window,
                     None if bands is None else [float(b) for b in bands],
-                    None if remaining is None else remaining if isinstance(remaining, str) else float(remaining))
+                    None if remaining is None else remaining if isinstance(remaining, str) else float(remaining),
+                    None if past is None else {str(m): float(w) for m, w in past.items()})
         blend.adopt(members, demos, dt)
         return blend
 
@@ -223,6 +230,20 @@ class Blend(Predictor):
             raise ValueError(f"weights have {W.shape[0]} bands, bands has {len(self.bands)} edges")
         return names, W, np.asarray(self.bands, dtype=np.float64)
 
+    def _past_weights(self, names) -> np.ndarray | None:
+        """``past`` as ``(members,)`` weights on the simplex in the order of ``names`` (None without it)."""
+        if self.past is None:
+            return None
+        if not isinstance(self.past, dict) or not self.past:
+            raise ValueError(f"past must be a non-empty dict {{family: weight}} or None, got {self.past!r}")
+        unknown = [m for m in self.past if m not in names]
+        if unknown:
+            raise ValueError(f"past names {unknown}, not members of the blend (members: {names})")
+        w = np.array([float(self.past.get(m, 0.0)) for m in names])
+        if np.any(w < 0) or not np.all(np.isfinite(w)) or w.sum() <= 0:
+            raise ValueError(f"past weights must be finite, non-negative and not all zero, got {self.past!r}")
+        return w / w.sum()
+
     def adopt(self, members, demos, dt):
         """Take ``members`` (``{family: fitted model}``, trained on ``demos`` at ``dt``) as the fitted blend."""
         names, W, edges = self._weight_table()
@@ -231,12 +252,15 @@ class Blend(Predictor):
         if isinstance(self.remaining, str) and self.remaining not in names:
             raise ValueError(f"remaining={self.remaining!r} names no member of the blend (members: {names}): the "
                              "shared end is read from a member's own timing, so that member must be in weights")
+        w_past = self._past_weights(names)
         self.members_ = {m: members[m] for m in names}
         share_phase_models(self.members_)  # one learned phase estimate a frame for the members that read the same
         self._derived = DerivedCache()  # values derived from the fitted state (the variance model's arrays)
         self._names, self._W, self._edges = names, W / W.sum(axis=1, keepdims=True), edges
         #: the real-time weights (look-ahead 0), which place the blend in time after every frame
         self._w_now = weights_at(np.zeros(1), edges, self._W)[0]
+        #: the weights of the robot's past over the members (None: the real-time weights there)
+        self._w_past = w_past
         #: the normalised weights C-contiguous, as the compiled ``blend.weights_on`` reads them
         self._W_table = np.ascontiguousarray(self._W)
         #: the bands' middles, between which :func:`weights_at` interpolates (computed once, not per frame)
@@ -342,6 +366,10 @@ class Blend(Predictor):
             ahead = (u - s) * D
             np.maximum(ahead, 0.0, out=ahead)
             W = self._weights_on(ahead)  # (n_grid, M)
+            zeros = int(W.size - np.count_nonzero(W))
+        if self._w_past is not None and s > 0.0:  # the robot's past (u < s) by its own weights
+            past = u < s
+            W[past] = self._w_past
             zeros = int(W.size - np.count_nonzero(W))
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed

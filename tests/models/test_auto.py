@@ -492,8 +492,8 @@ def tied():
 
 
 def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_budget(tied, blend):
-    """Every member of a fitted default carries weight (at least MIN_WEIGHT of some look-ahead band) or is the one
-    whose pace sets the blend's shared end (``Blend.remaining``), and on the tied data its modelled frame is within
+    """Every member of a fitted default carries weight (at least MIN_WEIGHT of some look-ahead band or weight in the
+    robot's past, ``Blend.past``) or is the one whose pace sets the blend's shared end (``Blend.remaining``), and on the tied data its modelled frame is within
     the budget: 3x the Interaction Primitive's, by the cost model."""
     from interprim.model_selection.stacking import MIN_WEIGHT
 
@@ -503,7 +503,8 @@ def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_bu
         if s["combine"] == "blend":
             assert set(s["band_weights"]) == set(model.model_.members_)
             for m, w in s["band_weights"].items():
-                assert max(w) >= MIN_WEIGHT or m == model.model_.remaining, (m, w, model.model_.remaining)
+                assert max(w) >= MIN_WEIGHT or m == model.model_.remaining or m in (model.model_.past or {}), (
+                    m, w, model.model_.remaining, model.model_.past)
     c = auto.selection_["cost"]
     assert c["budget"] == pytest.approx(3.0 * c["ip_frame"]) and c["frame"] <= c["budget"]
     assert c["frame"] == pytest.approx(_modelled_frame(auto, demos), rel=1e-12)

@@ -493,8 +493,8 @@ def tied():
 
 def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_budget(tied, blend):
     """Every member of a fitted default carries weight (at least MIN_WEIGHT of some look-ahead band or weight in the
-    robot's past, ``Blend.past``) or is the one whose pace sets the blend's shared end (``Blend.remaining``), and on the tied data its modelled frame is within
-    the budget: 3x the Interaction Primitive's, by the cost model."""
+    robot's past, ``Blend.past``) or is the one whose pace sets the blend's shared end (``Blend.remaining``), and
+    on the tied data its modelled frame is within the budget: 3x the Interaction Primitive's, by the cost model."""
     from interprim.model_selection.stacking import MIN_WEIGHT
 
     demos, auto = tied

@@ -436,7 +436,9 @@ def refine(cv: CrossValidation, fitted: Stacking, horizon: float, prefer: str = 
     :class:`~interprim.model_selection.stacking.Stacking` keeps the members carrying weight in some band (and the
     pace's family, of weight 0 in every band when it carries none, when it times the blend), its variance model
     fitted again with the chosen weights, and its ``record`` says what was chosen (``long_range``: ``remaining``,
-    ``beyond`` and both choices' tables).
+    ``beyond``, ``past`` and the choices' tables; ``past_weights``: the weights of the robot's past,
+    :func:`past_choice`, None for the real-time weights; a family weighted there alone joins at weight 0 in every
+    band).
 
     ``pace``: the family whose own remaining duration is the first timing candidate (:data:`PACE`; None: no such
     candidate), offered when it was compared and, with a budget, when the blend's families and it fit in it.

@@ -34,6 +34,11 @@ remaining duration read from the partner's pace").
 demonstration (``prior``) alone, (optionally each single family,) the real-time weights held at every look-ahead,
 the weights fitted per band.  Every candidate keeps the real-time band's weights; the per-band weights are scored
 cross-fitted (fitted on the other demonstrations' cases), the others need no fit.
+
+**The robot's past** (:func:`past_choice`).  Before now (normalised time ``u < s``) the blend reconstructs what the
+robot has done, which the paper's whole-movement measure (Fig. 7) reads and no look-ahead band scores.  Candidates:
+the real-time weights (tried first), the mean, and weights fitted on the past's error; another set than the
+real-time weights only when it is better by more than its noise.
 """
 
 from __future__ import annotations

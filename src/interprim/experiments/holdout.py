@@ -88,7 +88,8 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
     log(f"  {name}: chose {chosen} on the development recordings "
         f"({', '.join(f'{m} {v:.4g}' for m, v in inner.items())}), blend "
         f"{', '.join(f'{m} {x:.2f}' for m, x in weights.items())}; beyond the real-time band "
-        f"{lr.get('beyond', '-')}, remaining duration {lr.get('remaining', '-')}, the robot's past {lr.get('past', '-')}; in {time.perf_counter() - t0:.0f} s")
+        f"{lr.get('beyond', '-')}, remaining duration {lr.get('remaining', '-')}, the robot's past "
+        f"{lr.get('past', '-')}; in {time.perf_counter() - t0:.0f} s")
     prefixes = {"causal": Prefixes(hold, obs)}
     if lookahead and prefixes["causal"].causal:
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)

@@ -95,9 +95,13 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         prefixes["lookahead"] = Prefixes([np.asarray(x) for x in hold], obs)
     records: dict[str, list] = {p: [] for p in prefixes}
 
+    # fitted as a user fits them: on the recordings with their raw samples when they have them (the same arrays;
+    # the Interaction Primitive's calibration then sees causal prefixes)
+    fit_on = dev if getattr(dev, "raw", None) is not None else train
+
     def models():
         for m, factory in make.items():
-            yield m, factory().fit(train, dt=dt)
+            yield m, factory().fit(fit_on, dt=dt)
         yield "auto", blend
 
     for first, (m, est) in enumerate(models()):

@@ -348,7 +348,9 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     ``"protocol": "whole"``) are added too.  Returns records with ``"demo"`` added.
 
     ``demos`` may be a :class:`~interprim.datasets.Demonstrations` with raw samples (NuiSI, resampled
-    recordings): every prediction then sees a causal prefix (:class:`~interprim.model_selection.prefixes.Prefixes`).
+    recordings): every prediction then sees a causal prefix (:class:`~interprim.model_selection.prefixes.Prefixes`),
+    and every method is fitted on the training demonstrations with their raw samples (the same arrays; a model's
+    own cross-validation, the Interaction Primitive's calibration, then sees causal prefixes too).
     ``oracles``: one ``(T_i, D)`` best possible prediction per demonstration (synthetic data); adds the floor.
 
     ``test``: evaluate on a fixed hold-out instead of cross-validating: ``demos`` are then the training
@@ -358,6 +360,10 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     ``references`` as there too (``references=False``: no clock and oracle-duration records at all), and
     ``metrics``.
     """
+    # demonstrations with their raw samples (a Demonstrations or TrainingSet that can ``take`` a subset) are fitted
+    # with them, so that a model's own cross-validation (the Interaction Primitive's calibration) sees causal prefixes
+    # as a robot does; the arrays are the same
+    source = demos if getattr(demos, "raw", None) is not None and hasattr(demos, "take") else None
     if test is not None:
         # with a hold-out ``test``, ``demos`` are the training demonstrations themselves (arrays, not Prefixes)
         train = [np.asarray(d, dtype=np.float64) for d in cast("Iterable[ArrayLike]", demos)]
@@ -378,9 +384,11 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     sets = sets or folds(len(demos), k)
     bar = Progress(progress, len(sets), desc="folds", unit="fold", lines=False)  # a bar with the [experiments] extra
     for held in sets:
-        train = [d for i, d in enumerate(demos) if i not in set(held)]
+        kept = [i for i in range(len(demos)) if i not in set(held)]
+        train = [demos[i] for i in kept]
+        fit_on = train if source is None else cast(Any, source).take(kept) if test is None else source
         for first, (name, factory) in enumerate(make_estimators.items()):
-            est = factory().fit(train, dt=dt)
+            est = factory().fit(fit_on, dt=dt)
             for j in held:
                 def pre(k: int, j: int = j) -> np.ndarray:
                     return prefixes(j, k)

@@ -12,7 +12,13 @@ while phase errors make the real error larger than the posterior admits where ti
 count), the way a robot uses a prediction (:mod:`interprim.evaluation.realtime`): after the first ``p`` of a
 held-out demonstration, the frame ``j`` steps after the last observed one is compared with the prediction at
 normalised time ``s + h``, look-ahead ``h = j dt / D``, with the model's own phase ``s`` and duration ``D``;
-the observed past (``j <= 0``) is compared the same way.
+the observed past (``j <= 0``) is compared the same way.  When the demonstrations carry their raw samples (an
+irregular recording interpolated onto the grid, as NuiSI, whose partner is tracked at ~9 Hz on a 20 Hz grid), each
+held-out case sees its causal prefix (:class:`~interprim.model_selection.prefixes.Prefixes`: only the samples
+recorded by its last frame, the last one held), as a robot does; calibrated on the uncut interpolation instead,
+which hands every prefix the partner's next sample, the partner's band over the next 0.25 s covered 65-88 % under
+causal prefixes on NuiSI's development recordings, and 82-89 % calibrated on causal prefixes (three contiguous
+folds; the means unchanged).
 
 How far the posterior std is off depends on where one looks: the observed agent's next frames are pinned by
 the frames just seen and its far future is not; a DoF that barely moves (a shoulder) is predicted relatively
@@ -246,9 +252,13 @@ def fold_model(model, keep, observed=None):
 LOOKAHEAD_EDGES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.4, 1.0)
 
 
-def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, edges=LOOKAHEAD_EDGES):
+def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, edges=LOOKAHEAD_EDGES,
+                  prefixes=None):
     """Held-out squared errors and predicted variances of a fitted ``model``, per demonstration, fraction seen,
-    look-ahead bin and agent (the raw material of :func:`fit_calibration`).
+    look-ahead bin and agent (the raw material of :func:`fit_calibration`).  Each held-out case sees the first
+    frames of its demonstration's observed columns, or with ``prefixes`` (``prefixes(j, k)``: what a robot had of
+    demonstration ``j`` at its ``k``-th frame, :class:`~interprim.model_selection.prefixes.Prefixes`) its causal
+    prefix; the errors are always against the demonstration's own frames.
 
     Returns ``(sums, hsum, phases)``: ``sums`` of shape ``(S, F, B, D, 3)`` holds, for demonstration ``j`` held
     out, fraction ``i`` seen, look-ahead bin ``b`` (past bins ``-edges`` reversed, then future bins ``edges``)
@@ -283,7 +293,7 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
             T = d.shape[0]
             for i, p in enumerate(fr):
                 M = observed_frames(T, p, keep=1)  # at least one frame left to score
-                pred = m.predict(d[:M, obs])
+                pred = m.predict(d[:M, obs] if prefixes is None else prefixes(j, M))
                 s = phases[j, i] = float(pred.normalised_time)
                 h = (np.arange(T) - (M - 1)) * dt / float(pred.duration)
                 # the past the grid can show; the first frame sits at s + h = 0 up to rounding (the phase is its elapsed
@@ -377,7 +387,7 @@ def _estimate(sums, hsum, agents, clip):
 
 
 def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, min_demos: int = 6,
-                    clip=(1e-3, 1e3), edges=LOOKAHEAD_EDGES) -> Calibration | None:
+                    clip=(1e-3, 1e3), edges=LOOKAHEAD_EDGES, prefixes=None) -> Calibration | None:
     """Measure :class:`Calibration` of a fitted ``model`` by ``n_folds``-fold cross-validation on its own
     training demonstrations (:func:`fold_model`: the prior re-estimated without the held-out fold).
 
@@ -397,6 +407,11 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
         Bounds of a scale (a guard against a degenerate fold).
     edges : sequence of float
         Look-ahead bins in normalised time (from 0, increasing; mirrored for the observed past).
+    prefixes : Prefixes, optional
+        The demonstrations' causal observed prefixes (:class:`~interprim.model_selection.prefixes.Prefixes` of
+        demonstrations with their raw samples): a held-out case sees only the samples recorded by its last frame,
+        as a robot does, so the band is calibrated on the stale last frame of a partner tracked slower than the
+        grid.  Without it, the first frames of the demonstration.
 
     Returns
     -------
@@ -404,7 +419,7 @@ def fit_calibration(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS,
     """
     if len(demos) < min_demos:
         return None
-    sums, hsum, phases = held_out_sums(model, demos, n_folds, fractions, edges)
+    sums, hsum, phases = held_out_sums(model, demos, n_folds, fractions, edges, prefixes)
     fr = np.asarray(fractions, dtype=np.float64)
     sums = np.einsum("sik,si...->sk...", _tent(phases, fr), sums)  # re-binned by the phase the model estimated
     agents = ([int(i) for i in model.observed_dofs_], [int(i) for i in model.controlled_dofs_])

@@ -26,6 +26,7 @@ from ...core.blas import one_blas_thread
 from ...core.dmp import warn_representation
 from ...core.errors import NotFittedError
 from ...core.validation import check_positive
+from ...model_selection.prefixes import Prefixes
 from ..base import Predictor
 from ..training import TrainingSet
 from .fitted import FittedPrimitive
@@ -421,7 +422,9 @@ class InteractionPrimitive(Predictor):
         if self.n_basis == "cv":  # the representation chosen from the demonstrations
             chosen = choose_n_basis(params, arrays, dt, columns, obs, ctrl, kk)
             params["n_basis"] = chosen["chosen"]
-        self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk)
+        # with their raw samples (an irregular recording), the calibration's held-out cases see causal prefixes
+        prefixes = Prefixes(data, obs) if data.raw is not None and data.times is not None else None
+        self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk, prefixes)
         if chosen is not None:
             self.fitted_.selection_["n_basis"] = chosen  # fit assigns what the choice returned
         # at the caller's line: here, Predictor.fit, its one-BLAS-thread wrapper, the caller

@@ -43,10 +43,12 @@ __all__ = ["FittedPrimitive", "PARAM_NAMES", "FITTED_NAMES"]
 
 class _PendingCalibration:
     """:func:`~interprim.models.primitive.calibration.fit_calibration` of a state as fitted on ``arrays``, measured
-    once (at the end of the fit, or on first use for a fit inside :func:`interprim.core.cache.std_unused`)."""
+    once (at the end of the fit, or on first use for a fit inside :func:`interprim.core.cache.std_unused`);
+    ``prefixes`` (:class:`~interprim.model_selection.prefixes.Prefixes`, or None) gives the held-out cases' causal
+    observed prefixes."""
 
-    def __init__(self, origin, arrays):
-        self.origin, self.arrays, self.done, self.value = origin, arrays, False, None
+    def __init__(self, origin, arrays, prefixes=None):
+        self.origin, self.arrays, self.prefixes, self.done, self.value = origin, arrays, prefixes, False, None
 
     def resolve(self, reader):
         """The calibration (measured now if not yet), also set on ``reader`` (the state or a copy of it)."""
@@ -57,8 +59,8 @@ class _PendingCalibration:
             origin.__dict__.pop("_calibration_pending", None)
             origin.__dict__["calibration_"] = None  # as during an eager fit: the folds' copies carry none
             with single_thread():  # many small conditionings (a 252 x 252 covariance each): one BLAS thread
-                self.value = fit_calibration(origin, self.arrays)
-            self.done, self.origin, self.arrays = True, None, None
+                self.value = fit_calibration(origin, self.arrays, prefixes=self.prefixes)
+            self.done, self.origin, self.arrays, self.prefixes = True, None, None, None
             origin.__dict__["calibration_"] = self.value
         reader.__dict__["calibration_"] = self.value
         reader.__dict__.pop("_calibration_pending", None)
@@ -200,18 +202,19 @@ class FittedPrimitive:
 
     # ------------------------------------------------------------------ fitting
     @classmethod
-    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk) -> FittedPrimitive:
+    def learn(cls, params: dict, arrays, dt: float, columns, obs, ctrl, kk, prefixes=None) -> FittedPrimitive:
         """Fit a new state on validated demonstrations ``arrays`` (data columns, uniform ``dt``): the DMP
         parameters of each (Eq. 3-4), the prior (Eq. 10), the observation noise (Eq. 16; by cross-validation
         with ``sigma2="cv"``, :mod:`interprim.models.primitive.selection`), the phase model, the DTW reference
         (Sec. III-B), the input range and the calibration (:mod:`interprim.models.primitive.calibration`).  ``obs``,
         ``ctrl``: the agents' columns; ``kk``: PCA components per agent or ``None`` (as the estimator's parameter
-        check returns)."""
+        check returns); ``prefixes``: the demonstrations' causal observed prefixes when their raw samples are known
+        (:class:`~interprim.model_selection.prefixes.Prefixes`), which the calibration's held-out cases see."""
         st = cls(params)
-        cls._learn(st, arrays, dt, columns, obs, ctrl, kk)
+        cls._learn(st, arrays, dt, columns, obs, ctrl, kk, prefixes)
         return st
 
-    def _learn(self, arrays, dt, columns, obs, ctrl, kk):
+    def _learn(self, arrays, dt, columns, obs, ctrl, kk, prefixes=None):
         D = arrays[0].shape[1]
         beta_y = self.alpha_y / 4.0 if self.beta_y is None else float(self.beta_y)
         self.beta_y_ = beta_y
@@ -334,9 +337,9 @@ class FittedPrimitive:
         if self.calibrate is True or (self.calibrate == "with-cv" and self.sigma2 == "cv"):
             if std_deferred():  # a cross-validation that reads the means only: measured if the std is ever asked
                 del self.calibration_
-                self._calibration_pending = _PendingCalibration(self, arrays)
+                self._calibration_pending = _PendingCalibration(self, arrays, prefixes)
             else:
-                self.calibration_ = _PendingCalibration(self, arrays).resolve(self)
+                self.calibration_ = _PendingCalibration(self, arrays, prefixes).resolve(self)
 
     def measure_deferred(self) -> None:
         """Measure now what a fit inside :func:`interprim.core.cache.std_unused` deferred (the std's calibration),

@@ -88,7 +88,9 @@ def _choices(model) -> list:
             text += f", observed agent {_g(eo)} vs {_g(po)}"
         out.append(("held-out error", text + " (MSE per DoF variance)"))
     cal = getattr(model, "calibration_", None)
-    out.append(("uncertainty", "calibrated on held-out folds" if cal is not None else "the posterior (not calibrated)"))
+    causal = " (causal prefixes of the recorded samples)" if sel.get("calibration_prefixes") == "causal" else ""
+    out.append(("uncertainty", f"calibrated on held-out folds{causal}" if cal is not None
+                else "the posterior (not calibrated)"))
     return out
 
 

@@ -63,6 +63,17 @@ def test_a_fit_on_raw_samples_calibrates_on_causal_prefixes(slow):
     assert _same(causal.calibration_, fit_calibration(causal.fitted_, arrays, prefixes=P))
     assert _same(plain.calibration_, fit_calibration(plain.fitted_, arrays))
     assert not _same(causal.calibration_, plain.calibration_)
+    # the summary says what the calibration's held-out cases saw, also after a round trip through a model file
+    assert "calibrated on held-out folds (causal prefixes of the recorded samples)" in causal.summary()
+    assert "calibrated on held-out folds\n" in plain.summary() + "\n" and "causal" not in plain.summary()
+
+
+def test_the_summary_of_a_loaded_model_still_names_the_causal_calibration(slow, tmp_path):
+    _, _, causal, _ = slow
+    causal.save(tmp_path / "ip.npz")
+    back = ip.InteractionPrimitive.load(tmp_path / "ip.npz")
+    assert "(causal prefixes of the recorded samples)" in back.summary()
+    assert _same(back.calibration_, causal.calibration_)
 
 
 def test_the_stale_partner_widens_the_partners_band_near_now(slow):

@@ -335,6 +335,8 @@ class FittedPrimitive:
             np.concatenate([a[:, obs] for a in arrays], axis=0))
         self.calibration_ = None
         if self.calibrate is True or (self.calibrate == "with-cv" and self.sigma2 == "cv"):
+            if prefixes is not None:  # what the calibration's held-out cases see (summary() says it)
+                self.__dict__.setdefault("selection_", {})["calibration_prefixes"] = "causal"
             if std_deferred():  # a cross-validation that reads the means only: measured if the std is ever asked
                 del self.calibration_
                 self._calibration_pending = _PendingCalibration(self, arrays, prefixes)

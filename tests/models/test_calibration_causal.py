@@ -117,3 +117,41 @@ def test_the_causal_band_covers_a_new_slow_partner_better(slow):
     assert err["causal"] == err["plain"]
     assert abs(cov["causal"] - 0.9) < abs(cov["plain"] - 0.9), cov
     assert cov["causal"] >= 0.8, cov
+
+
+def _late_partner(ds, start):
+    """``ds`` whose partner's first recorded sample comes ``start`` seconds after each grid's first frame."""
+    raw = []
+    for streams in ds.raw:
+        s = streams[0]
+        keep = s.times >= start
+        raw.append([RawStream(s.times[keep], s.columns, s.values[keep]), *streams[1:]])
+    return Demonstrations(ds.demos, ds.times, ds.columns, dt=ds.dt, observed_dofs=ds.observed_dofs, raw=raw)
+
+
+def test_first_frame_is_where_a_causal_prefix_begins():
+    late = _late_partner(_slow_partner(4, seed=5), 0.2)
+    P = Prefixes(late, OBS)
+    for j in range(len(late)):
+        k0 = P.first_frame(j)
+        assert 1 < k0 < len(late[j])
+        with pytest.raises(ValueError, match="no raw sample at or before"):
+            P(j, k0 - 1)
+        assert P(j, k0).shape == (k0, 2)
+    assert Prefixes([np.asarray(x) for x in late], OBS).first_frame(0) == 1
+    with pytest.raises(ValueError, match="none of the raw streams"):
+        Prefixes(late, [0, 1, 5]).first_frame(0)
+
+
+def test_a_partner_recorded_late_is_calibrated_from_where_it_was_seen(slow):
+    """Held-out cases before the partner's first sample are left out (a robot could not predict there), not a crash."""
+    ds, arrays, causal, _ = slow
+    late = _late_partner(ds, 0.2)
+    model = ip.InteractionPrimitive(observed_dofs=OBS, n_basis=10).fit(late)
+    assert model.calibration_ is not None and model.calibration_.problem(5) is None
+    np.testing.assert_array_equal(model.thetas_, causal.thetas_)
+    sums, _, _ = held_out_sums(model.fitted_, arrays, prefixes=Prefixes(late, OBS))
+    full, _, _ = held_out_sums(model.fitted_, arrays, prefixes=Prefixes(ds, OBS))
+    seen = sums[..., 2].sum(axis=(2, 3)) > 0  # (demonstration, fraction) cases scored
+    assert not seen.all() and seen[:, -1].all()  # the earliest fractions of some cases left out, the latest kept
+    assert (full[..., 2].sum(axis=(2, 3)) > 0).all()

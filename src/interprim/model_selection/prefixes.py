@@ -123,6 +123,25 @@ class Prefixes:
         times, raw = cast("list[np.ndarray]", self._times), cast("list[Sequence[RawStream]]", self._raw)
         return causal_prefix(times[j], raw[j], k, self.observed_dofs)
 
+    def first_frame(self, j: int) -> int:
+        """The fewest frames ``k`` of demonstration ``j`` for which a robot had recorded every observed column at
+        least once (1 for plain arrays): a causal prefix exists from there on.
+
+        Raises
+        ------
+        ValueError
+            If an observed column is in none of the demonstration's raw streams.
+        """
+        if not self.causal:
+            return 1
+        times, raw = cast("list[np.ndarray]", self._times)[j], cast("list[Sequence[RawStream]]", self._raw)[j]
+        first = {int(c): float(s.times[0]) for s in raw for c in s.columns}
+        missing = [c for c in self.observed_dofs if c not in first]
+        if missing:
+            raise ValueError(f"columns {missing} are in none of the raw streams (they hold {sorted(first)})")
+        start = max(first[c] for c in self.observed_dofs)
+        return int(np.searchsorted(times + TIME_TOLERANCE, start, side="left")) + 1
+
     def subset(self, indices: Iterable[int]) -> Prefixes:
         """The prefixes of the demonstrations ``indices`` only (renumbered from 0)."""
         idx = list(indices)

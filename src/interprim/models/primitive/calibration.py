@@ -293,6 +293,8 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
             T = d.shape[0]
             for i, p in enumerate(fr):
                 M = observed_frames(T, p, keep=1)  # at least one frame left to score
+                if prefixes is not None and M < prefixes.first_frame(j):
+                    continue  # nothing of the partner recorded yet: no prediction a robot could make
                 pred = m.predict(d[:M, obs] if prefixes is None else prefixes(j, M))
                 s = phases[j, i] = float(pred.normalised_time)
                 h = (np.arange(T) - (M - 1)) * dt / float(pred.duration)

@@ -145,6 +145,68 @@ def test_uniform_grid_with_resample_dt(tmp_path):
     np.testing.assert_allclose(ds.demos[0][:, 3:], np.array([robot(t) for t in t_abs]), rtol=1e-9, atol=1e-7)
 
 
+def test_a_bag_on_a_grid_keeps_its_samples_as_recorded_for_causal_prefixes(tmp_path):
+    """With resample_dt the grid is interpolated from both streams; the samples as recorded are kept (``raw``), so
+    a prefix sees only the partner's samples recorded by its last frame, and split demonstrations and a folder of
+    bags whose columns come in another order keep them too."""
+    from interprim.model_selection.prefixes import Prefixes
+
+    b = two_agent_bag("mcap", starts=(10.0, 13.0), period=0.05, marker="/start")  # the partner at 20 Hz
+    path = b.write(bag_path(tmp_path, "mcap"))
+    ds = load_rosbag(path, ["/human/wrist", "/robot/joint_states"], resample_dt=0.01, split_topic="/start")
+    assert len(ds) == 2 and ds.raw is not None and len(ds.raw) == 2
+    P = Prefixes(ds, ds.observed_dofs)
+    assert P.causal
+    for j, (y, t, streams) in enumerate(zip(ds.demos, ds.times, ds.raw)):
+        obs, ctrl = streams
+        assert obs.columns == (0, 1, 2) and ctrl.columns == (3, 4)
+        # the recorded values at their stamps, on the demonstration's clock
+        np.testing.assert_allclose(obs.values, np.array([human(t0) for t0 in obs.times + t[0] + ds_start(j)]),
+                                   rtol=1e-9, atol=1e-7)
+        for k in (1, 7, 23, len(t)):
+            got = P(j, k)
+            recorded = obs.times <= t[k - 1] + 1e-9
+            last = obs.times[recorded][-1]
+            inside = t[:k] <= last + 1e-9
+            np.testing.assert_allclose(got[inside], y[:k][inside][:, :3], rtol=0, atol=1e-9)
+            np.testing.assert_allclose(got[~inside], np.repeat(obs.values[recorded][-1:], (~inside).sum(), 0),
+                                       rtol=0, atol=0)  # after the last sample recorded: held, not the next one
+        assert any((t[:k] > obs.times[obs.times <= t[k - 1] + 1e-9][-1] + 1e-9).any() for k in range(1, len(t)))
+    # without a grid, nothing is interpolated onto the partner's stamps: no raw samples are needed
+    assert load_rosbag(path, ["/human/wrist", "/robot/joint_states"], split_topic="/start").raw is None
+
+
+def ds_start(j):
+    """Seconds from a demonstration's first grid frame back to the bag's clock origin of ``human``: the grid starts
+    at the robot's first message after the marker (0.007 s after the partner's first sample)."""
+    return (10.0, 13.0)[j] + 0.007
+
+
+def test_a_folder_of_bags_keeps_their_samples_in_its_column_order(tmp_path):
+    folder = tmp_path / "bags"
+    folder.mkdir()
+    two_agent_bag("ros1").write(folder / "a.bag")
+    b = Bag("ros1")  # the robot's joints named in the other order: its columns are reordered to a.bag's
+    for k in range(40):
+        t = 20.0 + 0.02 * k
+        b.pose("/human/wrist", t, human(t))
+        b.joints("/robot/joint_states", t + 0.007, ["j2", "j1"], robot(t + 0.007)[::-1].copy())
+    b.write(folder / "b.bag")
+    ds = load_demonstrations(folder, topics="/human/wrist,/robot/joint_states", resample_dt=0.01)
+    assert ds.columns[3:] == ["j1", "j2"] and ds.raw is not None and len(ds.raw) == 2
+    for y, t, streams in zip(ds.demos, ds.times, ds.raw):
+        joints = next(s for s in streams if 3 in s.columns)
+        assert sorted(joints.columns) == [3, 4]
+        for c in (3, 4):  # each raw column holds the joint its grid column holds
+            v = joints.values[:, joints.columns.index(c)]
+            np.testing.assert_allclose(np.interp(t, joints.times, v), y[:, c], rtol=0, atol=1e-9)
+    sel = ds.select(["j2", "human/wrist_x", "human/wrist_y", "human/wrist_z", "j1"])
+    for streams in sel.raw:
+        assert sorted(c for s in streams for c in s.columns) == [0, 1, 2, 3, 4]
+        wrist = next(s for s in streams if 1 in s.columns)
+        assert wrist.columns == (1, 2, 3)
+
+
 def test_tf_frame_with_orientation(tmp_path):
     b = Bag("ros1")
     angle = np.linspace(0, 3.0, 30)  # about z, through more than pi: the quaternion sign flips in the file

@@ -297,6 +297,7 @@ def load_demonstrations(
     meta: dict = {}
     notes: list[str] = []
     all_bags = True  # bags are interpolated onto the resample_dt grid by their reader
+    raw: list | None = []  # every file's recorded samples, or None once a file has none
     for f in files:
         is_bag = f.suffix.lower() in (".bag", ".db3", ".mcap") or is_rosbag2_folder(f)
         all_bags = all_bags and is_bag
@@ -304,6 +305,7 @@ def load_demonstrations(
                         min_frames=int(min_frames), resample_dt=resample_dt if is_bag else None)
         d, t, c, lab, m = _read_file(f, common, kwargs)
         notes += [n for n in m.get("notes", []) if n not in notes]  # once per cause, not once per file
+        r = m.get("raw")  # the samples as recorded, when the reader interpolated them (a bag on a grid)
         if cols is None:
             cols, first = c, f
             meta = m
@@ -311,6 +313,7 @@ def load_demonstrations(
             if sorted(c) == sorted(cols):
                 order = [c.index(name) for name in cols]
                 d = [x[:, order] for x in d]
+                r = None if r is None else [[s.select(order) for s in streams] for streams in r]
             else:
                 missing = [x for x in cols if x not in c]
                 extra = [x for x in c if x not in cols]
@@ -319,6 +322,7 @@ def load_demonstrations(
                 )
         demos.extend(d)
         times.extend(t)
+        raw = None if raw is None or r is None else raw + list(r)
         labels.extend(lab if len(files) == 1 else [f"{f.stem}:{x}" if len(d) > 1 else f.stem for x in lab])
     assert cols is not None  # set by the first file (there is at least one)
     observed = None
@@ -331,7 +335,7 @@ def load_demonstrations(
             observed = select_columns(cols, names, where=f"{files[0]} ('observed')")
     ds = Demonstrations(
         demos=demos, times=times, columns=list(cols), dt=uniform_dt(times), observed_dofs=observed,
-        name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=notes,
+        name=p.stem, source=str(p), labels=labels, units=meta.get("units"), notes=notes, raw=raw or None,
     )  # fmt: skip
     if columns is not None and not parse_columns:
         ds = ds.select(columns)

@@ -61,6 +61,7 @@ import numpy as np
 
 from ..core.errors import DataFileError, MissingExtraError
 from ..core.preprocessing import interp_columns, step_count
+from ._base import RawStream
 
 __all__ = ["read_rosbag", "is_rosbag2_folder", "ROS_SUFFIXES"]
 
@@ -574,7 +575,8 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
     units = [u for _, _, _, uu in done for u in uu]
     segs = _segments([d[0] for d in done], markers, split_gap)
     max_steps = [_max_step(t, split_gap) for t, _, _, _ in done]
-    demos, times, labels = [], [], []
+    demos, times, labels, raw = [], [], [], []
+    offsets = np.cumsum([0] + [len(c) for c in cols])  # each stream's first column
     for k, (a, b) in enumerate(segs):
         where = f"{path}, demonstration {k} ({(a - start) * 1e-9:.3f}-{(b - start) * 1e-9:.3f} s after the bag start)"
         parts = []
@@ -620,7 +622,12 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
         demos.append(y)
         times.append(t_rel)
         labels.append(f"{path.stem}@{(t_ns[0] - start) * 1e-9:.3f}s")
+        if grid_dt is not None:  # the samples as recorded, on the demonstration's clock (causal prefixes)
+            raw.append([RawStream((t - t_ns[0]) * 1e-9, tuple(range(offsets[i], offsets[i + 1])),
+                                  np.asarray(yy, dtype=np.float64)) for i, (t, yy) in enumerate(parts)])
     meta = {"units": units}
+    if grid_dt is not None:
+        meta["raw"] = raw
     if len(streams) == 2:
         meta["observed"] = cols[0]
     return demos, times, columns, labels, meta

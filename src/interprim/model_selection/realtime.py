@@ -386,7 +386,12 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     for held in sets:
         kept = [i for i in range(len(demos)) if i not in set(held)]
         train = [demos[i] for i in kept]
-        fit_on = train if source is None else cast(Any, source).take(kept) if test is None else source
+        if source is None:
+            fit_on: Any = train
+        elif test is None:  # the fold's training demonstrations, with their raw samples
+            fit_on = cast(Any, source).take(kept)
+        else:  # a fixed hold-out: every method is fitted on all of ``source``
+            fit_on = source
         for first, (name, factory) in enumerate(make_estimators.items()):
             est = factory().fit(fit_on, dt=dt)
             for j in held:

@@ -285,6 +285,8 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
     hsum = np.zeros((B, 2))
     n = 101
     grid = np.linspace(0.0, 1.0, n)
+    # the fewest frames from which a robot had recorded the partner (1 without raw samples)
+    first = [1 if prefixes is None else prefixes.first_frame(j) for j in range(S)]
     for held in folds(S, n_folds, "contiguous"):
         held_set = set(held.tolist())
         m = fold_model(model, [i for i in range(S) if i not in held_set], observed)
@@ -293,7 +295,7 @@ def held_out_sums(model, demos, n_folds: int = 5, fractions=DEFAULT_FRACTIONS, e
             T = d.shape[0]
             for i, p in enumerate(fr):
                 M = observed_frames(T, p, keep=1)  # at least one frame left to score
-                if prefixes is not None and M < prefixes.first_frame(j):
+                if M < first[j]:
                     continue  # nothing of the partner recorded yet: no prediction a robot could make
                 pred = m.predict(d[:M, obs] if prefixes is None else prefixes(j, M))
                 s = phases[j, i] = float(pred.normalised_time)

@@ -423,7 +423,8 @@ class InteractionPrimitive(Predictor):
             chosen = choose_n_basis(params, arrays, dt, columns, obs, ctrl, kk)
             params["n_basis"] = chosen["chosen"]
         # with their raw samples (an irregular recording), the calibration's held-out cases see causal prefixes
-        prefixes = Prefixes(data, obs) if data.raw is not None and data.times is not None else None
+        recorded = Prefixes(data, obs)
+        prefixes = recorded if recorded.causal else None
         self.fitted_ = FittedPrimitive.learn(params, arrays, dt, columns, obs, ctrl, kk, prefixes)
         if chosen is not None:
             self.fitted_.selection_["n_basis"] = chosen  # fit assigns what the choice returned

@@ -518,6 +518,58 @@ def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_bu
     np.testing.assert_allclose(q.trajectory(60), auto.predict(x).trajectory(60), rtol=0, atol=1e-8)  # rounding
 
 
+def test_budget_phase_reads_the_inner_folds_fits():
+    """``budget_phase``: the learned phase when most inner-fold fits chose it, else the other phase most of them
+    chose (the first fold's on a tie); None when the IP was not fitted on every fold."""
+    from types import SimpleNamespace
+
+    from interprim.models.auto import budget_phase
+
+    def fits(*phases):
+        return [SimpleNamespace(fitted_=object(), phase_method_used=lambda p=p: p) for p in phases]
+
+    assert budget_phase(fits("learned", "likelihood", "learned"), 3) == "learned"
+    assert budget_phase(fits("learned", "likelihood", "likelihood"), 3) == "likelihood"
+    assert budget_phase(fits("learned", "dtw", "likelihood"), 3) == "dtw"  # no majority: the first fold's other
+    assert budget_phase(fits("learned", "learned", "likelihood", "likelihood"), 4) == "likelihood"  # half: not most
+    assert budget_phase(fits("learned", "learned"), 3) is None  # a fold without a fit
+    assert budget_phase(fits("learned", "learned") + [SimpleNamespace(fitted_=None)], 3) is None  # not fitted
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.002])
+def test_the_ip_is_fitted_on_all_demonstrations_only_when_the_model_keeps_it(monkeypatch, floor):
+    """The frame budget's yardstick, the Interaction Primitive's frame, is timed by the phase its inner-fold fits
+    chose; the IP is fitted on all the demonstrations only when the model keeps it (and then times the budget
+    itself).  Made to believe its inner folds chose the other phase, the fit gives the same model whenever it keeps
+    the IP: the selection is made again with the phase of the IP it keeps."""
+    from interprim.models import auto as auto_module
+    from interprim.models import registry
+
+    demos = _tied()
+    calls = []
+    real = registry.yardstick_ip
+    monkeypatch.setattr(registry, "yardstick_ip", lambda *a, **k: calls.append(1) or real(*a, **k))
+    first = ip.AutoInteraction([0, 1, 2], frame_budget_floor=floor).fit(demos, dt=0.02)
+    c = first.selection_["cost"]
+    kept = "ip" in first.model_.members_
+    assert len(calls) == int(kept)
+    assert c["ip_phase_from"] == ("fitted on all the demonstrations" if kept else "inner folds")
+    assert ("fitted on all the demonstrations" if kept else "as most of its inner-fold fits chose") in first.summary()
+    assert c["ip_phase"] == "likelihood" and c["ip_frame"] == pytest.approx(
+        registry.frame_cost("ip", registry.FrameSizes(12, float(np.mean([len(d) for d in demos])), 3, 6, 20)))
+    other = "learned" if c["ip_phase"] != "learned" else "likelihood"
+    monkeypatch.setattr(auto_module, "budget_phase", lambda fits, k: other)
+    calls.clear()
+    again = ip.AutoInteraction([0, 1, 2], frame_budget_floor=floor).fit(demos, dt=0.02)
+    if "ip" in again.model_.members_ or len(calls):  # the IP kept under the other phase: the selection made again
+        assert again.selection_["band_weights"] == first.selection_["band_weights"]
+        assert again.selection_["cost"] == dict(c, ip_phase_from="fitted on all the demonstrations")
+    calls.clear()
+    without = ip.AutoInteraction([0, 1, 2], candidates=("learned", "nn", "prior"), frame_budget_floor=floor)
+    assert without.fit(demos, dt=0.02).selection_["cost"]["ip_phase_from"] == "fitted on all the demonstrations"
+    assert len(calls) == 1  # the IP not compared: fitted on all the demonstrations for the budget alone
+
+
 def test_the_budget_picks_the_best_set_of_families_within_it(task):
     """``stack`` with a frame budget: when the full blend costs more, the blend is made of the set of families within
     the budget with the smallest summed band loss (checked by brute force over every set), and says what it left

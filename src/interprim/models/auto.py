@@ -36,7 +36,7 @@ from .blend import Blend, member_from_state
 from .primitive.estimator import InteractionPrimitive
 from .training import pace_trend
 
-__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR"]
+__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR", "budget_phase"]
 
 #: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
 CANDIDATES = registry.CANDIDATES
@@ -47,6 +47,49 @@ DEFAULT_FRAME_BUDGET = 3.0
 #: seconds (modelled) a streamed frame may always cost, however cheap the Interaction Primitive is on the data: a
 #: robot's control loop plans in milliseconds, and on small data sets 3x the IP's frame is a fraction of one
 DEFAULT_FRAME_BUDGET_FLOOR = 0.002
+
+
+
+#: Where ``selection_["cost"]["ip_phase"]``, the phase that times the frame budget's Interaction Primitive, comes from.
+INNER_FOLDS = "inner folds"
+ALL_DEMONSTRATIONS = "fitted on all the demonstrations"
+
+
+def _recorded(factory, built: list):
+    """``factory``, appending every estimator it builds to ``built`` (the inner folds' fits, read after them)."""
+    def build():
+        est = factory()
+        built.append(est)
+        return est
+    return build
+
+
+def _over_budget(costs: dict, names: list, budget: float) -> dict:
+    """``{family: modelled frame}`` of the families ``names`` whose frame alone exceeds ``budget`` (none of them can
+    be in a blend within it); the cheapest stays when none fits."""
+    over = {m: float(costs[m]) for m in names if costs.get(m) is not None and costs[m] > budget}
+    if over and len(over) == len(names):
+        over.pop(min(over, key=lambda m: (over[m], names.index(m))))
+    return over
+
+
+def budget_phase(fits, k: int) -> str | None:
+    """The Interaction Primitive's phase for the frame budget's yardstick (:class:`~interprim.models.registry.
+    FrameSizes`), read from its fits on the ``k`` inner training folds ``fits``: ``"learned"`` when more than half of
+    them chose the learned phase, else the phase most of the others chose (the first fold's on a tie); None when
+    fewer than ``k`` fits were made (the IP could not be fitted on every fold, or was not compared).
+
+    The cost model distinguishes the learned phase from the others (2-3x cheaper, registry's ``ip-learned``); its
+    own cross-validation chooses it (``phase_method="cv"``), on all the demonstrations much as on two thirds of
+    them: on the benchmark's three data sets the three inner folds chose what the fit on all of them chose.
+    """
+    phases = [f.phase_method_used() for f in fits if getattr(f, "fitted_", None) is not None]
+    if len(phases) < k:
+        return None
+    if 2 * phases.count("learned") > len(phases):
+        return "learned"
+    others = [p for p in phases if p != "learned"]
+    return max(others, key=lambda p: (others.count(p), -others.index(p)))
 
 
 class AutoInteraction(Predictor):
@@ -101,12 +144,15 @@ class AutoInteraction(Predictor):
         (:func:`interprim.models.registry.frame_cost`, :meth:`~interprim.models.blend.Blend.frame_overhead`: a
         formula per family in the sizes of the data -- demonstrations, frames, DoFs, basis -- whose constants were
         calibrated once in ``benchmarks/auto.py``), not from timings taken during the fit: one input gives one
-        model whatever the machine's load.  A family whose frame alone exceeds the budget is not compared at all
-        (nor fitted: the fit is cheaper too); when the best blend exceeds it, the best set of families within it
-        is blended instead (:func:`interprim.model_selection.stacking.stack`).  ``selection_["cost"]`` and
-        :meth:`summary` say what the model's frame costs and what was left out for the budget.  A user's own
-        family (a ``(name, factory)`` pair not named after a registry family) has no cost model: it is not counted,
-        and said so.
+        model whatever the machine's load.  The Interaction Primitive's frame depends on its phase, which its own
+        cross-validation chooses: the phase most of its inner-fold fits chose times it, and the IP is fitted on all
+        the demonstrations only when the model keeps it (then its own phase times the budget, and the selection is
+        made again if that phase is the other; the fit is an IP fit cheaper when the IP is not kept).  A family
+        whose frame alone exceeds the budget is not compared at all (nor fitted: the fit is cheaper too); when the
+        best blend exceeds it, the best set of families within it is blended instead
+        (:func:`interprim.model_selection.stacking.stack`).  ``selection_["cost"]`` and :meth:`summary` say what
+        the model's frame costs and what was left out for the budget.  A user's own family (a ``(name, factory)``
+        pair not named after a registry family) has no cost model: it is not counted, and said so.
     frame_budget_floor : float, default DEFAULT_FRAME_BUDGET_FLOOR (0.002)
         Seconds (modelled) a streamed frame may always cost: the budget is the larger of ``frame_budget`` times the
         Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a millisecond (small data
@@ -138,7 +184,10 @@ class AutoInteraction(Predictor):
         ``cost``: ``frame`` (the
         model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
         ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
-        for the budget) and ``not_costed``.  ``pace``: how the demonstrations' durations change with
+        for the budget), ``not_costed``, ``ip_phase`` (the phase that times the IP's frame; None without a budget)
+        and ``ip_phase_from`` (``"inner folds"``: the phase most of the IP's inner-fold fits chose, the model keeping
+        no IP; ``"fitted on all the demonstrations"``: the IP's own, fitted on all of them because the model keeps
+        it or the IP was not compared).  ``pace``: how the demonstrations' durations change with
         their order (:func:`~interprim.models.training.pace_trend`; a significant trend raises a
         :class:`~interprim.core.errors.PaceWarning` once and :meth:`summary` says it).
     """
@@ -225,6 +274,15 @@ class AutoInteraction(Predictor):
                                                             float(self.frame_budget_floor))
         return costs, cost, ip_frame, budget
 
+    def _yardstick(self, train, dt, progress):
+        """The Interaction Primitive of ``train`` fitted on all of it, as the frame budget's yardstick and, when the
+        model keeps it, its ip member (:func:`interprim.models.registry.yardstick_ip`)."""
+        with std_unused():  # its std's calibration is measured only if it becomes the whole model (final)
+            ref = registry.yardstick_ip(self.settings(), train, dt)
+        progress.grow(1)
+        progress.step("fitted ip (the frame budget's yardstick)")
+        return ref
+
     def factories(self) -> dict:
         """``{family: factory of an unfitted estimator}`` of the candidates: a registry name built with this model's
         settings (:meth:`settings`), a ``(name, factory)`` pair as given."""
@@ -279,19 +337,25 @@ class AutoInteraction(Predictor):
         # ``times``: causal prefixes in the inner CV); irregular stamps were resampled above and the CV sees the
         # resampled frames
         cv_demos = data if data.raw is not None and data.times is not None else train
-        make = self.factories()
+        factories = self.factories()
+        make = dict(factories)  # the families compared (the ip's factory recording its inner-fold fits)
         sizes = registry.FrameSizes(n, float(np.mean([len(d) for d in train])), len(self.observed_dofs),
                                     int(train[0].shape[1]), int(self.n_basis))
         progress = Progress(self.progress, len(make))
-        ref = None
-        if self.frame_budget is not None and len(make) > 1:
-            # the Interaction Primitive of these data, fitted once: the budget's yardstick (its phase, chosen by its
-            # own cross-validation, moves its frame by up to 2.5x) and, when the blend keeps it, its ip member
-            with std_unused():  # its std's calibration is measured only if it becomes a member (final)
-                ref = registry.yardstick_ip(self.settings(), train, dt)
-            progress.grow(1)
-            progress.step("fitted ip (the frame budget's yardstick)")
+        ref = None  # the Interaction Primitive fitted on all the demonstrations, when fitted
+        ip_folds: list = []  # the Interaction Primitives of the inner folds, when the registry's ip is compared
+        phase_from = None  # where the budget's IP phase comes from (None: no budget)
+        budgeted = self.frame_budget is not None and len(make) > 1
+        if budgeted and "ip" in make and "ip" in self.candidates:
+            # the budget's yardstick is the IP's frame, which its phase (chosen by its own cross-validation) moves by
+            # up to 2.5x: its inner-fold fits say which phase (budget_phase), so the IP is fitted on all the
+            # demonstrations only when the model keeps it; until the folds tell, its dearer phase
+            make["ip"] = _recorded(make["ip"], ip_folds)
+            sizes = dataclasses.replace(sizes, phase="likelihood")
+        elif budgeted:
+            ref = self._yardstick(train, dt, progress)
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
+            phase_from = ALL_DEMONSTRATIONS
         costs, cost, ip_frame, budget = self.budget_model(sizes, list(make))
 
         def final(m, member: bool = False):
@@ -307,8 +371,8 @@ class AutoInteraction(Predictor):
                 if reuse:
                     ref.fitted_.measure_deferred()  # in the fit, as an eager fit measures it
                     return ref
-                return make[m]().fit(train, dt=dt)
-            est = ref if reuse else make[m]()
+                return factories[m]().fit(train, dt=dt)
+            est = ref if reuse else factories[m]()
             if not isinstance(est, InteractionPrimitive):
                 return est.fit(train, dt=dt)
             if not reuse:
@@ -320,34 +384,61 @@ class AutoInteraction(Predictor):
         if budget is not None and len(make) > 1:
             # a family whose frame alone exceeds the budget cannot be in any blend within it: it is neither
             # compared nor fitted (the fit's cost falls with it); the cheapest family stays if none fits
-            over = {m: costs[m] for m in make if costs[m] is not None and costs[m] > budget}
-            if len(over) == len(make):
-                over.pop(min(over, key=lambda m: (over[m], list(make).index(m))))
-            left_out = {m: float(c) for m, c in over.items()}
-            make = {m: f for m, f in make.items() if m not in over}
-            progress.grow(-len(over))  # not compared: fewer steps than announced
+            left_out = _over_budget(costs, list(make), budget)
+            make = {m: f for m, f in make.items() if m not in left_out}
+            progress.grow(-len(left_out))  # not compared: fewer steps than announced
         cfg = stacking.scoring_config(float(self.horizon), train, dt, stride=int(self.stride),
                                       point_dim=int(self.point_dim),
                                       max_frames=None if self.max_prefixes is None else int(self.max_prefixes))
-        if len(make) == 1:  # nothing to compare: the one family, fitted (with the file's column names kept)
-            cv = None
-            chosen = next(iter(make))
-            selection = stacking.choice_record(chosen, {chosen: float("nan")})
-        else:
+        cv_all = None
+        if len(make) > 1:
             # looked up at call time (the leakage test spies on stacking.CrossValidation); its fits are scored and
             # discarded: their records of how they chose (selection_) are not read
             with records_unused():
-                cv = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg,
-                                              k=min(int(self.folds), n), horizon=float(self.horizon),
-                                              progress=progress)
-            chosen, selection = stacking.choice(cv, list(make))
-            if cv.why:
-                selection["not_compared"] = dict(cv.why)
-        if self.combine == "blend" and cv is not None and len(cv.names) > 1:
-            # the variance model is fitted once, after the long-range choice has set the weights
-            fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
-            # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
-            fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
+                cv_all = stacking.CrossValidation(make, cv_demos, self.observed_dofs, dt, cfg,
+                                                  k=min(int(self.folds), n), horizon=float(self.horizon),
+                                                  progress=progress)
+        if budgeted and ref is None:
+            phase = budget_phase(ip_folds, min(int(self.folds), n))
+            phase_from = INNER_FOLDS
+            if phase is None:  # the IP was not fitted on every inner fold (or not compared): fitted on all
+                ref = self._yardstick(train, dt, progress)
+                phase, phase_from = ref.phase_method_used(), ALL_DEMONSTRATIONS
+            sizes = dataclasses.replace(sizes, phase=phase)
+        for _ in range(2):  # once more at most: with the phase of the IP the model keeps
+            if budgeted:
+                costs, cost, ip_frame, budget = self.budget_model(sizes, list(costs))
+            compared, cv, over = make, cv_all, {}
+            if cv_all is not None and budget is not None:  # compared under the dearer phase's budget, over this one
+                over = _over_budget(costs, list(make), budget)
+                compared = {m: f for m, f in make.items() if m not in over}
+                cv = cv_all.subset([m for m in cv_all.errors if m not in over]) if over else cv_all
+            if cv is None or len(compared) == 1:  # nothing to compare: the one family, fitted (column names kept)
+                chosen = next(iter(compared))
+                selection = stacking.choice_record(chosen, {chosen: float("nan")})
+                cv = None
+            else:
+                chosen, selection = stacking.choice(cv, list(compared))
+                if cv.why:
+                    selection["not_compared"] = dict(cv.why)
+            fitted = remaining = None
+            if self.combine == "blend" and cv is not None and len(cv.names) > 1:
+                # the variance model is fitted once, after the long-range choice has set the weights
+                fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
+                # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
+                fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
+            keeps_ip = "ip" in (fitted.names if fitted is not None else [chosen])
+            if phase_from != INNER_FOLDS or not keeps_ip:
+                break
+            # the model keeps the IP: fitted on all the demonstrations now (it is needed anyway), its own phase
+            # is the budget's; when it is not the phase its inner folds chose, the selection is made again with it
+            ref = self._yardstick(train, dt, progress)
+            phase_from = ALL_DEMONSTRATIONS
+            if (ref.phase_method_used() == "learned") == (sizes.phase == "learned"):
+                break
+            sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
+        left_out = {**left_out, **over}
+        if fitted is not None:
             info = fitted.record
             progress.grow(len(fitted.names))
             members = {}
@@ -373,7 +464,8 @@ class AutoInteraction(Predictor):
         selection["cost"] = {"frame": cost(kept), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
                              "frame_budget_floor": float(self.frame_budget_floor),
                              "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
-                             "not_costed": [m for m in kept if costs.get(m) is None]}
+                             "not_costed": [m for m in kept if costs.get(m) is None],
+                             "ip_phase": None if phase_from is None else sizes.phase, "ip_phase_from": phase_from}
         progress.close()
         pace = pace_trend([(len(d) - 1) * dt for d in train])
         selection["pace"] = pace
@@ -504,11 +596,18 @@ class AutoInteraction(Predictor):
         ip_frame = c["ip_frame"]
         line = (f"streamed frame (modelled): {1e3 * c['frame']:.2f} ms, {c['frame'] / ip_frame:.1f}x the "
                 f"Interaction Primitive's {1e3 * ip_frame:.2f} ms on these data")
+        notes = []
+        if c.get("ip_phase"):  # the phase that times the IP's frame, and where it was read
+            notes.append(f"its {c['ip_phase']} phase, " + (
+                "as most of its inner-fold fits chose" if c.get("ip_phase_from") == INNER_FOLDS
+                else "fitted on all the demonstrations"))
         if c.get("budget") is not None:
             floor = c.get("frame_budget_floor")
             rule = f"{c['frame_budget']:g}x" if floor is None else \
                 f"the larger of {c['frame_budget']:g}x and {1e3 * floor:.2f} ms"
-            line += f" (budget, {rule}: {1e3 * c['budget']:.2f} ms)"
+            notes.append(f"budget, {rule}: {1e3 * c['budget']:.2f} ms")
+        if notes:
+            line += " (" + "; ".join(notes) + ")"
         out = [line]
         if c.get("left_out"):
             out.append("left out for the budget: " + ", ".join(

@@ -62,7 +62,9 @@ OUTER_PREFIXES = 24
 def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
     development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
-    its frame budget is computed from (the Interaction Primitive fitted on them for its phase, as the fit does)."""
+    its frame budget is computed from (the Interaction Primitive fitted on them for its phase: the fit reads it so
+    when it keeps the IP, and otherwise from the IP's inner-fold fits; on every development task the budget is the
+    2 ms floor either way, and the fit's model is the same as with the phase of the IP fitted on all of them)."""
     auto = AutoInteraction(obs, point_dim=point_dim)
     make = auto.factories()
     arrays = [np.asarray(x, dtype=np.float64) for x in dev]

@@ -22,9 +22,12 @@ def test_the_replayed_default_is_what_the_fit_chooses(folds):
     held, cv, sizes = inner[0]
     train = [d for i, d in enumerate(demos) if i not in set(held)]
     auto = ip.AutoInteraction(task.observed_dofs).fit(train, dt=task.dt)
-    cost, budget = sr._budget(cv, sizes)
-    got = sr.default_rule()(cv, cost, budget)
+    got = sr.choose(sr.default_rule(), cv, sizes)
+    assumed, own = sizes  # the IP's phase from its inner-fold fits, and its own on all the training recordings
+    used = own if "ip" in got["names"] else assumed
     s = auto.selection_
+    assert s["cost"]["ip_phase"] == used.phase
+    budget = sr._budget(cv, used)[1]
     assert got["names"] == list(s["band_weights"])
     for i, m in enumerate(got["names"]):
         assert got["W"][:, i] == pytest.approx(s["band_weights"][m], abs=1e-9)

@@ -38,6 +38,7 @@ Run (about 3 minutes on a 2-core machine)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -47,9 +48,9 @@ from ..model_selection import long_range, stacking
 from ..model_selection.realtime import folds
 from ..model_selection.yardsticks import place_cases
 from ..models import registry
-from ..models.auto import AutoInteraction
+from ..models.auto import AutoInteraction, budget_phase, recording_factory
 
-__all__ = ["task_folds", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
+__all__ = ["task_folds", "choose", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
 
 Z90 = 1.6448536269514722
 
@@ -62,9 +63,9 @@ OUTER_PREFIXES = 24
 def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
     development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
-    its frame budget is computed from (the Interaction Primitive fitted on them for its phase: the fit reads it so
-    when it keeps the IP, and otherwise from the IP's inner-fold fits; on every development task the budget is the
-    2 ms floor either way, and the fit's model is the same as with the phase of the IP fitted on all of them)."""
+    its frame budget is computed from: ``sizes`` is ``(assumed, own)``, the sizes with the Interaction Primitive's
+    phase read from its inner-fold fits (:func:`~interprim.models.auto.budget_phase`) and with the phase of the IP
+    fitted on all the training recordings, which the fit uses when its model keeps the IP (:func:`choose`)."""
     auto = AutoInteraction(obs, point_dim=point_dim)
     make = auto.factories()
     arrays = [np.asarray(x, dtype=np.float64) for x in dev]
@@ -76,10 +77,14 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
         d = dev.take(keep) if hasattr(dev, "take") else [dev[i] for i in keep]
         tr = [np.asarray(x, dtype=np.float64) for x in d]
         c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim, max_frames=auto.max_prefixes)
-        phase = registry.yardstick_ip(auto.settings(), tr, dt).phase_method_used()
+        own = registry.yardstick_ip(auto.settings(), tr, dt).phase_method_used()
+        fits: list = []
+        cv = stacking.CrossValidation(dict(make, ip=recording_factory(make["ip"], fits)), d, obs, dt, c, k=k,
+                                      horizon=0.25)
         sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
-                                    int(auto.n_basis), phase=phase)
-        inner.append((held, stacking.CrossValidation(make, d, obs, dt, c, k=k, horizon=0.25), sizes))
+                                    int(auto.n_basis), phase=own)
+        assumed = budget_phase(fits, k) or own
+        inner.append((held, cv, (dataclasses.replace(sizes, phase=assumed), sizes)))
     return outer, inner
 
 
@@ -87,6 +92,17 @@ def _budget(cv, sizes: registry.FrameSizes) -> tuple:
     """``(cost, budget)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of ``sizes``."""
     _, cost, _, budget = AutoInteraction([]).budget_model(sizes, cv.names)
     return cost, budget
+
+
+def choose(rule, cv, sizes: tuple):
+    """``rule``'s choice on the inner cross-validation ``cv`` with the frame budget as ``AutoInteraction.fit`` sets
+    it: timed by the IP's phase from its inner-fold fits, and made again with the phase of the IP fitted on all the
+    training recordings when the choice keeps the IP and that phase is the other (``sizes``: :func:`task_folds`)."""
+    assumed, own = sizes
+    choice = rule(cv, *_budget(cv, assumed))
+    if choice is not None and "ip" in choice["names"] and (assumed.phase == "learned") != (own.phase == "learned"):
+        choice = rule(cv, *_budget(cv, own))
+    return choice
 
 
 def default_rule(level: float | None = None):
@@ -163,11 +179,10 @@ def replay(outer, inner, rules: dict) -> dict:
     for rname, rule in rules.items():
         rows = []
         for held, cv, sizes in inner:
-            cost, budget = _budget(cv, sizes)
             if rname == "true end":
-                rows.append(_outer(outer, held, default_rule()(cv, cost, budget), true_end=True))
+                rows.append(_outer(outer, held, choose(default_rule(), cv, sizes), true_end=True))
                 continue
-            choice = rule(cv, cost, budget)
+            choice = choose(rule, cv, sizes)
             if choice is None:
                 break
             rows.append(_outer(outer, held, choice))

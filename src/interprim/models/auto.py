@@ -36,7 +36,8 @@ from .blend import Blend, member_from_state
 from .primitive.estimator import InteractionPrimitive
 from .training import pace_trend
 
-__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR", "budget_phase"]
+__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR", "budget_phase",
+           "recording_factory"]
 
 #: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
 CANDIDATES = registry.CANDIDATES
@@ -55,7 +56,7 @@ INNER_FOLDS = "inner folds"
 ALL_DEMONSTRATIONS = "fitted on all the demonstrations"
 
 
-def _recorded(factory, built: list):
+def recording_factory(factory, built: list):
     """``factory``, appending every estimator it builds to ``built`` (the inner folds' fits, read after them)."""
     def build():
         est = factory()
@@ -350,7 +351,7 @@ class AutoInteraction(Predictor):
             # the budget's yardstick is the IP's frame, which its phase (chosen by its own cross-validation) moves by
             # up to 2.5x: its inner-fold fits say which phase (budget_phase), so the IP is fitted on all the
             # demonstrations only when the model keeps it; until the folds tell, its dearer phase
-            make["ip"] = _recorded(make["ip"], ip_folds)
+            make["ip"] = recording_factory(make["ip"], ip_folds)
             sizes = dataclasses.replace(sizes, phase="likelihood")
         elif budgeted:
             ref = self._yardstick(train, dt, progress)
@@ -433,10 +434,10 @@ class AutoInteraction(Predictor):
             # the model keeps the IP: fitted on all the demonstrations now (it is needed anyway), its own phase
             # is the budget's; when it is not the phase its inner folds chose, the selection is made again with it
             ref = self._yardstick(train, dt, progress)
-            phase_from = ALL_DEMONSTRATIONS
-            if (ref.phase_method_used() == "learned") == (sizes.phase == "learned"):
-                break
+            phase_from, same = ALL_DEMONSTRATIONS, (ref.phase_method_used() == "learned") == (sizes.phase == "learned")
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
+            if same:  # the same frame cost: the selection stands
+                break
         left_out = {**left_out, **over}
         if fitted is not None:
             info = fitted.record

@@ -625,6 +625,28 @@ def test_inner_fold_messages_name_the_users_demonstrations(task):
     assert "of your 4 demonstrations" in auto.summary()
 
 
+def test_the_inner_cross_validation_is_bounded_before_it_is_expanded(monkeypatch, tmp_path):
+    """``held_out_size`` gives, before the cross-validation runs, the size of the held-out predictions it then holds
+    (``CrossValidation.mean``, every family, case and step ahead); a fit that would need more than half the
+    machine's memory at its peak stops first with an error naming the sizes and the remedies, and fits nothing."""
+    from interprim.model_selection import stacking
+
+    demos = _tied(8, 2, 2, 60)
+    cfg = stacking.scoring_config(0.25, demos, 0.02, stride=3, max_frames=16)
+    make = {m: f for m, f in default_methods([0, 1]).items() if m in ("nn", "prior")}
+    cv = stacking.CrossValidation(make, demos, [0, 1], 0.02, cfg, k=3, horizon=0.25)
+    cases, steps, size = stacking.held_out_size(len(make), [len(d) for d in demos], cfg, 0.02, 4)
+    assert cv.mean.shape == (2, cases, steps, 4) and size == cv.mean.nbytes
+    built = []
+    monkeypatch.setattr(stacking, "CrossValidation", lambda *a, **k: built.append(1))
+    monkeypatch.setattr(stacking, "physical_memory", lambda: 2 * stacking.PEAK_COPIES * size)  # too small for 5
+    with pytest.raises(ValueError, match=r"GB at its peak.*5 families x \d+ scored prefixes.*max_prefixes"):
+        ip.AutoInteraction([0, 1]).fit(demos, dt=0.02)
+    assert not built
+    monkeypatch.setattr(stacking, "physical_memory", lambda: None)  # a system that does not say: no bound
+    stacking.check_memory(5, [10 ** 6], cfg, 0.02, 10 ** 3)
+
+
 def test_frame_budget_is_checked():
     with pytest.raises(ValueError, match="frame_budget"):
         ip.AutoInteraction([0, 1], frame_budget=0).fit(_tied(4, 1, 1, 30), dt=0.02)

@@ -159,6 +159,18 @@ def _timing(pred: PredictionLike, k: int, dt: float, mean_dur_s: float) -> tuple
     return place_in_time(pred, k, dt, mean_dur_s)
 
 
+def scored_frames(T: int, cfg: RealTimeConfig) -> range:
+    """The numbers of frames seen ``k`` at which the protocol scores a held-out movement of ``T`` frames: from
+    ``cfg.start`` to ``cfg.stop`` of it (at least 3 frames seen), every ``cfg.stride``-th, at most
+    ``cfg.max_frames`` of them."""
+    k0 = max(3, int(math.ceil(cfg.start * T)))
+    k1 = max(k0, int(math.floor(cfg.stop * T)))
+    step = max(1, int(cfg.stride))
+    if cfg.max_frames is not None:
+        step = max(step, -(-(k1 - k0 + 1) // max(1, int(cfg.max_frames))))
+    return range(k0, k1 + 1, step)
+
+
 def realtime_fold(estimator: EstimatorLike, train: Iterable[np.ndarray], test: ArrayLike, observed_dofs: Iterable[int],
                   dt: float, cfg: RealTimeConfig = RealTimeConfig(), name: str = "method", fitted: bool = False,
                   frames: Iterable[int] | None = None, trace: bool = False,
@@ -213,14 +225,7 @@ def realtime_fold(estimator: EstimatorLike, train: Iterable[np.ndarray], test: A
     true_dur_s = (T - 1) * dt
     to_end = math.isinf(cfg.horizon)
     H = 0 if to_end else max(1, int(round(cfg.horizon / dt)))
-    if frames is None:
-        k0 = max(3, int(math.ceil(cfg.start * T)))
-        k1 = max(k0, int(math.floor(cfg.stop * T)))
-        step = max(1, int(cfg.stride))
-        if cfg.max_frames is not None:
-            step = max(step, -(-(k1 - k0 + 1) // max(1, int(cfg.max_frames))))
-        frames = range(k0, k1 + 1, step)
-    frames = [int(k) for k in frames]
+    frames = [int(k) for k in (scored_frames(T, cfg) if frames is None else frames)]
     for k in frames:
         if not 1 <= k <= T:
             raise ValueError(f"frames must be numbers of frames seen in 1..{T}, got {k}")

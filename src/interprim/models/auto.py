@@ -393,6 +393,8 @@ class AutoInteraction(Predictor):
                                       max_frames=None if self.max_prefixes is None else int(self.max_prefixes))
         cv_all = None
         if len(make) > 1:
+            # bounded before it is expanded: the held-out predictions of every family, case and step ahead
+            stacking.check_memory(len(make), [len(d) for d in train], cfg, dt, int(train[0].shape[1]))
             # looked up at call time (the leakage test spies on stacking.CrossValidation); its fits are scored and
             # discarded: their records of how they chose (selection_) are not read
             with records_unused():

@@ -627,8 +627,9 @@ def test_inner_fold_messages_name_the_users_demonstrations(task):
 
 def test_the_inner_cross_validation_is_bounded_before_it_is_expanded(monkeypatch, tmp_path):
     """``held_out_size`` gives, before the cross-validation runs, the size of the held-out predictions it then holds
-    (``CrossValidation.mean``, every family, case and step ahead); a fit that would need more than half the
-    machine's memory at its peak stops first with an error naming the sizes and the remedies, and fits nothing."""
+    (``CrossValidation.mean``, every family, case and step ahead); a fit that would need more than its share of the
+    machine's memory (MEMORY_SHARE) at its peak stops first with an error naming the sizes and the remedies, and
+    fits nothing."""
     from interprim.model_selection import stacking
 
     demos = _tied(8, 2, 2, 60)
@@ -639,7 +640,7 @@ def test_the_inner_cross_validation_is_bounded_before_it_is_expanded(monkeypatch
     assert cv.mean.shape == (2, cases, steps, 4) and size == cv.mean.nbytes
     built = []
     monkeypatch.setattr(stacking, "CrossValidation", lambda *a, **k: built.append(1))
-    monkeypatch.setattr(stacking, "physical_memory", lambda: 2 * stacking.PEAK_COPIES * size)  # too small for 5
+    monkeypatch.setattr(stacking, "physical_memory", lambda: stacking.PEAK_COPIES * size)  # too small for 5
     with pytest.raises(ValueError, match=r"GB at its peak.*5 families x \d+ scored prefixes.*max_prefixes"):
         ip.AutoInteraction([0, 1]).fit(demos, dt=0.02)
     assert not built

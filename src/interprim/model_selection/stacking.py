@@ -199,9 +199,10 @@ def _within_budget(cv: CrossValidation, steps: Sequence[np.ndarray], cost: Calla
 #: peak resident memory of ``AutoInteraction().fit`` at 20-50 demonstrations x 12-48 columns x 600-1200 frames, 4.8-5.5
 #: copies above the 0.3-0.5 GB the families and the libraries take (rounded up).
 PEAK_COPIES = 6
-#: The share of the machine's physical memory the inner cross-validation may take (the rest is the system's and the
-#: caller's).
-MEMORY_SHARE = 0.5
+#: The share of the machine's physical memory the inner cross-validation may take at its peak (the rest is the
+#: system's and the caller's): a bound on what cannot fit, not a guarantee that what is below it will (other
+#: processes' memory is not counted, so that one input gets one answer on one machine).
+MEMORY_SHARE = 0.75
 
 
 def held_out_size(n_families: int, lengths: Iterable[int], cfg: RealTimeConfig, dt: float,

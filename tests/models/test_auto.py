@@ -648,6 +648,21 @@ def test_the_inner_cross_validation_is_bounded_before_it_is_expanded(monkeypatch
     stacking.check_memory(5, [10 ** 6], cfg, 0.02, 10 ** 3)
 
 
+def test_the_memory_bound_reads_a_containers_limit(monkeypatch, tmp_path):
+    """``physical_memory``: a container's cgroup limit when it is below the machine's memory; "max" (no limit) or
+    no cgroup file leaves the machine's."""
+    from interprim.model_selection import stacking
+
+    machine = stacking.physical_memory()
+    limit = tmp_path / "memory.max"
+    monkeypatch.setattr(stacking, "CGROUP_LIMITS", (str(limit), str(tmp_path / "v1")))
+    assert stacking.physical_memory() == machine  # neither file
+    limit.write_text("max\n")
+    assert stacking.physical_memory() == machine
+    limit.write_text("1073741824\n")
+    assert stacking.physical_memory() == min(machine or 2 ** 62, 2 ** 30)
+
+
 def test_frame_budget_is_checked():
     with pytest.raises(ValueError, match="frame_budget"):
         ip.AutoInteraction([0, 1], frame_budget=0).fit(_tied(4, 1, 1, 30), dt=0.02)

@@ -38,7 +38,8 @@ __all__ = ["CrossValidation", "Stacking", "COMBINE", "MIN_WEIGHT", "BAND_LEVELS"
            "variance_model", "blend_parts",
            "crossfit_coverage", "crossfit_coverages", "band_level", "band_levels",
            "weights_at", "scoring_config", "stack", "choice", "choice_record", "fold_message", "case_rms_loss",
-           "simplex_minimum", "held_out_size", "check_memory", "physical_memory", "PEAK_COPIES", "MEMORY_SHARE"]
+           "simplex_minimum", "held_out_size", "check_memory", "physical_memory", "PEAK_COPIES", "MEMORY_SHARE",
+           "CGROUP_LIMITS"]
 
 #: How the compared families are used: a weighted blend of them (``"blend"``) or the best one alone (``"best"``).
 COMBINE = ("blend", "best")
@@ -217,14 +218,31 @@ def held_out_size(n_families: int, lengths: Iterable[int], cfg: RealTimeConfig, 
     return cases, steps, 8 * int(n_families) * cases * steps * int(n_dofs)
 
 
+#: Where Linux states a container's memory limit (cgroup v2, then v1): a process in a container is killed at it, however
+#: much memory the machine has.
+CGROUP_LIMITS = ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes")
+
+
 def physical_memory() -> int | None:
-    """Bytes of this machine's physical memory (None where the system does not say)."""
+    """Bytes of memory this process may use: the machine's physical memory, or the container's limit (cgroup) when
+    that is lower (None where the system says neither)."""
     import os
 
+    sizes = []
     try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+        sizes.append(int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE")))
     except (AttributeError, ValueError, OSError):
-        return None
+        pass
+    for path in CGROUP_LIMITS:
+        try:
+            with open(path, encoding="ascii") as fh:
+                text = fh.read(64).strip()  # a number, or "max" (no limit)
+        except OSError:
+            continue
+        if text.isdigit():
+            sizes.append(int(text))
+        break
+    return min(sizes) if sizes else None
 
 
 def check_memory(n_families: int, lengths: Sequence[int], cfg: RealTimeConfig, dt: float, n_dofs: int) -> None:
@@ -240,9 +258,9 @@ def check_memory(n_families: int, lengths: Sequence[int], cfg: RealTimeConfig, d
     mp = "every" if cfg.max_frames is None else str(cfg.max_frames)
     raise ValueError(
         f"the default's inner cross-validation would need about {need / 1e9:.1f} GB at its peak, more than "
-        f"{MEMORY_SHARE:.0%} of this machine's {total / 1e9:.1f} GB: {n_families} families x {cases} scored prefixes "
-        f"({mp} per held-out demonstration) x {steps} steps ahead (to the end of the longest demonstration, "
-        f"dt = {dt:g} s) x {n_dofs} columns of held-out predictions, about {PEAK_COPIES} copies of "
+        f"{MEMORY_SHARE:.0%} of the {total / 1e9:.1f} GB this process may use: {n_families} families x {cases} "
+        f"scored prefixes ({mp} per held-out demonstration) x {steps} steps ahead (to the end of the longest "
+        f"demonstration, dt = {dt:g} s) x {n_dofs} columns of held-out predictions, about {PEAK_COPIES} copies of "
         f"{one / 1e9:.2f} GB.  Score fewer prefixes (max_prefixes; interprim fit --max-prefixes N), compare fewer "
         f"families (candidates), or resample the demonstrations to a coarser interval (fewer steps ahead)")
 

@@ -49,8 +49,6 @@ DEFAULT_FRAME_BUDGET = 3.0
 #: robot's control loop plans in milliseconds, and on small data sets 3x the IP's frame is a fraction of one
 DEFAULT_FRAME_BUDGET_FLOOR = 0.002
 
-
-
 #: Where ``selection_["cost"]["ip_phase"]``, the phase that times the frame budget's Interaction Primitive, comes from.
 INNER_FOLDS = "inner folds"
 ALL_DEMONSTRATIONS = "fitted on all the demonstrations"

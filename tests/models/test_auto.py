@@ -630,37 +630,37 @@ def test_the_inner_cross_validation_is_bounded_before_it_is_expanded(monkeypatch
     (``CrossValidation.mean``, every family, case and step ahead); a fit that would need more than its share of the
     machine's memory (MEMORY_SHARE) at its peak stops first with an error naming the sizes and the remedies, and
     fits nothing."""
-    from interprim.model_selection import stacking
+    from interprim.model_selection import memory, stacking
 
     demos = _tied(8, 2, 2, 60)
     cfg = stacking.scoring_config(0.25, demos, 0.02, stride=3, max_frames=16)
     make = {m: f for m, f in default_methods([0, 1]).items() if m in ("nn", "prior")}
     cv = stacking.CrossValidation(make, demos, [0, 1], 0.02, cfg, k=3, horizon=0.25)
-    cases, steps, size = stacking.held_out_size(len(make), [len(d) for d in demos], cfg, 0.02, 4)
+    cases, steps, size = memory.held_out_size(len(make), [len(d) for d in demos], cfg, 0.02, 4)
     assert cv.mean.shape == (2, cases, steps, 4) and size == cv.mean.nbytes
     built = []
     monkeypatch.setattr(stacking, "CrossValidation", lambda *a, **k: built.append(1))
-    monkeypatch.setattr(stacking, "physical_memory", lambda: stacking.PEAK_COPIES * size)  # too small for 5
+    monkeypatch.setattr(memory, "physical_memory", lambda: memory.PEAK_COPIES * size)  # too small for 5
     with pytest.raises(ValueError, match=r"GB at its peak.*5 families x \d+ scored prefixes.*max_prefixes"):
         ip.AutoInteraction([0, 1]).fit(demos, dt=0.02)
     assert not built
-    monkeypatch.setattr(stacking, "physical_memory", lambda: None)  # a system that does not say: no bound
-    stacking.check_memory(5, [10 ** 6], cfg, 0.02, 10 ** 3)
+    monkeypatch.setattr(memory, "physical_memory", lambda: None)  # a system that does not say: no bound
+    memory.check_memory(5, [10 ** 6], cfg, 0.02, 10 ** 3)
 
 
 def test_the_memory_bound_reads_a_containers_limit(monkeypatch, tmp_path):
     """``physical_memory``: a container's cgroup limit when it is below the machine's memory; "max" (no limit) or
     no cgroup file leaves the machine's."""
-    from interprim.model_selection import stacking
+    from interprim.model_selection import memory
 
-    machine = stacking.physical_memory()
+    machine = memory.physical_memory()
     limit = tmp_path / "memory.max"
-    monkeypatch.setattr(stacking, "CGROUP_LIMITS", (str(limit), str(tmp_path / "v1")))
-    assert stacking.physical_memory() == machine  # neither file
+    monkeypatch.setattr(memory, "CGROUP_LIMITS", (str(limit), str(tmp_path / "v1")))
+    assert memory.physical_memory() == machine  # neither file
     limit.write_text("max\n")
-    assert stacking.physical_memory() == machine
+    assert memory.physical_memory() == machine
     limit.write_text("1073741824\n")
-    assert stacking.physical_memory() == min(machine or 2 ** 62, 2 ** 30)
+    assert memory.physical_memory() == min(machine or 2 ** 62, 2 ** 30)
 
 
 def test_frame_budget_is_checked():

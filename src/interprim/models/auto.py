@@ -29,7 +29,7 @@ from ..core.cv import DEFAULT_HORIZON
 from ..core.errors import PaceWarning
 from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
 from ..core.progress import Progress
-from ..model_selection import long_range, stacking
+from ..model_selection import long_range, memory, stacking
 from . import registry
 from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
@@ -392,7 +392,7 @@ class AutoInteraction(Predictor):
         cv_all = None
         if len(make) > 1:
             # bounded before it is expanded: the held-out predictions of every family, case and step ahead
-            stacking.check_memory(len(make), [len(d) for d in train], cfg, dt, int(train[0].shape[1]))
+            memory.check_memory(len(make), [len(d) for d in train], cfg, dt, int(train[0].shape[1]))
             # looked up at call time (the leakage test spies on stacking.CrossValidation); its fits are scored and
             # discarded: their records of how they chose (selection_) are not read
             with records_unused():

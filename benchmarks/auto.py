@@ -18,6 +18,7 @@ modelled frame (``selection_["cost"]``, a deterministic cost model, not a timing
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -218,49 +219,88 @@ def bench_auto(quick, make_demos, timed, row):
             "InteractionPrimitive", [r["frame_ip"]])
 
 
+def _predict_cpu(model, partial, n: int) -> float:
+    """Median process time of ``predict`` + ``trajectory(100)`` over the prefixes of ``partial`` 1 .. ``n`` frames
+    shorter than it (each call a new prefix, as :func:`_predict_once`)."""
+    out = []
+    for i in range(n + 1):
+        x = partial[:max(len(partial) - i, 2)]
+        t0 = time.process_time()
+        model.predict(x).trajectory(100)
+        out.append(time.process_time() - t0)
+    return float(np.median(out[1:]))
+
+
 def calibrate(log=print) -> None:
-    """Process time of one streamed frame of each family and of blends at six sizes, and the least-squares
-    constants of :data:`interprim.models.registry._COSTS_US`'s formulas (one BLAS thread)."""
+    """Process time of one streamed frame and of one ``predict`` (half the movement seen) of each family, of each
+    cost class of the IP (its phase) and of the learned interaction (its coupling), and of blends, at seven sizes;
+    the least-squares constants of :data:`interprim.models.registry._COSTS_US` and ``_PREDICT_US`` and of the
+    blend's :data:`interprim.models.blend._OVERHEAD_US` (one BLAS thread)."""
     from scipy.optimize import nnls
 
     from interprim.core.blas import single_thread
     from interprim.models import registry
     from interprim.models.blend import Blend
+    from interprim.models.learned import LearnedInteraction
 
-    sizes = [(10, 2, 3, 100), (20, 2, 3, 150), (30, 7, 7, 200), (20, 4, 4, 300), (40, 3, 3, 150), (15, 10, 8, 120)]
+    sizes = [(10, 2, 3, 100), (20, 2, 3, 150), (30, 7, 7, 200), (20, 4, 4, 300), (40, 3, 3, 150), (15, 10, 8, 120),
+             (20, 9, 3, 50)]
     fams = ["ip", "learned", "kernel", "nn", "prior"]
-    feats = {f: [] for f in fams + ["overhead"]}
-    ys = {f: [] for f in fams + ["overhead"]}
+    rows: dict = {}  # (what, kind) -> ([features], [microseconds])
+
+    def add(what, kind, z, model, partial):
+        if what == "frame":
+            t = min(_frame(model, partial, 3, clock=time.process_time) for _ in range(2))
+            feats = registry._cost_features(kind, z)
+        else:
+            t = _predict_cpu(model, partial, 6)
+            feats = registry._predict_features(kind, z)
+        f, y = rows.setdefault((what, kind), ([], []))
+        f.append(feats)
+        y.append(t * 1e6)
+        return t
+
     with single_thread():
         for S, Do, Dc, T in sizes:
             demos = shared_factors(S, Do, Dc, T)
             partial = shared_factors(1, Do, Dc, T, seed=1000)[0][: T // 2, :Do]
             obs = list(range(Do))
+            z = registry.FrameSizes(S, float(np.mean([len(d) for d in demos])), Do, Do + Dc)
             make = registry.factories(fams, registry.Settings(tuple(obs)))
             members = {m: make[m]().fit(demos, dt=0.01) for m in fams}
-            z = registry.FrameSizes(S, float(np.mean([len(d) for d in demos])), Do, Do + Dc)
-            alone = {}
-            for m in fams:
-                alone[m] = min(_frame(members[m], partial, 3, clock=time.process_time) for _ in range(2))
-                feats[m].append(registry._cost_features(registry.FAMILIES[m].cost_model, z))
-                ys[m].append(alone[m] * 1e6)
-            for ph, key in (("likelihood", "ip"), ("learned", "ip-learned")):  # one formula per phase of the IP
+            alone: dict = {"frame": {}, "predict": {}}
+            variants = []  # (kind, sizes, model): every cost class of the families
+            for ph, kind in (("likelihood", "ip"), ("learned", "ip-learned")):
                 one = registry.family("ip").build(registry.Settings(tuple(obs), phase_method=ph)).fit(demos, dt=0.01)
-                feats.setdefault(key + " (phase fixed)", []).append(registry._cost_features(key, z))
-                ys.setdefault(key + " (phase fixed)", []).append(
-                    min(_frame(one, partial, 3, clock=time.process_time) for _ in range(2)) * 1e6)
-            for names in (["ip", "nn"], fams):
-                W = {n: [1.0 / len(names)] * 2 for n in names}
-                b = Blend.from_fitted(obs, {n: members[n] for n in names}, W, None, demos, 0.01, 0.25,
-                                      bands=[0.25, 2.0])
-                t = min(_frame(b, partial, 3, clock=time.process_time) for _ in range(2))
-                feats["overhead"].append((1.0, len(names), len(names) * (Do + Dc)))
-                ys["overhead"].append((t - sum(alone[n] for n in names)) * 1e6)
-            log(f"{S} x {Do}+{Dc} x {T}: " + ", ".join(f"{m} {1e6 * v:.0f} us" for m, v in alone.items()))
-    for f in feats:
-        X, y = np.array(feats[f], dtype=float), np.array(ys[f])
+                variants.append((kind, dataclasses.replace(z, phase=ph), one))
+            for meth in ("ridge", "kernel", "ppca"):
+                one = LearnedInteraction(obs, coupling_kwargs={"methods": (meth,)}).fit(demos, dt=0.01)
+                if one.coupling_.method_ == meth:  # else its cross-validation kept the mean: not this class's cost
+                    z_m = dataclasses.replace(z, coupling=meth)
+                    variants.append((registry.COUPLING_CLASSES.get(meth, "learned"), z_m, one))
+            variants += [(m, z, members[m]) for m in ("kernel", "nn", "prior")]
+            for what in ("frame", "predict"):
+                for kind, z_v, model in variants:
+                    add(what, kind, z_v, model, partial)
+                for m in fams:  # the members as the registry builds them (their own choices), for the blends
+                    alone[what][m] = (min(_frame(members[m], partial, 3, clock=time.process_time) for _ in range(2))
+                                      if what == "frame" else _predict_cpu(members[m], partial, 6))
+                for names in (["ip", "nn"], fams):
+                    W = {n: [1.0 / len(names)] * 2 for n in names}
+                    b = Blend.from_fitted(obs, {n: members[n] for n in names}, W, None, demos, 0.01, 0.25,
+                                          bands=[0.25, 2.0])
+                    t = (min(_frame(b, partial, 3, clock=time.process_time) for _ in range(2)) if what == "frame"
+                         else _predict_cpu(b, partial, 6))
+                    f, y = rows.setdefault((what, "overhead"), ([], []))
+                    f.append((1.0, len(names), len(names) * (Do + Dc)))
+                    y.append((t - sum(alone[what][n] for n in names)) * 1e6)
+            log(f"{S} x {Do}+{Dc} x {T}: " + "; ".join(
+                f"{what} " + ", ".join(f"{m} {1e6 * v:.0f} us" for m, v in alone[what].items()) for what in alone))
+    for (what, kind), (f, y) in rows.items():
+        X, y = np.array(f, dtype=float), np.array(y)
         c, _ = nnls(X, y)
-        log(f"{f}: constants {np.round(c, 5).tolist()}, relative error {np.round((X @ c - y) / y, 2).tolist()}")
+        err = np.round((X @ c - y) / y, 2).tolist()
+        log(f"{what} {kind}: constants {np.round(c, 5).tolist()}, relative error {err}")
 
 
 def main(argv=None) -> int:

@@ -324,7 +324,7 @@ def test_fit_frame_budget_option(tmp_path, capsys):
     assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--frame-budget", "1.5",
                  "-o", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "streamed frame (modelled)" in text and "the larger of 1.5x and 2.00 ms" in text
+    assert "streamed frame (modelled)" in text and "the larger of 1.5x and 1.00 ms" in text
     import interprim as ip
 
     assert ip.load_any(out).frame_budget == 1.5
@@ -333,6 +333,10 @@ def test_fit_frame_budget_option(tmp_path, capsys):
                  "--frame-budget-floor", "0", "-o", str(out)]) == 0
     assert "the larger of 1.5x and 0.00 ms" in capsys.readouterr().out
     assert ip.load_any(out).frame_budget_floor == 0.0
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--frame-budget", "1.5",
+                 "--predict-budget-floor", "0.5", "-o", str(out)]) == 0
+    assert "predict from half the movement (modelled)" in capsys.readouterr().out
+    assert ip.load_any(out).predict_budget_floor == 0.0005
     assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--model", "nn",
                  "--frame-budget-floor", "1", "-o", str(out)]) != 0
     assert "--frame-budget-floor" in capsys.readouterr().err

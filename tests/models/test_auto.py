@@ -1,5 +1,7 @@
 """AutoInteraction: the family chosen by cross-validation on the training demonstrations."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -478,8 +480,10 @@ def _modelled_frame(auto, demos):
     from interprim.models import registry
     from interprim.models.blend import Blend
 
+    c = auto.selection_["cost"]
     z = registry.FrameSizes(len(demos), float(np.mean([len(d) for d in demos])), len(auto.observed_dofs),
-                            demos[0].shape[1], auto.n_basis)
+                            demos[0].shape[1], auto.n_basis, phase=c["ip_phase"] or "likelihood",
+                            coupling=c["learned_coupling"] or "ppca")
     members = list(auto.model_.members_) if hasattr(auto.model_, "members_") else [auto.chosen_]
     return sum(registry.frame_cost(m, z) for m in members) + Blend.frame_overhead(len(members), demos[0].shape[1])
 
@@ -488,7 +492,7 @@ def _modelled_frame(auto, demos):
 def tied():
     demos = _tied()
     # the budget purely relative (no floor), so that it binds on these small data
-    return demos, ip.AutoInteraction([0, 1, 2], frame_budget_floor=0.0).fit(demos, dt=0.02)
+    return demos, ip.AutoInteraction([0, 1, 2], frame_budget_floor=0.0, predict_budget_floor=0.0).fit(demos, dt=0.02)
 
 
 def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_budget(tied, blend):
@@ -507,6 +511,7 @@ def test_a_fitted_default_keeps_no_member_without_weight_and_stays_within_its_bu
                     m, w, model.model_.remaining, model.model_.past)
     c = auto.selection_["cost"]
     assert c["budget"] == pytest.approx(3.0 * c["ip_frame"]) and c["frame"] <= c["budget"]
+    assert c["predict_budget"] == pytest.approx(3.0 * c["ip_predict"]) and c["predict"] <= c["predict_budget"]
     assert c["frame"] == pytest.approx(_modelled_frame(auto, demos), rel=1e-12)
     for m in c["left_out"]:  # what was left out was left out for the budget, and is not run
         assert m not in getattr(auto.model_, "members_", {auto.chosen_: None})
@@ -534,6 +539,104 @@ def test_budget_phase_reads_the_inner_folds_fits():
     assert budget_phase(fits("learned", "learned", "likelihood", "likelihood"), 4) == "likelihood"  # half: not most
     assert budget_phase(fits("learned", "learned"), 3) is None  # a fold without a fit
     assert budget_phase(fits("learned", "learned") + [SimpleNamespace(fitted_=None)], 3) is None  # not fitted
+
+
+def test_budget_coupling_reads_the_inner_folds_fits():
+    """``budget_coupling``: the reduced-rank coupling when most inner-fold fits of the learned interaction chose it,
+    else the coupling most of the others chose (the first fold's on a tie); None when it was not fitted on every
+    fold."""
+    from types import SimpleNamespace
+
+    from interprim.models.auto import budget_coupling
+
+    def fits(*methods):
+        return [SimpleNamespace(coupling_=SimpleNamespace(method_=m)) for m in methods]
+
+    assert budget_coupling(fits("ppca", "ridge", "ppca"), 3) == "ppca"
+    assert budget_coupling(fits("ppca", "ridge", "blend"), 3) == "ridge"  # no majority: the first fold's other
+    assert budget_coupling(fits("kernel", "blend", "blend"), 3) == "blend"
+    assert budget_coupling(fits("ppca", "ppca", "ridge", "ridge"), 4) == "ridge"  # half: not most
+    assert budget_coupling(fits("ppca", "ppca"), 3) is None  # a fold without a fit
+    assert budget_coupling(fits("ppca", "ppca") + [SimpleNamespace(coupling_=None)], 3) is None  # not fitted
+
+
+def test_the_cost_model_tells_the_learned_couplings_apart():
+    """The learned interaction's frame is costed by its coupling's class: the reduced-rank coupling, which factorises
+    its joint PCA at every frame, 3-5x the linear smoothers at the benchmark's size (measured: 0.82 ms against
+    0.17-0.26 ms at 30 demonstrations x (7 + 7) DoFs x 200 frames); every linear smoother costs the same."""
+    from interprim.models import registry
+
+    z = registry.FrameSizes(30, 200.0, 7, 14)
+    ppca = registry.frame_cost("learned", dataclasses.replace(z, coupling="ppca"))
+    smooth = {m: registry.frame_cost("learned", dataclasses.replace(z, coupling=m))
+              for m in ("ridge", "kernel", "blend", "mean")}
+    assert len(set(smooth.values())) == 1 and 3.0 <= ppca / smooth["ridge"] <= 5.0
+    assert 0.6e-3 <= ppca <= 1.0e-3 and 0.15e-3 <= smooth["ridge"] <= 0.3e-3  # within 26 % of the measurements
+    assert registry.frame_cost("learned", z) == ppca  # sizes that do not say: the dearer class
+    assert registry.COUPLING_CLASSES == {"ppca": "learned-ppca"}
+
+
+def test_the_budget_bounds_a_predict_call_as_well_as_a_frame():
+    """``budget_model``: a blend within the budget (``cost <= budget``) has its modelled frame within the frame's
+    budget and its modelled predict within the predict's (each the larger of 3x the IP's and the floor); a family
+    whose predict alone exceeds the predict's budget (the aligned families redo a DTW of the whole prefix) is left
+    out for it, and the summary says what it costs a frame and a predict."""
+    import itertools
+
+    from interprim.models import registry
+
+    z = registry.FrameSizes(30, 200.0, 7, 14, phase="learned", coupling="blend")
+    auto = ip.AutoInteraction(list(range(7)), frame_budget_floor=0.0, predict_budget_floor=0.0)
+    bm = auto.budget_model(z, list(registry.CANDIDATES))
+    assert bm.budget == pytest.approx(3.0 * bm.ip_frame) and bm.predict_budget == pytest.approx(3.0 * bm.ip_predict)
+    for n in range(1, len(registry.CANDIDATES) + 1):
+        for members in map(list, itertools.combinations(registry.CANDIDATES, n)):
+            within = bm.cost(members) <= bm.budget
+            assert within == (bm.frame_of(members) <= bm.budget and bm.predict_of(members) <= bm.predict_budget)
+    assert registry.predict_cost("nn", z) > bm.predict_budget > registry.frame_cost("nn", z)  # cheap to stream
+    assert bm.costs["nn"] > bm.budget  # left out for its predict alone
+    longer = dataclasses.replace(z, n_frames=400.0)  # a DTW over twice the prefix and twice the frames: 4x the cells
+    grow = registry.predict_cost("nn", longer) - registry._PREDICT_US["nn"][0] * 1e-6
+    assert grow == pytest.approx(4.0 * (registry.predict_cost("nn", z) - registry._PREDICT_US["nn"][0] * 1e-6))
+    demos = _tied()
+    fitted = ip.AutoInteraction([0, 1, 2], frame_budget=1.0, frame_budget_floor=0.0, predict_budget_floor=0.0).fit(
+        demos, dt=0.02)
+    c = fitted.selection_["cost"]
+    assert c["predict"] <= c["predict_budget"] and c["frame"] <= c["budget"]
+    assert c["left_out"] and set(c["left_out_predict"]) == set(c["left_out"])  # at 1x the IP, something is
+    text = fitted.summary()
+    assert "predict from half the movement (modelled)" in text
+    m = min(c["left_out"], key=lambda k: c["left_out"][k])
+    assert f"{m} ({1e3 * c['left_out'][m]:.2f} ms a frame, {1e3 * c['left_out_predict'][m]:.2f} ms a predict)" in text
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.002])
+def test_the_learned_budget_coupling_is_its_own_when_the_model_keeps_it(monkeypatch, floor):
+    """The learned interaction's frame is costed by the coupling its inner-fold fits chose; when the model keeps it,
+    it is fitted on all the demonstrations then (once: that fit is the member) and its own coupling times the
+    budget.  Made to believe its inner folds chose the other class, the fit gives the same model whenever it keeps
+    the learned interaction: the selection is made again with the coupling of the one it keeps."""
+    from interprim.models import auto as auto_module
+    from interprim.models.learned import LearnedInteraction
+
+    demos = _tied()
+    fits = []
+    real = LearnedInteraction.fit
+    monkeypatch.setattr(LearnedInteraction, "fit", lambda self, *a, **k: fits.append(len(a[0])) or real(self, *a, **k))
+    first = ip.AutoInteraction([0, 1, 2], frame_budget_floor=floor).fit(demos, dt=0.02)
+    c = first.selection_["cost"]
+    kept = "learned" in getattr(first.model_, "members_", {first.chosen_: None})
+    assert fits.count(len(demos)) == int(kept)  # fitted on all the demonstrations once, only when kept
+    assert c["learned_coupling_from"] == ("fitted on all the demonstrations" if kept else "inner folds")
+    if kept:
+        own = first.model_.members_["learned"].coupling_.method_
+        assert c["learned_coupling"] == own and f"learned interaction's {own} coupling" in first.summary()
+    other = "ridge" if c["learned_coupling"] == "ppca" else "ppca"
+    monkeypatch.setattr(auto_module, "budget_coupling", lambda fits, k: other)
+    again = ip.AutoInteraction([0, 1, 2], frame_budget_floor=floor).fit(demos, dt=0.02)
+    if "learned" in getattr(again.model_, "members_", {}):  # kept under the other class: the selection made again
+        assert again.selection_["band_weights"] == first.selection_["band_weights"]
+        assert again.selection_["cost"]["frame"] == pytest.approx(c["frame"], rel=1e-12)
 
 
 @pytest.mark.parametrize("floor", [0.0, 0.002])
@@ -669,6 +772,8 @@ def test_frame_budget_is_checked():
     for bad in (-0.001, float("nan"), True, "2ms"):
         with pytest.raises(ValueError, match="frame_budget_floor"):
             ip.AutoInteraction([0, 1], frame_budget_floor=bad).fit(_tied(4, 1, 1, 30), dt=0.02)
+        with pytest.raises(ValueError, match="predict_budget_floor"):
+            ip.AutoInteraction([0, 1], predict_budget_floor=bad).fit(_tied(4, 1, 1, 30), dt=0.02)
 
 
 def test_max_prefixes_bounds_the_inner_cross_validation(monkeypatch):
@@ -698,10 +803,10 @@ def test_max_prefixes_bounds_the_inner_cross_validation(monkeypatch):
 
 
 def test_frame_budget_has_a_floor_in_milliseconds(tied):
-    """The budget is the larger of 3x the Interaction Primitive's modelled frame and the floor (2 ms by default):
+    """The budget is the larger of 3x the Interaction Primitive's modelled frame and the floor (1 ms by default):
     on small data, where the IP's frame is a fraction of a millisecond, the families that carry the accuracy are
     not left out for a saving no control loop needs; the floor changes nothing else."""
-    from interprim.models.auto import DEFAULT_FRAME_BUDGET_FLOOR
+    from interprim.models.auto import DEFAULT_FRAME_BUDGET_FLOOR, DEFAULT_PREDICT_BUDGET_FLOOR
 
     demos, relative = tied
     auto = ip.AutoInteraction([0, 1, 2]).fit(demos, dt=0.02)
@@ -709,7 +814,8 @@ def test_frame_budget_has_a_floor_in_milliseconds(tied):
     assert c["ip_frame"] == r["ip_frame"]
     assert c["budget"] == pytest.approx(max(3.0 * c["ip_frame"], DEFAULT_FRAME_BUDGET_FLOOR))
     assert c["frame"] <= c["budget"] and set(c["left_out"]) <= set(r["left_out"])
-    assert "the larger of 3x and 2.00 ms" in auto.summary()
+    assert "the larger of 3x and 1.00 ms" in auto.summary()
+    assert c["predict_budget"] == pytest.approx(max(3.0 * c["ip_predict"], DEFAULT_PREDICT_BUDGET_FLOOR))
     assert c["budget"] >= r["budget"] and c["budget"] == pytest.approx(DEFAULT_FRAME_BUDGET_FLOOR)  # tiny IP here
     # the blend within the floor may be dearer than within 3x the IP, never beyond the floor
     assert r["frame"] <= r["budget"] < c["budget"]

@@ -101,14 +101,19 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument(
         "--frame-budget", type=_frame_budget, default=None, metavar="X",
-        help="--model auto: the most a streamed frame may cost, as a multiple of the Interaction Primitive's on "
-        "the same data, or --frame-budget-floor milliseconds if that is more (default 3; 'none': no bound); "
-        "families that do not fit are left out, and the summary says which",
+        help="--model auto: the most a streamed frame, and a predict call, may cost, as a multiple of the "
+        "Interaction Primitive's on the same data, or --frame-budget-floor (--predict-budget-floor) milliseconds "
+        "if that is more (default 3; 'none': no bound); families that do not fit are left out, and the summary "
+        "says which",
     )
     p.add_argument(
         "--frame-budget-floor", type=_milliseconds, default=None, metavar="MS",
         help="--model auto: milliseconds a streamed frame may always cost, however cheap the Interaction "
-        "Primitive's frame is on the data (default 2; 0: the budget is the multiple alone)",
+        "Primitive's frame is on the data (default 1; 0: the budget is the multiple alone)",
+    )
+    p.add_argument(
+        "--predict-budget-floor", type=_milliseconds, default=None, metavar="MS",
+        help="--model auto: the same for a predict call from half the movement (default 2)",
     )
     p.add_argument(
         "--max-prefixes", type=_max_prefixes, default=None, metavar="N",
@@ -249,7 +254,7 @@ def cmd_fit(args) -> int:
         raise CommandError(f"{args.demos} holds {len(ds)} demonstration; at least 2 are needed to learn a "
                            "distribution. " + SPLIT_HINT)
     for flag, value in (("--frame-budget", args.frame_budget), ("--frame-budget-floor", args.frame_budget_floor),
-                        ("--max-prefixes", args.max_prefixes)):
+                        ("--predict-budget-floor", args.predict_budget_floor), ("--max-prefixes", args.max_prefixes)):
         if args.model != "auto" and value is not None:
             raise CommandError(f"{flag} sets how --model auto compares and blends the families; --model "
                                f"{args.model} is one family alone (drop {flag}, or use --model auto)")
@@ -304,6 +309,8 @@ def _fit_other(args, ds, obs, n_read) -> int:
         budget["frame_budget"] = None if args.frame_budget == "none" else float(args.frame_budget)
     if args.frame_budget_floor is not None:
         budget["frame_budget_floor"] = float(args.frame_budget_floor) / 1e3
+    if args.predict_budget_floor is not None:
+        budget["predict_budget_floor"] = float(args.predict_budget_floor) / 1e3
     if args.max_prefixes is not None:
         budget["max_prefixes"] = None if args.max_prefixes == "none" else int(args.max_prefixes)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),

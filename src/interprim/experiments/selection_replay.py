@@ -48,7 +48,7 @@ from ..model_selection import long_range, stacking
 from ..model_selection.realtime import folds
 from ..model_selection.yardsticks import place_cases
 from ..models import registry
-from ..models.auto import AutoInteraction, budget_phase, recording_factory
+from ..models.auto import AutoInteraction, budget_coupling, budget_phase, recording_factory
 
 __all__ = ["task_folds", "choose", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
 
@@ -64,8 +64,10 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
     development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
     its frame budget is computed from: ``sizes`` is ``(assumed, own)``, the sizes with the Interaction Primitive's
-    phase read from its inner-fold fits (:func:`~interprim.models.auto.budget_phase`) and with the phase of the IP
-    fitted on all the training recordings, which the fit uses when its model keeps the IP (:func:`choose`)."""
+    phase and the learned interaction's coupling read from their inner-fold fits
+    (:func:`~interprim.models.auto.budget_phase`, :func:`~interprim.models.auto.budget_coupling`) and with those of
+    the two fitted on all the training recordings, which the fit uses for a family its model keeps
+    (:func:`choose`)."""
     auto = AutoInteraction(obs, point_dim=point_dim)
     make = auto.factories()
     arrays = [np.asarray(x, dtype=np.float64) for x in dev]
@@ -78,30 +80,49 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
         tr = [np.asarray(x, dtype=np.float64) for x in d]
         c = stacking.scoring_config(0.25, tr, dt, stride=3, point_dim=point_dim, max_frames=auto.max_prefixes)
         own = registry.yardstick_ip(auto.settings(), tr, dt).phase_method_used()
+        own_coupling = make["learned"]().fit(tr, dt=dt).coupling_.method_
         fits: list = []
-        cv = stacking.CrossValidation(dict(make, ip=recording_factory(make["ip"], fits)), d, obs, dt, c, k=k,
-                                      horizon=0.25)
+        learned_fits: list = []
+        cv = stacking.CrossValidation(dict(make, ip=recording_factory(make["ip"], fits),
+                                           learned=recording_factory(make["learned"], learned_fits)),
+                                      d, obs, dt, c, k=k, horizon=0.25)
         sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
-                                    int(auto.n_basis), phase=own)
-        assumed = budget_phase(fits, k) or own
-        inner.append((held, cv, (dataclasses.replace(sizes, phase=assumed), sizes)))
+                                    int(auto.n_basis), phase=own, coupling=own_coupling)
+        assumed = dataclasses.replace(sizes, phase=budget_phase(fits, k) or own,
+                                      coupling=budget_coupling(learned_fits, k) or "ppca")
+        inner.append((held, cv, (assumed, sizes)))
     return outer, inner
 
 
 def _budget(cv, sizes: registry.FrameSizes) -> tuple:
     """``(cost, budget)`` of ``AutoInteraction``'s default frame budget on an inner fold's data of ``sizes``."""
-    _, cost, _, budget = AutoInteraction([]).budget_model(sizes, cv.names)
-    return cost, budget
+    bm = AutoInteraction([]).budget_model(sizes, cv.names)
+    return bm.cost, bm.budget
 
 
 def choose(rule, cv, sizes: tuple):
     """``rule``'s choice on the inner cross-validation ``cv`` with the frame budget as ``AutoInteraction.fit`` sets
-    it: timed by the IP's phase from its inner-fold fits, and made again with the phase of the IP fitted on all the
-    training recordings when the choice keeps the IP and that phase is the other (``sizes``: :func:`task_folds`)."""
-    assumed, own = sizes
-    choice = rule(cv, *_budget(cv, assumed))
-    if choice is not None and "ip" in choice["names"] and (assumed.phase == "learned") != (own.phase == "learned"):
-        choice = rule(cv, *_budget(cv, own))
+    it: timed by the IP's phase and the learned interaction's coupling from their inner-fold fits, and made again
+    with those of the family fitted on all the training recordings when the choice keeps it and its cost class is
+    the other (``sizes``: :func:`task_folds`)."""
+    current, own = sizes
+    fixed: set = set()
+    choice = None
+    for _ in range(3):
+        choice = rule(cv, *_budget(cv, current))
+        if choice is None:
+            return None
+        same = True
+        if "ip" in choice["names"] and "ip" not in fixed:
+            fixed.add("ip")
+            same = (current.phase == "learned") == (own.phase == "learned")
+            current = dataclasses.replace(current, phase=own.phase)
+        if "learned" in choice["names"] and "learned" not in fixed:
+            fixed.add("learned")
+            same = same and (current.coupling == "ppca") == (own.coupling == "ppca")
+            current = dataclasses.replace(current, coupling=own.coupling)
+        if same:
+            break
     return choice
 
 

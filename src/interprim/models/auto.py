@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 
@@ -36,8 +37,9 @@ from .blend import Blend, member_from_state
 from .primitive.estimator import InteractionPrimitive
 from .training import pace_trend
 
-__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR", "budget_phase",
-           "recording_factory"]
+__all__ = ["AutoInteraction", "CANDIDATES", "DEFAULT_FRAME_BUDGET", "DEFAULT_FRAME_BUDGET_FLOOR",
+           "DEFAULT_PREDICT_BUDGET_FLOOR", "Budget", "budget_phase",
+           "budget_coupling", "recording_factory"]
 
 #: The families compared by default (:data:`interprim.models.registry.CANDIDATES`).
 CANDIDATES = registry.CANDIDATES
@@ -47,7 +49,9 @@ CANDIDATES = registry.CANDIDATES
 DEFAULT_FRAME_BUDGET = 3.0
 #: seconds (modelled) a streamed frame may always cost, however cheap the Interaction Primitive is on the data: a
 #: robot's control loop plans in milliseconds, and on small data sets 3x the IP's frame is a fraction of one
-DEFAULT_FRAME_BUDGET_FLOOR = 0.002
+DEFAULT_FRAME_BUDGET_FLOOR = 0.001
+#: seconds (modelled) a ``predict`` call (from half the movement) may always cost: a call outside the control loop
+DEFAULT_PREDICT_BUDGET_FLOOR = 0.002
 
 #: Where ``selection_["cost"]["ip_phase"]``, the phase that times the frame budget's Interaction Primitive, comes from.
 INNER_FOLDS = "inner folds"
@@ -89,6 +93,42 @@ def budget_phase(fits, k: int) -> str | None:
         return "learned"
     others = [p for p in phases if p != "learned"]
     return max(others, key=lambda p: (others.count(p), -others.index(p)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Budget:
+    """The frame budget of :meth:`AutoInteraction.budget_model` on one data set.  ``cost(members)`` is what the
+    budget bounds, in seconds of a streamed frame: a blend's modelled frame (``frame_of``) or, if more, its
+    modelled ``predict`` (``predict_of``) as a share of the predict's budget, times ``budget`` (so that ``cost <=
+    budget`` bounds both); ``costs``: ``cost`` of each family alone (None: not costed); ``budget``,
+    ``predict_budget``: seconds (None: no budget); ``ip_frame``, ``ip_predict``: the Interaction Primitive's."""
+
+    costs: dict
+    cost: Callable[[list], float]
+    ip_frame: float
+    budget: float | None
+    frame_of: Callable[[list], float]
+    predict_of: Callable[[list], float]
+    ip_predict: float
+    predict_budget: float | None
+
+
+def budget_coupling(fits, k: int) -> str | None:
+    """The learned interaction's coupling for the frame budget (:class:`~interprim.models.registry.FrameSizes`),
+    read from its fits on the ``k`` inner training folds ``fits``: ``"ppca"`` when more than half of them chose it,
+    else the method most of the others chose (the first fold's on a tie); None when fewer than ``k`` fits were made.
+
+    Its own cross-validation chooses the coupling, and the reduced-rank one (``"ppca"``) costs 3-5x a frame of the
+    linear smoothers (registry's ``learned-ppca``): on the benchmark's data sets the learned frame measured 0.17 ms
+    (ridge), 0.26 ms (a blend of ridge and kernel) and 0.82 ms (ppca) at 30 demonstrations x (7 + 7) DoFs.
+    """
+    methods = [f.coupling_.method_ for f in fits if getattr(f, "coupling_", None) is not None]
+    if len(methods) < k:
+        return None
+    if 2 * methods.count("ppca") > len(methods):
+        return "ppca"
+    others = [m for m in methods if m != "ppca"]
+    return max(others, key=lambda m: (others.count(m), -others.index(m)))
 
 
 class AutoInteraction(Predictor):
@@ -138,25 +178,32 @@ class AutoInteraction(Predictor):
         turns it on.
     frame_budget : float or None, default DEFAULT_FRAME_BUDGET (3.0)
         The most a streamed frame (``stream.update`` + ``trajectory(100)``) may cost, as a multiple of the
-        Interaction Primitive's on the same data, or ``frame_budget_floor`` seconds if that is more (None: no
-        bound).  Costs come from a deterministic cost model
-        (:func:`interprim.models.registry.frame_cost`, :meth:`~interprim.models.blend.Blend.frame_overhead`: a
-        formula per family in the sizes of the data -- demonstrations, frames, DoFs, basis -- whose constants were
-        calibrated once in ``benchmarks/auto.py``), not from timings taken during the fit: one input gives one
-        model whatever the machine's load.  The Interaction Primitive's frame depends on its phase, which its own
-        cross-validation chooses: the phase most of its inner-fold fits chose times it, and the IP is fitted on all
-        the demonstrations only when the model keeps it (then its own phase times the budget, and the selection is
-        made again if that phase is the other; the fit is an IP fit cheaper when the IP is not kept).  A family
-        whose frame alone exceeds the budget is not compared at all (nor fitted: the fit is cheaper too); when the
-        best blend exceeds it, the best set of families within it is blended instead
+        Interaction Primitive's on the same data, or ``frame_budget_floor`` seconds if that is more; and the same
+        multiple of the IP's ``predict`` (from half the movement), or ``predict_budget_floor`` seconds if that is
+        more (None: no bound).  Costs come from a deterministic cost model
+        (:func:`interprim.models.registry.frame_cost`, :func:`~interprim.models.registry.predict_cost`,
+        :meth:`~interprim.models.blend.Blend.frame_overhead`: a formula per family and cost class in the sizes of
+        the data -- demonstrations, frames, DoFs, basis -- whose constants were calibrated once on an idle machine
+        in ``benchmarks/auto.py``), not from timings taken during the fit: one input gives one model whatever the
+        machine's load.  Two families' costs depend on what their own cross-validation chooses: the Interaction
+        Primitive's on its phase, the learned interaction's on its coupling (the reduced-rank one costs 3-5x the
+        linear smoothers).  What most of their inner-fold fits chose times them, and each is fitted on all the
+        demonstrations only when the model keeps it (then its own choice times the budget, and the selection is
+        made again if that choice is of the other cost class; the fit is an IP fit cheaper when the IP is not
+        kept).  A family whose cost alone exceeds the budget is not compared at all (nor fitted: the fit is
+        cheaper too); when the best blend exceeds it, the best set of families within it is blended instead
         (:func:`interprim.model_selection.stacking.stack`).  ``selection_["cost"]`` and :meth:`summary` say what
-        the model's frame costs and what was left out for the budget.  A user's own family (a ``(name, factory)``
-        pair not named after a registry family) has no cost model: it is not counted, and said so.
-    frame_budget_floor : float, default DEFAULT_FRAME_BUDGET_FLOOR (0.002)
-        Seconds (modelled) a streamed frame may always cost: the budget is the larger of ``frame_budget`` times the
-        Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a millisecond (small data
-        sets, few DoFs), a multiple of it would leave out the families that carry the accuracy, for a saving no
-        control loop needs; 0 makes the budget purely relative.
+        the model's frame and predict cost and what was left out for the budget.  A user's own family (a
+        ``(name, factory)`` pair not named after a registry family) has no cost model: it is not counted, and said
+        so.
+    frame_budget_floor : float, default DEFAULT_FRAME_BUDGET_FLOOR (0.001)
+        Seconds (modelled, on an idle machine) a streamed frame may always cost: the budget is the larger of
+        ``frame_budget`` times the Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a
+        millisecond (small data sets, few DoFs), a multiple of it would leave out the families that carry the
+        accuracy, for a saving no control loop needs; 0 makes the budget purely relative.
+    predict_budget_floor : float, default DEFAULT_PREDICT_BUDGET_FLOOR (0.002)
+        The same for a ``predict`` call (outside the control loop; the aligned families redo a DTW of the whole
+        prefix there, which their streams do frame by frame).
 
     Attributes
     ----------
@@ -182,12 +229,16 @@ class AutoInteraction(Predictor):
         level per agent, chosen by cross-fitting: :func:`interprim.model_selection.stacking.band_level`);
         ``cost``: ``frame`` (the
         model's modelled streamed frame, s), ``ip_frame`` (the Interaction Primitive's on the same data),
-        ``frame_budget``, ``budget`` (s), ``left_out`` (``{family: its modelled frame}`` of the families left out
-        for the budget), ``not_costed``, ``ip_phase`` (the phase that times the IP's frame; None without a budget)
-        and ``ip_phase_from`` (``"inner folds"``: the phase most of the IP's inner-fold fits chose, the model keeping
-        no IP; ``"fitted on all the demonstrations"``: the IP's own, fitted on all of them because the model keeps
-        it or the IP was not compared).  ``pace``: how the demonstrations' durations change with
-        their order (:func:`~interprim.models.training.pace_trend`; a significant trend raises a
+        ``frame_budget``, ``budget`` (s), ``predict``, ``ip_predict`` and ``predict_budget`` (the same for a
+        ``predict`` from half the movement), the two floors, ``left_out`` and ``left_out_predict`` (``{family:
+        its modelled frame / predict}`` of the families left out for the budget), ``not_costed``, ``ip_phase``
+        (the phase that times the IP's frame; None without a budget) and ``ip_phase_from`` (``"inner folds"``:
+        the phase most of the IP's inner-fold fits chose, the model keeping no IP; ``"fitted on all the
+        demonstrations"``: the IP's own, fitted on all of them because the model keeps it or the IP was not
+        compared), ``learned_coupling`` and ``learned_coupling_from`` (the same for the coupling that times the
+        learned interaction's frame, :func:`budget_coupling`; None when it is not costed by its folds).  ``pace``:
+        how the demonstrations' durations change with their order (:func:`~interprim.models.training.pace_trend`;
+        a significant trend raises a
         :class:`~interprim.core.errors.PaceWarning` once and :meth:`summary` says it).
     """
 
@@ -200,7 +251,8 @@ class AutoInteraction(Predictor):
     def __init__(self, observed_dofs, candidates=CANDIDATES, combine: str = "blend", folds: int = 3,
                  horizon: float = DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
                  point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET,
-                 frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR, max_prefixes: int | None = 16):
+                 frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR,
+                 predict_budget_floor: float = DEFAULT_PREDICT_BUDGET_FLOOR, max_prefixes: int | None = 16):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -213,6 +265,7 @@ class AutoInteraction(Predictor):
         self.progress = progress
         self.frame_budget = frame_budget
         self.frame_budget_floor = frame_budget_floor
+        self.predict_budget_floor = predict_budget_floor
         self.max_prefixes = max_prefixes
 
     def _check(self):
@@ -244,10 +297,11 @@ class AutoInteraction(Predictor):
                                    and np.isfinite(fb) and fb > 0):
             raise ValueError(f"frame_budget must be a positive multiple of the Interaction Primitive's frame, or "
                              f"None (no budget), got {fb!r}")
-        fl = self.frame_budget_floor
-        if not (isinstance(fl, (int, float, np.integer, np.floating)) and not isinstance(fl, bool)
-                and np.isfinite(fl) and fl >= 0):
-            raise ValueError(f"frame_budget_floor must be a number of seconds >= 0, got {fl!r}")
+        for name in ("frame_budget_floor", "predict_budget_floor"):
+            fl = getattr(self, name)
+            if not (isinstance(fl, (int, float, np.integer, np.floating)) and not isinstance(fl, bool)
+                    and np.isfinite(fl) and fl >= 0):
+                raise ValueError(f"{name} must be a number of seconds >= 0, got {fl!r}")
 
     def frame_costs(self, sizes: registry.FrameSizes) -> dict:
         """``{candidate: modelled seconds of one streamed frame}`` on data of ``sizes``
@@ -256,22 +310,36 @@ class AutoInteraction(Predictor):
         names = [c if isinstance(c, str) else c[0] for c in self.candidates]
         return {m: registry.frame_cost(m, sizes) for m in names}
 
-    def budget_model(self, sizes: registry.FrameSizes, names) -> tuple:
-        """``(costs, cost, ip_frame, budget)`` of the frame budget on data of ``sizes`` for the candidates ``names``:
-        ``{family: modelled seconds of its frame alone}`` (None: not costed), ``cost(members)`` the modelled frame
-        of a blend of ``members`` (:meth:`~interprim.models.blend.Blend.frame_overhead` included), the Interaction
-        Primitive's frame, and the budget in seconds (None without one): the larger of ``frame_budget`` times the
-        IP's frame and ``frame_budget_floor``."""
-        costs = {m: c for m, c in self.frame_costs(sizes).items() if m in set(names)}
+    def budget_model(self, sizes: registry.FrameSizes, names) -> Budget:
+        """The frame budget on data of ``sizes`` for the candidates ``names`` (:class:`Budget`): a blend's modelled
+        streamed frame (:meth:`~interprim.models.blend.Blend.frame_overhead` included) within the larger of
+        ``frame_budget`` times the IP's and ``frame_budget_floor``, and its modelled ``predict`` (from half the
+        movement, :func:`~interprim.models.registry.predict_cost`) within the larger of ``frame_budget`` times the
+        IP's and ``predict_budget_floor``."""
+        keep = set(names)
+        frame = {m: c for m, c in self.frame_costs(sizes).items() if m in keep}
+        pred = {m: registry.predict_cost(m, sizes) if c is not None else None for m, c in frame.items()}
+        ip_frame, ip_predict = registry.frame_cost("ip", sizes), registry.predict_cost("ip", sizes)
+        assert ip_frame is not None and ip_predict is not None  # the registry's ip has a cost model
+        budget = predict_budget = None
+        if self.frame_budget is not None:
+            budget = max(float(self.frame_budget) * ip_frame, float(self.frame_budget_floor))
+            predict_budget = max(float(self.frame_budget) * ip_predict, float(self.predict_budget_floor))
 
-        def cost(members) -> float:
-            return float(sum(costs[m] or 0.0 for m in members)) + Blend.frame_overhead(len(members), sizes.n_dofs)
+        def frame_of(members) -> float:
+            return float(sum(frame[m] or 0.0 for m in members)) + Blend.frame_overhead(len(members), sizes.n_dofs)
 
-        ip_frame = registry.frame_cost("ip", sizes)
-        assert ip_frame is not None  # the registry's ip has a cost model
-        budget = None if self.frame_budget is None else max(float(self.frame_budget) * ip_frame,
-                                                            float(self.frame_budget_floor))
-        return costs, cost, ip_frame, budget
+        def predict_of(members) -> float:
+            return float(sum(pred[m] or 0.0 for m in members)) + Blend.predict_overhead(len(members), sizes.n_dofs)
+
+        def cost(members) -> float:  # the frame, or the predict's share of its budget in frame seconds if more
+            f = frame_of(members)
+            if budget is None or predict_budget is None:
+                return f
+            return max(f, predict_of(members) * budget / predict_budget)
+
+        costs = {m: None if c is None else cost([m]) for m, c in frame.items()}
+        return Budget(costs, cost, ip_frame, budget, frame_of, predict_of, ip_predict, predict_budget)
 
     def _yardstick(self, train, dt, progress):
         """The Interaction Primitive of ``train`` fitted on all of it, as the frame budget's yardstick and, when the
@@ -355,7 +423,17 @@ class AutoInteraction(Predictor):
             ref = self._yardstick(train, dt, progress)
             sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
             phase_from = ALL_DEMONSTRATIONS
-        costs, cost, ip_frame, budget = self.budget_model(sizes, list(make))
+        learned_ref = None  # the learned interaction fitted on all the demonstrations, when fitted for the budget
+        learned_folds: list = []  # its fits on the inner folds, when the registry's learned is compared
+        coupling_from = None  # where the budget's learned coupling comes from (None: assumed, its dearer class)
+        if budgeted and "learned" in make:  # (a user's own family of that name without a coupling: its dearer)
+            # the same for the learned interaction, whose coupling (its own cross-validation's choice) moves its
+            # frame by 3-5x: until its inner folds tell, its cheaper one (no family is left out uncompared for a
+            # cost it may not have)
+            make["learned"] = recording_factory(make["learned"], learned_folds)
+            sizes = dataclasses.replace(sizes, coupling="ridge")
+        bm = self.budget_model(sizes, list(make))
+        costs, cost, budget = bm.costs, bm.cost, bm.budget
 
         def final(m, member: bool = False):
             """Family ``m`` fitted on all the demonstrations (the yardstick IP when it is the registry's ip): the
@@ -365,6 +443,8 @@ class AutoInteraction(Predictor):
             (:meth:`~interprim.models.primitive.estimator.InteractionPrimitive.without_calibration`:
             ``calibrate=False``, ``calibration_`` None, in its model file too); its means are the calibrated fit's.
             The model alone keeps the calibration it is fitted with."""
+            if m == "learned" and learned_ref is not None:  # fitted on all the demonstrations for the budget
+                return learned_ref
             reuse = m == "ip" and ref is not None and "ip" in self.candidates
             if not member:
                 if reuse:
@@ -406,9 +486,15 @@ class AutoInteraction(Predictor):
                 ref = self._yardstick(train, dt, progress)
                 phase, phase_from = ref.phase_method_used(), ALL_DEMONSTRATIONS
             sizes = dataclasses.replace(sizes, phase=phase)
-        for _ in range(2):  # once more at most: with the phase of the IP the model keeps
+        if budgeted and learned_folds:
+            coupling = budget_coupling(learned_folds, min(int(self.folds), n))
+            # not fitted on every inner fold (then not compared): its dearer coupling, should it be kept
+            sizes = dataclasses.replace(sizes, coupling="ppca" if coupling is None else coupling)
+            coupling_from = None if coupling is None else INNER_FOLDS
+        for _ in range(3):  # at most once more for each of the IP and the learned interaction the model keeps
             if budgeted:
-                costs, cost, ip_frame, budget = self.budget_model(sizes, list(costs))
+                bm = self.budget_model(sizes, list(costs))
+                costs, cost, budget = bm.costs, bm.cost, bm.budget
             compared, cv, over = make, cv_all, {}
             if cv_all is not None and budget is not None:  # compared under the dearer phase's budget, over this one
                 over = _over_budget(costs, list(make), budget)
@@ -428,15 +514,22 @@ class AutoInteraction(Predictor):
                 fitted = stacking.stack(cv, float(self.horizon), cost=cost, budget=budget, scales=False)
                 # the remaining duration and the weights beyond the real-time band, chosen on the rest of the movement
                 fitted, remaining = long_range.refine(cv, fitted, float(self.horizon), cost=cost, budget=budget)
-            keeps_ip = "ip" in (fitted.names if fitted is not None else [chosen])
-            if phase_from != INNER_FOLDS or not keeps_ip:
-                break
-            # the model keeps the IP: fitted on all the demonstrations now (it is needed anyway), its own phase
-            # is the budget's; when it is not the phase its inner folds chose, the selection is made again with it
-            ref = self._yardstick(train, dt, progress)
-            phase_from, same = ALL_DEMONSTRATIONS, (ref.phase_method_used() == "learned") == (sizes.phase == "learned")
-            sizes = dataclasses.replace(sizes, phase=ref.phase_method_used())
-            if same:  # the same frame cost: the selection stands
+            keeps = fitted.names if fitted is not None else [chosen]
+            same = True  # the members kept cost what the budget assumed: the selection stands
+            if phase_from == INNER_FOLDS and "ip" in keeps:
+                # the model keeps the IP: fitted on all the demonstrations now (it is needed anyway), its own phase
+                # is the budget's; when it is not the phase its inner folds chose, the selection is made again
+                ref = self._yardstick(train, dt, progress)
+                same = (ref.phase_method_used() == "learned") == (sizes.phase == "learned")
+                phase_from, sizes = ALL_DEMONSTRATIONS, dataclasses.replace(sizes, phase=ref.phase_method_used())
+            if coupling_from == INNER_FOLDS and "learned" in keeps:  # the same for the learned coupling
+                learned_ref = factories["learned"]().fit(train, dt=dt)
+                progress.grow(1)
+                progress.step("fitted learned (its coupling times the frame budget)")
+                own = learned_ref.coupling_.method_
+                same = same and (own == "ppca") == (sizes.coupling == "ppca")
+                coupling_from, sizes = ALL_DEMONSTRATIONS, dataclasses.replace(sizes, coupling=own)
+            if same:
                 break
         left_out = {**left_out, **over}
         if fitted is not None:
@@ -462,11 +555,18 @@ class AutoInteraction(Predictor):
             selection.update(combine="best", weights=weights)
         kept = list(weights)
         record = selection.pop("cost", {})
-        selection["cost"] = {"frame": cost(kept), "ip_frame": ip_frame, "frame_budget": self.frame_budget,
-                             "frame_budget_floor": float(self.frame_budget_floor),
-                             "budget": budget, "left_out": {**left_out, **record.get("left_out", {})},
+        left_all = {**left_out, **record.get("left_out", {})}
+        selection["cost"] = {"frame": bm.frame_of(kept), "ip_frame": bm.ip_frame, "frame_budget": self.frame_budget,
+                             "frame_budget_floor": float(self.frame_budget_floor), "budget": budget,
+                             "predict_budget_floor": float(self.predict_budget_floor),
+                             "predict": bm.predict_of(kept), "ip_predict": bm.ip_predict,
+                             "predict_budget": bm.predict_budget,
+                             "left_out": {m: bm.frame_of([m]) for m in left_all},
+                             "left_out_predict": {m: bm.predict_of([m]) for m in left_all},
                              "not_costed": [m for m in kept if costs.get(m) is None],
-                             "ip_phase": None if phase_from is None else sizes.phase, "ip_phase_from": phase_from}
+                             "ip_phase": None if phase_from is None else sizes.phase, "ip_phase_from": phase_from,
+                             "learned_coupling": None if coupling_from is None else sizes.coupling,
+                             "learned_coupling_from": coupling_from}
         progress.close()
         pace = pace_trend([(len(d) - 1) * dt for d in train])
         selection["pace"] = pace
@@ -602,6 +702,10 @@ class AutoInteraction(Predictor):
             notes.append(f"its {c['ip_phase']} phase, " + (
                 "as most of its inner-fold fits chose" if c.get("ip_phase_from") == INNER_FOLDS
                 else "fitted on all the demonstrations"))
+        if c.get("learned_coupling") and "learned" in self.weights_:  # the coupling that times the learned member
+            notes.append(f"the learned interaction's {c['learned_coupling']} coupling, " + (
+                "as most of its inner-fold fits chose" if c.get("learned_coupling_from") == INNER_FOLDS
+                else "fitted on all the demonstrations"))
         if c.get("budget") is not None:
             floor = c.get("frame_budget_floor")
             rule = f"{c['frame_budget']:g}x" if floor is None else \
@@ -610,9 +714,17 @@ class AutoInteraction(Predictor):
         if notes:
             line += " (" + "; ".join(notes) + ")"
         out = [line]
+        if c.get("predict") is not None:  # the same for a predict call
+            line = (f"predict from half the movement (modelled): {1e3 * c['predict']:.2f} ms, "
+                    f"{c['predict'] / c['ip_predict']:.1f}x the Interaction Primitive's {1e3 * c['ip_predict']:.2f} ms")
+            if c.get("predict_budget") is not None:
+                line += f" (budget: {1e3 * c['predict_budget']:.2f} ms)"
+            out.append(line)
         if c.get("left_out"):
+            preds = c.get("left_out_predict", {})
             out.append("left out for the budget: " + ", ".join(
-                f"{m} ({1e3 * v:.2f} ms a frame)" for m, v in sorted(c["left_out"].items(), key=lambda kv: kv[1])))
+                f"{m} ({1e3 * v:.2f} ms a frame" + (f", {1e3 * preds[m]:.2f} ms a predict)" if m in preds else ")")
+                for m, v in sorted(c["left_out"].items(), key=lambda kv: kv[1])))
         if c.get("not_costed"):
             out.append("not costed (no cost model): " + ", ".join(c["not_costed"]))
         return out

@@ -25,7 +25,9 @@ __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "plac
            "spread_std_np", "weights_on_np"]
 
 #: The blend's own frame cost in microseconds: ``a + b members + c members x DoFs`` (:meth:`Blend.frame_overhead`).
-_OVERHEAD_US = (40.8, 98.4, 2.62)
+_OVERHEAD_US = (0.0, 33.06, 7.52372)
+#: The same for one ``predict`` (:meth:`Blend.predict_overhead`).
+_PREDICT_OVERHEAD_US = (0.0, 95.9, 3.08596)
 
 
 def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
@@ -410,6 +412,16 @@ class Blend(Predictor):
         if n_members < 2:
             return 0.0
         a, b, c = _OVERHEAD_US
+        return (a + b * n_members + c * n_members * n_dofs) * 1e-6
+
+    @staticmethod
+    def predict_overhead(n_members: int, n_dofs: int) -> float:
+        """Modelled seconds a blend of ``n_members`` members adds to their own ``predict`` calls (the prefix checked
+        once, the combination): :func:`interprim.models.registry.predict_cost`'s model, calibrated with it; 0 for a
+        single family."""
+        if n_members < 2:
+            return 0.0
+        a, b, c = _PREDICT_OVERHEAD_US
         return (a + b * n_members + c * n_members * n_dofs) * 1e-6
 
     def predict(self, partial, **kwargs):

@@ -26,8 +26,8 @@ from .learned import LearnedInteraction
 from .primitive.estimator import InteractionPrimitive
 from .promp import InteractionProMP
 
-__all__ = ["Settings", "Family", "FAMILIES", "DEFAULT_HORIZON", "CANDIDATES", "family", "factories",
-           "default_methods", "class_named", "FrameSizes", "frame_cost", "yardstick_ip"]
+__all__ = ["Settings", "Family", "FAMILIES", "DEFAULT_HORIZON", "CANDIDATES", "COUPLING_CLASSES", "family", "factories",
+           "default_methods", "class_named", "FrameSizes", "frame_cost", "predict_cost", "yardstick_ip"]
 
 
 
@@ -72,31 +72,47 @@ class FrameSizes:
     n_dofs: int
     n_basis: int = 20
     phase: str = "likelihood"
+    #: the learned interaction's coupling (``CouplingModel.method_``, chosen by its own cross-validation):
+    #: ``"ppca"`` costs 3-5x the linear smoothers (``"ridge"``, ``"kernel"``, their ``"blend"``, ``"mean"``): its
+    #: joint PCA is factorised again at every frame (:data:`COUPLING_CLASSES`)
+    coupling: str = "ppca"
 
 
 # The frame cost model: seconds of one streamed frame (``stream.update`` + ``trajectory(100)``) of each family, a
-# linear formula in the sizes that drive it -- the Interaction Primitive's and the learned interaction's latent
+# formula in the sizes that drive it -- the Interaction Primitive's and the learned interaction's latent
 # conditioning (demonstrations x DoFs) and rollout (DoFs x frames), the open-end DTW of the aligned families
 # (demonstrations x frames x observed DoFs) and the kernel's weighted demonstrations (demonstrations x grid x DoFs).
 # Deterministic: one input gives one cost whatever the machine's load (a choice made from timings taken during a fit
-# would not be).  The constants are least-squares fits (non-negative) to the process time of 50-150 streamed frames
-# at six sizes (10-40 demonstrations, 5-18 DoFs, 100-300 frames; one BLAS thread) on the project's 2-core machine
-# while other jobs ran (load 5-10: the absolute figures are high, the ratios are what the budget uses), measured by
-# ``python -m benchmarks.auto --calibrate``; within 15-30 % of the measurement at most sizes.  The Interaction
-# Primitive has one formula per phase (its own cross-validation chooses it; the learned phase's frame is 2-3x
-# cheaper).
+# would not be).  The constants are least-squares fits (non-negative) to the process time of 75-150 streamed frames
+# at seven sizes (10-40 demonstrations, 5-18 DoFs, 50-300 frames; one BLAS thread) on the project's 2-core machine,
+# idle (so that the budget's floor, in seconds, is an idle machine's), measured by
+# ``python -m benchmarks.auto --calibrate`` on 2026-12-07; within 30 % of the measurement at every size.  Two
+# families have one formula per choice their own cross-validation makes: the Interaction Primitive per phase (the
+# learned phase's frame is 2-4x cheaper) and the learned interaction per coupling class (COUPLING_CLASSES: the
+# reduced-rank coupling's frame is 3-5x dearer; one formula for both classes was off by -45 % to +203 %).
 _COSTS_US = {
-    "ip": (185.5, 1.0987, 0.0385),        # 1, n_dofs x n_demos, n_dofs x n_frames (likelihood or DTW phase)
-    "ip-learned": (113.9, 0.3898, 0.0),   # the same with the learned phase
-    "learned": (317.9, 2.4492, 0.0198),   # 1, n_dofs x n_demos, n_dofs x n_frames
-    "kernel": (328.4, 0.00594, 0.00632),  # 1, n_demos x n_frames x n_observed, n_demos x 201 x n_dofs
-    "nn": (91.1, 0.00159),                # 1, n_demos x n_frames x n_observed
-    "prior": (43.0, 0.7096),              # 1, n_dofs
+    "ip": (143.73, 0.75536, 0.0),           # 1, n_dofs x n_demos, n_dofs x n_frames (likelihood or DTW phase)
+    "ip-learned": (85.18, 0.20722, 0.0),    # the same with the learned phase
+    "learned": (88.0, 0.26669, 0.0),        # 1, n_dofs x n_demos, n_dofs x n_frames (a linear smoother's coupling)
+    "learned-ppca": (215.11, 0.62346, 0.45039),  # 1, n_dofs x n_demos, (order of its PCA)^3 / 1000
+    "kernel": (97.87, 0.00057, 0.00248),    # 1, n_demos x n_frames x n_observed, n_demos x 201 x n_dofs
+    "nn": (42.86, 0.00056),                 # 1, n_demos x n_frames x n_observed
+    "prior": (34.65, 0.3872),               # 1, n_dofs
 }
+
+
+#: The learned interaction's cost classes by its coupling: the reduced-rank conditioning, whose joint PCA of the
+#: training rows (``n_jitter`` = 5 per demonstration, ``n_in`` = 10 resampled points per observed DoF) and the
+#: demonstrations' targets is an eigendecomposition of order ``min(5 n_demos, 10 n_observed + n_demos)`` at every
+#: frame, and the linear smoothers (ridge, kernel, their blend, the mean), a few products of that order.
+COUPLING_CLASSES = {"ppca": "learned-ppca"}
 
 
 def _cost_features(kind: str, z: FrameSizes) -> tuple:
     S, T, Do, D = float(z.n_demos), float(z.n_frames), float(z.n_observed), float(z.n_dofs)
+    if kind == "learned-ppca":
+        m = min(5.0 * S, 10.0 * Do + S)  # the order of the joint PCA's eigendecomposition
+        return 1.0, D * S, m ** 3 / 1e3
     if kind in ("ip", "ip-learned", "learned"):
         return 1.0, D * S * z.n_basis / 20.0 if kind != "learned" else D * S, D * T
     if kind == "kernel":
@@ -106,14 +122,64 @@ def _cost_features(kind: str, z: FrameSizes) -> tuple:
     return 1.0, D
 
 
+# The predict cost model: seconds of one ``predict`` + ``trajectory(100)`` from a prefix of half the movement (a new
+# prefix each call: nothing a model kept from an earlier call is reused), each family's own formula -- the aligned
+# families' open-end DTW of the whole prefix against every demonstration (demonstrations x prefix x frames x observed
+# DoFs), the IP's phase likelihood over the prefix (demonstrations x prefix x observed DoFs), the learned
+# interaction's conditioning as in its frame.  Calibrated with the frame's constants, in the same run
+# (``python -m benchmarks.auto --calibrate``); within 45 % of the measurement at every size but the smallest, where
+# the aligned families' fixed cost dominates (then up to +92 %: an overestimate).
+_PREDICT_US = {
+    "ip": (536.65, 3.70552, 0.0),           # 1, n_dofs x n_demos, n_demos x prefix x n_observed / 1000
+    "ip-learned": (117.24, 0.30973, 0.0),   # the same with the learned phase
+    "learned": (116.42, 0.36999, 0.0),      # 1, n_dofs x n_demos, prefix x n_observed / 1000
+    "learned-ppca": (278.88, 0.0, 0.90447),  # its frame's features
+    "kernel": (503.77, 355.13),             # 1, n_demos x prefix x n_frames x n_observed / 1e6 (DTW cells)
+    "nn": (326.33, 329.63),                 # the same
+    "prior": (36.97, 0.90886),              # 1, n_dofs
+}
+
+
+def _predict_features(kind: str, z: FrameSizes) -> tuple:
+    S, T, Do, D = float(z.n_demos), float(z.n_frames), float(z.n_observed), float(z.n_dofs)
+    half = 0.5 * T  # the prefix: half the movement
+    if kind in ("ip", "ip-learned"):
+        return 1.0, D * S * z.n_basis / 20.0, S * half * Do / 1e3
+    if kind == "learned":
+        return 1.0, D * S, half * Do / 1e3
+    if kind == "learned-ppca":
+        return _cost_features(kind, z)
+    if kind in ("kernel", "nn"):
+        return 1.0, S * half * T * Do / 1e6
+    return 1.0, D
+
+
+def _cost_kind(name: str, sizes: FrameSizes) -> str | None:
+    """The cost formula of the family ``name`` on data of ``sizes``: its cost class (the IP's phase, the learned
+    interaction's coupling), None for a family without a cost model."""
+    kind = getattr(FAMILIES.get(name), "cost_model", None)
+    if kind == "ip" and sizes.phase == "learned":
+        kind = "ip-learned"
+    if kind == "learned":
+        kind = COUPLING_CLASSES.get(sizes.coupling, kind)
+    return kind
+
+
+def predict_cost(name: str, sizes: FrameSizes) -> float | None:
+    """Modelled seconds of one ``predict`` of the family ``name`` from half of a movement of ``sizes`` (None: the
+    family has no cost model)."""
+    kind = _cost_kind(name, sizes)
+    if kind is None:
+        return None
+    return float(np.dot(_PREDICT_US[kind], _predict_features(kind, sizes))) * 1e-6
+
+
 def frame_cost(name: str, sizes: FrameSizes) -> float | None:
     """Modelled seconds of one streamed frame of the family ``name`` on data of ``sizes`` (None: the family has no
     cost model, e.g. a user's own family or the peer)."""
-    kind = getattr(FAMILIES.get(name), "cost_model", None)
+    kind = _cost_kind(name, sizes)
     if kind is None:
         return None
-    if kind == "ip" and sizes.phase == "learned":
-        kind = "ip-learned"
     return float(np.dot(_COSTS_US[kind], _cost_features(kind, sizes))) * 1e-6
 
 

@@ -86,13 +86,19 @@ def budget_phase(fits, k: int) -> str | None:
     own cross-validation chooses it (``phase_method="cv"``), on all the demonstrations much as on two thirds of
     them: on the benchmark's three data sets the three inner folds chose what the fit on all of them chose.
     """
-    phases = [f.phase_method_used() for f in fits if getattr(f, "fitted_", None) is not None]
-    if len(phases) < k:
+    return _inner_choice([f.phase_method_used() for f in fits if getattr(f, "fitted_", None) is not None], k,
+                         "learned")
+
+
+def _inner_choice(chosen: list, k: int, first: str) -> str | None:
+    """What the ``k`` inner-fold fits ``chosen`` (one choice each) say: ``first`` when more than half of them chose
+    it, else the choice most of the others made (the first fold's on a tie); None when fewer than ``k`` made one."""
+    if len(chosen) < k:
         return None
-    if 2 * phases.count("learned") > len(phases):
-        return "learned"
-    others = [p for p in phases if p != "learned"]
-    return max(others, key=lambda p: (others.count(p), -others.index(p)))
+    if 2 * chosen.count(first) > len(chosen):
+        return first
+    others = [c for c in chosen if c != first]
+    return max(others, key=lambda c: (others.count(c), -others.index(c)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,13 +128,7 @@ def budget_coupling(fits, k: int) -> str | None:
     linear smoothers (registry's ``learned-ppca``): on the benchmark's data sets the learned frame measured 0.17 ms
     (ridge), 0.26 ms (a blend of ridge and kernel) and 0.82 ms (ppca) at 30 demonstrations x (7 + 7) DoFs.
     """
-    methods = [f.coupling_.method_ for f in fits if getattr(f, "coupling_", None) is not None]
-    if len(methods) < k:
-        return None
-    if 2 * methods.count("ppca") > len(methods):
-        return "ppca"
-    others = [m for m in methods if m != "ppca"]
-    return max(others, key=lambda m: (others.count(m), -others.index(m)))
+    return _inner_choice([f.coupling_.method_ for f in fits if getattr(f, "coupling_", None) is not None], k, "ppca")
 
 
 class AutoInteraction(Predictor):

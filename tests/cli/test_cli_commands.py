@@ -337,6 +337,9 @@ def test_fit_frame_budget_option(tmp_path, capsys):
                  "--predict-budget-floor", "0.5", "-o", str(out)]) == 0
     assert "predict from half the movement (modelled)" in capsys.readouterr().out
     assert ip.load_any(out).predict_budget_floor == 0.0005
+    assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--predict-budget-floor", "none",
+                 "-o", str(out)]) == 0
+    assert ip.load_any(out).predict_budget_floor is None
     assert main(["fit", str(data), "--resample", "0.02", "--max-nan-gap", "1", "--model", "nn",
                  "--frame-budget-floor", "1", "-o", str(out)]) != 0
     assert "--frame-budget-floor" in capsys.readouterr().err

@@ -606,6 +606,10 @@ def test_the_budget_bounds_a_predict_call_as_well_as_a_frame():
     assert c["left_out"] and set(c["left_out_predict"]) == set(c["left_out"])  # at 1x the IP, something is
     text = fitted.summary()
     assert "predict from half the movement (modelled)" in text
+    streams = ip.AutoInteraction(list(range(7)), frame_budget_floor=0.0, predict_budget_floor=None)
+    only = streams.budget_model(z, list(registry.CANDIDATES))  # a predict not bounded: the frame alone decides
+    assert only.predict_budget is None and all(only.cost([m]) == only.frame_of([m]) for m in registry.CANDIDATES)
+    assert only.costs["nn"] <= only.budget  # cheap to stream, so it fits
     m = min(c["left_out"], key=lambda k: c["left_out"][k])
     assert f"{m} ({1e3 * c['left_out'][m]:.2f} ms a frame, {1e3 * c['left_out_predict'][m]:.2f} ms a predict)" in text
 

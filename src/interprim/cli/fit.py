@@ -112,8 +112,9 @@ def add_parser(subparsers) -> None:
         "Primitive's frame is on the data (default 1; 0: the budget is the multiple alone)",
     )
     p.add_argument(
-        "--predict-budget-floor", type=_milliseconds, default=None, metavar="MS",
-        help="--model auto: the same for a predict call from half the movement (default 2)",
+        "--predict-budget-floor", type=_milliseconds_or_none, default=None, metavar="MS",
+        help="--model auto: the same for a predict call from half the movement (default 2; 'none': a predict is "
+        "not bounded, for a robot that only streams)",
     )
     p.add_argument(
         "--max-prefixes", type=_max_prefixes, default=None, metavar="N",
@@ -221,6 +222,16 @@ def _milliseconds(text):
     return value
 
 
+def _milliseconds_or_none(text):
+    """:func:`_milliseconds`, or ``'none'`` (kept as the string: no bound)."""
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        return _milliseconds(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a number of milliseconds >= 0 or 'none', got {text!r}") from None
+
+
 def _sigma2(text):
     if text in ("residual", "cv"):
         return text
@@ -310,7 +321,8 @@ def _fit_other(args, ds, obs, n_read) -> int:
     if args.frame_budget_floor is not None:
         budget["frame_budget_floor"] = float(args.frame_budget_floor) / 1e3
     if args.predict_budget_floor is not None:
-        budget["predict_budget_floor"] = float(args.predict_budget_floor) / 1e3
+        budget["predict_budget_floor"] = (None if args.predict_budget_floor == "none"
+                                          else float(args.predict_budget_floor) / 1e3)
     if args.max_prefixes is not None:
         budget["max_prefixes"] = None if args.max_prefixes == "none" else int(args.max_prefixes)
     auto = AutoInteraction(obs, candidates=AutoInteraction.CANDIDATES if args.model == "auto" else (args.model,),

@@ -201,9 +201,10 @@ class AutoInteraction(Predictor):
         ``frame_budget`` times the Interaction Primitive's frame and this.  Where the IP's frame is a fraction of a
         millisecond (small data sets, few DoFs), a multiple of it would leave out the families that carry the
         accuracy, for a saving no control loop needs; 0 makes the budget purely relative.
-    predict_budget_floor : float, default DEFAULT_PREDICT_BUDGET_FLOOR (0.002)
+    predict_budget_floor : float or None, default DEFAULT_PREDICT_BUDGET_FLOOR (0.002)
         The same for a ``predict`` call (outside the control loop; the aligned families redo a DTW of the whole
-        prefix there, which their streams do frame by frame).
+        prefix there, which their streams do frame by frame, so that on long recordings their predict, not their
+        frame, decides whether they fit).  None: a predict is not bounded (a robot that only streams).
 
     Attributes
     ----------
@@ -252,7 +253,7 @@ class AutoInteraction(Predictor):
                  horizon: float = DEFAULT_HORIZON, stride: int = 3, n_basis: int = 20, smoothing_window=None,
                  point_dim: int = 1, progress: bool = False, frame_budget: float | None = DEFAULT_FRAME_BUDGET,
                  frame_budget_floor: float = DEFAULT_FRAME_BUDGET_FLOOR,
-                 predict_budget_floor: float = DEFAULT_PREDICT_BUDGET_FLOOR, max_prefixes: int | None = 16):
+                 predict_budget_floor: float | None = DEFAULT_PREDICT_BUDGET_FLOOR, max_prefixes: int | None = 16):
         self.observed_dofs = observed_dofs
         self.candidates = candidates
         self.combine = combine
@@ -299,9 +300,12 @@ class AutoInteraction(Predictor):
                              f"None (no budget), got {fb!r}")
         for name in ("frame_budget_floor", "predict_budget_floor"):
             fl = getattr(self, name)
+            if fl is None and name == "predict_budget_floor":  # a predict not bounded
+                continue
             if not (isinstance(fl, (int, float, np.integer, np.floating)) and not isinstance(fl, bool)
                     and np.isfinite(fl) and fl >= 0):
-                raise ValueError(f"{name} must be a number of seconds >= 0, got {fl!r}")
+                raise ValueError(f"{name} must be a number of seconds >= 0"
+                                 f"{' or None' if name == 'predict_budget_floor' else ''}, got {fl!r}")
 
     def frame_costs(self, sizes: registry.FrameSizes) -> dict:
         """``{candidate: modelled seconds of one streamed frame}`` on data of ``sizes``
@@ -324,7 +328,8 @@ class AutoInteraction(Predictor):
         budget = predict_budget = None
         if self.frame_budget is not None:
             budget = max(float(self.frame_budget) * ip_frame, float(self.frame_budget_floor))
-            predict_budget = max(float(self.frame_budget) * ip_predict, float(self.predict_budget_floor))
+            if self.predict_budget_floor is not None:
+                predict_budget = max(float(self.frame_budget) * ip_predict, float(self.predict_budget_floor))
 
         def frame_of(members) -> float:
             return float(sum(frame[m] or 0.0 for m in members)) + Blend.frame_overhead(len(members), sizes.n_dofs)
@@ -558,7 +563,8 @@ class AutoInteraction(Predictor):
         left_all = {**left_out, **record.get("left_out", {})}
         selection["cost"] = {"frame": bm.frame_of(kept), "ip_frame": bm.ip_frame, "frame_budget": self.frame_budget,
                              "frame_budget_floor": float(self.frame_budget_floor), "budget": budget,
-                             "predict_budget_floor": float(self.predict_budget_floor),
+                             "predict_budget_floor": (None if self.predict_budget_floor is None
+                                                      else float(self.predict_budget_floor)),
                              "predict": bm.predict_of(kept), "ip_predict": bm.ip_predict,
                              "predict_budget": bm.predict_budget,
                              "left_out": {m: bm.frame_of([m]) for m in left_all},

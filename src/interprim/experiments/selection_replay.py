@@ -113,14 +113,12 @@ def choose(rule, cv, sizes: tuple):
         if choice is None:
             return None
         same = True
-        if "ip" in choice["names"] and "ip" not in fixed:
-            fixed.add("ip")
-            same = (current.phase == "learned") == (own.phase == "learned")
-            current = dataclasses.replace(current, phase=own.phase)
-        if "learned" in choice["names"] and "learned" not in fixed:
-            fixed.add("learned")
-            same = same and (current.coupling == "ppca") == (own.coupling == "ppca")
-            current = dataclasses.replace(current, coupling=own.coupling)
+        for family, field in (("ip", "phase"), ("learned", "coupling")):
+            if family in choice["names"] and family not in fixed:
+                fixed.add(family)
+                mine = dataclasses.replace(current, **{field: getattr(own, field)})
+                same = same and registry.same_cost_class(family, current, mine)
+                current = mine
         if same:
             break
     return choice

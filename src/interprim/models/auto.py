@@ -525,15 +525,16 @@ class AutoInteraction(Predictor):
                 # the model keeps the IP: fitted on all the demonstrations now (it is needed anyway), its own phase
                 # is the budget's; when it is not the phase its inner folds chose, the selection is made again
                 ref = self._yardstick(train, dt, progress)
-                same = (ref.phase_method_used() == "learned") == (sizes.phase == "learned")
-                phase_from, sizes = ALL_DEMONSTRATIONS, dataclasses.replace(sizes, phase=ref.phase_method_used())
+                own = dataclasses.replace(sizes, phase=ref.phase_method_used())
+                same = registry.same_cost_class("ip", sizes, own)
+                phase_from, sizes = ALL_DEMONSTRATIONS, own
             if coupling_from == INNER_FOLDS and "learned" in keeps:  # the same for the learned coupling
                 learned_ref = factories["learned"]().fit(train, dt=dt)
                 progress.grow(1)
                 progress.step("fitted learned (its coupling times the frame budget)")
-                own = learned_ref.coupling_.method_
-                same = same and (own == "ppca") == (sizes.coupling == "ppca")
-                coupling_from, sizes = ALL_DEMONSTRATIONS, dataclasses.replace(sizes, coupling=own)
+                own = dataclasses.replace(sizes, coupling=learned_ref.coupling_.method_)
+                same = same and registry.same_cost_class("learned", sizes, own)
+                coupling_from, sizes = ALL_DEMONSTRATIONS, own
             if same:
                 break
         left_out = {**left_out, **over}

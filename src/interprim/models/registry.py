@@ -27,7 +27,8 @@ from .primitive.estimator import InteractionPrimitive
 from .promp import InteractionProMP
 
 __all__ = ["Settings", "Family", "FAMILIES", "DEFAULT_HORIZON", "CANDIDATES", "COUPLING_CLASSES", "family", "factories",
-           "default_methods", "class_named", "FrameSizes", "frame_cost", "predict_cost", "yardstick_ip"]
+           "default_methods", "class_named", "FrameSizes", "frame_cost", "predict_cost", "same_cost_class",
+           "yardstick_ip"]
 
 
 
@@ -165,22 +166,29 @@ def _cost_kind(name: str, sizes: FrameSizes) -> str | None:
     return kind
 
 
-def predict_cost(name: str, sizes: FrameSizes) -> float | None:
-    """Modelled seconds of one ``predict`` of the family ``name`` from half of a movement of ``sizes`` (None: the
-    family has no cost model)."""
+def same_cost_class(name: str, a: FrameSizes, b: FrameSizes) -> bool:
+    """Whether the family ``name`` is costed by the same formulas on sizes ``a`` and ``b`` (e.g. an IP whose phase
+    changed but stayed on the same side of the learned phase's formula)."""
+    return _cost_kind(name, a) == _cost_kind(name, b)
+
+
+def _modelled(name: str, sizes: FrameSizes, constants: dict, features) -> float | None:
     kind = _cost_kind(name, sizes)
     if kind is None:
         return None
-    return float(np.dot(_PREDICT_US[kind], _predict_features(kind, sizes))) * 1e-6
+    return float(np.dot(constants[kind], features(kind, sizes))) * 1e-6
+
+
+def predict_cost(name: str, sizes: FrameSizes) -> float | None:
+    """Modelled seconds of one ``predict`` of the family ``name`` from half of a movement of ``sizes`` (None: the
+    family has no cost model)."""
+    return _modelled(name, sizes, _PREDICT_US, _predict_features)
 
 
 def frame_cost(name: str, sizes: FrameSizes) -> float | None:
     """Modelled seconds of one streamed frame of the family ``name`` on data of ``sizes`` (None: the family has no
     cost model, e.g. a user's own family or the peer)."""
-    kind = _cost_kind(name, sizes)
-    if kind is None:
-        return None
-    return float(np.dot(_COSTS_US[kind], _cost_features(kind, sizes))) * 1e-6
+    return _modelled(name, sizes, _COSTS_US, _cost_features)
 
 
 def _ip(s: Settings, **extra):

@@ -7,6 +7,8 @@ comparison fitted on held-out folds (:func:`interprim.model_selection.stacking.s
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..core._compiled import registry as _registry
@@ -28,6 +30,9 @@ __all__ = ["Blend", "BlendPrediction", "BlendStream", "member_from_state", "plac
 _OVERHEAD_US = (0.0, 33.06, 7.52372)
 #: The same for one ``predict`` (:meth:`Blend.predict_overhead`).
 _PREDICT_OVERHEAD_US = (0.0, 95.9, 3.08596)
+#: A band weight (normalised, at most 1) at or above which a member's interpolated weight is positive at every
+#: look-ahead: :func:`numpy.interp`'s rounding moves its values by a few units in the last place of 1 (1e-16).
+_SURE_WEIGHT = 1e-12
 
 
 def member_from_state(cls_name: str, params: dict, arrays: dict, state: dict):
@@ -267,11 +272,35 @@ class Blend(Predictor):
         self._W_table = np.ascontiguousarray(self._W)
         #: the bands' middles, between which :func:`weights_at` interpolates (computed once, not per frame)
         self._mids = 0.5 * (np.concatenate([[0.0], edges[:-1]]) + edges) if len(edges) > 1 else None
+        #: the members weighted somewhere on a grid after now, before now, or on both sides (None: read from the
+        #: weights of each prediction)
+        self._active_by_side = self._members_by_side()
         self.observed_dofs_ = [int(i) for i in self.observed_dofs]
         self.dt_ = float(dt)
         self.mean_duration_ = float(np.mean([len(d) - 1 for d in demos])) * self.dt_
         self.n_dofs_ = int(np.asarray(demos[0]).shape[1])
         self._set_controlled()
+
+    def _members_by_side(self) -> tuple[list[int], list[int], list[int]] | None:
+        """``(after, past, both)``: the indices of the members with a nonzero weight at some point of a prediction's
+        grid whose points all lie after now (``u >= s``), all before now (``u < s``, weighted by ``past``), or on
+        both sides; None when a member's weight after now may be 0 at some look-ahead and not at another (each
+        prediction's weights then say which members are weighted, :meth:`_active`).
+
+        A member's weight after now is its bands' weights (normalised, at most 1) read at the look-ahead by
+        :func:`numpy.interp`'s operations, clipped at 0 and divided by the members' sum (at most their number, so
+        a positive weight stays positive): exactly 0 at every look-ahead when it is 0 in every band, and positive
+        at every finite look-ahead when it is at least :data:`_SURE_WEIGHT` in every band.  The rule needs the
+        bands' middles increasing, as the interpolation reads them."""
+        W = self._W
+        if self._mids is not None and W.shape[1] > 1 and not np.all(np.diff(self._mids) > 0):
+            return None
+        after = np.all(W >= _SURE_WEIGHT, axis=0)
+        if not np.all(after | np.all(W == 0.0, axis=0)):
+            return None
+        past = after if self._w_past is None else self._w_past != 0.0  # without past weights: never read (n_past 0)
+        return (np.flatnonzero(after).tolist(), np.flatnonzero(past).tolist(),
+                np.flatnonzero(after | past).tolist())
 
     def _set_controlled(self) -> None:
         """``controlled_dofs_``: every column not observed (what each prediction carries, listed once)."""
@@ -338,17 +367,17 @@ class Blend(Predictor):
         w0 = self._w_now
         dt, mean_dur = self.dt_, self.mean_duration_
         timing = [place_in_time(preds[m], n_frames, dt, mean_dur) for m in names]
-        sv = [t[0] for t in timing]
-        dv = [t[1] for t in timing]
-        s = float(np.dot(w0, sv))
-        D = float(np.dot(w0, dv))
+        sv, dv = zip(*timing)
+        s_all, d_all = np.array(sv), np.array(dv)  # what the placing of the members reads, made once
+        s = float(w0.dot(s_all))  # numpy.dot's product (the array's method: no dispatch)
+        D = float(w0.dot(d_all))
         R = None
         if isinstance(self.remaining, str):  # one shared end: a member's own (long_range.pace_remaining)
             sp, Dp = timing[names.index(self.remaining)]
             R = max(1.0 - sp, 0.0) * Dp
         elif self.remaining is not None:  # one shared end beyond the real-time band (long_range.remaining_duration)
             # remaining_duration's operations for one case: Rb = w0 . (max(1 - s_m, 0) D_m), Rc = max(mean - t, 0)
-            Rb = float(np.dot(w0, [max(1.0 - a, 0.0) * b for a, b in timing]))
+            Rb = float(w0.dot([max(1.0 - a, 0.0) * b for a, b in timing]))
             Rc = max(mean_dur - (n_frames - 1) * dt, 0.0)
             R = max(Rc + float(self.remaining) * (Rb - Rc), 0.0)
         if R is not None:
@@ -368,33 +397,41 @@ class Blend(Predictor):
             ahead = (u - s) * D
             np.maximum(ahead, 0.0, out=ahead)
             W = self._weights_on(ahead)  # (n_grid, M)
-            zeros = int(W.size - np.count_nonzero(W))
+        n_past = 0
         if self._w_past is not None and s > 0.0:  # the robot's past (u < s) by its own weights
-            past = u < s
-            W[past] = self._w_past
-            zeros = int(W.size - np.count_nonzero(W))
+            n_past = int(u.searchsorted(s))  # the points u < s: the grid increases, they are its first n_past
+            W[:n_past] = self._w_past
         # a member with no weight at any point of this prediction (e.g. one weighted in the real-time band alone,
         # once the rest of the movement is shorter than it) is not read: its trajectory is not computed
-        if zeros == 0:  # every member weighted at every point (the usual case)
-            active = range(len(names))
-        else:
-            active = np.flatnonzero(W.any(axis=0)).tolist()
-            if len(active) < len(names):
-                W = W[:, active]
+        active = self._active(W, n_past, s, D)
+        if len(active) < len(names):
+            W = W[:, active]
+            s_all, d_all = s_all[active], d_all[active]
         grids = np.empty((len(active), n_grid, self.n_dofs_))  # each member read on the grid straight into its row
         for k, i in enumerate(active):
             grids[k] = _on_grid(preds[names[i]], u)
-        sa = np.array(sv if zeros == 0 else [sv[i] for i in active])
-        da = np.array(dv if zeros == 0 else [dv[i] for i in active])
         h = float(self.horizon)
         Rv = np.nan if R is None else float(R)
         kernel = _registry.kernel("blend.place_members")
         Y = np.empty_like(grids)
         mean = np.empty((n_grid, self.n_dofs_))
-        if kernel is None or not kernel(u, ahead, sa, da, s, Rv, h, grids, np.ascontiguousarray(W), Y, mean,
+        if kernel is None or not kernel(u, ahead, s_all, d_all, s, Rv, h, grids, np.ascontiguousarray(W), Y, mean,
                                         np.empty(n_grid)):
-            Y, mean = place_members_np(u, ahead, sa, da, s, Rv, h, grids, W)
+            Y, mean = place_members_np(u, ahead, s_all, d_all, s, Rv, h, grids, W)
         return BlendPrediction(self, u, mean, Y, W, ahead, phase=s, duration=D, n_observed=n_frames)
+
+    def _active(self, W, n_past: int, s: float, D: float) -> list[int]:
+        """The indices of the members with a nonzero weight at some point of ``W`` (n, M), the weights of a
+        prediction (phase ``s``, duration ``D``) whose first ``n_past`` points are before now; every member when
+        no weight is 0.  Read from the members' weights in the bands (:meth:`_members_by_side`) when ``s`` and ``D``
+        are finite (no look-ahead is NaN), else from ``W``."""
+        n = W.shape[0]
+        sets = self._active_by_side
+        if sets is not None and n > 0 and math.isfinite(s) and math.isfinite(D):
+            return sets[0] if n_past == 0 else sets[1] if n_past == n else sets[2]
+        if np.count_nonzero(W) == W.size:
+            return list(range(W.shape[1]))
+        return np.flatnonzero(W.any(axis=0)).tolist()
 
     def _weights_on(self, ahead) -> np.ndarray:
         """:func:`~interprim.model_selection.stacking.weights_at` of the fitted weights at ``ahead`` (the same

@@ -46,7 +46,8 @@ def _trainable(make, demos, k, dt, log=None) -> dict:
 def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = None,
                             cfg: rt.RealTimeConfig | None = None, smoothing_window=None, n_basis: int = 20,
                             methods=None, whole_movement=(0.4, 0.6, 0.8), progress: bool = False, log=None,
-                            nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS"):
+                            nested: bool = True, inner_k: int = 3, data: str = "DEMOS", observed: str = "COLS",
+                            rest_stride: int | None = 3):
     """Every protocol of this module on one set of demonstrations (a user's recordings or a built-in set).
 
     Returns ``(records, summary, verdict_sentence)``; see
@@ -63,6 +64,10 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     With ``nested`` (default), the method a verdict names is chosen for each outer fold by an ``inner_k``-fold
     cross-validation on that fold's training demonstrations only (real-time error of the controlled agent),
     and its outer records are reported as the method ``"chosen"``: no choice is made on a test fold.
+
+    ``rest_stride``: every method is also scored over the rest of the movement in seconds (every remaining frame
+    after every ``rest_stride``-th frame seen; records with ``"protocol": "rest"``, summarised as ``rest_*`` by
+    :func:`~interprim.evaluation.realtime.summarise_with_rest`); None leaves it out.
     """
     cfg = rt.RealTimeConfig() if cfg is None else cfg
     source = demos
@@ -81,11 +86,12 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     if whole_movement and "prior" not in make:
         make["prior"] = rt.default_methods(observed_dofs)["prior"]
     recs = rt.realtime_sweep(make, prefixes, observed_dofs, dt, cfg, k=k, progress=progress,
-                          whole_movement=whole_movement)
+                             whole_movement=whole_movement, rest_stride=rest_stride)
     if nested:
-        choices, blended = _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement)
+        choices, blended = _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement,
+                                           rest_stride)
         recs = recs + nested_choice_records(recs, choices) + blended
-    summary = rt.summarise_realtime(recs)
+    summary = rt.summarise_with_rest(recs)
     if nested:
         return recs, summary, rt.nested_verdict(summary, recs, data=data, observed=observed)
     cands = [m for m in ("ip", "learned") if m in summary] or [next(iter(make))]
@@ -93,7 +99,8 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     return recs, summary, f"{best}: " + rt.verdict(summary, best)
 
 
-def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement) -> tuple:
+def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement,
+                    rest_stride=None) -> tuple:
     """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
     inner cross-validated error}, outer records of the blend)``.
 
@@ -102,8 +109,11 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
     builds it) -- whose inner ``inner_k``-fold cross-validation chooses the family (``chosen_``) and fits the blend
     (method ``"auto"``; only when at least two candidates could be compared).  With fewer than two of its candidate
     families evaluated, the choice is made among all the evaluated methods (``combine="best"``)."""
+    from dataclasses import replace
+
     from .models.auto import CANDIDATES, AutoInteraction
 
+    rest_cfg = None if rest_stride is None else replace(cfg, horizon=np.inf, stride=int(rest_stride))
     blendable = [m for m in make if m in CANDIDATES]
     names = blendable if len(blendable) >= 2 else list(make)
     choices, out = {}, []
@@ -138,6 +148,10 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
                                       fitted=True, prefix=pre):
                 if r["method"] == "auto":
                     out.append(dict(r, demo=int(j), chosen=tag))
+            if rest_cfg is not None:  # the rest of the movement in seconds, from the same fit
+                for r in rt.realtime_fold(auto, arrays, prefixes.demos[j], observed_dofs, dt, rest_cfg, name="auto",
+                                          fitted=True, prefix=pre, references=False):
+                    out.append(dict(r, demo=int(j), protocol="rest", chosen=tag))
             if whole_movement:
                 for r in rt.whole_movement_fold(auto, prefixes.demos[j], observed_dofs, whole_movement,
                                                 point_dim=cfg.point_dim, name="auto", prefix=pre):

@@ -31,7 +31,8 @@ def add_parser(subparsers):
     p.add_argument("--data", default="nuisi",
                    help="comma-separated data sets: nuisi, synthetic, synthetic-noisy, highfive-sim, characters "
                         "(default nuisi); or YOUR recordings: a CSV/NPZ file or a folder of them (with --observed), "
-                        "evaluated by the real-time, phase, calibration and whole-movement protocols")
+                        "evaluated by the real-time, rest-of-the-movement, phase, calibration and whole-movement "
+                        "protocols")
     p.add_argument("--observed", default=None,
                    help="with --data FILE: the observed agent's columns (names or 0-based indices, comma-separated; "
                         "default: the file's '# observed:' entry)")

@@ -53,8 +53,8 @@ from ..models.registry import default_methods
 from .nested import standard_error_ratio
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep",
-           "summarise_realtime", "default_methods", "verdict", "nested_verdict", "choose_method", "markdown_table",
-           "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
+           "summarise_realtime", "summarise_with_rest", "REST_KEYS", "default_methods", "verdict", "nested_verdict",
+           "choose_method", "markdown_table", "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
 
 def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
     """One plain sentence: does conditioning on the human help the robot's real-time prediction here?
@@ -81,10 +81,29 @@ def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
             f"the mean at the mean speed; {timing}. Use the mean (or more demonstrations).")
 
 
+#: The rest-of-the-movement figures :func:`summarise_with_rest` adds to a method's summary (``rest_`` + each).
+REST_KEYS = ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock", "rt_ctrl_vs_oracle")
+
+
+def summarise_with_rest(records) -> dict:
+    """:func:`summarise_realtime` of the real-time and whole-movement records, with each method's figures over the
+    rest of the movement in seconds (the records with ``"protocol": "rest"``) added as ``rest_`` + each of
+    :data:`REST_KEYS`: its error and its 90 % band's coverage, each agent, and the error ÷ the clock's and ÷ the
+    mean at the true duration's."""
+    summary = summarise_realtime([r for r in records if r.get("protocol") != "rest"])
+    rest = summarise_realtime([dict(r, protocol=None) for r in records if r.get("protocol") == "rest"])
+    for m, v in rest.items():
+        summary.setdefault(m, {}).update({f"rest_{k}": v[k] for k in REST_KEYS if k in v})
+    return summary
+
+
 def markdown_table(summary) -> str:
     """The summary as a Markdown table (one row per method)."""
     cols = [("rt_ctrl", "real-time RMSE, controlled", 4), ("rt_ctrl_vs_clock", "x clock", 2),
-            ("rt_ctrl_vs_oracle", "x oracle-duration", 2), ("phase_err", "phase error", 3),
+            ("rt_ctrl_vs_oracle", "x oracle-duration", 2),
+            ("rest_rt_ctrl_vs_clock", "rest of the movement, controlled, x clock", 2),
+            ("rest_rt_ctrl_vs_oracle", "x oracle-duration", 2),
+            ("rest_cov_ctrl", "90 % band over the rest, controlled", 2), ("phase_err", "phase error", 3),
             ("phase_err_vs_clock", "x clock", 2), ("cov_ctrl", "90 % band coverage, controlled", 2),
             ("cov_obs", "coverage, observed", 2), ("z_ctrl", "RMSE / std, controlled", 2),
             ("z_obs", "RMSE / std, observed", 2), ("wm_ctrl", "whole movement RMSE, controlled", 4),
@@ -205,6 +224,7 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     w = m.get("wm_ctrl_vs_prior")
     if w is not None and np.isfinite(w):
         parts.append(f"Whole movement: {w:.2f}x the mean demonstration's error.")
+    parts += _rest_sentences(summary, records, method, "the chosen model")
     a = summary.get("auto")
     if a is not None and "rt_ctrl_vs_clock" in a:  # what interprim fit makes by default, fitted inside the folds
         ra, se = standard_error_ratio(records, "auto", method)
@@ -219,6 +239,7 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
             rb, seb = standard_error_ratio(records, b, "auto")
             if np.isfinite(rb) and rb < 1 - (seb if np.isfinite(seb) else 0):
                 parts.append(f"A baseline beats the blend: {b} has {rb:.2f}x (± {seb:.2f}) its real-time error.")
+        parts += _rest_sentences(summary, records, "auto", "the blend")
     if order and a is not None and "rt_ctrl_vs_clock" in a:
         parts.append("To fit the blend: " + FIT_COMMANDS["auto"].format(data=data, observed=observed)
                      + "; the chosen family alone: "
@@ -226,6 +247,23 @@ def nested_verdict(summary, records, method: str = "chosen", threshold: float = 
     elif order:
         parts.append("To fit it: " + FIT_COMMANDS.get(order[0], order[0]).format(data=data, observed=observed))
     return " ".join(parts)
+
+
+def _rest_sentences(summary, records, method: str, who: str) -> list:
+    """What the verdict says of ``method`` over the rest of the movement in seconds (the records with ``"protocol":
+    "rest"``, :func:`summarise_with_rest`): its error ÷ the clock's and ÷ the mean at the true duration's, its 90 %
+    band's coverage there, and the clock named when it beats ``method`` by more than one standard error."""
+    m = summary.get(method, {})
+    r = m.get("rest_rt_ctrl_vs_clock")
+    if r is None or not np.isfinite(r):
+        return []
+    out = [f"Over the rest of the movement in seconds, {who} has {r:.2f}x the clock's error and "
+           f"{m.get('rest_rt_ctrl_vs_oracle', float('nan')):.2f}x the mean at the true duration's; its 90 % band "
+           f"covers {m.get('rest_cov_ctrl', float('nan')):.0%} of the controlled agent's frames there."]
+    rb, se = standard_error_ratio(records, "clock", method, protocol="rest")
+    if np.isfinite(rb) and rb < 1 - (se if np.isfinite(se) else 0):
+        out.append(f"The clock beats {who} there: {rb:.2f}x (± {se:.2f}) its error over the rest of the movement.")
+    return out
 
 
 def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = DEFAULT_HORIZON, notes=(),
@@ -256,7 +294,7 @@ def save_report(records, summary, sentence, out_dir, title: str = "", horizon: f
     mids = 0.5 * (bins[:-1] + bins[1:])
     curves = {}
     for m in summary:
-        rs = [r for r in records if r["method"] == m and "rt_ctrl" in r and r.get("protocol") != "whole"]
+        rs = [r for r in records if r["method"] == m and "rt_ctrl" in r and r.get("protocol") is None]
         if not rs:
             continue
         f = np.array([r["fraction"] for r in rs])

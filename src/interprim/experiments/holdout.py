@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.nested import HOLDOUT, measure_fitted, split_holdout, standard_error_ratio, yardstick_table
-from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_realtime
+from ..evaluation.realtime import RealTimeConfig, default_methods, summarise_with_rest
 from ..model_selection.prefixes import Prefixes
 from ..models.registry import FAMILIES
 
@@ -115,14 +115,8 @@ def run_task(name, dev, hold, obs, dt, point_dim, oracles=None, methods=METHODS,
         log(f"    {m}: fitted and measured in {time.perf_counter() - t1:.0f} s")
     for p in records:
         records[p] += [dict(r, method="chosen", chosen=chosen) for r in records[p] if r["method"] == chosen]
-    summary = {}
-    for p in records:
-        summary[p] = summarise_realtime([r for r in records[p] if r.get("protocol") != "rest"])
-        rest = summarise_realtime([dict(r, protocol=None) for r in records[p] if r.get("protocol") == "rest"])
-        for m, s in rest.items():  # the rest of the movement, in seconds from now: error and band coverage
-            summary[p].setdefault(m, {}).update({f"rest_{k}": v for k, v in s.items()
-                                                 if k in ("rt_ctrl", "cov_ctrl", "cov_obs", "rt_ctrl_vs_clock",
-                                                          "rt_ctrl_vs_oracle")})
+    # the rest of the movement, in seconds from now (error and band coverage), beside the real-time figures
+    summary = {p: summarise_with_rest(records[p]) for p in records}
     lr = blend.selection_.get("long_range", {})
     return {"records": records, "summary": summary,
             "chosen": chosen, "inner": inner, "weights": weights,

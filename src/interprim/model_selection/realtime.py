@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence, Sized
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol, cast
 
 import numpy as np
@@ -344,7 +344,8 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
                    k: int | None = None, progress: bool = False, whole_movement: Iterable[float] | None = None,
                    oracles: Sequence[ArrayLike | None] | None = None,
                    test: Prefixes | Iterable[ArrayLike] | None = None, trace: bool = False, std: bool = True,
-                   references: bool = True, metrics: bool = True) -> list[dict[str, Any]]:
+                   references: bool = True, metrics: bool = True, rest_stride: int | None = None
+                   ) -> list[dict[str, Any]]:
     """Cross-validated real-time protocol for several methods on one set of demonstrations.
 
     ``make_estimators`` maps a method name to a zero-argument factory of an unfitted estimator.  Each fold
@@ -363,7 +364,9 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     :class:`~interprim.datasets.Demonstrations` gives causal prefixes); ``oracles`` then belong to ``test``.
     ``trace``: as in :func:`realtime_fold` (the placed predictions with every real-time record); ``std`` and
     ``references`` as there too (``references=False``: no clock and oracle-duration records at all), and
-    ``metrics``.
+    ``metrics``.  ``rest_stride``: the rest of the movement too (every remaining frame of the held-out movement,
+    after every ``rest_stride``-th frame seen from ``cfg.start`` to ``cfg.stop``; records with ``"protocol":
+    "rest"``), from the same fitted estimators.
     """
     # demonstrations with their raw samples (a Demonstrations or TrainingSet that can ``take`` a subset) are fitted
     # with them, so that a model's own cross-validation (the Interaction Primitive's calibration) sees causal prefixes
@@ -386,6 +389,7 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
+    rest_cfg = None if rest_stride is None else replace(cfg, horizon=math.inf, stride=int(rest_stride))
     sets = sets or folds(len(demos), k)
     bar = Progress(progress, len(sets), desc="folds", unit="fold", lines=False)  # a bar with the [experiments] extra
     for held in sets:
@@ -411,6 +415,13 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
                         continue
                     r["demo"] = int(j)
                     recs.append(r)
+                if rest_cfg is not None:  # every remaining frame, from the same fit
+                    for r in realtime_fold(est, train, demos[j], observed_dofs, dt, rest_cfg, name=name, fitted=True,
+                                           prefix=pre, oracle=orc if not first else None, std=std,
+                                           references=references and not first, metrics=metrics):
+                        if r["method"] in ("clock", "oracle-duration", "oracle") and first:
+                            continue
+                        recs.append(dict(r, demo=int(j), protocol="rest"))
                 if whole_movement:
                     for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
                                                  point_dim=cfg.point_dim, name=name, prefix=pre,

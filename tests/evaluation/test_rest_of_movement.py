@@ -108,4 +108,7 @@ def test_the_clock_named_when_it_beats_a_model_over_the_rest():
     assert "The clock beats the blend there" in said
     better = [dict(r, rt_ctrl=r["rt_ctrl"] * (0.5 if r["method"] == "auto" else 1.0)) for r in recs]
     said = " ".join(rt._rest_sentences(summary, better, "auto", "the blend"))
-    assert "1.50x the clock's error" in said and "beats" not in said
+    assert "1.50x the clock's error" in said and "beats" not in said and "band covers 80%" in said
+    summary["auto"]["rest_cov_ctrl"] = float("nan")  # a method without a band (the nearest demonstration)
+    said = " ".join(rt._rest_sentences(summary, better, "auto", "the blend"))
+    assert "(it gives no band)" in said and "nan" not in said

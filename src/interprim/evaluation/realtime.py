@@ -257,9 +257,11 @@ def _rest_sentences(summary, records, method: str, who: str) -> list:
     r = m.get("rest_rt_ctrl_vs_clock")
     if r is None or not np.isfinite(r):
         return []
+    cov = m.get("rest_cov_ctrl", float("nan"))
+    band = (f"; its 90 % band covers {cov:.0%} of the controlled agent's frames there" if np.isfinite(cov)
+            else " (it gives no band)")
     out = [f"Over the rest of the movement in seconds, {who} has {r:.2f}x the clock's error and "
-           f"{m.get('rest_rt_ctrl_vs_oracle', float('nan')):.2f}x the mean at the true duration's; its 90 % band "
-           f"covers {m.get('rest_cov_ctrl', float('nan')):.0%} of the controlled agent's frames there."]
+           f"{m.get('rest_rt_ctrl_vs_oracle', float('nan')):.2f}x the mean at the true duration's{band}."]
     rb, se = standard_error_ratio(records, "clock", method, protocol="rest")
     if np.isfinite(rb) and rb < 1 - (se if np.isfinite(se) else 0):
         out.append(f"The clock beats {who} there: {rb:.2f}x (± {se:.2f}) its error over the rest of the movement.")

@@ -45,6 +45,19 @@ def fitted_paper(synthetic):
                                    phase_method="dtw").fit(train, dt=0.01)
 
 
+@pytest.fixture(scope="session")
+def blend_parts():
+    """``(demos, dt, members)``: two cheap fitted members (the nearest demonstration and the mean) of 8 noisy
+    synthetic demonstrations, for tests that build blends by hand (:meth:`interprim.models.blend.Blend.from_fitted`)."""
+    from interprim.models.demonstrations import NearestNeighbour, PriorMean
+    from interprim.synthetic import two_agent_demos
+
+    demos = two_agent_demos(8, seed=2, frames=80, noise=0.01)
+    dt = 0.05
+    members = {"nn": NearestNeighbour([0, 1]).fit(demos, dt=dt), "prior": PriorMean([0, 1]).fit(demos, dt=dt)}
+    return demos, dt, members
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)

@@ -90,18 +90,7 @@ def test_the_real_time_weights_are_kept_unless_another_past_is_better_by_more_th
     assert table["prior"]["vs_best"] > table["prior"]["se"]  # the mean is worse by more than its noise
 
 
-@pytest.fixture(scope="module")
-def parts():
-    from interprim.models.demonstrations import NearestNeighbour, PriorMean
-    from interprim.synthetic import two_agent_demos
-
-    demos = two_agent_demos(8, seed=2, frames=80, noise=0.01)
-    dt = 0.05
-    members = {"nn": NearestNeighbour([0, 1]).fit(demos, dt=dt), "prior": PriorMean([0, 1]).fit(demos, dt=dt)}
-    return demos, dt, members
-
-
-def test_a_blend_reads_its_past_with_its_past_weights_and_its_future_as_before(parts, tmp_path):
+def test_a_blend_reads_its_past_with_its_past_weights_and_its_future_as_before(blend_parts, tmp_path):
     """Blend(past={"prior": 1}) with all the band weight on "nn": before now the mean, read where the blend places
     it (u s_prior / s), after now what the blend without ``past`` gives; streamed = predicted; saved and restored."""
     import interprim as ip
@@ -109,7 +98,7 @@ def test_a_blend_reads_its_past_with_its_past_weights_and_its_future_as_before(p
     from interprim.model_selection.realtime import place_in_time
     from interprim.models.blend import Blend
 
-    demos, dt, members = parts
+    demos, dt, members = blend_parts
     weights = {"nn": [1.0, 1.0], "prior": [0.0, 0.0]}
     kw = dict(horizon=0.25, bands=[0.25, 4.0])
     plain = Blend.from_fitted([0, 1], members, weights, None, demos, dt, **kw)
@@ -139,9 +128,9 @@ def test_a_blend_reads_its_past_with_its_past_weights_and_its_future_as_before(p
 @pytest.mark.parametrize("past, match", [({"kernel": 1.0}, "not members"), ({"prior": -1.0}, "non-negative"),
                                          ({"prior": 0.0}, "not all zero"), ({}, "non-empty"),
                                          ({"prior": float("nan")}, "finite")])
-def test_bad_past_weights_are_refused(parts, past, match):
+def test_bad_past_weights_are_refused(blend_parts, past, match):
     from interprim.models.blend import Blend
 
-    demos, dt, members = parts
+    demos, dt, members = blend_parts
     with pytest.raises(ValueError, match=match):
         Blend.from_fitted([0, 1], members, {"nn": 1.0, "prior": 0.0}, None, demos, dt, past=past)

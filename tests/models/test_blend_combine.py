@@ -6,19 +6,9 @@ import pytest
 
 from interprim.core.preprocessing import unit_grid
 from interprim.models.blend import Blend
-from interprim.models.demonstrations import NearestNeighbour, PriorMean
 from interprim.models.grid import GridPrediction
-from interprim.synthetic import two_agent_demos
 
 BANDS = [0.25, 0.5, 4.0]
-
-
-@pytest.fixture(scope="module")
-def parts():
-    demos = two_agent_demos(8, seed=2, frames=80, noise=0.01)
-    dt = 0.05
-    members = {"nn": NearestNeighbour([0, 1]).fit(demos, dt=dt), "prior": PriorMean([0, 1]).fit(demos, dt=dt)}
-    return demos, dt, members
 
 
 def _same(a, b) -> bool:
@@ -52,10 +42,10 @@ def _placed(members, x, dt, phase=None):
     ({"nn": [1e-14, 0.5, 0.5], "prior": [1.0, 0.5, 0.5]}, BANDS, None, False),  # too small to be sure of
     ({"nn": 0.0, "prior": 1.0}, None, {"nn": 0.5, "prior": 0.5}, True),
 ])
-def test_the_members_read_are_those_weighted_somewhere_on_the_grid(parts, weights, bands, past, by_side):
+def test_the_members_read_are_those_weighted_somewhere_on_the_grid(blend_parts, weights, bands, past, by_side):
     """The members read from the weights in the bands and the past weights are those the prediction's own weights
     give a nonzero weight somewhere (the rule read from W), with the same numbers, after now and before it."""
-    demos, dt, members = parts
+    demos, dt, members = blend_parts
     blend = Blend.from_fitted([0, 1], members, weights, None, demos, dt, horizon=0.25, bands=bands, past=past)
     sets = blend._active_by_side
     assert (sets is not None) == by_side

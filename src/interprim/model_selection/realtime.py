@@ -389,7 +389,8 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
-    rest_cfg = None if rest_stride is None else replace(cfg, horizon=math.inf, stride=int(rest_stride))
+    protocols = [(cfg, None)] + ([] if rest_stride is None else
+                                 [(replace(cfg, horizon=math.inf, stride=int(rest_stride)), "rest")])
     sets = sets or folds(len(demos), k)
     bar = Progress(progress, len(sets), desc="folds", unit="fold", lines=False)  # a bar with the [experiments] extra
     for held in sets:
@@ -408,20 +409,17 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
                     return prefixes(j, k)
 
                 orc = None if oracles is None else oracles[j]
-                for r in realtime_fold(est, train, demos[j], observed_dofs, dt, cfg, name=name, fitted=True,
-                                       prefix=pre, oracle=orc if not first else None, trace=trace, std=std,
-                                       references=references and not first, metrics=metrics):
-                    if r["method"] in ("clock", "oracle-duration", "oracle") and first:
-                        continue
-                    r["demo"] = int(j)
-                    recs.append(r)
-                if rest_cfg is not None:  # every remaining frame, from the same fit
-                    for r in realtime_fold(est, train, demos[j], observed_dofs, dt, rest_cfg, name=name, fitted=True,
-                                           prefix=pre, oracle=orc if not first else None, std=std,
+                # real time, then (with rest_stride) every remaining frame, from the same fit; the references and
+                # the oracle come with the first method only
+                for c, protocol in protocols:
+                    for r in realtime_fold(est, train, demos[j], observed_dofs, dt, c, name=name, fitted=True,
+                                           prefix=pre, oracle=orc if not first else None,
+                                           trace=trace and protocol is None, std=std,
                                            references=references and not first, metrics=metrics):
-                        if r["method"] in ("clock", "oracle-duration", "oracle") and first:
-                            continue
-                        recs.append(dict(r, demo=int(j), protocol="rest"))
+                        r["demo"] = int(j)
+                        if protocol is not None:
+                            r["protocol"] = protocol
+                        recs.append(r)
                 if whole_movement:
                     for r in whole_movement_fold(est, demos[j], observed_dofs, whole_movement,
                                                  point_dim=cfg.point_dim, name=name, prefix=pre,

@@ -12,10 +12,20 @@ from __future__ import annotations
 import numpy as np
 
 from .evaluation import realtime as rt
-from .evaluation.nested import nested_choice_records
+from .evaluation.nested import (
+    YARDSTICKS,
+    forward_sentences,
+    measure_fitted,
+    nested_choice_records,
+    split_holdout,
+    yardstick_table,
+)
 from .model_selection.prefixes import Prefixes
 
-__all__ = ["evaluate_demonstrations"]
+__all__ = ["evaluate_demonstrations", "forward_check", "FORWARD_FROM"]
+
+#: The fewest recordings the forward check runs on: its latest third then holds at least 2 (a standard error).
+FORWARD_FROM = 6
 
 
 def _trainable(make, demos, k, dt, log=None) -> dict:
@@ -99,6 +109,19 @@ def evaluate_demonstrations(demos, observed_dofs, dt: float, k: int | None = Non
     return recs, summary, f"{best}: " + rt.verdict(summary, best)
 
 
+def _default_model(make, observed_dofs, cfg, folds: int):
+    """The model ``interprim fit`` makes by default (:class:`~interprim.models.auto.AutoInteraction`), its candidate
+    families the evaluated methods of ``make`` among its own (each built as the evaluation builds it; with fewer than
+    two of them, every evaluated method, and the best one kept: ``combine="best"``), unfitted."""
+    from .models.auto import CANDIDATES, AutoInteraction
+
+    blendable = [m for m in make if m in CANDIDATES]
+    names = blendable if len(blendable) >= 2 else list(make)
+    return AutoInteraction(observed_dofs, candidates=[(m, make[m]) for m in names],
+                           combine="blend" if len(blendable) >= 2 else "best", folds=int(folds), horizon=cfg.horizon,
+                           stride=max(cfg.stride, 3), point_dim=cfg.point_dim)
+
+
 def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, whole_movement,
                     rest_stride=None) -> tuple:
     """What is chosen inside each outer fold's training demonstrations only: ``({demo: the family with the smallest
@@ -111,11 +134,7 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
     families evaluated, the choice is made among all the evaluated methods (``combine="best"``)."""
     from dataclasses import replace
 
-    from .models.auto import CANDIDATES, AutoInteraction
-
     rest_cfg = None if rest_stride is None else replace(cfg, horizon=np.inf, stride=int(rest_stride))
-    blendable = [m for m in make if m in CANDIDATES]
-    names = blendable if len(blendable) >= 2 else list(make)
     choices, out = {}, []
     for held in rt.folds(len(prefixes), k):
         train = [i for i in range(len(prefixes)) if i not in set(held)]
@@ -127,14 +146,12 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
         arrays = [prefixes.demos[i] for i in train]
         # the training fold with its raw samples (causal prefixes in the inner cross-validation), or its arrays
         fold = source.take(train) if prefixes.causal and hasattr(source, "take") else arrays
-        auto = AutoInteraction(observed_dofs, candidates=[(m, make[m]) for m in names],
-                               combine="blend" if len(blendable) >= 2 else "best", folds=kk, horizon=cfg.horizon,
-                               stride=max(cfg.stride, 3), point_dim=cfg.point_dim)
+        auto = _default_model(make, observed_dofs, cfg, kk)
         try:
             auto.fit(fold, dt=dt)
             best = auto.chosen_
         except ValueError:  # no family could be fitted on every inner training fold
-            best, auto = next(iter(make)), None  # type: ignore[assignment]  # no fitted default on this fold
+            best, auto = next(iter(make)), None  # no fitted default on this fold
         for j in held:
             choices[j] = best
         if auto is None or auto.selection_.get("combine") != "blend":
@@ -157,3 +174,68 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
                                                 point_dim=cfg.point_dim, name="auto", prefix=pre):
                     out.append(dict(r, demo=int(j), protocol="whole", chosen=tag))
     return choices, out
+
+
+def forward_check(demos, observed_dofs, dt: float, cfg: rt.RealTimeConfig | None = None, smoothing_window=None,
+                  n_basis: int = 20, methods=None, inner_k: int = 3, rest_stride: int = 3, fractions=(0.6,),
+                  log=None) -> dict | None:
+    """The latest third of the recordings predicted by every method and by the default blend fitted on the earlier
+    two thirds only, as a robot predicts after its demonstrations (``interprim evaluate --data``'s forward check).
+
+    A cross-validation mixes early and late recordings, so it cannot see what changes over a session (on NuiSI the
+    partner's pace: docs/evaluation.md, "Forward in recording order"); this is the user's own hold-out
+    (:func:`~interprim.evaluation.nested.split_holdout`: the last third in the file's order), scored with every
+    yardstick of :func:`~interprim.evaluation.nested.measure_fitted` (real time, the rest of the movement in
+    seconds, the whole movement after ``fractions`` seen; causal prefixes when ``demos`` holds raw samples).
+    ``"auto"`` is :class:`~interprim.models.auto.AutoInteraction` with the evaluated families as candidates (its
+    inner ``inner_k``-fold cross-validation on the earlier recordings), as :func:`evaluate_demonstrations` builds
+    it.  ``log`` (a callable taking one line) hears of each fit.
+
+    Returns ``None`` with fewer than :data:`FORWARD_FROM` recordings, else ``{"latest": indices, "records":
+    [...], "table": yardstick_table, "sentences": [...]}``.
+    """
+
+    cfg = rt.RealTimeConfig() if cfg is None else cfg
+    prefixes = Prefixes(demos, observed_dofs)
+    n = len(prefixes)
+    if n < FORWARD_FROM:
+        return None
+    early, latest = split_holdout(n)
+    make = rt.default_methods(observed_dofs, smoothing_window=smoothing_window, n_basis=n_basis)
+    if methods is not None:
+        make = {m: make[m] for m in methods}
+    if "prior" not in make:  # the whole movement's reference
+        make["prior"] = rt.default_methods(observed_dofs)["prior"]
+    arrays = [prefixes.demos[i] for i in early]
+    # fitted on the earlier recordings with their raw samples when they have them (causal prefixes inside)
+    fit_on = demos.take(early) if prefixes.causal and hasattr(demos, "take") else arrays
+    test = Prefixes(demos.take(latest) if prefixes.causal and hasattr(demos, "take") else
+                    [prefixes.demos[i] for i in latest], observed_dofs)
+    def fitted():
+        for m, factory in make.items():
+            try:
+                yield m, factory().fit(fit_on, dt=dt)
+            except ValueError as exc:  # too few earlier recordings for its own cross-validation
+                if log is not None:
+                    log(f"forward check: {m} left out ({' '.join(str(exc).split())})")
+        try:
+            yield "auto", _default_model(make, observed_dofs, cfg, min(int(inner_k), len(early))).fit(fit_on, dt=dt)
+        except ValueError as exc:
+            if log is not None:
+                log(f"forward check: the default blend left out ({' '.join(str(exc).split())})")
+
+    records: list = []
+    first = True
+    for m, est in fitted():
+        got = measure_fitted(est, m, arrays, test, observed_dofs, dt, cfg.point_dim, horizon=cfg.horizon,
+                             stride=cfg.stride, rest_stride=rest_stride, fractions=fractions, references=first)
+        first = False
+        records += [dict(r, demo=latest[r["demo"]]) for r in got["causal"]]
+        if log is not None:
+            log(f"forward check: {m} fitted on the earlier {len(early)} recordings, measured on the latest "
+                f"{len(latest)}")
+    methods_seen = list(dict.fromkeys(r["method"] for r in records))
+    order = ["auto"] + [m for m in methods_seen if m not in ("auto", "clock", "oracle-duration")] + [
+        m for m in ("clock", "oracle-duration") if m in methods_seen]
+    return {"latest": list(latest), "records": records, "table": yardstick_table(records, order, YARDSTICKS),
+            "sentences": forward_sentences(records, n, latest)}

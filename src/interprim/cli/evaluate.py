@@ -69,6 +69,9 @@ def add_parser(subparsers):
                    help="NuiSI: use only the development recordings (the first two thirds of each interaction), "
                         "leaving the hold-out untouched")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--no-forward", action="store_true",
+                   help="with --data FILE: skip the forward check (the latest third of the recordings predicted by "
+                        "models fitted on the earlier two thirds; run from 6 recordings)")
     p.add_argument("--pca", type=int, default=6, help="principal components per agent of '+pca' methods")
     p.add_argument("--n-basis", type=int, default=20, help="basis functions per DoF of the IP models")
     p.add_argument("--fractions", default=None,
@@ -142,6 +145,7 @@ def run_user_data(args) -> int:
         MIN_DEMONSTRATIONS,
         RealTimeConfig,
         default_methods,
+        forward_markdown,
         markdown_table,
         save_report,
     )
@@ -194,14 +198,29 @@ def run_user_data(args) -> int:
         raise
     except (ValueError, TypeError) as exc:  # e.g. too few demonstrations left in a training fold
         raise InterprimError(f"cannot evaluate --data {args.data}: {exc}") from None
+    forward = None
+    if not args.no_forward:
+        from ..assessment import FORWARD_FROM, forward_check
+
+        if len(ds.demos) < FORWARD_FROM:
+            note(f"forward check left out: it predicts the latest third of the recordings from the earlier two "
+                 f"thirds and needs at least {FORWARD_FROM} recordings, got {len(ds.demos)}")
+        else:
+            forward = forward_check(ds, obs, float(ds.dt), cfg=cfg, smoothing_window=args.smoothing_window,
+                                    n_basis=args.n_basis, methods=methods,
+                                    log=lambda line: print(line, file=sys.stderr, flush=True))
     from ._common import moved, output_when_done
 
     with output_when_done(args.out, folder=True) as tmp:  # the report appears whole, or not at all
         paths = save_report(recs, summary, sentence, tmp, title=f"{args.data}: {len(ds.demos)} demonstrations",
-                            horizon=float(args.horizon), notes=notes)
+                            horizon=float(args.horizon), notes=notes, forward=forward)
     paths = moved(paths, tmp, args.out)
     print(markdown_table(summary))
+    if forward is not None:
+        print("\n" + forward_markdown(forward))
     print(f"\nverdict: {sentence}")
+    if forward is not None:
+        print(f"\nforward check: {' '.join(forward['sentences'])}")
     for p in paths:
         print(f"wrote {p}")
     return 0

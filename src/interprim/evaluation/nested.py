@@ -16,7 +16,8 @@ import numpy as np
 from ..core.cv import paired_gain
 
 __all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio", "measure_fitted",
-           "nested_sweep", "YARDSTICKS", "yardstick_table"]
+           "nested_sweep", "YARDSTICKS", "yardstick_table", "yardstick_markdown", "FORWARD_RIVALS",
+           "forward_sentences"]
 
 #: The untouched hold-out, fixed on 2026-11-26 before any new model was developed (docs/evaluation.md):
 #: for every real data set, the last third of each interaction's recordings in the file's order (NuiSI: the
@@ -166,3 +167,54 @@ def yardstick_table(records, methods, yardsticks=YARDSTICKS) -> dict:
     for label, key, protocol, ref in yardsticks:
         out[label] = {m: standard_error_ratio(records, m, ref, key=key, protocol=protocol) for m in methods}
     return out
+
+
+#: The forward check's methods compared with the default blend in its sentences (the families a user can fit alone
+#: and the two references every evaluation prints).
+FORWARD_RIVALS = ("ip", "learned", "ip-paper", "kernel", "nn", "prior", "clock")
+
+
+def forward_sentences(records, n_recordings: int, latest) -> list:
+    """What a verdict says of the forward check (:func:`interprim.assessment.forward_check`): the default blend's
+    (``"auto"``) error on the ``latest`` recordings (their indices) ÷ the clock's, in real time and over the rest of
+    the movement, and every rival of :data:`FORWARD_RIVALS` that beats it there by more than one standard error
+    (paired over the latest recordings, :func:`standard_error_ratio`)."""
+    latest = list(latest)
+    head = (f"Your latest {len(latest)} of {n_recordings} recordings, predicted by models fitted on the earlier ones "
+            f"(as a robot predicts after its demonstrations): ")
+    rt_, _ = standard_error_ratio(records, "auto", "clock")
+    rest, _ = standard_error_ratio(records, "auto", "clock", protocol="rest")
+    if not np.isfinite(rt_):
+        return [head + "the default blend could not be fitted on the earlier recordings."]
+    out = [head + f"the default blend has {rt_:.2f}x the clock's error in real time"
+           + (f" and {rest:.2f}x over the rest of the movement." if np.isfinite(rest) else ".")]
+    beaten = []
+    for what, protocol in (("real time", None), ("the rest of the movement", "rest")):
+        for m in FORWARD_RIVALS:
+            r, se = standard_error_ratio(records, m, "auto", protocol=protocol)
+            if np.isfinite(r) and np.isfinite(se) and r < 1.0 - se:
+                beaten.append(f"{m} in {what} ({r:.2f}x ± {se:.2f} its error)")
+    if beaten:
+        out.append("Beating it there by more than a standard error: " + "; ".join(beaten) + ". Your later "
+                   "recordings differ from the earlier ones more than the cross-validation, which mixes them, can "
+                   "see (e.g. the partner's pace changes over the session): check the model on recordings made "
+                   "after these, or fit the family named.")
+    return out
+
+
+def yardstick_markdown(table, title: str = "") -> str:
+    """One task's :func:`yardstick_table` as markdown: a row per method, a column per yardstick, each cell the
+    ratio ± its standard error (the reference's own cell, exactly 1, shown as 1)."""
+    labels = list(table)
+    methods = list(table[labels[0]]) if labels else []
+    lines = ([f"**{title}**", ""] if title else []) + [
+        "| method | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+    for m in methods:
+        cells = []
+        for label in labels:
+            r, se = table[label][m]
+            cells.append("—" if not np.isfinite(r) else f"{r:.2f} ± {se:.2f}" if np.isfinite(se) else f"{r:.2f}")
+        if all(c == "—" for c in cells):
+            continue
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

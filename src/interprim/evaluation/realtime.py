@@ -50,11 +50,12 @@ from ..model_selection.realtime import (
     whole_movement_fold,
 )
 from ..models.registry import default_methods
-from .nested import standard_error_ratio
+from .nested import standard_error_ratio, yardstick_markdown
 
 __all__ = ["RealTimeConfig", "mean_demo", "realtime_fold", "whole_movement_fold", "realtime_sweep",
            "summarise_realtime", "summarise_with_rest", "REST_KEYS", "default_methods", "verdict", "nested_verdict",
-           "choose_method", "markdown_table", "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS", "ALL_METHODS_FROM"]
+           "choose_method", "markdown_table", "forward_markdown", "save_report", "folds", "Z90", "MIN_DEMONSTRATIONS",
+           "ALL_METHODS_FROM"]
 
 def verdict(summary, method: str = "ip", threshold: float = 0.03) -> str:
     """One plain sentence: does conditioning on the human help the robot's real-time prediction here?
@@ -268,22 +269,37 @@ def _rest_sentences(summary, records, method: str, who: str) -> list:
     return out
 
 
+def forward_markdown(forward) -> str:
+    """The forward check (:func:`interprim.assessment.forward_check`) as a markdown section: every method's error
+    ÷ each yardstick's reference on the latest recordings, ± one standard error over them."""
+    return yardstick_markdown(forward["table"], title=(
+        f"Forward in recording order: the latest {len(forward['latest'])} recordings predicted by models fitted on "
+        "the earlier ones (± one standard error over the latest recordings)"))
+
+
 def save_report(records, summary, sentence, out_dir, title: str = "", horizon: float = DEFAULT_HORIZON, notes=(),
-                unit: str = "data units") -> list:
+                unit: str = "data units", forward=None) -> list:
     """Write ``realtime.json`` (records + summary), ``report.md`` (table + verdict) and, with matplotlib,
     ``realtime.png`` (real-time error of the controlled agent against the fraction seen, per method).
     ``notes``: lines added to the report (e.g. methods left out); ``unit``: the controlled columns' unit, for the
-    figure's y-axis."""
+    figure's y-axis; ``forward``: the forward check (:func:`interprim.assessment.forward_check`), written to
+    ``realtime.json`` (``"forward"``) and as a section of ``report.md``."""
     import json
     from pathlib import Path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / "realtime.json", out / "report.md"]
-    paths[0].write_text(json.dumps({"summary": summary, "verdict": sentence, "records": records,
-                                    "notes": list(notes)}, indent=1))
+    doc = {"summary": summary, "verdict": sentence, "records": records, "notes": list(notes)}
+    if forward is not None:
+        doc["forward"] = {"latest": forward["latest"], "verdict": " ".join(forward["sentences"]),
+                          "records": forward["records"],
+                          "table": {k: {m: list(v) for m, v in t.items()} for k, t in forward["table"].items()}}
+    paths[0].write_text(json.dumps(doc, indent=1))
+    section = "" if forward is None else (f"\n{forward_markdown(forward)}\n\n**Forward check:** "
+                                          f"{' '.join(forward['sentences'])}\n")
     paths[1].write_text((f"# {title}\n\n" if title else "") + markdown_table(summary) + f"\n\n**Verdict:** {sentence}\n"
-                        + "".join(f"\nNote: {n}\n" for n in notes))
+                        + section + "".join(f"\nNote: {n}\n" for n in notes))
     try:
         import matplotlib
 

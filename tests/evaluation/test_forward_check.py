@@ -105,11 +105,16 @@ def test_the_verdict_names_a_rival_only_when_it_beats_the_blend_by_more_than_a_s
     recs = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2],
                      "learned": [0.5, 0.6, 0.45, 0.55],  # half the blend's error on every recording: named
                      "kernel": [0.9, 1.4, 0.7, 1.2]})  # 0.96x on average, noisier than that: not named
-    recs += _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2], "kernel": [0.9, 1.4, 0.7, 1.2]}, "rest")
-    out = forward_sentences(recs, 12, [10, 11, 12, 13])
+    rest = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2], "kernel": [0.9, 1.4, 0.7, 1.2]}, "rest")
+    for r, c in zip([r for r in rest if r["method"] == "auto"], [0.7, 1.0, 0.9, 0.9]):
+        r["cov_ctrl"] = c
+    # a second case of recording 10: its mean 0.8, the mean over recordings 0.9 (0.88 over cases)
+    rest.append(dict(rest[0], k=7, cov_ctrl=0.9))
+    out = forward_sentences(recs + rest, 12, [10, 11, 12, 13])
     assert out[0] == ("Your latest 4 of 12 recordings, predicted by models fitted on the earlier ones (as a robot "
                       "predicts after its demonstrations): the default blend has 0.50x the clock's error in real "
-                      "time and 0.50x over the rest of the movement.")
+                      "time and 0.50x over the rest of the movement; its 90 % band covers 90% of the controlled "
+                      "agent's frames over the rest.")
     assert len(out) == 2 and "learned in real time (0.50x ± 0.00 its error)" in out[1]
     assert "kernel" not in out[1] and "the rest of the movement (" not in out[1]
     calm = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2], "kernel": [0.9, 1.4, 0.7, 1.2]})

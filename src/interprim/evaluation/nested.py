@@ -177,8 +177,9 @@ FORWARD_RIVALS = ("ip", "learned", "ip-paper", "kernel", "nn", "prior", "clock")
 def forward_sentences(records, n_recordings: int, latest) -> list:
     """What a verdict says of the forward check (:func:`interprim.assessment.forward_check`): the default blend's
     (``"auto"``) error on the ``latest`` recordings (their indices) ÷ the clock's, in real time and over the rest of
-    the movement, and every rival of :data:`FORWARD_RIVALS` that beats it there by more than one standard error
-    (paired over the latest recordings, :func:`standard_error_ratio`)."""
+    the movement, its 90 % band's coverage of the controlled agent there (the mean over recordings), and every rival
+    of :data:`FORWARD_RIVALS` that beats it there by more than one standard error (paired over the latest
+    recordings, :func:`standard_error_ratio`)."""
     latest = list(latest)
     head = (f"Your latest {len(latest)} of {n_recordings} recordings, predicted by models fitted on the earlier ones "
             f"(as a robot predicts after its demonstrations): ")
@@ -186,8 +187,15 @@ def forward_sentences(records, n_recordings: int, latest) -> list:
     rest, _ = standard_error_ratio(records, "auto", "clock", protocol="rest")
     if not np.isfinite(rt_):
         return [head + "the default blend could not be fitted on the earlier recordings."]
+    per_demo: dict = {}  # the band's coverage over the rest, per recording (each counts once)
+    for r in records:
+        if r["method"] == "auto" and r.get("protocol") == "rest" and np.isfinite(r.get("cov_ctrl", np.nan)):
+            per_demo.setdefault(r["demo"], []).append(r["cov_ctrl"])
+    cov = float(np.mean([np.mean(v) for v in per_demo.values()])) if per_demo else float("nan")
+    band = (f"; its 90 % band covers {cov:.0%} of the controlled agent's frames over the rest" if np.isfinite(cov)
+            else "")
     out = [head + f"the default blend has {rt_:.2f}x the clock's error in real time"
-           + (f" and {rest:.2f}x over the rest of the movement." if np.isfinite(rest) else ".")]
+           + (f" and {rest:.2f}x over the rest of the movement" if np.isfinite(rest) else "") + band + "."]
     beaten = []
     for what, protocol in (("real time", None), ("the rest of the movement", "rest")):
         for m in FORWARD_RIVALS:

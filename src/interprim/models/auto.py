@@ -745,4 +745,5 @@ def pace_message(pace: dict) -> str:
             f"{pace['n']} demonstrations, {p}; the last third {abs(100 * pace['change']):.0f} % {way} than the "
             f"first, {pace['last']:.2f} s against {pace['first']:.2f} s): the cross-validation mixes early and late "
             "demonstrations, so its figures may be optimistic for a partner at a new pace; check the model on "
-            "recordings made after these")
+            "recordings made after these ('interprim evaluate --data' predicts the latest third of the "
+            "demonstrations from the earlier two thirds: its forward check)")

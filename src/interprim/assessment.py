@@ -194,7 +194,6 @@ def forward_check(demos, observed_dofs, dt: float, cfg: rt.RealTimeConfig | None
     Returns ``None`` with fewer than :data:`FORWARD_FROM` recordings, else ``{"latest": indices, "records":
     [...], "table": yardstick_table, "sentences": [...]}``.
     """
-
     cfg = rt.RealTimeConfig() if cfg is None else cfg
     prefixes = Prefixes(demos, observed_dofs)
     n = len(prefixes)
@@ -211,6 +210,7 @@ def forward_check(demos, observed_dofs, dt: float, cfg: rt.RealTimeConfig | None
     fit_on = demos.take(early) if prefixes.causal and hasattr(demos, "take") else arrays
     test = Prefixes(demos.take(latest) if prefixes.causal and hasattr(demos, "take") else
                     [prefixes.demos[i] for i in latest], observed_dofs)
+
     def fitted():
         for m, factory in make.items():
             try:

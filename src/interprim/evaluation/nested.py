@@ -169,9 +169,9 @@ def yardstick_table(records, methods, yardsticks=YARDSTICKS) -> dict:
     return out
 
 
-#: The forward check's methods compared with the default blend in its sentences (the families a user can fit alone
-#: and the two references every evaluation prints).
-FORWARD_RIVALS = ("ip", "learned", "ip-paper", "kernel", "nn", "prior", "clock")
+#: The forward check's methods compared with the default blend in its sentences: the families a user can fit alone,
+#: and the clock (the mean demonstration at the mean speed, ``prior``'s prediction in seconds, named once).
+FORWARD_RIVALS = ("ip", "learned", "ip-paper", "kernel", "nn", "clock")
 
 
 def forward_sentences(records, n_recordings: int, latest) -> list:
@@ -206,13 +206,14 @@ def forward_sentences(records, n_recordings: int, latest) -> list:
         out.append("Beating it there by more than a standard error: " + "; ".join(beaten) + ". Your later "
                    "recordings differ from the earlier ones more than the cross-validation, which mixes them, can "
                    "see (e.g. the partner's pace changes over the session): check the model on recordings made "
-                   "after these, or fit the family named.")
+                   "after these, or fit the family named ('interprim fit --model NAME'; the clock is '--model "
+                   "prior').")
     return out
 
 
 def yardstick_markdown(table, title: str = "") -> str:
     """One task's :func:`yardstick_table` as markdown: a row per method, a column per yardstick, each cell the
-    ratio ± its standard error (the reference's own cell, exactly 1, shown as 1)."""
+    ratio ± its standard error ("—" where the method has no such figure; a method with none left out)."""
     labels = list(table)
     methods = list(table[labels[0]]) if labels else []
     lines = ([f"**{title}**", ""] if title else []) + [

@@ -21,7 +21,9 @@ EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.py"
 EXPECTED = {
     "01_check_data.py": r"as recorded: .*missing value[\s\S]*\nchecked 20 demonstrations; plot: .*check\.png",
     "02_fit.py": r"fitted in .* s: dt 0\.01 s.*\n[\s\S]*seen +90 %: phase 0\.\d+",
-    "03_evaluate.py": r"verdict: chosen inside the training folds: .*Conditioning on the human helps",
+    "03_evaluate.py": r"verdict: chosen inside the training folds: .*Conditioning on the human helps[\s\S]*"
+                      r"forward check: Your latest 6 of 16 recordings[\s\S]*forward in recording order: the default "
+                      r"blend .* predicts the rest of the movement of the latest third with [\d.]+x",
     "04_save_load.py": r"loaded model gives identical predictions\nmillimetres: out_of_range=True.*OutOfRangeWarning",
     "05_stream_control_loop.py": r"ticks at 100 Hz, \d+ updates: latency median [\d.]+ ms, p99 [\d.]+ ms\n"
                                  r"final joint error [\d.]+ rad; robot hand [\d.]+ cm",

@@ -116,6 +116,7 @@ def test_the_verdict_names_a_rival_only_when_it_beats_the_blend_by_more_than_a_s
                       "time and 0.50x over the rest of the movement; its 90 % band covers 90% of the controlled "
                       "agent's frames over the rest.")
     assert len(out) == 2 and "learned in real time (0.50x ± 0.00 its error)" in out[1]
+    assert f"with {2 * len(FORWARD_RIVALS)} comparisons made, one is won by chance" in out[1]  # said plainly
     assert "kernel" not in out[1] and "the rest of the movement (" not in out[1]
     calm = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2], "kernel": [0.9, 1.4, 0.7, 1.2]})
     assert len(forward_sentences(calm, 12, [10, 11, 12, 13])) == 1

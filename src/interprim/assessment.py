@@ -132,9 +132,7 @@ def _nested_choices(make, source, prefixes, observed_dofs, dt, cfg, k, inner_k, 
     builds it) -- whose inner ``inner_k``-fold cross-validation chooses the family (``chosen_``) and fits the blend
     (method ``"auto"``; only when at least two candidates could be compared).  With fewer than two of its candidate
     families evaluated, the choice is made among all the evaluated methods (``combine="best"``)."""
-    from dataclasses import replace
-
-    rest_cfg = None if rest_stride is None else replace(cfg, horizon=np.inf, stride=int(rest_stride))
+    rest_cfg = None if rest_stride is None else cfg.rest(rest_stride)
     choices, out = {}, []
     for held in rt.folds(len(prefixes), k):
         train = [i for i in range(len(prefixes)) if i not in set(held)]
@@ -207,9 +205,9 @@ def forward_check(demos, observed_dofs, dt: float, cfg: rt.RealTimeConfig | None
         make["prior"] = rt.default_methods(observed_dofs)["prior"]
     arrays = [prefixes.demos[i] for i in early]
     # fitted on the earlier recordings with their raw samples when they have them (causal prefixes inside)
-    fit_on = demos.take(early) if prefixes.causal and hasattr(demos, "take") else arrays
-    test = Prefixes(demos.take(latest) if prefixes.causal and hasattr(demos, "take") else
-                    [prefixes.demos[i] for i in latest], observed_dofs)
+    raw = prefixes.causal and hasattr(demos, "take")
+    fit_on = demos.take(early) if raw else arrays
+    test = Prefixes(demos.take(latest) if raw else [prefixes.demos[i] for i in latest], observed_dofs)
 
     def fitted():
         for m, factory in make.items():

@@ -94,7 +94,7 @@ def measure_fitted(est, name: str, train, test, observed_dofs, dt: float, point_
     from ..model_selection.realtime import RealTimeConfig, realtime_fold, whole_movement_fold
 
     cfg = RealTimeConfig(point_dim=point_dim, horizon=float(horizon), stride=int(stride))
-    rest_cfg = RealTimeConfig(point_dim=point_dim, horizon=math.inf, stride=int(rest_stride))
+    rest_cfg = cfg.rest(rest_stride)
     sets = prefix_sets or {"causal": test}
     out: dict = {p: [] for p in sets}
     for j, rec in enumerate(test.demos):

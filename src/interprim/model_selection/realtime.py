@@ -137,6 +137,11 @@ class RealTimeConfig:
     point_dim: int = 1
     max_frames: int | None = None
 
+    def rest(self, stride: int) -> RealTimeConfig:
+        """The same protocol over the rest of the movement: every remaining frame of the held-out movement
+        (``horizon`` infinite), after every ``stride``-th frame seen."""
+        return replace(self, horizon=math.inf, stride=int(stride))
+
 
 def mean_duration(demos: Iterable[Sized]) -> float:
     """Mean duration of the demonstrations in frames - 1 (the clock's)."""
@@ -389,8 +394,7 @@ def realtime_sweep(make_estimators: Mapping[str, Callable[[], EstimatorLike]], d
     if len(demos) < 3:
         raise ValueError(f"the real-time protocol needs at least 3 demonstrations, got {len(demos)}")
     recs = []
-    protocols = [(cfg, None)] + ([] if rest_stride is None else
-                                 [(replace(cfg, horizon=math.inf, stride=int(rest_stride)), "rest")])
+    protocols = [(cfg, None)] + ([] if rest_stride is None else [(cfg.rest(rest_stride), "rest")])
     sets = sets or folds(len(demos), k)
     bar = Progress(progress, len(sets), desc="folds", unit="fold", lines=False)  # a bar with the [experiments] extra
     for held in sets:

@@ -59,3 +59,24 @@ def test_the_mean_alone_is_the_clock_and_the_true_end_helps_only_the_seconds(fol
     one = sr.replay(outer, [inner[-1]], {"default": sr.default_rule()})["default"]
     assert res["default"]["real time ÷ clock (latest third)"] == pytest.approx(one["real time ÷ clock"], rel=1e-12)
     assert max(inner[-1][0]) == max(max(h) for h, _, _ in inner)  # the last fold holds out the latest recordings
+
+
+def test_the_letters_are_two_agent_tasks_of_the_recordings():
+    """``--tasks characters``: each letter's first recordings in file order, the pen's x observed and its y predicted,
+    every second frame of the 200 Hz recordings (the loader's own trajectories, not resampled)."""
+    from interprim.datasets import load_character_trajectories
+
+    tasks = sr.character_tasks(letters="ae", n=5)
+    assert [t[0] for t in tasks] == ["characters/a", "characters/e"]
+    raw = load_character_trajectories(letters="ae", max_per_letter=5)
+    for (_name, demos, obs, dt, pdim), letter in zip(tasks, "ae"):
+        assert obs == [0] and pdim == 1 and dt == pytest.approx(0.01)
+        assert len(demos) == 5
+        for got, full in zip(demos, raw[letter]):
+            np.testing.assert_array_equal(got, np.asarray(full)[::2])
+
+
+def test_an_unknown_task_set_is_refused_by_name(capsys):
+    with pytest.raises(SystemExit):
+        sr.main(["--tasks", "nuisi,letters"])
+    assert "unknown task set(s): letters" in capsys.readouterr().err

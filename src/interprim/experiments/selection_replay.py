@@ -30,9 +30,14 @@ at the nominal 90 %, as before it was chosen by cross-fitting), each family alon
 end`` (the default's weights with every member placed to the held-out recording's true end: a bound that needs the
 future, to show how much a perfect remaining duration would give).
 
-Run (about 3 minutes on a 2-core machine)::
+``--tasks characters`` replays the same rules on recordings of another kind, made elsewhere
+(:func:`character_tasks`: four handwritten letters of the UCI Character Trajectories set, 30 each, the pen's
+x observed and its y predicted).  They are not interactions, and no rule was chosen on them: they show whether
+what holds on the development tasks carries to data the rules were not developed on.
 
-    python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic] [--out DIR]
+Run (about 3 minutes on a 2-core machine; 30 s more for the letters)::
+
+    python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic,characters] [--out DIR]
 """
 
 from __future__ import annotations
@@ -50,7 +55,8 @@ from ..model_selection.yardsticks import place_cases
 from ..models import registry
 from ..models.auto import AutoInteraction, budget_coupling, budget_phase, recording_factory
 
-__all__ = ["task_folds", "choose", "default_rule", "single_rule", "replay", "coverage", "tables", "main"]
+__all__ = ["task_folds", "choose", "default_rule", "single_rule", "replay", "coverage", "tables", "character_tasks",
+           "main"]
 
 Z90 = 1.6448536269514722
 
@@ -92,6 +98,23 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
                                       coupling=budget_coupling(learned_fits, k) or "ppca")
         inner.append((held, cv, (assumed, sizes)))
     return outer, inner
+
+
+#: the letters :func:`character_tasks` replays: two closed strokes, one reversing, one zigzag
+CHARACTER_LETTERS = "aesw"
+
+
+def character_tasks(path=None, letters: str = CHARACTER_LETTERS, n: int = 30, step: int = 2) -> list:
+    """``[(name, demos, observed, dt, point_dim)]``: handwritten letters as two-agent tasks, the pen's x (column 0)
+    observed and its y predicted (:func:`~interprim.datasets.load_character_trajectories`; the first ``n`` samples
+    of each letter in file order, every ``step``-th frame of the 200 Hz recordings)."""
+    from ..datasets import load_character_trajectories
+
+    out = []
+    for letter, d in load_character_trajectories(path, letters=letters, max_per_letter=n).items():
+        demos = [np.asarray(x, dtype=np.float64)[::step] for x in d]
+        out.append((f"characters/{letter}", demos, [0], float(d.dt) * step, 1))
+    return out
 
 
 def _budget(cv, sizes: registry.FrameSizes) -> tuple:
@@ -238,15 +261,23 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.selection_replay",
                                  description=__doc__.split("\n")[0])
-    ap.add_argument("--tasks", default="nuisi,synthetic", help="nuisi, synthetic or both")
+    ap.add_argument("--tasks", default="nuisi,synthetic",
+                    help="comma-separated: nuisi, synthetic (the development tasks), characters (four letters)")
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     ap.add_argument("--out", default=None, help="folder for replay.json and replay.md (outside the repository)")
     args = ap.parse_args(argv)
     rules = {"default": default_rule(), "band at 90 %": default_rule(level=0.9), "true end": None,
              **{m: single_rule(m) for m in registry.CANDIDATES}}
     results = {}
+    which = tuple(t.strip() for t in args.tasks.split(","))
+    unknown = sorted(set(which) - {"nuisi", "synthetic", "characters"})
+    if unknown:
+        ap.error(f"unknown task set(s): {', '.join(unknown)} (known: nuisi, synthetic, characters)")
+    tasks = [(name, dev, obs, dt, pdim) for name, dev, _hold, obs, dt, pdim, _orc in holdout_tasks(which, args.data)]
+    if "characters" in which:
+        tasks += character_tasks()
     with single_thread():
-        for name, dev, _hold, obs, dt, pdim, _orc in holdout_tasks(tuple(args.tasks.split(",")), args.data):
+        for name, dev, obs, dt, pdim in tasks:
             outer, inner = task_folds(dev, obs, dt, pdim)
             results[name] = replay(outer, inner, rules)
             print(f"{name}: replayed", flush=True)

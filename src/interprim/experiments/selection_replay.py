@@ -35,7 +35,7 @@ future, to show how much a perfect remaining duration would give).
 x observed and its y predicted).  They are not interactions, and no rule was chosen on them: they show whether
 what holds on the development tasks carries to data the rules were not developed on.
 
-Run (about 3 minutes on a 2-core machine; 30 s more for the letters)::
+Run (about 3 minutes on a 2-core machine; about 45 s more for the letters)::
 
     python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic,characters] [--out DIR]
 """

@@ -12,7 +12,14 @@ from interprim import PaceWarning
 from interprim.assessment import FORWARD_FROM, forward_check
 from interprim.cli import main
 from interprim.evaluation import realtime as rt
-from interprim.evaluation.nested import FORWARD_RIVALS, YARDSTICKS, forward_sentences, yardstick_markdown
+from interprim.evaluation.nested import (
+    FORWARD_RIVALS,
+    WHOLE_RIVALS,
+    YARDSTICKS,
+    beaten_by,
+    forward_sentences,
+    yardstick_markdown,
+)
 from interprim.synthetic import two_agent_demos
 
 DT = 0.02
@@ -121,6 +128,50 @@ def test_the_verdict_names_a_rival_only_when_it_beats_the_blend_by_more_than_a_s
     calm = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2], "kernel": [0.9, 1.4, 0.7, 1.2]})
     assert len(forward_sentences(calm, 12, [10, 11, 12, 13])) == 1
     assert set(FORWARD_RIVALS) >= {"learned", "ip", "kernel", "nn", "clock"} and "prior" not in FORWARD_RIVALS
+
+
+
+def _whole(errors):
+    """Whole-movement records ``{method: [error per demonstration]}`` (the paper's measure, one per demonstration)."""
+    return [{"method": m, "demo": 10 + j, "protocol": "whole", "fraction": 0.6, "wm_ctrl": float(e)}
+            for m, es in errors.items() for j, e in enumerate(es)]
+
+
+def test_the_whole_movement_is_read_and_its_rivals_named():
+    """With whole-movement records the verdict gives the blend's whole movement ÷ the mean demonstration's and names
+    a family (or the mean itself, which stands for the clock there) that beats it there by more than a standard
+    error; the comparisons it counts grow by the whole movement's rivals."""
+    auto = [1.0, 1.2, 0.9, 1.1]
+    rt_recs = _records({"auto": auto, "clock": [2.0, 2.4, 1.8, 2.2]})
+    whole = _whole({"auto": auto, "prior": [1.1, 1.3, 1.0, 1.2], "learned": [0.8, 0.9, 0.75, 0.85],
+                    "kernel": [0.7, 1.5, 0.6, 1.4]})  # learned 0.79x, steady; kernel 1.0x, noisy
+    out = forward_sentences(rt_recs + whole, 12, [10, 11, 12, 13])
+    assert out[0].endswith("the default blend has 0.50x the clock's error in real time, and 0.91x the mean "
+                           "demonstration's on the whole movement.")
+    assert "learned in the whole movement (0.79x ± 0.02 its error)" in out[1]
+    assert "kernel" not in out[1] and "prior in" not in out[1]
+    assert f"with {2 * len(FORWARD_RIVALS) + len(WHOLE_RIVALS)} comparisons made" in out[1]
+    assert "prior" in WHOLE_RIVALS and "clock" not in WHOLE_RIVALS
+    # the mean demonstration beating the blend on the whole movement is named like any rival
+    worse = _whole({"auto": [1.5, 1.8, 1.4, 1.6], "prior": [1.1, 1.3, 1.0, 1.2]})
+    assert [m for m, _, _ in beaten_by(worse, "auto", WHOLE_RIVALS, key="wm_ctrl")] == ["prior"]
+
+
+def test_the_cross_validated_verdict_names_a_family_better_on_the_whole_movement():
+    """The verdict of ``interprim evaluate --data`` says when a family alone beats the default blend on the paper's
+    whole-movement measure by more than a standard error, and says nothing of it otherwise."""
+    rng = np.random.default_rng(0)
+    auto = 1.0 + 0.1 * rng.random(8)
+    recs = [dict(r, chosen="learned", k=5) for r in _records({"auto": auto, "chosen": auto * 1.02,
+                                                              "clock": 2 * auto, "learned": auto * 1.02})]
+    def verdict(learned_whole):
+        whole = _whole({"auto": auto, "chosen": learned_whole, "learned": learned_whole, "prior": auto * 1.05})
+        summary = rt.summarise_with_rest(recs + whole)
+        return rt.nested_verdict(summary, recs + whole, data="d.csv", observed="x")
+    named = verdict(auto * 0.8)
+    assert ("On the whole movement (the paper's measure, in normalised time), more than a standard error better "
+            "than the blend (2 compared): learned (0.80x ± 0.00 its error).") in named
+    assert "On the whole movement (the paper" not in verdict(auto * 1.01)
 
 
 def _csv(path, n):

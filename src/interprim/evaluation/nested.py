@@ -16,8 +16,8 @@ import numpy as np
 from ..core.cv import paired_gain
 
 __all__ = ["HOLDOUT", "split_holdout", "nested_choice_records", "standard_error_ratio", "measure_fitted",
-           "nested_sweep", "YARDSTICKS", "yardstick_table", "yardstick_markdown", "FORWARD_RIVALS",
-           "forward_sentences"]
+           "nested_sweep", "YARDSTICKS", "yardstick_table", "yardstick_markdown", "FORWARD_RIVALS", "WHOLE_RIVALS",
+           "beaten_by", "forward_sentences"]
 
 #: The untouched hold-out, fixed on 2026-11-26 before any new model was developed (docs/evaluation.md):
 #: for every real data set, the last third of each interaction's recordings in the file's order (NuiSI: the
@@ -173,13 +173,30 @@ def yardstick_table(records, methods, yardsticks=YARDSTICKS) -> dict:
 #: and the clock (the mean demonstration at the mean speed, ``prior``'s prediction in seconds, named once).
 FORWARD_RIVALS = ("ip", "learned", "ip-paper", "kernel", "nn", "clock")
 
+#: The same on the paper's whole-movement measure (normalised time), where the clock has no figure of its own: its
+#: reference there, the mean demonstration (``prior``), takes its place.
+WHOLE_RIVALS = tuple("prior" if m == "clock" else m for m in FORWARD_RIVALS)
+
+
+def beaten_by(records, target: str, rivals, key: str = "rt_ctrl", protocol=None) -> list:
+    """``[(rival, ratio, standard error)]``: every method of ``rivals`` whose error on ``key`` (records of
+    ``protocol``; see :func:`standard_error_ratio`) is below ``target``'s by more than one standard error (paired
+    over the recordings), ``ratio`` = the rival's error ÷ ``target``'s."""
+    out = []
+    for m in rivals:
+        r, se = standard_error_ratio(records, m, target, key=key, protocol=protocol)
+        if np.isfinite(r) and np.isfinite(se) and r < 1.0 - se:
+            out.append((m, r, se))
+    return out
+
 
 def forward_sentences(records, n_recordings: int, latest) -> list:
     """What a verdict says of the forward check (:func:`interprim.assessment.forward_check`): the default blend's
     (``"auto"``) error on the ``latest`` recordings (their indices) ÷ the clock's, in real time and over the rest of
-    the movement, its 90 % band's coverage of the controlled agent there (the mean over recordings), and every rival
-    of :data:`FORWARD_RIVALS` that beats it there by more than one standard error (paired over the latest
-    recordings, :func:`standard_error_ratio`)."""
+    the movement, its 90 % band's coverage of the controlled agent there (the mean over recordings), its whole
+    movement ÷ the mean demonstration's, and every rival of :data:`FORWARD_RIVALS` (of :data:`WHOLE_RIVALS` on the
+    whole movement) that beats it on one of the three by more than one standard error (paired over the latest
+    recordings, :func:`beaten_by`)."""
     latest = list(latest)
     head = (f"Your latest {len(latest)} of {n_recordings} recordings, predicted by models fitted on the earlier ones "
             f"(as a robot predicts after its demonstrations): ")
@@ -194,20 +211,24 @@ def forward_sentences(records, n_recordings: int, latest) -> list:
     cov = float(np.mean([np.mean(v) for v in per_demo.values()])) if per_demo else float("nan")
     band = (f"; its 90 % band covers {cov:.0%} of the controlled agent's frames over the rest" if np.isfinite(cov)
             else "")
+    whole, _ = standard_error_ratio(records, "auto", "prior", key="wm_ctrl")
     out = [head + f"the default blend has {rt_:.2f}x the clock's error in real time"
-           + (f" and {rest:.2f}x over the rest of the movement" if np.isfinite(rest) else "") + band + "."]
-    beaten = []
-    for what, protocol in (("real time", None), ("the rest of the movement", "rest")):
-        for m in FORWARD_RIVALS:
-            r, se = standard_error_ratio(records, m, "auto", protocol=protocol)
-            if np.isfinite(r) and np.isfinite(se) and r < 1.0 - se:
-                beaten.append(f"{m} in {what} ({r:.2f}x ± {se:.2f} its error)")
+           + (f" and {rest:.2f}x over the rest of the movement" if np.isfinite(rest) else "")
+           + (f", and {whole:.2f}x the mean demonstration's on the whole movement" if np.isfinite(whole) else "")
+           + band + "."]
+    checks: list[tuple[str, str, str | None, tuple[str, ...]]] = [
+        ("real time", "rt_ctrl", None, FORWARD_RIVALS), ("the rest of the movement", "rt_ctrl", "rest", FORWARD_RIVALS)]
+    if any(r.get("protocol") == "whole" for r in records):
+        checks.append(("the whole movement", "wm_ctrl", None, WHOLE_RIVALS))
+    beaten = [f"{m} in {what} ({r:.2f}x ± {se:.2f} its error)" for what, key, protocol, rivals in checks
+              for m, r, se in beaten_by(records, "auto", rivals, key, protocol)]
     if beaten:
+        n = sum(len(c[3]) for c in checks)
         out.append("Beating it there by more than a standard error: " + "; ".join(beaten) + ". Either your later "
                    "recordings differ from the earlier ones (e.g. the partner's pace changes over the session), which "
-                   f"the cross-validation, mixing them, cannot see, or, with {2 * len(FORWARD_RIVALS)} comparisons "
+                   f"the cross-validation, mixing them, cannot see, or, with {n} comparisons "
                    "made, one is won by chance: check the model on recordings made after these, or fit the family "
-                   "named ('interprim fit --model NAME'; the clock is '--model prior').")
+                   "named ('interprim fit --model NAME'; the clock and the mean demonstration are '--model prior').")
     return out
 
 

@@ -130,7 +130,6 @@ def test_the_verdict_names_a_rival_only_when_it_beats_the_blend_by_more_than_a_s
     assert set(FORWARD_RIVALS) >= {"learned", "ip", "kernel", "nn", "clock"} and "prior" not in FORWARD_RIVALS
 
 
-
 def _whole(errors):
     """Whole-movement records ``{method: [error per demonstration]}`` (the paper's measure, one per demonstration)."""
     return [{"method": m, "demo": 10 + j, "protocol": "whole", "fraction": 0.6, "wm_ctrl": float(e)}
@@ -164,6 +163,7 @@ def test_the_cross_validated_verdict_names_a_family_better_on_the_whole_movement
     auto = 1.0 + 0.1 * rng.random(8)
     recs = [dict(r, chosen="learned", k=5) for r in _records({"auto": auto, "chosen": auto * 1.02,
                                                               "clock": 2 * auto, "learned": auto * 1.02})]
+
     def verdict(learned_whole):
         whole = _whole({"auto": auto, "chosen": learned_whole, "learned": learned_whole, "prior": auto * 1.05})
         summary = rt.summarise_with_rest(recs + whole)

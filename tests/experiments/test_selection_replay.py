@@ -80,3 +80,76 @@ def test_an_unknown_task_set_is_refused_by_name(capsys):
     with pytest.raises(SystemExit):
         sr.main(["--tasks", "nuisi,letters"])
     assert "unknown task set(s): letters" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--tasks", "characters", "--letters", "aex"], "--letters: x: not among the set's letters"),
+    (["--tasks", "characters", "--letters", "aa"], "repeats a letter"),
+    (["--tasks", "characters", "--letters", ""], "none given"),
+    (["--tasks", "nuisi", "--letters", "b"], "--letters is read with --tasks characters only"),
+])
+def test_letters_outside_the_set_are_refused_by_name(argv, says, capsys):
+    with pytest.raises(SystemExit):
+        sr.main(argv)
+    assert says in capsys.readouterr().err
+
+
+def test_the_fresh_letters_are_the_sets_other_sixteen():
+    """The letters kept apart are the set's 20 (its ``key``, as the data's README lists them) without the four the
+    rules were replayed on, none twice."""
+    assert len(sr.FRESH_LETTERS) == 16 and not set(sr.FRESH_LETTERS) & set(sr.CHARACTER_LETTERS)
+    assert "".join(sorted(sr.FRESH_LETTERS + sr.CHARACTER_LETTERS)) == "abcdeghlmnopqrsuvwyz"
+
+
+def test_the_lasa_shapes_are_seven_recordings_each_on_their_own_durations():
+    """``--tasks lasa``: each shape's 7 recordings read at their own time stamps onto one interval, over their own
+    durations (which differ), the pen's x observed and its y predicted."""
+    from interprim.core.preprocessing import interp_columns
+    from interprim.datasets import load_lasa
+
+    (name, demos, obs, dt, pdim), = sr.lasa_tasks(["GShape"], dt=0.05, subsample=10)
+    raw = load_lasa("GShape", subsample=10)
+    assert name == "lasa/GShape" and obs == [0] and pdim == 1 and dt == 0.05 and len(demos) == 7
+    lengths = {len(d) for d in demos}
+    assert len(lengths) > 1  # every recording keeps its own duration
+    for d, x, t in zip(demos, raw, raw.times):
+        assert len(d) == int(round((t[-1] - t[0]) / 0.05)) + 1
+        np.testing.assert_allclose(d, interp_columns(t[0] + 0.05 * np.arange(len(d)), np.asarray(t), np.asarray(x)))
+        np.testing.assert_allclose(d[0], np.asarray(x)[0])
+
+
+def test_the_geometric_aggregate_is_of_the_ratios_over_the_folds(folds):
+    """``aggregate="geometric"``: each ratio is the geometric mean of the outer folds' (not above their mean, equal
+    for the mean demonstration's ratios of 1), the coverages their mean as before; an unknown aggregate is refused."""
+    _, _, (outer, inner) = folds
+    rules = {"default": sr.default_rule(), "prior": sr.single_rule("prior")}
+    mean = sr.replay(outer, inner, rules)
+    geo = sr.replay(outer, inner, rules, aggregate="geometric")
+    for k, v in geo["default"].items():
+        if k.startswith("band"):
+            assert v == pytest.approx(mean["default"][k], rel=1e-12)
+        else:
+            assert 0.0 < v <= mean["default"][k] + 1e-12
+    assert geo["prior"]["real time ÷ clock"] == pytest.approx(1.0, abs=1e-9)
+    assert geo["default"]["rest of the movement ÷ clock (latest third)"] == pytest.approx(
+        mean["default"]["rest of the movement ÷ clock (latest third)"], rel=1e-12)
+    with pytest.raises(ValueError, match="aggregate"):
+        sr.replay(outer, inner, rules, aggregate="median")
+
+
+def test_task_folds_take_their_inner_folds_apart(monkeypatch):
+    """``inner_k``: the outer folds as asked (one recording each here), every inner cross-validation in its own
+    number of folds."""
+    task = benchmark_tasks(5, seed=4)["reach"]
+    demos = [np.asarray(d) for d in task.demos]
+    made = []
+    real = sr.stacking.CrossValidation
+
+    def spy(*args, k=None, **kwargs):
+        made.append(k)
+        return real(*args, k=k, **kwargs)
+
+    monkeypatch.setattr(sr.stacking, "CrossValidation", spy)
+    outer, inner = sr.task_folds(demos, task.observed_dofs, task.dt, 1, k=len(demos), inner_k=2)
+    assert len(inner) == len(demos) and all(len(held) == 1 for held, _, _ in inner)
+    assert made == [len(demos)] + [2] * len(demos)

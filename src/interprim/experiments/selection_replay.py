@@ -30,14 +30,21 @@ at the nominal 90 %, as before it was chosen by cross-fitting), each family alon
 end`` (the default's weights with every member placed to the held-out recording's true end: a bound that needs the
 future, to show how much a perfect remaining duration would give).
 
+``--tasks lasa`` replays them with few demonstrations (:func:`lasa_tasks`: the 30 LASA shapes, 7 recordings each):
+the outer folds hold out one recording each (the members fitted on the other six, the inner cross-validation in 3
+folds, as the fit makes it), and each ratio is the geometric mean over the seven (``replay(aggregate="geometric")``).
+
 ``--tasks characters`` replays the same rules on recordings of another kind, made elsewhere
 (:func:`character_tasks`: four handwritten letters of the UCI Character Trajectories set, 30 each, the pen's
 x observed and its y predicted).  They are not interactions, and no rule was chosen on them: they show whether
-what holds on the development tasks carries to data the rules were not developed on.
+what holds on the development tasks carries to data the rules were not developed on.  ``--letters`` replaces the
+four letters (:data:`CHARACTER_LETTERS`) by others of the set's 20; :data:`FRESH_LETTERS`, the sixteen the rules
+were never replayed on before 2026-12-08, were replayed once, with the default as it stood then (docs/evaluation.md).
 
-Run (about 3 minutes on a 2-core machine; about 45 s more for the letters)::
+Run (about 3 minutes on a 2-core machine; about 45 s more for four letters, 6 minutes for the LASA shapes)::
 
-    python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic,characters] [--out DIR]
+    python -m interprim.experiments.selection_replay [--tasks nuisi,synthetic,characters,lasa] [--letters aesw]
+        [--out DIR]
 """
 
 from __future__ import annotations
@@ -56,7 +63,7 @@ from ..models import registry
 from ..models.auto import AutoInteraction, budget_coupling, budget_phase, recording_factory
 
 __all__ = ["task_folds", "choose", "default_rule", "single_rule", "replay", "coverage", "tables", "character_tasks",
-           "main"]
+           "CHARACTER_LETTERS", "FRESH_LETTERS", "lasa_tasks", "main"]
 
 Z90 = 1.6448536269514722
 
@@ -66,9 +73,10 @@ Z90 = 1.6448536269514722
 OUTER_PREFIXES = 24
 
 
-def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
-    """``(outer, [(held, inner, sizes)])``: the outer cross-validation of every default candidate over the
-    development recordings ``dev`` and, per outer fold, the inner one over its training recordings and the sizes
+def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3, inner_k: int | None = None) -> tuple:
+    """``(outer, [(held, inner, sizes)])``: the outer cross-validation (``k`` folds) of every default candidate over
+    the development recordings ``dev`` and, per outer fold, the inner one (``inner_k`` folds, default ``k``; the
+    fit's own is ``AutoInteraction.folds``, 3) over its training recordings and the sizes
     its frame budget is computed from: ``sizes`` is ``(assumed, own)``, the sizes with the Interaction Primitive's
     phase and the learned interaction's coupling read from their inner-fold fits
     (:func:`~interprim.models.auto.budget_phase`, :func:`~interprim.models.auto.budget_coupling`) and with those of
@@ -80,6 +88,7 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
     cfg = stacking.scoring_config(0.25, arrays, dt, stride=3, point_dim=point_dim, max_frames=OUTER_PREFIXES)
     outer = stacking.CrossValidation(make, dev, obs, dt, cfg, k=k, horizon=0.25)
     inner = []
+    ik = k if inner_k is None else int(inner_k)
     for held in folds(len(dev), k):
         keep = [i for i in range(len(dev)) if i not in set(held)]
         d = dev.take(keep) if hasattr(dev, "take") else [dev[i] for i in keep]
@@ -91,17 +100,19 @@ def task_folds(dev, obs, dt: float, point_dim: int, k: int = 3) -> tuple:
         learned_fits: list = []
         cv = stacking.CrossValidation(dict(make, ip=recording_factory(make["ip"], fits),
                                            learned=recording_factory(make["learned"], learned_fits)),
-                                      d, obs, dt, c, k=k, horizon=0.25)
+                                      d, obs, dt, c, k=ik, horizon=0.25)
         sizes = registry.FrameSizes(len(tr), float(np.mean([len(x) for x in tr])), len(obs), int(tr[0].shape[1]),
                                     int(auto.n_basis), phase=own, coupling=own_coupling)
-        assumed = dataclasses.replace(sizes, phase=budget_phase(fits, k) or own,
-                                      coupling=budget_coupling(learned_fits, k) or "ppca")
+        assumed = dataclasses.replace(sizes, phase=budget_phase(fits, ik) or own,
+                                      coupling=budget_coupling(learned_fits, ik) or "ppca")
         inner.append((held, cv, (assumed, sizes)))
     return outer, inner
 
 
 #: the letters :func:`character_tasks` replays: two closed strokes, one reversing, one zigzag
 CHARACTER_LETTERS = "aesw"
+#: the set's other sixteen letters, kept apart as a check the rules had not seen (``--letters``)
+FRESH_LETTERS = "bcdghlmnopqruvyz"
 
 
 def character_tasks(path=None, letters: str = CHARACTER_LETTERS, n: int = 30, step: int = 2) -> list:
@@ -114,6 +125,26 @@ def character_tasks(path=None, letters: str = CHARACTER_LETTERS, n: int = 30, st
     for letter, d in load_character_trajectories(path, letters=letters, max_per_letter=n).items():
         demos = [np.asarray(x, dtype=np.float64)[::step] for x in d]
         out.append((f"characters/{letter}", demos, [0], float(d.dt) * step, 1))
+    return out
+
+
+def lasa_tasks(shapes=None, dt: float = 0.05, subsample: int = 10) -> list:
+    """``[(name, demos, observed, dt, point_dim)]``: the LASA shapes (EPFL; the optional extra ``interprim[lasa]``)
+    as two-agent tasks with few demonstrations: 7 each, the pen's x (column 0) observed and its y predicted, each
+    demonstration (:func:`~interprim.datasets.load_lasa` at ``subsample``) read at its own time stamps onto a grid of
+    ``dt`` seconds over its own duration (4-7 s: 40-160 frames at 0.05 s).  ``shapes``: all 30 by default."""
+    from ..core.preprocessing import interp_columns
+    from ..datasets import lasa_shapes, load_lasa
+
+    out = []
+    for shape in (lasa_shapes() if shapes is None else list(shapes)):
+        d = load_lasa(shape, subsample=subsample)
+        demos = []
+        for x, t in zip(d, d.times):
+            t = np.asarray(t, dtype=np.float64)
+            n = int(round((t[-1] - t[0]) / dt)) + 1
+            demos.append(interp_columns(t[0] + np.arange(n) * dt, t, np.asarray(x, dtype=np.float64)))
+        out.append((f"lasa/{shape}", demos, [0], float(dt), 1))
     return out
 
 
@@ -212,9 +243,15 @@ def _outer(outer, held, choice: dict, true_end: bool = False) -> dict:
     return out
 
 
-def replay(outer, inner, rules: dict) -> dict:
+def replay(outer, inner, rules: dict, aggregate: str = "mean") -> dict:
     """``{rule: {yardstick: mean over the outer folds}}`` for one task (``outer``, ``inner``: :func:`task_folds`; a
-    rule named ``"true end"`` is the default's weights placed to the true end)."""
+    rule named ``"true end"`` is the default's weights placed to the true end).
+
+    ``aggregate="geometric"``: the ratios' geometric mean over the outer folds instead (the coverages' mean still),
+    for folds that hold out one recording each, where a recording unlike the others (its reference's error small)
+    would weigh on an arithmetic mean of ratios as much as all the others together."""
+    if aggregate not in ("mean", "geometric"):
+        raise ValueError(f"aggregate must be 'mean' or 'geometric', got {aggregate!r}")
     res: dict = {}
     # the fold that holds out the latest recordings (folds are contiguous, in recording order)
     latest = max(range(len(inner)), key=lambda i: max(inner[i][0]))
@@ -229,9 +266,16 @@ def replay(outer, inner, rules: dict) -> dict:
                 break
             rows.append(_outer(outer, held, choice))
         else:
-            res[rname] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+            res[rname] = {k: _aggregate([r[k] for r in rows], aggregate != "mean" and not k.startswith("band"))
+                          for k in rows[0]}
             res[rname].update({f"{k} (latest third)": float(rows[latest][k]) for k in rows[0]})
     return res
+
+
+def _aggregate(values: list, geometric: bool) -> float:
+    """The mean of ``values`` over the outer folds, or their geometric mean."""
+    v = np.asarray(values, dtype=np.float64)
+    return float(np.exp(np.mean(np.log(v)))) if geometric else float(np.mean(v))
 
 
 def tables(results: dict) -> str:
@@ -262,7 +306,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m interprim.experiments.selection_replay",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--tasks", default="nuisi,synthetic",
-                    help="comma-separated: nuisi, synthetic (the development tasks), characters (four letters)")
+                    help="comma-separated: nuisi, synthetic (the development tasks), characters (four letters), "
+                         "lasa (30 shapes of 7 recordings; needs interprim[lasa])")
+    ap.add_argument("--letters", default=CHARACTER_LETTERS,
+                    help=f"the letters --tasks characters replays (default {CHARACTER_LETTERS}; the set's others: "
+                         f"{FRESH_LETTERS})")
     ap.add_argument("--data", default=None, help="NuiSI file (default: the shared data folder)")
     ap.add_argument("--out", default=None, help="folder for replay.json and replay.md (outside the repository)")
     args = ap.parse_args(argv)
@@ -270,16 +318,30 @@ def main(argv=None) -> int:
              **{m: single_rule(m) for m in registry.CANDIDATES}}
     results = {}
     which = tuple(t.strip() for t in args.tasks.split(","))
-    unknown = sorted(set(which) - {"nuisi", "synthetic", "characters"})
+    unknown = sorted(set(which) - {"nuisi", "synthetic", "characters", "lasa"})
     if unknown:
-        ap.error(f"unknown task set(s): {', '.join(unknown)} (known: nuisi, synthetic, characters)")
+        ap.error(f"unknown task set(s): {', '.join(unknown)} (known: nuisi, synthetic, characters, lasa)")
+    if "characters" in which:
+        letters = args.letters.strip()
+        known = set(CHARACTER_LETTERS + FRESH_LETTERS)
+        bad = sorted(set(letters) - known)
+        if not letters or bad:
+            ap.error(f"--letters: {''.join(bad) or 'none given'}: not among the set's letters "
+                     f"({''.join(sorted(known))})")
+        if len(set(letters)) != len(letters):
+            ap.error(f"--letters: {letters!r} repeats a letter")
+    elif args.letters != CHARACTER_LETTERS:
+        ap.error("--letters is read with --tasks characters only")
     tasks = [(name, dev, obs, dt, pdim) for name, dev, _hold, obs, dt, pdim, _orc in holdout_tasks(which, args.data)]
     if "characters" in which:
-        tasks += character_tasks()
+        tasks += character_tasks(letters=letters)
+    if "lasa" in which:
+        tasks += lasa_tasks()
     with single_thread():
         for name, dev, obs, dt, pdim in tasks:
-            outer, inner = task_folds(dev, obs, dt, pdim)
-            results[name] = replay(outer, inner, rules)
+            few = name.startswith("lasa/")  # one recording held out per outer fold, the fit's 3 inner folds
+            outer, inner = task_folds(dev, obs, dt, pdim, k=len(dev) if few else 3, inner_k=3)
+            results[name] = replay(outer, inner, rules, aggregate="geometric" if few else "mean")
             print(f"{name}: replayed", flush=True)
     md = tables(results)
     print(md)

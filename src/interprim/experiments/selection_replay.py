@@ -32,14 +32,15 @@ future, to show how much a perfect remaining duration would give).
 
 ``--tasks lasa`` replays them with few demonstrations (:func:`lasa_tasks`: the 30 LASA shapes, 7 recordings each):
 the outer folds hold out one recording each (the members fitted on the other six, the inner cross-validation in 3
-folds, as the fit makes it), and each ratio is the geometric mean over the seven (``replay(aggregate="geometric")``).
+folds, as the fit makes it), and each ratio is the geometric mean over the seven (``replay(aggregate="geometric")``;
+there "latest third" is the fold that holds out the last recording).
 
 ``--tasks characters`` replays the same rules on recordings of another kind, made elsewhere
 (:func:`character_tasks`: four handwritten letters of the UCI Character Trajectories set, 30 each, the pen's
 x observed and its y predicted).  They are not interactions, and no rule was chosen on them: they show whether
 what holds on the development tasks carries to data the rules were not developed on.  ``--letters`` replaces the
-four letters (:data:`CHARACTER_LETTERS`) by others of the set's 20; :data:`FRESH_LETTERS`, the sixteen the rules
-were never replayed on before 2026-12-08, were replayed once, with the default as it stood then (docs/evaluation.md).
+four letters (:data:`CHARACTER_LETTERS`) by others of the set's 20; :data:`FRESH_LETTERS` are the sixteen others,
+kept apart as a check on recordings no rule was tried on (docs/evaluation.md gives their replay).
 
 Run (about 3 minutes on a 2-core machine; about 45 s more for four letters, 6 minutes for the LASA shapes)::
 
@@ -325,9 +326,10 @@ def main(argv=None) -> int:
         letters = args.letters.strip()
         known = set(CHARACTER_LETTERS + FRESH_LETTERS)
         bad = sorted(set(letters) - known)
-        if not letters or bad:
-            ap.error(f"--letters: {''.join(bad) or 'none given'}: not among the set's letters "
-                     f"({''.join(sorted(known))})")
+        if not letters:
+            ap.error("--letters: no letter given")
+        if bad:
+            ap.error(f"--letters: {''.join(bad)}: not among the set's letters ({''.join(sorted(known))})")
         if len(set(letters)) != len(letters):
             ap.error(f"--letters: {letters!r} repeats a letter")
     elif args.letters != CHARACTER_LETTERS:
@@ -336,7 +338,10 @@ def main(argv=None) -> int:
     if "characters" in which:
         tasks += character_tasks(letters=letters)
     if "lasa" in which:
-        tasks += lasa_tasks()
+        try:
+            tasks += lasa_tasks()
+        except ImportError as exc:  # the optional extra is missing: its message names the install command
+            ap.error(f"--tasks lasa: {exc}")
     with single_thread():
         for name, dev, obs, dt, pdim in tasks:
             few = name.startswith("lasa/")  # one recording held out per outer fold, the fit's 3 inner folds

@@ -133,18 +133,15 @@ def lasa_tasks(shapes=None, dt: float = 0.05, subsample: int = 10) -> list:
     """``[(name, demos, observed, dt, point_dim)]``: the LASA shapes (EPFL; the optional extra ``interprim[lasa]``)
     as two-agent tasks with few demonstrations: 7 each, the pen's x (column 0) observed and its y predicted, each
     demonstration (:func:`~interprim.datasets.load_lasa` at ``subsample``) read at its own time stamps onto a grid of
-    ``dt`` seconds over its own duration (4-7 s: 40-160 frames at 0.05 s).  ``shapes``: all 30 by default."""
-    from ..core.preprocessing import interp_columns
+    ``dt`` seconds over its own duration (:func:`~interprim.core.preprocessing.resample_step`; 4-7 s: 40-160 frames
+    at 0.05 s).  ``shapes``: all 30 by default."""
+    from ..core.preprocessing import resample_step
     from ..datasets import lasa_shapes, load_lasa
 
     out = []
     for shape in (lasa_shapes() if shapes is None else list(shapes)):
         d = load_lasa(shape, subsample=subsample)
-        demos = []
-        for x, t in zip(d, d.times):
-            t = np.asarray(t, dtype=np.float64)
-            n = int(round((t[-1] - t[0]) / dt)) + 1
-            demos.append(interp_columns(t[0] + np.arange(n) * dt, t, np.asarray(x, dtype=np.float64)))
+        demos = [resample_step(np.asarray(x, dtype=np.float64), t, dt)[0] for x, t in zip(d, d.times)]
         out.append((f"lasa/{shape}", demos, [0], float(dt), 1))
     return out
 

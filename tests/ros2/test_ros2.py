@@ -506,6 +506,54 @@ def test_cli_bridges_between_processes(model, demos, tmp_path):
     assert "published" in out and "responses" in out
 
 
+class _SignalMidFrame(Ros2Bridge):
+    """A bridge without DDS whose every frame is interrupted by Ctrl-C in the middle of the model's computation,
+    where (as a compiled function does) the interruption is turned into another error that the bridge counts and
+    goes past."""
+
+    def open(self):
+        pass
+
+    def close(self):
+        pass
+
+    def spin_once(self, timeout):
+        try:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                for _ in range(10_000):  # the handler runs here, between two bytecodes
+                    pass
+            except BaseException as e:
+                raise SystemError("returned a result with an exception set") from e
+        except Exception:
+            self.counts["unusable"] += 1
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 0)])
+def test_cli_stops_on_a_signal_that_lands_inside_the_model(model, tmp_path, monkeypatch, capsys, sig, code):
+    """CI saw the bridge go on after Ctrl-C when the signal landed inside the compiled phase search (its
+    KeyboardInterrupt came out as a SystemError, a message the bridge could not use): a signal now only sets a flag
+    read between two spins, and the command still stops, prints its counts and exits 130 (SIGINT) or 0 (SIGTERM)."""
+    import interprim.ros2
+    from interprim.cli import main
+
+    class Bridge(_SignalMidFrame):
+        def spin_once(self, timeout):
+            if sig == signal.SIGINT:
+                return super().spin_once(timeout)
+            os.kill(os.getpid(), sig)
+
+    path = tmp_path / "m.npz"
+    model.save(path)
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(interprim.ros2, "Ros2Bridge", Bridge)
+    rc = main(["ros2", str(path), "--observe", _hand("/h"), "--domain-id", "5", "--duration", "30"])
+    out = capsys.readouterr().out
+    assert rc == code
+    assert "published 0 responses" in out
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before  # the caller's handlers
+
+
 def test_cli_bad_observe_is_one_line(model, tmp_path):
     path = tmp_path / "m.npz"
     model.save(path)

@@ -91,19 +91,34 @@ def run(args) -> int:
           f"DDS domain {bridge.domain_id}{' (localhost only)' if args.localhost else ''}", flush=True)
     start = time.monotonic()
     status = 0
-    stop = []
-    if threading.current_thread() is threading.main_thread():  # a service manager's SIGTERM: stop, exit 0
-        signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    stop: list[int] = []
+
+    def on_signal(sig, _frame):
+        # A signal only sets a flag, read between two spins: an exception raised wherever the signal lands (inside
+        # a compiled phase search, a DDS callback) would be turned into another error there and lost, and the
+        # bridge would go on. A second Ctrl-C raises KeyboardInterrupt at once.
+        stop.append(sig)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    main = threading.current_thread() is threading.main_thread()
+    before = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) if main else None
+    if main:  # a service manager's SIGTERM: stop, exit 0
+        signal.signal(signal.SIGTERM, on_signal)
         # Ctrl-C (SIGINT) stops it even when started from a script's background job, which starts with SIGINT
         # ignored (Python then leaves it ignored, and `kill -INT` did nothing)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, on_signal)
     try:
         while not stop and (args.duration is None or time.monotonic() - start < args.duration):
             bridge.spin_once(0.05)
     except KeyboardInterrupt:
-        status = 130  # 128 + SIGINT, as the shell reports Ctrl-C (and as interprim serve exits)
+        stop.append(signal.SIGINT)
     finally:
         bridge.close()
+        if before is not None:  # a caller's own handlers again (main() may run inside a program)
+            signal.signal(signal.SIGINT, before[0])
+            signal.signal(signal.SIGTERM, before[1])
+    if signal.SIGINT in stop:
+        status = 130  # 128 + SIGINT, as the shell reports Ctrl-C (and as interprim serve exits)
     c = bridge.counts
     print("received {received} messages, {frames} frames, published {published} responses; dropped: "
           "{duplicate} duplicate, {late} late, {unusable} unusable, {invalid} invalid; {gap} restarts after a gap, "

@@ -108,6 +108,31 @@ def test_handwriting_without_the_lasa_extra_skips_lasa_with_a_note(monkeypatch, 
     assert "note: skipping the LASA shapes" in capsys.readouterr().err
 
 
+def test_ctrl_c_inside_compiled_code_is_an_interruption(monkeypatch, tmp_path, capsys):
+    """A Ctrl-C that lands while a numba function runs comes out of it as a SystemError caused by the
+    KeyboardInterrupt: the command says "interrupted" and exits 130, as for a Ctrl-C anywhere else; any other
+    SystemError is still raised."""
+    import interprim.experiments.handwriting as hw
+
+    def interrupted(out, **kw):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise SystemError("CPUDispatcher(<function f>) returned a result with an exception set") from e
+
+    monkeypatch.setattr(hw, "run_handwriting", interrupted)
+    assert main(["handwriting", "--out", str(tmp_path / "a"), "--no-figures"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip().endswith("interrupted") and "SystemError" not in err and "Traceback" not in err
+
+    def broken(out, **kw):
+        raise SystemError("a bug")
+
+    monkeypatch.setattr(hw, "run_handwriting", broken)
+    with pytest.raises(SystemError, match="a bug"):
+        main(["handwriting", "--out", str(tmp_path / "b"), "--no-figures"])
+
+
 # ----------------------------------------------------------------------------- small data, --methods
 def test_evaluate_three_demonstrations_leaves_out_what_cannot_train(recordings, tmp_path, capsys):
     out = tmp_path / "ev3"

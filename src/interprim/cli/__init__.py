@@ -145,6 +145,25 @@ def _run(parser, args) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except SystemError as exc:
+        # Ctrl-C while a compiled (numba) function ran: its KeyboardInterrupt comes out as a SystemError
+        # ("returned a result with an exception set") caused by it
+        if not _interrupted(exc):
+            raise
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by a KeyboardInterrupt (anywhere in its chain of causes and contexts)."""
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,6 +36,18 @@ def test_markers_are_known_and_skips_explained():
             assert b.lang in ("bash", "python"), f"line {b.line}: marker on a ```{b.lang} block"
 
 
+def test_every_fence_opens_or_closes_a_block_found():
+    """A fence the parser misreads (one indented inside a list item, once) pairs the wrong fences from there on, and
+    the blocks after it were neither run nor compared: every fence line belongs to exactly one block found."""
+    text = TUTORIAL.read_text()
+    fences = [n for n, ln in enumerate(text.splitlines(), 1) if ln.lstrip().startswith("```")]
+    bl = blocks(text)
+    assert len(fences) == 2 * len(bl)
+    assert [b.line for b in bl] == fences[::2]
+    indented = "1. a list item:\n\n   ```text\n   shown\n   ```\n\n```bash\necho hi\n```\n"
+    assert [(b.lang, b.body) for b in blocks(indented)] == [("text", "   shown"), ("bash", "echo hi")]
+
+
 def test_compare_catches_drift_and_ignores_timings():
     assert compare("held-out error 0.0598 (prior 0.1284)", "held-out error 0.0598 (prior 0.1285)") == []
     assert compare("held-out error 0.0598", "held-out error 0.0889")  # the drift of issue 21

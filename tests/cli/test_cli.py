@@ -110,6 +110,30 @@ def test_predict_csv_output_columns(files, tmp_path, capsys):
     assert 0.5 < rows[-1, 5] < 2.6  # robot_q ends at 1.6 * amplitude in (0.5, 1.5)
 
 
+def test_predict_fills_a_gap_in_the_partial_with_max_nan_gap(files, tmp_path, capsys):
+    """A lost marker in the observed frames: predict says which flag fills it (one line), and with it predicts
+    what it predicts from the frames without the gap, interpolated."""
+    test, _ = _demos(n=1, seed=99)
+    k = test[0].shape[0] // 2
+    x = test[0][:k, :2]
+    rows = ["time,human_x,human_y"] + [f"{0.02 * i:.2f},{'' if 10 <= i < 12 else repr(float(a))},{float(b)!r}"
+                                       for i, (a, b) in enumerate(x)]
+    gap = tmp_path / "gap.csv"
+    gap.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "p.csv"
+    assert main(["predict", str(files / "model.npz"), str(gap), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing value(s)" in err and "--max-nan-gap 2" in err and not out.exists()
+    assert main(["predict", str(files / "model.npz"), str(gap), "-o", str(out), "--max-nan-gap", "2"]) == 0
+    filled = x.copy()
+    filled[10:12, 0] = filled[9, 0] + (filled[12, 0] - filled[9, 0]) * np.array([1, 2]) / 3
+    ref = tmp_path / "filled.csv"
+    ref.write_text("\n".join(["time,human_x,human_y"] + [f"{0.02 * i:.2f},{float(a)!r},{float(b)!r}"
+                                                           for i, (a, b) in enumerate(filled)]) + "\n")
+    assert main(["predict", str(files / "model.npz"), str(ref), "-o", str(tmp_path / "r.csv")]) == 0
+    assert out.read_text() == (tmp_path / "r.csv").read_text()
+
+
 def test_predict_npz_output_and_extra_columns(files, tmp_path, capsys):
     out = tmp_path / "pred.npz"
     argv = ["predict", str(files / "model.npz"), str(files / "partial_full.npz"), "-o", str(out)]

@@ -136,7 +136,8 @@ def add_parser(subparsers) -> None:
         "--sigma2",
         type=_sigma2,
         default=None,
-        help="observation noise variance: a number, 'auto' or 'cv' (cross-validated) (default: the model's) (ip)",
+        help="observation noise variance: a number, 'residual' (from the fit's residual) or 'cv' (cross-validated) "
+        "(default: the model's) (ip)",
     )
     p.add_argument(
         "--phase-method",

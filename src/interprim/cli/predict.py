@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import CommandError, add_recording_args, output_when_done, positive_number, recording_options
+from ._common import (MAX_NAN_GAP_HELP, CommandError, add_recording_args, output_when_done, positive_number,
+                      recording_options)
 
 __all__ = ["add_parser"]
 
@@ -55,6 +56,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--observe-fraction", type=float, default=None, metavar="F",
                    help="observe only the first F (0 < F <= 1) of PARTIAL's frames, e.g. 0.6 for the first 60 %% of a "
                         "whole recording")
+    p.add_argument("--max-nan-gap", type=int, default=None, help="PARTIAL: " + MAX_NAN_GAP_HELP)
     add_recording_args(p, what="PARTIAL")
     p.set_defaults(func=cmd_predict)
 
@@ -91,7 +93,8 @@ def cmd_predict(args) -> int:
     model = ip.load_any(args.model)  # whatever 'interprim fit' saved (the model chosen on the data by default)
     columns = _model_columns(model) or [f"dof_{j}" for j in range(model.n_dofs_)]
     obs_names = [columns[i] for i in model.observed_dofs_]
-    part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1, **recording_options(args))
+    part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1, max_nan_gap=args.max_nan_gap,
+                               **recording_options(args))
     if len(part) != 1:
         raise CommandError(f"{args.partial} holds {len(part)} demonstrations; give the frames of one movement")
     missing = [c for c in obs_names if c not in part.columns]

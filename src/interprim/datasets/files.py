@@ -359,7 +359,7 @@ def resampled(ds: Demonstrations, dt: float) -> Demonstrations:
         ds.dt = float(dt)
         return ds
     new_d, new_t = [], []
-    # the recorded samples, so that an evaluation can build causal prefixes (evaluation.protocol)
+    # the recorded samples, so that an evaluation can build causal prefixes (model_selection.prefixes)
     ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]
               for y, t in zip(ds.demos, ds.times)]
     for y, t in zip(ds.demos, ds.times):

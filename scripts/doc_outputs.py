@@ -33,8 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 TUTORIAL = ROOT / "docs" / "tutorial.md"
 #: a fenced block; its fences may be indented (up to 3 spaces, as Markdown allows inside a list item)
-FENCE = re.compile(r"(?:<!-- tutorial: (?P<mark>\w+)(?P<why>[^>]*)-->\s*\n)?```(?P<lang>\w*)\n(?P<body>.*?)\n[ ]{0,3}```",
-                   re.S)
+FENCE = re.compile(r"(?:<!-- tutorial: (?P<mark>\w+)(?P<why>[^>]*)-->\s*\n)?```(?P<lang>\w*)\n(?P<body>.*?)"
+                   r"\n[ ]{0,3}```", re.S)
 NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 TIMING = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?= ?ms\b)|(?<=\bin )\d+(?:\.\d+)?(?= s\b)")
 

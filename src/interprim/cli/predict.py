@@ -9,8 +9,14 @@ from __future__ import annotations
 import argparse
 
 from ..core.errors import DataFileError, InterprimError
-from ._common import (MAX_NAN_GAP_HELP, CommandError, add_recording_args, output_when_done, positive_number,
-                      recording_options)
+from ._common import (
+    MAX_NAN_GAP_HELP,
+    CommandError,
+    add_recording_args,
+    output_when_done,
+    positive_number,
+    recording_options,
+)
 
 __all__ = ["add_parser"]
 

@@ -169,7 +169,7 @@ def test_fit_errors(files, tmp_path, capsys):
     err = _err(capsys, ["fit", "--model", "ip", str(bad), "--observed", "x", "-o", m])
     assert "bad.csv" in err and "line 4" in err and "strictly increasing" in err
     err = _err(capsys, ["fit", "--model", "ip", str(files / "demos.csv"), "--observed", "0", "--n-basis", "0", "-o", m])
-    assert "--n-basis must be positive" in err
+    assert "--n-basis must be a positive finite number" in err
     one = tmp_path / "one.csv"
     save_demonstrations(one, [np.ones((10, 2))], dt=0.1, columns=["a", "b"])
     assert "at least 2 are needed" in _err(capsys, ["fit", "--model", "ip", str(one), "--observed", "a", "-o", m])
@@ -192,7 +192,7 @@ def test_predict_errors(files, tmp_path, capsys):
     two = tmp_path / "two.csv"
     save_demonstrations(two, [np.ones((6, 2)), np.ones((6, 2))], dt=0.02, columns=COLS[:2])
     assert "holds 2 demonstrations" in _err(capsys, ["predict", model, str(two), "-o", out])
-    assert "--samples must be >= 0" in _err(capsys, ["predict", model, partial, "-o", out, "--samples", "-1"])
+    assert "--samples must be in 0..10000" in _err(capsys, ["predict", model, partial, "-o", out, "--samples", "-1"])
     # a demonstrations file is not a model
     assert "interprim predict: error:" in _err(capsys, ["predict", str(files / "demos_meta.npz"), partial, "-o", out],
                                                status=2)

@@ -6,7 +6,7 @@ import contextlib
 
 from ..core.errors import InterprimError
 
-__all__ = ["CommandError", "output_when_done"]
+__all__ = ["CommandError", "output_when_done", "check_output"]
 
 
 class CommandError(InterprimError, ValueError):
@@ -79,9 +79,42 @@ def split_cols(values):
 
 
 def positive_number(value, name):
-    if value is not None and not value > 0:
-        raise CommandError(f"{name} must be positive, got {value!r}")
+    """``value`` (None passes), refused unless a positive finite number."""
+    import math
+
+    if value is not None and not (value > 0 and math.isfinite(value)):
+        raise CommandError(f"{name} must be a positive finite number, got {value!r}")
     return value
+
+
+def check_output(path, flag: str, *, inputs=(), folder: bool = False, suffixes=None) -> None:
+    """Refuse, before any work, an output the command could not write or that would destroy an input.
+
+    ``path`` (given with ``flag``): a file, or a folder with ``folder=True``.  Refused: a suffix not in
+    ``suffixes``; a folder output that exists as a file, or a file output that exists as a folder; a path under
+    an existing file (a file cannot hold a folder); an output that is one of ``inputs`` (the same file, however
+    named: the input would be replaced by the output)."""
+    import os
+    from pathlib import Path
+
+    out = Path(path)
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise CommandError(f"{flag} {path}: the output must end in {' or '.join(suffixes)}")
+    if out.exists():
+        if folder and not out.is_dir():
+            raise CommandError(f"{flag} {path}: exists and is not a folder (the output is a folder)")
+        if not folder and out.is_dir():
+            raise CommandError(f"{flag} {path}: is a folder (the output is a file)")
+    for parent in out.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise CommandError(f"{flag} {path}: {parent} is a file, not a folder")
+            break
+    if out.exists() and not folder:
+        for given in inputs:
+            if given is not None and Path(given).exists() and os.path.samefile(out, given):
+                raise CommandError(f"{flag} {path}: is the input {given}; the output would replace it (choose "
+                                   "another name)")
 
 
 # ----------------------------------------------------------------------------- recordings

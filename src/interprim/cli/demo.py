@@ -100,6 +100,12 @@ def run(args) -> int:
             raise DemoArgumentError(f"--nuisi-demo must be in 0..{actions[args.nuisi] - 1} for {args.nuisi}, "
                                     f"got {args.nuisi_demo}")
     out = Path(args.out)
+    from ._common import CommandError, check_output
+
+    try:
+        check_output(out, "--out", folder=True)
+    except CommandError as exc:
+        raise DemoArgumentError(str(exc)) from None
     log = (lambda *a, **k: None) if args.quiet else print
     t0 = time.perf_counter()
     log(f"interprim demo: simulated high-five -> {out}/")

@@ -226,9 +226,37 @@ def run_user_data(args) -> int:
     return 0
 
 
+def _fractions(text: str) -> tuple:
+    """``--fractions`` as numbers in (0, 1], or a one-line error naming the flag."""
+    from ._common import CommandError
+
+    out = []
+    for f in (f.strip() for f in text.split(",")):
+        if not f:
+            continue
+        try:
+            v = float(f)
+        except ValueError:
+            raise CommandError(f"--fractions {text}: {f!r} is not a number (comma-separated fractions in (0, 1])") \
+                from None
+        if not 0 < v <= 1:
+            raise CommandError(f"--fractions {text}: {f} is not in (0, 1] (the fraction of a movement observed)")
+        out.append(v)
+    if not out:
+        raise CommandError(f"--fractions {text!r}: no fraction given")
+    return tuple(out)
+
+
 def run(args) -> int:
     from dataclasses import replace
 
+    from ._common import check_output, positive_number
+
+    positive_number(args.horizon, "--horizon")
+    positive_number(args.dt, "--dt")
+    positive_number(args.resample, "--resample")
+    fractions = _fractions(args.fractions) if args.fractions else None
+    check_output(args.out, "--out", folder=True)
     if _is_user_data(args.data):
         return run_user_data(args)
 
@@ -236,8 +264,8 @@ def run(args) -> int:
 
     cfg = EvalConfig(data_path=args.data_path, pca_components=args.pca, n_basis=args.n_basis,
                      development_only=args.development_only)
-    if args.fractions:
-        cfg = replace(cfg, fractions=tuple(float(f) for f in args.fractions.split(",") if f.strip()))
+    if fractions is not None:
+        cfg = replace(cfg, fractions=fractions)
     if args.quick:
         cfg = replace(cfg, fractions=(0.2, 0.4, 0.6, 0.8, 1.0), recognition_fractions=(0.2, 0.4, 0.6))
     datasets = [d.strip() for d in args.data.split(",") if d.strip()]

@@ -13,6 +13,7 @@ described in ``docs/data-formats.md``.
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from ..core.cv import DEFAULT_HORIZON
@@ -23,6 +24,7 @@ from ._common import (
     CommandError,
     add_recording_args,
     agent_columns,
+    check_output,
     output_when_done,
     positive_number,
     print_notes,
@@ -240,8 +242,8 @@ def _sigma2(text):
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive number, 'residual' or 'cv', got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text!r}")
     return v
 
 
@@ -258,6 +260,7 @@ def cmd_fit(args) -> int:
 
     positive_number(args.n_basis, "--n-basis")
     positive_number(args.horizon, "--horizon")
+    check_output(args.output, "-o", inputs=(args.demos,), suffixes=(".npz",))
     ds = read_demonstrations(args.demos, args, columns=args.columns)  # as 'interprim evaluate --data' reads it
     print_notes(ds, "fit")
     n_read = ds.n_dofs

@@ -90,6 +90,13 @@ def cmd_handwriting(args) -> int:
             raise CommandError(f"unknown LASA shape(s) {bad}; available: {', '.join(known)}")
     if args.folds < 2:
         raise CommandError(f"--folds must be >= 2, got {args.folds}")
+    if args.max_per_letter < 0:
+        raise CommandError(f"--max-per-letter must be >= 0 (0: all), got {args.max_per_letter}")
+    if args.n_basis < 1:
+        raise CommandError(f"--n-basis must be >= 1, got {args.n_basis}")
+    from ._common import check_output
+
+    check_output(args.out, "--out", folder=True)
     observations = [o.strip() for o in args.observations.split(",") if o.strip()]
     bad = [o for o in observations if o not in ("forcing", "position")]
     if bad or not observations:

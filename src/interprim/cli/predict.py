@@ -13,6 +13,7 @@ from ._common import (
     MAX_NAN_GAP_HELP,
     CommandError,
     add_recording_args,
+    check_output,
     output_when_done,
     positive_number,
     recording_options,
@@ -39,6 +40,12 @@ distance when the model gives them, and out_of_range / duration_out_of_range as 
 example:
   interprim predict model.npz first_half.csv -o prediction.csv --samples 10
 """
+
+
+#: the largest --n-points and --samples, and values (points x columns x (samples + 2)) of one prediction file
+MAX_POINTS = 100_000
+MAX_SAMPLES = 10_000
+MAX_VALUES = 50_000_000
 
 
 def add_parser(subparsers) -> None:
@@ -85,18 +92,20 @@ def cmd_predict(args) -> int:
 
     out = Path(args.output)
     suffix = out.suffix.lower()
-    if suffix not in (".csv", ".npz"):
-        raise CommandError(f"-o {args.output}: the output must end in .csv or .npz")
-    if args.samples < 0:
-        raise CommandError(f"--samples must be >= 0, got {args.samples}")
-    if args.n_points < 2:
-        raise CommandError(f"--n-points must be >= 2, got {args.n_points}")
+    check_output(out, "-o", inputs=(args.model, args.partial), suffixes=(".csv", ".npz"))
+    if not 0 <= args.samples <= MAX_SAMPLES:
+        raise CommandError(f"--samples must be in 0..{MAX_SAMPLES}, got {args.samples}")
+    if not 2 <= args.n_points <= MAX_POINTS:
+        raise CommandError(f"--n-points must be in 2..{MAX_POINTS}, got {args.n_points}")
     positive_number(args.dt, "--dt")
     if args.observe_fraction is not None and not 0 < args.observe_fraction <= 1:
         raise CommandError(f"--observe-fraction must be in (0, 1], got {args.observe_fraction!r}")
     if not Path(args.model).exists():
         raise FileNotFoundError(f"model file not found: {args.model}")
     model = ip.load_any(args.model)  # whatever 'interprim fit' saved (the model chosen on the data by default)
+    if (args.samples + 2) * args.n_points * model.n_dofs_ > MAX_VALUES:  # mean, std and the samples, written whole
+        raise CommandError(f"--samples {args.samples} x --n-points {args.n_points} x {model.n_dofs_} columns is more "
+                           f"than the {MAX_VALUES:.0e} values a prediction file may hold")
     columns = _model_columns(model) or [f"dof_{j}" for j in range(model.n_dofs_)]
     obs_names = [columns[i] for i in model.observed_dofs_]
     part = load_demonstrations(args.partial, dt=args.dt or model.dt_, min_frames=1, max_nan_gap=args.max_nan_gap,

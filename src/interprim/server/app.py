@@ -82,8 +82,8 @@ class ServerConfig:
     def validate(self) -> None:
         """Check the limits and options; raises ``ValueError`` naming the first one that is wrong.
 
-        Listening on a non-loopback host needs a ``token``; the counts must be at least 1, the rate
-        positive, ``default_points`` in ``[2, max_points]``, ``loop`` one of ``auto``/``uvloop``/``asyncio``
+        Listening on a non-loopback host needs a ``token``; the port is in 0..65535; the counts must be at least 1,
+        the rate positive, ``default_points`` in ``[2, max_points]``, ``loop`` one of ``auto``/``uvloop``/``asyncio``
         and ``max_message_bytes`` at least 256.
         """
         if not is_loopback(self.host) and not self.token:
@@ -91,6 +91,8 @@ class ServerConfig:
                 f"refusing to listen on {self.host!r} without a token: anyone who can reach it could use the "
                 "server. Pass --token (or set INTERPRIM_TOKEN), or keep the default --host 127.0.0.1"
             )
+        if not 0 <= int(self.port) <= 65535:  # the socket layer would take it modulo 65536
+            raise ValueError(f"port must be in 0..65535 (0: any free port), got {self.port}")
         for name in ("max_sessions", "max_message_bytes", "send_queue", "max_points", "rate_burst", "max_errors",
                      "max_pending", "max_unauthenticated", "max_unauthenticated_per_address"):
             if int(getattr(self, name)) < 1:

@@ -608,7 +608,7 @@ def write_results(path, info, scal, quick, load_end, elapsed):
            "(a parabola through the best lattice points, then one through 3 points 0.2 % apart: about 3 "
            "evaluations from scratch per frame) so that the stream's phase is predict's; the paper's DTW phase is "
            "one DTW column O(N D_o).  Batch predict with the likelihood phase: ~35 candidates (12-point grid, "
-           "9-12 more inside the intervals around its best three points, Brent on the two highest peaks, the last "
+           "3 more inside each interval next to its best three points, Brent on the two highest peaks, the last "
            "parabolas), each O(M q (q + D_o)) + O(D_o (q^3 + q^2 r + q r^2)): at the "
            "reference size ~40 us of dense factorisation + 0.08 us per observed frame per candidate.",
            "- **Online step**, per frame with M frames seen, N reference frames, D_o observed DoF, q = n_basis + 1, "

@@ -93,3 +93,18 @@ def test_a_valid_output_next_to_the_inputs_is_written(files, tmp_path, capsys):
     out = tmp_path / "sub" / "p.csv"  # a folder that does not exist yet is created
     assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out)]) == 0
     assert out.is_file()
+
+
+def test_a_prediction_that_is_not_finite_is_refused_and_not_written(files, tmp_path, capsys, monkeypatch):
+    """A model whose prediction overflows (here a prior mean whose spread is infinite, as data beyond the
+    floating-point range leave it) gives no file with inf or NaN in it: predict says what is not finite."""
+    import interprim as ip
+
+    model = ip.load_any(files / "model.npz")
+    prior = model.model_  # the family fitted alone (--model prior)
+    prior.std_ = np.full_like(prior.std_, np.inf)
+    monkeypatch.setattr(ip, "load_any", lambda path: model)
+    out = tmp_path / "p.csv"
+    assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out)]) == 1
+    _one_line_error(capsys, "is not finite (", "std)")
+    assert not out.exists()

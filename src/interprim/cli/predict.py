@@ -151,6 +151,12 @@ def cmd_predict(args) -> int:
     mean = np.asarray(pred.trajectory(n))
     sd = pred.std(n)
     std = np.full_like(mean, np.nan) if sd is None else np.asarray(sd)  # NaN: the model gives no uncertainty
+    bad = [what for what, v in (("phase", pred.phase), ("duration", pred.duration), ("mean", mean),
+                                 ("std", std if sd is not None else 0.0)) if not np.all(np.isfinite(v))]
+    if bad:  # nothing a robot could use: said, and no file written
+        raise CommandError(f"the prediction from {args.partial} is not finite ({', '.join(bad)}): values beyond "
+                           "the floating-point range in the model or the frames? (input distance "
+                           f"{float(getattr(pred, 'input_distance', float('nan'))):.3g} standard deviations)")
     samples = np.asarray(pred.samples(args.samples, n, random_state=args.seed)) if args.samples else None
     scalars = {
         "phase": float(pred.phase),

@@ -151,8 +151,9 @@ def cmd_predict(args) -> int:
     mean = np.asarray(pred.trajectory(n))
     sd = pred.std(n)
     std = np.full_like(mean, np.nan) if sd is None else np.asarray(sd)  # NaN: the model gives no uncertainty
-    bad = [what for what, v in (("phase", pred.phase), ("duration", pred.duration), ("mean", mean),
-                                 ("std", std if sd is not None else 0.0)) if not np.all(np.isfinite(v))]
+    # (a phase may be NaN: a model that does not estimate one, as the mean demonstration, says so)
+    bad = [what for what, v in (("duration", pred.duration), ("mean", mean), ("std", std if sd is not None else 0.0))
+           if not np.all(np.isfinite(v))]
     if bad:  # nothing a robot could use: said, and no file written
         raise CommandError(f"the prediction from {args.partial} is not finite ({', '.join(bad)}): values beyond "
                            "the floating-point range in the model or the frames? (input distance "

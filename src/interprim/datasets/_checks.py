@@ -3,6 +3,8 @@ missing values, time stamps, lengths."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..core.errors import DataFileError
@@ -70,6 +72,70 @@ def warn(message, category):
     while f is not None and str(f.f_globals.get("__name__", "")).split(".")[0] == "interprim":
         f, level = f.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)
+
+
+def check_column_names(names, where):
+    """Refuse column names that no file written from them can hold: none at all, an empty name, or one with a
+    comma or a line break (the CSV files written from the demonstrations, e.g. a prediction, would be corrupt)."""
+    if not len(names):
+        raise DataFileError(f"{where}: no data columns (0 columns)")
+    for j, name in enumerate(names):
+        text = str(name)
+        if not text.strip():
+            raise DataFileError(f"{where}: column {j} has an empty name")
+        bad = next((c for c in (",", "\n", "\r") if c in text), None)
+        if bad is not None:
+            what = "a comma" if bad == "," else "a line break"
+            raise DataFileError(f"{where}: column {j} name {text[:80]!r} holds {what}; column names must not "
+                                "(they are written to CSV headers)")
+
+
+def number(text: str) -> float:
+    """``float(text)``, but ``ValueError`` for the underscores Python's ``float`` accepts (``1_0`` is 10): a cell of a
+    data file with one is not a number."""
+    if "_" in text:
+        raise ValueError(f"could not convert string to float: {text!r}")
+    return float(text)
+
+
+def whole_number(text: str):
+    """``text`` as an ``int`` when it is a finite whole number (``"12"``, ``"12.0"``), else ``None``."""
+    try:
+        v = number(text.strip())
+    except ValueError:
+        return None
+    if not math.isfinite(v) or v != int(v):
+        return None
+    return int(v)
+
+
+def first_bad_utf8(path):
+    """``(line, byte offset)`` (1-based line) of the first byte of ``path`` that is not UTF-8, or ``None``; read in
+    blocks (only called after a ``UnicodeDecodeError``, to name where)."""
+    import codecs
+
+    dec = codecs.getincrementaldecoder("utf-8")()
+    line, offset = 1, 0
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(1 << 20)
+            if not block:
+                return None
+            try:
+                dec.decode(block)
+            except UnicodeDecodeError as exc:  # exc.start counts from the start of the bytes the decoder held
+                held = len(exc.object) - len(block)
+                pos = exc.start - held
+                return line + block[:max(pos, 0)].count(b"\n"), offset + pos
+            line += block.count(b"\n")
+            offset += len(block)
+
+
+def not_utf8(path, what):
+    """The :class:`DataFileError` of a text file with a byte that is not UTF-8, naming its line and offset."""
+    where = first_bad_utf8(path)
+    at = f" (line {where[0]}, byte {where[1]})" if where else ""
+    return DataFileError(f"{path}: not a {what} text file: a byte that is not UTF-8{at}; export it as UTF-8 text")
 
 
 def check_frames(n, min_frames, where):

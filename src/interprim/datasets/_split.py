@@ -146,8 +146,16 @@ def _filled(y):
     return z / rms if rms > 0 else z[:, :0]
 
 
+#: Fewest frames of one repetition (a found or given period).
+MIN_PERIOD_FRAMES = 4
+#: The period is the first autocorrelation peak at least this share of the highest one: the highest peak of a
+#: periodic take may be at any multiple of its period (each multiple is as periodic), the first is the period.
+PEAK_SHARE = 0.9
+
+
 def _period(z, rate, where):
-    """The period (frames) of a repeating movement: the highest autocorrelation peak after the first dip below 0."""
+    """The period (frames) of a repeating movement: after the autocorrelation's first dip below 0, the first peak
+    within :data:`PEAK_SHARE` of the highest (the fundamental, not a multiple of it)."""
     T = z.shape[0]
     n = 1 << int(np.ceil(np.log2(2 * T)))
     f = np.fft.rfft(z, n, axis=0)
@@ -159,8 +167,15 @@ def _period(z, rate, where):
         raise DataFileError(f"{where}: split_repetitions found no repeating movement (the take never moves away "
                             "from its first poses for long); give the period in seconds, or use split_frames")
     lo = int(below[0])
-    P = lo + int(np.argmax(ac[lo:T // 2 + 1]))
-    if ac[P] < MIN_PERIODICITY or P < 4:
+    seg = ac[lo:T // 2 + 1]
+    best = float(seg.max())
+    level = PEAK_SHARE * best if best > 0 else best  # (a take without a positive peak is refused below)
+    first = int(np.flatnonzero(seg >= level)[0])  # the first lag near the highest peak's height
+    end = first
+    while end + 1 < len(seg) and seg[end + 1] >= level:  # the first such lobe ...
+        end += 1
+    P = lo + first + int(np.argmax(seg[first:end + 1]))  # ... and its top
+    if ac[P] < MIN_PERIODICITY or P < MIN_PERIOD_FRAMES:
         raise DataFileError(
             f"{where}: split_repetitions found no repeating movement (best period {P / rate:.3g} s, autocorrelation "
             f"{ac[P]:.2f} < {MIN_PERIODICITY}; at least two repetitions are needed); give the period in seconds, or "
@@ -209,8 +224,14 @@ def find_repetitions(y, rate, *, where: str, period=None):
         how = f"autocorrelation {corr:.2f}"
     else:
         if not (np.isfinite(period) and period > 0):
-            raise ValueError(f"split_repetitions must be True or a positive period in seconds, got {period!r}")
-        P, how = max(4, int(round(period * rate))), "given"
+            raise DataFileError(f"split_repetitions must be True or a positive period in seconds (finite), got "
+                                f"{period!r}")
+        if period * rate < MIN_PERIOD_FRAMES - 0.5:  # not clamped: a period this short is a wrong number or unit
+            raise DataFileError(
+                f"{where}: split_repetitions period {period:g} s is {period * rate:.3g} frames at {rate:.4g} Hz; a "
+                f"repetition needs at least {MIN_PERIOD_FRAMES} frames ({MIN_PERIOD_FRAMES / rate:.3g} s): give the "
+                "period in seconds")
+        P, how = int(round(period * rate)), "given"
         if 2 * P > T:
             raise DataFileError(f"{where}: split_repetitions period {period} s ({P} frames) leaves less than two "
                                 f"repetitions in {T} frames")
@@ -289,7 +310,7 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
     cuts = []
     if gap is not None:
         if not (np.isfinite(gap) and gap > 0):
-            raise ValueError(f"split_gap must be a positive number of seconds, got {gap!r}")
+            raise DataFileError(f"split_gap must be a positive number of seconds, got {gap!r}")
         cuts = [(a - 1, b + 1) for a, b in _pauses(y, rate, gap)]
     if events is not None and not len(events):
         raise DataFileError(f"{where}: no event inside the recording to split at (split_events)")
@@ -310,7 +331,7 @@ def split_take(y, rate, numbers, *, where: str, trim=False, events=None, ranges=
         raise DataFileError(f"{where}: nothing is left between the pauses (split_gap={gap})")
     if repetitions is not None:
         if isinstance(repetitions, str) or isinstance(repetitions, (bool, np.bool_)) and not repetitions:
-            raise ValueError(f"split_repetitions must be True (the period found from the take) or a positive period "
+            raise DataFileError(f"split_repetitions must be True (the period found from the take) or a positive period "
                              f"in seconds, got {repetitions!r}")
         period = None if repetitions is True else float(repetitions)
         out = []

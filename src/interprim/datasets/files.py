@@ -89,8 +89,23 @@ def _read_file(p: Path, common: Common, kwargs: dict) -> Table:
             fmts = [r.name for r in sorted(READERS, key=_module_order) if name in r.accepts()]
             raise DataFileError(f"{p}: the option {name}= applies to {', '.join(dict.fromkeys(fmts))} files, not to "
                                 f"this {cls.name} file")
+    from ._checks import check_column_names
+
     opts = _options(kwargs)
-    return cls().read(p, common, {T: opts[T] for T in cls.takes})
+    table = cls().read(p, common, {T: opts[T] for T in cls.takes})
+    check_column_names(table.columns, str(p))  # names from the file end up in CSV headers (predictions)
+    return table
+
+
+def _seconds(name: str, value) -> None:
+    """Refuse an interval option that is not a positive, finite number of seconds (one line on the command line)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise DataFileError(f"{name} must be a positive number of seconds, got {value!r}") from None
+    if not (np.isfinite(v) and v > 0):
+        why = "" if np.isfinite(v) else " (not a finite number)"
+        raise DataFileError(f"{name} must be a positive number of seconds, got {value!r}{why}")
 
 
 def load_demonstrations(
@@ -243,18 +258,18 @@ def load_demonstrations(
 
     p = Path(path).expanduser()
     _check_readable(p)
+    # the options' errors are DataFileErrors (also ValueErrors): the command line reports them in one line
     if time_unit is not None and time_unit not in TIME_UNITS:
-        raise ValueError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
-    if dt is not None and not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    if resample_dt is not None and not (np.isfinite(resample_dt) and resample_dt > 0):
-        raise ValueError(f"resample_dt must be a positive number of seconds, got {resample_dt!r}")
+        raise DataFileError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
+    for name, value in (("dt", dt), ("resample_dt", resample_dt), ("split_gap", split_gap)):
+        if value is not None:
+            _seconds(name, value)
+    if split_repetitions is not None and not isinstance(split_repetitions, (bool, np.bool_, str)):
+        _seconds("split_repetitions (the period)", split_repetitions)
     if bvh_mode is not None and bvh_mode not in ("positions", "angles"):
-        raise ValueError(f"bvh_mode must be 'positions' or 'angles', got {bvh_mode!r}")
-    if split_gap is not None and not (np.isfinite(split_gap) and split_gap > 0):
-        raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
+        raise DataFileError(f"bvh_mode must be 'positions' or 'angles', got {bvh_mode!r}")
     if min_marker_coverage is not None and not (0.0 <= float(min_marker_coverage) <= 1.0):
-        raise ValueError(f"min_marker_coverage must be a share of frames in [0, 1], got {min_marker_coverage!r}")
+        raise DataFileError(f"min_marker_coverage must be a share of frames in [0, 1], got {min_marker_coverage!r}")
     kwargs = dict(markers=markers, joints=joints, length_unit=length_unit, bvh_mode=bvh_mode, end_sites=end_sites,
                   topics=topics, orientation=orientation, split_topic=split_topic, split_gap=split_gap, trim=trim,
                   split_events=split_events or None, split_frames=split_frames, time_column=time_column,
@@ -340,7 +355,7 @@ def load_demonstrations(
     if columns is not None and not parse_columns:
         ds = ds.select(columns)
     if resample_dt is not None and not all_bags:
-        ds = resampled(ds, resample_dt)
+        ds = resampled(ds, resample_dt, min_frames=int(min_frames))
     elif resample_dt is not None:
         ds.dt = float(resample_dt)
     return ds
@@ -352,12 +367,44 @@ def median_interval(times) -> float:
     return float(np.median(np.concatenate([np.diff(np.asarray(t, dtype=np.float64)) for t in times])))
 
 
-def resampled(ds: Demonstrations, dt: float) -> Demonstrations:
+#: Most frames one demonstration may have after ``resample_dt`` (checked before the grid is allocated).
+MAX_RESAMPLED_FRAMES = 10_000_000
+#: Most values (frames times columns) one demonstration may have after ``resample_dt`` (2 GiB of float64).
+MAX_RESAMPLED_VALUES = 1 << 28
+
+
+def check_grid(n: int, n_cols: int, duration: float, dt: float, min_frames: int | None, where: str) -> None:
+    """Refuse a resampling grid of ``n`` frames (``resample_dt=dt`` over ``duration`` s) before it is allocated: more
+    than :data:`MAX_RESAMPLED_FRAMES` frames (or :data:`MAX_RESAMPLED_VALUES` values), or fewer than ``min_frames``."""
+    if n > MAX_RESAMPLED_FRAMES or n * max(n_cols, 1) > MAX_RESAMPLED_VALUES:
+        raise DataFileError(
+            f"{where}: resample_dt={dt!r} s over its {duration:.6g} s gives {duration / dt + 1:.3g} frames of "
+            f"{n_cols} columns, over the limit of {MAX_RESAMPLED_FRAMES:g} frames ({MAX_RESAMPLED_VALUES:g} values) "
+            "for one demonstration; choose a larger resample interval (seconds)")
+    if min_frames is not None and n < min_frames:
+        raise DataFileError(
+            f"{where}: resample_dt={dt!r} s over its {duration:.6g} s leaves only {n} frame(s), at least {min_frames} "
+            "are needed; choose a smaller resample interval (seconds)")
+
+
+def resampled(ds: Demonstrations, dt: float, min_frames: int | None = None) -> Demonstrations:
     """``ds`` linearly interpolated onto a uniform grid of interval ``dt`` (s), its recorded samples kept in ``raw``
-    (so that an evaluation builds causal prefixes); stamps already on that grid up to rounding are kept as read."""
+    (so that an evaluation builds causal prefixes); stamps already on that grid up to rounding are kept as read.
+    A grid of more than :data:`MAX_RESAMPLED_FRAMES` frames, or of fewer than ``min_frames``, is refused before it
+    is allocated."""
+    from ..core.preprocessing import step_count
+
     if sampling(ds.times, dt=dt).uniform:
         ds.dt = float(dt)
         return ds
+    for i, (y, t) in enumerate(zip(ds.demos, ds.times)):
+        duration = float(t[-1] - t[0])
+        count = duration / float(dt)
+        n = int(min(count, 1e18)) + 1 if np.isfinite(count) else 2**62  # bounded before step_count's int()
+        if n <= MAX_RESAMPLED_FRAMES:
+            n = step_count(duration, dt)
+        label = ds.labels[i] if ds.labels and i < len(ds.labels) else str(i)
+        check_grid(n, np.shape(y)[1], duration, dt, min_frames, f"{ds.source}, demonstration {label!r}")
     new_d, new_t = [], []
     # the recorded samples, so that an evaluation can build causal prefixes (model_selection.prefixes)
     ds.raw = [[RawStream(np.asarray(t, dtype=np.float64), tuple(range(y.shape[1])), np.asarray(y, dtype=np.float64))]

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import DataFileError
+from ._checks import number
 
 __all__ = ["read_bvh"]
 
@@ -225,7 +226,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     See :func:`load_bvh` for the parameters; ``split`` holds ``trim``, ``ranges`` and ``gap``
     (:func:`._split.cut_take`).
     """
-    from ._checks import check_frames
+    from ._checks import check_frames, check_stamps
     from ._split import cut_take
     from .mocap_c3d import metres_per_unit
 
@@ -242,11 +243,14 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
     skel, i, n_ch = _parse_hierarchy(path, lines)
     n_frames, i = _header_value(path, lines, i + 1, "Frames:")
     frame_time, i = _header_value(path, lines, i, "Frame Time:")
-    if not (n_frames == int(n_frames) and n_frames >= 0):
+    if not (np.isfinite(n_frames) and n_frames == int(n_frames) and n_frames >= 0):
         raise DataFileError(f"{path}, line {i - 1}: 'Frames:' must be a whole number, got {n_frames!r}")
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise DataFileError(f"{path}, line {i}: 'Frame Time:' must be a positive number of seconds, got {frame_time!r}")
     n_frames = int(n_frames)
+    if n_frames > 1 and not np.isfinite((n_frames - 1) * frame_time):
+        raise DataFileError(f"{path}, line {i}: 'Frame Time: {frame_time!r}' over {n_frames} frames gives times "
+                            "that are not finite numbers; the frame time is in seconds")
     room = min(n_frames, len(lines) - i)  # not more than the file can hold (a damaged 'Frames:' may be huge)
     values = np.empty((room, n_ch))
     lineno = np.empty(room, dtype=np.int64)
@@ -262,7 +266,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
                 f"{path}, line {li + 1} (frame {k}): {len(row)} values, the hierarchy declares {n_ch} channels"
             )
         try:
-            values[k] = [float(v) for v in row]
+            values[k] = [number(v) for v in row]
         except ValueError:
             bad = next(v for v in row if not _is_number(v))
             raise DataFileError(f"{path}, line {li + 1} (frame {k}): non-numeric value {bad!r}") from None
@@ -319,6 +323,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
         y = np.hstack(blocks)
         units = [unit] * len(cols)
     t = np.arange(n_frames) * frame_time
+    check_stamps(t, f"{path} ('Frame Time: {frame_time!r}')", lambda r: f"frame {r}")
     split = dict(split or {})
     demos, times, names = cut_take(path, y, t, np.arange(n_frames), split, max_nan_gap=max_nan_gap,
                                    min_frames=min_frames, where_col=lambda d: f"{path}, column {cols[d]!r}",
@@ -328,7 +333,7 @@ def read_bvh(path, *, mode="positions", joints=None, length_unit=None, end_sites
 
 def _is_number(v):
     try:
-        float(v)
+        number(v)
     except ValueError:
         return False
     return True

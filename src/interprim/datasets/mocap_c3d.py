@@ -336,6 +336,10 @@ def _event_rows(path, events, which, rate, first, n_frames):
     for ctx, lab, s in events:
         if names is not None and lab not in names and f"{ctx}:{lab}" not in names:
             continue
+        if not np.isfinite(s * rate):
+            shown = f"{ctx}:{lab}" if ctx else lab
+            raise DataFileError(f"{path}: event {shown!r} has time {float(s)!r} s, not a finite number; it cannot mark "
+                                "a frame to split at (split_events): fix or remove it, or name the other events")
         row = int(round(s * rate)) + 1 - first
         if 0 <= row < n_frames:
             chosen.append(row)

@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import DataFileError, MissingExtraError
+from ..core.errors import DataFileError, DataFileWarning, MissingExtraError
 from ..core.preprocessing import interp_columns, step_count
 from ._base import RawStream
 
@@ -488,9 +488,19 @@ def _finish_stream(path, s, joints):
         axes = ["x", "y", "z"] + (["qx", "qy", "qz", "qw"] if y.shape[1] == 7 else [])
         cols = [f"{prefix}_{a}" for a in axes]
         units = ["m"] * 3 + [""] * (len(axes) - 3)
+    if np.isinf(y).any():  # NaN is a missing value (filled or refused later); an infinite value is refused
+        r, c = (int(v) for v in np.argwhere(np.isinf(y))[0])
+        raise DataFileError(f"{path}, topic {s.topic}, message {r}: infinite value {y[r, c]} in field {cols[c]!r}")
     order = np.argsort(t, kind="stable")
     t, y = t[order], y[order]
     keep = np.concatenate([[True], np.diff(t) > 0])  # same stamp as the message before: skipped
+    dropped = int((~keep).sum())
+    if dropped:
+        from ._checks import warn
+
+        warn(f"{path}: topic {s.topic}: {dropped} of {len(t)} messages have the same time stamp as a message before "
+             "them and are left out (the first message of each stamp is kept); check the publisher's header stamps",
+             DataFileWarning)
     t, y = t[keep], y[keep]
     if s.msgtype != JOINT_STATE and s.fields is None and y.shape[1] == 7:
         q = y[:, 3:7]
@@ -554,9 +564,9 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
     if isinstance(joints, str):
         joints = [j.strip() for j in joints.split(",") if j.strip()]
     if split_gap is not None and not (np.isfinite(split_gap) and split_gap > 0):
-        raise ValueError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
+        raise DataFileError(f"split_gap must be a positive number of seconds, got {split_gap!r}")
     if grid_dt is not None and not (np.isfinite(grid_dt) and grid_dt > 0):
-        raise ValueError(f"grid_dt must be a positive number of seconds, got {grid_dt!r}")
+        raise DataFileError(f"resample_dt (grid_dt) must be a positive number of seconds, got {grid_dt!r}")
     streams = [_Stream(spec, role) for spec, role in zip(topics, ("observed", "controlled"))]
     if len(streams) == 2 and streams[0].label == streams[1].label:
         raise DataFileError(f"{path}: the observed and controlled agents are the same stream {streams[0].label!r}")
@@ -595,7 +605,13 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
                               for s, p in zip(streams, parts))
             raise DataFileError(f"{where}: the streams do not overlap in time ({spans})")
         if grid_dt is not None:
-            n = step_count(hi - lo, grid_dt * 1e9)
+            from .files import MAX_RESAMPLED_FRAMES, check_grid
+
+            count = (hi - lo) / (grid_dt * 1e9)
+            n = int(min(count, 1e18)) + 1 if np.isfinite(count) else 2**62  # bounded before it is allocated
+            if n <= MAX_RESAMPLED_FRAMES:
+                n = step_count(hi - lo, grid_dt * 1e9)
+            check_grid(n, len(columns), (hi - lo) * 1e-9, grid_dt, min_frames, where)
             t_ns = lo + np.round(np.arange(n) * grid_dt * 1e9).astype(np.int64)
         else:
             t_obs = parts[0][0]

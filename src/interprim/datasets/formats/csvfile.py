@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ...core.errors import DataFileError
-from .._checks import check_frames, check_stamps, fill_nans
+from .._checks import check_frames, check_stamps, fill_nans, number
 from .base import Common, CsvOptions, Reader, Table, TakeOptions, register
 from .takes import split_table
 
@@ -135,6 +135,7 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
                     if ":" in text:
                         k, v = text.split(":", 1)
                         meta[k.strip().lower()] = v.strip()
+                        meta.setdefault("comment_lines", {})[k.strip().lower()] = reader.line_num
                     continue
                 header = [c.strip() for c in cells]
                 header_line = reader.line_num
@@ -196,7 +197,7 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
                     raise DataFileError(f"{path}, line {line}: missing value in column {col!r}")
                 return math.nan
             try:
-                v = float(s)
+                v = number(s)  # not float: it reads 1_0 as 10
             except ValueError:
                 hint = ("" if columns is not None or not allow_missing  # the time column has no such hint
                         else "; choose the numeric columns with columns=")
@@ -264,18 +265,26 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
         labels.append(label if i_demo is not None else path.stem)
     if columns is not None:
         meta["selected"] = True
+    units_line = meta.pop("comment_lines", {}).get("units")
+    meta["units"] = _units(path, units_line, meta.get("units"), [h for h in header if h not in skip], data_cols)
     return demos, times, data_cols, labels, meta
 
 
-def _units(meta, columns):
-    """``# units:`` of a CSV file: one unit for every column, or one per column (comma-separated)."""
-    text = meta.get("units")
+def _units(path, line, text, file_columns, columns):
+    """``# units:`` of a CSV file (line ``line``): one unit for every column, or one per data column of the file
+    (comma-separated, in the order of the header), of which those of ``columns`` are kept; another number of
+    units is refused (ignoring it would leave the columns without units, or with the wrong ones)."""
     if not text:
         return None
     parts = [u.strip() for u in str(text).split(",")]
     if len(parts) == 1:
         return [parts[0]] * len(columns)
-    return parts if len(parts) == len(columns) else None
+    if len(parts) != len(file_columns):
+        raise DataFileError(f"{path}, line {line}: '# units: {str(text)[:80]}' names {len(parts)} units for the "
+                            f"{len(file_columns)} data columns; give one unit for all of them or one per data column, "
+                            "in the order of the header")
+    unit = dict(zip(file_columns, parts))
+    return [unit.get(c) for c in columns]
 
 
 @register
@@ -294,7 +303,7 @@ class CsvReader(Reader):
                                                     time_column=o.time_column, time_unit=o.time_unit,
                                                     columns=o.columns, fill=not splitting)
         lines = meta.pop("lines", None)
-        meta["units"] = _units(meta, cols)
+        meta.setdefault("units", None)
         table = Table(demos, times, cols, labels, meta)
         if splitting:
             table = split_table(path, table, take, common, row_name="line", numbers=lines)

@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...core.errors import DataFileError
+from ...core.errors import DataFileError, DataFileWarning
+from .._checks import not_utf8, number, whole_number
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
+from .csvfile import _csv_limit, _lines
 from .takes import read_marker_take
 
 __all__ = ["MotiveCsvReader", "read_motive_csv"]
@@ -26,16 +28,13 @@ _UNITS = {"meters": "m", "millimeters": "mm", "centimeters": "cm", "m": "m", "mm
 MAX_BYTES = 8 * 2**30
 
 
-def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=None, min_frames=5, split=None,
-                    min_marker_coverage=None):
-    """Read one Motive CSV export; ``(demos, times, columns, labels, meta)`` as the other readers return."""
-    from ..mocap_c3d import marker_take, metres_per_unit
-
-    path = Path(path)
-    if path.stat().st_size > MAX_BYTES:
-        raise DataFileError(f"{path}: over the reader's limit of {MAX_BYTES} bytes")
+def _parse(path):
+    """The first line's ``key,value`` pairs, the description rows, the ``Frame,...`` row and the frame rows."""
+    max_chars = _csv_limit("max_line_chars")
+    if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
+        csv.field_size_limit(max_chars)
     with open(path, encoding="utf-8-sig", newline="") as fh:
-        reader = csv.reader(fh)
+        reader = csv.reader(_lines(fh, path, max_chars))
         try:
             first = next(reader)
         except StopIteration:
@@ -56,6 +55,23 @@ def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=N
             if not cells or not any(c.strip() for c in cells):
                 continue
             rows.append((line, cells))
+    return info, desc, header, rows
+
+
+def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=None, min_frames=5, split=None,
+                    min_marker_coverage=None):
+    """Read one Motive CSV export; ``(demos, times, columns, labels, meta)`` as the other readers return."""
+    from ..mocap_c3d import marker_take, metres_per_unit
+
+    path = Path(path)
+    if path.stat().st_size > MAX_BYTES:
+        raise DataFileError(f"{path}: over the reader's limit of {MAX_BYTES} bytes")
+    try:
+        info, desc, header, rows = _parse(path)
+    except UnicodeDecodeError:
+        raise not_utf8(path, "Motive CSV") from None
+    except csv.Error as exc:
+        raise DataFileError(f"{path}: not a readable Motive CSV text file ({exc})") from None
     if header is None:
         raise DataFileError(f"{path}: no 'Frame,Time (Seconds),...' row; expected an OptiTrack Motive CSV export "
                             "with its header")
@@ -74,7 +90,9 @@ def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=N
     if unit is None:
         raise DataFileError(f"{path}: unknown Length Units {info.get('Length Units')!r}; pass length_unit=")
     scale = metres_per_unit(unit, str(path), "Length Units")
-    picked, columns, seen = [], [], {}
+    picked, columns, seen = [], [], set()
+    count: dict[tuple, int] = {}
+    renamed: dict[str, list] = {}
     for j in range(2, n_cols):
         q = quantity[j] if j < len(quantity) else ""
         axis = header[1][j].strip().lower()
@@ -82,12 +100,25 @@ def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=N
             continue
         name = names[j] if j < len(names) else ""
         kind = (kinds[j] if j < len(kinds) else "").replace(" ", "")
-        key = (name, axis)
-        if key in seen:  # a Rigid Body Marker and a Marker of one name: the type tells them apart
-            name = f"{kind}:{name}"
-        seen[(name, axis)] = j
+        nth = count[(name, axis)] = count.get((name, axis), 0) + 1
+        given = name
+        if (name, axis) in seen:  # a Rigid Body Marker and a Marker of one name: the type tells them apart
+            name = f"{kind}:{given}"
+        if (name, axis) in seen:  # two of one type and name: numbered in the order of the columns
+            name = f"{kind}:{given}#{nth}"
+            while (name, axis) in seen:
+                nth += 1
+                name = f"{kind}:{given}#{nth}"
+            renamed.setdefault(given, []).append(name)
+        seen.add((name, axis))
         picked.append(j)
         columns.append(f"{name}_{axis}")
+    if renamed:
+        from .._checks import warn
+
+        shown = "; ".join(f"{given!r} as {', '.join(dict.fromkeys(new))}" for given, new in renamed.items())
+        warn(f"{path}: several bodies or markers of one type share a name; their columns are numbered in the "
+             f"order of the file: {shown}", DataFileWarning)
     if not picked:
         raise DataFileError(f"{path}: no Position columns (Rigid Body, Marker, Bone) in the export")
     if not rows:
@@ -97,15 +128,15 @@ def read_motive_csv(path: Path, *, markers=None, length_unit=None, max_nan_gap=N
     for r, (line, cells) in enumerate(rows):
         if len(cells) < n_cols:
             cells = cells + [""] * (n_cols - len(cells))
-        try:
-            frames.append(int(float(cells[0])))
-        except ValueError:
-            raise DataFileError(f"{path}, line {line}: frame number {cells[0][:40]!r} is not a number") from None
+        frame = whole_number(cells[0])
+        if frame is None:
+            raise DataFileError(f"{path}, line {line}: frame number {cells[0][:40]!r} is not a whole number")
+        frames.append(frame)
         for k, j in enumerate(picked):
             c = cells[j].strip()
             if c:
                 try:
-                    data[r, k] = float(c)
+                    data[r, k] = number(c)
                 except ValueError:
                     raise DataFileError(f"{path}, line {line}: non-numeric value {c[:40]!r} in column "
                                         f"{columns[k]!r}") from None

@@ -6,13 +6,16 @@ is judged from its ``.npy`` header first (:mod:`interprim._npz`, the guard of mo
 from __future__ import annotations
 
 import re
+import tokenize
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from ..._npz import member_header
 from ...core.errors import DataFileError
-from .._checks import check_frames, check_stamps, fill_nans
+from .._checks import check_column_names, check_frames, check_stamps, fill_nans
 from .base import Common, Reader, Table, TakeOptions, register
 from .takes import split_table
 
@@ -23,6 +26,9 @@ _TIME_KEY = re.compile(r"^time_(\d+)$")
 _NPZ_META = {"columns", "dt", "observed"}
 
 MAX_NPZ_ARRAY_BYTES = 4 << 30  # one array of a data .npz once read (4 GiB)
+#: what reading a damaged member raises (a bad CRC, a broken deflate stream, a cut member, a malformed ``.npy``
+#: header: numpy parses its text with ``tokenize``/``ast``, which raise these and never execute it)
+_DAMAGED = (zipfile.BadZipFile, zlib.error, EOFError, OSError, tokenize.TokenError, SyntaxError)
 
 
 def _check_npz_member(npz, key: str, path: Path) -> None:
@@ -33,8 +39,8 @@ def _check_npz_member(npz, key: str, path: Path) -> None:
         return
     try:
         h = member_header(zf, zf.getinfo(key + ".npy"))
-    except (KeyError, ValueError, OSError, EOFError):
-        return  # np.load reports it
+    except (KeyError, ValueError, *_DAMAGED):
+        return  # reading it reports it
     if h.nbytes > MAX_NPZ_ARRAY_BYTES:
         raise DataFileError(f"{path}: key {key!r} declares shape {h.shape} of {h.dtype} ({h.count:.3g} values, "
                             f"{h.nbytes / 2**30:.3g} GiB), over the limit of {MAX_NPZ_ARRAY_BYTES / 2**30:g} GiB "
@@ -50,22 +56,24 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
     try:
         npz = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001
-        raise DataFileError(f"{path}: not a readable .npz file ({exc})") from None
+        raise DataFileError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     if not hasattr(npz, "files"):
         raise DataFileError(f"{path}: a single .npy array, expected an .npz archive with demo_000, ...")
     meta = {}
     with npz:
         keys = list(npz.files)
-        demo_keys = {}
-        time_keys = {}
+        demo_keys: dict[int, str] = {}
+        time_keys: dict[int, str] = {}
         for k in keys:
             m = _DEMO_KEY.match(k)
+            found = demo_keys if m else time_keys
+            m = m or _TIME_KEY.match(k)
             if m:
-                demo_keys[int(m.group(1))] = k
-                continue
-            m = _TIME_KEY.match(k)
-            if m:
-                time_keys[int(m.group(1))] = k
+                i = int(m.group(1))
+                if i in found:  # demo_000 and demo_0 are both demonstration 0: one would be lost
+                    raise DataFileError(f"{path}: keys {found[i]!r} and {k!r} are both number {i}; every demo_/time_ "
+                                        "number must be given once")
+                found[i] = k
                 continue
             if k not in _NPZ_META:
                 raise DataFileError(
@@ -82,8 +90,14 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
             _check_npz_member(npz, k, path)  # from its header, before any data is read
             try:
                 return npz[k]
-            except ValueError as exc:  # object arrays would need pickle
-                raise DataFileError(f"{path}: key {k!r} cannot be read without pickle ({exc})") from None
+            except ValueError as exc:
+                if "pickle" in str(exc):  # object arrays would need pickle
+                    raise DataFileError(f"{path}: key {k!r} cannot be read without pickle ({exc})") from None
+                raise DataFileError(f"{path}: key {k!r} is not a readable .npy array (damaged header or data: "
+                                    f"{exc})") from None
+            except _DAMAGED as exc:
+                raise DataFileError(f"{path}: key {k!r} is damaged ({type(exc).__name__}: {exc}); the archive "
+                                    "cannot be read") from None
             except MemoryError:
                 raise DataFileError(f"{path}: key {k!r} does not fit in memory") from None
 
@@ -106,6 +120,7 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
             dup = sorted({c for c in columns if columns.count(c) > 1})
             if dup:
                 raise DataFileError(f"{path}: duplicate column name(s) {dup} in 'columns'")
+            check_column_names(columns, f"{path}, 'columns'")
         if "observed" in npz.files:
             a = load("observed")
             meta["observed"] = ",".join(str(c) for c in np.atleast_1d(a).astype(str))
@@ -127,6 +142,8 @@ def read_npz(path: Path, dt, max_nan_gap, min_frames, fill=True):
             if y.ndim != 2:
                 raise DataFileError(f"{path}: {k!r} must have shape (T, D), got {y.shape}")
             y = y.astype(np.float64)
+            if y.shape[1] == 0:
+                raise DataFileError(f"{path}: {k!r} has shape {y.shape}: no columns")
             if n_cols is None:
                 n_cols = y.shape[1]
                 if columns is not None and len(columns) != n_cols:

@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ...core.errors import DataFileError, DataFileWarning
+from .._checks import not_utf8, number, whole_number
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
+from .csvfile import _csv_limit, _lines
 from .takes import read_marker_take
 
 __all__ = ["QualisysTsvReader", "read_qualisys_tsv"]
@@ -28,25 +30,17 @@ MAX_BYTES = 8 * 2**30
 
 def _number(path, line_no, key, text):
     try:
-        return float(text)
+        return number(text.strip())
     except ValueError:
         raise DataFileError(f"{path}, line {line_no}: {key} must be a number, got {text!r}") from None
 
 
-def read_qualisys_tsv(path: Path, *, markers=None, length_unit=None, max_nan_gap=None, min_frames=5, split=None,
-                      min_marker_coverage=None):
-    """Read one QTM 3D TSV export; ``(demos, times, columns, labels, meta)`` as the other readers return."""
-    from .._checks import warn
-    from ..mocap_c3d import marker_take, metres_per_unit
-
-    path = Path(path)
-    size = path.stat().st_size
-    if size > MAX_BYTES:
-        raise DataFileError(f"{path}: {size} bytes, over the TSV reader's limit of {MAX_BYTES} bytes")
+def _parse(path):
+    """The header variables, events, marker names, row of column names and data rows ``(line, cells)`` of a TSV."""
     header, events, names, col_names = {}, [], None, None
-    rows, frames, first_data = [], [], None
+    rows, first_data = [], None
     with open(path, encoding="utf-8-sig", errors="strict", newline="") as fh:
-        for n, raw in enumerate(fh, start=1):
+        for n, raw in enumerate(_lines(fh, path, _csv_limit("max_line_chars")), start=1):
             line = raw.rstrip("\r\n")
             if not line.strip():
                 continue
@@ -67,6 +61,25 @@ def read_qualisys_tsv(path: Path, *, markers=None, length_unit=None, max_nan_gap
             if first_data is None:
                 first_data = n
             rows.append((n, cells))
+    return header, events, names, col_names, rows
+
+
+def read_qualisys_tsv(path: Path, *, markers=None, length_unit=None, max_nan_gap=None, min_frames=5, split=None,
+                      min_marker_coverage=None):
+    """Read one QTM 3D TSV export; ``(demos, times, columns, labels, meta)`` as the other readers return."""
+    from .._checks import warn
+    from ..mocap_c3d import marker_take, metres_per_unit
+
+    path = Path(path)
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise DataFileError(f"{path}: {size} bytes, over the TSV reader's limit of {MAX_BYTES} bytes")
+    try:
+        parsed = _parse(path)
+    except UnicodeDecodeError:
+        raise not_utf8(path, "Qualisys TSV") from None
+    header, events, names, col_names, rows = parsed
+    frames = []
     if names is None:
         raise DataFileError(f"{path}: no MARKER_NAMES line; expected a Qualisys 3D TSV export with its header "
                             "(QTM: Project options > TSV export > Include TSV header)")
@@ -94,18 +107,24 @@ def read_qualisys_tsv(path: Path, *, markers=None, length_unit=None, max_nan_gap
         if len(cells) != lead + 3 * M:
             raise DataFileError(f"{path}, line {n}: {len(cells)} cells, expected {lead + 3 * M} ({lead} frame/time "
                                 f"and 3 for each of the {M} markers of MARKER_NAMES)")
-        frames.append(int(float(cells[0])) if lead else r + 1)
+        frame = whole_number(cells[0]) if lead else r + 1
+        if frame is None:
+            raise DataFileError(f"{path}, line {n}: frame number {cells[0][:40]!r} is not a whole number")
+        frames.append(frame)
         for j, c in enumerate(cells[lead:]):
             if c in ("", "NaN", "nan", "-"):
                 continue
             try:
-                data[r, j] = float(c)
+                data[r, j] = number(c)
             except ValueError:
                 raise DataFileError(f"{path}, line {n}: non-numeric value {c[:40]!r} for marker "
                                     f"{names[j // 3]!r}") from None
     declared = header.get("NO_OF_FRAMES")
     if declared is not None:
-        want = int(_number(path, declared[0], "NO_OF_FRAMES", declared[1]))
+        want = whole_number(declared[1])
+        if want is None or want < 0:
+            raise DataFileError(f"{path}, line {declared[0]}: NO_OF_FRAMES must be a whole number of frames, got "
+                                f"{declared[1][:40]!r}")
         if len(rows) < want:
             warn(f"{path}: NO_OF_FRAMES announces {want} frames but the file holds {len(rows)}; keeping those",
                  DataFileWarning)

@@ -39,7 +39,7 @@ _LIMIT_ENV = {"max_line_chars": "INTERPRIM_CSV_MAX_LINE_CHARS", "max_columns": "
               "max_bytes": "INTERPRIM_CSV_MAX_BYTES"}
 
 
-def _csv_limit(name: str) -> int:
+def csv_limit(name: str) -> int:
     env = os.environ.get(_LIMIT_ENV[name])
     if env:
         try:
@@ -53,12 +53,12 @@ def _csv_limit(name: str) -> int:
 
 def _over(path, what, value, name):
     return DataFileError(
-        f"{path}: {what} ({value}) exceeds the CSV reader's limit {name}={_csv_limit(name)}; if the file is "
+        f"{path}: {what} ({value}) exceeds the CSV reader's limit {name}={csv_limit(name)}; if the file is "
         f"right, raise it with the environment variable {_LIMIT_ENV[name]}=N"
     )
 
 
-def _lines(fh, path, max_chars):
+def bounded_lines(fh, path, max_chars):
     """The file's lines, each read with a bounded ``readline``: a too-long line is refused without reading it."""
     n = 0
     while True:
@@ -115,17 +115,17 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
     from .._base import select_columns, shown_names
 
     size = path.stat().st_size
-    if size > _csv_limit("max_bytes"):
+    if size > csv_limit("max_bytes"):
         raise _over(path, "the file's size", f"{size} bytes", "max_bytes")
-    max_chars = _csv_limit("max_line_chars")
-    max_cols = _csv_limit("max_columns")
+    max_chars = csv_limit("max_line_chars")
+    max_cols = csv_limit("max_columns")
     if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
         csv.field_size_limit(max_chars)
     meta: dict[str, Any] = {}
     header = None
     header_line = 0
     with open(path, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.reader(_lines(fh, path, max_chars))
+        reader = csv.reader(bounded_lines(fh, path, max_chars))
         try:
             for cells in reader:  # the comments and the header
                 if not cells or all(not c.strip() for c in cells):

@@ -19,7 +19,7 @@ import numpy as np
 from ...core.errors import DataFileError, DataFileWarning
 from .._checks import not_utf8, number, whole_number
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
-from .csvfile import _csv_limit, _lines
+from .csvfile import bounded_lines, csv_limit
 from .takes import read_marker_take
 
 __all__ = ["MotiveCsvReader", "read_motive_csv"]
@@ -30,11 +30,11 @@ MAX_BYTES = 8 * 2**30
 
 def _parse(path):
     """The first line's ``key,value`` pairs, the description rows, the ``Frame,...`` row and the frame rows."""
-    max_chars = _csv_limit("max_line_chars")
+    max_chars = csv_limit("max_line_chars")
     if csv.field_size_limit() < max_chars:  # one cell may be as long as a line (the module's default is 128 KiB)
         csv.field_size_limit(max_chars)
     with open(path, encoding="utf-8-sig", newline="") as fh:
-        reader = csv.reader(_lines(fh, path, max_chars))
+        reader = csv.reader(bounded_lines(fh, path, max_chars))
         try:
             first = next(reader)
         except StopIteration:

@@ -18,7 +18,7 @@ import numpy as np
 from ...core.errors import DataFileError, DataFileWarning
 from .._checks import not_utf8, number, whole_number
 from .base import Common, MarkerOptions, Reader, Table, TakeOptions, register
-from .csvfile import _csv_limit, _lines
+from .csvfile import bounded_lines, csv_limit
 from .takes import read_marker_take
 
 __all__ = ["QualisysTsvReader", "read_qualisys_tsv"]
@@ -40,7 +40,7 @@ def _parse(path):
     header, events, names, col_names = {}, [], None, None
     rows, first_data = [], None
     with open(path, encoding="utf-8-sig", errors="strict", newline="") as fh:
-        for n, raw in enumerate(_lines(fh, path, _csv_limit("max_line_chars")), start=1):
+        for n, raw in enumerate(bounded_lines(fh, path, csv_limit("max_line_chars")), start=1):
             line = raw.rstrip("\r\n")
             if not line.strip():
                 continue

@@ -170,6 +170,28 @@ def _scan_powers(Ad: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+#: the most values (float64: 512 MiB) of the arrays a :class:`LinearRollout` precomputes
+MAX_ROLLOUT_VALUES = 1 << 26
+
+
+def rollout_values(n_basis: int, n_steps: int) -> int:
+    """Values of the arrays a :class:`LinearRollout` of ``n_basis`` basis functions over ``n_steps`` steps
+    precomputes: the powers ``(n_steps + 1, 2, 2)`` and the forced response ``(n_steps + 1, 2, n_basis + 1)``."""
+    return (int(n_steps) + 1) * (4 + 2 * (int(n_basis) + 1))
+
+
+def check_rollout_size(n_basis: int, n_steps: int) -> None:
+    """``ValueError`` naming ``n_steps`` unless it is a positive integer whose rollout (:func:`rollout_values`) stays
+    within :data:`MAX_ROLLOUT_VALUES`: checked before anything is allocated."""
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+    n = rollout_values(n_basis, n_steps)
+    if n > MAX_ROLLOUT_VALUES:
+        limit = MAX_ROLLOUT_VALUES // (4 + 2 * (int(n_basis) + 1)) - 1
+        raise ValueError(f"n_steps={int(n_steps)} with n_basis={int(n_basis)} would precompute {n} values for the "
+                         f"DMP rollout, over the limit of {MAX_ROLLOUT_VALUES}: n_steps must be at most {limit}")
+
+
 @lru_cache(maxsize=16)
 def _discretisation(alpha_y: float, beta_y: float, n_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation of the DMP's linear part over one step ``1 / n_steps``."""
@@ -210,6 +232,7 @@ class LinearRollout:
         self.basis = basis
         self.alpha_y = float(alpha_y)
         self.beta_y = float(beta_y)
+        check_rollout_size(basis.n_basis, n_steps)
         self.n_steps = int(n_steps)
         K = self.n_steps
         Ad, Bd, powers = _discretisation(self.alpha_y, self.beta_y, K)

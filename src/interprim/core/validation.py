@@ -59,6 +59,14 @@ def as_demonstrations(demos: Any, min_rows: int = 1, name: str = "demos") -> lis
     return arrays
 
 
+def check_min_frames(arrays: Any, min_frames: int, name: str = "demos") -> None:
+    """Raise ``ValueError("demos[j] has T frames; at least min_frames are needed")`` for the first of the
+    (validated) ``arrays`` with fewer than ``min_frames`` frames (rows)."""
+    for j, a in enumerate(arrays):
+        if a.shape[0] < min_frames:
+            raise ValueError(f"{name}[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
+
+
 def as_frame(frame: ArrayLike, name: str, n_cols: int) -> np.ndarray:
     """Check a single frame of ``n_cols`` finite values."""
     try:

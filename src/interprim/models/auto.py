@@ -27,11 +27,12 @@ import numpy as np
 from ..core.blas import one_blas_thread
 from ..core.cache import DerivedCache, records_unused, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
-from ..core.errors import PaceWarning
+from ..core.errors import ModelFileError, PaceWarning
 from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_range, mark
 from ..core.progress import Progress
 from ..model_selection import long_range, memory, stacking
 from . import registry
+from . import state_checks as check
 from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
 from .primitive.estimator import InteractionPrimitive
@@ -632,17 +633,27 @@ class AutoInteraction(Predictor):
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
         inner = {k[len("model_"):]: v for k, v in arrays.items() if k.startswith("model_")}
-        self.model_ = member_from_state(meta["class"], meta["params"], inner, meta["state"])
+        n_dofs = check.integer("n_dofs_", meta["n_dofs_"], 1, check.MAX_GRID)
+        obs = check.columns("observed_dofs_", meta["observed_dofs_"], n_dofs)
+        if check.columns("params.observed_dofs", self.observed_dofs, n_dofs) != obs:
+            check.fail("params.observed_dofs", self.observed_dofs, f"not the fitted observed_dofs_ {obs}")
+        try:
+            self.model_ = member_from_state(meta["class"], meta["params"], inner, meta["state"])
+        except ModelFileError as exc:
+            raise check.prefixed("model: ", exc) from None
+        if getattr(self.model_, "n_dofs_", n_dofs) != n_dofs or list(self.model_.observed_dofs_) != obs:
+            check.fail("class", meta["class"], f"a model of observed columns {self.model_.observed_dofs_} of "
+                       f"{getattr(self.model_, 'n_dofs_', '?')}, not the file's {obs} of {n_dofs}")
         self.chosen_ = str(meta["chosen"])
         self.selection_ = dict(meta["selection"])
-        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
-        self.weights_ = {str(k): float(v) for k, v in meta.get("weights", {self.chosen_: 1.0}).items()}
-        self.n_dofs_ = int(meta["n_dofs_"])
+        self.observed_dofs_ = obs
+        self.weights_ = {str(k): check.number(f"weights.{k}", v, nonneg=True)
+                         for k, v in meta.get("weights", {self.chosen_: 1.0}).items()}
+        self.n_dofs_ = n_dofs
         self.controlled_dofs_ = [i for i in range(self.n_dofs_) if i not in set(self.observed_dofs_)]
-        self.dt_ = float(meta["dt_"])
-        self.mean_duration_ = float(meta["mean_duration_"])
-        cols = meta.get("columns_")
-        self.columns_ = None if cols is None else [str(c) for c in cols]
+        self.dt_ = check.number("dt_", meta["dt_"], positive=True)
+        self.mean_duration_ = check.number("mean_duration_", meta["mean_duration_"], positive=True)
+        self.columns_ = check.names("columns_", meta.get("columns_"), n_dofs)
         # a file of version 1 has no statistics: no check (input_distance NaN)
         self.set_input_range(meta.get("input_range"))
         if self.input_range_ is not None and self.input_range_[0].shape != (len(self.observed_dofs_),):

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
@@ -419,8 +420,10 @@ class Predictor(Params):
     def load(cls: type[P], path: str | os.PathLike[str]) -> P:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
         from ..io import load_estimator
+        from .state_checks import building
 
-        return load_estimator(path, cls)
+        with building(Path(path)):  # the file's name on every error; inconsistent values a ModelFileError
+            return load_estimator(path, cls)
 
 
 def _jsonable(v: Any) -> Any:

@@ -14,12 +14,14 @@ import numpy as np
 from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
+from ..core.errors import ModelFileError
 from ..core.preprocessing import interp_columns, unit_grid
 from ..core.validation import as_2d_finite
 from ..io import estimator_from_state
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
 from . import registry
+from . import state_checks as check
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 
@@ -503,16 +505,49 @@ class Blend(Predictor):
 
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
+        if not isinstance(self.weights, dict) or not self.weights:
+            check.fail("params.weights", self.weights, "not a {member: weight} record")
+        n_dofs = check.integer("n_dofs", meta["n_dofs"], 1, check.MAX_GRID)
+        obs = check.columns("observed_dofs_", meta["observed_dofs_"], n_dofs)
+        if check.columns("params.observed_dofs", self.observed_dofs, n_dofs) != obs:
+            check.fail("params.observed_dofs", self.observed_dofs, f"not the fitted observed_dofs_ {obs}")
+        dt = check.number("dt", meta["dt"], positive=True)
+        mean_duration = check.number("mean_duration", meta["mean_duration"], positive=True)
         members = {}
         for m in self.weights:
             info = meta["members"][m]
             inner = {k[len(m) + 2:]: v for k, v in arrays.items() if k.startswith(f"{m}__")}
-            members[m] = member_from_state(info["class"], info["params"], inner, info["state"])
-        n_dofs = int(meta["n_dofs"])
-        self.adopt(members, [np.zeros((2, n_dofs))], float(meta["dt"]))
-        self.mean_duration_ = float(meta["mean_duration"])
-        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+            try:
+                est = member_from_state(info["class"], info["params"], inner, info["state"])
+            except ModelFileError as exc:
+                raise check.prefixed(f"member {m!r}: ", exc) from None
+            if getattr(est, "n_dofs_", n_dofs) != n_dofs or list(est.observed_dofs_) != obs:
+                check.fail(f"members.{m}", info["class"], f"a member of observed columns {est.observed_dofs_} "
+                           f"of {getattr(est, 'n_dofs_', '?')}, not the blend's {obs} of {n_dofs}")
+            members[m] = est
+        self._check_scales(n_dofs)
+        self.adopt(members, [np.zeros((2, n_dofs))], dt)
+        self.mean_duration_ = mean_duration
+        self.observed_dofs_ = obs
         self._set_controlled()
+
+    def _check_scales(self, n_dofs: int) -> None:
+        """The variance model ``scales`` of a model file (``a``, ``b``: ``(H, n_dofs)`` finite, not negative; ``t``:
+        ``(H,)`` increasing positive seconds) and ``horizon``, checked before a prediction's std reads them."""
+        check.number("params.horizon", self.horizon, positive=True)
+        sc = self.scales
+        if not sc:
+            return
+        if not isinstance(sc, dict) or not {"a", "b"} <= set(sc):
+            check.fail("params.scales", sc, "not a variance model {'a': ..., 'b': ...}")
+        a = check.array("params.scales.a", sc["a"], (None, n_dofs), nonneg=True)
+        check.array("params.scales.b", sc["b"], a.shape, nonneg=True)
+        if a.shape[0] == 0:
+            check.fail("params.scales.a", sc["a"], "an empty variance model")
+        if "t" in sc:
+            t = check.array("params.scales.t", sc["t"], (a.shape[0],), positive=True)
+            if np.any(np.diff(t) <= 0):
+                check.fail("params.scales.t", sc["t"], "not increasing")
 
     def __repr__(self):
         w = ", ".join(f"{m} {np.atleast_1d(x)[0]:.2f}" for m, x in self.weights.items())

@@ -79,7 +79,7 @@ from ..core.cache import DerivedCache, std_deferred
 from ..core.cv import folds as cv_folds
 from ..core.cv import n_folds as cv_n_folds
 from ..core.cv import paired_gain
-from ..core.errors import NotFittedError
+from ..core.errors import ModelFileError, NotFittedError
 from ..core.preprocessing import column_index, unit_grid
 from ..core.validation import as_2d_finite
 from .conditioners import PPCA, Blend, Conditioner, Context, Kernel, Mean, Ridge, conditioner, target_block
@@ -777,9 +777,50 @@ class CouplingModel:
         obj.methods_ = list(obj.methods_)
         if isinstance(obj.param_, list):  # a blend: (ridge, bandwidth, weight)
             obj.param_ = tuple(obj.param_)
+        cls._check_state(obj, arrays)
         ends = np.cumsum(arrays["obs_lengths"])
         obj.obs_frames_ = [np.ascontiguousarray(f) for f in np.split(np.asarray(arrays["obs_frames"]), ends[:-1])]
         return obj
+
+    def _check_state(self, arrays) -> None:
+        """The values :meth:`from_state` read, checked before a prediction divides by or allocates with them
+        (:mod:`interprim.models.state_checks`: ModelFileError naming the field and its value)."""
+        from . import state_checks as check
+
+        D = check.integer("coupling.n_dofs_", self.n_dofs_, 1, check.MAX_GRID)
+        obs = check.columns("coupling.observed_dofs_", self.observed_dofs_, D)
+        ctrl = check.columns("coupling.controlled_dofs_", self.controlled_dofs_, D, allow_empty=True)
+        if sorted(obs + ctrl) != list(range(D)):
+            check.fail("coupling.controlled_dofs_", self.controlled_dofs_,
+                       f"observed_dofs_ {obs} and controlled_dofs_ do not partition the {D} columns")
+        self.observed_dofs_, self.controlled_dofs_ = obs, ctrl
+        S = check.integer("coupling.n_demos_", self.n_demos_, 1, check.MAX_GRID)
+        n_in = check.integer("coupling.params.n_in", self.n_in, 2, check.MAX_GRID)
+        n_out = check.integer("coupling.params.n_out", self.n_out, 2, check.MAX_GRID)
+        check.size("coupling.params.n_in", n_in * len(obs) * S)
+        check.size("coupling.params.n_out", n_out * D * S)
+        self.mean_duration_ = check.number("coupling.mean_duration_", self.mean_duration_, positive=True)
+        self.clock_rel_std_ = check.number("coupling.clock_rel_std_", self.clock_rel_std_, nonneg=True)
+        self.fractions_ = check.array("coupling.fractions_", self.fractions_, (None,), positive=True)
+        F = self.fractions_.size
+        if F == 0 or np.any(self.fractions_ > 1) or np.any(np.diff(self.fractions_) <= 0):
+            raise ModelFileError(f"array 'coupling.fractions_' = {self.fractions_.tolist()}: not increasing "
+                                 "phases in (0, 1]")
+        self.durations_ = check.array("coupling.durations_", self.durations_, (S,), positive=True)
+        self.Y_ = check.array("coupling.Y_", self.Y_, (S, n_out, D))
+        self.y_mean_ = check.array("coupling.y_mean_", self.y_mean_, (n_out, D))
+        self.dof_scale_ = check.array("coupling.dof_scale_", self.dof_scale_, (D,), positive=True)
+        self.feature_scale_ = check.array("coupling.feature_scale_", self.feature_scale_, (len(obs),), positive=True)
+        self.residual_var_ = check.array("coupling.residual_var_", self.residual_var_, (F, n_out, D), nonneg=True)
+        frames = check.array("coupling.obs_frames", arrays["obs_frames"], (None, len(obs)))
+        check.lengths("coupling.obs_lengths", arrays["obs_lengths"], frames.shape[0], n=S)
+        sc = self.scale_
+        if not isinstance(sc, dict) or set(sc) != {"observed", "controlled"}:
+            check.fail("coupling.scale_", sc, "not the calibration factors {'observed': ..., 'controlled': ...}")
+        self.scale_ = {k: check.number(f"coupling.scale_.{k}", v, nonneg=True) for k, v in sc.items()}
+        if not isinstance(self.methods_, list) or any(m not in METHODS for m in self.methods_) \
+                or self.method_ not in self.methods_:
+            check.fail("coupling.method_", self.method_, f"not one of the fitted methods {self.methods_!r}")
 
 
 def _sq_loss(ec: np.ndarray, w_ctrl: np.ndarray, n_mean) -> np.ndarray:

@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from ..core.preprocessing import time_normalise
-from ..core.validation import as_2d_finite, as_frame
+from ..core.validation import as_2d_finite, as_frame, check_min_frames
+from . import state_checks as check
 from .base import BaseStream, InputMarks, Predictor
 from .grid import GridPrediction
 from .training import TrainingSet
@@ -35,6 +36,7 @@ class Baseline(Predictor):
     """What the three methods share: the column layout, the sampling interval and the prediction's timing."""
 
     observed_dofs: Any  # a parameter of each subclass's __init__
+    n: Any  # the prediction's grid size (a parameter of each subclass's __init__)
 
     def _fit_common(self, data: TrainingSet) -> list:
         """The demonstrations of the validated training set (at least 2), with ``observed_dofs_``, ``dt_``,
@@ -42,6 +44,7 @@ class Baseline(Predictor):
         if len(data) < 2:
             raise ValueError(f"at least 2 demonstrations are needed, got {len(data)}")
         arrays = list(data.arrays)
+        check_min_frames(arrays, 2)  # every demonstration has a duration and a time-normalised movement
         dt = data.dt
         D = data.n_dofs
         obs = self.observed_dofs
@@ -77,10 +80,20 @@ class Baseline(Predictor):
                 "n_dofs_": self.n_dofs_}
 
     def _set_common(self, meta):
-        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
-        self.dt_ = float(meta["dt_"])
-        self.mean_duration_ = float(meta["mean_duration_"])
-        self.n_dofs_ = int(meta["n_dofs_"])
+        """The column layout and timing of a model file's ``meta``, checked (:mod:`~.state_checks`)."""
+        n_dofs = check.integer("n_dofs_", meta["n_dofs_"], 1, check.MAX_GRID)
+        obs = check.columns("observed_dofs_", meta["observed_dofs_"], n_dofs)
+        params = getattr(self, "observed_dofs", None)
+        if params is not None and check.columns("params.observed_dofs", params, n_dofs) != obs:
+            check.fail("params.observed_dofs", params, f"not the fitted observed_dofs_ {obs}")
+        self.dt_ = check.number("dt_", meta["dt_"], positive=True)
+        self.mean_duration_ = check.number("mean_duration_", meta["mean_duration_"], positive=True)
+        self.observed_dofs_ = obs
+        self.n_dofs_ = n_dofs
+
+    def _grid_size(self) -> int:
+        """The parameter ``n`` (points of the prediction's grid), checked."""
+        return check.integer("params.n", self.n, 2, check.MAX_GRID)
 
 
 class AlignedStream(BaseStream):
@@ -232,7 +245,9 @@ class PriorMean(Baseline):
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
         self._set_common(meta)
-        self.mean_, self.std_ = arrays["mean"], arrays["std"]
+        shape = (self._grid_size(), self.n_dofs_)
+        self.mean_ = check.array("mean", arrays["mean"], shape)
+        self.std_ = check.array("std", arrays["std"], shape, nonneg=True)
 
 
 class NearestNeighbour(AlignedBaseline):
@@ -267,9 +282,12 @@ class NearestNeighbour(AlignedBaseline):
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
         self._set_common(meta)
-        ends = np.cumsum(arrays["lengths"])
-        self.observed_ = [np.ascontiguousarray(u) for u in np.split(arrays["observed"], ends[:-1])]
-        self.demos_ = list(arrays["demos"])
+        observed = check.array("observed", arrays["observed"], (None, len(self.observed_dofs_)))
+        lengths = check.lengths("lengths", arrays["lengths"], observed.shape[0])
+        demos = check.array("demos", arrays["demos"], (len(lengths), self._grid_size(), self.n_dofs_))
+        ends = np.cumsum(lengths)
+        self.observed_ = [np.ascontiguousarray(u) for u in np.split(observed, ends[:-1])]
+        self.demos_ = list(demos)
 
     def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """The nearest demonstration to ``partial`` (``(M, len(observed_dofs))`` frames from the start).

@@ -14,6 +14,7 @@ from ..io import model_kind
 from . import registry
 from .auto import AutoInteraction
 from .blend import Blend
+from .state_checks import building
 
 __all__ = ["load_any", "model_classes"]
 
@@ -28,12 +29,15 @@ def model_classes() -> dict:
 def load_any(path):
     """Read any interprim model file as the class it names (``interprim fit``'s output, whatever model it chose).
 
-    Raises :class:`~interprim.core.errors.ModelFileError` for a file that is not a readable interprim model, or that
-    holds a model class this version does not know.
+    Raises :class:`~interprim.core.errors.ModelFileError` for a file that is not a readable interprim model, that
+    holds a model class this version does not know, or whose values are inconsistent (every family checks what it
+    reads, :mod:`interprim.models.state_checks`; a MemoryError, ArithmeticError, LinAlgError or ValueError raised
+    while the model is built from them becomes "inconsistent values in the model file: ...").
     """
     kind = model_kind(path)
     classes = model_classes()
     if kind not in classes:
         raise ModelFileError(f"{Path(path)}: holds a {kind!r} model, which this interprim does not know (it reads "
                              f"{', '.join(classes)})")
-    return classes[kind].load(path)
+    with building(Path(path)):  # what building the model from the file's values raises: a ModelFileError
+        return classes[kind].load(path)

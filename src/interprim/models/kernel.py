@@ -26,6 +26,7 @@ from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import unit_grid
 from ..model_selection.prefixes import observed_frames
+from . import state_checks as check
 from .demonstrations import AlignedBaseline
 from .grid import GridPrediction
 from .training import TrainingSet
@@ -257,17 +258,30 @@ class KernelDemonstrations(AlignedBaseline):
     def load_state(self, arrays, meta):
         """Restore the state written by :meth:`to_state`."""
         self._set_common(meta)
-        ends = np.cumsum(arrays["lengths"])
-        self.demos_ = [np.ascontiguousarray(a) for a in np.split(arrays["demos"], ends[:-1])]
+        D = self.n_dofs_
+        demos = check.array("demos", arrays["demos"], (None, D))
+        lengths = check.lengths("lengths", arrays["lengths"], demos.shape[0])
+        n = check.integer("params.n", self.n, 2, check.MAX_GRID)
+        # a prediction reads every demonstration at each of the n points of its grid (zero-padded to the longest)
+        check.size("params.n", len(lengths) * n * D)
+        check.size("lengths", len(lengths) * (int(lengths.max()) + 1) * D)
+        std_scale = check.array("std_scale", arrays["std_scale"], (D,), nonneg=True)
+        std_floor = check.array("std_floor", arrays["std_floor"], (D,), nonneg=True)
+        bandwidth = check.number("bandwidth_", meta["bandwidth_"], positive=True)
+        cost_scale = check.number("cost_scale_", meta["cost_scale_"], positive=True)
+        cv = meta["cv_errors_"]
+        if not isinstance(cv, list) or not all(isinstance(p, list) and len(p) == 2 for p in cv):
+            check.fail("cv_errors_", cv, "not a list of [bandwidth, error] pairs")
+        ends = np.cumsum(lengths)
+        self.demos_ = [np.ascontiguousarray(a) for a in np.split(demos, ends[:-1])]
         self._derived = DerivedCache()
         self.obs_ = list(self.observed_dofs_)
         self.ctrl_ = [i for i in range(self.n_dofs_) if i not in set(self.obs_)] or self.obs_
         self.observed_ = [np.ascontiguousarray(a[:, self.obs_]) for a in self.demos_]
-        self.std_scale_ = np.asarray(arrays["std_scale"], dtype=np.float64)
-        self.std_floor_ = np.asarray(arrays["std_floor"], dtype=np.float64)
-        self.bandwidth_ = float(meta["bandwidth_"])
-        self.cost_scale_ = float(meta["cost_scale_"])
-        self.cv_errors_ = {float(h): float(e) for h, e in meta["cv_errors_"]}
+        self.std_scale_, self.std_floor_ = std_scale, std_floor
+        self.bandwidth_ = bandwidth
+        self.cost_scale_ = cost_scale
+        self.cv_errors_ = {float(h): float(e) for h, e in cv}
 
     def _predict(self, partial) -> GridPrediction:  # type: ignore[override]  # only the options it names
         """Predict the whole movement of both agents from the observed prefix ``partial`` (``(M, n_obs)``).

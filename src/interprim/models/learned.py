@@ -32,6 +32,7 @@ import numpy as np
 from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
+from . import state_checks as check
 from .base import BasePrediction, BaseStream, InputMarks, Predictor
 from .coupling import CouplingModel
 from .grid import GridPrediction
@@ -154,8 +155,12 @@ class LearnedInteraction(Predictor):
         phase_std = self._coupling_kwargs(self.phase_)["phase_std"]
         self.coupling_ = CouplingModel.from_state(ca, meta["coupling"], phase_std=phase_std if callable(phase_std)
                                                   else None)
-        self.dt_ = float(meta["dt_"])
-        self.observed_dofs_ = [int(i) for i in meta["observed_dofs_"]]
+        self.dt_ = check.number("dt_", meta["dt_"], positive=True)
+        obs = check.columns("observed_dofs_", meta["observed_dofs_"], self.coupling_.n_dofs_)
+        if obs != self.coupling_.observed_dofs_ or len(obs) != self.phase_.n_dofs_:
+            check.fail("observed_dofs_", meta["observed_dofs_"], f"not the coupling's observed columns "
+                       f"{self.coupling_.observed_dofs_} nor {self.phase_.n_dofs_} columns of the phase model")
+        self.observed_dofs_ = obs
 
 
 class LearnedStream(BaseStream):

@@ -672,7 +672,36 @@ class LearnedPhase:
         for k, v in arrays.items():
             setattr(obj, k, np.asarray(v))
         cls._check_fitted(obj)
+        cls._check_state(obj)
         return obj
+
+    def _check_state(self) -> None:
+        """The values a model file gave (:meth:`from_state`), checked before any estimate divides by or allocates
+        with them: :class:`~interprim.core.errors.ModelFileError` naming the field and its value."""
+        from ..core.errors import ModelFileError
+        from ..models import state_checks as check
+
+        try:
+            self._check_params()
+        except (TypeError, ValueError) as exc:
+            raise ModelFileError(f"inconsistent parameters of the learned phase: {exc}") from None
+        self.dt_ = check.number("phase.dt_", self.dt_, positive=True)
+        self.mean_duration_ = check.number("phase.mean_duration_", self.mean_duration_, positive=True)
+        D = check.integer("phase.n_dofs_", self.n_dofs_, 1, check.MAX_GRID)
+        S = check.integer("phase.n_demos_", self.n_demos_, 1, check.MAX_GRID)
+        K = check.integer("phase.n_grid_", self.n_grid_, 1, check.MAX_GRID)
+        check.integer("phase._w", self._w, 1, check.MAX_GRID)
+        check.integer("phase.history", self.history, 1, check.MAX_GRID)
+        check.size("phase.history", (self.history + 1) * D)
+        self.scale_ = check.array("phase.scale_", self.scale_, (D,), positive=True)
+        self.durations_ = check.array("phase.durations_", self.durations_, (S,), positive=True)
+        self.std_grid_ = check.array("phase.std_grid_", self.std_grid_, (K,), nonneg=True)
+        if self.method_ not in ("clock",) + _MODELS:
+            check.fail("phase.method_", self.method_, f"not one of {('clock',) + _MODELS}")
+        feats = self.features_
+        if not isinstance(feats, tuple) or (not feats and self.method_ != "clock") or any(
+                f not in FEATURE_GROUPS for f in feats):
+            check.fail("phase.features_", feats, f"not a list of the feature groups {FEATURE_GROUPS}")
 
     def tracker(self) -> PhaseTracker:
         """An online estimator fed one frame at a time (features updated in ``O(D)`` per frame)."""

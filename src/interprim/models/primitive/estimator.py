@@ -17,15 +17,16 @@ back to the demonstrations' column order.
 from __future__ import annotations
 
 import copy
+import math
 import numbers
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...core.blas import one_blas_thread
-from ...core.dmp import warn_representation
+from ...core.dmp import check_rollout_size, warn_representation
 from ...core.errors import NotFittedError
-from ...core.validation import check_positive
+from ...core.validation import check_min_frames, check_positive
 from ...model_selection.prefixes import Prefixes
 from ..base import Predictor
 from ..training import TrainingSet
@@ -48,6 +49,8 @@ COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
 PHASE_METHODS = ("dtw", "likelihood", "learned", "cv")
 SIGMA2_RULES = ("cv", "residual")
 CALIBRATE_RULES = ("with-cv",)
+#: the largest prior covariance ``fit`` builds (``n_basis`` is refused beyond it): 256 MiB of float64
+MAX_COVARIANCE_BYTES = 256 << 20
 #: Values of releases up to 0.1.0 that model files may still hold: read as their names of today (interprim.io)
 OLD_VALUES = {"phase_method": {"auto": "cv"}, "sigma2": {"auto": "residual"}, "calibrate": {"auto": "with-cv"}}
 
@@ -328,8 +331,9 @@ class InteractionPrimitive(Predictor):
             "calibrate": self.calibrate if isinstance(self.calibrate, str) else bool(self.calibrate),
         }
 
-    def _check_params(self, n_dofs: int, n_demos: int):
-        """Validate every parameter (cheap; ``fit`` calls it before any expensive work)."""
+    def _check_params(self, n_dofs: int, n_demos: int, min_frames: int | None = None):
+        """Validate every parameter (cheap; ``fit`` calls it before any expensive work, with ``min_frames`` the
+        frames of the shortest demonstration, which bounds ``n_basis``; a model file's load without)."""
         obs = self.observed_dofs
         if obs is None or isinstance(obs, (str, bytes)) or np.ndim(obs) != 1 or len(obs) == 0:
             raise TypeError(f"observed_dofs must be a non-empty sequence of column indices, got {obs!r}")
@@ -396,7 +400,30 @@ class InteractionPrimitive(Predictor):
             kk = [min(int(kk[0]), len(obs)), min(int(kk[1]), len(ctrl))]
         else:
             kk = None
+        if not isinstance(self.n_basis, str):
+            check_rollout_size(int(self.n_basis), self.n_steps)
+            if min_frames is not None:
+                self._check_n_basis(int(self.n_basis), n_dofs if kk is None else sum(kk), min_frames)
         return obs, ctrl, kk
+
+    def check_params(self, n_dofs: int, n_demos: int) -> None:
+        """Check every parameter as ``fit`` does for ``n_dofs``-column data of ``n_demos`` demonstrations (a model
+        file's parameters, before its state is built); ``ValueError`` or ``TypeError`` naming the parameter."""
+        self._check_params(n_dofs, n_demos)
+
+    @staticmethod
+    def _check_n_basis(n_basis: int, n_latent: int, min_frames: int) -> None:
+        """``ValueError`` naming ``n_basis`` and its limit when the data cannot support it: more basis functions than
+        frames of the shortest demonstration, or a prior covariance over :data:`MAX_COVARIANCE_BYTES`."""
+        if n_basis > min_frames:
+            raise ValueError(f"n_basis={n_basis} is more basis functions than the {min_frames} frames of the "
+                             f"shortest demonstration: n_basis must be at most {min_frames}")
+        P = n_latent * (n_basis + 1)
+        if P * P * 8 > MAX_COVARIANCE_BYTES:
+            limit = int(math.isqrt(MAX_COVARIANCE_BYTES // 8) // n_latent) - 1
+            raise ValueError(f"n_basis={n_basis} makes {P} parameters ({n_latent} DoFs x {n_basis + 1}), whose "
+                             f"covariance takes {P * P * 8 / 2**20:.0f} MiB, over the limit of "
+                             f"{MAX_COVARIANCE_BYTES >> 20} MiB: n_basis must be at most {limit} for {n_latent} DoFs")
 
     # ------------------------------------------------------------------ fitting
     def _fit(self, data: TrainingSet) -> None:
@@ -411,11 +438,8 @@ class InteractionPrimitive(Predictor):
         D = data.n_dofs
         columns = None if data.columns is None else list(data.columns)
         dt = data.dt
-        obs, ctrl, kk = self._check_params(D, len(arrays))
-        min_frames = max(5, self.smoothing_window or 0)
-        for j, a in enumerate(arrays):
-            if a.shape[0] < min_frames:
-                raise ValueError(f"demos[{j}] has {a.shape[0]} frames; at least {min_frames} are needed")
+        check_min_frames(arrays, max(5, self.smoothing_window or 0))
+        obs, ctrl, kk = self._check_params(D, len(arrays), min(a.shape[0] for a in arrays))
         self.__dict__.pop("fitted_", None)  # a fit that fails leaves the estimator unfitted
         params = self.json_params()
         chosen = None

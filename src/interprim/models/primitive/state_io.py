@@ -17,6 +17,8 @@ from ...core.errors import ModelFileError
 from ...core.gaussian import GaussianPrior
 from ...core.preprocessing import PCA
 from ...io import FORMAT, FORMAT_VERSION, checksum, expect, read_archive, write_archive
+from .. import state_checks as check
+from ..state_checks import building
 
 __all__ = ["save_model", "model_state", "load_model", "model_from_state", "fitted_from_state"]
 
@@ -133,10 +135,18 @@ def model_from_state(data: dict, meta: dict, model_class, path="<state>"):
         params = model.json_params()  # the file's parameters, with the defaults of those it predates
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: incomplete or inconsistent model file: {exc!r}") from None
+    with building(path):
+        n_dofs = check.integer("n_dofs", meta.get("n_dofs"), 1, check.MAX_GRID)
+        n_demos = check.integer("n_demos", meta.get("n_demos"), 1, check.MAX_GRID)
+    try:  # the parameters as fit checks them (n_steps and the rollout's size, phase_method, alpha_y, ...)
+        model.check_params(n_dofs, n_demos)
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: inconsistent parameters in field 'params': {exc}") from None
     fitted = fitted_from_state(data, meta, params, path)
     try:
-        model.load_fitted(fitted)
-    except (TypeError, ValueError, OverflowError) as exc:
+        with building(path):  # the derived state (basis, rollout) built from the file's values
+            model.load_fitted(fitted)
+    except (TypeError, OverflowError) as exc:
         raise ModelFileError(f"{path}: inconsistent model parameters: {exc}") from None
     return model
 
@@ -147,6 +157,57 @@ def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> d
     :meth:`~interprim.models.primitive.estimator.InteractionPrimitive.json_params` gives them); problems raise
     :class:`~interprim.core.errors.ModelFileError` naming ``path``
     (:meth:`~interprim.models.primitive.fitted.FittedPrimitive.from_state` builds the state from them)."""
+    with building(path):
+        fitted = _fitted_from_state(data, meta, params, path)
+        _check_values(fitted, params)
+    return fitted
+
+
+def _check_values(st: dict, params: dict) -> None:
+    """The fitted scalars and the prior of a model file, checked before a prediction divides by them or factors
+    the covariance: ModelFileError naming the field (:mod:`interprim.models.state_checks`)."""
+    for field, name in (("beta_y", "beta_y_"), ("dt", "dt_"), ("mean_duration", "mean_duration_"),
+                        ("sigma2", "sigma2_")):
+        st[name] = check.number(field, st[name], positive=True)
+    if st["phase_sigma2_"] is not None:
+        st["phase_sigma2_"] = check.number("phase_sigma2", st["phase_sigma2_"], positive=True)
+    check.integer("n_observed_latent", st["n_observed_latent_"], 1, st["n_latent_"])
+    check.array("durations", st["durations_"], positive=True)
+    prior = st["prior_"]
+    cov = np.asarray(prior.cov)
+    scale = float(np.max(np.abs(cov))) if cov.size else 0.0
+    if cov.size and not np.allclose(cov, cov.T, rtol=1e-8, atol=1e-12 * scale):
+        raise ModelFileError("array 'prior_cov' is not symmetric")
+    d = np.diag(cov)
+    if np.any(d < 0):
+        j = int(np.argmin(d))
+        raise ModelFileError(f"array 'prior_cov' is not a covariance: prior_cov[{j}, {j}] = {d[j]!r} < 0")
+    factored = prior.diag is not None and prior.factor is not None
+    if factored:  # diag(prior_diag) + prior_factor prior_factor^T: the same covariance, semi-definite by its form
+        check.array("prior_diag", prior.diag, nonneg=True)
+        f = np.asarray(prior.factor)
+        gap = cov - f @ f.T
+        gap[np.diag_indices_from(gap)] -= np.asarray(prior.diag)
+        if cov.size and float(np.max(np.abs(gap))) > 1e-6 * max(scale, 1e-300):
+            raise ModelFileError("arrays 'prior_diag'/'prior_factor' and 'prior_cov' are not the same covariance")
+    elif cov.size and not _semidefinite(cov):
+        raise ModelFileError("array 'prior_cov' is not a covariance: it is not positive semi-definite")
+
+
+def _semidefinite(cov: np.ndarray) -> bool:
+    """Whether the symmetric ``cov`` is positive semi-definite up to rounding (a Cholesky factor of it with a
+    relative jitter of 1e-9, else its smallest eigenvalue against its largest)."""
+    jitter = 1e-9 * max(float(np.mean(np.abs(np.diag(cov)))), 1e-300)
+    try:
+        np.linalg.cholesky(cov + jitter * np.eye(cov.shape[0]))
+        return True
+    except np.linalg.LinAlgError:
+        ev = np.linalg.eigvalsh(cov)
+        return bool(ev[0] >= -1e-8 * max(abs(float(ev[-1])), 1e-300))
+
+
+def _fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> dict:
+    """:func:`fitted_from_state` without the checks of the values (:func:`_check_values`)."""
     phase_method = params["phase_method"]
     try:
         st = SimpleNamespace()  # the fitted attributes

@@ -19,6 +19,7 @@ from interprim.models.demonstrations import NearestNeighbour, PriorMean
 from interprim.models.files import load_any
 from interprim.models.kernel import KernelDemonstrations
 from interprim.models.learned import LearnedInteraction
+from interprim.models.promp import InteractionProMP
 from interprim.synthetic import two_agent_demos
 
 DT = 0.02
@@ -40,6 +41,7 @@ def models(demos):
             "nn": NearestNeighbour([0, 1], n=50).fit(demos, dt=DT),
             "kernel": KernelDemonstrations([0, 1], n=51).fit(demos, dt=DT),
             "learned": LearnedInteraction([0, 1]).fit(demos, dt=DT),
+            "promp": InteractionProMP([0, 1]).fit(demos, dt=DT),
         }
         out["blend"] = Blend.from_fitted([0, 1], {"nn": out["nn"], "prior": out["prior"]},
                                          {"nn": 0.5, "prior": 0.5},
@@ -137,6 +139,9 @@ CASES = [
     ("learned", _set("state", "coupling", "params", "n_out", value=10**11), "n_out"),
     ("learned", _set("state", "observed_dofs_", value=[0, 8]), "observed_dofs_"),
     ("learned", _set("state", "dt_", value=0.0), "'dt_'"),
+    ("promp", _set("state", "sigma2_", value=-1.0), "'sigma2_'"),
+    ("promp", _array("cov", lambda a: np.ascontiguousarray(a[:3])), "'cov'"),
+    ("promp", _set("state", "order_", value=[0, 1, 2, 2, 4]), "order_"),
     ("blend", _set("params", "scales", "a", value=lambda a: (-np.asarray(a) - 1.0).tolist()), "scales"),
     ("blend", _set("state", "observed_dofs_", value=[0, 8]), "observed_dofs_"),
     ("blend", _set("state", "dt", value=0.0), "'dt'"),
@@ -159,7 +164,7 @@ def test_bad_values_are_refused_naming_the_field(files, tmp_path, family, edit, 
     assert msg.startswith(str(bad)), msg  # names the file
 
 
-@pytest.mark.parametrize("family", ["ip", "prior", "nn", "kernel", "learned", "blend", "auto"])
+@pytest.mark.parametrize("family", ["ip", "prior", "nn", "kernel", "learned", "promp", "blend", "auto"])
 def test_valid_file_loads_and_predicts_identically(models, files, family, demos):
     partial = demos[0][:15, :2]
     before = models[family].predict(partial)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import state_checks as check
 from .demonstrations import Baseline
 from .grid import GridPrediction
 from .training import TrainingSet
@@ -97,9 +98,16 @@ class InteractionProMP(Baseline):
         from movement_primitives.promp import ProMP
 
         self._set_common(meta)
-        self.order_ = [int(i) for i in meta["order_"]]
-        self.sigma2_, self.n_obs_ = float(meta["sigma2_"]), int(meta["n_obs_"])
-        self.weights_, self.mean_, self.cov_ = arrays["weights"], arrays["mean"], arrays["cov"]
+        D = self.n_dofs_
+        self.order_ = check.columns("order_", meta["order_"], D)
+        if sorted(self.order_) != list(range(D)) or self.order_[:len(self.observed_dofs_)] != self.observed_dofs_:
+            check.fail("order_", meta["order_"], f"not the {D} columns with observed_dofs_ first")
+        self.sigma2_ = check.number("sigma2_", meta["sigma2_"], positive=True)
+        self.n_obs_ = check.integer("n_obs_", meta["n_obs_"], len(self.observed_dofs_), len(self.observed_dofs_))
+        P = D * check.integer("params.n_weights", self.n_weights, 1, check.MAX_GRID)
+        self.weights_ = check.array("weights", arrays["weights"], (None, P))
+        self.mean_ = check.array("mean", arrays["mean"], (P,))
+        self.cov_ = check.array("cov", arrays["cov"], (P, P))
         self.promp_ = ProMP(n_dims=self.n_dofs_, n_weights_per_dim=int(self.n_weights))
 
     def _stats(self, partial, s):

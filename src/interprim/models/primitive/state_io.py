@@ -181,7 +181,7 @@ def _check_values(st: dict, params: dict) -> None:
     d = np.diag(cov)
     if np.any(d < 0):
         j = int(np.argmin(d))
-        raise ModelFileError(f"array 'prior_cov' is not a covariance: prior_cov[{j}, {j}] = {d[j]!r} < 0")
+        raise ModelFileError(f"array 'prior_cov' is not a covariance: prior_cov[{j}, {j}] = {float(d[j])!r} < 0")
     factored = prior.diag is not None and prior.factor is not None
     if factored:  # diag(prior_diag) + prior_factor prior_factor^T: the same covariance, semi-definite by its form
         check.array("prior_diag", prior.diag, nonneg=True)

@@ -151,6 +151,7 @@ CASES = [
     ("auto", _set("state", "observed_dofs_", value=[0, 8]), "observed_dofs_"),
     ("auto", _set("state", "mean_duration_", value=0.0), "mean_duration_"),
     ("auto", _set("state", "weights", "nn", value=NAN), "weights"),
+    ("auto", _set("state", "params", "bands", value=lambda b: [b[0], NAN] + b[2:]), "bands"),
 ]
 
 

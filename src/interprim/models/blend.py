@@ -535,6 +535,11 @@ class Blend(Predictor):
         """The variance model ``scales`` of a model file (``a``, ``b``: ``(H, n_dofs)`` finite, not negative; ``t``:
         ``(H,)`` increasing positive seconds) and ``horizon``, checked before a prediction's std reads them."""
         check.number("params.horizon", self.horizon, positive=True)
+        if self.bands is not None:  # the look-ahead bands' edges (seconds), the last may be inf
+            edges = np.asarray(self.bands, dtype=np.float64) if isinstance(self.bands, list) else None
+            if edges is None or edges.ndim != 1 or edges.size == 0 or np.any(np.isnan(edges)) \
+                    or np.any(edges <= 0) or np.any(np.diff(edges) <= 0):
+                check.fail("params.bands", self.bands, "not increasing positive look-ahead edges")
         sc = self.scales
         if not sc:
             return

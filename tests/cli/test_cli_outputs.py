@@ -108,3 +108,19 @@ def test_a_prediction_that_is_not_finite_is_refused_and_not_written(files, tmp_p
     assert main(["predict", str(files / "model.npz"), str(files / "partial.csv"), "-o", str(out)]) == 1
     _one_line_error(capsys, "is not finite (", "std)")
     assert not out.exists()
+
+
+def test_demonstrations_beyond_the_floating_point_range_of_the_fit_are_refused(tmp_path, capsys):
+    """Values whose squares overflow made every spread infinite: the mean demonstration was saved, and predicted
+    inf and NaN.  ``fit`` (Python and the command line) refuses them, naming where."""
+    from interprim.models.demonstrations import PriorMean
+
+    demos = [d.copy() for d in two_agent_demos(8, seed=0, frames=40)]
+    demos[3][7, 0] = 3e300
+    with pytest.raises(ValueError, match=r"demos\[3\] holds 3e\+300 at frame 7, column 0: beyond the 1e\+100"):
+        PriorMean([0, 1]).fit(demos, dt=0.01)
+    save_demonstrations(tmp_path / "huge.csv", demos, [np.arange(len(x)) * 0.01 for x in demos], columns=COLS)
+    out = tmp_path / "m.npz"
+    assert main(["fit", str(tmp_path / "huge.csv"), "--observed", "h0,h1", "--model", "prior", "-o", str(out)]) == 1
+    _one_line_error(capsys, "3e+300", "wrong units?")
+    assert not out.exists()

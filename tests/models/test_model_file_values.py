@@ -227,8 +227,8 @@ def test_n_basis_beyond_the_frames_is_refused(demos):
 
 
 def test_n_basis_beyond_the_covariance_bound_is_refused():
-    with pytest.raises(ValueError, match=r"n_basis=1500 makes 7505 parameters .* n_basis must be at most \d+"):
-        ip.InteractionPrimitive._check_n_basis(1500, 5, 4000)
+    with pytest.raises(ValueError, match=r"n_basis=3500 makes 17505 parameters .* n_basis must be at most \d+"):
+        ip.InteractionPrimitive._check_n_basis(3500, 5, 4000)
     ip.InteractionPrimitive._check_n_basis(20, 5, 4000)  # the default is fine
 
 

@@ -45,10 +45,10 @@ def as_2d_finite(a: ArrayLike, name: str, n_cols: int | None = None, min_rows: i
     return np.ascontiguousarray(arr)
 
 
-def as_demonstrations(demos: Any, min_rows: int = 1, name: str = "demos") -> list[np.ndarray]:
+def as_demonstrations(demos: Any, min_rows: int = 1, name: str = "demos", fit: bool = False) -> list[np.ndarray]:
     """Return ``demos`` (a sequence of ``(T_j, D)`` arrays) as validated float64 arrays of one width, or raise a
     clear error: each checked by :func:`as_2d_finite` (``demos[j]`` in messages, at least ``min_rows`` frames), at
-    least one, all with the first one's number of columns."""
+    least one, all with the first one's number of columns; ``fit``: no value beyond :data:`MAX_ABS_VALUE`."""
     arrays = [as_2d_finite(d, f"{name}[{j}]", min_rows=min_rows) for j, d in enumerate(demos)]
     if not arrays:
         raise ValueError(f"{name} is empty: at least one demonstration is needed")
@@ -56,7 +56,16 @@ def as_demonstrations(demos: Any, min_rows: int = 1, name: str = "demos") -> lis
     for j, a in enumerate(arrays):
         if a.shape[1] != D:
             raise ValueError(f"{name}[{j}] has {a.shape[1]} columns but {name}[0] has {D}")
+        big = np.abs(a) > MAX_ABS_VALUE if fit else None
+        if big is not None and big.any():  # the sums of its squares would overflow: every spread becomes inf/NaN
+            row, col = np.argwhere(big)[0]
+            raise ValueError(f"{name}[{j}] holds {a[row, col]:.3g} at frame {row}, column {col}: beyond the "
+                             f"{MAX_ABS_VALUE:.0e} the fit's sums of squares can hold (wrong units?)")
     return arrays
+
+
+#: the largest magnitude a demonstration's value may have: the sums of squares of 10^8 such values stay finite
+MAX_ABS_VALUE = 1e100
 
 
 def check_min_frames(arrays: Any, min_frames: int, name: str = "demos") -> None:

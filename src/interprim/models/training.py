@@ -173,7 +173,7 @@ def training_set(demos, dt: float | None = None, times=None, columns=None) -> Tr
         demos = list(demos)
     if not isinstance(demos, (list, tuple)):
         raise TypeError(f"demos must be a list of (T, D) arrays, got {type(demos).__name__}")
-    arrays = as_demonstrations(demos)
+    arrays = as_demonstrations(demos, fit=True)
     D = arrays[0].shape[1]
     if columns is not None:
         columns = tuple(str(c) for c in columns)

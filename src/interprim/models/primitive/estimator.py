@@ -49,8 +49,9 @@ COVARIANCE_METHODS = ("shrinkage", "ridge", "empirical")
 PHASE_METHODS = ("dtw", "likelihood", "learned", "cv")
 SIGMA2_RULES = ("cv", "residual")
 CALIBRATE_RULES = ("with-cv",)
-#: the largest prior covariance ``fit`` builds (``n_basis`` is refused beyond it): 256 MiB of float64
-MAX_COVARIANCE_BYTES = 256 << 20
+#: the largest prior covariance ``fit`` builds (``n_basis`` is refused beyond it): 2 GiB of float64, e.g. 240 DoFs
+#: (two agents of 40 markers) up to 67 basis functions; the fit holds a few arrays of that size
+MAX_COVARIANCE_BYTES = 2 << 30
 #: Values of releases up to 0.1.0 that model files may still hold: read as their names of today (interprim.io)
 OLD_VALUES = {"phase_method": {"auto": "cv"}, "sigma2": {"auto": "residual"}, "calibrate": {"auto": "with-cv"}}
 

@@ -242,3 +242,9 @@ def test_nan_in_json_is_a_number_that_is_refused(files, tmp_path):
     bad = edited(files["ip"], tmp_path / "nan.npz", _set("mean_duration", value=math.nan))
     with pytest.raises(ModelFileError, match="'mean_duration'"):
         load_any(bad)
+
+
+@pytest.mark.parametrize("window", [2, 4, 0])
+def test_an_even_or_too_small_smoothing_window_is_refused_as_its_message_says(demos, window):
+    with pytest.raises(ValueError, match=rf"smoothing_window must be None or an odd integer >= 3, got {window}"):
+        ip.InteractionPrimitive([0, 1], n_basis=5, smoothing_window=window).fit(demos, dt=DT)

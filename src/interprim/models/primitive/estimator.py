@@ -369,7 +369,7 @@ class InteractionPrimitive(Predictor):
         if self.phase_method not in PHASE_METHODS:
             raise ValueError(f"phase_method must be one of {PHASE_METHODS}, got {self.phase_method!r}")
         if self.smoothing_window is not None and (not isinstance(self.smoothing_window, numbers.Integral)
-                                                  or self.smoothing_window < 3):
+                                                  or self.smoothing_window < 3 or self.smoothing_window % 2 == 0):
             raise ValueError(f"smoothing_window must be None or an odd integer >= 3, got {self.smoothing_window!r}")
         if not isinstance(self.min_observed, numbers.Integral) or self.min_observed < 3:
             raise ValueError(f"min_observed must be an integer >= 3, got {self.min_observed!r}")

@@ -144,3 +144,23 @@ def check_frames(n, min_frames, where):
 
 
 # --------------------------------------------------------------------------- CSV
+
+
+#: Most frames one demonstration may have after ``resample_dt`` (checked before the grid is allocated).
+MAX_RESAMPLED_FRAMES = 10_000_000
+#: Most values (frames times columns) one demonstration may have after ``resample_dt`` (2 GiB of float64).
+MAX_RESAMPLED_VALUES = 1 << 28
+
+
+def check_grid(n: int, n_cols: int, duration: float, dt: float, min_frames: int | None, where: str) -> None:
+    """Refuse a resampling grid of ``n`` frames (``resample_dt=dt`` over ``duration`` s) before it is allocated: more
+    than :data:`MAX_RESAMPLED_FRAMES` frames (or :data:`MAX_RESAMPLED_VALUES` values), or fewer than ``min_frames``."""
+    if n > MAX_RESAMPLED_FRAMES or n * max(n_cols, 1) > MAX_RESAMPLED_VALUES:
+        raise DataFileError(
+            f"{where}: resample_dt={dt!r} s over its {duration:.6g} s gives {duration / dt + 1:.3g} frames of "
+            f"{n_cols} columns, over the limit of {MAX_RESAMPLED_FRAMES:g} frames ({MAX_RESAMPLED_VALUES:g} values) "
+            "for one demonstration; choose a larger resample interval (seconds)")
+    if min_frames is not None and n < min_frames:
+        raise DataFileError(
+            f"{where}: resample_dt={dt!r} s over its {duration:.6g} s leaves only {n} frame(s), at least {min_frames} "
+            "are needed; choose a smaller resample interval (seconds)")

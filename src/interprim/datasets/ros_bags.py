@@ -605,7 +605,7 @@ def read_rosbag(path, *, topics, joints=None, orientation=False, split_topic=Non
                               for s, p in zip(streams, parts))
             raise DataFileError(f"{where}: the streams do not overlap in time ({spans})")
         if grid_dt is not None:
-            from .files import MAX_RESAMPLED_FRAMES, check_grid
+            from ._checks import MAX_RESAMPLED_FRAMES, check_grid
 
             count = (hi - lo) / (grid_dt * 1e9)
             n = int(min(count, 1e18)) + 1 if np.isfinite(count) else 2**62  # bounded before it is allocated

@@ -24,6 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core import state_checks as check
 from ..core.blas import one_blas_thread
 from ..core.cache import DerivedCache, records_unused, shared_fits, std_unused
 from ..core.cv import DEFAULT_HORIZON
@@ -32,7 +33,6 @@ from ..core.input_range import CHECKED_BY_CALLER, duration_range, fit_input_rang
 from ..core.progress import Progress
 from ..model_selection import long_range, memory, stacking
 from . import registry
-from . import state_checks as check
 from .base import CheckedStream, Predictor, training_set
 from .blend import Blend, member_from_state
 from .primitive.estimator import InteractionPrimitive

@@ -419,8 +419,8 @@ class Predictor(Params):
     @classmethod
     def load(cls: type[P], path: str | os.PathLike[str]) -> P:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
+        from ..core.state_checks import building
         from ..io import load_estimator
-        from .state_checks import building
 
         with building(Path(path)):  # the file's name on every error; inconsistent values a ModelFileError
             return load_estimator(path, cls)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..core import state_checks as check
 from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
@@ -21,7 +22,6 @@ from ..io import estimator_from_state
 from ..model_selection.realtime import place_in_time
 from ..model_selection.stacking import weights_at
 from . import registry
-from . import state_checks as check
 from .base import BaseStream, Predictor, training_set
 from .grid import GridPrediction
 

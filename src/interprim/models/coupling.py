@@ -784,8 +784,8 @@ class CouplingModel:
 
     def _check_state(self, arrays) -> None:
         """The values :meth:`from_state` read, checked before a prediction divides by or allocates with them
-        (:mod:`interprim.models.state_checks`: ModelFileError naming the field and its value)."""
-        from . import state_checks as check
+        (:mod:`interprim.core.state_checks`: ModelFileError naming the field and its value)."""
+        from ..core import state_checks as check
 
         D = check.integer("coupling.n_dofs_", self.n_dofs_, 1, check.MAX_GRID)
         obs = check.columns("coupling.observed_dofs_", self.observed_dofs_, D)

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from ..core import state_checks as check
 from ..core.preprocessing import time_normalise
 from ..core.validation import as_2d_finite, as_frame, check_min_frames
-from . import state_checks as check
 from .base import BaseStream, InputMarks, Predictor
 from .grid import GridPrediction
 from .training import TrainingSet
@@ -80,7 +80,7 @@ class Baseline(Predictor):
                 "n_dofs_": self.n_dofs_}
 
     def _set_common(self, meta):
-        """The column layout and timing of a model file's ``meta``, checked (:mod:`~.state_checks`)."""
+        """The column layout and timing of a model file's ``meta``, checked (:mod:`~interprim.core.state_checks`)."""
         n_dofs = check.integer("n_dofs_", meta["n_dofs_"], 1, check.MAX_GRID)
         obs = check.columns("observed_dofs_", meta["observed_dofs_"], n_dofs)
         params = getattr(self, "observed_dofs", None)

@@ -10,11 +10,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.errors import ModelFileError
+from ..core.state_checks import building
 from ..io import model_kind
 from . import registry
 from .auto import AutoInteraction
 from .blend import Blend
-from .state_checks import building
 
 __all__ = ["load_any", "model_classes"]
 
@@ -31,7 +31,7 @@ def load_any(path):
 
     Raises :class:`~interprim.core.errors.ModelFileError` for a file that is not a readable interprim model, that
     holds a model class this version does not know, or whose values are inconsistent (every family checks what it
-    reads, :mod:`interprim.models.state_checks`; a MemoryError, ArithmeticError, LinAlgError or ValueError raised
+    reads, :mod:`interprim.core.state_checks`; a MemoryError, ArithmeticError, LinAlgError or ValueError raised
     while the model is built from them becomes "inconsistent values in the model file: ...").
     """
     kind = model_kind(path)

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core import state_checks as check
 from ..core._compiled import registry as _registry
 from ..core.cache import DerivedCache
 from ..core.cv import DEFAULT_HORIZON
 from ..core.preprocessing import unit_grid
 from ..model_selection.prefixes import observed_frames
-from . import state_checks as check
 from .demonstrations import AlignedBaseline
 from .grid import GridPrediction
 from .training import TrainingSet

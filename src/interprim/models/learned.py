@@ -29,10 +29,10 @@ import math
 
 import numpy as np
 
+from ..core import state_checks as check
 from ..core.blas import one_blas_thread
 from ..core.validation import as_2d_finite, as_frame
 from ..phase.learned import LearnedPhase
-from . import state_checks as check
 from .base import BasePrediction, BaseStream, InputMarks, Predictor
 from .coupling import CouplingModel
 from .grid import GridPrediction

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import state_checks as check
+from ..core import state_checks as check
 from .demonstrations import Baseline
 from .grid import GridPrediction
 from .training import TrainingSet

@@ -678,8 +678,8 @@ class LearnedPhase:
     def _check_state(self) -> None:
         """The values a model file gave (:meth:`from_state`), checked before any estimate divides by or allocates
         with them: :class:`~interprim.core.errors.ModelFileError` naming the field and its value."""
+        from ..core import state_checks as check
         from ..core.errors import ModelFileError
-        from ..models import state_checks as check
 
         try:
             self._check_params()

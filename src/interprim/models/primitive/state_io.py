@@ -13,12 +13,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ...core import state_checks as check
 from ...core.errors import ModelFileError
 from ...core.gaussian import GaussianPrior
 from ...core.preprocessing import PCA
+from ...core.state_checks import building
 from ...io import FORMAT, FORMAT_VERSION, checksum, expect, read_archive, write_archive
-from .. import state_checks as check
-from ..state_checks import building
 
 __all__ = ["save_model", "model_state", "load_model", "model_from_state", "fitted_from_state"]
 
@@ -165,7 +165,7 @@ def fitted_from_state(data: dict, meta: dict, params: dict, path="<state>") -> d
 
 def _check_values(st: dict, params: dict) -> None:
     """The fitted scalars and the prior of a model file, checked before a prediction divides by them or factors
-    the covariance: ModelFileError naming the field (:mod:`interprim.models.state_checks`)."""
+    the covariance: ModelFileError naming the field (:mod:`interprim.core.state_checks`)."""
     for field, name in (("beta_y", "beta_y_"), ("dt", "dt_"), ("mean_duration", "mean_duration_"),
                         ("sigma2", "sigma2_")):
         st[name] = check.number(field, st[name], positive=True)

@@ -75,7 +75,7 @@ def size(field: str, n_values: int, limit: int = MAX_VALUES) -> None:
                              f"{limit} for a model file")
 
 
-def array(field: str, arr: Any, shape: tuple | None = None, positive: bool = False,
+def array(field: str, arr: Any, shape: tuple[Any, ...] | None = None, positive: bool = False,
           nonneg: bool = False) -> np.ndarray:
     """``arr`` as a finite float64 array of ``shape`` (``None`` entries: any size; ``positive`` / ``nonneg``:
     every value), or raise :class:`ModelFileError` naming ``field``."""

@@ -649,6 +649,7 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="also write the rows as JSON to this file")
     args = ap.parse_args(argv)
     try:
+        import scipy.linalg  # noqa: F401 - its own OpenBLAS loaded first, so that the limit reaches it too
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(1)

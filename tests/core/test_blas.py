@@ -142,6 +142,20 @@ def test_nested_and_concurrent_calls_restore_the_pools(model, human):
         assert _blas.depth() == 0 and all(c == 2 for c in _blas_counts())
 
 
+def test_a_callers_own_limit_outlives_the_calls(model, human):
+    """A caller that runs BLAS on one thread (a controller pinning its threads) keeps it after the library's calls,
+    from its own thread and from others: the thread-local count was reset with 0, which put OpenBLAS's global count
+    back to the machine's default (two threads here), and every later product of the caller's ran on two."""
+    with threadpool_limits(1, user_api="blas"):
+        assert all(c == 1 for c in _blas_counts())
+        model.predict(human[:60]).std(20)
+        assert _blas.depth() == 0 and all(c == 1 for c in _blas_counts())
+        t = threading.Thread(target=lambda: model.stream().update(human[0]).std(5))
+        t.start()
+        t.join()
+        assert all(c == 1 for c in _blas_counts())
+
+
 def test_exception_inside_a_call_restores_the_pools(model):
     with threadpool_limits(2, user_api="blas"):
         with pytest.raises(ValueError):

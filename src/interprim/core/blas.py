@@ -30,7 +30,10 @@ silently ignored, the product runs on two threads and the second one spins
 between calls, taking a whole core (measured: a server at 185 % CPU instead
 of 100 %).  Every thread's outermost call therefore also sets OpenBLAS's
 *thread-local* count, ``openblas_set_num_threads_local(1)``, which works
-from any thread, and restores it on exit.
+from any thread.  In the wheels' OpenBLAS that count is the process's (set from
+one thread, every thread reads it), and the call returns the count it replaces:
+the process's first library call keeps what it returned, and the last exit puts
+it back, so a caller's own setting (``threadpool_limits(1)``) outlives the calls.
 """
 
 from __future__ import annotations
@@ -58,10 +61,11 @@ class _State:
     ctrl: list[Any] | None = None  # threadpoolctl's controllers of the loaded libraries
     key = -1  # len(sys.modules) when they were inspected
     local: list[Any] | None = None  # OpenBLAS's thread-local setters (ctypes functions)
+    saved_local: list[tuple[Any, int]] | None = None  # (setter, the count it replaced) at the process's first call
 
 
 _STATE = _State()
-_THREAD = threading.local()  # per thread: depth of library calls and the thread-local counts to restore
+_THREAD = threading.local()  # per thread: depth of library calls
 # called at the entry of an outermost call (interprim.core._compiled.loader switches paths there)
 _HOOK: list[Callable[[], object] | None] = [None]
 
@@ -109,14 +113,11 @@ class _OneThread:
     def __enter__(self) -> _OneThread:
         t = _THREAD
         d = getattr(t, "depth", 0)
-        if d == 0:  # this thread's outermost call: OpenBLAS's thread-local count, which any thread may set
-            with _LOCK:
-                setters = _local_setters()
-            for fn in setters:
-                fn(1)
-            t.local = setters
-        t.depth = d + 1
         with _LOCK:
+            # this thread's outermost call: OpenBLAS's count through its thread-local setter, which works from any
+            # thread; it returns the count it replaces (in the wheels' OpenBLAS the count is the process's, so
+            # only the process's first call reads the caller's own, which the last exit puts back)
+            prevs = [(fn, fn(1)) for fn in _local_setters()] if d == 0 else []
             if _STATE.depth == 0:
                 hook = _HOOK[0]
                 if hook is not None:
@@ -128,22 +129,21 @@ class _OneThread:
                         lc.set_num_threads(1)
                         saved.append((lc, n))
                 _STATE.saved = saved
+                _STATE.saved_local = prevs
             _STATE.depth += 1
+        t.depth = d + 1
         return self
 
     def __exit__(self, *exc: object) -> Literal[False]:
         with _LOCK:
             _STATE.depth -= 1
-            if _STATE.depth == 0:
+            if _STATE.depth == 0:  # the last call in the process: the caller's counts again
                 for lc, n in _STATE.saved or ():
                     lc.set_num_threads(n)
-                _STATE.saved = None
-        t = _THREAD
-        t.depth -= 1
-        if t.depth == 0:
-            for fn in t.local:
-                fn(0)  # 0: no thread-local count, the thread follows the global one again
-            t.local = ()
+                for fn, prev in _STATE.saved_local or ():
+                    fn(prev)  # (0 instead reset OpenBLAS to the machine's default: a caller's limit was undone)
+                _STATE.saved = _STATE.saved_local = None
+        _THREAD.depth -= 1
         return False
 
 

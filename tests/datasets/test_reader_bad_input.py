@@ -302,3 +302,16 @@ def test_bag_grid_is_checked_before_it_is_allocated(tmp_path, dt, what):
     path = _bag(tmp_path)
     with pytest.raises(DataFileError, match=rf"resample_dt={dt!r} s over its .* s .*{what}"):
         load_demonstrations(path, topics="/human/wrist,/robot/joint_states", resample_dt=dt)
+
+
+def test_a_csv_without_a_header_line_is_refused_not_read_one_frame_short(tmp_path):
+    """Without a header line the first frame became the column names ('0.0', '1.5', ...) and was lost silently."""
+    from interprim.datasets import load_demonstrations
+
+    rows = "\n".join(f"{0.01 * i:.2f},{1.5 + 0.1 * i:.2f},{2.5 - 0.1 * i:.2f}" for i in range(8))
+    (tmp_path / "nohdr.csv").write_text(rows + "\n")
+    with pytest.raises(DataFileError, match=r"line 1: the first line is numbers \(0\.00, 1\.50, 2\.50\), not column"):
+        load_demonstrations(tmp_path / "nohdr.csv")
+    # whole numbers are names (a data frame without column names writes 0, 1, 2, ...)
+    (tmp_path / "int.csv").write_text("time,0,1\n" + rows + "\n")
+    assert load_demonstrations(tmp_path / "int.csv").columns == ["0", "1"]

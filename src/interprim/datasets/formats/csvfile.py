@@ -58,6 +58,16 @@ def _over(path, what, value, name):
     )
 
 
+def _looks_like_data(header) -> bool:
+    """Whether a header line is a line of data: every cell a number, and not all of them plain whole numbers (0, 1,
+    2, ... are column names as a data frame without names writes them)."""
+    try:
+        [float(h) for h in header]
+    except ValueError:
+        return False
+    return not all(re.fullmatch(r"\d+", h) for h in header)
+
+
 def bounded_lines(fh, path, max_chars):
     """The file's lines, each read with a bounded ``readline``: a too-long line is refused without reading it."""
     n = 0
@@ -151,6 +161,10 @@ def read_csv(path: Path, dt, max_nan_gap, min_frames, time_column=None, time_uni
             empty = next(i for i, h in enumerate(header) if not h)
             raise DataFileError(f"{path}, line {header_line}: empty column name in the header (column {empty + 1} of "
                                 f"{n_cols}: {shown_names(header)})")
+        if _looks_like_data(header):  # no header line: the first frame would be taken as names and lost
+            raise DataFileError(f"{path}, line {header_line}: the first line is numbers ({shown_names(header)}), not "
+                                "column names: a CSV file starts with a header line naming its columns (e.g. "
+                                "time,x,y)")
         dup = sorted(h for h, c in Counter(header).items() if c > 1)
         if dup:
             raise DataFileError(f"{path}, line {header_line}: duplicate column name(s) {dup[:10]}")

@@ -62,7 +62,7 @@ def _looks_like_data(header) -> bool:
     """Whether a header line is a line of data: every cell a number, and not all of them plain whole numbers (0, 1,
     2, ... are column names as a data frame without names writes them)."""
     try:
-        [float(h) for h in header]
+        [number(h) for h in header]  # a number as the data's cells are read
     except ValueError:
         return False
     return not all(re.fullmatch(r"\d+", h) for h in header)

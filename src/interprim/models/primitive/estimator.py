@@ -19,6 +19,7 @@ from __future__ import annotations
 import copy
 import math
 import numbers
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -586,9 +587,11 @@ class InteractionPrimitive(Predictor):
     @classmethod
     def load(cls, path) -> InteractionPrimitive:
         """Load a model saved by :meth:`save`; raises :class:`~interprim.ModelFileError` on bad files."""
+        from ...core.state_checks import building
         from .state_io import load_model
 
-        return load_model(path, cls)
+        with building(Path(path)):  # as Predictor.load: the file's name on every error, inconsistent values named
+            return load_model(path, cls)
 
     def __repr__(self):
         import inspect
